@@ -1,0 +1,52 @@
+# Hand-written stub of the native module; checked with `python -m mypy.stubtest phloem._core`.
+import numpy as np
+from numpy.typing import NDArray
+
+__version__: str
+
+def nnf(
+    source: NDArray[np.float32],
+    target: NDArray[np.float32],
+    *,
+    patch_size: int,
+    iterations: int,
+    levels: int,
+    exact: bool,
+    seed: int,
+    weights: NDArray[np.float32] | None = None,
+    source_mask: NDArray[np.bool_] | None = None,
+    target_mask: NDArray[np.bool_] | None = None,
+    init: NDArray[np.int32] | None = None,
+    source_knn: NDArray[np.int32] | None = None,
+    threads: int | None = None,
+) -> tuple[NDArray[np.int32], NDArray[np.float32], int]: ...
+def knn(
+    exemplar: NDArray[np.float32],
+    *,
+    k: int,
+    patch_size: int,
+    iterations: int,
+    exact: bool,
+    exclude: int,
+    seed: int,
+    weights: NDArray[np.float32] | None = None,
+    threads: int | None = None,
+) -> tuple[NDArray[np.int32], NDArray[np.float32]]: ...
+def coherence_candidates(
+    refs: NDArray[np.int32],
+    exemplar_shape: tuple[int, int],
+    *,
+    patch_size: int,
+    wrap: bool,
+    knn_idx: NDArray[np.int32] | None = None,
+    threads: int | None = None,
+) -> NDArray[np.int32]: ...
+def vote(
+    source: NDArray[np.float32],
+    field: NDArray[np.int32],
+    *,
+    patch_size: int,
+    weights: NDArray[np.float32] | None = None,
+    threads: int | None = None,
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]: ...
+def default_threads() -> int: ...

@@ -1,0 +1,116 @@
+"""Argument checks shared by every public function.
+
+Each check raises ``ValueError`` (or ``TypeError`` for a wrong kind of object) whose message
+starts with the parameter's name, so a user knows which argument to fix.
+"""
+
+from __future__ import annotations
+
+import numbers
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["as_image", "as_mask", "check_patch_size", "check_seed", "check_size", "check_threads", "restore_ndim"]
+
+
+def as_image(image: Any, name: str) -> NDArray[np.float32]:
+    """Return ``image`` as a C-contiguous ``(H, W, C)`` float32 array.
+
+    Integer dtypes are scaled to [0, 1] by their maximum value (uint8 by 255, uint16 by 65535);
+    float inputs keep their values. Rejects booleans, complex numbers, the wrong number of
+    dimensions, empty axes and non-finite values.
+    """
+    arr = np.asarray(image)
+    if arr.dtype == np.bool_ or not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+        raise TypeError(f"{name}: expected a real-valued image array, got dtype {arr.dtype}")
+    if arr.ndim == 2:
+        arr = arr[:, :, None]
+    elif arr.ndim != 3:
+        raise ValueError(f"{name}: expected shape (H, W) or (H, W, C), got {arr.shape}")
+    if 0 in arr.shape:
+        raise ValueError(f"{name}: expected a non-empty image, got shape {arr.shape}")
+    if np.issubdtype(arr.dtype, np.integer):
+        info = np.iinfo(arr.dtype)
+        out = arr.astype(np.float32) / np.float32(info.max)
+    else:
+        out = np.ascontiguousarray(arr, dtype=np.float32)
+        bad = ~np.isfinite(out)
+        if bad.any():
+            y, x, c = np.argwhere(bad)[0]
+            raise ValueError(f"{name}: expected finite values, found {arr[y, x, c]} at (row {y}, col {x}, channel {c})")
+    return np.ascontiguousarray(out)
+
+
+def restore_ndim(out: NDArray[np.float32], like: Any) -> NDArray[np.float32]:
+    """Drop the channel axis again if the user passed a 2-D image."""
+    return out[:, :, 0] if np.ndim(like) == 2 else out
+
+
+def as_mask(mask: Any, name: str, shape: tuple[int, int]) -> NDArray[np.bool_]:
+    """Return ``mask`` as a C-contiguous ``(H, W)`` bool array of the given shape.
+
+    Accepts bool arrays and integer or float arrays of 0 and 1 (any non-zero counts as set).
+    A trailing channel axis of length 1 is dropped.
+    """
+    arr = np.asarray(mask)
+    if arr.ndim == 3 and arr.shape[2] == 1:
+        arr = arr[:, :, 0]
+    if arr.ndim != 2:
+        raise ValueError(f"{name}: expected a 2-D mask of shape {shape}, got shape {arr.shape}")
+    if arr.shape != tuple(shape):
+        raise ValueError(f"{name}: expected shape {tuple(shape)} to match the image, got {arr.shape}")
+    if arr.dtype != np.bool_:
+        if not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+            raise TypeError(f"{name}: expected a boolean mask, got dtype {arr.dtype}")
+        if np.issubdtype(arr.dtype, np.floating) and not np.isfinite(arr).all():
+            raise ValueError(f"{name}: expected finite values in the mask")
+        arr = arr != 0
+    return np.ascontiguousarray(arr)
+
+
+def check_patch_size(patch_size: Any, name: str = "patch_size") -> int:
+    """Return ``patch_size`` as an int, checking it is odd and at least 1."""
+    if isinstance(patch_size, bool) or not isinstance(patch_size, numbers.Integral):
+        raise TypeError(f"{name}: expected an odd integer, got {patch_size!r}")
+    p = int(patch_size)
+    if p < 1 or p % 2 == 0:
+        raise ValueError(f"{name}: expected an odd size >= 1, got {p}")
+    return p
+
+
+def check_int(value: Any, name: str, minimum: int) -> int:
+    """Return ``value`` as an int, checking it is at least ``minimum``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name}: expected an integer, got {value!r}")
+    if int(value) < minimum:
+        raise ValueError(f"{name}: expected an integer >= {minimum}, got {value}")
+    return int(value)
+
+
+def check_seed(seed: Any) -> int:
+    """Return a 64-bit seed from an int or a ``numpy.random.Generator``."""
+    if isinstance(seed, np.random.Generator):
+        return int(seed.integers(0, 2**63))
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
+        raise TypeError(f"seed: expected an integer or a numpy.random.Generator, got {seed!r}")
+    if not 0 <= int(seed) < 2**64:
+        raise ValueError(f"seed: expected an integer in [0, 2**64), got {seed}")
+    return int(seed)
+
+
+def check_threads(threads: Any) -> int | None:
+    """Return ``threads`` (None or a positive int)."""
+    return None if threads is None else check_int(threads, "threads", 1)
+
+
+def check_size(size: Any, name: str = "size") -> tuple[int, int]:
+    """Return ``size`` as ``(height, width)``; an int means a square."""
+    if isinstance(size, numbers.Integral) and not isinstance(size, bool):
+        size = (int(size), int(size))
+    try:
+        h, w = size
+    except (TypeError, ValueError):
+        raise TypeError(f"{name}: expected (height, width) or an int, got {size!r}") from None
+    return check_int(h, f"{name}[0] (height)", 1), check_int(w, f"{name}[1] (width)", 1)

@@ -1,0 +1,223 @@
+"""The ``phloem`` command: one sub-command per capability.
+
+Every sub-command that writes an image also writes ``OUT.json`` beside it with the parameters,
+the seed and the phloem version, refuses to replace existing files unless ``--force`` is given,
+and checks all of that before the (possibly long) computation starts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from . import __version__, data, io, patch, texture
+from ._progress import Bar
+
+__all__ = ["main"]
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 512x512, got {text!r}") from None
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"expected positive sizes, got {text!r}")
+    return h, w
+
+
+def _positive(text: str) -> int:
+    v = int(text)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text}")
+    return v
+
+
+def _common(p: argparse.ArgumentParser, *, writes: bool = True) -> None:
+    g = p.add_argument_group("common options")
+    g.add_argument("--seed", type=int, default=0, help="seed of every random choice; same seed, same output (default 0)")
+    g.add_argument("--threads", type=_positive, default=None, help="worker threads (default: PHLOEM_NUM_THREADS or all cores)")
+    g.add_argument("--max-pixels", type=_positive, default=io.DEFAULT_MAX_PIXELS, help="refuse input images larger than this many pixels (default %(default)s)")
+    g.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    if writes:
+        g.add_argument("--force", action="store_true", help="replace OUT and OUT.json if they exist")
+        g.add_argument("--bit-depth", type=int, choices=(8, 16), default=8, help="bits per channel of OUT (16 for PNG/TIFF only; default 8)")
+
+
+def _preflight(args: argparse.Namespace) -> None:
+    """Fail before computing if the output cannot be written."""
+    out = Path(args.out)
+    io._encode(out, np.zeros((1, 1), np.float32), args.bit_depth)  # extension and bit depth
+    io._check_target(out, args.force)
+    io._check_target(io.sidecar_path(out), args.force)
+
+
+def _params(args: argparse.Namespace, skip: Sequence[str] = ()) -> dict[str, Any]:
+    drop = {"func", "quiet", "force", "threads", "seed", "max_pixels", *skip}
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items() if k not in drop}
+
+
+def _run(label: str, args: argparse.Namespace, work: Callable[[Any], np.ndarray]) -> np.ndarray:
+    bar = Bar(label, enabled=not args.quiet)
+    t0 = time.perf_counter()
+    try:
+        out = work(bar)
+    finally:
+        bar.close()
+    if not args.quiet:
+        print(f"{label}: {time.perf_counter() - t0:.2f} s", file=sys.stderr)
+    return out
+
+
+def _save(args: argparse.Namespace, command: str, image: np.ndarray, **extra: Any) -> None:
+    side = io.write_result(
+        args.out, image, command=command, parameters={**_params(args), **extra}, seed=args.seed,
+        overwrite=args.force, bit_depth=args.bit_depth,
+    )  # fmt: skip
+    if not args.quiet:
+        print(f"wrote {args.out} and {side}", file=sys.stderr)
+
+
+def _cmd_synthesize(args: argparse.Namespace) -> None:
+    _preflight(args)
+    ex = io.read_image(args.input, max_pixels=args.max_pixels)
+    out = _run(
+        "synthesize",
+        args,
+        lambda bar: texture.synthesize(
+            ex, args.size, patch_size=args.patch_size, levels=args.levels, iterations=args.iterations,
+            seed=args.seed, threads=args.threads, progress=bar,
+        ),  # fmt: skip
+    )
+    _save(args, "synthesize", out)
+
+
+def _cmd_complete(args: argparse.Namespace) -> None:
+    _preflight(args)
+    img = io.read_image(args.input, max_pixels=args.max_pixels)
+    m = io.read_image(args.mask, max_pixels=args.max_pixels)
+    if m.ndim == 3:
+        m = m[..., 3] if m.shape[2] == 4 and args.mask_alpha else m[..., :3].max(axis=2)
+    if m.shape != img.shape[:2]:
+        raise ValueError(f"mask: {args.mask} is {m.shape[1]}×{m.shape[0]}, but the image is {img.shape[1]}×{img.shape[0]}")
+    hole = (m < 0.5) if args.mask_alpha else (m >= 0.5)
+    out = _run(
+        "complete",
+        args,
+        lambda bar: texture.complete(
+            img, hole, patch_size=args.patch_size, levels=args.levels, iterations=args.iterations,
+            seed=args.seed, threads=args.threads, progress=bar,
+        ),  # fmt: skip
+    )
+    _save(args, "complete", out)
+
+
+def _cmd_nnf(args: argparse.Namespace) -> None:
+    out = Path(args.out)
+    if out.suffix.lower() != ".npz":
+        raise ValueError(f"out: expected a .npz file for the field, got {out.name}")
+    io._check_target(out, args.force)
+    src = io.read_image(args.source, max_pixels=args.max_pixels)
+    tgt = io.read_image(args.target, max_pixels=args.max_pixels)
+    t0 = time.perf_counter()
+    field, dist = patch.nnf(
+        src, tgt, patch_size=args.patch_size, iterations=args.iterations, method=args.method, levels=args.levels,
+        seed=args.seed, threads=args.threads,
+    )  # fmt: skip
+    import io as _pyio
+
+    buf = _pyio.BytesIO()
+    np.savez_compressed(buf, field=field, distance=dist)
+    io._atomic_write(out, buf.getvalue(), args.force)
+    if not args.quiet:
+        print(f"nnf: {time.perf_counter() - t0:.2f} s, mean distance {float(dist.mean()):.4g}; wrote {out}", file=sys.stderr)
+
+
+def _cmd_demo(args: argparse.Namespace) -> None:
+    _preflight(args)
+    ex = data.bark()[..., :3]
+    out = _run(
+        "demo: bark texture",
+        args,
+        lambda bar: texture.synthesize(ex, args.size, seed=args.seed, threads=args.threads, progress=bar),
+    )
+    _save(args, "demo", out, input="phloem.data.bark()")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the ``phloem`` command."""
+    ap = argparse.ArgumentParser(
+        prog="phloem",
+        description="New images of natural structures from a few real examples.",
+        epilog="Run 'phloem COMMAND --help' for the options of a command.",
+    )
+    ap.add_argument("--version", action="version", version=f"phloem {__version__}")
+    sub = ap.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    p = sub.add_parser("synthesize", help="synthesise a texture of any size from an exemplar image",
+                       description="Texture optimisation (Kwatra et al. 2005) over an image pyramid, with PatchMatch search and robust patch voting.")  # fmt: skip
+    p.add_argument("input", metavar="IN", help="exemplar image (PNG, JPEG or TIFF)")
+    p.add_argument("--size", type=_size, required=True, metavar="WxH", help="output width x height in pixels, e.g. 512x512")
+    p.add_argument("--out", required=True, metavar="OUT", help="output image (.png, .jpg, .tif)")
+    p.add_argument("--patch-size", type=int, default=7, help="patch side, odd (default 7)")
+    p.add_argument("--levels", type=_positive, default=None, help="pyramid levels (default: from the exemplar size)")
+    p.add_argument("--iterations", type=_positive, default=4, help="search-and-vote iterations per level (default 4)")
+    _common(p)
+    p.set_defaults(func=_cmd_synthesize)
+
+    p = sub.add_parser("complete", help="fill a masked region of an image from the rest of it",
+                       description="Coarse-to-fine patch-based completion (Wexler et al. 2007) on PatchMatch.")  # fmt: skip
+    p.add_argument("input", metavar="IN", help="image with a region to fill")
+    p.add_argument("mask", metavar="MASK", help="image of the same size, white where pixels are to be filled")
+    p.add_argument("--out", required=True, metavar="OUT", help="output image (.png, .jpg, .tif)")
+    p.add_argument("--mask-alpha", action="store_true", help="take the hole from MASK's alpha channel: transparent pixels are filled")
+    p.add_argument("--patch-size", type=int, default=7, help="patch side, odd (default 7)")
+    p.add_argument("--levels", type=_positive, default=None, help="pyramid levels (default: from the hole size)")
+    p.add_argument("--iterations", type=_positive, default=5, help="search-and-vote iterations per level (default 5)")
+    _common(p)
+    p.set_defaults(func=_cmd_complete)
+
+    p = sub.add_parser("nnf", help="nearest-neighbour field between two images, saved as .npz",
+                       description="PatchMatch (Barnes et al. 2009) or exact search; writes arrays 'field' (H, W, 2) and 'distance' (H, W).")  # fmt: skip
+    p.add_argument("source", metavar="SOURCE", help="image the patches come from")
+    p.add_argument("target", metavar="TARGET", help="image whose pixels get matches")
+    p.add_argument("--out", required=True, metavar="OUT.npz", help="output .npz file")
+    p.add_argument("--patch-size", type=int, default=7, help="patch side, odd (default 7)")
+    p.add_argument("--iterations", type=int, default=5, help="PatchMatch iterations (default 5)")
+    p.add_argument("--levels", type=_positive, default=1, help="coarse-to-fine pyramid levels (default 1)")
+    p.add_argument("--method", choices=("patchmatch", "exact"), default="patchmatch", help="search method (default patchmatch)")
+    _common(p, writes=False)
+    p.add_argument("--force", action="store_true", help="replace OUT if it exists")
+    p.set_defaults(func=_cmd_nnf)
+
+    p = sub.add_parser("demo", help="the main job on embedded data: a bark texture from the built-in Douglas-fir exemplar",
+                       description="Synthesises a bark texture from phloem's embedded CC0 Douglas-fir bark photo.")  # fmt: skip
+    p.add_argument("--out", default="bark.png", metavar="OUT", help="output image (default bark.png)")
+    p.add_argument("--size", type=_size, default=(512, 512), metavar="WxH", help="output size (default 512x512)")
+    _common(p)
+    p.set_defaults(func=_cmd_demo)
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``phloem`` command; returns the exit status."""
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    try:
+        args.func(args)
+    except (ValueError, TypeError, FileExistsError, FileNotFoundError, io.ImageReadError) as e:
+        print(f"phloem {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"phloem {args.command}: interrupted; nothing was written", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

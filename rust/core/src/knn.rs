@@ -1,0 +1,391 @@
+//! k nearest patches inside one exemplar, and the k-coherence candidate sets built from them
+//! (Tong, Zhang, Liu, Wang, Shum 2002, "Synthesis of bidirectional texture functions on
+//! arbitrary surfaces"; used by the texture-by-numbers solver of Laitoch 2018, §3.3.6).
+//!
+//! Every exemplar pixel has a patch: the exemplar is mirrored by `patch_size / 2` pixels at its
+//! border, so pixels near the edge take part too. A pixel's neighbours exclude itself and every
+//! pixel within `exclude` (Chebyshev distance) of it, so that the lists hold other places in
+//! the exemplar rather than the same place shifted by one pixel.
+//!
+//! The thesis used FLANN's approximate search. phloem offers exact brute force and an
+//! approximate search of its own: k-PatchMatch (Barnes et al. 2010, "The generalized
+//! PatchMatch correspondence algorithm") with neighbour-of-neighbour enrichment. Its passes are
+//! Jacobi-style (each reads only the previous pass), so the result is independent of threads.
+
+use rayon::prelude::*;
+
+use crate::error::{invalid, Result};
+use crate::image::{prescale, Image};
+use crate::patch::{ssd, NONE};
+use crate::rng::Rng;
+
+/// Parameters of [`knn`].
+#[derive(Clone, Debug)]
+pub struct KnnParams {
+    /// Side of the square patches; odd. Default 7.
+    pub patch_size: usize,
+    /// Neighbours per pixel. Default 4.
+    pub k: usize,
+    /// Passes of the approximate search. Default 6.
+    pub iterations: usize,
+    /// Exact brute force instead of the approximate search (`O(N²)`; small exemplars only).
+    pub exact: bool,
+    /// Pixels within this Chebyshev distance of a pixel are not its neighbours. Default
+    /// `patch_size / 2`.
+    pub exclude: usize,
+    /// Seed of every random choice.
+    pub seed: u64,
+}
+
+impl Default for KnnParams {
+    fn default() -> Self {
+        Self { patch_size: 7, k: 4, iterations: 6, exact: false, exclude: 3, seed: 0 }
+    }
+}
+
+/// The `k` nearest neighbours of every exemplar pixel, nearest first.
+#[derive(Clone, Debug)]
+pub struct Knn {
+    /// Exemplar height.
+    pub h: usize,
+    /// Exemplar width.
+    pub w: usize,
+    /// Neighbours per pixel.
+    pub k: usize,
+    /// `h × w × k` flat exemplar indices.
+    pub idx: Vec<u32>,
+    /// `h × w × k` patch distances (weighted sums of squared differences).
+    pub dist: Vec<f32>,
+}
+
+/// The exemplar mirrored by `r` pixels on every side (`abcd` → `cb|abcd|cb` for r = 2).
+fn mirror_pad(data: &[f32], h: usize, w: usize, c: usize, r: usize) -> Vec<f32> {
+    let (ph, pw) = (h + 2 * r, w + 2 * r);
+    let reflect = |i: i64, n: usize| -> usize {
+        if n == 1 {
+            return 0;
+        }
+        let n = n as i64;
+        let mut i = i;
+        // Mirror without repeating the edge pixel; loop covers r >= n.
+        while i < 0 || i >= n {
+            i = if i < 0 { -i } else { 2 * (n - 1) - i };
+        }
+        i as usize
+    };
+    let mut out = Vec::with_capacity(ph * pw * c);
+    for y in 0..ph {
+        let sy = reflect(y as i64 - r as i64, h);
+        for x in 0..pw {
+            let sx = reflect(x as i64 - r as i64, w);
+            out.extend_from_slice(&data[(sy * w + sx) * c..][..c]);
+        }
+    }
+    out
+}
+
+struct Padded {
+    data: Vec<f32>,
+    pw: usize,
+    w: usize,
+    c: usize,
+    p: usize,
+}
+
+impl Padded {
+    #[inline]
+    fn dist(&self, a: u32, b: u32, cutoff: f32) -> f32 {
+        let (ay, ax) = (a as usize / self.w, a as usize % self.w);
+        let (by, bx) = (b as usize / self.w, b as usize % self.w);
+        let len = self.p * self.c;
+        let mut acc = 0f32;
+        for k in 0..self.p {
+            let a0 = ((ay + k) * self.pw + ax) * self.c;
+            let b0 = ((by + k) * self.pw + bx) * self.c;
+            acc += ssd(&self.data[a0..a0 + len], &self.data[b0..b0 + len]);
+            if acc >= cutoff {
+                return acc;
+            }
+        }
+        acc
+    }
+}
+
+/// A sorted list of at most `k` (distance, index) pairs.
+struct Best<'a> {
+    d: &'a mut [f32],
+    i: &'a mut [u32],
+}
+
+impl Best<'_> {
+    #[inline]
+    fn worst(&self) -> f32 {
+        self.d[self.d.len() - 1]
+    }
+
+    #[inline]
+    fn offer(&mut self, j: u32, dist: f32) {
+        let k = self.d.len();
+        if dist >= self.d[k - 1] || self.i.contains(&j) {
+            return;
+        }
+        let mut pos = k - 1;
+        while pos > 0 && self.d[pos - 1] > dist {
+            self.d[pos] = self.d[pos - 1];
+            self.i[pos] = self.i[pos - 1];
+            pos -= 1;
+        }
+        self.d[pos] = dist;
+        self.i[pos] = j;
+    }
+}
+
+/// Computes the `k` nearest patches of every exemplar pixel (see the module docs).
+pub fn knn(exemplar: &Image<'_>, weights: Option<&[f32]>, params: &KnnParams) -> Result<Knn> {
+    let p = params.patch_size;
+    if p == 0 || p % 2 == 0 {
+        return Err(invalid("patch_size", format!("expected an odd size >= 1, got {p}")));
+    }
+    let (h, w, c) = (exemplar.h, exemplar.w, exemplar.c);
+    if params.k == 0 {
+        return Err(invalid("k", "expected at least 1 neighbour, got 0"));
+    }
+    let ex = params.exclude;
+    let excluded_max = (2 * ex + 1).min(h) * (2 * ex + 1).min(w);
+    if h * w <= excluded_max || h * w - excluded_max < params.k {
+        return Err(invalid(
+            "k",
+            format!("{} neighbours cannot be found in a {h}×{w} exemplar when {ex} pixels around each are excluded", params.k),
+        ));
+    }
+    exemplar.check_finite("exemplar")?;
+    let r = p / 2;
+    let scaled = prescale(exemplar, weights)?;
+    let pad = Padded { data: mirror_pad(&scaled, h, w, c, r), pw: w + 2 * r, w, c, p };
+    let n = h * w;
+    let k = params.k;
+    let far = |a: usize, b: usize| (a / w).abs_diff(b / w).max((a % w).abs_diff(b % w)) > ex;
+
+    let mut dist = vec![f32::INFINITY; n * k];
+    let mut idx = vec![NONE; n * k];
+    if params.exact {
+        dist.par_chunks_mut(k).zip(idx.par_chunks_mut(k)).enumerate().for_each(|(a, (d, i))| {
+            let mut best = Best { d, i };
+            for b in 0..n {
+                if far(a, b) {
+                    let dd = pad.dist(a as u32, b as u32, best.worst());
+                    best.offer(b as u32, dd);
+                }
+            }
+        });
+        return Ok(Knn { h, w, k, idx, dist });
+    }
+
+    // Random start: k distinct far-enough pixels.
+    dist.par_chunks_mut(k).zip(idx.par_chunks_mut(k)).enumerate().for_each(|(a, (d, i))| {
+        let mut rng = Rng::keyed(params.seed, u64::MAX, a as u64);
+        let mut best = Best { d, i };
+        let mut tries = 0;
+        while best.i.contains(&NONE) && tries < 64 * k {
+            let b = rng.below(n as u64) as usize;
+            if far(a, b) {
+                best.offer(b as u32, pad.dist(a as u32, b as u32, f32::INFINITY));
+            }
+            tries += 1;
+        }
+    });
+    let radius0 = h.max(w) as i64;
+    for it in 0..params.iterations {
+        let prev_i = idx.clone();
+        dist.par_chunks_mut(k).zip(idx.par_chunks_mut(k)).enumerate().for_each(|(a, (d, i))| {
+            let mut best = Best { d, i };
+            let (ay, ax) = ((a / w) as i64, (a % w) as i64);
+            let consider = |b: u32, best: &mut Best<'_>| {
+                if b != NONE && far(a, b as usize) {
+                    let dd = pad.dist(a as u32, b, best.worst());
+                    best.offer(b, dd);
+                }
+            };
+            // Propagation from the 4-neighbours' lists, shifted back by the offset.
+            for (oy, ox) in [(0i64, -1i64), (0, 1), (-1, 0), (1, 0)] {
+                let (ny, nx) = (ay + oy, ax + ox);
+                if ny < 0 || nx < 0 || ny >= h as i64 || nx >= w as i64 {
+                    continue;
+                }
+                for &b in &prev_i[(ny as usize * w + nx as usize) * k..][..k] {
+                    if b == NONE {
+                        continue;
+                    }
+                    let (by, bx) = ((b as usize / w) as i64 - oy, (b as usize % w) as i64 - ox);
+                    if by >= 0 && bx >= 0 && by < h as i64 && bx < w as i64 {
+                        consider((by as usize * w + bx as usize) as u32, &mut best);
+                    }
+                }
+            }
+            // Enrichment: neighbours of neighbours.
+            for j in 0..k {
+                let b = prev_i[a * k + j];
+                if b == NONE {
+                    continue;
+                }
+                for &b2 in &prev_i[b as usize * k..][..k] {
+                    consider(b2, &mut best);
+                }
+            }
+            // Random search around the current best, radius halving.
+            let mut rng = Rng::keyed(params.seed, it as u64, a as u64);
+            let b0 = best.i[0];
+            if b0 != NONE {
+                let (by, bx) = ((b0 as usize / w) as i64, (b0 as usize % w) as i64);
+                let mut rad = radius0;
+                while rad >= 1 {
+                    let y = rng.range_inclusive((by - rad).max(0), (by + rad).min(h as i64 - 1));
+                    let x = rng.range_inclusive((bx - rad).max(0), (bx + rad).min(w as i64 - 1));
+                    consider((y as usize * w + x as usize) as u32, &mut best);
+                    rad /= 2;
+                }
+            }
+        });
+    }
+    Ok(Knn { h, w, k, idx, dist })
+}
+
+/// k-coherence candidate sets (Laitoch 2018, §3.3.6) for an output image of references.
+///
+/// `refs` holds, per output pixel of an `h × w` image, the flat exemplar index its value was
+/// copied from (or [`NONE`]). For each output pixel `p0` and each `p` in its `patch_size`
+/// window, the reference of `p` forward-shifted by `p0 − p` is a coherence candidate; with
+/// `knn`, each candidate's neighbours join the set. With `wrap`, shifts that leave the
+/// exemplar wrap around; without, they are dropped. Returns `h × w × m` indices, each set
+/// deduplicated in discovery order and padded with [`NONE`], where
+/// `m = patch_size² × (1 + knn.k)`.
+pub fn coherence_candidates(refs: &[u32], h: usize, w: usize, eh: usize, ew: usize, knn: Option<&Knn>, patch_size: usize, wrap: bool) -> Result<(Vec<u32>, usize)> {
+    if patch_size == 0 || patch_size % 2 == 0 {
+        return Err(invalid("patch_size", format!("expected an odd size >= 1, got {patch_size}")));
+    }
+    if refs.len() != h * w {
+        return Err(invalid("refs", format!("expected {h}×{w} references, got {}", refs.len())));
+    }
+    if let Some(bad) = refs.iter().find(|v| **v != NONE && **v as usize >= eh * ew) {
+        return Err(invalid("refs", format!("reference {bad} is outside the {eh}×{ew} exemplar")));
+    }
+    if let Some(t) = knn {
+        if t.h != eh || t.w != ew {
+            return Err(invalid("knn", format!("expected a table for the {eh}×{ew} exemplar, got {}×{}", t.h, t.w)));
+        }
+    }
+    let r = (patch_size / 2) as i64;
+    let kk = knn.map_or(0, |t| t.k);
+    let m = patch_size * patch_size * (1 + kk);
+    let mut out = vec![NONE; h * w * m];
+    out.par_chunks_mut(m).enumerate().for_each(|(i, set)| {
+        let (y0, x0) = ((i / w) as i64, (i % w) as i64);
+        let mut n = 0usize;
+        let mut push = |v: u32, set: &mut [u32]| {
+            if !set[..n].contains(&v) {
+                set[n] = v;
+                n += 1;
+            }
+        };
+        for oy in -r..=r {
+            for ox in -r..=r {
+                let (y, x) = (y0 + oy, x0 + ox);
+                if y < 0 || x < 0 || y >= h as i64 || x >= w as i64 {
+                    continue;
+                }
+                let e = refs[y as usize * w + x as usize];
+                if e == NONE {
+                    continue;
+                }
+                let (mut ey, mut ex) = ((e as usize / ew) as i64 - oy, (e as usize % ew) as i64 - ox);
+                if wrap {
+                    ey = ey.rem_euclid(eh as i64);
+                    ex = ex.rem_euclid(ew as i64);
+                } else if ey < 0 || ex < 0 || ey >= eh as i64 || ex >= ew as i64 {
+                    continue;
+                }
+                let cand = (ey as usize * ew + ex as usize) as u32;
+                push(cand, set);
+                if let Some(t) = knn {
+                    for &b in &t.idx[cand as usize * t.k..][..t.k] {
+                        if b != NONE {
+                            push(b, set);
+                        }
+                    }
+                }
+            }
+        }
+    });
+    Ok((out, m))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tex(h: usize, w: usize) -> Vec<f32> {
+        let mut rng = Rng::keyed(3, 0, 0);
+        (0..h * w * 3)
+            .map(|i| {
+                let (y, x) = ((i / 3 / w) as f32, (i / 3 % w) as f32);
+                ((x * 0.4).sin() * (y * 0.3).cos()) * 0.5 + rng.below(100) as f32 / 400.0
+            })
+            .collect()
+    }
+
+    #[test]
+    fn mirror_pad_reflects_without_repeating_the_edge() {
+        let d = [1f32, 2., 3., 4.];
+        let p = mirror_pad(&d, 1, 4, 1, 2);
+        // Rows also mirror: a 1-row image mirrors onto itself.
+        assert_eq!(&p[2 * 8..3 * 8], &[3., 2., 1., 2., 3., 4., 3., 2.]);
+    }
+
+    #[test]
+    fn exact_lists_are_sorted_far_and_optimal() {
+        let (h, w) = (14, 13);
+        let d = tex(h, w);
+        let img = Image::new("exemplar", &d, h, w, 3).unwrap();
+        let params = KnnParams { patch_size: 5, k: 3, exact: true, exclude: 2, ..KnnParams::default() };
+        let t = knn(&img, None, &params).unwrap();
+        let pad = Padded { data: mirror_pad(&d, h, w, 3, 2), pw: w + 4, w, c: 3, p: 5 };
+        for a in 0..h * w {
+            let mut all: Vec<f32> = (0..h * w)
+                .filter(|&b| (a / w).abs_diff(b / w).max((a % w).abs_diff(b % w)) > 2)
+                .map(|b| pad.dist(a as u32, b as u32, f32::INFINITY))
+                .collect();
+            all.sort_by(f32::total_cmp);
+            for j in 0..3 {
+                assert!((t.dist[a * 3 + j] - all[j]).abs() <= 1e-5 * all[j].max(1.0));
+            }
+        }
+    }
+
+    #[test]
+    fn approximate_recall_is_high() {
+        let (h, w) = (40, 40);
+        let d = tex(h, w);
+        let img = Image::new("exemplar", &d, h, w, 3).unwrap();
+        let base = KnnParams { patch_size: 5, k: 4, exclude: 2, iterations: 8, ..KnnParams::default() };
+        let exact = knn(&img, None, &KnnParams { exact: true, ..base.clone() }).unwrap();
+        let approx = knn(&img, None, &base).unwrap();
+        // Quality by distance: the approximate k-th distance is rarely worse than exact.
+        let mean = |v: &[f32]| v.iter().map(|x| f64::from(*x)).sum::<f64>() / v.len() as f64;
+        let (me, ma) = (mean(&exact.dist), mean(&approx.dist));
+        assert!(ma <= me * 1.10, "approximate mean distance {ma} vs exact {me}");
+    }
+
+    #[test]
+    fn candidates_forward_shift() {
+        // A 3×3 output copied as a block from (5, 5) of a 10×10 exemplar: every pixel's
+        // coherence candidates all agree on the same exemplar pixel.
+        let (eh, ew) = (10usize, 10usize);
+        let refs: Vec<u32> = (0..9).map(|i| ((5 + i / 3) * ew + 5 + i % 3) as u32).collect();
+        let (c, m) = coherence_candidates(&refs, 3, 3, eh, ew, None, 3, false).unwrap();
+        assert_eq!(m, 9);
+        for i in 0..9 {
+            assert_eq!(c[i * m], refs[i]);
+            assert!(c[i * m + 1..(i + 1) * m].iter().all(|v| *v == NONE));
+        }
+    }
+}

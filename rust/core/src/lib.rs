@@ -1,0 +1,22 @@
+//! phloem-core: the pure-Rust engines under every phloem pipeline.
+//!
+//! Nothing here knows about Python. Images are `H×W×C` `f32` arrays in row-major
+//! (C-contiguous) order, masks are `H×W` `bool`, and every stochastic routine takes a
+//! `seed` and returns the same result whatever the number of rayon threads.
+//!
+//! Engines so far:
+//! - [`patch`]: nearest-neighbour fields by PatchMatch (Barnes et al. 2009) and exact search;
+//! - [`knn`]: k nearest patches inside one exemplar and the k-coherence candidate sets of
+//!   Tong et al. 2002;
+//! - [`vote`]: weighted patch voting, the M-step of texture optimisation (Kwatra et al. 2005)
+//!   and of image completion (Wexler et al. 2007).
+
+pub mod error;
+pub mod image;
+pub mod knn;
+pub mod patch;
+pub mod rng;
+pub mod vote;
+
+pub use error::{Error, Result};
+pub use image::Image;

@@ -1,0 +1,765 @@
+//! Nearest-neighbour fields between two images: PatchMatch (Barnes, Shechtman, Finkelstein,
+//! Goldman 2009, "PatchMatch: a randomized correspondence algorithm for structural image
+//! editing") and exact search, the reference it is measured against.
+//!
+//! For every target pixel that needs a match, the field holds the centre of a source patch of
+//! `patch_size × patch_size` pixels whose distance to the target patch centred there is
+//! (approximately, for PatchMatch) minimal. Distances are weighted sums of squared differences
+//! over all channels. Source patches always lie wholly inside the source; target patches are
+//! clipped at the target border (only the part inside is compared), so every target pixel gets
+//! a match.
+//!
+//! Parallelism and determinism: an iteration splits the target into stripes of
+//! [`STRIPE_ROWS`] rows — a property of the image, not of the thread pool. Inside a stripe the
+//! scan is sequential (raster order on even iterations, reverse on odd ones, as in the paper),
+//! so propagation runs at full strength; across a stripe border a pixel reads its neighbour's
+//! match from the previous iteration. Every pixel draws its random numbers from its own
+//! stream keyed by `(seed, level, iteration, pixel)`. Together these make the result
+//! bit-identical for any number of threads.
+
+use std::borrow::Cow;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use rayon::prelude::*;
+
+use crate::error::{invalid, Result};
+use crate::image::{prescale, Image};
+use crate::rng::Rng;
+
+/// Rows per work unit of one PatchMatch iteration. Fixed, so that results do not depend on
+/// the thread count.
+pub const STRIPE_ROWS: usize = 16;
+
+/// Marks a target pixel that needs no match.
+pub const NONE: u32 = u32::MAX;
+
+/// How to compute the field.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// Randomised search with propagation (approximate, fast).
+    PatchMatch,
+    /// Brute force over every allowed source patch (exact, `O(source × target)`).
+    Exact,
+}
+
+/// Parameters of [`nnf`]. Validated before any work starts.
+#[derive(Clone, Debug)]
+pub struct NnfParams {
+    /// Side of the square patches; odd. Default 7.
+    pub patch_size: usize,
+    /// PatchMatch iterations per pyramid level (each one propagation + random search pass).
+    /// Default 5, the paper's "4–5 iterations suffice". Ignored by exact search.
+    pub iterations: usize,
+    /// Pyramid levels for coarse-to-fine PatchMatch; 1 (the default) matches at full
+    /// resolution only. Levels stop early when the source gets smaller than a patch.
+    pub levels: usize,
+    /// Seed of every random choice.
+    pub seed: u64,
+    /// PatchMatch or exact search.
+    pub method: Method,
+}
+
+impl Default for NnfParams {
+    fn default() -> Self {
+        Self { patch_size: 7, iterations: 5, levels: 1, seed: 0, method: Method::PatchMatch }
+    }
+}
+
+/// The inputs of [`nnf`]: two images with the same channel count and optional constraints.
+#[derive(Clone, Copy, Debug)]
+pub struct NnfInput<'a> {
+    /// Where patches come from.
+    pub source: Image<'a>,
+    /// Where patches are matched.
+    pub target: Image<'a>,
+    /// One non-negative weight per channel (default: all 1).
+    pub weights: Option<&'a [f32]>,
+    /// `source.h × source.w`: source pixels that may serve as patch centres.
+    pub source_mask: Option<&'a [bool]>,
+    /// `target.h × target.w`: target pixels that need a match (default: all).
+    pub target_mask: Option<&'a [bool]>,
+    /// `target.h × target.w × 2` initial (row, col) source centres; `-1` rows mean "random".
+    pub init: Option<&'a [i32]>,
+    /// Forward enrichment (Barnes et al. 2010, "The generalized PatchMatch correspondence
+    /// algorithm", §3.2): `source.h × source.w × k` flat source indices of each source
+    /// pixel's most similar other source patches (from [`crate::knn::knn`]). Each iteration
+    /// then also tries the neighbours of a pixel's current match, which is what finds good
+    /// matches when source and target share no coherent structure. Full resolution only.
+    pub source_knn: Option<(&'a [u32], usize)>,
+}
+
+/// A nearest-neighbour field.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Nnf {
+    /// Target height.
+    pub h: usize,
+    /// Target width.
+    pub w: usize,
+    /// Source width (to decode `idx`).
+    pub source_w: usize,
+    /// Per target pixel, the flat source index `row * source_w + col` of the matched patch
+    /// centre, or [`NONE`].
+    pub idx: Vec<u32>,
+    /// Per target pixel, the weighted squared distance of its match (`+inf` for [`NONE`]).
+    pub dist: Vec<f32>,
+    /// Number of candidate patches whose distance was evaluated (for throughput figures).
+    pub evaluations: u64,
+}
+
+impl Nnf {
+    /// The field as `h × w × 2` (row, col) pairs, `-1` where no match was asked for.
+    #[must_use]
+    pub fn to_rowcol(&self) -> Vec<i32> {
+        let sw = self.source_w as u32;
+        self.idx
+            .iter()
+            .flat_map(|&i| if i == NONE { [-1, -1] } else { [(i / sw) as i32, (i % sw) as i32] })
+            .collect()
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Cell {
+    idx: u32,
+    d: f32,
+}
+
+const EMPTY: Cell = Cell { idx: NONE, d: f32::INFINITY };
+
+/// Sum of squared differences of two equally long slices, eight lanes at a time so the
+/// compiler vectorises it. The summation order is fixed, so the value is reproducible.
+#[inline]
+pub(crate) fn ssd(a: &[f32], b: &[f32]) -> f32 {
+    debug_assert_eq!(a.len(), b.len());
+    let mut acc = [0f32; 8];
+    let ca = a.chunks_exact(8);
+    let cb = b.chunks_exact(8);
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for i in 0..8 {
+            let d = x[i] - y[i];
+            acc[i] += d * d;
+        }
+    }
+    let mut tail = 0f32;
+    for (x, y) in ra.iter().zip(rb) {
+        let d = x - y;
+        tail += d * d;
+    }
+    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
+}
+
+/// One resolution of a matching problem: prescaled buffers, dimensions and constraints.
+struct Level<'a> {
+    src: Cow<'a, [f32]>,
+    sh: usize,
+    sw: usize,
+    tgt: Cow<'a, [f32]>,
+    th: usize,
+    tw: usize,
+    c: usize,
+    r: usize,
+    /// Per source pixel: may be a patch centre (mask and border both allow it).
+    allowed: Vec<bool>,
+    allowed_list: Vec<u32>,
+    /// Per target pixel: needs a match.
+    need: Option<Cow<'a, [bool]>>,
+    /// Source self-similarity lists for enrichment, `k` per source pixel.
+    knn: Option<(&'a [u32], usize)>,
+}
+
+impl Level<'_> {
+    fn new<'b>(
+        src: Cow<'b, [f32]>,
+        (sh, sw): (usize, usize),
+        tgt: Cow<'b, [f32]>,
+        (th, tw): (usize, usize),
+        c: usize,
+        r: usize,
+        source_mask: Option<&[bool]>,
+        need: Option<Cow<'b, [bool]>>,
+    ) -> Level<'b> {
+        let mut allowed = vec![false; sh * sw];
+        let mut allowed_list = Vec::new();
+        if sh > 2 * r && sw > 2 * r {
+            for y in r..sh - r {
+                for x in r..sw - r {
+                    let i = y * sw + x;
+                    if source_mask.is_none_or(|m| m[i]) {
+                        allowed[i] = true;
+                        allowed_list.push(i as u32);
+                    }
+                }
+            }
+        }
+        Level { src, sh, sw, tgt, th, tw, c, r, allowed, allowed_list, need, knn: None }
+    }
+
+    #[inline]
+    fn needs(&self, i: usize) -> bool {
+        self.need.as_ref().is_none_or(|m| m[i])
+    }
+
+    /// Distance between the target patch at `(ty, tx)` and the source patch centred at `s`,
+    /// abandoning the sum once it reaches `cutoff`.
+    #[inline]
+    fn dist(&self, ty: usize, tx: usize, s: u32, cutoff: f32) -> f32 {
+        let (sy, sx) = ((s as usize) / self.sw, (s as usize) % self.sw);
+        let r = self.r;
+        let dy0 = ty.min(r);
+        let dy1 = (self.th - 1 - ty).min(r);
+        let dx0 = tx.min(r);
+        let dx1 = (self.tw - 1 - tx).min(r);
+        let len = (dx0 + dx1 + 1) * self.c;
+        let mut acc = 0f32;
+        for k in 0..=dy0 + dy1 {
+            let t0 = ((ty - dy0 + k) * self.tw + tx - dx0) * self.c;
+            let s0 = ((sy - dy0 + k) * self.sw + sx - dx0) * self.c;
+            acc += ssd(&self.tgt[t0..t0 + len], &self.src[s0..s0 + len]);
+            if acc >= cutoff {
+                return acc;
+            }
+        }
+        acc
+    }
+
+    #[inline]
+    fn valid(&self, y: i64, x: i64) -> Option<u32> {
+        let r = self.r as i64;
+        if y < r || x < r || y >= (self.sh as i64) - r || x >= (self.sw as i64) - r {
+            return None;
+        }
+        let i = y as usize * self.sw + x as usize;
+        self.allowed[i].then_some(i as u32)
+    }
+
+    fn random_allowed(&self, rng: &mut Rng) -> u32 {
+        self.allowed_list[rng.below(self.allowed_list.len() as u64) as usize]
+    }
+
+    /// Starting field: `guess(pixel)` where it proposes an allowed centre, random elsewhere.
+    fn initialise(&self, seed: u64, level: usize, guess: impl Fn(usize) -> Option<u32> + Sync) -> Vec<Cell> {
+        let mut cells = vec![EMPTY; self.th * self.tw];
+        cells.par_chunks_mut(self.tw).enumerate().for_each(|(y, row)| {
+            for (x, cell) in row.iter_mut().enumerate() {
+                let i = y * self.tw + x;
+                if !self.needs(i) {
+                    continue;
+                }
+                let idx = guess(i).unwrap_or_else(|| {
+                    let mut rng = Rng::keyed(seed, (level as u64) << 32 | 0xFFFF_FFFF, i as u64);
+                    self.random_allowed(&mut rng)
+                });
+                *cell = Cell { idx, d: self.dist(y, x, idx, f32::INFINITY) };
+            }
+        });
+        cells
+    }
+
+    /// One PatchMatch iteration (propagation + random search) over the whole target.
+    fn iterate(&self, cells: &mut [Cell], seed: u64, level: usize, it: usize) -> u64 {
+        let prev = cells.to_vec();
+        let reverse = it % 2 == 1;
+        let step: i64 = if reverse { 1 } else { -1 };
+        let evals = AtomicU64::new(0);
+        let search_radius = self.sh.max(self.sw) as i64;
+        let tw = self.tw;
+        cells.par_chunks_mut(STRIPE_ROWS * tw).enumerate().for_each(|(stripe, chunk)| {
+            let y0 = stripe * STRIPE_ROWS;
+            let rows = chunk.len() / tw;
+            let mut count = 0u64;
+            for yy in 0..rows {
+                let ly = if reverse { rows - 1 - yy } else { yy };
+                let y = y0 + ly;
+                for xx in 0..tw {
+                    let x = if reverse { tw - 1 - xx } else { xx };
+                    let li = ly * tw + x;
+                    let mut best = chunk[li];
+                    if best.idx == NONE {
+                        continue;
+                    }
+                    let mut try_candidate = |cand: Option<u32>, best: &mut Cell| {
+                        if let Some(s) = cand {
+                            if s != best.idx {
+                                count += 1;
+                                let d = self.dist(y, x, s, best.d);
+                                if d < best.d {
+                                    *best = Cell { idx: s, d };
+                                }
+                            }
+                        }
+                    };
+                    // Propagation: the neighbour one step back along the scan, shifted.
+                    let nx = x as i64 + step;
+                    if nx >= 0 && nx < tw as i64 {
+                        let n = chunk[ly * tw + nx as usize].idx;
+                        if n != NONE {
+                            let (sy, sx) = ((n as usize / self.sw) as i64, (n as usize % self.sw) as i64);
+                            try_candidate(self.valid(sy, sx - step), &mut best);
+                        }
+                    }
+                    let nly = ly as i64 + step;
+                    let ny = y as i64 + step;
+                    let n = if nly >= 0 && nly < rows as i64 {
+                        chunk[nly as usize * tw + x].idx
+                    } else if ny >= 0 && ny < self.th as i64 {
+                        prev[ny as usize * tw + x].idx
+                    } else {
+                        NONE
+                    };
+                    if n != NONE {
+                        let (sy, sx) = ((n as usize / self.sw) as i64, (n as usize % self.sw) as i64);
+                        try_candidate(self.valid(sy - step, sx), &mut best);
+                    }
+                    // Forward enrichment: the source neighbours of the current match.
+                    if let Some((table, k)) = self.knn {
+                        let b = best.idx as usize;
+                        for &j in &table[b * k..(b + 1) * k] {
+                            if j != NONE && self.allowed[j as usize] {
+                                try_candidate(Some(j), &mut best);
+                            }
+                        }
+                    }
+                    // Random search around the current best, radius halving (alpha = 1/2).
+                    let mut rng = Rng::keyed(seed, (level as u64) << 32 | it as u64, (y * tw + x) as u64);
+                    let (by, bx) = ((best.idx as usize / self.sw) as i64, (best.idx as usize % self.sw) as i64);
+                    let r = self.r as i64;
+                    let mut rad = search_radius;
+                    while rad >= 1 {
+                        let ylo = (by - rad).max(r);
+                        let yhi = (by + rad).min(self.sh as i64 - 1 - r);
+                        let xlo = (bx - rad).max(r);
+                        let xhi = (bx + rad).min(self.sw as i64 - 1 - r);
+                        let cy = rng.range_inclusive(ylo, yhi);
+                        let cx = rng.range_inclusive(xlo, xhi);
+                        try_candidate(self.valid(cy, cx), &mut best);
+                        rad /= 2;
+                    }
+                    chunk[li] = best;
+                }
+            }
+            evals.fetch_add(count, Ordering::Relaxed);
+        });
+        evals.into_inner()
+    }
+
+    /// Exact search: every allowed source centre for every target pixel that needs one.
+    fn exact(&self) -> (Vec<Cell>, u64) {
+        let mut cells = vec![EMPTY; self.th * self.tw];
+        cells.par_chunks_mut(self.tw).enumerate().for_each(|(y, row)| {
+            for (x, cell) in row.iter_mut().enumerate() {
+                if !self.needs(y * self.tw + x) {
+                    continue;
+                }
+                let mut best = Cell { idx: NONE, d: f32::INFINITY };
+                for &s in &self.allowed_list {
+                    let d = self.dist(y, x, s, best.d);
+                    if d < best.d {
+                        best = Cell { idx: s, d };
+                    }
+                }
+                *cell = best;
+            }
+        });
+        let n = self.allowed_list.len() as u64 * self.need_count() as u64;
+        (cells, n)
+    }
+
+    fn need_count(&self) -> usize {
+        self.need.as_ref().map_or(self.th * self.tw, |m| m.iter().filter(|v| **v).count())
+    }
+
+    /// Half-resolution copy: 2×2 box average of images, AND of the source mask, OR of the
+    /// target mask.
+    fn coarser(&self, source_mask: Option<&[bool]>) -> (Level<'static>, Option<Vec<bool>>) {
+        let (src, sh, sw) = half(&self.src, self.sh, self.sw, self.c);
+        let (tgt, th, tw) = half(&self.tgt, self.th, self.tw, self.c);
+        let smask = source_mask.map(|m| half_mask(m, self.sh, self.sw, true));
+        let need = self.need.as_ref().map(|m| Cow::Owned(half_mask(m, self.th, self.tw, false)));
+        let lvl = Level::new(Cow::Owned(src), (sh, sw), Cow::Owned(tgt), (th, tw), self.c, self.r, smask.as_deref(), need);
+        (lvl, smask)
+    }
+}
+
+fn half(buf: &[f32], h: usize, w: usize, c: usize) -> (Vec<f32>, usize, usize) {
+    let (nh, nw) = (h / 2, w / 2);
+    let mut out = vec![0f32; nh * nw * c];
+    out.par_chunks_mut(nw * c).enumerate().for_each(|(y, row)| {
+        for x in 0..nw {
+            for k in 0..c {
+                let at = |yy: usize, xx: usize| buf[(yy * w + xx) * c + k];
+                row[x * c + k] =
+                    0.25 * (at(2 * y, 2 * x) + at(2 * y, 2 * x + 1) + at(2 * y + 1, 2 * x) + at(2 * y + 1, 2 * x + 1));
+            }
+        }
+    });
+    (out, nh, nw)
+}
+
+fn half_mask(m: &[bool], h: usize, w: usize, all: bool) -> Vec<bool> {
+    let (nh, nw) = (h / 2, w / 2);
+    let mut out = Vec::with_capacity(nh * nw);
+    for y in 0..nh {
+        for x in 0..nw {
+            let q = [m[2 * y * w + 2 * x], m[2 * y * w + 2 * x + 1], m[(2 * y + 1) * w + 2 * x], m[(2 * y + 1) * w + 2 * x + 1]];
+            out.push(if all { q.iter().all(|v| *v) } else { q.iter().any(|v| *v) });
+        }
+    }
+    out
+}
+
+/// Checks every argument of [`nnf`] and returns the prescaled finest level.
+fn validate<'a>(input: &NnfInput<'a>, params: &NnfParams) -> Result<Level<'a>> {
+    let (s, t) = (input.source, input.target);
+    let p = params.patch_size;
+    if p == 0 || p % 2 == 0 {
+        return Err(invalid("patch_size", format!("expected an odd size >= 1, got {p}")));
+    }
+    if p > s.h || p > s.w {
+        return Err(invalid(
+            "patch_size",
+            format!("{p} does not fit in the source image of {}×{} pixels", s.h, s.w),
+        ));
+    }
+    if t.c != s.c {
+        return Err(invalid("target", format!("expected {} channels like source, got {}", s.c, t.c)));
+    }
+    if params.levels == 0 {
+        return Err(invalid("levels", "expected at least 1 pyramid level, got 0"));
+    }
+    s.check_finite("source")?;
+    t.check_finite("target")?;
+    if let Some(m) = input.source_mask {
+        if m.len() != s.h * s.w {
+            return Err(invalid("source_mask", format!("expected {}×{} values like source, got {}", s.h, s.w, m.len())));
+        }
+    }
+    if let Some(m) = input.target_mask {
+        if m.len() != t.h * t.w {
+            return Err(invalid("target_mask", format!("expected {}×{} values like target, got {}", t.h, t.w, m.len())));
+        }
+        if !m.iter().any(|v| *v) {
+            return Err(invalid("target_mask", "no target pixel is selected (the mask is empty)"));
+        }
+    }
+    let src = prescale(&s, input.weights)?;
+    let tgt = prescale(&t, input.weights)?;
+    let level = Level::new(
+        Cow::Owned(src),
+        (s.h, s.w),
+        Cow::Owned(tgt),
+        (t.h, t.w),
+        s.c,
+        p / 2,
+        input.source_mask,
+        input.target_mask.map(Cow::Borrowed),
+    );
+    if level.allowed_list.is_empty() {
+        return Err(invalid(
+            "source_mask",
+            format!("no source patch may be used: the mask selects no pixel at least {} pixels from the border", p / 2),
+        ));
+    }
+    if let Some((table, k)) = input.source_knn {
+        if k == 0 || table.len() != s.h * s.w * k {
+            return Err(invalid("source_knn", format!("expected {}×{}×k neighbour indices like source, got {} values for k = {k}", s.h, s.w, table.len())));
+        }
+        if let Some(bad) = table.iter().find(|v| **v != NONE && **v as usize >= s.h * s.w) {
+            return Err(invalid("source_knn", format!("index {bad} is outside the {}×{} source", s.h, s.w)));
+        }
+    }
+    let mut level = level;
+    level.knn = input.source_knn;
+    if let Some(init) = input.init {
+        if init.len() != t.h * t.w * 2 {
+            return Err(invalid("init", format!("expected a {}×{}×2 field like target, got {} values", t.h, t.w, init.len())));
+        }
+        for (i, rc) in init.chunks_exact(2).enumerate() {
+            if rc[0] < 0 && rc[1] < 0 {
+                continue;
+            }
+            if level.valid(i64::from(rc[0]), i64::from(rc[1])).is_none() {
+                return Err(invalid(
+                    "init",
+                    format!(
+                        "entry at (row {}, col {}) = ({}, {}) is not an allowed source patch centre",
+                        i / t.w,
+                        i % t.w,
+                        rc[0],
+                        rc[1]
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(level)
+}
+
+/// Computes a nearest-neighbour field from `input.target` to `input.source`.
+///
+/// See the module documentation for the conventions. Errors name the offending argument:
+/// an even or oversized `patch_size`, mismatched channels or mask sizes, NaN or infinite
+/// values, an empty target mask, a source mask that leaves no usable patch, an `init` entry
+/// that is not an allowed centre.
+pub fn nnf(input: &NnfInput<'_>, params: &NnfParams) -> Result<Nnf> {
+    let finest = validate(input, params)?;
+    if params.method == Method::Exact {
+        let (cells, evaluations) = finest.exact();
+        return Ok(to_nnf(&finest, &cells, evaluations));
+    }
+    // Build the pyramid, finest first, while the source can still hold a patch.
+    let mut levels = vec![finest];
+    let mut masks: Vec<Option<Vec<bool>>> = vec![input.source_mask.map(<[bool]>::to_vec)];
+    while levels.len() < params.levels && input.init.is_none() {
+        let last = levels.last().expect("pyramid has a level");
+        if last.sh / 2 < params.patch_size || last.sw / 2 < params.patch_size || last.th < 2 || last.tw < 2 {
+            break;
+        }
+        let (next, m) = last.coarser(masks.last().expect("mask per level").as_deref());
+        if next.allowed_list.is_empty() || next.need_count() == 0 {
+            break;
+        }
+        levels.push(next);
+        masks.push(m);
+    }
+    let mut evaluations = 0u64;
+    let mut cells: Vec<Cell> = Vec::new();
+    for li in (0..levels.len()).rev() {
+        let lvl = &levels[li];
+        cells = if li + 1 == levels.len() {
+            match input.init {
+                Some(init) => lvl.initialise(params.seed, li, |i| {
+                    let (r, c) = (init[2 * i], init[2 * i + 1]);
+                    lvl.valid(i64::from(r), i64::from(c))
+                }),
+                None => lvl.initialise(params.seed, li, |_| None),
+            }
+        } else {
+            let coarse = &levels[li + 1];
+            let prev = &cells;
+            lvl.initialise(params.seed, li, |i| {
+                let (y, x) = (i / lvl.tw, i % lvl.tw);
+                let (py, px) = ((y / 2).min(coarse.th - 1), (x / 2).min(coarse.tw - 1));
+                let n = prev[py * coarse.tw + px].idx;
+                if n == NONE {
+                    return None;
+                }
+                let (sy, sx) = ((n as usize / coarse.sw) as i64, (n as usize % coarse.sw) as i64);
+                let r = lvl.r as i64;
+                let cy = (2 * sy + (y - 2 * py) as i64).clamp(r, lvl.sh as i64 - 1 - r);
+                let cx = (2 * sx + (x - 2 * px) as i64).clamp(r, lvl.sw as i64 - 1 - r);
+                lvl.valid(cy, cx)
+            })
+        };
+        for it in 0..params.iterations {
+            evaluations += lvl.iterate(&mut cells, params.seed, li, it);
+        }
+    }
+    Ok(to_nnf(&levels[0], &cells, evaluations))
+}
+
+fn to_nnf(lvl: &Level<'_>, cells: &[Cell], evaluations: u64) -> Nnf {
+    Nnf {
+        h: lvl.th,
+        w: lvl.tw,
+        source_w: lvl.sw,
+        idx: cells.iter().map(|c| c.idx).collect(),
+        dist: cells.iter().map(|c| c.d).collect(),
+        evaluations,
+    }
+}
+
+/// The distance [`nnf`] assigns to matching target pixel `(ty, tx)` with the source patch
+/// centred at `(sy, sx)`; unweighted. For tests and metrics.
+#[must_use]
+pub fn patch_distance(source: &Image<'_>, target: &Image<'_>, patch_size: usize, (ty, tx): (usize, usize), (sy, sx): (usize, usize)) -> f32 {
+    let r = patch_size as i64 / 2;
+    let mut acc = 0f32;
+    for dy in -r..=r {
+        for dx in -r..=r {
+            let (y, x) = (ty as i64 + dy, tx as i64 + dx);
+            if y < 0 || x < 0 || y >= target.h as i64 || x >= target.w as i64 {
+                continue;
+            }
+            let a = target.pixel(y as usize, x as usize);
+            let b = source.pixel((sy as i64 + dy) as usize, (sx as i64 + dx) as usize);
+            acc += a.iter().zip(b).map(|(u, v)| (u - v) * (u - v)).sum::<f32>();
+        }
+    }
+    acc
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    /// A smooth-plus-noise test texture with structure at several scales.
+    pub(crate) fn texture(h: usize, w: usize, c: usize, seed: u64) -> Vec<f32> {
+        let mut rng = Rng::keyed(seed, 0, 0);
+        let mut v = Vec::with_capacity(h * w * c);
+        for y in 0..h {
+            for x in 0..w {
+                for k in 0..c {
+                    let (fy, fx) = (y as f32, x as f32);
+                    let base = ((fx * 0.31 + k as f32).sin() * (fy * 0.17).cos() + (0.05 * (fx + 2.0 * fy)).sin()) * 0.4 + 0.5;
+                    v.push(base + (rng.below(1000) as f32 / 1000.0 - 0.5) * 0.1);
+                }
+            }
+        }
+        v
+    }
+
+    fn run(src: &[f32], sh: usize, sw: usize, tgt: &[f32], th: usize, tw: usize, params: &NnfParams) -> Nnf {
+        let input = NnfInput {
+            source: Image::new("source", src, sh, sw, 3).unwrap(),
+            target: Image::new("target", tgt, th, tw, 3).unwrap(),
+            weights: None,
+            source_mask: None,
+            target_mask: None,
+            init: None,
+            source_knn: None,
+        };
+        nnf(&input, params).unwrap()
+    }
+
+    #[test]
+    fn ssd_matches_naive_sum() {
+        let a: Vec<f32> = (0..29).map(|i| i as f32 * 0.1).collect();
+        let b: Vec<f32> = (0..29).map(|i| (i * i) as f32 * 0.01).collect();
+        let naive: f32 = a.iter().zip(&b).map(|(x, y)| (x - y) * (x - y)).sum();
+        assert!((ssd(&a, &b) - naive).abs() < 1e-4 * naive);
+    }
+
+    #[test]
+    fn exact_finds_the_true_minimum() {
+        let (sh, sw, th, tw) = (20, 24, 9, 11);
+        let src = texture(sh, sw, 3, 1);
+        let tgt = texture(th, tw, 3, 2);
+        let f = run(&src, sh, sw, &tgt, th, tw, &NnfParams { method: Method::Exact, patch_size: 5, ..NnfParams::default() });
+        let s = Image::new("s", &src, sh, sw, 3).unwrap();
+        let t = Image::new("t", &tgt, th, tw, 3).unwrap();
+        for ty in 0..th {
+            for tx in 0..tw {
+                let mut best = f32::INFINITY;
+                for sy in 2..sh - 2 {
+                    for sx in 2..sw - 2 {
+                        best = best.min(patch_distance(&s, &t, 5, (ty, tx), (sy, sx)));
+                    }
+                }
+                let got = f.dist[ty * tw + tx];
+                assert!((got - best).abs() <= 1e-4 * best.max(1.0), "({ty},{tx}): {got} vs {best}");
+                let i = f.idx[ty * tw + tx] as usize;
+                let d = patch_distance(&s, &t, 5, (ty, tx), (i / sw, i % sw));
+                assert!((d - got).abs() <= 1e-4 * d.max(1.0));
+            }
+        }
+    }
+
+    #[test]
+    fn patchmatch_recovers_a_shifted_copy() {
+        // The target is a crop of the source: every interior pixel has a zero-distance match.
+        let (sh, sw) = (64, 64);
+        let src = texture(sh, sw, 3, 5);
+        let (th, tw, oy, ox) = (32, 40, 13, 9);
+        let mut tgt = Vec::with_capacity(th * tw * 3);
+        for y in 0..th {
+            for x in 0..tw {
+                tgt.extend_from_slice(&src[((y + oy) * sw + x + ox) * 3..][..3]);
+            }
+        }
+        let f = run(&src, sh, sw, &tgt, th, tw, &NnfParams::default());
+        let exact_hits = (0..th * tw)
+            .filter(|&i| {
+                let (y, x) = (i / tw, i % tw);
+                f.idx[i] as usize == (y + oy) * sw + x + ox
+            })
+            .count();
+        assert!(exact_hits as f32 > 0.97 * (th * tw) as f32, "{exact_hits} of {}", th * tw);
+    }
+
+    #[test]
+    fn identical_for_any_thread_count() {
+        let (sh, sw, th, tw) = (70, 50, 45, 61);
+        let src = texture(sh, sw, 3, 3);
+        let tgt = texture(th, tw, 3, 4);
+        let params = NnfParams { levels: 3, ..NnfParams::default() };
+        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        let three = rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap();
+        let a = one.install(|| run(&src, sh, sw, &tgt, th, tw, &params));
+        let b = three.install(|| run(&src, sh, sw, &tgt, th, tw, &params));
+        assert_eq!(a.idx, b.idx);
+        assert_eq!(a.dist.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), b.dist.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+        assert_eq!(a.evaluations, b.evaluations);
+    }
+
+    #[test]
+    fn masks_are_respected() {
+        let (sh, sw, th, tw) = (40, 40, 30, 30);
+        let src = texture(sh, sw, 3, 8);
+        let tgt = texture(th, tw, 3, 9);
+        let smask: Vec<bool> = (0..sh * sw).map(|i| (i % sw) < 20).collect();
+        let tmask: Vec<bool> = (0..th * tw).map(|i| (i / tw) % 3 == 0).collect();
+        let input = NnfInput {
+            source: Image::new("source", &src, sh, sw, 3).unwrap(),
+            target: Image::new("target", &tgt, th, tw, 3).unwrap(),
+            weights: None,
+            source_mask: Some(&smask),
+            target_mask: Some(&tmask),
+            init: None,
+            source_knn: None,
+        };
+        for method in [Method::PatchMatch, Method::Exact] {
+            let f = nnf(&input, &NnfParams { method, levels: 2, ..NnfParams::default() }).unwrap();
+            for (i, &s) in f.idx.iter().enumerate() {
+                if tmask[i] {
+                    assert_ne!(s, NONE);
+                    let (y, x) = (s as usize / sw, s as usize % sw);
+                    assert!(smask[s as usize] && (3..sh - 3).contains(&y) && (3..sw - 3).contains(&x));
+                } else {
+                    assert_eq!(s, NONE);
+                    assert!(f.dist[i].is_infinite());
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bad_arguments_are_named() {
+        let src = texture(10, 10, 3, 1);
+        let mut input = NnfInput {
+            source: Image::new("source", &src, 10, 10, 3).unwrap(),
+            target: Image::new("target", &src, 10, 10, 3).unwrap(),
+            weights: None,
+            source_mask: None,
+            target_mask: None,
+            init: None,
+            source_knn: None,
+        };
+        let name = |r: Result<Nnf>| match r {
+            Err(crate::Error::InvalidArgument { name, .. }) => name,
+            other => panic!("expected an invalid argument, got {other:?}"),
+        };
+        assert_eq!(name(nnf(&input, &NnfParams { patch_size: 4, ..NnfParams::default() })), "patch_size");
+        assert_eq!(name(nnf(&input, &NnfParams { patch_size: 11, ..NnfParams::default() })), "patch_size");
+        let empty = vec![false; 100];
+        input.target_mask = Some(&empty);
+        assert_eq!(name(nnf(&input, &NnfParams::default())), "target_mask");
+        input.target_mask = None;
+        input.source_mask = Some(&empty);
+        assert_eq!(name(nnf(&input, &NnfParams::default())), "source_mask");
+        input.source_mask = None;
+        let mut nan = src.clone();
+        nan[17] = f32::NAN;
+        input.target = Image::new("target", &nan, 10, 10, 3).unwrap();
+        assert_eq!(name(nnf(&input, &NnfParams::default())), "target");
+        input.target = Image::new("target", &src, 10, 10, 3).unwrap();
+        let w = [1.0, -1.0, 1.0];
+        input.weights = Some(&w);
+        assert_eq!(name(nnf(&input, &NnfParams::default())), "weights");
+        input.weights = None;
+        let init = vec![0i32; 200];
+        input.init = Some(&init);
+        assert_eq!(name(nnf(&input, &NnfParams::default())), "init");
+    }
+}

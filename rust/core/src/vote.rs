@@ -1,0 +1,150 @@
+//! Weighted patch voting: every output pixel becomes the weighted mean of the values that the
+//! overlapping matched source patches put there. This is the colour update of texture
+//! optimisation (Kwatra, Essa, Bobick, Kwatra 2005, Eq. 4 with weights `|z_p − x_p|^(r−2)`) and
+//! of space-time completion (Wexler, Shechtman, Irani 2007, Eq. 3); the caller chooses the
+//! per-patch weights.
+//!
+//! The loop is written in gather form (each output pixel reads the patches that cover it), so
+//! pixels are independent, the sum order is fixed and the result does not depend on threads.
+
+use rayon::prelude::*;
+
+use crate::error::{invalid, Result};
+use crate::image::Image;
+use crate::patch::NONE;
+
+/// Output of [`vote`].
+#[derive(Clone, Debug)]
+pub struct Voted {
+    /// `h × w × c` voted values; pixels no patch covers are 0.
+    pub image: Vec<f32>,
+    /// `h × w` sum of the weights that reached each pixel (0 where nothing did).
+    pub weight: Vec<f32>,
+}
+
+/// Converts a `h × w × 2` (row, col) field into flat source indices, checking every entry is
+/// a patch centre whose patch lies inside the `sh × sw` source (`-1, -1` means no match).
+pub fn idx_from_rowcol(field: &[i32], sh: usize, sw: usize, patch_size: usize) -> Result<Vec<u32>> {
+    let r = (patch_size / 2) as i32;
+    field
+        .chunks_exact(2)
+        .enumerate()
+        .map(|(i, rc)| {
+            if rc[0] == -1 && rc[1] == -1 {
+                return Ok(NONE);
+            }
+            if rc[0] < r || rc[1] < r || rc[0] >= sh as i32 - r || rc[1] >= sw as i32 - r {
+                return Err(invalid(
+                    "field",
+                    format!("entry {i} = ({}, {}) is not a centre of a {patch_size}×{patch_size} patch inside the {sh}×{sw} source", rc[0], rc[1]),
+                ));
+            }
+            Ok(rc[0] as u32 * sw as u32 + rc[1] as u32)
+        })
+        .collect()
+}
+
+/// Votes source patches into an `h × w` image.
+///
+/// `idx[i]` is the source centre matched to target pixel `i` (or [`NONE`]); `weights[i]` the
+/// weight of that patch (default 1). Weights must be finite and non-negative.
+pub fn vote(source: &Image<'_>, idx: &[u32], h: usize, w: usize, weights: Option<&[f32]>, patch_size: usize) -> Result<Voted> {
+    if patch_size == 0 || patch_size % 2 == 0 {
+        return Err(invalid("patch_size", format!("expected an odd size >= 1, got {patch_size}")));
+    }
+    if idx.len() != h * w {
+        return Err(invalid("field", format!("expected {h}×{w} entries, got {}", idx.len())));
+    }
+    if let Some(wt) = weights {
+        if wt.len() != h * w {
+            return Err(invalid("weights", format!("expected {h}×{w} patch weights like the field, got {}", wt.len())));
+        }
+        if let Some(bad) = wt.iter().find(|v| !v.is_finite() || **v < 0.0) {
+            return Err(invalid("weights", format!("expected finite non-negative weights, got {bad}")));
+        }
+    }
+    let r = patch_size / 2;
+    let (c, sw) = (source.c, source.w);
+    let mut image = vec![0f32; h * w * c];
+    let mut weight = vec![0f32; h * w];
+    image.par_chunks_mut(w * c).zip(weight.par_chunks_mut(w)).enumerate().for_each(|(y, (row, wrow))| {
+        let mut acc = vec![0f32; c];
+        for x in 0..w {
+            acc.iter_mut().for_each(|v| *v = 0.0);
+            let mut total = 0f32;
+            for cy in y.saturating_sub(r)..=(y + r).min(h - 1) {
+                for cx in x.saturating_sub(r)..=(x + r).min(w - 1) {
+                    let ci = cy * w + cx;
+                    let s = idx[ci];
+                    if s == NONE {
+                        continue;
+                    }
+                    let wt = weights.map_or(1.0, |v| v[ci]);
+                    if wt == 0.0 {
+                        continue;
+                    }
+                    // Source pixel at the same offset from the source centre.
+                    let (sy, sx) = (s as usize / sw + y - cy, s as usize % sw + x - cx);
+                    let px = &source.data[(sy * sw + sx) * c..][..c];
+                    for (a, v) in acc.iter_mut().zip(px) {
+                        *a += wt * v;
+                    }
+                    total += wt;
+                }
+            }
+            if total > 0.0 {
+                for (o, a) in row[x * c..(x + 1) * c].iter_mut().zip(&acc) {
+                    *o = a / total;
+                }
+            }
+            wrow[x] = total;
+        }
+    });
+    Ok(Voted { image, weight })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn identity_field_reproduces_the_source() {
+        let (h, w, c, p) = (12, 15, 2, 5);
+        let src: Vec<f32> = (0..h * w * c).map(|i| (i as f32 * 0.37).sin()).collect();
+        let img = Image::new("source", &src, h, w, c).unwrap();
+        // Interior pixels map to themselves; border pixels have no valid centre.
+        let idx: Vec<u32> = (0..h * w)
+            .map(|i| {
+                let (y, x) = (i / w, i % w);
+                if (2..h - 2).contains(&y) && (2..w - 2).contains(&x) { i as u32 } else { NONE }
+            })
+            .collect();
+        let v = vote(&img, &idx, h, w, None, p).unwrap();
+        for i in 0..h * w {
+            assert!(v.weight[i] > 0.0);
+            for k in 0..c {
+                assert!((v.image[i * c + k] - src[i * c + k]).abs() < 1e-5);
+            }
+        }
+    }
+
+    #[test]
+    fn weights_average_conflicting_votes() {
+                // Columns 0..5 hold 0, columns 5..9 hold 1.
+        let src: Vec<f32> = (0..27).map(|i| if i % 9 < 5 { 0.0 } else { 1.0 }).collect();
+        let img = Image::new("source", &src, 3, 9, 1).unwrap();
+        // Target 1×2: pixel 0 matched to centre (1,1) (zeros), pixel 1 to (1,7) (ones).
+        let idx = [10u32, 16];
+        let v = vote(&img, &idx, 1, 2, Some(&[1.0, 3.0]), 3).unwrap();
+        assert!((v.image[0] - 0.75).abs() < 1e-6 && (v.image[1] - 0.75).abs() < 1e-6);
+        assert!((v.weight[0] - 4.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn rejects_bad_fields() {
+        assert!(idx_from_rowcol(&[0, 0], 10, 10, 3).is_err());
+        assert!(idx_from_rowcol(&[1, 8], 10, 10, 3).is_ok());
+        assert!(idx_from_rowcol(&[1, 9], 10, 10, 3).is_err());
+        assert_eq!(idx_from_rowcol(&[-1, -1], 10, 10, 3).unwrap(), vec![NONE]);
+    }
+}

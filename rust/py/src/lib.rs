@@ -1,0 +1,20 @@
+//! `phloem._core`: the thin PyO3 layer over phloem-core. It converts arrays, releases the GIL
+//! around every parallel kernel, maps errors, and nothing else; the algorithms live in
+//! `rust/core`.
+
+use pyo3::prelude::*;
+
+mod errors;
+mod patch;
+mod threads;
+
+#[pymodule(gil_used = false)]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add_function(wrap_pyfunction!(patch::nnf_py, m)?)?;
+    m.add_function(wrap_pyfunction!(patch::knn_py, m)?)?;
+    m.add_function(wrap_pyfunction!(patch::coherence_candidates_py, m)?)?;
+    m.add_function(wrap_pyfunction!(patch::vote_py, m)?)?;
+    m.add_function(wrap_pyfunction!(threads::default_threads_py, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,49 @@
+"""Shared fixtures: real textures that ship with the tests (tests/data) or the package."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import phloem
+
+DATA = Path(__file__).parent / "data"
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+@pytest.fixture(scope="session")
+def bark() -> np.ndarray:
+    """Embedded Douglas-fir bark, RGB float32 (256, 256, 3)."""
+    return phloem.data.bark()[..., :3].copy()
+
+
+@pytest.fixture(scope="session")
+def water() -> np.ndarray:
+    """Water photo, RGB float32 (300, 300, 3)."""
+    return phloem.io.read_image(DATA / "water.jpg")
+
+
+@pytest.fixture(scope="session")
+def gravel() -> np.ndarray:
+    """Gravel, gray float32 (128, 128)."""
+    return phloem.io.read_image(DATA / "gravel_128.png")
+
+
+def shared_file(*parts: str) -> Path:
+    """A file of ../shared/data, or skip the test when the folder is absent (e.g. in CI)."""
+    p = SHARED.joinpath(*parts)
+    if not p.exists():
+        pytest.skip(f"{p} is not available")
+    return p
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    os.environ.setdefault("HYPOTHESIS_PROFILE", "fast")
+    from hypothesis import settings
+
+    settings.register_profile("fast", max_examples=25, deadline=None)
+    settings.register_profile("slow", max_examples=200, deadline=None)
+    settings.load_profile(os.environ["HYPOTHESIS_PROFILE"])
