@@ -18,6 +18,7 @@ def nnf(
     target_mask: NDArray[np.bool_] | None = None,
     init: NDArray[np.int32] | None = None,
     source_knn: NDArray[np.int32] | None = None,
+    source_cost: NDArray[np.float32] | None = None,
     threads: int | None = None,
 ) -> tuple[NDArray[np.int32], NDArray[np.float32], int]: ...
 def knn(

@@ -157,7 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Run 'phloem COMMAND --help' for the options of a command.",
     )
     ap.add_argument("--version", action="version", version=f"phloem {__version__}")
-    sub = ap.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    sub = ap.add_subparsers(dest="command", metavar="COMMAND", required=True, help="what to make; each has its own --help")
 
     p = sub.add_parser("synthesize", help="synthesise a texture of any size from an exemplar image",
                        description="Texture optimisation (Kwatra et al. 2005) over an image pyramid, with PatchMatch search and robust patch voting.")  # fmt: skip

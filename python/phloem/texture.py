@@ -53,6 +53,48 @@ def _upsample_field(field: NDArray[np.int32], shape: tuple[int, int], src_shape:
     return up
 
 
+def _block_field(shape: tuple[int, int], src_shape: tuple[int, int], p: int, rng: np.random.Generator) -> NDArray[np.int32]:
+    """Starting field of random coherent blocks: voting it gives a patchwork of exemplar
+    pieces, not the grey average a per-pixel random field gives."""
+    r = p // 2
+    h, w = shape
+    bh, bw = (max(1, min(2 * p, src_shape[0] - 2 * r)), max(1, min(2 * p, src_shape[1] - 2 * r)))
+    field = np.empty((h, w, 2), np.int32)
+    for y0 in range(0, h, bh):
+        for x0 in range(0, w, bw):
+            sy = rng.integers(r, src_shape[0] - r - bh + 1)
+            sx = rng.integers(r, src_shape[1] - r - bw + 1)
+            hh, ww = min(bh, h - y0), min(bw, w - x0)
+            field[y0 : y0 + hh, x0 : x0 + ww, 0] = sy + np.arange(hh)[:, None]
+            field[y0 : y0 + hh, x0 : x0 + ww, 1] = sx + np.arange(ww)[None, :]
+    return field
+
+
+def _occurrence_cost(
+    field: NDArray[np.int32], src_shape: tuple[int, int], p: int, lam: float, scale: float
+) -> NDArray[np.float32]:
+    """Occurrence penalty of Kaspar et al. 2015: how much more than uniformly each source
+    patch is covered by the current field, times ``lam`` and the median patch distance."""
+    sh, sw = src_shape
+    centres = np.bincount((field[..., 0] * sw + field[..., 1]).ravel(), minlength=sh * sw).reshape(sh, sw)
+    # Pixels covered: each used centre covers its p×p patch; a candidate's occurrence is the
+    # mean coverage over its own patch (two box filters).
+    cover = cv2.boxFilter(centres.astype(np.float32), -1, (p, p), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    mean_cover = cv2.boxFilter(cover, -1, (p, p), normalize=True, borderType=cv2.BORDER_CONSTANT)
+    r = p // 2
+    usable = (sh - 2 * r) * (sw - 2 * r)
+    expected = field.shape[0] * field.shape[1] * p * p / max(usable, 1)
+    over = np.maximum(mean_cover / expected - 1.0, 0.0)
+    return np.ascontiguousarray(lam * max(scale, 1e-8) * over, dtype=np.float32)
+
+
+def _robust_weights(dist: NDArray[np.float32]) -> NDArray[np.float32]:
+    """Kwatra's robust vote weights |z − x|^(r − 2) = SSD^((r − 2) / 2), with the SSD floored
+    at a tenth of its median so one exact copy cannot outvote every neighbour (hard seams)."""
+    floor = max(0.1 * float(np.median(dist)), 1e-8)
+    return np.power(np.maximum(dist, floor), (ROBUST_EXPONENT - 2.0) / 2.0, dtype=np.float32)
+
+
 def _auto_levels(min_side: int, patch_size: int) -> int:
     # Coarsest exemplar keeps at least ~4 patches across.
     return max(1, min(6, int(math.floor(math.log2(max(min_side / (4 * patch_size), 1.0)))) + 1))
@@ -66,6 +108,7 @@ def synthesize(
     levels: int | None = None,
     iterations: int = 4,
     search_iterations: int = 2,
+    diversity: float = 1.0,
     weights: Any = None,
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
@@ -90,6 +133,11 @@ def synthesize(
     search_iterations : int, optional
         PatchMatch iterations inside each search step, warm-started from the previous field
         (default 2).
+    diversity : float, optional
+        Weight λ of the occurrence penalty (Kaspar et al. 2015): a source patch used more
+        often than uniform use would give costs ``λ × median distance × overuse``, which
+        keeps the optimisation from settling on a few (usually the smoothest) exemplar
+        patches. 0 gives plain texture optimisation (default 1).
     weights : (C,) array_like, optional
         Per-channel weights of the patch distance.
     seed : int or numpy.random.Generator, optional
@@ -109,6 +157,8 @@ def synthesize(
     .. [1] V. Kwatra, I. Essa, A. Bobick, N. Kwatra, "Texture optimization for example-based
        synthesis", ACM TOG 24(3), 2005.
     .. [2] M. Laitoch, "Procedural modeling of tree bark", 2018, §3.3.
+    .. [3] A. Kaspar, B. Neubert, D. Lischinski, M. Pauly, J. Kopf, "Self tuning texture
+       optimization", Computer Graphics Forum 34(2), 2015.
 
     Examples
     --------
@@ -140,6 +190,9 @@ def synthesize(
         if lv and min(es) < p:
             break
         pyramid.append((ex if lv == 0 else _downsample(ex, es), (max(1, math.ceil(h / f)), max(1, math.ceil(w / f)))))
+    lam = float(diversity)
+    if not math.isfinite(lam) or lam < 0:
+        raise ValueError(f"diversity: expected a finite value >= 0, got {diversity}")
     total = len(pyramid) * iters
     done = 0
     field: NDArray[np.int32] | None = None
@@ -147,20 +200,19 @@ def synthesize(
     for lv in range(len(pyramid) - 1, -1, -1):
         ex_l, shape = pyramid[lv]
         if field is None:
-            # Random start: a random field voted into an image (0 PatchMatch iterations).
-            noise = np.zeros((*shape, ex.shape[2]), dtype=np.float32)
-            field, _, _ = _core.nnf(ex_l, noise, patch_size=p, iterations=0, levels=1, exact=False, seed=s, threads=t)
+            field = _block_field(shape, ex_l.shape[:2], p, np.random.default_rng(s))
         else:
             field = _upsample_field(field, shape, ex_l.shape[:2], r)
         out, _ = _core.vote(ex_l, field, patch_size=p, threads=t)
+        last = 0.0
         for it in range(iters):
+            cost = _occurrence_cost(field, ex_l.shape[:2], p, lam, last) if lam > 0 and it else None
             field, dist, _ = _core.nnf(
                 ex_l, out, patch_size=p, iterations=s_iters, levels=1, exact=False,
-                seed=s + 7919 * (lv * 64 + it + 1), weights=wts, init=field, threads=t,
+                seed=s + 7919 * (lv * 64 + it + 1), weights=wts, init=field, source_cost=cost, threads=t,
             )  # fmt: skip
-            # Robust weights |z - x|^(r - 2) with |.| the patch's L2 norm (Kwatra 2005, §3).
-            wvote = np.power(np.maximum(dist, 1e-6), (ROBUST_EXPONENT - 2.0) / 2.0, dtype=np.float32)
-            out, _ = _core.vote(ex_l, field, patch_size=p, weights=wvote, threads=t)
+            last = float(np.median(dist))
+            out, _ = _core.vote(ex_l, field, patch_size=p, weights=_robust_weights(dist), threads=t)
             done += 1
             if progress is not None:
                 progress(done, total)

@@ -86,6 +86,10 @@ pub struct NnfInput<'a> {
     /// then also tries the neighbours of a pixel's current match, which is what finds good
     /// matches when source and target share no coherent structure. Full resolution only.
     pub source_knn: Option<(&'a [u32], usize)>,
+    /// `source.h × source.w` non-negative cost added to the distance of every patch centred
+    /// there, e.g. the occurrence penalty of Kaspar et al. 2015 that keeps texture
+    /// optimisation from reusing a few source patches everywhere. Full resolution only.
+    pub source_cost: Option<&'a [f32]>,
 }
 
 /// A nearest-neighbour field.
@@ -166,6 +170,8 @@ struct Level<'a> {
     need: Option<Cow<'a, [bool]>>,
     /// Source self-similarity lists for enrichment, `k` per source pixel.
     knn: Option<(&'a [u32], usize)>,
+    /// Additive cost per source centre.
+    cost: Option<&'a [f32]>,
 }
 
 impl Level<'_> {
@@ -192,7 +198,7 @@ impl Level<'_> {
                 }
             }
         }
-        Level { src, sh, sw, tgt, th, tw, c, r, allowed, allowed_list, need, knn: None }
+        Level { src, sh, sw, tgt, th, tw, c, r, allowed, allowed_list, need, knn: None, cost: None }
     }
 
     #[inline]
@@ -211,7 +217,10 @@ impl Level<'_> {
         let dx0 = tx.min(r);
         let dx1 = (self.tw - 1 - tx).min(r);
         let len = (dx0 + dx1 + 1) * self.c;
-        let mut acc = 0f32;
+        let mut acc = self.cost.map_or(0.0, |c| c[s as usize]);
+        if acc >= cutoff {
+            return acc;
+        }
         for k in 0..=dy0 + dy1 {
             let t0 = ((ty - dy0 + k) * self.tw + tx - dx0) * self.c;
             let s0 = ((sy - dy0 + k) * self.sw + sx - dx0) * self.c;
@@ -468,8 +477,17 @@ fn validate<'a>(input: &NnfInput<'a>, params: &NnfParams) -> Result<Level<'a>> {
             return Err(invalid("source_knn", format!("index {bad} is outside the {}×{} source", s.h, s.w)));
         }
     }
+    if let Some(cost) = input.source_cost {
+        if cost.len() != s.h * s.w {
+            return Err(invalid("source_cost", format!("expected {}×{} values like source, got {}", s.h, s.w, cost.len())));
+        }
+        if let Some(bad) = cost.iter().find(|v| !v.is_finite() || **v < 0.0) {
+            return Err(invalid("source_cost", format!("expected finite non-negative costs, got {bad}")));
+        }
+    }
     let mut level = level;
     level.knn = input.source_knn;
+    level.cost = input.source_cost;
     if let Some(init) = input.init {
         if init.len() != t.h * t.w * 2 {
             return Err(invalid("init", format!("expected a {}×{}×2 field like target, got {} values", t.h, t.w, init.len())));
@@ -619,6 +637,7 @@ mod tests {
             target_mask: None,
             init: None,
             source_knn: None,
+            source_cost: None,
         };
         nnf(&input, params).unwrap()
     }
@@ -708,6 +727,7 @@ mod tests {
             target_mask: Some(&tmask),
             init: None,
             source_knn: None,
+            source_cost: None,
         };
         for method in [Method::PatchMatch, Method::Exact] {
             let f = nnf(&input, &NnfParams { method, levels: 2, ..NnfParams::default() }).unwrap();
@@ -735,6 +755,7 @@ mod tests {
             target_mask: None,
             init: None,
             source_knn: None,
+            source_cost: None,
         };
         let name = |r: Result<Nnf>| match r {
             Err(crate::Error::InvalidArgument { name, .. }) => name,

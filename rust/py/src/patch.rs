@@ -25,7 +25,7 @@ fn rowcol(idx: &[u32], sw: usize) -> Vec<i32> {
 type NnfOut<'py> = (Bound<'py, PyArray3<i32>>, Bound<'py, PyArray2<f32>>, u64);
 
 #[pyfunction]
-#[pyo3(name = "nnf", signature = (source, target, *, patch_size, iterations, levels, exact, seed, weights=None, source_mask=None, target_mask=None, init=None, source_knn=None, threads=None))]
+#[pyo3(name = "nnf", signature = (source, target, *, patch_size, iterations, levels, exact, seed, weights=None, source_mask=None, target_mask=None, init=None, source_knn=None, source_cost=None, threads=None))]
 pub fn nnf_py<'py>(
     py: Python<'py>,
     source: PyReadonlyArray3<'py, f32>,
@@ -40,6 +40,7 @@ pub fn nnf_py<'py>(
     target_mask: Option<PyReadonlyArray2<'py, bool>>,
     init: Option<PyReadonlyArray3<'py, i32>>,
     source_knn: Option<numpy::PyReadonlyArray4<'py, i32>>,
+    source_cost: Option<PyReadonlyArray2<'py, f32>>,
     threads: Option<usize>,
 ) -> PyResult<NnfOut<'py>> {
     let sw = source.as_array().dim().1;
@@ -71,6 +72,7 @@ pub fn nnf_py<'py>(
         target_mask: target_mask.as_ref().map(|m| m.as_slice().map_err(not_contiguous("target_mask"))).transpose()?,
         init: init.as_ref().map(|m| m.as_slice().map_err(not_contiguous("init"))).transpose()?,
         source_knn: table.as_ref().map(|(t, k)| (t.as_slice(), *k)),
+        source_cost: source_cost.as_ref().map(|m| m.as_slice().map_err(not_contiguous("source_cost"))).transpose()?,
     };
     let method = if exact { Method::Exact } else { Method::PatchMatch };
     let params = NnfParams { patch_size, iterations, levels, seed, method };
