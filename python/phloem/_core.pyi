@@ -3,6 +3,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 __version__: str
+__all__ = ["__version__", "coherence_candidates", "default_threads", "knn", "nnf", "vote"]
 
 def nnf(
     source: NDArray[np.float32],

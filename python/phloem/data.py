@@ -20,7 +20,7 @@ __all__ = ["bark", "brick", "path"]
 
 def path(name: str) -> str:
     """Filesystem path of an embedded file, e.g. ``path("bark_douglas_fir.png")``."""
-    res = files(__package__ or "phloem").joinpath("data", name)
+    res = files(__package__ or "phloem") / "data" / name
     if not res.is_file():
         raise ValueError(f"name: no embedded file {name!r}")
     with as_file(res) as p:

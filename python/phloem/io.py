@@ -110,7 +110,7 @@ def read_image(path: str | os.PathLike[str], *, max_pixels: int = DEFAULT_MAX_PI
     elif img.dtype == np.uint16:
         out = img.astype(np.float32) / 65535.0
     elif img.dtype == np.float32:
-        out = img
+        out = img.astype(np.float32)
     else:
         raise ImageReadError(f"path: {p} has {img.dtype} samples; expected 8- or 16-bit integers")
     if out.ndim == 3:
@@ -127,7 +127,7 @@ def _to_storage(image: Any, bit_depth: int) -> NDArray[Any]:
     if c not in (1, 3, 4):
         raise ValueError(f"image: expected 1 (gray), 3 (RGB) or 4 (RGBA) channels to write, got {c}")
     scale, dtype = (255.0, np.uint8) if bit_depth == 8 else (65535.0, np.uint16)
-    out = np.rint(np.clip(arr, 0.0, 1.0) * scale).astype(dtype)
+    out: NDArray[Any] = np.rint(np.clip(arr, 0.0, 1.0) * scale).astype(dtype)
     if c == 3:
         out = out[:, :, ::-1]
     elif c == 4:

@@ -64,7 +64,7 @@ def coherence_map(
     out = dist / (ny[:, None] * nx[None, :] * img.shape[2]).astype(np.float32)
     if m is not None:
         out[~m] = np.nan
-    return out.astype(np.float32)
+    return np.asarray(out, dtype=np.float32)
 
 
 def patch_coherence(image: Any, exemplar: Any, **kwargs: Any) -> float:

@@ -200,7 +200,7 @@ def knn(
     """
     img = as_image(exemplar, "exemplar")
     p = check_patch_size(patch_size)
-    return _core.knn(  # type: ignore[no-any-return]
+    return _core.knn(
         img,
         k=check_int(k, "k", 1),
         patch_size=p,
@@ -257,7 +257,7 @@ def candidates(
         nb = np.ascontiguousarray(np.asarray(neighbours), dtype=np.int32)
         if nb.ndim != 4 or nb.shape[:2] != (eh, ew) or nb.shape[3] != 2:
             raise ValueError(f"neighbours: expected shape ({eh}, {ew}, k, 2), got {nb.shape}")
-    return _core.coherence_candidates(  # type: ignore[no-any-return]
+    return _core.coherence_candidates(
         r, (eh, ew), patch_size=check_patch_size(patch_size), wrap=bool(wrap), knn_idx=nb, threads=check_threads(threads)
     )
 
@@ -297,6 +297,6 @@ def vote(
         w = np.ascontiguousarray(np.asarray(weights, dtype=np.float32))
         if w.shape != f.shape[:2]:
             raise ValueError(f"weights: expected shape {f.shape[:2]} like the field, got {w.shape}")
-    return _core.vote(  # type: ignore[no-any-return]
+    return _core.vote(
         src, f, patch_size=check_patch_size(patch_size), weights=w, threads=check_threads(threads)
     )

@@ -24,5 +24,8 @@ pub type Result<T> = std::result::Result<T, Error>;
 
 /// Shorthand for an [`Error::InvalidArgument`].
 pub fn invalid(name: &'static str, message: impl Into<String>) -> Error {
-    Error::InvalidArgument { name, message: message.into() }
+    Error::InvalidArgument {
+        name,
+        message: message.into(),
+    }
 }

@@ -20,10 +20,19 @@ impl<'a> Image<'a> {
     /// Wraps a slice; checks that its length is `h * w * c` and that no dimension is zero.
     pub fn new(name: &'static str, data: &'a [f32], h: usize, w: usize, c: usize) -> Result<Self> {
         if h == 0 || w == 0 || c == 0 {
-            return Err(invalid(name, format!("expected a non-empty image, got shape ({h}, {w}, {c})")));
+            return Err(invalid(
+                name,
+                format!("expected a non-empty image, got shape ({h}, {w}, {c})"),
+            ));
         }
         if data.len() != h * w * c {
-            return Err(invalid(name, format!("buffer of {} values does not hold ({h}, {w}, {c})", data.len())));
+            return Err(invalid(
+                name,
+                format!(
+                    "buffer of {} values does not hold ({h}, {w}, {c})",
+                    data.len()
+                ),
+            ));
         }
         Ok(Self { data, h, w, c })
     }
@@ -51,7 +60,12 @@ impl<'a> Image<'a> {
             let p = i / self.c;
             return Err(invalid(
                 name,
-                format!("expected finite values, found {} at pixel (row {}, col {})", self.data[i], p / self.w, p % self.w),
+                format!(
+                    "expected finite values, found {} at pixel (row {}, col {})",
+                    self.data[i],
+                    p / self.w,
+                    p % self.w
+                ),
             ));
         }
         Ok(())
@@ -61,13 +75,25 @@ impl<'a> Image<'a> {
 /// Multiplies every channel by `sqrt(weight)`, so a plain sum of squared differences of the
 /// result equals the weighted one of the original. Returns an owned buffer.
 pub fn prescale(img: &Image<'_>, weights: Option<&[f32]>) -> Result<Vec<f32>> {
-    let Some(wts) = weights else { return Ok(img.data.to_vec()) };
+    let Some(wts) = weights else {
+        return Ok(img.data.to_vec());
+    };
     if wts.len() != img.c {
-        return Err(invalid("weights", format!("expected {} per-channel weights, got {}", img.c, wts.len())));
+        return Err(invalid(
+            "weights",
+            format!("expected {} per-channel weights, got {}", img.c, wts.len()),
+        ));
     }
     if let Some(bad) = wts.iter().find(|v| !v.is_finite() || **v < 0.0) {
-        return Err(invalid("weights", format!("expected finite non-negative weights, got {bad}")));
+        return Err(invalid(
+            "weights",
+            format!("expected finite non-negative weights, got {bad}"),
+        ));
     }
     let s: Vec<f32> = wts.iter().map(|v| v.sqrt()).collect();
-    Ok(img.data.chunks_exact(img.c).flat_map(|px| px.iter().zip(&s).map(|(v, k)| v * k)).collect())
+    Ok(img
+        .data
+        .chunks_exact(img.c)
+        .flat_map(|px| px.iter().zip(&s).map(|(v, k)| v * k))
+        .collect())
 }

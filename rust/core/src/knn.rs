@@ -39,7 +39,14 @@ pub struct KnnParams {
 
 impl Default for KnnParams {
     fn default() -> Self {
-        Self { patch_size: 7, k: 4, iterations: 6, exact: false, exclude: 3, seed: 0 }
+        Self {
+            patch_size: 7,
+            k: 4,
+            iterations: 6,
+            exact: false,
+            exclude: 3,
+            seed: 0,
+        }
     }
 }
 
@@ -144,7 +151,10 @@ impl Best<'_> {
 pub fn knn(exemplar: &Image<'_>, weights: Option<&[f32]>, params: &KnnParams) -> Result<Knn> {
     let p = params.patch_size;
     if p == 0 || p % 2 == 0 {
-        return Err(invalid("patch_size", format!("expected an odd size >= 1, got {p}")));
+        return Err(invalid(
+            "patch_size",
+            format!("expected an odd size >= 1, got {p}"),
+        ));
     }
     let (h, w, c) = (exemplar.h, exemplar.w, exemplar.c);
     if params.k == 0 {
@@ -161,7 +171,13 @@ pub fn knn(exemplar: &Image<'_>, weights: Option<&[f32]>, params: &KnnParams) ->
     exemplar.check_finite("exemplar")?;
     let r = p / 2;
     let scaled = prescale(exemplar, weights)?;
-    let pad = Padded { data: mirror_pad(&scaled, h, w, c, r), pw: w + 2 * r, w, c, p };
+    let pad = Padded {
+        data: mirror_pad(&scaled, h, w, c, r),
+        pw: w + 2 * r,
+        w,
+        c,
+        p,
+    };
     let n = h * w;
     let k = params.k;
     let far = |a: usize, b: usize| (a / w).abs_diff(b / w).max((a % w).abs_diff(b % w)) > ex;
@@ -169,83 +185,94 @@ pub fn knn(exemplar: &Image<'_>, weights: Option<&[f32]>, params: &KnnParams) ->
     let mut dist = vec![f32::INFINITY; n * k];
     let mut idx = vec![NONE; n * k];
     if params.exact {
-        dist.par_chunks_mut(k).zip(idx.par_chunks_mut(k)).enumerate().for_each(|(a, (d, i))| {
-            let mut best = Best { d, i };
-            for b in 0..n {
-                if far(a, b) {
-                    let dd = pad.dist(a as u32, b as u32, best.worst());
-                    best.offer(b as u32, dd);
+        dist.par_chunks_mut(k)
+            .zip(idx.par_chunks_mut(k))
+            .enumerate()
+            .for_each(|(a, (d, i))| {
+                let mut best = Best { d, i };
+                for b in 0..n {
+                    if far(a, b) {
+                        let dd = pad.dist(a as u32, b as u32, best.worst());
+                        best.offer(b as u32, dd);
+                    }
                 }
-            }
-        });
+            });
         return Ok(Knn { h, w, k, idx, dist });
     }
 
     // Random start: k distinct far-enough pixels.
-    dist.par_chunks_mut(k).zip(idx.par_chunks_mut(k)).enumerate().for_each(|(a, (d, i))| {
-        let mut rng = Rng::keyed(params.seed, u64::MAX, a as u64);
-        let mut best = Best { d, i };
-        let mut tries = 0;
-        while best.i.contains(&NONE) && tries < 64 * k {
-            let b = rng.below(n as u64) as usize;
-            if far(a, b) {
-                best.offer(b as u32, pad.dist(a as u32, b as u32, f32::INFINITY));
+    dist.par_chunks_mut(k)
+        .zip(idx.par_chunks_mut(k))
+        .enumerate()
+        .for_each(|(a, (d, i))| {
+            let mut rng = Rng::keyed(params.seed, u64::MAX, a as u64);
+            let mut best = Best { d, i };
+            let mut tries = 0;
+            while best.i.contains(&NONE) && tries < 64 * k {
+                let b = rng.below(n as u64) as usize;
+                if far(a, b) {
+                    best.offer(b as u32, pad.dist(a as u32, b as u32, f32::INFINITY));
+                }
+                tries += 1;
             }
-            tries += 1;
-        }
-    });
+        });
     let radius0 = h.max(w) as i64;
     for it in 0..params.iterations {
         let prev_i = idx.clone();
-        dist.par_chunks_mut(k).zip(idx.par_chunks_mut(k)).enumerate().for_each(|(a, (d, i))| {
-            let mut best = Best { d, i };
-            let (ay, ax) = ((a / w) as i64, (a % w) as i64);
-            let consider = |b: u32, best: &mut Best<'_>| {
-                if b != NONE && far(a, b as usize) {
-                    let dd = pad.dist(a as u32, b, best.worst());
-                    best.offer(b, dd);
+        dist.par_chunks_mut(k)
+            .zip(idx.par_chunks_mut(k))
+            .enumerate()
+            .for_each(|(a, (d, i))| {
+                let mut best = Best { d, i };
+                let (ay, ax) = ((a / w) as i64, (a % w) as i64);
+                let consider = |b: u32, best: &mut Best<'_>| {
+                    if b != NONE && far(a, b as usize) {
+                        let dd = pad.dist(a as u32, b, best.worst());
+                        best.offer(b, dd);
+                    }
+                };
+                // Propagation from the 4-neighbours' lists, shifted back by the offset.
+                for (oy, ox) in [(0i64, -1i64), (0, 1), (-1, 0), (1, 0)] {
+                    let (ny, nx) = (ay + oy, ax + ox);
+                    if ny < 0 || nx < 0 || ny >= h as i64 || nx >= w as i64 {
+                        continue;
+                    }
+                    for &b in &prev_i[(ny as usize * w + nx as usize) * k..][..k] {
+                        if b == NONE {
+                            continue;
+                        }
+                        let (by, bx) = ((b as usize / w) as i64 - oy, (b as usize % w) as i64 - ox);
+                        if by >= 0 && bx >= 0 && by < h as i64 && bx < w as i64 {
+                            consider((by as usize * w + bx as usize) as u32, &mut best);
+                        }
+                    }
                 }
-            };
-            // Propagation from the 4-neighbours' lists, shifted back by the offset.
-            for (oy, ox) in [(0i64, -1i64), (0, 1), (-1, 0), (1, 0)] {
-                let (ny, nx) = (ay + oy, ax + ox);
-                if ny < 0 || nx < 0 || ny >= h as i64 || nx >= w as i64 {
-                    continue;
-                }
-                for &b in &prev_i[(ny as usize * w + nx as usize) * k..][..k] {
+                // Enrichment: neighbours of neighbours.
+                for j in 0..k {
+                    let b = prev_i[a * k + j];
                     if b == NONE {
                         continue;
                     }
-                    let (by, bx) = ((b as usize / w) as i64 - oy, (b as usize % w) as i64 - ox);
-                    if by >= 0 && bx >= 0 && by < h as i64 && bx < w as i64 {
-                        consider((by as usize * w + bx as usize) as u32, &mut best);
+                    for &b2 in &prev_i[b as usize * k..][..k] {
+                        consider(b2, &mut best);
                     }
                 }
-            }
-            // Enrichment: neighbours of neighbours.
-            for j in 0..k {
-                let b = prev_i[a * k + j];
-                if b == NONE {
-                    continue;
+                // Random search around the current best, radius halving.
+                let mut rng = Rng::keyed(params.seed, it as u64, a as u64);
+                let b0 = best.i[0];
+                if b0 != NONE {
+                    let (by, bx) = ((b0 as usize / w) as i64, (b0 as usize % w) as i64);
+                    let mut rad = radius0;
+                    while rad >= 1 {
+                        let y =
+                            rng.range_inclusive((by - rad).max(0), (by + rad).min(h as i64 - 1));
+                        let x =
+                            rng.range_inclusive((bx - rad).max(0), (bx + rad).min(w as i64 - 1));
+                        consider((y as usize * w + x as usize) as u32, &mut best);
+                        rad /= 2;
+                    }
                 }
-                for &b2 in &prev_i[b as usize * k..][..k] {
-                    consider(b2, &mut best);
-                }
-            }
-            // Random search around the current best, radius halving.
-            let mut rng = Rng::keyed(params.seed, it as u64, a as u64);
-            let b0 = best.i[0];
-            if b0 != NONE {
-                let (by, bx) = ((b0 as usize / w) as i64, (b0 as usize % w) as i64);
-                let mut rad = radius0;
-                while rad >= 1 {
-                    let y = rng.range_inclusive((by - rad).max(0), (by + rad).min(h as i64 - 1));
-                    let x = rng.range_inclusive((bx - rad).max(0), (bx + rad).min(w as i64 - 1));
-                    consider((y as usize * w + x as usize) as u32, &mut best);
-                    rad /= 2;
-                }
-            }
-        });
+            });
     }
     Ok(Knn { h, w, k, idx, dist })
 }
@@ -259,19 +286,43 @@ pub fn knn(exemplar: &Image<'_>, weights: Option<&[f32]>, params: &KnnParams) ->
 /// exemplar wrap around; without, they are dropped. Returns `h × w × m` indices, each set
 /// deduplicated in discovery order and padded with [`NONE`], where
 /// `m = patch_size² × (1 + knn.k)`.
-pub fn coherence_candidates(refs: &[u32], h: usize, w: usize, eh: usize, ew: usize, knn: Option<&Knn>, patch_size: usize, wrap: bool) -> Result<(Vec<u32>, usize)> {
+pub fn coherence_candidates(
+    refs: &[u32],
+    h: usize,
+    w: usize,
+    eh: usize,
+    ew: usize,
+    knn: Option<&Knn>,
+    patch_size: usize,
+    wrap: bool,
+) -> Result<(Vec<u32>, usize)> {
     if patch_size == 0 || patch_size % 2 == 0 {
-        return Err(invalid("patch_size", format!("expected an odd size >= 1, got {patch_size}")));
+        return Err(invalid(
+            "patch_size",
+            format!("expected an odd size >= 1, got {patch_size}"),
+        ));
     }
     if refs.len() != h * w {
-        return Err(invalid("refs", format!("expected {h}×{w} references, got {}", refs.len())));
+        return Err(invalid(
+            "refs",
+            format!("expected {h}×{w} references, got {}", refs.len()),
+        ));
     }
     if let Some(bad) = refs.iter().find(|v| **v != NONE && **v as usize >= eh * ew) {
-        return Err(invalid("refs", format!("reference {bad} is outside the {eh}×{ew} exemplar")));
+        return Err(invalid(
+            "refs",
+            format!("reference {bad} is outside the {eh}×{ew} exemplar"),
+        ));
     }
     if let Some(t) = knn {
         if t.h != eh || t.w != ew {
-            return Err(invalid("knn", format!("expected a table for the {eh}×{ew} exemplar, got {}×{}", t.h, t.w)));
+            return Err(invalid(
+                "knn",
+                format!(
+                    "expected a table for the {eh}×{ew} exemplar, got {}×{}",
+                    t.h, t.w
+                ),
+            ));
         }
     }
     let r = (patch_size / 2) as i64;
@@ -297,7 +348,8 @@ pub fn coherence_candidates(refs: &[u32], h: usize, w: usize, eh: usize, ew: usi
                 if e == NONE {
                     continue;
                 }
-                let (mut ey, mut ex) = ((e as usize / ew) as i64 - oy, (e as usize % ew) as i64 - ox);
+                let (mut ey, mut ex) =
+                    ((e as usize / ew) as i64 - oy, (e as usize % ew) as i64 - ox);
                 if wrap {
                     ey = ey.rem_euclid(eh as i64);
                     ex = ex.rem_euclid(ew as i64);
@@ -346,17 +398,29 @@ mod tests {
         let (h, w) = (14, 13);
         let d = tex(h, w);
         let img = Image::new("exemplar", &d, h, w, 3).unwrap();
-        let params = KnnParams { patch_size: 5, k: 3, exact: true, exclude: 2, ..KnnParams::default() };
+        let params = KnnParams {
+            patch_size: 5,
+            k: 3,
+            exact: true,
+            exclude: 2,
+            ..KnnParams::default()
+        };
         let t = knn(&img, None, &params).unwrap();
-        let pad = Padded { data: mirror_pad(&d, h, w, 3, 2), pw: w + 4, w, c: 3, p: 5 };
+        let pad = Padded {
+            data: mirror_pad(&d, h, w, 3, 2),
+            pw: w + 4,
+            w,
+            c: 3,
+            p: 5,
+        };
         for a in 0..h * w {
             let mut all: Vec<f32> = (0..h * w)
                 .filter(|&b| (a / w).abs_diff(b / w).max((a % w).abs_diff(b % w)) > 2)
                 .map(|b| pad.dist(a as u32, b as u32, f32::INFINITY))
                 .collect();
             all.sort_by(f32::total_cmp);
-            for j in 0..3 {
-                assert!((t.dist[a * 3 + j] - all[j]).abs() <= 1e-5 * all[j].max(1.0));
+            for (j, want) in all.iter().take(3).enumerate() {
+                assert!((t.dist[a * 3 + j] - want).abs() <= 1e-5 * want.max(1.0));
             }
         }
     }
@@ -366,13 +430,30 @@ mod tests {
         let (h, w) = (40, 40);
         let d = tex(h, w);
         let img = Image::new("exemplar", &d, h, w, 3).unwrap();
-        let base = KnnParams { patch_size: 5, k: 4, exclude: 2, iterations: 8, ..KnnParams::default() };
-        let exact = knn(&img, None, &KnnParams { exact: true, ..base.clone() }).unwrap();
+        let base = KnnParams {
+            patch_size: 5,
+            k: 4,
+            exclude: 2,
+            iterations: 8,
+            ..KnnParams::default()
+        };
+        let exact = knn(
+            &img,
+            None,
+            &KnnParams {
+                exact: true,
+                ..base.clone()
+            },
+        )
+        .unwrap();
         let approx = knn(&img, None, &base).unwrap();
         // Quality by distance: the approximate k-th distance is rarely worse than exact.
         let mean = |v: &[f32]| v.iter().map(|x| f64::from(*x)).sum::<f64>() / v.len() as f64;
         let (me, ma) = (mean(&exact.dist), mean(&approx.dist));
-        assert!(ma <= me * 1.10, "approximate mean distance {ma} vs exact {me}");
+        assert!(
+            ma <= me * 1.10,
+            "approximate mean distance {ma} vs exact {me}"
+        );
     }
 
     #[test]
@@ -380,7 +461,9 @@ mod tests {
         // A 3×3 output copied as a block from (5, 5) of a 10×10 exemplar: every pixel's
         // coherence candidates all agree on the same exemplar pixel.
         let (eh, ew) = (10usize, 10usize);
-        let refs: Vec<u32> = (0..9).map(|i| ((5 + i / 3) * ew + 5 + i % 3) as u32).collect();
+        let refs: Vec<u32> = (0..9)
+            .map(|i| ((5 + i / 3) * ew + 5 + i % 3) as u32)
+            .collect();
         let (c, m) = coherence_candidates(&refs, 3, 3, eh, ew, None, 3, false).unwrap();
         assert_eq!(m, 9);
         for i in 0..9 {

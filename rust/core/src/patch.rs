@@ -61,7 +61,13 @@ pub struct NnfParams {
 
 impl Default for NnfParams {
     fn default() -> Self {
-        Self { patch_size: 7, iterations: 5, levels: 1, seed: 0, method: Method::PatchMatch }
+        Self {
+            patch_size: 7,
+            iterations: 5,
+            levels: 1,
+            seed: 0,
+            method: Method::PatchMatch,
+        }
     }
 }
 
@@ -117,7 +123,13 @@ impl Nnf {
         let sw = self.source_w as u32;
         self.idx
             .iter()
-            .flat_map(|&i| if i == NONE { [-1, -1] } else { [(i / sw) as i32, (i % sw) as i32] })
+            .flat_map(|&i| {
+                if i == NONE {
+                    [-1, -1]
+                } else {
+                    [(i / sw) as i32, (i % sw) as i32]
+                }
+            })
             .collect()
     }
 }
@@ -128,7 +140,10 @@ struct Cell {
     d: f32,
 }
 
-const EMPTY: Cell = Cell { idx: NONE, d: f32::INFINITY };
+const EMPTY: Cell = Cell {
+    idx: NONE,
+    d: f32::INFINITY,
+};
 
 /// Sum of squared differences of two equally long slices, eight lanes at a time so the
 /// compiler vectorises it. The summation order is fixed, so the value is reproducible.
@@ -198,7 +213,21 @@ impl Level<'_> {
                 }
             }
         }
-        Level { src, sh, sw, tgt, th, tw, c, r, allowed, allowed_list, need, knn: None, cost: None }
+        Level {
+            src,
+            sh,
+            sw,
+            tgt,
+            th,
+            tw,
+            c,
+            r,
+            allowed,
+            allowed_list,
+            need,
+            knn: None,
+            cost: None,
+        }
     }
 
     #[inline]
@@ -247,21 +276,33 @@ impl Level<'_> {
     }
 
     /// Starting field: `guess(pixel)` where it proposes an allowed centre, random elsewhere.
-    fn initialise(&self, seed: u64, level: usize, guess: impl Fn(usize) -> Option<u32> + Sync) -> Vec<Cell> {
+    fn initialise(
+        &self,
+        seed: u64,
+        level: usize,
+        guess: impl Fn(usize) -> Option<u32> + Sync,
+    ) -> Vec<Cell> {
         let mut cells = vec![EMPTY; self.th * self.tw];
-        cells.par_chunks_mut(self.tw).enumerate().for_each(|(y, row)| {
-            for (x, cell) in row.iter_mut().enumerate() {
-                let i = y * self.tw + x;
-                if !self.needs(i) {
-                    continue;
+        cells
+            .par_chunks_mut(self.tw)
+            .enumerate()
+            .for_each(|(y, row)| {
+                for (x, cell) in row.iter_mut().enumerate() {
+                    let i = y * self.tw + x;
+                    if !self.needs(i) {
+                        continue;
+                    }
+                    let idx = guess(i).unwrap_or_else(|| {
+                        let mut rng =
+                            Rng::keyed(seed, (level as u64) << 32 | 0xFFFF_FFFF, i as u64);
+                        self.random_allowed(&mut rng)
+                    });
+                    *cell = Cell {
+                        idx,
+                        d: self.dist(y, x, idx, f32::INFINITY),
+                    };
                 }
-                let idx = guess(i).unwrap_or_else(|| {
-                    let mut rng = Rng::keyed(seed, (level as u64) << 32 | 0xFFFF_FFFF, i as u64);
-                    self.random_allowed(&mut rng)
-                });
-                *cell = Cell { idx, d: self.dist(y, x, idx, f32::INFINITY) };
-            }
-        });
+            });
         cells
     }
 
@@ -273,109 +314,126 @@ impl Level<'_> {
         let evals = AtomicU64::new(0);
         let search_radius = self.sh.max(self.sw) as i64;
         let tw = self.tw;
-        cells.par_chunks_mut(STRIPE_ROWS * tw).enumerate().for_each(|(stripe, chunk)| {
-            let y0 = stripe * STRIPE_ROWS;
-            let rows = chunk.len() / tw;
-            let mut count = 0u64;
-            for yy in 0..rows {
-                let ly = if reverse { rows - 1 - yy } else { yy };
-                let y = y0 + ly;
-                for xx in 0..tw {
-                    let x = if reverse { tw - 1 - xx } else { xx };
-                    let li = ly * tw + x;
-                    let mut best = chunk[li];
-                    if best.idx == NONE {
-                        continue;
-                    }
-                    let mut try_candidate = |cand: Option<u32>, best: &mut Cell| {
-                        if let Some(s) = cand {
-                            if s != best.idx {
-                                count += 1;
-                                let d = self.dist(y, x, s, best.d);
-                                if d < best.d {
-                                    *best = Cell { idx: s, d };
+        cells
+            .par_chunks_mut(STRIPE_ROWS * tw)
+            .enumerate()
+            .for_each(|(stripe, chunk)| {
+                let y0 = stripe * STRIPE_ROWS;
+                let rows = chunk.len() / tw;
+                let mut count = 0u64;
+                for yy in 0..rows {
+                    let ly = if reverse { rows - 1 - yy } else { yy };
+                    let y = y0 + ly;
+                    for xx in 0..tw {
+                        let x = if reverse { tw - 1 - xx } else { xx };
+                        let li = ly * tw + x;
+                        let mut best = chunk[li];
+                        if best.idx == NONE {
+                            continue;
+                        }
+                        let mut try_candidate = |cand: Option<u32>, best: &mut Cell| {
+                            if let Some(s) = cand {
+                                if s != best.idx {
+                                    count += 1;
+                                    let d = self.dist(y, x, s, best.d);
+                                    if d < best.d {
+                                        *best = Cell { idx: s, d };
+                                    }
+                                }
+                            }
+                        };
+                        // Propagation: the neighbour one step back along the scan, shifted.
+                        let nx = x as i64 + step;
+                        if nx >= 0 && nx < tw as i64 {
+                            let n = chunk[ly * tw + nx as usize].idx;
+                            if n != NONE {
+                                let (sy, sx) =
+                                    ((n as usize / self.sw) as i64, (n as usize % self.sw) as i64);
+                                try_candidate(self.valid(sy, sx - step), &mut best);
+                            }
+                        }
+                        let nly = ly as i64 + step;
+                        let ny = y as i64 + step;
+                        let n = if nly >= 0 && nly < rows as i64 {
+                            chunk[nly as usize * tw + x].idx
+                        } else if ny >= 0 && ny < self.th as i64 {
+                            prev[ny as usize * tw + x].idx
+                        } else {
+                            NONE
+                        };
+                        if n != NONE {
+                            let (sy, sx) =
+                                ((n as usize / self.sw) as i64, (n as usize % self.sw) as i64);
+                            try_candidate(self.valid(sy - step, sx), &mut best);
+                        }
+                        // Forward enrichment: the source neighbours of the current match.
+                        if let Some((table, k)) = self.knn {
+                            let b = best.idx as usize;
+                            for &j in &table[b * k..(b + 1) * k] {
+                                if j != NONE && self.allowed[j as usize] {
+                                    try_candidate(Some(j), &mut best);
                                 }
                             }
                         }
-                    };
-                    // Propagation: the neighbour one step back along the scan, shifted.
-                    let nx = x as i64 + step;
-                    if nx >= 0 && nx < tw as i64 {
-                        let n = chunk[ly * tw + nx as usize].idx;
-                        if n != NONE {
-                            let (sy, sx) = ((n as usize / self.sw) as i64, (n as usize % self.sw) as i64);
-                            try_candidate(self.valid(sy, sx - step), &mut best);
+                        // Random search around the current best, radius halving (alpha = 1/2).
+                        let mut rng =
+                            Rng::keyed(seed, (level as u64) << 32 | it as u64, (y * tw + x) as u64);
+                        let (by, bx) = (
+                            (best.idx as usize / self.sw) as i64,
+                            (best.idx as usize % self.sw) as i64,
+                        );
+                        let r = self.r as i64;
+                        let mut rad = search_radius;
+                        while rad >= 1 {
+                            let ylo = (by - rad).max(r);
+                            let yhi = (by + rad).min(self.sh as i64 - 1 - r);
+                            let xlo = (bx - rad).max(r);
+                            let xhi = (bx + rad).min(self.sw as i64 - 1 - r);
+                            let cy = rng.range_inclusive(ylo, yhi);
+                            let cx = rng.range_inclusive(xlo, xhi);
+                            try_candidate(self.valid(cy, cx), &mut best);
+                            rad /= 2;
                         }
+                        chunk[li] = best;
                     }
-                    let nly = ly as i64 + step;
-                    let ny = y as i64 + step;
-                    let n = if nly >= 0 && nly < rows as i64 {
-                        chunk[nly as usize * tw + x].idx
-                    } else if ny >= 0 && ny < self.th as i64 {
-                        prev[ny as usize * tw + x].idx
-                    } else {
-                        NONE
-                    };
-                    if n != NONE {
-                        let (sy, sx) = ((n as usize / self.sw) as i64, (n as usize % self.sw) as i64);
-                        try_candidate(self.valid(sy - step, sx), &mut best);
-                    }
-                    // Forward enrichment: the source neighbours of the current match.
-                    if let Some((table, k)) = self.knn {
-                        let b = best.idx as usize;
-                        for &j in &table[b * k..(b + 1) * k] {
-                            if j != NONE && self.allowed[j as usize] {
-                                try_candidate(Some(j), &mut best);
-                            }
-                        }
-                    }
-                    // Random search around the current best, radius halving (alpha = 1/2).
-                    let mut rng = Rng::keyed(seed, (level as u64) << 32 | it as u64, (y * tw + x) as u64);
-                    let (by, bx) = ((best.idx as usize / self.sw) as i64, (best.idx as usize % self.sw) as i64);
-                    let r = self.r as i64;
-                    let mut rad = search_radius;
-                    while rad >= 1 {
-                        let ylo = (by - rad).max(r);
-                        let yhi = (by + rad).min(self.sh as i64 - 1 - r);
-                        let xlo = (bx - rad).max(r);
-                        let xhi = (bx + rad).min(self.sw as i64 - 1 - r);
-                        let cy = rng.range_inclusive(ylo, yhi);
-                        let cx = rng.range_inclusive(xlo, xhi);
-                        try_candidate(self.valid(cy, cx), &mut best);
-                        rad /= 2;
-                    }
-                    chunk[li] = best;
                 }
-            }
-            evals.fetch_add(count, Ordering::Relaxed);
-        });
+                evals.fetch_add(count, Ordering::Relaxed);
+            });
         evals.into_inner()
     }
 
     /// Exact search: every allowed source centre for every target pixel that needs one.
     fn exact(&self) -> (Vec<Cell>, u64) {
         let mut cells = vec![EMPTY; self.th * self.tw];
-        cells.par_chunks_mut(self.tw).enumerate().for_each(|(y, row)| {
-            for (x, cell) in row.iter_mut().enumerate() {
-                if !self.needs(y * self.tw + x) {
-                    continue;
-                }
-                let mut best = Cell { idx: NONE, d: f32::INFINITY };
-                for &s in &self.allowed_list {
-                    let d = self.dist(y, x, s, best.d);
-                    if d < best.d {
-                        best = Cell { idx: s, d };
+        cells
+            .par_chunks_mut(self.tw)
+            .enumerate()
+            .for_each(|(y, row)| {
+                for (x, cell) in row.iter_mut().enumerate() {
+                    if !self.needs(y * self.tw + x) {
+                        continue;
                     }
+                    let mut best = Cell {
+                        idx: NONE,
+                        d: f32::INFINITY,
+                    };
+                    for &s in &self.allowed_list {
+                        let d = self.dist(y, x, s, best.d);
+                        if d < best.d {
+                            best = Cell { idx: s, d };
+                        }
+                    }
+                    *cell = best;
                 }
-                *cell = best;
-            }
-        });
+            });
         let n = self.allowed_list.len() as u64 * self.need_count() as u64;
         (cells, n)
     }
 
     fn need_count(&self) -> usize {
-        self.need.as_ref().map_or(self.th * self.tw, |m| m.iter().filter(|v| **v).count())
+        self.need
+            .as_ref()
+            .map_or(self.th * self.tw, |m| m.iter().filter(|v| **v).count())
     }
 
     /// Half-resolution copy: 2×2 box average of images, AND of the source mask, OR of the
@@ -384,8 +442,20 @@ impl Level<'_> {
         let (src, sh, sw) = half(&self.src, self.sh, self.sw, self.c);
         let (tgt, th, tw) = half(&self.tgt, self.th, self.tw, self.c);
         let smask = source_mask.map(|m| half_mask(m, self.sh, self.sw, true));
-        let need = self.need.as_ref().map(|m| Cow::Owned(half_mask(m, self.th, self.tw, false)));
-        let lvl = Level::new(Cow::Owned(src), (sh, sw), Cow::Owned(tgt), (th, tw), self.c, self.r, smask.as_deref(), need);
+        let need = self
+            .need
+            .as_ref()
+            .map(|m| Cow::Owned(half_mask(m, self.th, self.tw, false)));
+        let lvl = Level::new(
+            Cow::Owned(src),
+            (sh, sw),
+            Cow::Owned(tgt),
+            (th, tw),
+            self.c,
+            self.r,
+            smask.as_deref(),
+            need,
+        );
         (lvl, smask)
     }
 }
@@ -397,8 +467,11 @@ fn half(buf: &[f32], h: usize, w: usize, c: usize) -> (Vec<f32>, usize, usize) {
         for x in 0..nw {
             for k in 0..c {
                 let at = |yy: usize, xx: usize| buf[(yy * w + xx) * c + k];
-                row[x * c + k] =
-                    0.25 * (at(2 * y, 2 * x) + at(2 * y, 2 * x + 1) + at(2 * y + 1, 2 * x) + at(2 * y + 1, 2 * x + 1));
+                row[x * c + k] = 0.25
+                    * (at(2 * y, 2 * x)
+                        + at(2 * y, 2 * x + 1)
+                        + at(2 * y + 1, 2 * x)
+                        + at(2 * y + 1, 2 * x + 1));
             }
         }
     });
@@ -410,8 +483,17 @@ fn half_mask(m: &[bool], h: usize, w: usize, all: bool) -> Vec<bool> {
     let mut out = Vec::with_capacity(nh * nw);
     for y in 0..nh {
         for x in 0..nw {
-            let q = [m[2 * y * w + 2 * x], m[2 * y * w + 2 * x + 1], m[(2 * y + 1) * w + 2 * x], m[(2 * y + 1) * w + 2 * x + 1]];
-            out.push(if all { q.iter().all(|v| *v) } else { q.iter().any(|v| *v) });
+            let q = [
+                m[2 * y * w + 2 * x],
+                m[2 * y * w + 2 * x + 1],
+                m[(2 * y + 1) * w + 2 * x],
+                m[(2 * y + 1) * w + 2 * x + 1],
+            ];
+            out.push(if all {
+                q.iter().all(|v| *v)
+            } else {
+                q.iter().any(|v| *v)
+            });
         }
     }
     out
@@ -422,33 +504,64 @@ fn validate<'a>(input: &NnfInput<'a>, params: &NnfParams) -> Result<Level<'a>> {
     let (s, t) = (input.source, input.target);
     let p = params.patch_size;
     if p == 0 || p % 2 == 0 {
-        return Err(invalid("patch_size", format!("expected an odd size >= 1, got {p}")));
+        return Err(invalid(
+            "patch_size",
+            format!("expected an odd size >= 1, got {p}"),
+        ));
     }
     if p > s.h || p > s.w {
         return Err(invalid(
             "patch_size",
-            format!("{p} does not fit in the source image of {}×{} pixels", s.h, s.w),
+            format!(
+                "{p} does not fit in the source image of {}×{} pixels",
+                s.h, s.w
+            ),
         ));
     }
     if t.c != s.c {
-        return Err(invalid("target", format!("expected {} channels like source, got {}", s.c, t.c)));
+        return Err(invalid(
+            "target",
+            format!("expected {} channels like source, got {}", s.c, t.c),
+        ));
     }
     if params.levels == 0 {
-        return Err(invalid("levels", "expected at least 1 pyramid level, got 0"));
+        return Err(invalid(
+            "levels",
+            "expected at least 1 pyramid level, got 0",
+        ));
     }
     s.check_finite("source")?;
     t.check_finite("target")?;
     if let Some(m) = input.source_mask {
         if m.len() != s.h * s.w {
-            return Err(invalid("source_mask", format!("expected {}×{} values like source, got {}", s.h, s.w, m.len())));
+            return Err(invalid(
+                "source_mask",
+                format!(
+                    "expected {}×{} values like source, got {}",
+                    s.h,
+                    s.w,
+                    m.len()
+                ),
+            ));
         }
     }
     if let Some(m) = input.target_mask {
         if m.len() != t.h * t.w {
-            return Err(invalid("target_mask", format!("expected {}×{} values like target, got {}", t.h, t.w, m.len())));
+            return Err(invalid(
+                "target_mask",
+                format!(
+                    "expected {}×{} values like target, got {}",
+                    t.h,
+                    t.w,
+                    m.len()
+                ),
+            ));
         }
         if !m.iter().any(|v| *v) {
-            return Err(invalid("target_mask", "no target pixel is selected (the mask is empty)"));
+            return Err(invalid(
+                "target_mask",
+                "no target pixel is selected (the mask is empty)",
+            ));
         }
     }
     let src = prescale(&s, input.weights)?;
@@ -471,18 +584,43 @@ fn validate<'a>(input: &NnfInput<'a>, params: &NnfParams) -> Result<Level<'a>> {
     }
     if let Some((table, k)) = input.source_knn {
         if k == 0 || table.len() != s.h * s.w * k {
-            return Err(invalid("source_knn", format!("expected {}×{}×k neighbour indices like source, got {} values for k = {k}", s.h, s.w, table.len())));
+            return Err(invalid(
+                "source_knn",
+                format!(
+                    "expected {}×{}×k neighbour indices like source, got {} values for k = {k}",
+                    s.h,
+                    s.w,
+                    table.len()
+                ),
+            ));
         }
-        if let Some(bad) = table.iter().find(|v| **v != NONE && **v as usize >= s.h * s.w) {
-            return Err(invalid("source_knn", format!("index {bad} is outside the {}×{} source", s.h, s.w)));
+        if let Some(bad) = table
+            .iter()
+            .find(|v| **v != NONE && **v as usize >= s.h * s.w)
+        {
+            return Err(invalid(
+                "source_knn",
+                format!("index {bad} is outside the {}×{} source", s.h, s.w),
+            ));
         }
     }
     if let Some(cost) = input.source_cost {
         if cost.len() != s.h * s.w {
-            return Err(invalid("source_cost", format!("expected {}×{} values like source, got {}", s.h, s.w, cost.len())));
+            return Err(invalid(
+                "source_cost",
+                format!(
+                    "expected {}×{} values like source, got {}",
+                    s.h,
+                    s.w,
+                    cost.len()
+                ),
+            ));
         }
         if let Some(bad) = cost.iter().find(|v| !v.is_finite() || **v < 0.0) {
-            return Err(invalid("source_cost", format!("expected finite non-negative costs, got {bad}")));
+            return Err(invalid(
+                "source_cost",
+                format!("expected finite non-negative costs, got {bad}"),
+            ));
         }
     }
     let mut level = level;
@@ -490,7 +628,15 @@ fn validate<'a>(input: &NnfInput<'a>, params: &NnfParams) -> Result<Level<'a>> {
     level.cost = input.source_cost;
     if let Some(init) = input.init {
         if init.len() != t.h * t.w * 2 {
-            return Err(invalid("init", format!("expected a {}×{}×2 field like target, got {} values", t.h, t.w, init.len())));
+            return Err(invalid(
+                "init",
+                format!(
+                    "expected a {}×{}×2 field like target, got {} values",
+                    t.h,
+                    t.w,
+                    init.len()
+                ),
+            ));
         }
         for (i, rc) in init.chunks_exact(2).enumerate() {
             if rc[0] < 0 && rc[1] < 0 {
@@ -519,6 +665,10 @@ fn validate<'a>(input: &NnfInput<'a>, params: &NnfParams) -> Result<Level<'a>> {
 /// an even or oversized `patch_size`, mismatched channels or mask sizes, NaN or infinite
 /// values, an empty target mask, a source mask that leaves no usable patch, an `init` entry
 /// that is not an allowed centre.
+///
+/// # Panics
+///
+/// Never on valid input; the `expect`s guard invariants of the pyramid built here.
 pub fn nnf(input: &NnfInput<'_>, params: &NnfParams) -> Result<Nnf> {
     let finest = validate(input, params)?;
     if params.method == Method::Exact {
@@ -530,7 +680,11 @@ pub fn nnf(input: &NnfInput<'_>, params: &NnfParams) -> Result<Nnf> {
     let mut masks: Vec<Option<Vec<bool>>> = vec![input.source_mask.map(<[bool]>::to_vec)];
     while levels.len() < params.levels && input.init.is_none() {
         let last = levels.last().expect("pyramid has a level");
-        if last.sh / 2 < params.patch_size || last.sw / 2 < params.patch_size || last.th < 2 || last.tw < 2 {
+        if last.sh / 2 < params.patch_size
+            || last.sw / 2 < params.patch_size
+            || last.th < 2
+            || last.tw < 2
+        {
             break;
         }
         let (next, m) = last.coarser(masks.last().expect("mask per level").as_deref());
@@ -562,7 +716,10 @@ pub fn nnf(input: &NnfInput<'_>, params: &NnfParams) -> Result<Nnf> {
                 if n == NONE {
                     return None;
                 }
-                let (sy, sx) = ((n as usize / coarse.sw) as i64, (n as usize % coarse.sw) as i64);
+                let (sy, sx) = (
+                    (n as usize / coarse.sw) as i64,
+                    (n as usize % coarse.sw) as i64,
+                );
                 let r = lvl.r as i64;
                 let cy = (2 * sy + (y - 2 * py) as i64).clamp(r, lvl.sh as i64 - 1 - r);
                 let cx = (2 * sx + (x - 2 * px) as i64).clamp(r, lvl.sw as i64 - 1 - r);
@@ -590,7 +747,13 @@ fn to_nnf(lvl: &Level<'_>, cells: &[Cell], evaluations: u64) -> Nnf {
 /// The distance [`nnf`] assigns to matching target pixel `(ty, tx)` with the source patch
 /// centred at `(sy, sx)`; unweighted. For tests and metrics.
 #[must_use]
-pub fn patch_distance(source: &Image<'_>, target: &Image<'_>, patch_size: usize, (ty, tx): (usize, usize), (sy, sx): (usize, usize)) -> f32 {
+pub fn patch_distance(
+    source: &Image<'_>,
+    target: &Image<'_>,
+    patch_size: usize,
+    (ty, tx): (usize, usize),
+    (sy, sx): (usize, usize),
+) -> f32 {
     let r = patch_size as i64 / 2;
     let mut acc = 0f32;
     for dy in -r..=r {
@@ -620,7 +783,10 @@ mod tests {
             for x in 0..w {
                 for k in 0..c {
                     let (fy, fx) = (y as f32, x as f32);
-                    let base = ((fx * 0.31 + k as f32).sin() * (fy * 0.17).cos() + (0.05 * (fx + 2.0 * fy)).sin()) * 0.4 + 0.5;
+                    let base = ((fx * 0.31 + k as f32).sin() * (fy * 0.17).cos()
+                        + (0.05 * (fx + 2.0 * fy)).sin())
+                        * 0.4
+                        + 0.5;
                     v.push(base + (rng.below(1000) as f32 / 1000.0 - 0.5) * 0.1);
                 }
             }
@@ -628,7 +794,15 @@ mod tests {
         v
     }
 
-    fn run(src: &[f32], sh: usize, sw: usize, tgt: &[f32], th: usize, tw: usize, params: &NnfParams) -> Nnf {
+    fn run(
+        src: &[f32],
+        sh: usize,
+        sw: usize,
+        tgt: &[f32],
+        th: usize,
+        tw: usize,
+        params: &NnfParams,
+    ) -> Nnf {
         let input = NnfInput {
             source: Image::new("source", src, sh, sw, 3).unwrap(),
             target: Image::new("target", tgt, th, tw, 3).unwrap(),
@@ -655,7 +829,19 @@ mod tests {
         let (sh, sw, th, tw) = (20, 24, 9, 11);
         let src = texture(sh, sw, 3, 1);
         let tgt = texture(th, tw, 3, 2);
-        let f = run(&src, sh, sw, &tgt, th, tw, &NnfParams { method: Method::Exact, patch_size: 5, ..NnfParams::default() });
+        let f = run(
+            &src,
+            sh,
+            sw,
+            &tgt,
+            th,
+            tw,
+            &NnfParams {
+                method: Method::Exact,
+                patch_size: 5,
+                ..NnfParams::default()
+            },
+        );
         let s = Image::new("s", &src, sh, sw, 3).unwrap();
         let t = Image::new("t", &tgt, th, tw, 3).unwrap();
         for ty in 0..th {
@@ -667,7 +853,10 @@ mod tests {
                     }
                 }
                 let got = f.dist[ty * tw + tx];
-                assert!((got - best).abs() <= 1e-4 * best.max(1.0), "({ty},{tx}): {got} vs {best}");
+                assert!(
+                    (got - best).abs() <= 1e-4 * best.max(1.0),
+                    "({ty},{tx}): {got} vs {best}"
+                );
                 let i = f.idx[ty * tw + tx] as usize;
                 let d = patch_distance(&s, &t, 5, (ty, tx), (i / sw, i % sw));
                 assert!((d - got).abs() <= 1e-4 * d.max(1.0));
@@ -694,7 +883,11 @@ mod tests {
                 f.idx[i] as usize == (y + oy) * sw + x + ox
             })
             .count();
-        assert!(exact_hits as f32 > 0.97 * (th * tw) as f32, "{exact_hits} of {}", th * tw);
+        assert!(
+            exact_hits as f32 > 0.97 * (th * tw) as f32,
+            "{exact_hits} of {}",
+            th * tw
+        );
     }
 
     #[test]
@@ -702,13 +895,25 @@ mod tests {
         let (sh, sw, th, tw) = (70, 50, 45, 61);
         let src = texture(sh, sw, 3, 3);
         let tgt = texture(th, tw, 3, 4);
-        let params = NnfParams { levels: 3, ..NnfParams::default() };
-        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
-        let three = rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap();
+        let params = NnfParams {
+            levels: 3,
+            ..NnfParams::default()
+        };
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let three = rayon::ThreadPoolBuilder::new()
+            .num_threads(3)
+            .build()
+            .unwrap();
         let a = one.install(|| run(&src, sh, sw, &tgt, th, tw, &params));
         let b = three.install(|| run(&src, sh, sw, &tgt, th, tw, &params));
         assert_eq!(a.idx, b.idx);
-        assert_eq!(a.dist.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), b.dist.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+        assert_eq!(
+            a.dist.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            b.dist.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        );
         assert_eq!(a.evaluations, b.evaluations);
     }
 
@@ -730,12 +935,22 @@ mod tests {
             source_cost: None,
         };
         for method in [Method::PatchMatch, Method::Exact] {
-            let f = nnf(&input, &NnfParams { method, levels: 2, ..NnfParams::default() }).unwrap();
+            let f = nnf(
+                &input,
+                &NnfParams {
+                    method,
+                    levels: 2,
+                    ..NnfParams::default()
+                },
+            )
+            .unwrap();
             for (i, &s) in f.idx.iter().enumerate() {
                 if tmask[i] {
                     assert_ne!(s, NONE);
                     let (y, x) = (s as usize / sw, s as usize % sw);
-                    assert!(smask[s as usize] && (3..sh - 3).contains(&y) && (3..sw - 3).contains(&x));
+                    assert!(
+                        smask[s as usize] && (3..sh - 3).contains(&y) && (3..sw - 3).contains(&x)
+                    );
                 } else {
                     assert_eq!(s, NONE);
                     assert!(f.dist[i].is_infinite());
@@ -761,8 +976,26 @@ mod tests {
             Err(crate::Error::InvalidArgument { name, .. }) => name,
             other => panic!("expected an invalid argument, got {other:?}"),
         };
-        assert_eq!(name(nnf(&input, &NnfParams { patch_size: 4, ..NnfParams::default() })), "patch_size");
-        assert_eq!(name(nnf(&input, &NnfParams { patch_size: 11, ..NnfParams::default() })), "patch_size");
+        assert_eq!(
+            name(nnf(
+                &input,
+                &NnfParams {
+                    patch_size: 4,
+                    ..NnfParams::default()
+                }
+            )),
+            "patch_size"
+        );
+        assert_eq!(
+            name(nnf(
+                &input,
+                &NnfParams {
+                    patch_size: 11,
+                    ..NnfParams::default()
+                }
+            )),
+            "patch_size"
+        );
         let empty = vec![false; 100];
         input.target_mask = Some(&empty);
         assert_eq!(name(nnf(&input, &NnfParams::default())), "target_mask");
@@ -782,5 +1015,49 @@ mod tests {
         let init = vec![0i32; 200];
         input.init = Some(&init);
         assert_eq!(name(nnf(&input, &NnfParams::default())), "init");
+    }
+
+    #[test]
+    fn source_cost_steers_matches_away() {
+        // Target is a crop of the source: the zero-distance match wins, unless it costs.
+        let (sh, sw) = (40, 40);
+        let src = texture(sh, sw, 3, 21);
+        let (th, tw) = (12, 12);
+        let mut tgt = Vec::new();
+        for y in 0..th {
+            for x in 0..tw {
+                tgt.extend_from_slice(&src[((y + 10) * sw + x + 10) * 3..][..3]);
+            }
+        }
+        let mut cost = vec![0f32; sh * sw];
+        let mut input = NnfInput {
+            source: Image::new("source", &src, sh, sw, 3).unwrap(),
+            target: Image::new("target", &tgt, th, tw, 3).unwrap(),
+            weights: None,
+            source_mask: None,
+            target_mask: None,
+            init: None,
+            source_knn: None,
+            source_cost: None,
+        };
+        let params = NnfParams {
+            method: Method::Exact,
+            ..NnfParams::default()
+        };
+        let free = nnf(&input, &params).unwrap();
+        let at = |i: usize| ((i / tw) + 10) * sw + (i % tw) + 10;
+        assert!((0..th * tw).all(|i| free.idx[i] as usize == at(i)));
+        for i in 0..th * tw {
+            cost[at(i)] = 1e6;
+        }
+        input.source_cost = Some(&cost);
+        let taxed = nnf(&input, &params).unwrap();
+        assert!((0..th * tw).all(|i| taxed.idx[i] as usize != at(i) && taxed.dist[i] < 1e6));
+        let pm = nnf(&input, &NnfParams::default()).unwrap();
+        assert!((0..th * tw).all(|i| pm.idx[i] as usize != at(i)));
+        let mut negative = cost.clone();
+        negative[0] = -1.0;
+        input.source_cost = Some(&negative);
+        assert!(nnf(&input, &params).is_err());
     }
 }

@@ -58,8 +58,14 @@ mod tests {
     fn streams_are_reproducible_and_distinct() {
         let a: Vec<u64> = (0..4).map(|_| Rng::keyed(1, 2, 3).next_u64()).collect();
         assert!(a.windows(2).all(|w| w[0] == w[1]));
-        assert_ne!(Rng::keyed(1, 2, 3).next_u64(), Rng::keyed(1, 2, 4).next_u64());
-        assert_ne!(Rng::keyed(1, 2, 3).next_u64(), Rng::keyed(2, 2, 3).next_u64());
+        assert_ne!(
+            Rng::keyed(1, 2, 3).next_u64(),
+            Rng::keyed(1, 2, 4).next_u64()
+        );
+        assert_ne!(
+            Rng::keyed(1, 2, 3).next_u64(),
+            Rng::keyed(2, 2, 3).next_u64()
+        );
     }
 
     #[test]

@@ -48,58 +48,84 @@ pub fn idx_from_rowcol(field: &[i32], sh: usize, sw: usize, patch_size: usize) -
 ///
 /// `idx[i]` is the source centre matched to target pixel `i` (or [`NONE`]); `weights[i]` the
 /// weight of that patch (default 1). Weights must be finite and non-negative.
-pub fn vote(source: &Image<'_>, idx: &[u32], h: usize, w: usize, weights: Option<&[f32]>, patch_size: usize) -> Result<Voted> {
+pub fn vote(
+    source: &Image<'_>,
+    idx: &[u32],
+    h: usize,
+    w: usize,
+    weights: Option<&[f32]>,
+    patch_size: usize,
+) -> Result<Voted> {
     if patch_size == 0 || patch_size % 2 == 0 {
-        return Err(invalid("patch_size", format!("expected an odd size >= 1, got {patch_size}")));
+        return Err(invalid(
+            "patch_size",
+            format!("expected an odd size >= 1, got {patch_size}"),
+        ));
     }
     if idx.len() != h * w {
-        return Err(invalid("field", format!("expected {h}×{w} entries, got {}", idx.len())));
+        return Err(invalid(
+            "field",
+            format!("expected {h}×{w} entries, got {}", idx.len()),
+        ));
     }
     if let Some(wt) = weights {
         if wt.len() != h * w {
-            return Err(invalid("weights", format!("expected {h}×{w} patch weights like the field, got {}", wt.len())));
+            return Err(invalid(
+                "weights",
+                format!(
+                    "expected {h}×{w} patch weights like the field, got {}",
+                    wt.len()
+                ),
+            ));
         }
         if let Some(bad) = wt.iter().find(|v| !v.is_finite() || **v < 0.0) {
-            return Err(invalid("weights", format!("expected finite non-negative weights, got {bad}")));
+            return Err(invalid(
+                "weights",
+                format!("expected finite non-negative weights, got {bad}"),
+            ));
         }
     }
     let r = patch_size / 2;
     let (c, sw) = (source.c, source.w);
     let mut image = vec![0f32; h * w * c];
     let mut weight = vec![0f32; h * w];
-    image.par_chunks_mut(w * c).zip(weight.par_chunks_mut(w)).enumerate().for_each(|(y, (row, wrow))| {
-        let mut acc = vec![0f32; c];
-        for x in 0..w {
-            acc.iter_mut().for_each(|v| *v = 0.0);
-            let mut total = 0f32;
-            for cy in y.saturating_sub(r)..=(y + r).min(h - 1) {
-                for cx in x.saturating_sub(r)..=(x + r).min(w - 1) {
-                    let ci = cy * w + cx;
-                    let s = idx[ci];
-                    if s == NONE {
-                        continue;
+    image
+        .par_chunks_mut(w * c)
+        .zip(weight.par_chunks_mut(w))
+        .enumerate()
+        .for_each(|(y, (row, wrow))| {
+            let mut acc = vec![0f32; c];
+            for x in 0..w {
+                acc.fill(0.0);
+                let mut total = 0f32;
+                for cy in y.saturating_sub(r)..=(y + r).min(h - 1) {
+                    for cx in x.saturating_sub(r)..=(x + r).min(w - 1) {
+                        let ci = cy * w + cx;
+                        let s = idx[ci];
+                        if s == NONE {
+                            continue;
+                        }
+                        let wt = weights.map_or(1.0, |v| v[ci]);
+                        if wt == 0.0 {
+                            continue;
+                        }
+                        // Source pixel at the same offset from the source centre.
+                        let (sy, sx) = (s as usize / sw + y - cy, s as usize % sw + x - cx);
+                        let px = &source.data[(sy * sw + sx) * c..][..c];
+                        for (a, v) in acc.iter_mut().zip(px) {
+                            *a += wt * v;
+                        }
+                        total += wt;
                     }
-                    let wt = weights.map_or(1.0, |v| v[ci]);
-                    if wt == 0.0 {
-                        continue;
-                    }
-                    // Source pixel at the same offset from the source centre.
-                    let (sy, sx) = (s as usize / sw + y - cy, s as usize % sw + x - cx);
-                    let px = &source.data[(sy * sw + sx) * c..][..c];
-                    for (a, v) in acc.iter_mut().zip(px) {
-                        *a += wt * v;
-                    }
-                    total += wt;
                 }
-            }
-            if total > 0.0 {
-                for (o, a) in row[x * c..(x + 1) * c].iter_mut().zip(&acc) {
-                    *o = a / total;
+                if total > 0.0 {
+                    for (o, a) in row[x * c..(x + 1) * c].iter_mut().zip(&acc) {
+                        *o = a / total;
+                    }
                 }
+                wrow[x] = total;
             }
-            wrow[x] = total;
-        }
-    });
+        });
     Ok(Voted { image, weight })
 }
 
@@ -116,7 +142,11 @@ mod tests {
         let idx: Vec<u32> = (0..h * w)
             .map(|i| {
                 let (y, x) = (i / w, i % w);
-                if (2..h - 2).contains(&y) && (2..w - 2).contains(&x) { i as u32 } else { NONE }
+                if (2..h - 2).contains(&y) && (2..w - 2).contains(&x) {
+                    i as u32
+                } else {
+                    NONE
+                }
             })
             .collect();
         let v = vote(&img, &idx, h, w, None, p).unwrap();
@@ -130,7 +160,7 @@ mod tests {
 
     #[test]
     fn weights_average_conflicting_votes() {
-                // Columns 0..5 hold 0, columns 5..9 hold 1.
+        // Columns 0..5 hold 0, columns 5..9 hold 1.
         let src: Vec<f32> = (0..27).map(|i| if i % 9 < 5 { 0.0 } else { 1.0 }).collect();
         let img = Image::new("source", &src, 3, 9, 1).unwrap();
         // Target 1×2: pixel 0 matched to centre (1,1) (zeros), pixel 1 to (1,7) (ones).

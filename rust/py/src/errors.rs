@@ -30,7 +30,9 @@ pub fn guarded<T>(f: impl FnOnce() -> phloem_core::Result<T>) -> phloem_core::Re
                 .map(|s| (*s).to_string())
                 .or_else(|| payload.downcast_ref::<String>().cloned())
                 .unwrap_or_else(|| "unknown panic".into());
-            Err(Error::Internal(format!("phloem-core panicked: {msg} (please report this as a bug)")))
+            Err(Error::Internal(format!(
+                "phloem-core panicked: {msg} (please report this as a bug)"
+            )))
         }
     }
 }

@@ -2,6 +2,9 @@
 //! around every parallel kernel, maps errors, and nothing else; the algorithms live in
 //! `rust/core`.
 
+// PyO3 hands every argument over by value (borrowed arrays included); the lint cannot see that.
+#![allow(clippy::needless_pass_by_value)]
+
 use pyo3::prelude::*;
 
 mod errors;

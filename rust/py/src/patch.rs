@@ -1,7 +1,9 @@
 //! Bindings of `phloem_core::{patch, knn, vote}` for `phloem.patch`.
 
 use ndarray::{Array2, Array3, Array4};
-use numpy::{IntoPyArray, PyArray2, PyArray3, PyArray4, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
+use numpy::{
+    IntoPyArray, PyArray2, PyArray3, PyArray4, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+};
 use phloem_core::image::Image;
 use phloem_core::knn::{self, KnnParams};
 use phloem_core::patch::{self, Method, NnfInput, NnfParams, NONE};
@@ -18,7 +20,13 @@ fn image<'a>(name: &'static str, a: &'a PyReadonlyArray3<'_, f32>) -> PyResult<I
 
 fn rowcol(idx: &[u32], sw: usize) -> Vec<i32> {
     idx.iter()
-        .flat_map(|&i| if i == NONE { [-1, -1] } else { [(i as usize / sw) as i32, (i as usize % sw) as i32] })
+        .flat_map(|&i| {
+            if i == NONE {
+                [-1, -1]
+            } else {
+                [(i as usize / sw) as i32, (i as usize % sw) as i32]
+            }
+        })
         .collect()
 }
 
@@ -67,16 +75,43 @@ pub fn nnf_py<'py>(
     let input = NnfInput {
         source: image("source", &source)?,
         target: image("target", &target)?,
-        weights: weights.as_ref().map(|w| w.as_slice().map_err(not_contiguous("weights"))).transpose()?,
-        source_mask: source_mask.as_ref().map(|m| m.as_slice().map_err(not_contiguous("source_mask"))).transpose()?,
-        target_mask: target_mask.as_ref().map(|m| m.as_slice().map_err(not_contiguous("target_mask"))).transpose()?,
-        init: init.as_ref().map(|m| m.as_slice().map_err(not_contiguous("init"))).transpose()?,
+        weights: weights
+            .as_ref()
+            .map(|w| w.as_slice().map_err(not_contiguous("weights")))
+            .transpose()?,
+        source_mask: source_mask
+            .as_ref()
+            .map(|m| m.as_slice().map_err(not_contiguous("source_mask")))
+            .transpose()?,
+        target_mask: target_mask
+            .as_ref()
+            .map(|m| m.as_slice().map_err(not_contiguous("target_mask")))
+            .transpose()?,
+        init: init
+            .as_ref()
+            .map(|m| m.as_slice().map_err(not_contiguous("init")))
+            .transpose()?,
         source_knn: table.as_ref().map(|(t, k)| (t.as_slice(), *k)),
-        source_cost: source_cost.as_ref().map(|m| m.as_slice().map_err(not_contiguous("source_cost"))).transpose()?,
+        source_cost: source_cost
+            .as_ref()
+            .map(|m| m.as_slice().map_err(not_contiguous("source_cost")))
+            .transpose()?,
     };
-    let method = if exact { Method::Exact } else { Method::PatchMatch };
-    let params = NnfParams { patch_size, iterations, levels, seed, method };
-    let f = py.detach(|| guarded(|| install(threads, || patch::nnf(&input, &params)))).map_err(to_py)?;
+    let method = if exact {
+        Method::Exact
+    } else {
+        Method::PatchMatch
+    };
+    let params = NnfParams {
+        patch_size,
+        iterations,
+        levels,
+        seed,
+        method,
+    };
+    let f = py
+        .detach(|| guarded(|| install(threads, || patch::nnf(&input, &params))))
+        .map_err(to_py)?;
     let field = Array3::from_shape_vec((f.h, f.w, 2), f.to_rowcol()).expect("field shape");
     let dist = Array2::from_shape_vec((f.h, f.w), f.dist).expect("dist shape");
     Ok((field.into_pyarray(py), dist.into_pyarray(py), f.evaluations))
@@ -99,9 +134,21 @@ pub fn knn_py<'py>(
     threads: Option<usize>,
 ) -> PyResult<KnnOut<'py>> {
     let img = image("exemplar", &exemplar)?;
-    let weights = weights.as_ref().map(|w| w.as_slice().map_err(not_contiguous("weights"))).transpose()?;
-    let params = KnnParams { patch_size, k, iterations, exact, exclude, seed };
-    let t = py.detach(|| guarded(|| install(threads, || knn::knn(&img, weights, &params)))).map_err(to_py)?;
+    let weights = weights
+        .as_ref()
+        .map(|w| w.as_slice().map_err(not_contiguous("weights")))
+        .transpose()?;
+    let params = KnnParams {
+        patch_size,
+        k,
+        iterations,
+        exact,
+        exclude,
+        seed,
+    };
+    let t = py
+        .detach(|| guarded(|| install(threads, || knn::knn(&img, weights, &params))))
+        .map_err(to_py)?;
     let idx = Array4::from_shape_vec((t.h, t.w, t.k, 2), rowcol(&t.idx, t.w)).expect("knn shape");
     let dist = Array3::from_shape_vec((t.h, t.w, t.k), t.dist).expect("knn dist shape");
     Ok((idx.into_pyarray(py), dist.into_pyarray(py)))
@@ -126,7 +173,10 @@ pub fn coherence_candidates_py<'py>(
                 if p[0] == -1 && p[1] == -1 {
                     Ok(NONE)
                 } else if p[0] < 0 || p[1] < 0 || p[0] as usize >= eh || p[1] as usize >= ew {
-                    Err(to_py(phloem_core::error::invalid(name, format!("({}, {}) is outside the {eh}×{ew} exemplar", p[0], p[1]))))
+                    Err(to_py(phloem_core::error::invalid(
+                        name,
+                        format!("({}, {}) is outside the {eh}×{ew} exemplar", p[0], p[1]),
+                    )))
                 } else {
                     Ok((p[0] as usize * ew + p[1] as usize) as u32)
                 }
@@ -138,12 +188,24 @@ pub fn coherence_candidates_py<'py>(
         Some(t) => {
             let (th, tw, k, _) = t.as_array().dim();
             let idx = flat("knn_idx", t.as_slice().map_err(not_contiguous("knn_idx"))?)?;
-            Some(knn::Knn { h: th, w: tw, k, idx, dist: Vec::new() })
+            Some(knn::Knn {
+                h: th,
+                w: tw,
+                k,
+                idx,
+                dist: Vec::new(),
+            })
         }
         None => None,
     };
     let (c, m) = py
-        .detach(|| guarded(|| install(threads, || knn::coherence_candidates(&r, h, w, eh, ew, table.as_ref(), patch_size, wrap))))
+        .detach(|| {
+            guarded(|| {
+                install(threads, || {
+                    knn::coherence_candidates(&r, h, w, eh, ew, table.as_ref(), patch_size, wrap)
+                })
+            })
+        })
         .map_err(to_py)?;
     let out = Array4::from_shape_vec((h, w, m, 2), rowcol(&c, ew)).expect("candidate shape");
     Ok(out.into_pyarray(py))
@@ -164,11 +226,25 @@ pub fn vote_py<'py>(
     let src = image("source", &source)?;
     let (h, w, two) = field.as_array().dim();
     if two != 2 {
-        return Err(to_py(phloem_core::error::invalid("field", format!("expected shape (H, W, 2), got last axis {two}"))));
+        return Err(to_py(phloem_core::error::invalid(
+            "field",
+            format!("expected shape (H, W, 2), got last axis {two}"),
+        )));
     }
-    let idx = vote::idx_from_rowcol(field.as_slice().map_err(not_contiguous("field"))?, src.h, src.w, patch_size).map_err(to_py)?;
-    let wts = weights.as_ref().map(|w| w.as_slice().map_err(not_contiguous("weights"))).transpose()?;
-    let v = py.detach(|| guarded(|| install(threads, || vote::vote(&src, &idx, h, w, wts, patch_size)))).map_err(to_py)?;
+    let idx = vote::idx_from_rowcol(
+        field.as_slice().map_err(not_contiguous("field"))?,
+        src.h,
+        src.w,
+        patch_size,
+    )
+    .map_err(to_py)?;
+    let wts = weights
+        .as_ref()
+        .map(|w| w.as_slice().map_err(not_contiguous("weights")))
+        .transpose()?;
+    let v = py
+        .detach(|| guarded(|| install(threads, || vote::vote(&src, &idx, h, w, wts, patch_size))))
+        .map_err(to_py)?;
     let img = Array3::from_shape_vec((h, w, src.c), v.image).expect("vote shape");
     let wt = Array2::from_shape_vec((h, w), v.weight).expect("weight shape");
     Ok((img.into_pyarray(py), wt.into_pyarray(py)))

@@ -14,7 +14,12 @@ fn pools() -> &'static Mutex<HashMap<usize, Arc<ThreadPool>>> {
 }
 
 fn env_threads() -> Option<usize> {
-    std::env::var("PHLOEM_NUM_THREADS").ok()?.trim().parse().ok().filter(|n| *n > 0)
+    std::env::var("PHLOEM_NUM_THREADS")
+        .ok()?
+        .trim()
+        .parse()
+        .ok()
+        .filter(|n| *n > 0)
 }
 
 /// The thread count used when none is given.
@@ -31,12 +36,19 @@ pub fn default_threads_py() -> usize {
 /// Runs `f` on a pool of `threads` workers.
 pub fn install<T: Send>(threads: Option<usize>, f: impl FnOnce() -> Result<T> + Send) -> Result<T> {
     let n = match threads {
-        Some(0) => return Err(phloem_core::error::invalid("threads", "expected at least 1 thread, got 0")),
+        Some(0) => {
+            return Err(phloem_core::error::invalid(
+                "threads",
+                "expected at least 1 thread, got 0",
+            ))
+        }
         Some(n) => n,
         None => default_threads(),
     };
     let pool = {
-        let mut map = pools().lock().map_err(|_| Error::Internal("thread pool cache poisoned".into()))?;
+        let mut map = pools()
+            .lock()
+            .map_err(|_| Error::Internal("thread pool cache poisoned".into()))?;
         if let Some(p) = map.get(&n) {
             Arc::clone(p)
         } else {

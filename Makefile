@@ -1,0 +1,27 @@
+.DEFAULT_GOAL := help
+
+help:  ## list the targets
+	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
+
+install:  ## build and install phloem with the test extras
+	pip install ".[test]"
+
+test: install  ## every test: Rust unit tests and pytest (what CI runs)
+	cargo test --release -p phloem-core && pytest
+
+lint:  ## rustfmt, clippy and the stub check
+	cargo fmt --all -- --check
+	cargo clippy --workspace --all-targets -- -D warnings
+	python -m mypy.stubtest phloem._core
+
+bench:  ## Rust criterion benches and Python benchmarks
+	cargo bench -p phloem-core --bench patch
+	pytest benches/bench_patch.py --benchmark-enable --benchmark-only
+
+peers:  ## side-by-side runs against PyPatchMatch, resynthesizer, texture-synthesis
+	python benches/peers.py
+
+sheet:  ## contact sheet of the texture jobs (out/texture_sheet.png)
+	python benches/sheet_texture.py out/texture_sheet.png
+
+.PHONY: help install test lint bench peers sheet
