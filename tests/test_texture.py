@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import phloem
-from phloem.metrics import coherence_map, patch_coherence
+from phloem.metrics import coherence_map, patch_coherence, repetition
 from phloem.texture import complete, synthesize
 
 
@@ -48,6 +48,24 @@ def test_synthesis_is_not_a_copy(synthesized, exemplar):
     offsets = field - np.stack(np.mgrid[0:160, 0:200], -1)
     _, counts = np.unique(offsets.reshape(-1, 2), axis=0, return_counts=True)
     assert counts.max() < 0.25 * 160 * 200
+
+
+@pytest.mark.parametrize("name", ["bark", "water"])
+def test_synthesis_does_not_tile_the_exemplar(name, request):
+    # A tiled copy is perfectly coherent, so coherence cannot catch it; repetition can. The
+    # output may repeat itself no more than the exemplar does (a tiled output scores ~0.9).
+    ex = np.ascontiguousarray(request.getfixturevalue(name)[:150, :150])
+    out = synthesize(ex, (256, 256), seed=0)
+    assert repetition(out) < repetition(ex) + 0.05
+
+
+def test_repetition_metric():
+    rng = np.random.default_rng(0)
+    tile = rng.random((40, 40))
+    assert repetition(np.tile(tile, (3, 3))) > 0.99
+    assert repetition(rng.random((120, 120))) < 0.15
+    with pytest.raises(ValueError, match="min_shift"):
+        repetition(tile, min_shift=30)
 
 
 def test_synthesis_deterministic_across_threads(exemplar):

@@ -1,7 +1,9 @@
 """Measures of result quality that the papers use, so tests and users can score an output.
 
 So far: patch coherence to an exemplar (how well every patch of an output is explained by some
-patch of the exemplar — the quantity texture optimisation minimises, Kwatra et al. 2005, Eq. 1).
+patch of the exemplar — the quantity texture optimisation minimises, Kwatra et al. 2005, Eq. 1),
+and repetition (how strongly an output repeats itself at a distance, which coherence cannot see:
+a tiled copy of the exemplar is perfectly coherent).
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from numpy.typing import NDArray
 from . import patch as _patch
 from ._validate import as_image, as_mask, check_patch_size
 
-__all__ = ["patch_coherence", "coherence_map"]
+__all__ = ["patch_coherence", "coherence_map", "repetition"]
 
 
 def coherence_map(
@@ -80,3 +82,56 @@ def patch_coherence(image: Any, exemplar: Any, **kwargs: Any) -> float:
     0.0
     """
     return float(np.nanmean(coherence_map(image, exemplar, **kwargs)))
+
+
+def repetition(image: Any, *, min_shift: int = 16) -> float:
+    """Strongest self-similarity of ``image`` at shifts of at least ``min_shift`` pixels.
+
+    The maximum, over all shifts ``(dy, dx)`` with ``max(|dy|, |dx|) >= min_shift``, of the
+    normalised autocorrelation of the gray image (computed by FFT with zero padding, each
+    shift normalised by its overlap). Near 1 for an image that repeats verbatim (an exemplar
+    tiled periodically), low for a natural texture. Strongly regular textures (bricks) score
+    high by nature: compare an output with its exemplar.
+
+    Parameters
+    ----------
+    image : (M, N[, C]) array_like
+        The image; colour is averaged to gray.
+    min_shift : int, optional
+        Shifts closer than this are ignored (default 16), since every image resembles itself
+        shifted by a pixel.
+
+    Returns
+    -------
+    float
+        In [-1, 1].
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> tile = np.random.default_rng(0).random((40, 40))
+    >>> round(phloem.metrics.repetition(np.tile(tile, (3, 3))), 3)
+    1.0
+    """
+    g = as_image(image, "image").mean(axis=2).astype(np.float64)
+    h, w = g.shape
+    m = int(min_shift)
+    if m < 1 or m >= max(h, w) // 2:
+        raise ValueError(f"min_shift: expected 1 <= min_shift < {max(h, w) // 2} for a {h}×{w} image, got {min_shift}")
+    g -= g.mean()
+    shape = (2 * h, 2 * w)
+    f = np.fft.rfft2(g, shape)
+    ac = np.fft.irfft2(f * np.conj(f), shape)
+    ones = np.fft.rfft2(np.ones_like(g), shape)
+    sq = np.fft.rfft2(g * g, shape)
+    # Overlap count and the energy of each side of the overlap, per shift.
+    n = np.fft.irfft2(ones * np.conj(ones), shape)
+    e1 = np.fft.irfft2(sq * np.conj(ones), shape)
+    e2 = np.fft.irfft2(ones * np.conj(sq), shape)
+    dy = np.minimum(np.arange(2 * h), 2 * h - np.arange(2 * h))
+    dx = np.minimum(np.arange(2 * w), 2 * w - np.arange(2 * w))
+    far = np.maximum(dy[:, None], dx[None, :]) >= m
+    # Keep shifts whose overlap is at least a quarter of the image, so tiny corners don't count.
+    valid = far & (n > 0.25 * h * w)
+    corr = ac[valid] / np.sqrt(np.maximum(e1[valid] * e2[valid], 1e-24))
+    return float(corr.max()) if corr.size else 0.0

@@ -96,7 +96,9 @@ def _robust_weights(dist: NDArray[np.float32]) -> NDArray[np.float32]:
 
 
 def _auto_levels(min_side: int, patch_size: int) -> int:
-    # Coarsest exemplar keeps at least ~4 patches across.
+    # The coarsest exemplar keeps at least ~4 patches across. Going coarser (2.5 patches)
+    # gets brick courses right but leaves so little exemplar that the output tiles it
+    # periodically, which is worse (see metrics.repetition and the note on issue 2).
     return max(1, min(6, int(math.floor(math.log2(max(min_side / (4 * patch_size), 1.0)))) + 1))
 
 
@@ -127,7 +129,9 @@ def synthesize(
         Neighbourhood side, odd (default 7).
     levels : int, optional
         Pyramid levels (default: as many as keep the coarsest exemplar at least four patches
-        wide, at most 6).
+        wide, at most 6). One more level helps strongly regular textures (brick courses)
+        but risks periodic tiling of small exemplars; check with
+        :func:`phloem.metrics.repetition`.
     iterations : int, optional
         Search-and-vote iterations per level (default 4).
     search_iterations : int, optional
