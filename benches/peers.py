@@ -57,6 +57,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import math
 import os
@@ -77,6 +78,9 @@ SHARED = Path("/work/shared/data")
 COFFEE = SHARED / "strokes" / "skimage_coffee.png"
 WATER = REPO / "tests" / "data" / "water.jpg"
 GRAVEL = SHARED / "textures" / "skimage_gravel.png"
+
+CompletionTool = Callable[[np.ndarray, np.ndarray], np.ndarray]  # (damaged u8, mask) -> float
+SynthesisTool = Callable[[np.ndarray, int], Callable[[], np.ndarray]]  # (u8, side) -> job
 
 SLOW_RUN_S = 20.0  # after a first run slower than this, don't repeat
 CONTRAST_WINDOW = 7
@@ -115,7 +119,7 @@ def log(message: str) -> None:
 
 
 def to_u8(image: np.ndarray) -> np.ndarray:
-    return (np.clip(image, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    return np.asarray((np.clip(image, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8))
 
 
 def to_float(image: np.ndarray) -> np.ndarray:
@@ -136,7 +140,7 @@ def resize(image: np.ndarray, size: int) -> np.ndarray:
         return image
     interp = cv2.INTER_CUBIC if size > image.shape[0] else cv2.INTER_AREA
     out = cv2.resize(image, (size, size), interpolation=interp)
-    return np.clip(out, 0.0, 1.0)
+    return np.asarray(np.clip(out, 0.0, 1.0))
 
 
 def center_crop(image: np.ndarray, side: int | None = None) -> np.ndarray:
@@ -185,13 +189,11 @@ def _window_stds(gray: np.ndarray, mask: np.ndarray) -> np.ndarray:
     inside = mask[top : ys.max() + 1, left : xs.max() + 1]
     win = np.lib.stride_tricks.sliding_window_view(region, (k, k))[::s, ::s]
     full = np.lib.stride_tricks.sliding_window_view(inside, (k, k))[::s, ::s].all(axis=(2, 3))
-    return win[full].std(axis=(1, 2))
+    return np.asarray(win[full].std(axis=(1, 2)))
 
 
 def contrast_ratio(result: np.ndarray, original: np.ndarray, mask: np.ndarray) -> float:
-    return float(
-        _window_stds(_gray(result), mask).mean() / _window_stds(_gray(original), mask).mean()
-    )
+    return float(_window_stds(_gray(result), mask).mean() / _window_stds(_gray(original), mask).mean())
 
 
 # --------------------------------------------------------------------------- inputs
@@ -234,14 +236,14 @@ def square_hole(size: int, hole: int) -> np.ndarray:
 # --------------------------------------------------------------------------- tools
 #
 # A completion tool maps (uint8 image with the hole blacked out, bool mask) to a float32
-# RGB image in [0, 1]; a synthesis tool maps (uint8 exemplar, output side) likewise.
-# ``*_tools`` return name → callable for the tools that are available, logging the rest.
+# RGB image in [0, 1]. A synthesis tool takes (uint8 exemplar, output side), does its
+# untimed preparation and returns the job to time, which returns a float32 RGB image.
 
 
 def _phloem_complete(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
     import phloem
 
-    return phloem.texture.complete(to_float(image), mask, seed=0)
+    return np.asarray(phloem.texture.complete(to_float(image), mask, seed=0))
 
 
 def _patchmatch_complete(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -261,9 +263,7 @@ def _resynthesizer_complete(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
     params.isMakeSeamlesslyTileableHorizontally = 0
     params.isMakeSeamlesslyTileableVertically = 0
     # the mask is a selection: non-zero (white) = synthesise, zero = keep and sample from
-    out = resynthesizer.resynthesize(
-        Image.fromarray(image), Image.fromarray(mask.astype(np.uint8) * 255), params
-    )
+    out = resynthesizer.resynthesize(Image.fromarray(image), Image.fromarray(mask.astype(np.uint8) * 255), params)
     return to_float(np.asarray(out.convert("RGB")))
 
 
@@ -285,8 +285,9 @@ def _resynthesizer_missing() -> str | None:
     return None
 
 
-def completion_tools() -> dict[str, Callable[[np.ndarray, np.ndarray], np.ndarray]]:
-    tools = {"phloem": _phloem_complete}
+def completion_tools() -> dict[str, CompletionTool]:
+    """Name → tool for phloem and the completion peers that are available."""
+    tools: dict[str, CompletionTool] = {"phloem": _phloem_complete}
     for name, fn, missing in (
         ("patchmatch", _patchmatch_complete, _patchmatch_missing),
         ("resynthesizer", _resynthesizer_complete, _resynthesizer_missing),
@@ -319,12 +320,12 @@ def texture_synthesis_command(binary: str, exemplar: Path, out: Path, size: int)
     ]  # fmt: skip
 
 
-def make_texture_synthesis(binary: str, workdir: Path) -> Callable[[np.ndarray, int], np.ndarray]:
+def make_texture_synthesis(binary: str, workdir: Path) -> SynthesisTool:
     """A synthesis tool running the CLI; the exemplar PNG is written before timing starts."""
 
     def tool(exemplar: np.ndarray, size: int) -> Callable[[], np.ndarray]:
-        from PIL import Image
         import phloem
+        from PIL import Image
 
         src, out = workdir / "exemplar.png", workdir / "out.png"
         Image.fromarray(exemplar).save(src)
@@ -332,7 +333,7 @@ def make_texture_synthesis(binary: str, workdir: Path) -> Callable[[np.ndarray, 
 
         def run() -> np.ndarray:
             out.unlink(missing_ok=True)
-            proc = subprocess.run(command, capture_output=True, text=True, timeout=1800)
+            proc = subprocess.run(command, check=False, capture_output=True, text=True, timeout=1800)
             if proc.returncode != 0:
                 tail = (proc.stderr or proc.stdout).strip()[-500:]
                 raise RuntimeError(f"exit {proc.returncode}: {tail}")
@@ -365,15 +366,13 @@ def run_completion(config: Config) -> list[Result]:
             log(f"completion  {case:<8} {tool} ...")
             result = Result("completion", case, tool)
             try:
-                out, result.time_s, result.runs = time_best(
-                    lambda fn=fn: fn(damaged, mask), config.complete_runs
-                )
+                out, result.time_s, result.runs = time_best(functools.partial(fn, damaged, mask), config.complete_runs)
                 result.metrics = {
                     "hole_mae": hole_mae(out, original, mask),
                     "contrast_ratio": contrast_ratio(out, original, mask),
                     "outside_changed": float(np.abs(out[~mask] - original[~mask]).max()),
                 }
-            except Exception as exc:  # a failing peer must not stop the benchmark
+            except Exception as exc:  # noqa: BLE001 (a failing peer must not stop the run)
                 result.error = f"{type(exc).__name__}: {exc}"
                 log(f"  failed: {result.error}")
             results.append(result)
@@ -383,8 +382,7 @@ def run_completion(config: Config) -> list[Result]:
 def run_synthesis(config: Config, texsyn_binary: str | None) -> list[Result]:
     import phloem
 
-    tools: dict[str, Callable[[np.ndarray, int], Callable[[], np.ndarray]]]
-    tools = {"phloem": _phloem_synthesize}
+    tools: dict[str, SynthesisTool] = {"phloem": _phloem_synthesize}
     results = []
     with tempfile.TemporaryDirectory(prefix="phloem-peers-") as tmp:
         if texsyn_binary:
@@ -397,15 +395,11 @@ def run_synthesis(config: Config, texsyn_binary: str | None) -> list[Result]:
                 log(f"synthesis   {case:<8} {tool} ...")
                 result = Result("synthesis", case, tool)
                 try:
-                    out, result.time_s, result.runs = time_best(
-                        make(exemplar, config.synth_size), config.synth_runs
-                    )
+                    out, result.time_s, result.runs = time_best(make(exemplar, config.synth_size), config.synth_runs)
                     if out.shape[:2] != (config.synth_size, config.synth_size):
                         raise RuntimeError(f"output has shape {out.shape}")
-                    result.metrics = {
-                        "patch_coherence": phloem.metrics.patch_coherence(out, reference)
-                    }
-                except Exception as exc:
+                    result.metrics = {"patch_coherence": phloem.metrics.patch_coherence(out, reference)}
+                except Exception as exc:  # noqa: BLE001
                     result.error = f"{type(exc).__name__}: {exc}"
                     log(f"  failed: {result.error}")
                 results.append(result)
@@ -415,7 +409,8 @@ def run_synthesis(config: Config, texsyn_binary: str | None) -> list[Result]:
 def time_ratios(results: list[Result]) -> list[dict[str, Any]]:
     """t_phloem / t_peer per (workload, case, peer), plus a geometric mean per workload."""
     times = {(r.workload, r.case, r.tool): r.time_s for r in results if r.time_s}
-    rows, grouped = [], {}
+    rows: list[dict[str, Any]] = []
+    grouped: dict[tuple[str, str], list[float]] = {}
     for (workload, case, tool), t in times.items():
         base = times.get((workload, case, "phloem"))
         if tool == "phloem" or base is None:
@@ -432,7 +427,10 @@ def time_ratios(results: list[Result]) -> list[dict[str, Any]]:
 
 def format_table(headers: list[str], rows: list[list[str]]) -> str:
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(headers)]
-    line = lambda cells: "  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip()
+
+    def line(cells: list[str]) -> str:
+        return "  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip()
+
     return "\n".join([line(headers), line(["-" * w for w in widths]), *map(line, rows)])
 
 
@@ -486,7 +484,7 @@ def _version(dist: str) -> str | None:
 def environment(texsyn_binary: str | None) -> dict[str, Any]:
     texsyn = None
     if texsyn_binary:
-        proc = subprocess.run([texsyn_binary, "--version"], capture_output=True, text=True)
+        proc = subprocess.run([texsyn_binary, "--version"], check=False, capture_output=True, text=True)
         texsyn = proc.stdout.strip() or None
     return {
         "python": platform.python_version(),
@@ -508,9 +506,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="small sizes and fewer runs")
     parser.add_argument("--json", metavar="OUT.json", help="also write the figures as JSON")
-    parser.add_argument(
-        "--only", choices=["completion", "synthesis"], help="run only one workload"
-    )
+    parser.add_argument("--only", choices=["completion", "synthesis"], help="run only one workload")
     parser.add_argument("--texture-synthesis", metavar="PATH", help="the CLI binary to use")
     return parser.parse_args(argv)
 

@@ -30,6 +30,10 @@ use crate::rng::Rng;
 /// the thread count.
 pub const STRIPE_ROWS: usize = 16;
 
+/// Forces the portable (non-AVX2) code path; for tests and for timing the difference.
+pub static FORCE_PORTABLE: std::sync::atomic::AtomicBool =
+    std::sync::atomic::AtomicBool::new(false);
+
 /// Marks a target pixel that needs no match.
 pub const NONE: u32 = u32::MAX;
 
@@ -134,6 +138,21 @@ impl Nnf {
     }
 }
 
+/// Source positions inside a level are packed as `row << 16 | col`: decoding is two shifts
+/// instead of two divisions by the width, which the hot loop does for every candidate.
+#[inline(always)]
+fn pack(y: usize, x: usize) -> u32 {
+    ((y as u32) << 16) | x as u32
+}
+
+#[inline(always)]
+fn unpack(p: u32) -> (usize, usize) {
+    ((p >> 16) as usize, (p & 0xFFFF) as usize)
+}
+
+/// Largest source side the packed positions can hold.
+pub const MAX_SOURCE_SIDE: usize = 0xFFFF;
+
 #[derive(Clone, Copy, Debug)]
 struct Cell {
     idx: u32,
@@ -147,7 +166,7 @@ const EMPTY: Cell = Cell {
 
 /// Sum of squared differences of two equally long slices, eight lanes at a time so the
 /// compiler vectorises it. The summation order is fixed, so the value is reproducible.
-#[inline]
+#[inline(always)]
 pub(crate) fn ssd(a: &[f32], b: &[f32]) -> f32 {
     debug_assert_eq!(a.len(), b.len());
     let mut acc = [0f32; 8];
@@ -168,7 +187,135 @@ pub(crate) fn ssd(a: &[f32], b: &[f32]) -> f32 {
     ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
 }
 
+/// A patch-distance kernel. Each row is split into chunks of eight values (the last one
+/// zero-padded); chunk `j` of every row adds its squared differences lane by lane into
+/// accumulator `j mod 3`. Rows are never reduced on their own, so a patch's additions form
+/// three short independent chains instead of one long serial one; the three are combined and
+/// reduced only when a total is needed. Implementations must give bit-identical results.
+trait Kernel {
+    type Acc: Copy;
+    fn zero() -> Self::Acc;
+    fn add_row(acc: &mut Self::Acc, a: &[f32], b: &[f32]);
+    fn total(acc: &Self::Acc) -> f32;
+}
+
+/// The portable kernel.
+struct Portable;
+
+impl Kernel for Portable {
+    type Acc = [[f32; 8]; 3];
+
+    #[inline(always)]
+    fn zero() -> Self::Acc {
+        [[0.0; 8]; 3]
+    }
+
+    #[inline(always)]
+    fn add_row(acc: &mut Self::Acc, a: &[f32], b: &[f32]) {
+        let n = a.len().min(b.len());
+        for (chunk, start) in (0..n).step_by(8).enumerate() {
+            let lanes = &mut acc[chunk % 3];
+            for (i, lane) in lanes.iter_mut().enumerate().take((n - start).min(8)) {
+                let d = a[start + i] - b[start + i];
+                *lane += d * d;
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn total(acc: &Self::Acc) -> f32 {
+        let mut v = [0f32; 8];
+        for (i, lane) in v.iter_mut().enumerate() {
+            *lane = (acc[0][i] + acc[1][i]) + acc[2][i];
+        }
+        ((v[0] + v[4]) + (v[1] + v[5])) + ((v[2] + v[6]) + (v[3] + v[7]))
+    }
+}
+
+/// AVX2 intrinsics doing exactly what [`Portable`] does lane by lane: subtract, multiply, add
+/// (no fused multiply-add, whose single rounding would change results); the tail chunk is a
+/// masked load whose empty lanes add `+0.0`, which changes nothing.
+#[cfg(target_arch = "x86_64")]
+struct Avx2;
+
+#[cfg(target_arch = "x86_64")]
+impl Kernel for Avx2 {
+    type Acc = [std::arch::x86_64::__m256; 3];
+
+    #[inline(always)]
+    fn zero() -> Self::Acc {
+        // SAFETY: only reached from `Level::stripe_avx2`, which requires AVX2.
+        unsafe { [std::arch::x86_64::_mm256_setzero_ps(); 3] }
+    }
+
+    #[inline(always)]
+    fn add_row(acc: &mut Self::Acc, a: &[f32], b: &[f32]) {
+        use std::arch::x86_64::{
+            _mm256_add_ps, _mm256_cmpgt_epi32, _mm256_loadu_ps, _mm256_maskload_ps, _mm256_mul_ps,
+            _mm256_set1_epi32, _mm256_setr_epi32, _mm256_sub_ps,
+        };
+        let n = a.len().min(b.len());
+        let full = n / 8 * 8;
+        // SAFETY: AVX2 is enabled (see `zero`); full loads read below `full <= n`, and the
+        // masked load touches only the `n - full` lanes inside both slices.
+        unsafe {
+            let mut i = 0;
+            let mut chunk = 0;
+            while i < full {
+                let d = _mm256_sub_ps(
+                    _mm256_loadu_ps(a.as_ptr().add(i)),
+                    _mm256_loadu_ps(b.as_ptr().add(i)),
+                );
+                acc[chunk % 3] = _mm256_add_ps(acc[chunk % 3], _mm256_mul_ps(d, d));
+                i += 8;
+                chunk += 1;
+            }
+            let rest = (n - full) as i32;
+            if rest > 0 {
+                let mask = _mm256_cmpgt_epi32(
+                    _mm256_set1_epi32(rest),
+                    _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+                );
+                let d = _mm256_sub_ps(
+                    _mm256_maskload_ps(a.as_ptr().add(full), mask),
+                    _mm256_maskload_ps(b.as_ptr().add(full), mask),
+                );
+                acc[chunk % 3] = _mm256_add_ps(acc[chunk % 3], _mm256_mul_ps(d, d));
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn total(acc: &Self::Acc) -> f32 {
+        use std::arch::x86_64::{
+            _mm256_add_ps, _mm256_castps256_ps128, _mm256_extractf128_ps, _mm_add_ps,
+            _mm_cvtss_f32, _mm_shuffle_ps,
+        };
+        // SAFETY: AVX2 is enabled (see `zero`).
+        unsafe {
+            let v = _mm256_add_ps(_mm256_add_ps(acc[0], acc[1]), acc[2]);
+            // (v0+v4, v1+v5, v2+v6, v3+v7), then (s0+s1) + (s2+s3) as in `Portable::total`.
+            let s = _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps::<1>(v));
+            let s01 = _mm_cvtss_f32(_mm_add_ps(s, _mm_shuffle_ps::<0b01>(s, s)));
+            let s23 = _mm_cvtss_f32(_mm_add_ps(
+                _mm_shuffle_ps::<0b10>(s, s),
+                _mm_shuffle_ps::<0b11>(s, s),
+            ));
+            s01 + s23
+        }
+    }
+}
+
 /// One resolution of a matching problem: prescaled buffers, dimensions and constraints.
+/// What one pass over the stripes shares.
+struct Pass<'p> {
+    /// The field before this iteration, read across stripe borders.
+    prev: &'p [Cell],
+    seed: u64,
+    level: usize,
+    it: usize,
+}
+
 struct Level<'a> {
     src: Cow<'a, [f32]>,
     sh: usize,
@@ -181,10 +328,13 @@ struct Level<'a> {
     /// Per source pixel: may be a patch centre (mask and border both allow it).
     allowed: Vec<bool>,
     allowed_list: Vec<u32>,
+    /// Whether a source mask restricts centres beyond the border (else `allowed` need not be
+    /// read, which saves a cache miss per random candidate).
+    masked: bool,
     /// Per target pixel: needs a match.
     need: Option<Cow<'a, [bool]>>,
-    /// Source self-similarity lists for enrichment, `k` per source pixel.
-    knn: Option<(&'a [u32], usize)>,
+    /// Source self-similarity lists for enrichment, `k` packed positions per source pixel.
+    knn: Option<(Vec<u32>, usize)>,
     /// Additive cost per source centre.
     cost: Option<&'a [f32]>,
 }
@@ -208,7 +358,7 @@ impl Level<'_> {
                     let i = y * sw + x;
                     if source_mask.is_none_or(|m| m[i]) {
                         allowed[i] = true;
-                        allowed_list.push(i as u32);
+                        allowed_list.push(pack(y, x));
                     }
                 }
             }
@@ -227,6 +377,7 @@ impl Level<'_> {
             need,
             knn: None,
             cost: None,
+            masked: source_mask.is_some(),
         }
     }
 
@@ -237,38 +388,72 @@ impl Level<'_> {
 
     /// Distance between the target patch at `(ty, tx)` and the source patch centred at `s`,
     /// abandoning the sum once it reaches `cutoff`.
-    #[inline]
+    #[inline(always)]
     fn dist(&self, ty: usize, tx: usize, s: u32, cutoff: f32) -> f32 {
-        let (sy, sx) = ((s as usize) / self.sw, (s as usize) % self.sw);
+        self.dist_with::<Portable>(ty, tx, s, cutoff)
+    }
+
+    #[inline(always)]
+    fn dist_with<K: Kernel>(&self, ty: usize, tx: usize, s: u32, cutoff: f32) -> f32 {
+        let (sy, sx) = unpack(s);
         let r = self.r;
         let dy0 = ty.min(r);
         let dy1 = (self.th - 1 - ty).min(r);
         let dx0 = tx.min(r);
         let dx1 = (self.tw - 1 - tx).min(r);
         let len = (dx0 + dx1 + 1) * self.c;
-        let mut acc = self.cost.map_or(0.0, |c| c[s as usize]);
-        if acc >= cutoff {
-            return acc;
+        let base = self.cost.map_or(0.0, |c| c[sy * self.sw + sx]);
+        if base >= cutoff {
+            return base;
         }
-        for k in 0..=dy0 + dy1 {
+        let mut acc = K::zero();
+        let rows = dy0 + dy1 + 1;
+        for k in 0..rows {
             let t0 = ((ty - dy0 + k) * self.tw + tx - dx0) * self.c;
             let s0 = ((sy - dy0 + k) * self.sw + sx - dx0) * self.c;
-            acc += ssd(&self.tgt[t0..t0 + len], &self.src[s0..s0 + len]);
-            if acc >= cutoff {
-                return acc;
+            K::add_row(&mut acc, &self.tgt[t0..t0 + len], &self.src[s0..s0 + len]);
+            // Early termination, checked every other row: the check is a horizontal sum and an
+            // unpredictable branch, both worth amortising.
+            if k % 2 == 1 && k + 1 < rows {
+                let partial = base + K::total(&acc);
+                if partial >= cutoff {
+                    return partial;
+                }
             }
         }
-        acc
+        base + K::total(&acc)
     }
 
-    #[inline]
+    /// Hints the cache to load the source rows a distance evaluation of centre `s` against
+    /// target row `ty` will read. A no-op off x86-64.
+    #[inline(always)]
+    fn prefetch(&self, s: u32, ty: usize) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+            let (sy, sx) = unpack(s);
+            let (dy0, dy1) = (ty.min(self.r), (self.th - 1 - ty).min(self.r));
+            let row0 = (sy - dy0) * self.sw + sx - self.r.min(sx);
+            for k in 0..=dy0 + dy1 {
+                let at = (row0 + k * self.sw) * self.c;
+                if at < self.src.len() {
+                    // SAFETY: prefetching is a hint and cannot fault; the address is in bounds.
+                    unsafe { _mm_prefetch::<_MM_HINT_T0>(self.src.as_ptr().add(at).cast::<i8>()) };
+                }
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = (s, ty);
+    }
+
+    #[inline(always)]
     fn valid(&self, y: i64, x: i64) -> Option<u32> {
         let r = self.r as i64;
         if y < r || x < r || y >= (self.sh as i64) - r || x >= (self.sw as i64) - r {
             return None;
         }
-        let i = y as usize * self.sw + x as usize;
-        self.allowed[i].then_some(i as u32)
+        let (y, x) = (y as usize, x as usize);
+        (!self.masked || self.allowed[y * self.sw + x]).then_some(pack(y, x))
     }
 
     fn random_allowed(&self, rng: &mut Rng) -> u32 {
@@ -309,97 +494,140 @@ impl Level<'_> {
     /// One PatchMatch iteration (propagation + random search) over the whole target.
     fn iterate(&self, cells: &mut [Cell], seed: u64, level: usize, it: usize) -> u64 {
         let prev = cells.to_vec();
-        let reverse = it % 2 == 1;
-        let step: i64 = if reverse { 1 } else { -1 };
         let evals = AtomicU64::new(0);
-        let search_radius = self.sh.max(self.sw) as i64;
         let tw = self.tw;
+        #[cfg(target_arch = "x86_64")]
+        let fast =
+            !FORCE_PORTABLE.load(Ordering::Relaxed) && std::arch::is_x86_feature_detected!("avx2");
         cells
             .par_chunks_mut(STRIPE_ROWS * tw)
             .enumerate()
             .for_each(|(stripe, chunk)| {
-                let y0 = stripe * STRIPE_ROWS;
-                let rows = chunk.len() / tw;
-                let mut count = 0u64;
-                for yy in 0..rows {
-                    let ly = if reverse { rows - 1 - yy } else { yy };
-                    let y = y0 + ly;
-                    for xx in 0..tw {
-                        let x = if reverse { tw - 1 - xx } else { xx };
-                        let li = ly * tw + x;
-                        let mut best = chunk[li];
-                        if best.idx == NONE {
-                            continue;
-                        }
-                        let mut try_candidate = |cand: Option<u32>, best: &mut Cell| {
-                            if let Some(s) = cand {
-                                if s != best.idx {
-                                    count += 1;
-                                    let d = self.dist(y, x, s, best.d);
-                                    if d < best.d {
-                                        *best = Cell { idx: s, d };
-                                    }
-                                }
-                            }
-                        };
-                        // Propagation: the neighbour one step back along the scan, shifted.
-                        let nx = x as i64 + step;
-                        if nx >= 0 && nx < tw as i64 {
-                            let n = chunk[ly * tw + nx as usize].idx;
-                            if n != NONE {
-                                let (sy, sx) =
-                                    ((n as usize / self.sw) as i64, (n as usize % self.sw) as i64);
-                                try_candidate(self.valid(sy, sx - step), &mut best);
-                            }
-                        }
-                        let nly = ly as i64 + step;
-                        let ny = y as i64 + step;
-                        let n = if nly >= 0 && nly < rows as i64 {
-                            chunk[nly as usize * tw + x].idx
-                        } else if ny >= 0 && ny < self.th as i64 {
-                            prev[ny as usize * tw + x].idx
-                        } else {
-                            NONE
-                        };
-                        if n != NONE {
-                            let (sy, sx) =
-                                ((n as usize / self.sw) as i64, (n as usize % self.sw) as i64);
-                            try_candidate(self.valid(sy - step, sx), &mut best);
-                        }
-                        // Forward enrichment: the source neighbours of the current match.
-                        if let Some((table, k)) = self.knn {
-                            let b = best.idx as usize;
-                            for &j in &table[b * k..(b + 1) * k] {
-                                if j != NONE && self.allowed[j as usize] {
-                                    try_candidate(Some(j), &mut best);
-                                }
-                            }
-                        }
-                        // Random search around the current best, radius halving (alpha = 1/2).
-                        let mut rng =
-                            Rng::keyed(seed, (level as u64) << 32 | it as u64, (y * tw + x) as u64);
-                        let (by, bx) = (
-                            (best.idx as usize / self.sw) as i64,
-                            (best.idx as usize % self.sw) as i64,
-                        );
-                        let r = self.r as i64;
-                        let mut rad = search_radius;
-                        while rad >= 1 {
-                            let ylo = (by - rad).max(r);
-                            let yhi = (by + rad).min(self.sh as i64 - 1 - r);
-                            let xlo = (bx - rad).max(r);
-                            let xhi = (bx + rad).min(self.sw as i64 - 1 - r);
-                            let cy = rng.range_inclusive(ylo, yhi);
-                            let cx = rng.range_inclusive(xlo, xhi);
-                            try_candidate(self.valid(cy, cx), &mut best);
-                            rad /= 2;
-                        }
-                        chunk[li] = best;
-                    }
-                }
+                let pass = Pass {
+                    prev: &prev,
+                    seed,
+                    level,
+                    it,
+                };
+                #[cfg(target_arch = "x86_64")]
+                let count = if fast {
+                    // SAFETY: the CPU supports AVX2 (checked just above).
+                    unsafe { self.stripe_avx2(chunk, stripe, &pass) }
+                } else {
+                    self.stripe::<Portable>(chunk, stripe, &pass)
+                };
+                #[cfg(not(target_arch = "x86_64"))]
+                let count = self.stripe::<Portable>(chunk, stripe, &pass);
                 evals.fetch_add(count, Ordering::Relaxed);
             });
         evals.into_inner()
+    }
+
+    /// [`Self::stripe`] with the AVX2 kernel, compiled for AVX2; bit-identical results.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn stripe_avx2(&self, chunk: &mut [Cell], stripe: usize, pass: &Pass<'_>) -> u64 {
+        self.stripe::<Avx2>(chunk, stripe, pass)
+    }
+
+    /// Propagation and random search over one stripe; returns the candidates evaluated.
+    #[inline(always)]
+    fn stripe<K: Kernel>(&self, chunk: &mut [Cell], stripe: usize, pass: &Pass<'_>) -> u64 {
+        let tw = self.tw;
+        let reverse = pass.it % 2 == 1;
+        let step: i64 = if reverse { 1 } else { -1 };
+        let search_radius = self.sh.max(self.sw) as i64;
+        let y0 = stripe * STRIPE_ROWS;
+        let rows = chunk.len() / tw;
+        let mut count = 0u64;
+        for yy in 0..rows {
+            let ly = if reverse { rows - 1 - yy } else { yy };
+            let y = y0 + ly;
+            for xx in 0..tw {
+                let x = if reverse { tw - 1 - xx } else { xx };
+                let li = ly * tw + x;
+                let mut best = chunk[li];
+                if best.idx == NONE {
+                    continue;
+                }
+                let mut try_candidate = |cand: Option<u32>, best: &mut Cell| {
+                    if let Some(s) = cand {
+                        if s != best.idx {
+                            count += 1;
+                            let d = self.dist_with::<K>(y, x, s, best.d);
+                            if d < best.d {
+                                *best = Cell { idx: s, d };
+                            }
+                        }
+                    }
+                };
+                // Propagation: the neighbour one step back along the scan, shifted.
+                let nx = x as i64 + step;
+                if nx >= 0 && nx < tw as i64 {
+                    let n = chunk[ly * tw + nx as usize].idx;
+                    if n != NONE {
+                        let (sy, sx) = unpack(n);
+                        try_candidate(self.valid(sy as i64, sx as i64 - step), &mut best);
+                    }
+                }
+                let nly = ly as i64 + step;
+                let ny = y as i64 + step;
+                let n = if nly >= 0 && nly < rows as i64 {
+                    chunk[nly as usize * tw + x].idx
+                } else if ny >= 0 && ny < self.th as i64 {
+                    pass.prev[ny as usize * tw + x].idx
+                } else {
+                    NONE
+                };
+                if n != NONE {
+                    let (sy, sx) = unpack(n);
+                    try_candidate(self.valid(sy as i64 - step, sx as i64), &mut best);
+                }
+                // Forward enrichment: the source neighbours of the current match.
+                if let Some((table, k)) = &self.knn {
+                    let (by, bx) = unpack(best.idx);
+                    let b = by * self.sw + bx;
+                    for &j in &table[b * k..(b + 1) * k] {
+                        let (jy, jx) = unpack(j);
+                        try_candidate(self.valid(jy as i64, jx as i64), &mut best);
+                    }
+                }
+                // Random search around the current best, radius halving (alpha = 1/2). The
+                // centre is fixed for the whole sequence (Barnes et al. 2009, Eq. 1), so all
+                // samples are drawn first and their rows prefetched: the evaluations below
+                // then find the source in cache instead of waiting on memory one by one.
+                let mut rng = Rng::keyed(
+                    pass.seed,
+                    (pass.level as u64) << 32 | pass.it as u64,
+                    (y * tw + x) as u64,
+                );
+                let (by, bx) = unpack(best.idx);
+                let (by, bx) = (by as i64, bx as i64);
+                let r = self.r as i64;
+                let mut samples = [NONE; 40];
+                let mut ns = 0;
+                let mut rad = search_radius;
+                while rad >= 1 && ns < samples.len() {
+                    let ylo = (by - rad).max(r);
+                    let yhi = (by + rad).min(self.sh as i64 - 1 - r);
+                    let xlo = (bx - rad).max(r);
+                    let xhi = (bx + rad).min(self.sw as i64 - 1 - r);
+                    let cy = rng.range_inclusive(ylo, yhi);
+                    let cx = rng.range_inclusive(xlo, xhi);
+                    if let Some(s) = self.valid(cy, cx) {
+                        self.prefetch(s, y);
+                        samples[ns] = s;
+                        ns += 1;
+                    }
+                    rad /= 2;
+                }
+                for &s in &samples[..ns] {
+                    try_candidate(Some(s), &mut best);
+                }
+                chunk[li] = best;
+            }
+        }
+        count
     }
 
     /// Exact search: every allowed source centre for every target pixel that needs one.
@@ -518,6 +746,15 @@ fn validate<'a>(input: &NnfInput<'a>, params: &NnfParams) -> Result<Level<'a>> {
             ),
         ));
     }
+    if s.h > MAX_SOURCE_SIDE || s.w > MAX_SOURCE_SIDE {
+        return Err(invalid(
+            "source",
+            format!(
+                "expected at most {MAX_SOURCE_SIDE} pixels per side, got {}×{}",
+                s.h, s.w
+            ),
+        ));
+    }
     if t.c != s.c {
         return Err(invalid(
             "target",
@@ -624,7 +861,19 @@ fn validate<'a>(input: &NnfInput<'a>, params: &NnfParams) -> Result<Level<'a>> {
         }
     }
     let mut level = level;
-    level.knn = input.source_knn;
+    level.knn = input.source_knn.map(|(table, k)| {
+        let packed = table
+            .iter()
+            .map(|&j| {
+                if j == NONE {
+                    NONE
+                } else {
+                    pack(j as usize / s.w, j as usize % s.w)
+                }
+            })
+            .collect();
+        (packed, k)
+    });
     level.cost = input.source_cost;
     if let Some(init) = input.init {
         if init.len() != t.h * t.w * 2 {
@@ -716,10 +965,8 @@ pub fn nnf(input: &NnfInput<'_>, params: &NnfParams) -> Result<Nnf> {
                 if n == NONE {
                     return None;
                 }
-                let (sy, sx) = (
-                    (n as usize / coarse.sw) as i64,
-                    (n as usize % coarse.sw) as i64,
-                );
+                let (sy, sx) = unpack(n);
+                let (sy, sx) = (sy as i64, sx as i64);
                 let r = lvl.r as i64;
                 let cy = (2 * sy + (y - 2 * py) as i64).clamp(r, lvl.sh as i64 - 1 - r);
                 let cx = (2 * sx + (x - 2 * px) as i64).clamp(r, lvl.sw as i64 - 1 - r);
@@ -738,7 +985,17 @@ fn to_nnf(lvl: &Level<'_>, cells: &[Cell], evaluations: u64) -> Nnf {
         h: lvl.th,
         w: lvl.tw,
         source_w: lvl.sw,
-        idx: cells.iter().map(|c| c.idx).collect(),
+        idx: cells
+            .iter()
+            .map(|c| {
+                if c.idx == NONE {
+                    NONE
+                } else {
+                    let (y, x) = unpack(c.idx);
+                    (y * lvl.sw + x) as u32
+                }
+            })
+            .collect(),
         dist: cells.iter().map(|c| c.d).collect(),
         evaluations,
     }
@@ -1059,5 +1316,23 @@ mod tests {
         negative[0] = -1.0;
         input.source_cost = Some(&negative);
         assert!(nnf(&input, &params).is_err());
+    }
+
+    #[test]
+    fn simd_and_portable_paths_agree_bit_for_bit() {
+        let (sh, sw, th, tw) = (50, 60, 40, 45);
+        let src = texture(sh, sw, 3, 31);
+        let tgt = texture(th, tw, 3, 32);
+        let params = NnfParams {
+            levels: 2,
+            ..NnfParams::default()
+        };
+        FORCE_PORTABLE.store(true, Ordering::Relaxed);
+        let portable = run(&src, sh, sw, &tgt, th, tw, &params);
+        FORCE_PORTABLE.store(false, Ordering::Relaxed);
+        let fast = run(&src, sh, sw, &tgt, th, tw, &params);
+        assert_eq!(portable.idx, fast.idx);
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&portable.dist), bits(&fast.dist));
     }
 }
