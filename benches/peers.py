@@ -31,7 +31,9 @@ What it measures
      generate EXEMPLAR.png``; the timing includes process start and the CLI's own PNG
      reading and writing (best of 2 runs).
 
-   Reported: wall time and ``phloem.metrics.patch_coherence(output, exemplar)`` (lower is
+   Reported: wall time, ``phloem.metrics.repetition(output)`` (about 0.9 or more: the
+   output tiles itself; compare with the exemplar's own) and
+   ``phloem.metrics.patch_coherence(output, exemplar)`` (lower is
    better), the same metric for both tools. Both get the same 8-bit exemplar.
 
 3. **Ratios**: ``t_phloem / t_peer`` per case and its geometric mean per workload
@@ -398,7 +400,11 @@ def run_synthesis(config: Config, texsyn_binary: str | None) -> list[Result]:
                     out, result.time_s, result.runs = time_best(make(exemplar, config.synth_size), config.synth_runs)
                     if out.shape[:2] != (config.synth_size, config.synth_size):
                         raise RuntimeError(f"output has shape {out.shape}")
-                    result.metrics = {"patch_coherence": phloem.metrics.patch_coherence(out, reference)}
+                    result.metrics = {
+                        "patch_coherence": phloem.metrics.patch_coherence(out, reference),
+                        # Coherence rewards verbatim copying; repetition shows tiling.
+                        "repetition": phloem.metrics.repetition(out),
+                    }
                 except Exception as exc:  # noqa: BLE001
                     result.error = f"{type(exc).__name__}: {exc}"
                     log(f"  failed: {result.error}")
@@ -461,10 +467,10 @@ def report(results: list[Result], ratios: list[dict[str, Any]], config: Config) 
         )
         rows = [
             [r.case, r.tool, _fmt(r.time_s, ".3f"), str(r.runs),
-             _fmt(r.metrics.get("patch_coherence"), ".5f"), r.error or ""]
+             _fmt(r.metrics.get("patch_coherence"), ".5f"), _fmt(r.metrics.get("repetition"), ".3f"), r.error or ""]
             for r in synthesis
         ]  # fmt: skip
-        parts.append(format_table(["exemplar", "tool", "time_s", "runs", "coherence", ""], rows))
+        parts.append(format_table(["exemplar", "tool", "time_s", "runs", "coherence", "repetition", ""], rows))
     if ratios:
         parts.append("\nTime ratios t_phloem / t_peer (below 1: phloem faster)")
         rows = [[r["workload"], r["case"], r["peer"], f"{r['ratio']:.3f}"] for r in ratios]
