@@ -149,3 +149,14 @@ def test_embedded_data():
     assert phloem.data.brick().shape == (512, 512)
     with pytest.raises(ValueError, match="name"):
         phloem.data.path("nothing.png")
+
+
+def test_written_files_get_the_umask_mode(tmp_path):
+    import os
+
+    mask = os.umask(0o022)
+    try:
+        write_image(tmp_path / "m.png", np.zeros((2, 2), np.float32))
+        assert (tmp_path / "m.png").stat().st_mode & 0o777 == 0o644
+    finally:
+        os.umask(mask)

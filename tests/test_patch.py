@@ -286,3 +286,22 @@ def test_patchmatch_close_to_exact_on_shared_grass():
     for enrich, limit in ((0, 1.28), (8, 1.17)):
         ratio = nnf(src, tgt, iterations=5, enrich=enrich, seed=1)[1].mean() / d_ex.mean()
         assert ratio <= limit, (enrich, ratio)
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="needs os.fork")
+@pytest.mark.filterwarnings("ignore:This process .* is multi-threaded:DeprecationWarning")
+def test_forked_child_can_use_the_thread_pools(bark):
+    # The parent builds and caches a 2-thread pool; a forked child inherits the cache but not
+    # the threads. Without phloem's at-fork hook the child's call hangs (killed by the timeout).
+    import multiprocessing as mp
+
+    src = np.ascontiguousarray(bark[:64, :64])
+    expected, _ = nnf(src, src[8:40, 8:40], threads=2, seed=3)
+    ctx = mp.get_context("fork")
+    with ctx.Pool(1) as pool:
+        got = pool.apply_async(_nnf_in_child, (src,)).get(timeout=60)
+    assert np.array_equal(got, expected)
+
+
+def _nnf_in_child(src):
+    return nnf(src, src[8:40, 8:40], threads=2, seed=3)[0]

@@ -12,8 +12,15 @@ cli       the ``phloem`` command
 
 from __future__ import annotations
 
+import os
+
 from . import _core, data, io, metrics, patch, texture
 
 __version__: str = _core.__version__
+
+# A forked child inherits phloem's cached thread pools but not their threads; without this
+# its first parallel call would hang (e.g. multiprocessing's default "fork" on Linux).
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_core._after_fork_in_child)
 
 __all__ = ["__version__", "data", "io", "metrics", "patch", "texture"]

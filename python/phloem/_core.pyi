@@ -3,7 +3,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 __version__: str
-__all__ = ["__version__", "coherence_candidates", "default_threads", "knn", "nnf", "vote"]
+__all__ = ["__version__", "_after_fork_in_child", "coherence_candidates", "default_threads", "knn", "nnf", "vote"]
 
 def nnf(
     source: NDArray[np.float32],
@@ -52,3 +52,4 @@ def vote(
     threads: int | None = None,
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]: ...
 def default_threads() -> int: ...
+def _after_fork_in_child() -> None: ...

@@ -58,7 +58,7 @@ def _preflight(args: argparse.Namespace) -> None:
 
 
 def _params(args: argparse.Namespace, skip: Sequence[str] = ()) -> dict[str, Any]:
-    drop = {"func", "quiet", "force", "threads", "seed", "max_pixels", *skip}
+    drop = {"func", "command", "quiet", "force", "threads", "seed", "max_pixels", *skip}
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items() if k not in drop}
 
 

@@ -22,6 +22,21 @@ fn env_threads() -> Option<usize> {
         .filter(|n| *n > 0)
 }
 
+/// Forgets every cached pool. Called in a forked child, where the pools' worker threads do
+/// not exist: using one would hang. The old pools are leaked, not dropped, since dropping
+/// would signal threads that are not there.
+pub fn forget_pools() {
+    if let Ok(mut map) = pools().lock() {
+        std::mem::forget(std::mem::take(&mut *map));
+    }
+}
+
+#[pyfunction]
+#[pyo3(name = "_after_fork_in_child")]
+pub fn after_fork_in_child_py() {
+    forget_pools();
+}
+
 /// The thread count used when none is given.
 pub fn default_threads() -> usize {
     env_threads().unwrap_or_else(rayon::current_num_threads)
