@@ -27,16 +27,10 @@ fn load(rel: &str, size: u32) -> Vec<f32> {
 }
 
 fn input<'a>(src: &'a [f32], tgt: &'a [f32], n: usize) -> NnfInput<'a> {
-    NnfInput {
-        source: Image::new("source", src, n, n, 3).unwrap(),
-        target: Image::new("target", tgt, n, n, 3).unwrap(),
-        weights: None,
-        source_mask: None,
-        target_mask: None,
-        init: None,
-        source_knn: None,
-        source_cost: None,
-    }
+    NnfInput::new(
+        Image::new("source", src, n, n, 3).unwrap(),
+        Image::new("target", tgt, n, n, 3).unwrap(),
+    )
 }
 
 fn pool(n: usize) -> rayon::ThreadPool {

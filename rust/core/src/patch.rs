@@ -106,6 +106,24 @@ pub struct NnfInput<'a> {
     pub source_cost: Option<&'a [f32]>,
 }
 
+impl<'a> NnfInput<'a> {
+    /// Matches `target` against `source` with no weights, masks, initial field, enrichment
+    /// or costs; set those fields with struct-update syntax.
+    #[must_use]
+    pub fn new(source: Image<'a>, target: Image<'a>) -> Self {
+        Self {
+            source,
+            target,
+            weights: None,
+            source_mask: None,
+            target_mask: None,
+            init: None,
+            source_knn: None,
+            source_cost: None,
+        }
+    }
+}
+
 /// A nearest-neighbour field.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Nnf {
@@ -1064,16 +1082,10 @@ mod tests {
         tw: usize,
         params: &NnfParams,
     ) -> Nnf {
-        let input = NnfInput {
-            source: Image::new("source", src, sh, sw, 3).unwrap(),
-            target: Image::new("target", tgt, th, tw, 3).unwrap(),
-            weights: None,
-            source_mask: None,
-            target_mask: None,
-            init: None,
-            source_knn: None,
-            source_cost: None,
-        };
+        let input = NnfInput::new(
+            Image::new("source", src, sh, sw, 3).unwrap(),
+            Image::new("target", tgt, th, tw, 3).unwrap(),
+        );
         nnf(&input, params).unwrap()
     }
 
@@ -1186,14 +1198,12 @@ mod tests {
         let smask: Vec<bool> = (0..sh * sw).map(|i| (i % sw) < 20).collect();
         let tmask: Vec<bool> = (0..th * tw).map(|i| (i / tw) % 3 == 0).collect();
         let input = NnfInput {
-            source: Image::new("source", &src, sh, sw, 3).unwrap(),
-            target: Image::new("target", &tgt, th, tw, 3).unwrap(),
-            weights: None,
             source_mask: Some(&smask),
             target_mask: Some(&tmask),
-            init: None,
-            source_knn: None,
-            source_cost: None,
+            ..NnfInput::new(
+                Image::new("source", &src, sh, sw, 3).unwrap(),
+                Image::new("target", &tgt, th, tw, 3).unwrap(),
+            )
         };
         for method in [Method::PatchMatch, Method::Exact] {
             let f = nnf(
@@ -1223,16 +1233,10 @@ mod tests {
     #[test]
     fn bad_arguments_are_named() {
         let src = texture(10, 10, 3, 1);
-        let mut input = NnfInput {
-            source: Image::new("source", &src, 10, 10, 3).unwrap(),
-            target: Image::new("target", &src, 10, 10, 3).unwrap(),
-            weights: None,
-            source_mask: None,
-            target_mask: None,
-            init: None,
-            source_knn: None,
-            source_cost: None,
-        };
+        let mut input = NnfInput::new(
+            Image::new("source", &src, 10, 10, 3).unwrap(),
+            Image::new("target", &src, 10, 10, 3).unwrap(),
+        );
         let name = |r: Result<Nnf>| match r {
             Err(crate::Error::InvalidArgument { name, .. }) => name,
             other => panic!("expected an invalid argument, got {other:?}"),
@@ -1291,16 +1295,10 @@ mod tests {
             }
         }
         let mut cost = vec![0f32; sh * sw];
-        let mut input = NnfInput {
-            source: Image::new("source", &src, sh, sw, 3).unwrap(),
-            target: Image::new("target", &tgt, th, tw, 3).unwrap(),
-            weights: None,
-            source_mask: None,
-            target_mask: None,
-            init: None,
-            source_knn: None,
-            source_cost: None,
-        };
+        let mut input = NnfInput::new(
+            Image::new("source", &src, sh, sw, 3).unwrap(),
+            Image::new("target", &tgt, th, tw, 3).unwrap(),
+        );
         let params = NnfParams {
             method: Method::Exact,
             ..NnfParams::default()
