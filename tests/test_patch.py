@@ -261,6 +261,12 @@ def test_bad_images_name_the_argument(source, target, name):
         nnf(source, target, patch_size=3)
 
 
+def test_exact_search_refuses_hours_of_work():
+    big = np.zeros((600, 600), np.float32)
+    with pytest.raises(ValueError, match="patchmatch"):
+        nnf(big, big, method="exact")
+
+
 def test_any_real_dtype_and_layout_is_accepted(bark):
     u8 = (bark[:40, :40] * 255).round().astype(np.uint8)
     f_u8, _ = nnf(u8, u8[5:25, 5:25], method="exact", patch_size=5)

@@ -173,3 +173,8 @@ def test_synthesis_rejects_nan_exemplar(bark):
     ex[3, 4, 1] = np.nan
     with pytest.raises(ValueError, match="exemplar"):
         synthesize(ex, 32)
+
+
+def test_absurd_output_size_fails_at_once(bark):
+    with pytest.raises(ValueError, match="max_pixels"):
+        synthesize(bark[:32, :32], (100_000, 100_000))

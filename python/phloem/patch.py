@@ -16,7 +16,11 @@ from numpy.typing import NDArray
 from . import _core
 from ._validate import as_image, as_mask, check_int, check_patch_size, check_seed, check_threads
 
-__all__ = ["nnf", "knn", "candidates", "vote"]
+__all__ = ["nnf", "knn", "candidates", "vote", "EXACT_LIMIT"]
+
+#: Most source × target pixel pairs :func:`nnf` accepts for ``method="exact"`` (about 2·10^10:
+#: minutes on two cores). The Rust call cannot be interrupted, so larger jobs are refused.
+EXACT_LIMIT = 2**34
 
 
 def _weights(weights: Any, channels: int) -> NDArray[np.float32] | None:
@@ -58,7 +62,8 @@ def nnf(
         PatchMatch iterations per pyramid level (default 5; Barnes et al. report that 4–5
         suffice). Ignored by exact search.
     method : {"patchmatch", "exact"}, optional
-        Randomised PatchMatch (default) or brute-force exact search, ``O(Ms·Ns·Mt·Nt)``.
+        Randomised PatchMatch (default) or brute-force exact search, ``O(Ms·Ns·Mt·Nt)``,
+        refused above :data:`EXACT_LIMIT` pixel pairs.
     weights : (C,) array_like, optional
         Non-negative per-channel weights of the squared differences (default all 1).
     source_mask : (Ms, Ns) array_like of bool, optional
@@ -109,6 +114,13 @@ def nnf(
         raise ValueError(f"target: expected {src.shape[2]} channels like source, got {tgt.shape[2]}")
     if method not in ("patchmatch", "exact"):
         raise ValueError(f"method: expected 'patchmatch' or 'exact', got {method!r}")
+    if method == "exact":
+        work = src.shape[0] * src.shape[1] * tgt.shape[0] * tgt.shape[1]
+        if work > EXACT_LIMIT:
+            raise ValueError(
+                f"method: exact search would compare {work:.3g} patch pairs (limit {EXACT_LIMIT:.3g}, minutes of "
+                "uninterruptible work); use method='patchmatch' (with enrich=k for near-exact fields) or smaller images"
+            )
     smask = None if source_mask is None else as_mask(source_mask, "source_mask", src.shape[:2])
     tmask = None if target_mask is None else as_mask(target_mask, "target_mask", tgt.shape[:2])
     table = None

@@ -115,7 +115,8 @@ def synthesize(
     iterations: int = 4,
     search_iterations: int = 2,
     diversity: float = 1.0,
-    weights: Any = None,
+        weights: Any = None,
+    max_pixels: int = 2**28,
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
     progress: Progress = None,
@@ -148,6 +149,9 @@ def synthesize(
         patches. 0 gives plain texture optimisation (default 1).
     weights : (C,) array_like, optional
         Per-channel weights of the patch distance.
+    max_pixels : int, optional
+        Refuse outputs larger than this many pixels (default 2**28, about 16k × 16k), so a
+        typo in ``size`` fails at once instead of exhausting memory.
     seed : int or numpy.random.Generator, optional
         Seed (default 0). The output is identical for any number of threads.
     threads : int, optional
@@ -177,6 +181,8 @@ def synthesize(
     """
     ex = as_image(exemplar, "exemplar")
     h, w = check_size(size)
+    if h * w > check_int(max_pixels, "max_pixels", 1):
+        raise ValueError(f"size: {w}×{h} = {h * w} pixels exceeds max_pixels = {max_pixels}")
     p = check_patch_size(patch_size)
     if p > min(ex.shape[:2]):
         raise ValueError(f"patch_size: {p} does not fit in the {ex.shape[0]}×{ex.shape[1]} exemplar")
@@ -275,7 +281,7 @@ def complete(
         Patch side, odd (default 7).
     levels : int, optional
         Pyramid levels (default: chosen from the hole and image size).
-        iterations : int, optional
+    iterations : int, optional
         Search-and-vote iterations per level (default 5). About 10 gives visibly sharper
         fills of large holes for twice the time.
     search_iterations : int, optional

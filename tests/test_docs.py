@@ -1,0 +1,17 @@
+"""Every Examples section in phloem's docstrings runs and shows what it claims."""
+
+from __future__ import annotations
+
+import doctest
+import importlib
+
+import pytest
+
+
+@pytest.mark.parametrize("module", ["phloem.io", "phloem.data", "phloem.patch", "phloem.texture", "phloem.metrics"])
+def test_docstring_examples(module):
+    mod = importlib.import_module(module)
+    result = doctest.testmod(mod, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    assert result.failed == 0
+    if module != "phloem.data":
+        assert result.attempted > 0, f"{module} has no examples"
