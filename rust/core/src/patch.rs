@@ -273,27 +273,35 @@ impl Kernel for Avx2 {
     #[inline(always)]
     fn add_row(acc: &mut Self::Acc, a: &[f32], b: &[f32]) {
         use std::arch::x86_64::{
-            _mm256_add_ps, _mm256_cmpgt_epi32, _mm256_loadu_ps, _mm256_maskload_ps, _mm256_mul_ps,
-            _mm256_set1_epi32, _mm256_setr_epi32, _mm256_sub_ps,
+            __m256, _mm256_add_ps, _mm256_cmpgt_epi32, _mm256_loadu_ps, _mm256_maskload_ps,
+            _mm256_mul_ps, _mm256_set1_epi32, _mm256_setr_epi32, _mm256_sub_ps,
         };
         let n = a.len().min(b.len());
         let full = n / 8 * 8;
         // SAFETY: AVX2 is enabled (see `zero`); full loads read below `full <= n`, and the
         // masked load touches only the `n - full` lanes inside both slices.
         unsafe {
-            let mut i = 0;
-            let mut chunk = 0;
-            while i < full {
+            let sq = |i: usize| -> __m256 {
                 let d = _mm256_sub_ps(
                     _mm256_loadu_ps(a.as_ptr().add(i)),
                     _mm256_loadu_ps(b.as_ptr().add(i)),
                 );
-                acc[chunk % 3] = _mm256_add_ps(acc[chunk % 3], _mm256_mul_ps(d, d));
-                i += 8;
-                chunk += 1;
+                _mm256_mul_ps(d, d)
+            };
+            // Chunk j goes to accumulator j mod 3, as in `Portable`; the indices are static
+            // so the three accumulators stay in registers.
+            let [mut a0, mut a1, mut a2] = *acc;
+            let mut i = 0;
+            while i + 24 <= full {
+                a0 = _mm256_add_ps(a0, sq(i));
+                a1 = _mm256_add_ps(a1, sq(i + 8));
+                a2 = _mm256_add_ps(a2, sq(i + 16));
+                i += 24;
             }
+            // 0, 1 or 2 full chunks left, then maybe a partial one: the next slots in order.
+            let left = (full - i) / 8;
             let rest = (n - full) as i32;
-            if rest > 0 {
+            let tail = if rest > 0 {
                 let mask = _mm256_cmpgt_epi32(
                     _mm256_set1_epi32(rest),
                     _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
@@ -302,8 +310,29 @@ impl Kernel for Avx2 {
                     _mm256_maskload_ps(a.as_ptr().add(full), mask),
                     _mm256_maskload_ps(b.as_ptr().add(full), mask),
                 );
-                acc[chunk % 3] = _mm256_add_ps(acc[chunk % 3], _mm256_mul_ps(d, d));
+                Some(_mm256_mul_ps(d, d))
+            } else {
+                None
+            };
+            match (left, tail) {
+                (0, Some(t)) => a0 = _mm256_add_ps(a0, t),
+                (1, None) => a0 = _mm256_add_ps(a0, sq(i)),
+                (1, Some(t)) => {
+                    a0 = _mm256_add_ps(a0, sq(i));
+                    a1 = _mm256_add_ps(a1, t);
+                }
+                (2, None) => {
+                    a0 = _mm256_add_ps(a0, sq(i));
+                    a1 = _mm256_add_ps(a1, sq(i + 8));
+                }
+                (2, Some(t)) => {
+                    a0 = _mm256_add_ps(a0, sq(i));
+                    a1 = _mm256_add_ps(a1, sq(i + 8));
+                    a2 = _mm256_add_ps(a2, t);
+                }
+                _ => {}
             }
+            *acc = [a0, a1, a2];
         }
     }
 
@@ -1336,5 +1365,31 @@ mod tests {
         assert_eq!(portable.idx, fast.idx);
         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&portable.dist), bits(&fast.dist));
+    }
+
+    #[test]
+    fn simd_and_portable_agree_for_every_row_shape() {
+        // Rows of 1..=60 values: every count of full chunks and every tail length.
+        for (p, c) in [(1, 1), (3, 1), (3, 3), (5, 4), (7, 2), (9, 3), (11, 5)] {
+            let (sh, sw, th, tw) = (30, 34, 17, 19);
+            let src = texture(sh, sw, c, 40 + p as u64);
+            let tgt = texture(th, tw, c, 50 + c as u64);
+            let input = NnfInput::new(
+                Image::new("source", &src, sh, sw, c).unwrap(),
+                Image::new("target", &tgt, th, tw, c).unwrap(),
+            );
+            let params = NnfParams {
+                patch_size: p,
+                iterations: 3,
+                ..NnfParams::default()
+            };
+            FORCE_PORTABLE.store(true, Ordering::Relaxed);
+            let portable = nnf(&input, &params).unwrap();
+            FORCE_PORTABLE.store(false, Ordering::Relaxed);
+            let fast = nnf(&input, &params).unwrap();
+            assert_eq!(portable.idx, fast.idx, "p = {p}, c = {c}");
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&portable.dist), bits(&fast.dist), "p = {p}, c = {c}");
+        }
     }
 }
