@@ -186,27 +186,16 @@ const EMPTY: Cell = Cell {
     d: f32::INFINITY,
 };
 
-/// Sum of squared differences of two equally long slices, eight lanes at a time so the
-/// compiler vectorises it. The summation order is fixed, so the value is reproducible.
-#[inline(always)]
-pub(crate) fn ssd(a: &[f32], b: &[f32]) -> f32 {
-    debug_assert_eq!(a.len(), b.len());
-    let mut acc = [0f32; 8];
-    let ca = a.chunks_exact(8);
-    let cb = b.chunks_exact(8);
-    let (ra, rb) = (ca.remainder(), cb.remainder());
-    for (x, y) in ca.zip(cb) {
-        for i in 0..8 {
-            let d = x[i] - y[i];
-            acc[i] += d * d;
-        }
+/// Whether the AVX2 kernel may be used (the CPU has it and [`FORCE_PORTABLE`] is off).
+pub(crate) fn avx2_enabled() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        !FORCE_PORTABLE.load(Ordering::Relaxed) && std::arch::is_x86_feature_detected!("avx2")
     }
-    let mut tail = 0f32;
-    for (x, y) in ra.iter().zip(rb) {
-        let d = x - y;
-        tail += d * d;
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
     }
-    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
 }
 
 /// A patch-distance kernel. Each row is split into chunks of eight values (the last one
@@ -214,7 +203,7 @@ pub(crate) fn ssd(a: &[f32], b: &[f32]) -> f32 {
 /// accumulator `j mod 3`. Rows are never reduced on their own, so a patch's additions form
 /// three short independent chains instead of one long serial one; the three are combined and
 /// reduced only when a total is needed. Implementations must give bit-identical results.
-trait Kernel {
+pub(crate) trait Kernel {
     type Acc: Copy;
     fn zero() -> Self::Acc;
     fn add_row(acc: &mut Self::Acc, a: &[f32], b: &[f32]);
@@ -222,7 +211,7 @@ trait Kernel {
 }
 
 /// The portable kernel.
-struct Portable;
+pub(crate) struct Portable;
 
 impl Kernel for Portable {
     type Acc = [[f32; 8]; 3];
@@ -258,7 +247,7 @@ impl Kernel for Portable {
 /// (no fused multiply-add, whose single rounding would change results); the tail chunk is a
 /// masked load whose empty lanes add `+0.0`, which changes nothing.
 #[cfg(target_arch = "x86_64")]
-struct Avx2;
+pub(crate) struct Avx2;
 
 #[cfg(target_arch = "x86_64")]
 impl Kernel for Avx2 {
@@ -581,6 +570,29 @@ impl Level<'_> {
         self.stripe::<Avx2>(chunk, stripe, pass)
     }
 
+    /// Evaluates candidate `cand` for target pixel `(y, x)`, keeping it if it beats `best`.
+    /// A method, not a closure: a closure the compiler does not inline is compiled without
+    /// AVX2, and every intrinsic in it becomes a call.
+    #[inline(always)]
+    fn try_candidate<K: Kernel>(
+        &self,
+        y: usize,
+        x: usize,
+        count: &mut u64,
+        cand: Option<u32>,
+        best: &mut Cell,
+    ) {
+        if let Some(s) = cand {
+            if s != best.idx {
+                *count += 1;
+                let d = self.dist_with::<K>(y, x, s, best.d);
+                if d < best.d {
+                    *best = Cell { idx: s, d };
+                }
+            }
+        }
+    }
+
     /// Propagation and random search over one stripe; returns the candidates evaluated.
     #[inline(always)]
     fn stripe<K: Kernel>(&self, chunk: &mut [Cell], stripe: usize, pass: &Pass<'_>) -> u64 {
@@ -601,24 +613,19 @@ impl Level<'_> {
                 if best.idx == NONE {
                     continue;
                 }
-                let mut try_candidate = |cand: Option<u32>, best: &mut Cell| {
-                    if let Some(s) = cand {
-                        if s != best.idx {
-                            count += 1;
-                            let d = self.dist_with::<K>(y, x, s, best.d);
-                            if d < best.d {
-                                *best = Cell { idx: s, d };
-                            }
-                        }
-                    }
-                };
                 // Propagation: the neighbour one step back along the scan, shifted.
                 let nx = x as i64 + step;
                 if nx >= 0 && nx < tw as i64 {
                     let n = chunk[ly * tw + nx as usize].idx;
                     if n != NONE {
                         let (sy, sx) = unpack(n);
-                        try_candidate(self.valid(sy as i64, sx as i64 - step), &mut best);
+                        self.try_candidate::<K>(
+                            y,
+                            x,
+                            &mut count,
+                            self.valid(sy as i64, sx as i64 - step),
+                            &mut best,
+                        );
                     }
                 }
                 let nly = ly as i64 + step;
@@ -632,7 +639,13 @@ impl Level<'_> {
                 };
                 if n != NONE {
                     let (sy, sx) = unpack(n);
-                    try_candidate(self.valid(sy as i64 - step, sx as i64), &mut best);
+                    self.try_candidate::<K>(
+                        y,
+                        x,
+                        &mut count,
+                        self.valid(sy as i64 - step, sx as i64),
+                        &mut best,
+                    );
                 }
                 // Forward enrichment: the source neighbours of the current match.
                 if let Some((table, k)) = &self.knn {
@@ -640,7 +653,13 @@ impl Level<'_> {
                     let b = by * self.sw + bx;
                     for &j in &table[b * k..(b + 1) * k] {
                         let (jy, jx) = unpack(j);
-                        try_candidate(self.valid(jy as i64, jx as i64), &mut best);
+                        self.try_candidate::<K>(
+                            y,
+                            x,
+                            &mut count,
+                            self.valid(jy as i64, jx as i64),
+                            &mut best,
+                        );
                     }
                 }
                 // Random search around the current best, radius halving (alpha = 1/2). The
@@ -673,7 +692,7 @@ impl Level<'_> {
                     rad /= 2;
                 }
                 for &s in &samples[..ns] {
-                    try_candidate(Some(s), &mut best);
+                    self.try_candidate::<K>(y, x, &mut count, Some(s), &mut best);
                 }
                 chunk[li] = best;
             }
@@ -1119,11 +1138,19 @@ mod tests {
     }
 
     #[test]
-    fn ssd_matches_naive_sum() {
-        let a: Vec<f32> = (0..29).map(|i| i as f32 * 0.1).collect();
-        let b: Vec<f32> = (0..29).map(|i| (i * i) as f32 * 0.01).collect();
-        let naive: f32 = a.iter().zip(&b).map(|(x, y)| (x - y) * (x - y)).sum();
-        assert!((ssd(&a, &b) - naive).abs() < 1e-4 * naive);
+    fn kernel_total_matches_naive_sum() {
+        for n in [1usize, 5, 8, 13, 21, 24, 29, 50] {
+            let a: Vec<f32> = (0..n).map(|i| i as f32 * 0.1).collect();
+            let b: Vec<f32> = (0..n).map(|i| (i * i) as f32 * 0.01).collect();
+            let naive: f32 = a.iter().zip(&b).map(|(x, y)| (x - y) * (x - y)).sum();
+            let mut acc = Portable::zero();
+            Portable::add_row(&mut acc, &a, &b);
+            Portable::add_row(&mut acc, &b, &a);
+            assert!(
+                (Portable::total(&acc) - 2.0 * naive).abs() <= 1e-4 * naive.max(1.0),
+                "n = {n}"
+            );
+        }
     }
 
     #[test]
