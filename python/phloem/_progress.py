@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Callable, Optional, TextIO
+from typing import Optional, TextIO
+from collections.abc import Callable
 
 Progress = Optional[Callable[[int, int], None]]
 

@@ -13,7 +13,8 @@ import json
 import os
 import tempfile
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
+from collections.abc import Mapping
 
 import cv2
 import numpy as np
@@ -26,8 +27,8 @@ __all__ = [
     "DEFAULT_MAX_PIXELS",
     "ImageReadError",
     "read_image",
-    "write_image",
     "sidecar_path",
+    "write_image",
     "write_result",
 ]
 

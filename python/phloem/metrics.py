@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from . import patch as _patch
 from ._validate import as_image, as_mask, check_patch_size
 
-__all__ = ["patch_coherence", "coherence_map", "repetition"]
+__all__ = ["coherence_map", "patch_coherence", "repetition"]
 
 
 def coherence_map(

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from . import _core
 from ._validate import as_image, as_mask, check_int, check_patch_size, check_seed, check_threads
 
-__all__ = ["nnf", "knn", "candidates", "vote", "EXACT_LIMIT"]
+__all__ = ["EXACT_LIMIT", "candidates", "knn", "nnf", "vote"]
 
 #: Most source × target pixel pairs :func:`nnf` accepts for ``method="exact"`` (about 2·10^10:
 #: minutes on two cores). The Rust call cannot be interrupted, so larger jobs are refused.

@@ -24,7 +24,7 @@ from . import _core
 from ._progress import Progress
 from ._validate import as_image, as_mask, check_int, check_patch_size, check_seed, check_size, check_threads, restore_ndim
 
-__all__ = ["synthesize", "complete"]
+__all__ = ["complete", "synthesize"]
 
 #: Kwatra et al. 2005 robust exponent r: weights are |z_p − x_p|^(r − 2).
 ROBUST_EXPONENT = 0.8
