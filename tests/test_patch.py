@@ -259,6 +259,13 @@ def test_bad_images_name_the_argument(source, target, name):
         nnf(source, target, patch_size=3)
 
 
+def test_enrich_table_outside_the_source_is_named(bark):
+    table, _ = knn(bark[:32, :32], 2, patch_size=5)
+    table[3, 4, 1] = (5, 32)  # one column past the source
+    with pytest.raises(ValueError, match="source_knn"):
+        nnf(bark[:32, :32], bark[:20, :20], patch_size=5, enrich=table)
+
+
 def test_exact_search_refuses_hours_of_work():
     big = np.zeros((600, 600), np.float32)
     with pytest.raises(ValueError, match="patchmatch"):

@@ -234,6 +234,18 @@ def synthesize(
     return restore_ndim(out, exemplar)
 
 
+def _patch_masks(hole: NDArray[np.bool_], p: int) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """For completion with ``p × p`` patches: the target pixels whose patch touches the hole
+    (they need a match) and the source centres whose patch is wholly known and inside."""
+    need = cv2.dilate(hole.astype(np.uint8), np.ones((p, p), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    source = ~need.astype(bool)
+    r = p // 2
+    if r:
+        source[:r, :] = source[-r:, :] = False
+        source[:, :r] = source[:, -r:] = False
+    return need.astype(bool), source
+
+
 def _fill_inward(img: NDArray[np.float32], hole: NDArray[np.bool_]) -> NDArray[np.float32]:
     """Onion-peel start for the coarsest level: each ring of the hole takes the mean of its
     already known 8-neighbours."""
@@ -318,12 +330,8 @@ def complete(
     r = p // 2
     if not hole.any():
         raise ValueError("mask: no pixel is selected for filling (the mask is empty)")
-    kernel = np.ones((p, p), np.uint8)
-    usable = ~cv2.dilate(hole.astype(np.uint8), kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
-    if r:
-        usable[:r, :] = usable[-r:, :] = False
-        usable[:, :r] = usable[:, -r:] = False
-    if not usable.any():
+    need0, source0 = _patch_masks(hole, p)
+    if not source0.any():
         raise ValueError(f"mask: the known region holds no complete {p}×{p} patch to copy from")
     iters = check_int(iterations, "iterations", 1)
     s_iters = check_int(search_iterations, "search_iterations", 1)
@@ -339,30 +347,27 @@ def complete(
         n_levels = check_int(levels, "levels", 1)
 
     known = (~hole).astype(np.float32)
-    pyramid: list[tuple[NDArray[np.float32], NDArray[np.bool_]]] = [(img, hole)]
+    # Per level: image, hole, pixels needing a match, usable source centres.
+    Level = tuple[NDArray[np.float32], NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]
+    pyramid: list[Level] = [(img, hole, need0, source0)]
     for lv in range(1, n_levels):
         h, w = (max(1, round(img.shape[0] / 2**lv)), max(1, round(img.shape[1] / 2**lv)))
         k = cv2.resize(known, (w, h), interpolation=cv2.INTER_AREA)
         v = _downsample(img * known[..., None], (h, w))
         hole_l = k < 0.999
-        src_l = cv2.erode((~hole_l).astype(np.uint8), kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0)
-        if min(h, w) < p or not src_l.any():
+        need_l, source_l = _patch_masks(hole_l, p)
+        if min(h, w) < p or not source_l.any():
             break
-        pyramid.append((np.ascontiguousarray(v / np.maximum(k, 1e-6)[..., None], dtype=np.float32), hole_l))
+        values = np.ascontiguousarray(v / np.maximum(k, 1e-6)[..., None], dtype=np.float32)
+        pyramid.append((values, hole_l, need_l, source_l))
     total = len(pyramid) * iters
     done = 0
     field: NDArray[np.int32] | None = None
     cur: NDArray[np.float32] | None = None
     for lv in range(len(pyramid) - 1, -1, -1):
-        orig, hole_l = pyramid[lv]
-        hl = hole_l.astype(np.uint8)
-        need = cv2.dilate(hl, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
-        smask = ~need
-        if r:
-            smask[:r, :] = smask[-r:, :] = False
-            smask[:, :r] = smask[:, -r:] = False
+        orig, hole_l, need, smask = pyramid[lv]
         # Distance of hole pixels to the known region, for Wexler's confidence γ^−d.
-        depth = cv2.distanceTransform(hl, cv2.DIST_L2, 3)
+        depth = cv2.distanceTransform(hole_l.astype(np.uint8), cv2.DIST_L2, 3)
         conf = np.power(WEXLER_GAMMA, -depth).astype(np.float32)
         if cur is None:
             cur = _fill_inward(orig, hole_l)
@@ -393,8 +398,7 @@ def complete(
             wvote[need] = np.exp(-d / (2.0 * sigma2)) * conf[need]
             voted, wsum = _core.vote(cur, field, patch_size=p, weights=wvote, threads=t)
             fill = hole_l & (wsum > 0)
-            cur = cur.copy()
-            cur[fill] = voted[fill]
+            cur[fill] = voted[fill]  # cur is this level's own copy, never the pyramid's image
             init = field
             done += 1
             if progress is not None:

@@ -30,6 +30,25 @@ fn rowcol(idx: &[u32], sw: usize) -> Vec<i32> {
         .collect()
 }
 
+/// The inverse of [`rowcol`]: (row, col) pairs to flat indices into an `h × w` image,
+/// `(-1, -1)` to [`NONE`]; any other pair outside the image is an error naming `name`.
+fn flat_indices(name: &'static str, rc: &[i32], h: usize, w: usize) -> PyResult<Vec<u32>> {
+    rc.chunks_exact(2)
+        .map(|p| {
+            if p[0] == -1 && p[1] == -1 {
+                Ok(NONE)
+            } else if p[0] < 0 || p[1] < 0 || p[0] as usize >= h || p[1] as usize >= w {
+                Err(to_py(phloem_core::error::invalid(
+                    name,
+                    format!("({}, {}) is outside the {h}×{w} image", p[0], p[1]),
+                )))
+            } else {
+                Ok((p[0] as usize * w + p[1] as usize) as u32)
+            }
+        })
+        .collect()
+}
+
 type NnfOut<'py> = (Bound<'py, PyArray3<i32>>, Bound<'py, PyArray2<f32>>, u64);
 
 #[pyfunction]
@@ -51,23 +70,16 @@ pub fn nnf_py<'py>(
     source_cost: Option<PyReadonlyArray2<'py, f32>>,
     threads: Option<usize>,
 ) -> PyResult<NnfOut<'py>> {
-    let sw = source.as_array().dim().1;
+    let (sh, sw) = (source.as_array().dim().0, source.as_array().dim().1);
     let table = match &source_knn {
         Some(t) => {
             let k = t.as_array().dim().2;
-            let rc = t.as_slice().map_err(not_contiguous("source_knn"))?;
-            let flat: Vec<u32> = rc
-                .chunks_exact(2)
-                .map(|p| {
-                    if p[0] < 0 || p[1] < 0 {
-                        NONE
-                    } else if p[1] as usize >= sw {
-                        NONE - 1 // rejected by the core as outside the source
-                    } else {
-                        (p[0] as usize * sw + p[1] as usize) as u32
-                    }
-                })
-                .collect();
+            let flat = flat_indices(
+                "source_knn",
+                t.as_slice().map_err(not_contiguous("source_knn"))?,
+                sh,
+                sw,
+            )?;
             Some((flat, k))
         }
         None => None,
@@ -167,27 +179,21 @@ pub fn coherence_candidates_py<'py>(
 ) -> PyResult<Bound<'py, PyArray4<i32>>> {
     let (eh, ew) = exemplar_shape;
     let (h, w, _) = refs.as_array().dim();
-    let flat = |name: &'static str, rc: &[i32]| -> PyResult<Vec<u32>> {
-        rc.chunks_exact(2)
-            .map(|p| {
-                if p[0] == -1 && p[1] == -1 {
-                    Ok(NONE)
-                } else if p[0] < 0 || p[1] < 0 || p[0] as usize >= eh || p[1] as usize >= ew {
-                    Err(to_py(phloem_core::error::invalid(
-                        name,
-                        format!("({}, {}) is outside the {eh}×{ew} exemplar", p[0], p[1]),
-                    )))
-                } else {
-                    Ok((p[0] as usize * ew + p[1] as usize) as u32)
-                }
-            })
-            .collect()
-    };
-    let r = flat("refs", refs.as_slice().map_err(not_contiguous("refs"))?)?;
+    let r = flat_indices(
+        "refs",
+        refs.as_slice().map_err(not_contiguous("refs"))?,
+        eh,
+        ew,
+    )?;
     let table = match &knn_idx {
         Some(t) => {
             let (th, tw, k, _) = t.as_array().dim();
-            let idx = flat("knn_idx", t.as_slice().map_err(not_contiguous("knn_idx"))?)?;
+            let idx = flat_indices(
+                "knn_idx",
+                t.as_slice().map_err(not_contiguous("knn_idx"))?,
+                eh,
+                ew,
+            )?;
             Some(knn::Knn {
                 h: th,
                 w: tw,
