@@ -5,7 +5,8 @@ Submodules
 io        reading and writing images and result sidecars
 data      small embedded example images
 patch     patch matching: PatchMatch and exact fields, k nearest patches, k-coherence, voting
-texture   texture synthesis and image completion
+seams     exact grid max-flow / min-cut and graph-cut seams between overlapping images
+texture   texture synthesis, graph-cut quilting and image completion
 metrics   measures of result quality
 cli       the ``phloem`` command
 """
@@ -14,7 +15,7 @@ from __future__ import annotations
 
 import os
 
-from . import _core, data, io, metrics, patch, texture
+from . import _core, data, io, metrics, patch, seams, texture
 
 __version__: str = _core.__version__
 
@@ -23,4 +24,4 @@ __version__: str = _core.__version__
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_core._after_fork_in_child)
 
-__all__ = ["__version__", "data", "io", "metrics", "patch", "texture"]
+__all__ = ["__version__", "data", "io", "metrics", "patch", "seams", "texture"]

@@ -3,7 +3,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 __version__: str
-__all__ = ["__version__", "_after_fork_in_child", "coherence_candidates", "default_threads", "knn", "nnf", "vote"]
+__all__ = [
+    "__version__",
+    "_after_fork_in_child",
+    "coherence_candidates",
+    "default_threads",
+    "grid_maxflow",
+    "knn",
+    "nnf",
+    "seam",
+    "vote",
+]
 
 def nnf(
     source: NDArray[np.float32],
@@ -53,3 +63,25 @@ def vote(
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]: ...
 def default_threads() -> int: ...
 def _after_fork_in_child() -> None: ...
+def grid_maxflow(
+    source: NDArray[np.float32],
+    sink: NDArray[np.float32],
+    edges: NDArray[np.float32],
+    *,
+    connectivity: int,
+    directed: bool,
+) -> tuple[float, NDArray[np.bool_]]: ...
+def seam(
+    a: NDArray[np.float32],
+    b: NDArray[np.float32],
+    region: NDArray[np.bool_],
+    *,
+    cost: str,
+    connectivity: int,
+    border_weight: float | None = None,
+    a_mask: NDArray[np.bool_] | None = None,
+    b_mask: NDArray[np.bool_] | None = None,
+    seeds: NDArray[np.uint8] | None = None,
+    edges: NDArray[np.float32] | None = None,
+    threads: int | None = None,
+) -> tuple[NDArray[np.bool_], float, tuple[int, int]]: ...

@@ -9,13 +9,17 @@
 //! - [`knn`]: k nearest patches inside one exemplar and the k-coherence candidate sets of
 //!   Tong et al. 2002;
 //! - [`vote`]: weighted patch voting, the M-step of texture optimisation (Kwatra et al. 2005)
-//!   and of image completion (Wexler et al. 2007).
+//!   and of image completion (Wexler et al. 2007);
+//! - [`maxflow`]: exact s-t max-flow / min-cut on grid graphs (Boykov & Kolmogorov 2004);
+//! - [`seams`]: graph-cut seams between overlapping images (Kwatra et al. 2003; Luo et al.).
 
 pub mod error;
 pub mod image;
 pub mod knn;
+pub mod maxflow;
 pub mod patch;
 pub mod rng;
+pub mod seams;
 pub mod vote;
 
 pub use error::{Error, Result};

@@ -9,6 +9,7 @@ use pyo3::prelude::*;
 
 mod errors;
 mod patch;
+mod seams;
 mod threads;
 
 #[pymodule(gil_used = false)]
@@ -18,6 +19,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(patch::knn_py, m)?)?;
     m.add_function(wrap_pyfunction!(patch::coherence_candidates_py, m)?)?;
     m.add_function(wrap_pyfunction!(patch::vote_py, m)?)?;
+    m.add_function(wrap_pyfunction!(seams::grid_maxflow_py, m)?)?;
+    m.add_function(wrap_pyfunction!(seams::seam_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::default_threads_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::after_fork_in_child_py, m)?)?;
     Ok(())

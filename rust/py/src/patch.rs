@@ -13,7 +13,10 @@ use pyo3::prelude::*;
 use crate::errors::{guarded, not_contiguous, to_py};
 use crate::threads::install;
 
-fn image<'a>(name: &'static str, a: &'a PyReadonlyArray3<'_, f32>) -> PyResult<Image<'a>> {
+pub(crate) fn image<'a>(
+    name: &'static str,
+    a: &'a PyReadonlyArray3<'_, f32>,
+) -> PyResult<Image<'a>> {
     let (h, w, c) = a.as_array().dim();
     Image::new(name, a.as_slice().map_err(not_contiguous(name))?, h, w, c).map_err(to_py)
 }

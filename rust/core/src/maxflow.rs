@@ -1,0 +1,829 @@
+//! Exact s-t max-flow / min-cut on 4- and 8-connected grid graphs.
+//!
+//! The algorithm is Boykov & Kolmogorov's (*An experimental comparison of min-cut/max-flow
+//! algorithms for energy minimization in vision*, PAMI 2004), as in their `maxflow` v3
+//! library: two search trees grown from the terminals, augmentation along the paths where
+//! they meet, and adoption of orphans with the timestamp/distance heuristics. It is
+//! specialised to grids: the graph is padded by one ring of nodes with zero capacity, so a
+//! neighbour is an implicit offset and the hot loops have no adjacency lists and no bounds
+//! tests.
+//!
+//! Capacities are `f32`, as in the `GraphFloat` variant of the C++ library; the flow value is
+//! accumulated in `f64`. A terminal capacity of `+∞` is a hard constraint. The algorithm is
+//! sequential and deterministic; the seam code builds its capacities in parallel.
+
+use std::collections::VecDeque;
+
+use crate::error::{invalid, Result};
+
+/// Row and column steps of the directions, in the order E, S, W, N, SE, SW, NW, NE; the
+/// opposite of direction `d` is `d ^ 2`.
+pub const DIRS: [(isize, isize); 8] = [
+    (0, 1),
+    (1, 0),
+    (0, -1),
+    (-1, 0),
+    (1, 1),
+    (1, -1),
+    (-1, -1),
+    (-1, 1),
+];
+
+/// The directions of the symmetric edge layout: E and S for 4-connectivity, then SE and SW.
+pub const SYMMETRIC_DIRS: [usize; 4] = [0, 1, 4, 5];
+
+const FREE: u8 = 255;
+const TERMINAL: u8 = 254;
+const ORPHAN: u8 = 253;
+
+#[inline]
+const fn opp(d: usize) -> usize {
+    d ^ 2
+}
+
+/// How edge capacities are given to [`GridGraph::set_edges`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EdgeLayout {
+    /// `k/2` values per pixel (E, S[, SE, SW]): one capacity for both directions of an edge.
+    Symmetric,
+    /// `k` values per pixel (E, S, W, N[, SE, SW, NW, NE]): the capacity from the pixel to
+    /// that neighbour.
+    Directed,
+}
+
+/// A grid graph with residual capacities, ready for [`GridGraph::maxflow`].
+#[derive(Clone, Debug)]
+pub struct GridGraph {
+    h: usize,
+    w: usize,
+    pw: usize,
+    k: usize,
+    /// Residual capacity from node `i` in direction `d` at `i * k + d` (padded indexing).
+    cap: Vec<f32>,
+    /// Residual terminal capacity: `> 0` from the source, `< 0` to the sink.
+    tr: Vec<f32>,
+    /// Flow already pushed straight from source to sink through single nodes.
+    base_flow: f64,
+    sink_side: Vec<bool>,
+    solved: bool,
+}
+
+impl GridGraph {
+    /// An `h × w` grid with `connectivity` 4 or 8 and all capacities zero.
+    pub fn new(h: usize, w: usize, connectivity: usize) -> Result<Self> {
+        if connectivity != 4 && connectivity != 8 {
+            return Err(invalid(
+                "connectivity",
+                format!("expected 4 or 8, got {connectivity}"),
+            ));
+        }
+        if h == 0 || w == 0 {
+            return Err(invalid(
+                "shape",
+                format!("expected a non-empty grid, got {h}×{w}"),
+            ));
+        }
+        let (ph, pw) = (h + 2, w + 2);
+        let n = ph
+            .checked_mul(pw)
+            .filter(|&n| n < u32::MAX as usize)
+            .ok_or_else(|| invalid("shape", format!("{h}×{w} is too large for a grid graph")))?;
+        Ok(Self {
+            h,
+            w,
+            pw,
+            k: connectivity,
+            cap: vec![0.0; n * connectivity],
+            tr: vec![0.0; n],
+            base_flow: 0.0,
+            sink_side: Vec::new(),
+            solved: false,
+        })
+    }
+
+    /// Grid height.
+    #[must_use]
+    pub fn height(&self) -> usize {
+        self.h
+    }
+
+    /// Grid width.
+    #[must_use]
+    pub fn width(&self) -> usize {
+        self.w
+    }
+
+    #[inline]
+    fn node(&self, y: usize, x: usize) -> usize {
+        (y + 1) * self.pw + x + 1
+    }
+
+    fn offset(&self, d: usize) -> isize {
+        DIRS[d].0 * self.pw as isize + DIRS[d].1
+    }
+
+    fn inside(&self, y: usize, x: usize, d: usize) -> bool {
+        let (ny, nx) = (y as isize + DIRS[d].0, x as isize + DIRS[d].1);
+        ny >= 0 && nx >= 0 && (ny as usize) < self.h && (nx as usize) < self.w
+    }
+
+    /// Sets every edge capacity from an `h × w × m` row-major array (`m = k/2` for
+    /// [`EdgeLayout::Symmetric`], `k` for [`EdgeLayout::Directed`]). Capacities of edges that
+    /// leave the grid are ignored. `name` is the argument named in errors.
+    pub fn set_edges(
+        &mut self,
+        name: &'static str,
+        edges: &[f32],
+        layout: EdgeLayout,
+    ) -> Result<()> {
+        let m = match layout {
+            EdgeLayout::Symmetric => self.k / 2,
+            EdgeLayout::Directed => self.k,
+        };
+        if edges.len() != self.h * self.w * m {
+            return Err(invalid(
+                name,
+                format!(
+                    "expected {}×{}×{m} capacities, got {} values",
+                    self.h,
+                    self.w,
+                    edges.len()
+                ),
+            ));
+        }
+        if let Some(i) = edges.iter().position(|v| !v.is_finite() || *v < 0.0) {
+            return Err(invalid(
+                name,
+                format!(
+                    "capacities must be finite and non-negative; entry {} (pixel ({}, {}), direction {}) is {}",
+                    i,
+                    i / m / self.w,
+                    i / m % self.w,
+                    i % m,
+                    edges[i]
+                ),
+            ));
+        }
+        self.cap.fill(0.0);
+        let k = self.k;
+        for y in 0..self.h {
+            for x in 0..self.w {
+                let p = self.node(y, x);
+                for (s, &v) in edges[(y * self.w + x) * m..][..m].iter().enumerate() {
+                    let d = match layout {
+                        EdgeLayout::Symmetric => SYMMETRIC_DIRS[s],
+                        EdgeLayout::Directed => s,
+                    };
+                    if !self.inside(y, x, d) {
+                        continue;
+                    }
+                    self.cap[p * k + d] = v;
+                    if layout == EdgeLayout::Symmetric {
+                        let q = p.wrapping_add_signed(self.offset(d));
+                        self.cap[q * k + opp(d)] = v;
+                    }
+                }
+            }
+        }
+        self.solved = false;
+        Ok(())
+    }
+
+    /// Sets the capacity of the edge from pixel `(y, x)` in direction `d` (and, if
+    /// `symmetric`, back). Out-of-grid edges are ignored.
+    pub fn set_edge(&mut self, y: usize, x: usize, d: usize, v: f32, symmetric: bool) {
+        if d >= self.k || !self.inside(y, x, d) {
+            return;
+        }
+        let p = self.node(y, x);
+        self.cap[p * self.k + d] = v;
+        if symmetric {
+            let q = p.wrapping_add_signed(self.offset(d));
+            self.cap[q * self.k + opp(d)] = v;
+        }
+        self.solved = false;
+    }
+
+    /// Sets the terminal capacities from two `h × w` arrays: `source[i]` from the source to
+    /// pixel `i`, `sink[i]` from pixel `i` to the sink. `+∞` is a hard constraint; a pixel
+    /// may not be hard-tied to both terminals.
+    pub fn set_terminals(&mut self, source: &[f32], sink: &[f32]) -> Result<()> {
+        for (name, a) in [("source", source), ("sink", sink)] {
+            if a.len() != self.h * self.w {
+                return Err(invalid(
+                    name,
+                    format!(
+                        "expected {}×{} capacities, got {} values",
+                        self.h,
+                        self.w,
+                        a.len()
+                    ),
+                ));
+            }
+            if let Some(i) = a.iter().position(|v| v.is_nan() || *v < 0.0) {
+                return Err(invalid(
+                    name,
+                    format!(
+                        "capacities must be non-negative (+inf for a hard constraint); pixel ({}, {}) is {}",
+                        i / self.w,
+                        i % self.w,
+                        a[i]
+                    ),
+                ));
+            }
+        }
+        self.tr.fill(0.0);
+        self.base_flow = 0.0;
+        for y in 0..self.h {
+            for x in 0..self.w {
+                let i = y * self.w + x;
+                let (s, t) = (source[i], sink[i]);
+                if s.is_infinite() && t.is_infinite() {
+                    return Err(invalid(
+                        "sink",
+                        format!("pixel ({y}, {x}) has infinite capacity to both terminals"),
+                    ));
+                }
+                self.set_terminal(y, x, s, t);
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds `s` to the source capacity and `t` to the sink capacity of pixel `(y, x)`.
+    #[inline]
+    pub fn set_terminal(&mut self, y: usize, x: usize, s: f32, t: f32) {
+        let p = self.node(y, x);
+        let (s, t) = (s + self.tr[p].max(0.0), t + (-self.tr[p]).max(0.0));
+        // Push min(s, t) straight through the node; keep the difference as residual.
+        let m = s.min(t);
+        self.base_flow += f64::from(m);
+        self.tr[p] = if s.is_infinite() {
+            f32::INFINITY
+        } else if t.is_infinite() {
+            f32::NEG_INFINITY
+        } else {
+            s - t
+        };
+        self.solved = false;
+    }
+
+    /// Computes the maximum flow, leaving the minimum cut for [`GridGraph::sink_side`].
+    pub fn maxflow(&mut self) -> f64 {
+        let n = self.tr.len();
+        let mut offs = [0isize; 8];
+        for (d, o) in offs.iter_mut().enumerate().take(self.k) {
+            *o = self.offset(d);
+        }
+        let mut s = Solver {
+            k: self.k,
+            offs,
+            cap: &mut self.cap,
+            tr: &mut self.tr,
+            parent: vec![FREE; n],
+            is_sink: vec![false; n],
+            ts: vec![0; n],
+            dist: vec![0; n],
+            queued: vec![false; n],
+            active: VecDeque::new(),
+            orphans: VecDeque::new(),
+            time: 0,
+            flow: self.base_flow,
+        };
+        s.run();
+        let flow = s.flow;
+        let (parent, is_sink) = (s.parent, s.is_sink);
+        self.sink_side = (0..self.h)
+            .flat_map(|y| (0..self.w).map(move |x| (y, x)))
+            .map(|(y, x)| {
+                let p = (y + 1) * self.pw + x + 1;
+                parent[p] != FREE && is_sink[p]
+            })
+            .collect();
+        self.base_flow = flow;
+        self.solved = true;
+        flow
+    }
+
+    /// After [`GridGraph::maxflow`]: `true` for the pixels on the sink side of a minimum cut
+    /// (nodes reachable from neither tree go to the source side, as in the C++ library).
+    #[must_use]
+    pub fn sink_side(&self) -> Option<&[bool]> {
+        self.solved.then_some(self.sink_side.as_slice())
+    }
+}
+
+struct Solver<'g> {
+    k: usize,
+    offs: [isize; 8],
+    cap: &'g mut [f32],
+    tr: &'g mut [f32],
+    parent: Vec<u8>,
+    is_sink: Vec<bool>,
+    ts: Vec<u32>,
+    dist: Vec<u32>,
+    queued: Vec<bool>,
+    active: VecDeque<u32>,
+    orphans: VecDeque<u32>,
+    time: u32,
+    flow: f64,
+}
+
+impl Solver<'_> {
+    #[inline]
+    fn nb(&self, i: usize, d: usize) -> usize {
+        i.wrapping_add_signed(self.offs[d])
+    }
+
+    #[inline]
+    fn activate(&mut self, i: usize) {
+        if !self.queued[i] {
+            self.queued[i] = true;
+            self.active.push_back(i as u32);
+        }
+    }
+
+    fn next_active(&mut self) -> Option<usize> {
+        while let Some(i) = self.active.pop_front() {
+            let i = i as usize;
+            self.queued[i] = false;
+            if self.parent[i] != FREE {
+                return Some(i);
+            }
+        }
+        None
+    }
+
+    fn run(&mut self) {
+        for i in 0..self.tr.len() {
+            let t = self.tr[i];
+            if t != 0.0 {
+                self.parent[i] = TERMINAL;
+                self.is_sink[i] = t < 0.0;
+                self.dist[i] = 1;
+                self.activate(i);
+            }
+        }
+        let mut current: Option<usize> = None;
+        loop {
+            let i = match current.take() {
+                Some(i) if self.parent[i] != FREE => i,
+                _ => match self.next_active() {
+                    Some(i) => i,
+                    None => break,
+                },
+            };
+            if let Some((p, q, d)) = self.grow(i) {
+                self.time += 1;
+                self.augment(p, q, d);
+                self.adopt();
+                current = Some(i);
+            }
+        }
+    }
+
+    /// Grows the tree of `i` by one layer; returns a source-tree node, a sink-tree node and
+    /// the direction of the residual edge between them when the trees touch.
+    #[inline]
+    fn grow(&mut self, i: usize) -> Option<(usize, usize, usize)> {
+        let k = self.k;
+        let sink = self.is_sink[i];
+        for d in 0..k {
+            let j = self.nb(i, d);
+            let r = if sink {
+                self.cap[j * k + opp(d)]
+            } else {
+                self.cap[i * k + d]
+            };
+            if r <= 0.0 {
+                continue;
+            }
+            if self.parent[j] == FREE {
+                self.is_sink[j] = sink;
+                self.parent[j] = opp(d) as u8;
+                self.ts[j] = self.ts[i];
+                self.dist[j] = self.dist[i] + 1;
+                self.activate(j);
+            } else if self.is_sink[j] != sink {
+                return Some(if sink { (j, i, opp(d)) } else { (i, j, d) });
+            } else if self.ts[j] <= self.ts[i] && self.dist[j] > self.dist[i] {
+                self.parent[j] = opp(d) as u8;
+                self.ts[j] = self.ts[i];
+                self.dist[j] = self.dist[i] + 1;
+            }
+        }
+        None
+    }
+
+    #[inline]
+    fn orphan_front(&mut self, i: usize) {
+        self.parent[i] = ORPHAN;
+        self.orphans.push_front(i as u32);
+    }
+
+    fn augment(&mut self, p: usize, q: usize, d: usize) {
+        let k = self.k;
+        let mut f = self.cap[p * k + d];
+        let mut i = p;
+        loop {
+            let a = self.parent[i];
+            if a == TERMINAL {
+                f = f.min(self.tr[i]);
+                break;
+            }
+            let j = self.nb(i, a as usize);
+            f = f.min(self.cap[j * k + opp(a as usize)]);
+            i = j;
+        }
+        i = q;
+        loop {
+            let a = self.parent[i];
+            if a == TERMINAL {
+                f = f.min(-self.tr[i]);
+                break;
+            }
+            f = f.min(self.cap[i * k + a as usize]);
+            i = self.nb(i, a as usize);
+        }
+
+        self.cap[p * k + d] -= f;
+        self.cap[q * k + opp(d)] += f;
+        i = p;
+        loop {
+            let a = self.parent[i];
+            if a == TERMINAL {
+                self.tr[i] -= f;
+                if self.tr[i] <= 0.0 {
+                    self.orphan_front(i);
+                }
+                break;
+            }
+            let a = a as usize;
+            let j = self.nb(i, a);
+            self.cap[j * k + opp(a)] -= f;
+            self.cap[i * k + a] += f;
+            if self.cap[j * k + opp(a)] <= 0.0 {
+                self.orphan_front(i);
+            }
+            i = j;
+        }
+        i = q;
+        loop {
+            let a = self.parent[i];
+            if a == TERMINAL {
+                self.tr[i] += f;
+                if self.tr[i] >= 0.0 {
+                    self.orphan_front(i);
+                }
+                break;
+            }
+            let a = a as usize;
+            let j = self.nb(i, a);
+            self.cap[i * k + a] -= f;
+            self.cap[j * k + opp(a)] += f;
+            if self.cap[i * k + a] <= 0.0 {
+                self.orphan_front(i);
+            }
+            i = j;
+        }
+        self.flow += f64::from(f);
+    }
+
+    fn adopt(&mut self) {
+        while let Some(i) = self.orphans.pop_front() {
+            self.process_orphan(i as usize);
+        }
+    }
+
+    /// Residual capacity of the edge that would make `j` (neighbour of `i` in direction `d`)
+    /// the parent of `i` in a tree of side `sink`.
+    #[inline]
+    fn residual_to(&self, i: usize, j: usize, d: usize, sink: bool) -> f32 {
+        if sink {
+            self.cap[i * self.k + d]
+        } else {
+            self.cap[j * self.k + opp(d)]
+        }
+    }
+
+    fn process_orphan(&mut self, i: usize) {
+        let k = self.k;
+        let sink = self.is_sink[i];
+        let mut best: Option<(usize, u32)> = None;
+        for d in 0..k {
+            let j = self.nb(i, d);
+            if self.parent[j] == FREE
+                || self.is_sink[j] != sink
+                || self.residual_to(i, j, d, sink) <= 0.0
+            {
+                continue;
+            }
+            // Does j still reach its terminal? Count the distance on the way.
+            let mut m = j;
+            let mut dd = 0u32;
+            let valid = loop {
+                if self.ts[m] == self.time {
+                    dd += self.dist[m];
+                    break true;
+                }
+                let a = self.parent[m];
+                dd += 1;
+                if a == TERMINAL {
+                    self.ts[m] = self.time;
+                    self.dist[m] = 1;
+                    break true;
+                }
+                if a == ORPHAN {
+                    break false;
+                }
+                m = self.nb(m, a as usize);
+            };
+            if valid {
+                if best.is_none_or(|(_, bd)| dd < bd) {
+                    best = Some((d, dd));
+                }
+                let mut m = j;
+                while self.ts[m] != self.time {
+                    self.ts[m] = self.time;
+                    self.dist[m] = dd;
+                    dd -= 1;
+                    m = self.nb(m, self.parent[m] as usize);
+                }
+            }
+        }
+        if let Some((d, dd)) = best {
+            self.parent[i] = d as u8;
+            self.ts[i] = self.time;
+            self.dist[i] = dd + 1;
+            return;
+        }
+        self.ts[i] = 0;
+        for d in 0..k {
+            let j = self.nb(i, d);
+            let a = self.parent[j];
+            if a == FREE || self.is_sink[j] != sink {
+                continue;
+            }
+            if self.residual_to(i, j, d, sink) > 0.0 {
+                self.activate(j);
+            }
+            if a != TERMINAL && a != ORPHAN && self.nb(j, a as usize) == i {
+                self.parent[j] = ORPHAN;
+                self.orphans.push_back(j as u32);
+            }
+        }
+        self.parent[i] = FREE;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    /// Dinic-free reference: Edmonds–Karp on a dense residual matrix (tiny graphs only).
+    fn reference(h: usize, w: usize, k: usize, edges: &[f32], source: &[f32], sink: &[f32]) -> f64 {
+        let n = h * w + 2;
+        let (s, t) = (h * w, h * w + 1);
+        let mut c = vec![vec![0f64; n]; n];
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                c[s][i] += f64::from(source[i]);
+                c[i][t] += f64::from(sink[i]);
+                for d in 0..k {
+                    let (ny, nx) = (y as isize + DIRS[d].0, x as isize + DIRS[d].1);
+                    if ny < 0 || nx < 0 || ny >= h as isize || nx >= w as isize {
+                        continue;
+                    }
+                    c[i][ny as usize * w + nx as usize] += f64::from(edges[i * k + d]);
+                }
+            }
+        }
+        let mut flow = 0.0;
+        loop {
+            let mut prev = vec![usize::MAX; n];
+            prev[s] = s;
+            let mut q = VecDeque::from([s]);
+            while let Some(u) = q.pop_front() {
+                for v in 0..n {
+                    if prev[v] == usize::MAX && c[u][v] > 1e-12 {
+                        prev[v] = u;
+                        q.push_back(v);
+                    }
+                }
+            }
+            if prev[t] == usize::MAX {
+                return flow;
+            }
+            let mut f = f64::INFINITY;
+            let mut v = t;
+            while v != s {
+                f = f.min(c[prev[v]][v]);
+                v = prev[v];
+            }
+            v = t;
+            while v != s {
+                c[prev[v]][v] -= f;
+                c[v][prev[v]] += f;
+                v = prev[v];
+            }
+            flow += f;
+        }
+    }
+
+    fn cut_value(
+        h: usize,
+        w: usize,
+        k: usize,
+        edges: &[f32],
+        source: &[f32],
+        sink: &[f32],
+        side: &[bool],
+    ) -> f64 {
+        let mut v = 0.0;
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                v += f64::from(if side[i] { source[i] } else { sink[i] });
+                for d in 0..k {
+                    let (ny, nx) = (y as isize + DIRS[d].0, x as isize + DIRS[d].1);
+                    if ny < 0 || nx < 0 || ny >= h as isize || nx >= w as isize {
+                        continue;
+                    }
+                    if !side[i] && side[ny as usize * w + nx as usize] {
+                        v += f64::from(edges[i * k + d]);
+                    }
+                }
+            }
+        }
+        v
+    }
+
+    fn random_case(seed: u64, h: usize, w: usize, k: usize) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+        let mut rng = Rng::keyed(seed, 1, 2);
+        let mut u = || (rng.below(1000) as f32) / 100.0;
+        let edges: Vec<f32> = (0..h * w * k).map(|_| u()).collect();
+        let mut source: Vec<f32> = (0..h * w).map(|_| u() * 0.5).collect();
+        let mut sink: Vec<f32> = (0..h * w).map(|_| u() * 0.5).collect();
+        // Sparse terminals, like a seam problem.
+        for i in 0..h * w {
+            if i % 3 != 0 {
+                source[i] = 0.0;
+            }
+            if i % 5 != 1 {
+                sink[i] = 0.0;
+            }
+        }
+        (edges, source, sink)
+    }
+
+    #[test]
+    fn flow_equals_reference_and_labels_are_a_minimum_cut() {
+        for (seed, (h, w, k)) in [(5, 7, 4), (6, 6, 8), (1, 13, 4), (9, 4, 8), (8, 8, 4)]
+            .into_iter()
+            .enumerate()
+        {
+            for rep in 0..4 {
+                let (edges, source, sink) = random_case(seed as u64 * 10 + rep, h, w, k);
+                let mut g = GridGraph::new(h, w, k).unwrap();
+                g.set_edges("edges", &edges, EdgeLayout::Directed).unwrap();
+                g.set_terminals(&source, &sink).unwrap();
+                let flow = g.maxflow();
+                let want = reference(h, w, k, &edges, &source, &sink);
+                assert!(
+                    (flow - want).abs() <= 1e-4 * want.max(1.0),
+                    "{h}×{w}×{k}: {flow} vs {want}"
+                );
+                let cut = cut_value(h, w, k, &edges, &source, &sink, g.sink_side().unwrap());
+                assert!(
+                    (cut - want).abs() <= 1e-4 * want.max(1.0),
+                    "cut {cut} vs {want}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn many_random_grids_with_hard_constraints_match_the_reference() {
+        let mut rng = Rng::keyed(4242, 0, 0);
+        for case in 0..60 {
+            let (h, w) = (1 + rng.below(12) as usize, 1 + rng.below(12) as usize);
+            let k = if case % 2 == 0 { 4 } else { 8 };
+            let zero = 1 + rng.below(4);
+            let mut val = |scale: u64| {
+                if rng.below(zero + 1) == 0 {
+                    0.0
+                } else {
+                    rng.below(scale) as f32 / 7.0
+                }
+            };
+            let edges: Vec<f32> = (0..h * w * k).map(|_| val(50)).collect();
+            let mut source: Vec<f32> = (0..h * w).map(|_| val(30)).collect();
+            let mut sink: Vec<f32> = (0..h * w).map(|_| val(30)).collect();
+            source[0] = f32::INFINITY;
+            sink[h * w - 1] = if h * w > 1 { f32::INFINITY } else { 1.0 };
+            let mut g = GridGraph::new(h, w, k).unwrap();
+            g.set_edges("edges", &edges, EdgeLayout::Directed).unwrap();
+            g.set_terminals(&source, &sink).unwrap();
+            let flow = g.maxflow();
+            // The reference cannot take infinities: a capacity above every finite cut is as hard.
+            let big = 1e6f32;
+            let fin = |a: &[f32]| a.iter().map(|v| v.min(big)).collect::<Vec<_>>();
+            let want = reference(h, w, k, &edges, &fin(&source), &fin(&sink));
+            assert!(
+                (flow - want).abs() <= 1e-4 * want.max(1.0),
+                "case {case} {h}×{w}×{k}: {flow} vs {want}"
+            );
+            let side = g.sink_side().unwrap();
+            let cut = cut_value(h, w, k, &edges, &fin(&source), &fin(&sink), side);
+            assert!(
+                (cut - want).abs() <= 1e-4 * want.max(1.0),
+                "case {case}: cut {cut} vs {want}"
+            );
+            assert!(!side[0]);
+        }
+    }
+
+    #[test]
+    fn symmetric_layout_is_the_directed_one_with_equal_capacities() {
+        let (h, w) = (6, 9);
+        for k in [4, 8] {
+            let (edges, source, sink) = random_case(77, h, w, k / 2);
+            let sym = &edges[..h * w * k / 2];
+            let mut dir = vec![0f32; h * w * k];
+            for y in 0..h {
+                for x in 0..w {
+                    for (s, &d) in SYMMETRIC_DIRS[..k / 2].iter().enumerate() {
+                        let v = sym[(y * w + x) * k / 2 + s];
+                        dir[(y * w + x) * k + d] = v;
+                        let (ny, nx) = (y as isize + DIRS[d].0, x as isize + DIRS[d].1);
+                        if ny >= 0 && nx >= 0 && (ny as usize) < h && (nx as usize) < w {
+                            dir[(ny as usize * w + nx as usize) * k + opp(d)] = v;
+                        }
+                    }
+                }
+            }
+            let mut a = GridGraph::new(h, w, k).unwrap();
+            a.set_edges("edges", sym, EdgeLayout::Symmetric).unwrap();
+            a.set_terminals(&source, &sink).unwrap();
+            let want = reference(h, w, k, &dir, &source, &sink);
+            assert!((a.maxflow() - want).abs() < 1e-4 * want.max(1.0));
+        }
+    }
+
+    #[test]
+    fn hard_constraints_hold_and_a_straight_cut_is_found() {
+        // Columns 0 tied to the source, the last to the sink, unit edges: the cut is one column
+        // of horizontal edges, so the flow is h, and every hard constraint is on its side.
+        let (h, w) = (10, 12);
+        let mut g = GridGraph::new(h, w, 4).unwrap();
+        g.set_edges("edges", &vec![1.0; h * w * 2], EdgeLayout::Symmetric)
+            .unwrap();
+        let mut source = vec![0f32; h * w];
+        let mut sink = vec![0f32; h * w];
+        for y in 0..h {
+            source[y * w] = f32::INFINITY;
+            sink[y * w + w - 1] = f32::INFINITY;
+        }
+        g.set_terminals(&source, &sink).unwrap();
+        assert!((g.maxflow() - h as f64).abs() < 1e-9);
+        let side = g.sink_side().unwrap();
+        for y in 0..h {
+            assert!(!side[y * w] && side[y * w + w - 1]);
+        }
+    }
+
+    #[test]
+    fn bad_capacities_are_rejected_by_name() {
+        let mut g = GridGraph::new(2, 2, 4).unwrap();
+        let e = g.set_edges(
+            "edges",
+            &[1.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            EdgeLayout::Symmetric,
+        );
+        assert!(matches!(
+            e,
+            Err(crate::Error::InvalidArgument { name: "edges", .. })
+        ));
+        let e = g.set_edges("edges", &[f32::NAN; 8], EdgeLayout::Symmetric);
+        assert!(matches!(
+            e,
+            Err(crate::Error::InvalidArgument { name: "edges", .. })
+        ));
+        let e = g.set_terminals(
+            &[f32::INFINITY, 0.0, 0.0, 0.0],
+            &[f32::INFINITY, 0.0, 0.0, 0.0],
+        );
+        assert!(matches!(
+            e,
+            Err(crate::Error::InvalidArgument { name: "sink", .. })
+        ));
+        let e = g.set_terminals(&[0.0, f32::NAN, 0.0, 0.0], &[0.0; 4]);
+        assert!(matches!(
+            e,
+            Err(crate::Error::InvalidArgument { name: "source", .. })
+        ));
+        assert!(GridGraph::new(2, 2, 6).is_err());
+    }
+}

@@ -1,0 +1,125 @@
+//! Bindings of `phloem_core::{maxflow, seams}` for `phloem.seams`.
+
+use ndarray::Array2;
+use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2, PyReadonlyArray3};
+use phloem_core::error::invalid;
+use phloem_core::maxflow::{EdgeLayout, GridGraph};
+use phloem_core::seams::{self, SeamCost, SeamInput};
+use pyo3::prelude::*;
+
+use crate::errors::{guarded, not_contiguous, to_py};
+use crate::patch::image;
+use crate::threads::install;
+
+fn mask<'a>(
+    name: &'static str,
+    m: Option<&'a PyReadonlyArray2<'_, bool>>,
+) -> PyResult<Option<&'a [bool]>> {
+    m.map(|m| m.as_slice().map_err(not_contiguous(name)))
+        .transpose()
+}
+
+type FlowOut<'py> = (f64, Bound<'py, PyArray2<bool>>);
+
+#[pyfunction]
+#[pyo3(name = "grid_maxflow", signature = (source, sink, edges, *, connectivity, directed))]
+pub fn grid_maxflow_py<'py>(
+    py: Python<'py>,
+    source: PyReadonlyArray2<'py, f32>,
+    sink: PyReadonlyArray2<'py, f32>,
+    edges: PyReadonlyArray3<'py, f32>,
+    connectivity: usize,
+    directed: bool,
+) -> PyResult<FlowOut<'py>> {
+    let (h, w) = source.as_array().dim();
+    let (eh, ew, _) = edges.as_array().dim();
+    if sink.as_array().dim() != (h, w) || (eh, ew) != (h, w) {
+        return Err(to_py(invalid(
+            if (eh, ew) == (h, w) { "sink" } else { "edges" },
+            format!("expected the shape of source ({h}, {w}) in the first two axes"),
+        )));
+    }
+    let s = source.as_slice().map_err(not_contiguous("source"))?;
+    let t = sink.as_slice().map_err(not_contiguous("sink"))?;
+    let e = edges.as_slice().map_err(not_contiguous("edges"))?;
+    let layout = if directed {
+        EdgeLayout::Directed
+    } else {
+        EdgeLayout::Symmetric
+    };
+    let (flow, side) = py
+        .detach(|| {
+            guarded(|| {
+                let mut g = GridGraph::new(h, w, connectivity)?;
+                g.set_edges("edges", e, layout)?;
+                g.set_terminals(s, t)?;
+                let flow = g.maxflow();
+                Ok((flow, g.sink_side().expect("solved").to_vec()))
+            })
+        })
+        .map_err(to_py)?;
+    let side = Array2::from_shape_vec((h, w), side).expect("label shape");
+    Ok((flow, side.into_pyarray(py)))
+}
+
+type SeamOut<'py> = (Bound<'py, PyArray2<bool>>, f64, (usize, usize));
+
+#[pyfunction]
+#[pyo3(name = "seam", signature = (a, b, region, *, cost, connectivity, border_weight=None, a_mask=None, b_mask=None, seeds=None, edges=None, threads=None))]
+pub fn seam_py<'py>(
+    py: Python<'py>,
+    a: PyReadonlyArray3<'py, f32>,
+    b: PyReadonlyArray3<'py, f32>,
+    region: PyReadonlyArray2<'py, bool>,
+    cost: &str,
+    connectivity: usize,
+    border_weight: Option<f32>,
+    a_mask: Option<PyReadonlyArray2<'py, bool>>,
+    b_mask: Option<PyReadonlyArray2<'py, bool>>,
+    seeds: Option<PyReadonlyArray2<'py, u8>>,
+    edges: Option<PyReadonlyArray3<'py, f32>>,
+    threads: Option<usize>,
+) -> PyResult<SeamOut<'py>> {
+    let cost = match cost {
+        "kwatra" => SeamCost::Kwatra,
+        "gradient" => SeamCost::Gradient,
+        "luo" => SeamCost::Luo,
+        other => {
+            return Err(to_py(invalid(
+                "cost",
+                format!(
+                    "expected 'kwatra', 'gradient', 'luo' or an array of edge costs, got {other:?}"
+                ),
+            )))
+        }
+    };
+    let (h, w, _) = a.as_array().dim();
+    let region_s = region.as_slice().map_err(not_contiguous("region"))?;
+    let a_mask_s = mask("a_mask", a_mask.as_ref())?;
+    let b_mask_s = mask("b_mask", b_mask.as_ref())?;
+    let seeds_s = seeds
+        .as_ref()
+        .map(|s| s.as_slice().map_err(not_contiguous("seeds")))
+        .transpose()?;
+    let edges_s = edges
+        .as_ref()
+        .map(|e| e.as_slice().map_err(not_contiguous("cost")))
+        .transpose()?;
+    let input = SeamInput {
+        a: image("a", &a)?,
+        b: image("b", &b)?,
+        region: region_s,
+        a_mask: a_mask_s,
+        b_mask: b_mask_s,
+        seeds: seeds_s,
+        cost,
+        edges: edges_s,
+        border_weight: border_weight.unwrap_or_else(|| cost.default_border_weight()),
+        connectivity,
+    };
+    let s = py
+        .detach(|| guarded(|| install(threads, || seams::seam(&input))))
+        .map_err(to_py)?;
+    let take_b = Array2::from_shape_vec((h, w), s.take_b).expect("seam shape");
+    Ok((take_b.into_pyarray(py), s.energy, s.tied))
+}
