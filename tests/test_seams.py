@@ -92,6 +92,16 @@ def test_flow_matches_pymaxflow_and_labels_are_a_min_cut(seed, directed, k):
         assert not side[:, 0].any() and side[:, -1].all()
 
 
+@pytest.mark.parametrize("threads", [1, 2])
+def test_large_grid_split_in_halves_matches_pymaxflow(threads):
+    rng = np.random.default_rng(7)
+    source, sink, edges = random_graph(rng, 300, 260, 2)
+    flow, side = grid_maxflow(source, sink, edges, threads=threads)
+    ref, _ = pymaxflow(source, sink, edges)
+    assert flow == pytest.approx(ref, rel=1e-5)
+    assert cut_value(source, sink, edges, side) == pytest.approx(ref, rel=1e-5)
+
+
 def kwatra_edges(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Kwatra et al. 2003 Eq. 1 for east and south edges, written independently in numpy."""
     d = np.sqrt(((a.astype(np.float64) - b) ** 2).sum(-1))

@@ -70,6 +70,7 @@ def grid_maxflow(
     *,
     connectivity: int,
     directed: bool,
+    threads: int | None = None,
 ) -> tuple[float, NDArray[np.bool_]]: ...
 def seam(
     a: NDArray[np.float32],

@@ -50,6 +50,7 @@ def grid_maxflow(
     *,
     connectivity: int = 4,
     directed: bool = False,
+    threads: int | None = None,
 ) -> tuple[float, NDArray[np.bool_]]:
     """Maximum flow and minimum cut of a grid graph.
 
@@ -71,6 +72,11 @@ def grid_maxflow(
         Neighbourhood (default 4).
     directed : bool, optional
         Layout of ``edges`` (default symmetric).
+    threads : int, optional
+        Worker threads. Grids of 2^13 pixels or more are cut in two (twice over for big ones), the halves solved in
+        parallel and the search finished on the whole (the result is exact, and the same for
+        any number of threads).
+
 
     Returns
     -------
@@ -102,7 +108,7 @@ def grid_maxflow(
     if both.any():
         y, x = np.argwhere(both)[0]
         raise ValueError(f"sink: pixel ({y}, {x}) has infinite capacity to both terminals")
-    return _core.grid_maxflow(s, t, e, connectivity=conn, directed=bool(directed))
+    return _core.grid_maxflow(s, t, e, connectivity=conn, directed=bool(directed), threads=check_threads(threads))
 
 
 @overload

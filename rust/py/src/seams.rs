@@ -22,7 +22,7 @@ fn mask<'a>(
 type FlowOut<'py> = (f64, Bound<'py, PyArray2<bool>>);
 
 #[pyfunction]
-#[pyo3(name = "grid_maxflow", signature = (source, sink, edges, *, connectivity, directed))]
+#[pyo3(name = "grid_maxflow", signature = (source, sink, edges, *, connectivity, directed, threads=None))]
 pub fn grid_maxflow_py<'py>(
     py: Python<'py>,
     source: PyReadonlyArray2<'py, f32>,
@@ -30,6 +30,7 @@ pub fn grid_maxflow_py<'py>(
     edges: PyReadonlyArray3<'py, f32>,
     connectivity: usize,
     directed: bool,
+    threads: Option<usize>,
 ) -> PyResult<FlowOut<'py>> {
     let (h, w) = source.as_array().dim();
     let (eh, ew, _) = edges.as_array().dim();
@@ -50,11 +51,13 @@ pub fn grid_maxflow_py<'py>(
     let (flow, side) = py
         .detach(|| {
             guarded(|| {
-                let mut g = GridGraph::new(h, w, connectivity)?;
-                g.set_edges("edges", e, layout)?;
-                g.set_terminals(s, t)?;
-                let flow = g.maxflow();
-                Ok((flow, g.sink_side().expect("solved").to_vec()))
+                install(threads, || {
+                    let mut g = GridGraph::new(h, w, connectivity)?;
+                    g.set_edges("edges", e, layout)?;
+                    g.set_terminals(s, t)?;
+                    let flow = g.maxflow();
+                    Ok((flow, g.sink_side().unwrap_or_default().to_vec()))
+                })
             })
         })
         .map_err(to_py)?;
