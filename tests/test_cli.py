@@ -20,7 +20,7 @@ def exemplar_png(tmp_path, bark):
     return p
 
 
-@pytest.mark.parametrize("cmd", [[], ["synthesize"], ["complete"], ["nnf"], ["demo"]])
+@pytest.mark.parametrize("cmd", [[], ["synthesize"], ["quilt"], ["complete"], ["nnf"], ["demo"]])
 def test_help_explains_every_option(cmd, capsys):
     with pytest.raises(SystemExit) as e:
         main([*cmd, "--help"])
@@ -46,6 +46,21 @@ def test_synthesize_writes_image_and_sidecar(tmp_path, exemplar_png):
     assert img.shape == (48, 80, 3)
     meta = json.loads(io.sidecar_path(out).read_text())
     assert meta["seed"] == 4 and meta["parameters"]["size"] == [48, 80] and meta["command"] == "synthesize"
+
+
+def test_quilt_writes_exemplar_pixels_and_sidecar(tmp_path, exemplar_png):
+    out = tmp_path / "q.png"
+    args = ["quilt", str(exemplar_png), "--size", "90x70", "--block", "24", "--out", str(out), "--seed", "2", "-q"]
+    assert main(args) == 0
+    img = io.read_image(out)
+    ex = io.read_image(exemplar_png)
+    assert img.shape == (70, 90, 3)
+    # Every output colour occurs in the exemplar (8-bit PNG round trip on both sides).
+    colours = {tuple(c) for c in (ex.reshape(-1, 3) * 255).round().astype(int)}
+    assert all(tuple(c) in colours for c in (img.reshape(-1, 3) * 255).round().astype(int))
+    meta = json.loads(io.sidecar_path(out).read_text())
+    assert meta["command"] == "quilt" and meta["parameters"]["block"] == 24 and meta["seed"] == 2
+    assert main(args) == 2, "no silent overwrite"
 
 
 def test_same_seed_same_file(tmp_path, exemplar_png):

@@ -98,6 +98,20 @@ def _cmd_synthesize(args: argparse.Namespace) -> None:
     _save(args, "synthesize", out)
 
 
+def _cmd_quilt(args: argparse.Namespace) -> None:
+    _preflight(args)
+    ex = io.read_image(args.input, max_pixels=args.max_pixels)
+    out = _run(
+        "quilt",
+        args,
+        lambda bar: texture.quilt(
+            ex, args.size, block=args.block, overlap=args.overlap, randomness=args.randomness, cost=args.cost,
+            seed=args.seed, threads=args.threads, progress=bar,
+        ),  # fmt: skip
+    )
+    _save(args, "quilt", out)
+
+
 def _cmd_complete(args: argparse.Namespace) -> None:
     _preflight(args)
     img = io.read_image(args.input, max_pixels=args.max_pixels)
@@ -170,6 +184,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--iterations", type=_positive, default=4, help="search-and-vote iterations per level (default 4)")
     _common(p)
     p.set_defaults(func=_cmd_synthesize)
+
+    p = sub.add_parser("quilt", help="texture of any size from exemplar blocks joined along graph-cut seams",
+                       description="Graph-cut quilting (Kwatra et al. 2003): exemplar blocks placed by entire-patch matching, "
+                                   "cut into the output along minimum-cost seams. Every output pixel is an exemplar pixel.")  # fmt: skip
+    p.add_argument("input", metavar="IN", help="exemplar image (PNG, JPEG or TIFF)")
+    p.add_argument("--size", type=_size, required=True, metavar="WxH", help="output width x height in pixels, e.g. 512x512")
+    p.add_argument("--out", required=True, metavar="OUT", help="output image (.png, .jpg, .tif)")
+    p.add_argument("--block", type=_positive, default=None, help="side of the exemplar blocks (default: 64, or half the exemplar's shorter side)")
+    p.add_argument("--overlap", type=_positive, default=None, help="overlap of neighbouring blocks in pixels (default: block/4)")
+    p.add_argument("--randomness", type=float, default=0.01,
+                   help="Kwatra's k: 0 always takes the best-matching block, larger values pick worse matches more often (default 0.01)")  # fmt: skip
+    p.add_argument("--cost", choices=("kwatra", "gradient", "luo"), default="kwatra",
+                   help="seam cost: colour difference, gradient-normalised colour difference, or Luo et al.'s d^4/G (default kwatra)")  # fmt: skip
+    _common(p)
+    p.set_defaults(func=_cmd_quilt)
 
     p = sub.add_parser("complete", help="fill a masked region of an image from the rest of it",
                        description="Coarse-to-fine patch-based completion (Wexler et al. 2007) on PatchMatch.")  # fmt: skip
