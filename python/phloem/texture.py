@@ -14,7 +14,7 @@ confidence falling off towards the hole's centre.
 from __future__ import annotations
 
 import math
-from typing import Any, Literal
+from typing import Any, Literal, overload
 
 import cv2
 import numpy as np
@@ -418,12 +418,42 @@ def _masked_ssd(ex: NDArray[np.float32], tmpl: NDArray[np.float32], mask: NDArra
     for c0 in range(0, ex.shape[2], 4):  # matchTemplate takes up to four channels at a time
         e = np.ascontiguousarray(ex[..., c0 : c0 + 4])
         t = np.ascontiguousarray(tmpl[..., c0 : c0 + 4])
-        r = cv2.matchTemplate(e, t, cv2.TM_SQDIFF, mask=m)
+        r = np.asarray(cv2.matchTemplate(e, t, cv2.TM_SQDIFF, mask=m), np.float32)
         out = r if out is None else out + r
     assert out is not None
     return np.maximum(out, 0)
 
 
+@overload
+def quilt(
+    exemplar: Any,
+    size: int | tuple[int, int],
+    *,
+    block: int | None = ...,
+    overlap: int | None = ...,
+    randomness: float = ...,
+    cost: Literal["kwatra", "gradient", "luo"] = ...,
+    max_pixels: int = ...,
+    seed: int | np.random.Generator = ...,
+    threads: int | None = ...,
+    return_sources: Literal[False] = ...,
+    progress: Progress = ...,
+) -> NDArray[np.float32]: ...
+@overload
+def quilt(
+    exemplar: Any,
+    size: int | tuple[int, int],
+    *,
+    block: int | None = ...,
+    overlap: int | None = ...,
+    randomness: float = ...,
+    cost: Literal["kwatra", "gradient", "luo"] = ...,
+    max_pixels: int = ...,
+    seed: int | np.random.Generator = ...,
+    threads: int | None = ...,
+    return_sources: Literal[True],
+    progress: Progress = ...,
+) -> tuple[NDArray[np.float32], NDArray[np.int32]]: ...
 def quilt(
     exemplar: Any,
     size: int | tuple[int, int],
