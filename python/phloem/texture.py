@@ -533,7 +533,7 @@ def quilt(
     eh, ew, nc = ex.shape
     if min(eh, ew) < 2:
         raise ValueError(f"exemplar: expected at least 2×2 pixels, got {eh}×{ew}")
-    b = min(64, min(eh, ew) // 2) if block is None else check_int(block, "block", 2)
+    b = max(2, min(64, min(eh, ew) // 2)) if block is None else check_int(block, "block", 2)
     if b > min(eh, ew):
         raise ValueError(f"block: {b} does not fit in the {eh}×{ew} exemplar")
     ov = max(1, b // 4) if overlap is None else check_int(overlap, "overlap", 1)

@@ -1,0 +1,120 @@
+"""Contact sheet of the graph-cut jobs: look at it before trusting any number.
+
+    python benches/sheet_seams.py out/seams_sheet.png
+
+Quilting rows (bark, water, brick): exemplar | quilt with the Kwatra cost | its pieces
+(each exemplar offset one colour, seams in red) | quilt with the gradient cost | randomly
+placed blocks with straight cuts, for comparison. Seam rows: a disk-shaped fragment (b) laid
+over existing content (a) as in Sibbing et al. §5.3: the overlap | the seam with the
+Kwatra, gradient and Luo costs (a = dark, b = light, seam red) | the composite.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import phloem
+from phloem.seams import seam
+
+sys.path.insert(0, str(Path(__file__).parent))
+from sheet_texture import ROOT, TILE, _fit, _label  # noqa: E402
+
+
+def _pieces(src: np.ndarray) -> np.ndarray:
+    yy, xx = np.mgrid[0 : src.shape[0], 0 : src.shape[1]]
+    off = (src[..., 0] - yy) * 4096 + (src[..., 1] - xx)
+    _, ids = np.unique(off, return_inverse=True)
+    ids = ids.reshape(off.shape)
+    rng = np.random.default_rng(0)
+    colours = rng.uniform(0.25, 0.9, (ids.max() + 1, 3)).astype(np.float32)
+    vis = colours[ids]
+    edge = np.zeros(off.shape, bool)
+    edge[:, 1:] |= off[:, 1:] != off[:, :-1]
+    edge[1:, :] |= off[1:, :] != off[:-1, :]
+    vis[edge] = (1, 0, 0)
+    return vis
+
+
+def _seam_overlay(img: np.ndarray, labels: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    vis = img.copy()
+    edge = np.zeros(labels.shape, bool)
+    edge[:, 1:] |= (labels[:, 1:] != labels[:, :-1]) & valid[:, 1:] & valid[:, :-1]
+    edge[1:, :] |= (labels[1:, :] != labels[:-1, :]) & valid[1:, :] & valid[:-1, :]
+    vis[edge] = (1, 0, 0)
+    return vis
+
+
+def _random_blocks(ex: np.ndarray, size: int, block: int) -> np.ndarray:
+    rng = np.random.default_rng(1)
+    out = np.zeros((size, size, 3), np.float32)
+    for i in range(0, size, block):
+        for j in range(0, size, block):
+            ty, tx = rng.integers(0, ex.shape[0] - block), rng.integers(0, ex.shape[1] - block)
+            piece = ex[ty : ty + block, tx : tx + block]
+            out[i : i + block, j : j + block] = piece[: size - i, : size - j]
+    return out
+
+
+def _rgb3(img: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(np.repeat(img[..., None], 3, axis=2) if img.ndim == 2 else img[..., :3])
+
+
+def quilt_row(name: str, ex: np.ndarray) -> list[np.ndarray]:
+    ex = _rgb3(ex)
+    t0 = time.perf_counter()
+    out, src = phloem.texture.quilt(ex, 384, seed=1, return_sources=True)
+    dt = time.perf_counter() - t0
+    grad = phloem.texture.quilt(ex, 384, seed=1, cost="gradient")
+    rep = phloem.metrics.repetition(out)
+    return [
+        _label(_fit(ex), f"{name} exemplar {ex.shape[1]}x{ex.shape[0]}"),
+        _label(_fit(out), f"quilt kwatra {dt:.2f}s rep {rep:.2f}"),
+        _label(_fit(_pieces(src)), "pieces and seams"),
+        _label(_fit(grad), "quilt gradient cost"),
+        _label(_fit(_random_blocks(ex, 384, 64)), "random blocks, straight cuts"),
+    ]
+
+
+def seam_row(ex: np.ndarray) -> list[np.ndarray]:
+    ex = _rgb3(ex)
+    h = w = 160
+    yy, xx = np.mgrid[0:h, 0:w]
+    old = xx < 100
+    new = (yy - 80) ** 2 + (xx - 95) ** 2 < 60**2
+    a = np.zeros((h, w, 3), np.float32)
+    b = np.zeros((h, w, 3), np.float32)
+    a[old] = ex[:h, :w][old]
+    b[new] = ex[60 : 60 + h, 90 : 90 + w][new]
+    region = old & new
+    over = 0.35 * a + 0.65 * b
+    over[~region] *= 0.4
+    tiles = [_label(_fit(over), "overlap (bright) of a and disk b")]
+    for cost in ("kwatra", "gradient", "luo"):
+        take_b = seam(a, b, region, a_mask=old, b_mask=new, cost=cost)
+        comp = np.where(take_b[..., None], b, a)
+        tiles.append(_label(_fit(_seam_overlay(comp, take_b, old | new)), f"seam, {cost} cost"))
+    take_b = seam(a, b, region, a_mask=old, b_mask=new, cost="gradient")
+    tiles.append(_label(_fit(np.where(take_b[..., None], b, a)), "composite (gradient)"))
+    return tiles
+
+
+def main(out: Path) -> None:
+    water = phloem.io.read_image(ROOT / "tests" / "data" / "water.jpg")
+    rows = [
+        quilt_row("bark", phloem.data.bark()),
+        quilt_row("water", water),
+        quilt_row("brick", phloem.data.brick()),
+        seam_row(phloem.data.bark()),
+    ]
+    sheet = np.concatenate([np.concatenate(r, axis=1) for r in rows], axis=0)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    phloem.io.write_image(out, sheet, overwrite=True)
+    print(f"wrote {out} ({sheet.shape[1]}x{sheet.shape[0]}); tile {TILE}px")
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1] if len(sys.argv) > 1 else "out/seams_sheet.png"))
