@@ -102,6 +102,16 @@ def test_greedy_quilt_and_other_costs(bark, gravel):
     assert g.shape == (150, 90) and g.dtype == np.float32
 
 
+def test_extra_channels_ride_along(bark):
+    """A height map and a label channel (5 channels: more than OpenCV matches at once) are
+    copied from the same exemplar pixels as the colours."""
+    yy, xx = np.mgrid[0:256, 0:256]
+    ex = np.dstack([bark, (yy / 255.0)[..., None], ((xx // 32) / 8.0)[..., None]]).astype(np.float32)
+    out, src = quilt(ex, (90, 90), block=40, seed=1, return_sources=True)
+    assert out.shape == (90, 90, 5)
+    assert np.array_equal(out, ex[src[..., 0], src[..., 1]])
+
+
 def test_progress_is_reported(bark):
     calls = []
     quilt(bark, (100, 100), block=40, overlap=10, progress=lambda d, t: calls.append((d, t)))

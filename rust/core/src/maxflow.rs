@@ -39,6 +39,9 @@ const SPLIT_MIN_SIDE: usize = 32;
 /// ... at most this many times over (four parts: enough for the few cores phloem targets).
 const SPLIT_DEPTH: usize = 2;
 
+/// Most nodes of a [`GridGraph`] (about 16k × 16k; some 10 GB of graph).
+pub const MAX_NODES: usize = 1 << 28;
+
 const FREE: u8 = 255;
 const TERMINAL: u8 = 254;
 const ORPHAN: u8 = 253;
@@ -93,8 +96,13 @@ impl GridGraph {
         let (ph, pw) = (h + 2, w + 2);
         let n = ph
             .checked_mul(pw)
-            .filter(|&n| n < u32::MAX as usize)
-            .ok_or_else(|| invalid("shape", format!("{h}×{w} is too large for a grid graph")))?;
+            .filter(|&n| n <= MAX_NODES)
+            .ok_or_else(|| {
+                invalid(
+                    "shape",
+                    format!("{h}×{w} is too large for a grid graph (at most {MAX_NODES} nodes)"),
+                )
+            })?;
         Ok(Self {
             h,
             w,
