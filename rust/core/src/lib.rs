@@ -9,12 +9,18 @@
 //! - [`knn`]: k nearest patches inside one exemplar and the k-coherence candidate sets of
 //!   Tong et al. 2002;
 //! - [`vote`]: weighted patch voting, the M-step of texture optimisation (Kwatra et al. 2005)
-//!   and of image completion (Wexler et al. 2007).
+//!   and of image completion (Wexler et al. 2007);
+//! - [`poisson`]: Poisson image editing (Pérez et al. 2003) with normal or mixed gradients and
+//!   fixed pixels, solved by multigrid-preconditioned conjugate gradients;
+//! - [`field`]: smooth fields that interpolate given vectors (Sibbing et al. 2010, §5.3).
 
 pub mod error;
+pub mod field;
 pub mod image;
 pub mod knn;
+pub(crate) mod multigrid;
 pub mod patch;
+pub mod poisson;
 pub mod rng;
 pub mod vote;
 

@@ -1,0 +1,923 @@
+//! Poisson image editing: seamless cloning with normal or mixed gradients (Pérez, Gangnet,
+//! Blake, "Poisson image editing", SIGGRAPH 2003, Eqs. 7, 11–13), with the extra constraints
+//! of the photometric correction in Sibbing, Pavić, Kobbelt, "Image synthesis for branching
+//! structures", 2010, §5.3: chosen pixels keep their source colours (there, the border of a new
+//! fragment where it has no neighbouring fragment).
+//!
+//! The region Ω is the mask placed at `offset` in the destination (pixels landing outside it
+//! are clipped). For each pixel `p` in Ω and each 4-neighbour `q` inside the destination,
+//! the discrete equation (Pérez Eq. 7) is
+//! `|N_p| f_p − Σ_{q∈N_p∩Ω} f_q = Σ_{q∈N_p∩∂Ω} f*_q + Σ_{q∈N_p} v_pq`, with
+//! - `v_pq = g_p − g_q` (normal cloning, `g` the source) or the one of `g_p − g_q` and
+//!   `f*_p − f*_q` with the larger magnitude (mixed gradients, Eq. 13), per channel;
+//! - `f*_q` the destination value where `q` is outside Ω (Dirichlet), the source value where
+//!   `q` is a `fixed` pixel (Dirichlet, the §5.3 constraint);
+//! - neighbours outside the destination dropped from `N_p` (Neumann: zero normal derivative).
+//! Source values are read with the source's edge replicated, so a gradient across the
+//! source's border is zero.
+//!
+//! A connected part of Ω with no Dirichlet neighbour (it fills a whole connected region of
+//! the destination) determines `f` only up to a constant; it keeps the mean of the source
+//! over it. Solving with one pixel pinned gives an exact solution of the singular system
+//! (its right-hand side sums to zero), which is then shifted to that mean.
+//!
+//! The unknown is the correction `h = f − g`, which is smooth (harmonic in normal mode), so
+//! zero is a good first guess. It is found by conjugate gradients in `f64`, preconditioned by
+//! one V-cycle of the Galerkin multigrid in [`crate::multigrid`] (in `f32`), for up to four
+//! channels at once; the stopping test is the relative residual `‖b − A f‖ / ‖b‖` of the
+//! system above in every channel. Reductions sum fixed bands of rows in a fixed order, so
+//! the result is bit-identical for any number of threads.
+
+use rayon::prelude::*;
+
+use crate::error::{invalid, Result};
+use crate::image::Image;
+use crate::multigrid::{rows_mut, Hierarchy, Level, BAND};
+
+/// Which guidance field drives the blend.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Mode {
+    /// Source gradients (Pérez Eq. 11).
+    #[default]
+    Normal,
+    /// Per edge and channel the larger-magnitude gradient of source and destination (Eq. 13).
+    Mixed,
+}
+
+/// Solver parameters of [`seamless`].
+#[derive(Clone, Copy, Debug)]
+pub struct BlendParams {
+    /// Guidance field (default [`Mode::Normal`]).
+    pub mode: Mode,
+    /// Stop when the relative residual of every channel is at most this (default `1e-6`).
+    pub tol: f64,
+    /// Most conjugate-gradient iterations (default 200); the result is returned either way
+    /// and [`Blended::residual`] says how far it got.
+    pub max_iterations: usize,
+}
+
+impl Default for BlendParams {
+    fn default() -> Self {
+        Self {
+            mode: Mode::Normal,
+            tol: 1e-6,
+            max_iterations: 200,
+        }
+    }
+}
+
+/// The images of a blend.
+#[derive(Clone, Copy, Debug)]
+pub struct BlendInput<'a> {
+    /// Source `h × w × C`: its gradients are pasted.
+    pub src: Image<'a>,
+    /// Destination `H × W × C`.
+    pub dst: Image<'a>,
+    /// `h × w` region to paste, in source coordinates.
+    pub mask: &'a [bool],
+    /// (row, col) of the source's top-left pixel in the destination; may be negative.
+    pub offset: (i64, i64),
+    /// Optional `h × w` pixels of the mask that keep their source values.
+    pub fixed: Option<&'a [bool]>,
+}
+
+/// Output of [`seamless`].
+#[derive(Clone, Debug)]
+pub struct Blended {
+    /// `H × W × C` result: the destination with the region replaced.
+    pub image: Vec<f32>,
+    /// Conjugate-gradient iterations (the largest over channel groups).
+    pub iterations: usize,
+    /// Largest relative residual `‖b − A f‖ / ‖b‖` over channels, of the `f64` solution.
+    pub residual: f64,
+    /// Number of unknowns (region pixels that are neither fixed nor pinned).
+    pub unknowns: usize,
+}
+
+// Cell kinds on the working grid.
+const OUT: u8 = 0; // outside the destination: Neumann
+const DST: u8 = 1; // destination pixel outside the region: Dirichlet, destination value
+const FIX: u8 = 2; // fixed (or pinned) region pixel: Dirichlet, source value
+const UNK: u8 = 3; // unknown
+
+/// The region on a framed, odd-sized grid over its bounding box in the destination.
+struct Grid {
+    h: usize,
+    w: usize,
+    /// Destination (row, col) of grid cell (0, 0).
+    y0: i64,
+    x0: i64,
+    kind: Vec<u8>,
+    /// For pinned components: per cell the component index (`u32::MAX` elsewhere).
+    comp: Vec<u32>,
+    /// Number of pinned components.
+    ncomp: usize,
+}
+
+impl Grid {
+    fn new(input: &BlendInput<'_>) -> Result<Self> {
+        let (sh, sw) = (input.src.h, input.src.w);
+        let (dh, dw) = (input.dst.h as i64, input.dst.w as i64);
+        let (oy, ox) = input.offset;
+        let inside = |sy: usize, sx: usize| {
+            let (y, x) = (sy as i64 + oy, sx as i64 + ox);
+            (0..dh).contains(&y) && (0..dw).contains(&x)
+        };
+        let (mut y0, mut y1, mut x0, mut x1) = (i64::MAX, i64::MIN, i64::MAX, i64::MIN);
+        let mut any = false;
+        for sy in 0..sh {
+            for sx in 0..sw {
+                if input.mask[sy * sw + sx] {
+                    any = true;
+                    if inside(sy, sx) {
+                        let (y, x) = (sy as i64 + oy, sx as i64 + ox);
+                        y0 = y0.min(y);
+                        y1 = y1.max(y);
+                        x0 = x0.min(x);
+                        x1 = x1.max(x);
+                    }
+                }
+            }
+        }
+        if !any {
+            return Err(invalid("mask", "expected at least one pixel set, got none"));
+        }
+        if y0 == i64::MAX {
+            return Err(invalid(
+                "mask",
+                format!(
+                    "no pixel of the mask lands inside the {dh}×{dw} destination at offset ({oy}, {ox})"
+                ),
+            ));
+        }
+        let h = ((y1 - y0 + 3) as usize) | 1;
+        let w = ((x1 - x0 + 3) as usize) | 1;
+        let (gy0, gx0) = (y0 - 1, x0 - 1);
+        let mut kind = vec![OUT; h * w];
+        for gy in 0..h {
+            let y = gy as i64 + gy0;
+            if !(0..dh).contains(&y) {
+                continue;
+            }
+            for gx in 0..w {
+                if (0..dw).contains(&(gx as i64 + gx0)) {
+                    kind[gy * w + gx] = DST;
+                }
+            }
+        }
+        for sy in 0..sh {
+            for sx in 0..sw {
+                if input.mask[sy * sw + sx] && inside(sy, sx) {
+                    let gy = (sy as i64 + oy - gy0) as usize;
+                    let gx = (sx as i64 + ox - gx0) as usize;
+                    let fixed = input.fixed.is_some_and(|f| f[sy * sw + sx]);
+                    kind[gy * w + gx] = if fixed { FIX } else { UNK };
+                }
+            }
+        }
+        let mut grid = Self {
+            h,
+            w,
+            y0: gy0,
+            x0: gx0,
+            kind,
+            comp: Vec::new(),
+            ncomp: 0,
+        };
+        grid.pin_floating_components();
+        Ok(grid)
+    }
+
+    /// Pins the first pixel of every connected set of unknowns that has no Dirichlet
+    /// neighbour, remembering the set so its mean can be restored.
+    fn pin_floating_components(&mut self) {
+        let (h, w) = (self.h, self.w);
+        let mut seen = vec![false; h * w];
+        let mut stack = Vec::new();
+        let mut members = Vec::new();
+        for start in 0..h * w {
+            if self.kind[start] != UNK || seen[start] {
+                continue;
+            }
+            seen[start] = true;
+            stack.push(start);
+            members.clear();
+            let mut grounded = false;
+            while let Some(p) = stack.pop() {
+                members.push(p);
+                for q in [p - w, p - 1, p + 1, p + w] {
+                    match self.kind[q] {
+                        UNK if !seen[q] => {
+                            seen[q] = true;
+                            stack.push(q);
+                        }
+                        DST | FIX => grounded = true,
+                        _ => {}
+                    }
+                }
+            }
+            if !grounded {
+                if self.comp.is_empty() {
+                    self.comp = vec![u32::MAX; h * w];
+                }
+                for &p in &members {
+                    self.comp[p] = self.ncomp as u32;
+                }
+                // `start` is the component's first cell in raster order.
+                self.kind[start] = FIX;
+                self.ncomp += 1;
+            }
+        }
+    }
+
+    fn diag(&self) -> Vec<f32> {
+        let w = self.w;
+        (0..self.h * w)
+            .map(|p| {
+                if self.kind[p] == UNK {
+                    [p - w, p - 1, p + 1, p + w]
+                        .iter()
+                        .filter(|&&q| self.kind[q] != OUT)
+                        .count() as f32
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    }
+}
+
+/// Reads source and destination values of grid cells for channels `c0..c0 + L`.
+struct Sampler<'a, const L: usize> {
+    input: &'a BlendInput<'a>,
+    grid: &'a Grid,
+    c0: usize,
+}
+
+impl<const L: usize> Sampler<'_, L> {
+    /// Source value at grid cell `(gy, gx)`, the source's edge replicated.
+    #[inline]
+    fn src(&self, gy: usize, gx: usize) -> [f64; L] {
+        let s = &self.input.src;
+        let (oy, ox) = self.input.offset;
+        let sy = (gy as i64 + self.grid.y0 - oy).clamp(0, s.h as i64 - 1) as usize;
+        let sx = (gx as i64 + self.grid.x0 - ox).clamp(0, s.w as i64 - 1) as usize;
+        self.lanes(s.pixel(sy, sx))
+    }
+
+    /// Destination value at grid cell `(gy, gx)` (which must lie inside the destination).
+    #[inline]
+    fn dst(&self, gy: usize, gx: usize) -> [f64; L] {
+        let y = (gy as i64 + self.grid.y0) as usize;
+        let x = (gx as i64 + self.grid.x0) as usize;
+        self.lanes(self.input.dst.pixel(y, x))
+    }
+
+    #[inline]
+    fn lanes(&self, px: &[f32]) -> [f64; L] {
+        let mut v = [0f64; L];
+        for (c, t) in v.iter_mut().enumerate() {
+            if let Some(&x) = px.get(self.c0 + c) {
+                *t = f64::from(x);
+            }
+        }
+        v
+    }
+
+    /// Right-hand side of row `(gy, gx)` for the kinds in `kind`, as `(b_f, b_h)`: the system
+    /// for `f` and for the correction `h = f − g`.
+    fn rhs(&self, kind: &[u8], mode: Mode, gy: usize, gx: usize) -> ([f64; L], [f64; L]) {
+        let w = self.grid.w;
+        let p = gy * w + gx;
+        let (mut bf, mut bh) = ([0f64; L], [0f64; L]);
+        let gp = self.src(gy, gx);
+        let fp = self.dst(gy, gx);
+        for (q, qy, qx) in [
+            (p - w, gy - 1, gx),
+            (p - 1, gy, gx - 1),
+            (p + 1, gy, gx + 1),
+            (p + w, gy + 1, gx),
+        ] {
+            let kq = kind[q];
+            if kq == OUT {
+                continue;
+            }
+            let gq = self.src(qy, qx);
+            let fq = self.dst(qy, qx);
+            for c in 0..L {
+                let gs = gp[c] - gq[c];
+                let v = match mode {
+                    Mode::Normal => gs,
+                    Mode::Mixed => {
+                        let ds = fp[c] - fq[c];
+                        if ds.abs() > gs.abs() {
+                            ds
+                        } else {
+                            gs
+                        }
+                    }
+                };
+                bf[c] += v;
+                bh[c] += v - gs;
+                if kq != UNK {
+                    let val = if kq == FIX { gq[c] } else { fq[c] };
+                    bf[c] += val;
+                    bh[c] += val - gq[c];
+                }
+            }
+        }
+        (bf, bh)
+    }
+}
+
+/// Calls `f(band_index, band)` on bands of [`BAND`] rows of `x` (parallel on large grids) and
+/// returns the results in band order.
+fn bands<T: Send, R: Send>(
+    x: &mut [T],
+    w: usize,
+    f: impl Fn(usize, &mut [T]) -> R + Sync,
+) -> Vec<R> {
+    if x.len() >= 16 * 1024 {
+        x.par_chunks_mut(BAND * w)
+            .enumerate()
+            .map(|(i, b)| f(i, b))
+            .collect()
+    } else {
+        x.chunks_mut(BAND * w)
+            .enumerate()
+            .map(|(i, b)| f(i, b))
+            .collect()
+    }
+}
+
+fn sum_lanes<const L: usize>(parts: &[[f64; L]]) -> [f64; L] {
+    let mut s = [0f64; L];
+    for p in parts {
+        for c in 0..L {
+            s[c] += p[c];
+        }
+    }
+    s
+}
+
+/// `q = A p` on the fine level; returns `⟨p, q⟩` per lane.
+fn apply<const L: usize>(diag: &[f32], w: usize, p: &[[f64; L]], q: &mut [[f64; L]]) -> [f64; L] {
+    let parts = bands(q, w, |bi, qb| {
+        let mut dot = [0f64; L];
+        for (k, out) in qb.iter_mut().enumerate() {
+            let i = bi * BAND * w + k;
+            let d = f64::from(diag[i]);
+            if d == 0.0 {
+                *out = [0.0; L];
+                continue;
+            }
+            let (c0, l, r, u, dn) = (p[i], p[i - 1], p[i + 1], p[i - w], p[i + w]);
+            let mut v = [0f64; L];
+            for c in 0..L {
+                v[c] = d * c0[c] - (l[c] + r[c] + u[c] + dn[c]);
+                dot[c] += c0[c] * v[c];
+            }
+            *out = v;
+        }
+        dot
+    });
+    sum_lanes(&parts)
+}
+
+/// Preconditioned conjugate gradients for `A h = b` on the fine level, all lanes at once.
+/// `scale[c]` is the norm the residual of lane `c` is measured against. Returns `(h,
+/// iterations)`.
+fn pcg<const L: usize>(
+    mg: &Hierarchy,
+    diag: &[f32],
+    b: &[[f64; L]],
+    scale: [f64; L],
+    tol: f64,
+    max_iterations: usize,
+) -> (Vec<[f64; L]>, usize) {
+    let w = mg.levels[0].w;
+    let n = b.len();
+    let mut ws = mg.work::<L>();
+    let mut x = vec![[0f64; L]; n];
+    let mut r = b.to_vec();
+    let mut rf = vec![[0f32; L]; n];
+    let mut z = vec![[0f32; L]; n];
+    let mut p = vec![[0f64; L]; n];
+    let mut q = vec![[0f64; L]; n];
+    let done = |rr: [f64; L]| (0..L).all(|c| rr[c].sqrt() <= tol * scale[c]);
+    let norm2 = |v: &[[f64; L]], rf: &mut [[f32; L]]| {
+        // Also refreshes the f32 copy the preconditioner reads.
+        let parts = bands(rf, w, |bi, rb| {
+            let mut s = [0f64; L];
+            for (k, o) in rb.iter_mut().enumerate() {
+                let t = v[bi * BAND * w + k];
+                for c in 0..L {
+                    s[c] += t[c] * t[c];
+                }
+                *o = t.map(|u| u as f32);
+            }
+            s
+        });
+        sum_lanes(&parts)
+    };
+    let mut it = 0;
+    let mut rr = norm2(&r, &mut rf);
+    loop {
+        if done(rr) || it >= max_iterations {
+            break;
+        }
+        mg.vcycle(&mut ws, &rf, &mut z);
+        let mut rz = dot_mixed(&r, &z, w);
+        for (pi, zi) in p.iter_mut().zip(&z) {
+            *pi = zi.map(f64::from);
+        }
+        loop {
+            let pq = apply(diag, w, &p, &mut q);
+            let alpha: [f64; L] = std::array::from_fn(|c| {
+                if pq[c] > 0.0 && rz[c] > 0.0 {
+                    rz[c] / pq[c]
+                } else {
+                    0.0
+                }
+            });
+            let parts = {
+                let (pp, qq) = (&p, &q);
+                let chunks: Vec<_> = x
+                    .chunks_mut(BAND * w)
+                    .zip(r.chunks_mut(BAND * w))
+                    .zip(rf.chunks_mut(BAND * w))
+                    .collect();
+                let job = |(bi, ((xb, rb), fb)): (
+                    usize,
+                    ((&mut [[f64; L]], &mut [[f64; L]]), &mut [[f32; L]]),
+                )| {
+                    let mut s = [0f64; L];
+                    for k in 0..xb.len() {
+                        let i = bi * BAND * w + k;
+                        for c in 0..L {
+                            xb[k][c] += alpha[c] * pp[i][c];
+                            rb[k][c] -= alpha[c] * qq[i][c];
+                            s[c] += rb[k][c] * rb[k][c];
+                        }
+                        fb[k] = rb[k].map(|u| u as f32);
+                    }
+                    s
+                };
+                if n >= 16 * 1024 {
+                    chunks
+                        .into_par_iter()
+                        .enumerate()
+                        .map(job)
+                        .collect::<Vec<_>>()
+                } else {
+                    chunks.into_iter().enumerate().map(job).collect::<Vec<_>>()
+                }
+            };
+            rr = sum_lanes(&parts);
+            it += 1;
+            if done(rr) || it >= max_iterations {
+                break;
+            }
+            mg.vcycle(&mut ws, &rf, &mut z);
+            let rz_new = dot_mixed(&r, &z, w);
+            let beta: [f64; L] =
+                std::array::from_fn(|c| if rz[c] > 0.0 { rz_new[c] / rz[c] } else { 0.0 });
+            rz = rz_new;
+            bands(&mut p, w, |bi, pb| {
+                for (k, pi) in pb.iter_mut().enumerate() {
+                    let zi = z[bi * BAND * w + k];
+                    for c in 0..L {
+                        pi[c] = f64::from(zi[c]) + beta[c] * pi[c];
+                    }
+                }
+            });
+        }
+        // The recurrence drifts from the true residual; check it, and restart from it if the
+        // tolerance is not met after all.
+        apply(diag, w, &x, &mut q);
+        for (ri, (bi, qi)) in r.iter_mut().zip(b.iter().zip(&q)) {
+            for c in 0..L {
+                ri[c] = bi[c] - qi[c];
+            }
+        }
+        rr = norm2(&r, &mut rf);
+        if done(rr) || it >= max_iterations {
+            break;
+        }
+    }
+    (x, it)
+}
+
+/// `⟨r, z⟩` per lane, summed by bands.
+fn dot_mixed<const L: usize>(r: &[[f64; L]], z: &[[f32; L]], w: usize) -> [f64; L] {
+    let parts: Vec<[f64; L]> = r
+        .par_chunks(BAND * w)
+        .zip(z.par_chunks(BAND * w))
+        .map(|(rb, zb)| {
+            let mut s = [0f64; L];
+            for (a, b) in rb.iter().zip(zb) {
+                for c in 0..L {
+                    s[c] += a[c] * f64::from(b[c]);
+                }
+            }
+            s
+        })
+        .collect();
+    sum_lanes(&parts)
+}
+
+/// Blends `src` into `dst` over `mask` (see the module documentation).
+pub fn seamless(input: &BlendInput<'_>, params: &BlendParams) -> Result<Blended> {
+    let (src, dst) = (&input.src, &input.dst);
+    if src.c != dst.c {
+        return Err(invalid(
+            "dst",
+            format!("expected {} channels like src, got {}", src.c, dst.c),
+        ));
+    }
+    if input.mask.len() != src.h * src.w {
+        return Err(invalid(
+            "mask",
+            format!(
+                "expected {}×{} values like src, got {}",
+                src.h,
+                src.w,
+                input.mask.len()
+            ),
+        ));
+    }
+    if let Some(f) = input.fixed {
+        if f.len() != src.h * src.w {
+            return Err(invalid(
+                "fixed",
+                format!(
+                    "expected {}×{} values like src, got {}",
+                    src.h,
+                    src.w,
+                    f.len()
+                ),
+            ));
+        }
+        if let Some(i) = (0..f.len()).find(|&i| f[i] && !input.mask[i]) {
+            return Err(invalid(
+                "fixed",
+                format!(
+                    "pixel (row {}, col {}) is fixed but not in the mask",
+                    i / src.w,
+                    i % src.w
+                ),
+            ));
+        }
+    }
+    if !(params.tol.is_finite() && params.tol > 0.0) {
+        return Err(invalid(
+            "tol",
+            format!("expected a positive tolerance, got {}", params.tol),
+        ));
+    }
+    src.check_finite("src")?;
+    dst.check_finite("dst")?;
+    let grid = Grid::new(input)?;
+    let diag = grid.diag();
+    let mg = Hierarchy::new(Level::five(grid.h, grid.w, diag.clone()));
+    let mut out = dst.data.to_vec();
+    let (mut iterations, mut residual) = (0, 0.0f64);
+    let c = src.c;
+    match c {
+        1 => {
+            let (i, r) = solve_group::<1>(input, params, &grid, &diag, &mg, 0, &mut out);
+            (iterations, residual) = (i, r);
+        }
+        2 => {
+            let (i, r) = solve_group::<2>(input, params, &grid, &diag, &mg, 0, &mut out);
+            (iterations, residual) = (i, r);
+        }
+        _ => {
+            for c0 in (0..c).step_by(4) {
+                let (i, r) = solve_group::<4>(input, params, &grid, &diag, &mg, c0, &mut out);
+                iterations = iterations.max(i);
+                residual = residual.max(r);
+            }
+        }
+    }
+    Ok(Blended {
+        image: out,
+        iterations,
+        residual,
+        unknowns: mg.levels[0].n,
+    })
+}
+
+/// Solves channels `c0..c0 + L` and writes them into `out`; returns (iterations, residual).
+fn solve_group<const L: usize>(
+    input: &BlendInput<'_>,
+    params: &BlendParams,
+    grid: &Grid,
+    diag: &[f32],
+    mg: &Hierarchy,
+    c0: usize,
+    out: &mut [f32],
+) -> (usize, f64) {
+    let s = Sampler::<L> { input, grid, c0 };
+    let (h, w) = (grid.h, grid.w);
+    let mut b = vec![[0f64; L]; h * w];
+    let mut bf = vec![[0f64; L]; h * w];
+    {
+        let mut pairs: Vec<_> = b.chunks_mut(w).zip(bf.chunks_mut(w)).collect();
+        let job = |(gy, (brow, frow)): (usize, &mut (&mut [[f64; L]], &mut [[f64; L]]))| {
+            for gx in 0..w {
+                if grid.kind[gy * w + gx] == UNK {
+                    let (f, hh) = s.rhs(&grid.kind, params.mode, gy, gx);
+                    frow[gx] = f;
+                    brow[gx] = hh;
+                }
+            }
+        };
+        if h * w >= 16 * 1024 {
+            pairs.par_iter_mut().enumerate().for_each(job);
+        } else {
+            pairs.iter_mut().enumerate().for_each(job);
+        }
+    }
+    let scale = norms(&mut bf, w);
+    let (x, it) = pcg(mg, diag, &b, scale, params.tol, params.max_iterations);
+    // f = g + h on the region (pinned components shifted to the source's mean).
+    let mut f = vec![[0f64; L]; h * w];
+    rows_mut(&mut f, w, |gy, row| {
+        for gx in 0..w {
+            let p = gy * w + gx;
+            if grid.kind[p] >= FIX {
+                let g = s.src(gy, gx);
+                row[gx] = std::array::from_fn(|c| g[c] + x[p][c]);
+            }
+        }
+    });
+    if grid.ncomp > 0 {
+        let mut sum = vec![([0f64; L], 0usize); grid.ncomp];
+        for p in 0..h * w {
+            let k = grid.comp[p];
+            if k != u32::MAX {
+                for c in 0..L {
+                    sum[k as usize].0[c] += x[p][c];
+                }
+                sum[k as usize].1 += 1;
+            }
+        }
+        for p in 0..h * w {
+            let k = grid.comp[p];
+            if k != u32::MAX {
+                let (m, n) = sum[k as usize];
+                for c in 0..L {
+                    f[p][c] -= m[c] / n as f64;
+                }
+            }
+        }
+    }
+    let residual = final_residual(&s, grid, params.mode, &f);
+    // Write the region into the output.
+    let (dw, nc) = (input.dst.w, input.dst.c);
+    for gy in 1..h - 1 {
+        for gx in 1..w - 1 {
+            let p = gy * w + gx;
+            if grid.kind[p] < FIX {
+                continue;
+            }
+            let y = (gy as i64 + grid.y0) as usize;
+            let xx = (gx as i64 + grid.x0) as usize;
+            let o = (y * dw + xx) * nc;
+            for c in 0..L.min(nc - c0) {
+                out[o + c0 + c] = f[p][c] as f32;
+            }
+        }
+    }
+    (it, residual)
+}
+
+/// `‖v‖` per lane, summed by bands (reuses `v` as scratch-free input).
+fn norms<const L: usize>(v: &mut [[f64; L]], w: usize) -> [f64; L] {
+    let parts = bands(v, w, |_, vb| {
+        let mut s = [0f64; L];
+        for t in vb.iter() {
+            for c in 0..L {
+                s[c] += t[c] * t[c];
+            }
+        }
+        s
+    });
+    sum_lanes(&parts).map(|s| if s > 0.0 { s.sqrt() } else { 1.0 })
+}
+
+/// Largest relative residual over lanes of `f` in the system of the user's problem, pinned
+/// pixels counted as unknowns again.
+fn final_residual<const L: usize>(
+    s: &Sampler<'_, L>,
+    grid: &Grid,
+    mode: Mode,
+    f: &[[f64; L]],
+) -> f64 {
+    let (h, w) = (grid.h, grid.w);
+    let mut kind = grid.kind.clone();
+    for p in 0..h * w {
+        if grid.ncomp > 0 && grid.comp[p] != u32::MAX {
+            kind[p] = UNK;
+        }
+    }
+    let mut rows = vec![([0f64; L], [0f64; L]); h];
+    rows_mut(&mut rows, 1, |gy, out| {
+        let (mut rr, mut bb) = ([0f64; L], [0f64; L]);
+        for gx in 0..w {
+            let p = gy * w + gx;
+            if kind[p] != UNK {
+                continue;
+            }
+            let (bf, _) = s.rhs(&kind, mode, gy, gx);
+            let mut af = [0f64; L];
+            for q in [p - w, p - 1, p + 1, p + w] {
+                match kind[q] {
+                    OUT => {}
+                    UNK => {
+                        for c in 0..L {
+                            af[c] += f[p][c] - f[q][c];
+                        }
+                    }
+                    _ => {
+                        for c in 0..L {
+                            af[c] += f[p][c];
+                        }
+                    }
+                }
+            }
+            for c in 0..L {
+                rr[c] += (bf[c] - af[c]).powi(2);
+                bb[c] += bf[c] * bf[c];
+            }
+        }
+        out[0] = (rr, bb);
+    });
+    let (mut rr, mut bb) = ([0f64; L], [0f64; L]);
+    for (r, b) in &rows {
+        for c in 0..L {
+            rr[c] += r[c];
+            bb[c] += b[c];
+        }
+    }
+    (0..L)
+        .map(|c| {
+            if bb[c] > 0.0 {
+                (rr[c] / bb[c]).sqrt()
+            } else {
+                rr[c].sqrt()
+            }
+        })
+        .fold(0.0, f64::max)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn img(h: usize, w: usize, c: usize, f: impl Fn(usize, usize, usize) -> f32) -> Vec<f32> {
+        (0..h * w * c)
+            .map(|i| f(i / c / w, i / c % w, i % c))
+            .collect()
+    }
+
+    fn disk(n: usize, r: f32) -> Vec<bool> {
+        let m = (n as f32 - 1.0) / 2.0;
+        (0..n * n)
+            .map(|i| ((i / n) as f32 - m).powi(2) + ((i % n) as f32 - m).powi(2) < r * r)
+            .collect()
+    }
+
+    fn blend(
+        src: &[f32],
+        sh: usize,
+        dst: &[f32],
+        dh: usize,
+        c: usize,
+        mask: &[bool],
+        off: (i64, i64),
+        mode: Mode,
+    ) -> Blended {
+        let input = BlendInput {
+            src: Image::new("src", src, sh, sh, c).unwrap(),
+            dst: Image::new("dst", dst, dh, dh, c).unwrap(),
+            mask,
+            offset: off,
+            fixed: None,
+        };
+        seamless(
+            &input,
+            &BlendParams {
+                mode,
+                ..BlendParams::default()
+            },
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn residual_is_below_tolerance_on_a_textured_disk() {
+        let (sh, dh) = (70, 100);
+        let src = img(sh, sh, 3, |y, x, c| {
+            ((y * 7 + x * 13 + c * 5) % 17) as f32 / 17.0
+        });
+        let dst = img(dh, dh, 3, |y, x, c| {
+            (y as f32 * 0.01 + x as f32 * 0.02 + c as f32 * 0.1).sin()
+        });
+        for mode in [Mode::Normal, Mode::Mixed] {
+            let b = blend(&src, sh, &dst, dh, 3, &disk(sh, 30.0), (10, 20), mode);
+            assert!(b.residual < 1e-6, "{mode:?}: residual {}", b.residual);
+            assert!(b.iterations <= 15, "{mode:?}: {} iterations", b.iterations);
+        }
+    }
+
+    #[test]
+    fn self_blend_is_the_identity() {
+        let dh = 50;
+        let dst = img(dh, dh, 2, |y, x, c| {
+            ((y * 3 + x * 5 + c) % 11) as f32 / 11.0
+        });
+        let src: Vec<f32> = (0..30 * 30 * 2)
+            .map(|i| {
+                let (y, x, c) = (i / 2 / 30, i / 2 % 30, i % 2);
+                dst[((y + 5) * dh + x + 12) * 2 + c]
+            })
+            .collect();
+        let b = blend(
+            &src,
+            30,
+            &dst,
+            dh,
+            2,
+            &disk(30, 14.0),
+            (5, 12),
+            Mode::Normal,
+        );
+        assert_eq!(b.image, dst);
+        assert_eq!(b.iterations, 0);
+    }
+
+    #[test]
+    fn whole_destination_keeps_the_source_mean() {
+        // The mask covers all of dst: no Dirichlet pixel, the solution is src shifted to its mean.
+        let n = 20;
+        let src = img(n, n, 1, |y, x, _| (y * x) as f32 / 400.0);
+        let dst = img(n, n, 1, |_, _, _| 0.5);
+        let b = blend(
+            &src,
+            n,
+            &dst,
+            n,
+            1,
+            &vec![true; n * n],
+            (0, 0),
+            Mode::Normal,
+        );
+        for (o, s) in b.image.iter().zip(&src) {
+            assert!((o - s).abs() < 1e-5, "{o} vs {s}");
+        }
+        assert!(b.residual < 1e-6);
+    }
+
+    #[test]
+    fn errors_name_the_argument() {
+        let src = vec![0.0f32; 16];
+        let dst = vec![0.0f32; 64];
+        let mask = vec![true; 16];
+        let input = BlendInput {
+            src: Image::new("src", &src, 4, 4, 1).unwrap(),
+            dst: Image::new("dst", &dst, 8, 8, 1).unwrap(),
+            mask: &mask,
+            offset: (100, 0),
+            fixed: None,
+        };
+        let e = seamless(&input, &BlendParams::default()).unwrap_err();
+        assert!(e.to_string().starts_with("mask:"), "{e}");
+        let none = vec![false; 16];
+        let e = seamless(
+            &BlendInput {
+                mask: &none,
+                offset: (0, 0),
+                ..input
+            },
+            &BlendParams::default(),
+        )
+        .unwrap_err();
+        assert!(e.to_string().starts_with("mask:"), "{e}");
+        let mut fixed = vec![false; 16];
+        fixed[3] = true;
+        let part: Vec<bool> = (0..16).map(|i| i != 3).collect();
+        let e = seamless(
+            &BlendInput {
+                mask: &part,
+                fixed: Some(&fixed),
+                offset: (0, 0),
+                ..input
+            },
+            &BlendParams::default(),
+        )
+        .unwrap_err();
+        assert!(e.to_string().starts_with("fixed:"), "{e}");
+    }
+}
