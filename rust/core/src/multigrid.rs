@@ -33,7 +33,7 @@ pub(crate) const BAND: usize = 8;
 const PARALLEL_CELLS: usize = 16 * 1024;
 
 /// Coarsening stops once a level has at most this many unknowns; it is solved densely.
-const COARSEST: usize = 300;
+const COARSEST: usize = 64;
 
 /// The operator of one level.
 pub(crate) enum Stencil {
@@ -54,6 +54,8 @@ pub(crate) struct Level {
     pub inv: Vec<f32>,
     /// Number of unknowns.
     pub n: usize,
+    /// The row of an unknown whose neighbourhood is all unknowns (the fast path of coarsening).
+    interior: [f32; 9],
 }
 
 impl Level {
@@ -71,6 +73,7 @@ impl Level {
             stencil: Stencil::Five(diag),
             inv,
             n,
+            interior: [0.0, -1.0, 0.0, -1.0, 4.0, -1.0, 0.0, -1.0, 0.0],
         }
     }
 
@@ -99,47 +102,98 @@ impl Level {
         }
     }
 
+    /// Row `p` of the operator as 9 coefficients over the 3×3 neighbourhood.
+    #[inline]
+    fn row9(&self, p: usize) -> [f32; 9] {
+        match &self.stencil {
+            Stencil::Nine(a) => a[p],
+            Stencil::Five(d) => {
+                let w = self.w;
+                let off = |q: usize| if d[q] > 0.0 { -1.0 } else { 0.0 };
+                [
+                    0.0,
+                    off(p - w),
+                    0.0,
+                    off(p - 1),
+                    d[p],
+                    off(p + 1),
+                    0.0,
+                    off(p + w),
+                    0.0,
+                ]
+            }
+        }
+    }
+
+    /// Whether row `p` is the level's interior stencil (then so are its neighbours' columns).
+    #[inline]
+    fn is_interior(&self, p: usize) -> bool {
+        match &self.stencil {
+            Stencil::Nine(a) => a[p] == self.interior,
+            Stencil::Five(d) => {
+                d[p] == 4.0
+                    && d[p - 1] > 0.0
+                    && d[p + 1] > 0.0
+                    && d[p - self.w] > 0.0
+                    && d[p + self.w] > 0.0
+            }
+        }
+    }
+
     /// The Galerkin coarse level `Pᵀ A P`.
     fn coarsen(&self) -> Self {
         let (hf, wf) = (self.h, self.w);
         let hc = (hf / 2 + 2) | 1;
         let wc = (wf / 2 + 2) | 1;
+        // Where the 3×3 fine points under a coarse point all carry the interior stencil, the
+        // coarse row is a constant: compute it once.
+        let interior = galerkin_row(2, 2, |_, _| Some(self.interior));
+        let flags: Vec<bool> = (0..hf * wf)
+            .map(|p| {
+                let (y, x) = (p / wf, p % wf);
+                y > 0
+                    && y < hf - 1
+                    && x > 0
+                    && x < wf - 1
+                    && self.inv[p] > 0.0
+                    && self.is_interior(p)
+            })
+            .collect();
+        let row_at = |fy: usize, fx: usize| {
+            if fy == 0 || fy >= hf - 1 || fx == 0 || fx >= wf - 1 {
+                return None;
+            }
+            let f = fy * wf + fx;
+            (self.inv[f] > 0.0).then(|| self.row9(f))
+        };
         let mut a = vec![[0f32; 9]; hc * wc];
         let row = |i: usize, out: &mut [[f32; 9]]| {
-            if i == 0 || i >= hc - 1 {
+            if i == 0 || 2 * i >= hf {
                 return;
             }
             for (j, cell) in out.iter_mut().enumerate().take(wc - 1).skip(1) {
-                let mut acc = [0f64; 9];
-                for fy in (2 * i - 2)..=(2 * i) {
-                    if fy == 0 || fy >= hf - 1 {
-                        continue;
-                    }
-                    let wy = if fy == 2 * i - 1 { 1.0 } else { 0.5 };
-                    for fx in (2 * j - 2)..=(2 * j) {
-                        if fx == 0 || fx >= wf - 1 {
-                            continue;
-                        }
-                        let f = fy * wf + fx;
-                        if self.inv[f] == 0.0 {
-                            continue;
-                        }
-                        let wfi = wy * if fx == 2 * j - 1 { 1.0 } else { 0.5 };
-                        for k in 0..9 {
-                            let afg = f64::from(self.coef(f, k));
-                            if afg == 0.0 {
-                                continue;
-                            }
-                            let (gy, gx) = (fy + k / 3 - 1, fx + k % 3 - 1);
-                            for (jy, vy) in parents(gy) {
-                                for (jx, vx) in parents(gx) {
-                                    acc[(jy + 1 - i) * 3 + (jx + 1 - j)] += wfi * afg * vy * vx;
-                                }
-                            }
-                        }
-                    }
+                if 2 * j >= wf {
+                    break;
                 }
-                *cell = acc.map(|v| v as f32);
+                let o = (2 * i - 1) * wf + 2 * j - 1;
+                let all = [
+                    o - wf - 1,
+                    o - wf,
+                    o - wf + 1,
+                    o - 1,
+                    o,
+                    o + 1,
+                    o + wf - 1,
+                    o + wf,
+                    o + wf + 1,
+                ]
+                .iter()
+                .all(|&f| flags[f]);
+                *cell = if all {
+                    interior
+                } else {
+                    galerkin_row(i, j, row_at)
+                };
             }
         };
         if hc * wc >= PARALLEL_CELLS / 4 {
@@ -170,21 +224,50 @@ impl Level {
             stencil: Stencil::Nine(a),
             inv,
             n,
+            interior,
         }
     }
 }
 
-/// Coarse rows (or columns) a fine row interpolates from, with weights.
-#[inline]
-fn parents(t: usize) -> impl Iterator<Item = (usize, f64)> {
-    let (a, b, w) = if t % 2 == 1 {
-        ((t + 1) / 2, usize::MAX, 1.0)
-    } else {
-        (t / 2, t / 2 + 1, 0.5)
+/// Row `(i, j)` of the Galerkin product `Pᵀ A P`, from the fine rows `row_at(fy, fx)` (`None`
+/// off the unknowns). Coarse `i` sits on fine `2i − 1`.
+fn galerkin_row(i: usize, j: usize, row_at: impl Fn(usize, usize) -> Option<[f32; 9]>) -> [f32; 9] {
+    // Parents of fine row/column t: (first coarse index, its weight, weight of the next).
+    let par = |t: usize| -> (usize, f64, f64) {
+        if t % 2 == 1 {
+            (t.div_ceil(2), 1.0, 0.0)
+        } else {
+            (t / 2, 0.5, 0.5)
+        }
     };
-    [(a, w), (b, w)]
-        .into_iter()
-        .filter(|&(i, _)| i != usize::MAX)
+    let mut acc = [0f64; 9];
+    for fy in (2 * i - 2)..=(2 * i) {
+        let wy = if fy == 2 * i - 1 { 1.0 } else { 0.5 };
+        for fx in (2 * j - 2)..=(2 * j) {
+            let Some(st) = row_at(fy, fx) else { continue };
+            let wfi = wy * if fx == 2 * j - 1 { 1.0 } else { 0.5 };
+            for (k, &c) in st.iter().enumerate() {
+                if c == 0.0 {
+                    continue;
+                }
+                let v = wfi * f64::from(c);
+                let (jy, ay, by) = par(fy + k / 3 - 1);
+                let (jx, ax, bx) = par(fx + k % 3 - 1);
+                let (ky, kx) = (jy + 1 - i, jx + 1 - j);
+                acc[ky * 3 + kx] += v * ay * ax;
+                if bx != 0.0 {
+                    acc[ky * 3 + kx + 1] += v * ay * bx;
+                }
+                if by != 0.0 {
+                    acc[ky * 3 + 3 + kx] += v * by * ax;
+                    if bx != 0.0 {
+                        acc[ky * 3 + 3 + kx + 1] += v * by * bx;
+                    }
+                }
+            }
+        }
+    }
+    acc.map(|v| v as f32)
 }
 
 /// A dense Cholesky factor of the coarsest level (regularised: the level may be singular).
@@ -296,41 +379,56 @@ impl Hierarchy {
 
     /// Zeroed work vectors for `L` lanes.
     pub fn work<const L: usize>(&self) -> Work<L> {
-        let z = || {
+        // Level 0's `x` and `b` are the caller's vectors.
+        let z = |fine: bool| {
             self.levels
                 .iter()
-                .map(|l| vec![[0f32; L]; l.h * l.w])
+                .enumerate()
+                .map(|(i, l)| {
+                    if i == 0 && !fine {
+                        Vec::new()
+                    } else {
+                        vec![[0f32; L]; l.h * l.w]
+                    }
+                })
                 .collect::<Vec<_>>()
         };
         Work {
-            x: z(),
-            b: z(),
-            r: z(),
+            x: z(false),
+            b: z(false),
+            r: z(true),
         }
     }
 
     /// `z = M⁻¹ r`: one symmetric V(1,1)-cycle from a zero guess. `r` and `z` live on the fine
     /// grid and are 0 off the unknowns.
     pub fn vcycle<const L: usize>(&self, ws: &mut Work<L>, r: &[[f32; L]], z: &mut [[f32; L]]) {
-        ws.b[0].copy_from_slice(r);
-        self.cycle(ws, 0);
-        z.copy_from_slice(&ws.x[0]);
+        self.cycle(ws, 0, r, z);
     }
 
-    fn cycle<const L: usize>(&self, ws: &mut Work<L>, l: usize) {
+    fn cycle<const L: usize>(
+        &self,
+        ws: &mut Work<L>,
+        l: usize,
+        b: &[[f32; L]],
+        x: &mut [[f32; L]],
+    ) {
         let lev = &self.levels[l];
         if l + 1 == self.levels.len() {
-            self.coarsest.solve(&ws.b[l], &mut ws.x[l]);
+            self.coarsest.solve(b, x);
             return;
         }
-        smooth(lev, &mut ws.x[l], &ws.b[l], true);
-        residual(lev, &ws.x[l], &ws.b[l], &mut ws.r[l]);
+        smooth(lev, x, b, true);
+        residual(lev, x, b, &mut ws.r[l]);
         let coarse = &self.levels[l + 1];
-        restrict(lev, coarse, &ws.r[l], &mut ws.b[l + 1]);
-        self.cycle(ws, l + 1);
-        let (xf, xc) = ws.x.split_at_mut(l + 1);
-        prolong_add(lev, coarse, &xc[0], &mut xf[l]);
-        smooth(lev, &mut ws.x[l], &ws.b[l], false);
+        let mut bc = std::mem::take(&mut ws.b[l + 1]);
+        let mut xc = std::mem::take(&mut ws.x[l + 1]);
+        restrict(lev, coarse, &ws.r[l], &mut bc);
+        self.cycle(ws, l + 1, &bc, &mut xc);
+        prolong_add(lev, coarse, &xc, x);
+        ws.b[l + 1] = bc;
+        ws.x[l + 1] = xc;
+        smooth(lev, x, b, false);
     }
 }
 
@@ -618,6 +716,18 @@ fn prolong_add<const L: usize>(fine: &Level, coarse: &Level, xc: &[[f32; L]], xf
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Coarse rows (or columns) a fine row interpolates from, with weights.
+    fn parents(t: usize) -> impl Iterator<Item = (usize, f64)> {
+        let (a, b, w) = if t % 2 == 1 {
+            ((t + 1) / 2, usize::MAX, 1.0)
+        } else {
+            (t / 2, t / 2 + 1, 0.5)
+        };
+        [(a, w), (b, w)]
+            .into_iter()
+            .filter(|&(i, _)| i != usize::MAX)
+    }
 
     /// A disk of unknowns with Dirichlet all round, on an odd grid.
     fn disk(n: usize) -> Level {

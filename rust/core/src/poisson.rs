@@ -247,69 +247,62 @@ impl Grid {
     }
 }
 
-/// Reads source and destination values of grid cells for channels `c0..c0 + L`.
-struct Sampler<'a, const L: usize> {
-    input: &'a BlendInput<'a>,
-    grid: &'a Grid,
-    c0: usize,
+/// Source and destination values on the grid for channels `c0..c0 + L`.
+struct Values<const L: usize> {
+    /// Source, its edge replicated beyond its border.
+    g: Vec<[f32; L]>,
+    /// Destination (0 outside it).
+    d: Vec<[f32; L]>,
 }
 
-impl<const L: usize> Sampler<'_, L> {
-    /// Source value at grid cell `(gy, gx)`, the source's edge replicated.
-    #[inline]
-    fn src(&self, gy: usize, gx: usize) -> [f64; L] {
-        let s = &self.input.src;
-        let (oy, ox) = self.input.offset;
-        let sy = (gy as i64 + self.grid.y0 - oy).clamp(0, s.h as i64 - 1) as usize;
-        let sx = (gx as i64 + self.grid.x0 - ox).clamp(0, s.w as i64 - 1) as usize;
-        self.lanes(s.pixel(sy, sx))
-    }
-
-    /// Destination value at grid cell `(gy, gx)` (which must lie inside the destination).
-    #[inline]
-    fn dst(&self, gy: usize, gx: usize) -> [f64; L] {
-        let y = (gy as i64 + self.grid.y0) as usize;
-        let x = (gx as i64 + self.grid.x0) as usize;
-        self.lanes(self.input.dst.pixel(y, x))
-    }
-
-    #[inline]
-    fn lanes(&self, px: &[f32]) -> [f64; L] {
-        let mut v = [0f64; L];
-        for (c, t) in v.iter_mut().enumerate() {
-            if let Some(&x) = px.get(self.c0 + c) {
-                *t = f64::from(x);
+impl<const L: usize> Values<L> {
+    fn new(input: &BlendInput<'_>, grid: &Grid, c0: usize) -> Self {
+        let (h, w) = (grid.h, grid.w);
+        let (s, dst) = (&input.src, &input.dst);
+        let (oy, ox) = input.offset;
+        let nc = L.min(s.c - c0);
+        let mut g = vec![[0f32; L]; h * w];
+        let mut d = vec![[0f32; L]; h * w];
+        rows_mut(&mut g, w, |gy, row| {
+            let sy = (gy as i64 + grid.y0 - oy).clamp(0, s.h as i64 - 1) as usize;
+            for (gx, v) in row.iter_mut().enumerate() {
+                let sx = (gx as i64 + grid.x0 - ox).clamp(0, s.w as i64 - 1) as usize;
+                v[..nc].copy_from_slice(&s.pixel(sy, sx)[c0..c0 + nc]);
             }
-        }
-        v
+        });
+        rows_mut(&mut d, w, |gy, row| {
+            let y = gy as i64 + grid.y0;
+            if !(0..dst.h as i64).contains(&y) {
+                return;
+            }
+            for (gx, v) in row.iter_mut().enumerate() {
+                let x = gx as i64 + grid.x0;
+                if (0..dst.w as i64).contains(&x) {
+                    v[..nc].copy_from_slice(&dst.pixel(y as usize, x as usize)[c0..c0 + nc]);
+                }
+            }
+        });
+        Self { g, d }
     }
 
-    /// Right-hand side of row `(gy, gx)` for the kinds in `kind`, as `(b_f, b_h)`: the system
-    /// for `f` and for the correction `h = f − g`.
-    fn rhs(&self, kind: &[u8], mode: Mode, gy: usize, gx: usize) -> ([f64; L], [f64; L]) {
-        let w = self.grid.w;
-        let p = gy * w + gx;
+    /// Right-hand side of the row of unknown `p` for the cell kinds `kind`, as `(b_f, b_h)`:
+    /// the system for `f` and for the correction `h = f − g`.
+    #[inline]
+    fn rhs(&self, kind: &[u8], w: usize, mode: Mode, p: usize) -> ([f64; L], [f64; L]) {
         let (mut bf, mut bh) = ([0f64; L], [0f64; L]);
-        let gp = self.src(gy, gx);
-        let fp = self.dst(gy, gx);
-        for (q, qy, qx) in [
-            (p - w, gy - 1, gx),
-            (p - 1, gy, gx - 1),
-            (p + 1, gy, gx + 1),
-            (p + w, gy + 1, gx),
-        ] {
+        let (gp, fp) = (self.g[p], self.d[p]);
+        for q in [p - w, p - 1, p + 1, p + w] {
             let kq = kind[q];
             if kq == OUT {
                 continue;
             }
-            let gq = self.src(qy, qx);
-            let fq = self.dst(qy, qx);
+            let (gq, fq) = (self.g[q], self.d[q]);
             for c in 0..L {
-                let gs = gp[c] - gq[c];
+                let gs = f64::from(gp[c]) - f64::from(gq[c]);
                 let v = match mode {
                     Mode::Normal => gs,
                     Mode::Mixed => {
-                        let ds = fp[c] - fq[c];
+                        let ds = f64::from(fp[c]) - f64::from(fq[c]);
                         if ds.abs() > gs.abs() {
                             ds
                         } else {
@@ -321,8 +314,8 @@ impl<const L: usize> Sampler<'_, L> {
                 bh[c] += v - gs;
                 if kq != UNK {
                     let val = if kq == FIX { gq[c] } else { fq[c] };
-                    bf[c] += val;
-                    bh[c] += val - gq[c];
+                    bf[c] += f64::from(val);
+                    bh[c] += f64::from(val) - f64::from(gq[c]);
                 }
             }
         }
@@ -386,7 +379,7 @@ fn apply<const L: usize>(diag: &[f32], w: usize, p: &[[f64; L]], q: &mut [[f64; 
 
 /// Preconditioned conjugate gradients for `A h = b` on the fine level, all lanes at once.
 /// `scale[c]` is the norm the residual of lane `c` is measured against. Returns `(h,
-/// iterations)`.
+/// iterations, largest relative true residual)`.
 fn pcg<const L: usize>(
     mg: &Hierarchy,
     diag: &[f32],
@@ -394,7 +387,7 @@ fn pcg<const L: usize>(
     scale: [f64; L],
     tol: f64,
     max_iterations: usize,
-) -> (Vec<[f64; L]>, usize) {
+) -> (Vec<[f64; L]>, usize, f64) {
     let w = mg.levels[0].w;
     let n = b.len();
     let mut ws = mg.work::<L>();
@@ -505,7 +498,8 @@ fn pcg<const L: usize>(
             break;
         }
     }
-    (x, it)
+    let rel = (0..L).map(|c| rr[c].sqrt() / scale[c]).fold(0.0, f64::max);
+    (x, it, rel)
 }
 
 /// `⟨r, z⟩` per lane, summed by bands.
@@ -576,11 +570,10 @@ pub fn seamless(input: &BlendInput<'_>, params: &BlendParams) -> Result<Blended>
         ));
     }
     src.check_finite("src")?;
-    dst.check_finite("dst")?;
     let grid = Grid::new(input)?;
     let diag = grid.diag();
     let mg = Hierarchy::new(Level::five(grid.h, grid.w, diag.clone()));
-    let mut out = dst.data.to_vec();
+    let mut out = copy_finite(dst, "dst")?;
     let (mut iterations, mut residual) = (0, 0.0f64);
     let c = src.c;
     match c {
@@ -608,6 +601,35 @@ pub fn seamless(input: &BlendInput<'_>, params: &BlendParams) -> Result<Blended>
     })
 }
 
+/// A copy of `img`'s values, failing (naming `name`) at the first non-finite one. One parallel
+/// pass does both.
+fn copy_finite(img: &Image<'_>, name: &'static str) -> Result<Vec<f32>> {
+    const CHUNK: usize = 1 << 16;
+    let mut out = vec![0f32; img.data.len()];
+    let bad: Vec<Option<usize>> = out
+        .par_chunks_mut(CHUNK)
+        .zip(img.data.par_chunks(CHUNK))
+        .enumerate()
+        .map(|(i, (o, d))| {
+            o.copy_from_slice(d);
+            d.iter().position(|v| !v.is_finite()).map(|k| i * CHUNK + k)
+        })
+        .collect();
+    if let Some(i) = bad.into_iter().flatten().next() {
+        let p = i / img.c;
+        return Err(invalid(
+            name,
+            format!(
+                "expected finite values, found {} at pixel (row {}, col {})",
+                img.data[i],
+                p / img.w,
+                p % img.w
+            ),
+        ));
+    }
+    Ok(out)
+}
+
 /// Solves channels `c0..c0 + L` and writes them into `out`; returns (iterations, residual).
 fn solve_group<const L: usize>(
     input: &BlendInput<'_>,
@@ -618,40 +640,26 @@ fn solve_group<const L: usize>(
     c0: usize,
     out: &mut [f32],
 ) -> (usize, f64) {
-    let s = Sampler::<L> { input, grid, c0 };
+    let vals = Values::<L>::new(input, grid, c0);
     let (h, w) = (grid.h, grid.w);
     let mut b = vec![[0f64; L]; h * w];
-    let mut bf = vec![[0f64; L]; h * w];
-    {
-        let mut pairs: Vec<_> = b.chunks_mut(w).zip(bf.chunks_mut(w)).collect();
-        let job = |(gy, (brow, frow)): (usize, &mut (&mut [[f64; L]], &mut [[f64; L]]))| {
-            for gx in 0..w {
-                if grid.kind[gy * w + gx] == UNK {
-                    let (f, hh) = s.rhs(&grid.kind, params.mode, gy, gx);
-                    frow[gx] = f;
-                    brow[gx] = hh;
+    let parts = bands(&mut b, w, |bi, band| {
+        let mut s = [0f64; L];
+        for (k, cell) in band.iter_mut().enumerate() {
+            let p = bi * BAND * w + k;
+            if grid.kind[p] == UNK {
+                let (f, hh) = vals.rhs(&grid.kind, w, params.mode, p);
+                for c in 0..L {
+                    s[c] += f[c] * f[c];
                 }
-            }
-        };
-        if h * w >= 16 * 1024 {
-            pairs.par_iter_mut().enumerate().for_each(job);
-        } else {
-            pairs.iter_mut().enumerate().for_each(job);
-        }
-    }
-    let scale = norms(&mut bf, w);
-    let (x, it) = pcg(mg, diag, &b, scale, params.tol, params.max_iterations);
-    // f = g + h on the region (pinned components shifted to the source's mean).
-    let mut f = vec![[0f64; L]; h * w];
-    rows_mut(&mut f, w, |gy, row| {
-        for gx in 0..w {
-            let p = gy * w + gx;
-            if grid.kind[p] >= FIX {
-                let g = s.src(gy, gx);
-                row[gx] = std::array::from_fn(|c| g[c] + x[p][c]);
+                *cell = hh;
             }
         }
+        s
     });
+    let scale = sum_lanes(&parts).map(|s| if s > 0.0 { s.sqrt() } else { 1.0 });
+    let (mut x, it, mut residual) = pcg(mg, diag, &b, scale, params.tol, params.max_iterations);
+    // Pinned components keep the source's mean: shift their correction to mean zero.
     if grid.ncomp > 0 {
         let mut sum = vec![([0f64; L], 0usize); grid.ncomp];
         for p in 0..h * w {
@@ -668,14 +676,19 @@ fn solve_group<const L: usize>(
             if k != u32::MAX {
                 let (m, n) = sum[k as usize];
                 for c in 0..L {
-                    f[p][c] -= m[c] / n as f64;
+                    x[p][c] -= m[c] / n as f64;
                 }
             }
         }
     }
-    let residual = final_residual(&s, grid, params.mode, &f);
-    // Write the region into the output.
+    if grid.ncomp > 0 {
+        // The solve had one pixel per pinned component as Dirichlet; measure the user's system.
+        // (Otherwise the residual of h is that of f = g + h, already measured.)
+        residual = final_residual(&vals, grid, params.mode, &x);
+    }
+    // f = g + h on the region.
     let (dw, nc) = (input.dst.w, input.dst.c);
+    let lanes = L.min(nc - c0);
     for gy in 1..h - 1 {
         for gx in 1..w - 1 {
             let p = gy * w + gx;
@@ -684,65 +697,65 @@ fn solve_group<const L: usize>(
             }
             let y = (gy as i64 + grid.y0) as usize;
             let xx = (gx as i64 + grid.x0) as usize;
-            let o = (y * dw + xx) * nc;
-            for c in 0..L.min(nc - c0) {
-                out[o + c0 + c] = f[p][c] as f32;
+            let o = (y * dw + xx) * nc + c0;
+            for c in 0..lanes {
+                out[o + c] = (f64::from(vals.g[p][c]) + x[p][c]) as f32;
             }
         }
     }
     (it, residual)
 }
 
-/// `‖v‖` per lane, summed by bands (reuses `v` as scratch-free input).
-fn norms<const L: usize>(v: &mut [[f64; L]], w: usize) -> [f64; L] {
-    let parts = bands(v, w, |_, vb| {
-        let mut s = [0f64; L];
-        for t in vb.iter() {
-            for c in 0..L {
-                s[c] += t[c] * t[c];
-            }
-        }
-        s
-    });
-    sum_lanes(&parts).map(|s| if s > 0.0 { s.sqrt() } else { 1.0 })
-}
-
-/// Largest relative residual over lanes of `f` in the system of the user's problem, pinned
-/// pixels counted as unknowns again.
+/// Largest relative residual over lanes of `f = g + h` in the system of the user's problem
+/// (pinned pixels counted as unknowns again).
 fn final_residual<const L: usize>(
-    s: &Sampler<'_, L>,
+    vals: &Values<L>,
     grid: &Grid,
     mode: Mode,
-    f: &[[f64; L]],
+    h: &[[f64; L]],
 ) -> f64 {
-    let (h, w) = (grid.h, grid.w);
-    let mut kind = grid.kind.clone();
-    for p in 0..h * w {
-        if grid.ncomp > 0 && grid.comp[p] != u32::MAX {
-            kind[p] = UNK;
+    let w = grid.w;
+    let kind: Vec<u8> = if grid.ncomp > 0 {
+        (0..grid.kind.len())
+            .map(|p| {
+                if grid.comp[p] != u32::MAX {
+                    UNK
+                } else {
+                    grid.kind[p]
+                }
+            })
+            .collect()
+    } else {
+        grid.kind.clone()
+    };
+    let f = |p: usize| -> [f64; L] {
+        match kind[p] {
+            UNK | FIX => std::array::from_fn(|c| f64::from(vals.g[p][c]) + h[p][c]),
+            _ => vals.d[p].map(f64::from),
         }
-    }
-    let mut rows = vec![([0f64; L], [0f64; L]); h];
-    rows_mut(&mut rows, 1, |gy, out| {
+    };
+    let row = |gy: usize| {
         let (mut rr, mut bb) = ([0f64; L], [0f64; L]);
         for gx in 0..w {
             let p = gy * w + gx;
             if kind[p] != UNK {
                 continue;
             }
-            let (bf, _) = s.rhs(&kind, mode, gy, gx);
+            let (bf, _) = vals.rhs(&kind, w, mode, p);
+            let fp = f(p);
             let mut af = [0f64; L];
             for q in [p - w, p - 1, p + 1, p + w] {
                 match kind[q] {
                     OUT => {}
                     UNK => {
+                        let fq = f(q);
                         for c in 0..L {
-                            af[c] += f[p][c] - f[q][c];
+                            af[c] += fp[c] - fq[c];
                         }
                     }
                     _ => {
                         for c in 0..L {
-                            af[c] += f[p][c];
+                            af[c] += fp[c];
                         }
                     }
                 }
@@ -752,10 +765,15 @@ fn final_residual<const L: usize>(
                 bb[c] += bf[c] * bf[c];
             }
         }
-        out[0] = (rr, bb);
-    });
+        (rr, bb)
+    };
+    let sums: Vec<([f64; L], [f64; L])> = if grid.h * w >= 16 * 1024 {
+        (0..grid.h).into_par_iter().map(row).collect()
+    } else {
+        (0..grid.h).map(row).collect()
+    };
     let (mut rr, mut bb) = ([0f64; L], [0f64; L]);
-    for (r, b) in &rows {
+    for (r, b) in &sums {
         for c in 0..L {
             rr[c] += r[c];
             bb[c] += b[c];

@@ -7,6 +7,7 @@
 
 use pyo3::prelude::*;
 
+mod blend;
 mod errors;
 mod patch;
 mod threads;
@@ -18,6 +19,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(patch::knn_py, m)?)?;
     m.add_function(wrap_pyfunction!(patch::coherence_candidates_py, m)?)?;
     m.add_function(wrap_pyfunction!(patch::vote_py, m)?)?;
+    m.add_function(wrap_pyfunction!(blend::seamless_py, m)?)?;
+    m.add_function(wrap_pyfunction!(blend::interpolate_field_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::default_threads_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::after_fork_in_child_py, m)?)?;
     Ok(())
