@@ -17,6 +17,9 @@
 //! (bilinear interpolation between grids of halved resolution, symmetric Gauss–Seidel
 //! smoothing, a dense Cholesky factor on the coarsest grid), all in `f64`.
 
+// Lane loops index several arrays in lockstep; the index form is what vectorises.
+#![allow(clippy::needless_range_loop)]
+
 use rayon::prelude::*;
 
 use crate::error::{invalid, Result};
@@ -50,6 +53,9 @@ pub struct Field {
     /// Largest relative residual of the normal equations over components.
     pub residual: f64,
 }
+
+/// A sparse row: (column, value) pairs, columns increasing.
+type Row = Vec<(u32, f64)>;
 
 /// A square sparse matrix in compressed rows, columns sorted.
 #[derive(Clone, Debug, Default)]
@@ -140,6 +146,9 @@ fn parents(t: usize) -> impl Iterator<Item = (usize, f64)> {
 
 /// Builds the coarse level of `f` (setting `f.p`), or `None` when it would not shrink.
 fn coarsen(f: &mut FLevel) -> Option<FLevel> {
+    // Accumulator window radius: coarse stencils of LᵀL reach 2 points; one to spare.
+    const R: usize = 3;
+    const S: usize = 2 * R + 1;
     let (hc, wc) = (f.h / 2 + 1, f.w / 2 + 1);
     let mut index = vec![u32::MAX; hc * wc];
     for &(y, x) in &f.pos {
@@ -179,8 +188,6 @@ fn coarsen(f: &mut FLevel) -> Option<FLevel> {
             children[c as usize].push((fi, wt));
         }
     }
-    const R: usize = 3; // window radius: the coarse stencils reach 2 points; one to spare
-    const S: usize = 2 * R + 1;
     let fa = &f.a;
     let fp = &f.p;
     let rows: Vec<Vec<(u32, f64)>> = (0..pos.len())
@@ -536,7 +543,7 @@ pub fn interpolate_field(
         }
     }
     // Rows of LᵀL over the free pixels; columns of constrained pixels go to the right side.
-    let rows: Vec<(Vec<(u32, f64)>, Vec<f64>)> = free
+    let rows: Vec<(Row, Vec<f64>)> = free
         .par_iter()
         .map(|&i| {
             // (LᵀL)_iq = Σ_k L_ki L_kq over k ∈ {i} ∪ N(i).
@@ -657,8 +664,11 @@ mod tests {
         let f = interpolate_field(&disk(n), n, n, &pts, &vals, 2, &FieldParams::default()).unwrap();
         for (k, p) in pts.iter().enumerate() {
             let o = (p[0] as usize * n + p[1] as usize) * 2;
-            assert_eq!(f.values[o], vals[2 * k] as f32);
-            assert_eq!(f.values[o + 1], vals[2 * k + 1] as f32);
+            assert_eq!(f.values[o].to_bits(), (vals[2 * k] as f32).to_bits());
+            assert_eq!(
+                f.values[o + 1].to_bits(),
+                (vals[2 * k + 1] as f32).to_bits()
+            );
         }
         assert!(f.residual <= 1e-10, "{}", f.residual);
         assert!(f.values[0].is_nan());

@@ -8,7 +8,7 @@
 //! fine point `2i − 1`; prolongation `P` is bilinear interpolation restricted to the fine
 //! unknowns, restriction is `Pᵀ`, and coarse operators are Galerkin products `Pᵀ A P`, which
 //! stay 9-point (Wesseling, *An Introduction to Multigrid Methods*, 1992, §6.2; Dendy's
-//! BoxMG). Galerkin coarsening needs no rule for irregular boundaries, holes, one-pixel-wide
+//! `BoxMG`). Galerkin coarsening needs no rule for irregular boundaries, holes, one-pixel-wide
 //! strands or pinned pixels: the coarse operators inherit them from the fine one. A coarse
 //! operator can be singular where `P` loses rank on thin strands, but the coarse equations are
 //! always consistent (their right-hand sides lie in the range of `Pᵀ`), and the smoother and
@@ -22,6 +22,9 @@
 //!
 //! Vectors hold `L` independent right-hand sides per point (`[f32; L]`), so the three colour
 //! channels of an image are smoothed in one sweep with SIMD lanes.
+
+// Lane loops index several arrays in lockstep; the index form is what vectorises.
+#![allow(clippy::needless_range_loop)]
 
 use rayon::prelude::*;
 
@@ -126,7 +129,9 @@ impl Level {
     }
 
     /// Whether row `p` is the level's interior stencil (then so are its neighbours' columns).
+    /// Exact comparison on purpose: the fast path must give the bits the slow one would.
     #[inline]
+    #[allow(clippy::float_cmp)]
     fn is_interior(&self, p: usize) -> bool {
         match &self.stencil {
             Stencil::Nine(a) => a[p] == self.interior,
@@ -446,11 +451,8 @@ fn smooth<const L: usize>(lev: &Level, x: &mut [[f32; L]], b: &[[f32; L]], pre: 
     let nc = colours(lev);
     for step in 0..nc {
         let colour = if pre { step } else { nc - 1 - step };
-        let zero = pre && step == 0;
-        if zero {
-            x.fill([0.0; L]);
-        }
-        sweep(lev, x, b, colour, zero);
+        // The first step from zero also writes the zeros of the other colours.
+        sweep(lev, x, b, colour, pre && step == 0);
     }
 }
 
@@ -480,21 +482,34 @@ fn sweep<const L: usize>(
             let down = if yy + 1 == rows { below } else { &after[..w] };
             let o = y * w;
             match &lev.stencil {
+                Stencil::Five(_) if zero => {
+                    let start = if (1 + y) % 2 == colour { 1 } else { 2 };
+                    cur.fill([0.0; L]);
+                    for xi in (start..w - 1).step_by(2) {
+                        let inv = lev.inv[o + xi];
+                        cur[xi] = b[o + xi].map(|t| t * inv);
+                    }
+                }
+                Stencil::Nine(_) if zero => {
+                    cur.fill([0.0; L]);
+                    if y % 2 != colour / 2 {
+                        continue;
+                    }
+                    let start = if colour % 2 == 1 { 1 } else { 2 };
+                    for xi in (start..w - 1).step_by(2) {
+                        let inv = lev.inv[o + xi];
+                        cur[xi] = b[o + xi].map(|t| t * inv);
+                    }
+                }
                 Stencil::Five(_) => {
                     let start = if (1 + y) % 2 == colour { 1 } else { 2 };
                     for xi in (start..w - 1).step_by(2) {
                         let inv = lev.inv[o + xi];
                         let bb = b[o + xi];
+                        let (l, r, u, d) = (cur[xi - 1], cur[xi + 1], up[xi], down[xi]);
                         let mut v = [0f32; L];
-                        if zero {
-                            for c in 0..L {
-                                v[c] = inv * bb[c];
-                            }
-                        } else {
-                            let (l, r, u, d) = (cur[xi - 1], cur[xi + 1], up[xi], down[xi]);
-                            for c in 0..L {
-                                v[c] = inv * (bb[c] + l[c] + r[c] + u[c] + d[c]);
-                            }
+                        for c in 0..L {
+                            v[c] = inv * (bb[c] + l[c] + r[c] + u[c] + d[c]);
                         }
                         cur[xi] = v;
                     }
@@ -511,18 +526,16 @@ fn sweep<const L: usize>(
                         }
                         let s = &a[o + xi];
                         let mut v = b[o + xi];
-                        if !zero {
-                            for k in [0, 1, 2] {
-                                let n = up[xi + k - 1];
-                                let m = down[xi + k - 1];
-                                for c in 0..L {
-                                    v[c] -= s[k] * n[c] + s[k + 6] * m[c];
-                                }
-                            }
-                            let (l, r) = (cur[xi - 1], cur[xi + 1]);
+                        for k in [0, 1, 2] {
+                            let n = up[xi + k - 1];
+                            let m = down[xi + k - 1];
                             for c in 0..L {
-                                v[c] -= s[3] * l[c] + s[5] * r[c];
+                                v[c] -= s[k] * n[c] + s[k + 6] * m[c];
                             }
+                        }
+                        let (l, r) = (cur[xi - 1], cur[xi + 1]);
+                        for c in 0..L {
+                            v[c] -= s[3] * l[c] + s[5] * r[c];
                         }
                         cur[xi] = v.map(|t| t * inv);
                     }
@@ -592,21 +605,22 @@ pub(crate) fn rows_mut<T: Send>(
     }
 }
 
-/// `r = b − A x`, 0 off the unknowns.
+/// `r = b − A x` after pre-smoothing, 0 off the unknowns. The colour updated last has a zero
+/// residual (its equations were just solved), so only the others are computed.
 fn residual<const L: usize>(lev: &Level, x: &[[f32; L]], b: &[[f32; L]], r: &mut [[f32; L]]) {
     let (h, w) = (lev.h, lev.w);
     rows_mut(r, w, |y, out| {
+        out.fill([0.0; L]);
         if y == 0 || y == h - 1 {
-            out.fill([0.0; L]);
             return;
         }
         let o = y * w;
         match &lev.stencil {
             Stencil::Five(d) => {
-                for xi in 0..w {
+                // Colour 1 (x + y odd) was updated last.
+                for xi in ((2 - y % 2)..w - 1).step_by(2) {
                     let p = o + xi;
                     if d[p] == 0.0 {
-                        out[xi] = [0.0; L];
                         continue;
                     }
                     let (c0, l, rr, u, dn) = (x[p], x[p - 1], x[p + 1], x[p - w], x[p + w]);
@@ -618,10 +632,10 @@ fn residual<const L: usize>(lev: &Level, x: &[[f32; L]], b: &[[f32; L]], r: &mut
                 }
             }
             Stencil::Nine(a) => {
-                for xi in 0..w {
+                for xi in 1..w - 1 {
                     let p = o + xi;
-                    if lev.inv[p] == 0.0 {
-                        out[xi] = [0.0; L];
+                    // Colour 3 (odd row, odd column) was updated last.
+                    if lev.inv[p] == 0.0 || (y % 2 == 1 && xi % 2 == 1) {
                         continue;
                     }
                     let s = &a[p];
@@ -674,40 +688,31 @@ fn prolong_add<const L: usize>(fine: &Level, coarse: &Level, xc: &[[f32; L]], xf
         if y == 0 || y == hf - 1 {
             return;
         }
-        let (r0, r1) = if y % 2 == 1 {
-            ((y + 1) / 2, usize::MAX)
+        // The coarse row interpolated to fine row y, then along it.
+        let mut t = vec![[0f32; L]; wc];
+        if y % 2 == 1 {
+            let r = y.div_ceil(2) * wc;
+            t.copy_from_slice(&xc[r..r + wc]);
         } else {
-            (y / 2, y / 2 + 1)
-        };
-        for (xi, cell) in out.iter_mut().enumerate().take(wf - 1).skip(1) {
-            if fine.inv[y * wf + xi] == 0.0 {
+            let (r0, r1) = (y / 2 * wc, (y / 2 + 1) * wc);
+            for (k, tk) in t.iter_mut().enumerate() {
+                let (a, b) = (xc[r0 + k], xc[r1 + k]);
+                *tk = std::array::from_fn(|c| 0.5 * (a[c] + b[c]));
+            }
+        }
+        let inv = &fine.inv[y * wf..(y + 1) * wf];
+        for xi in 1..wf - 1 {
+            if inv[xi] == 0.0 {
                 continue;
             }
-            let (c0, c1) = if xi % 2 == 1 {
-                ((xi + 1) / 2, usize::MAX)
+            let v = if xi % 2 == 1 {
+                t[xi.div_ceil(2)]
             } else {
-                (xi / 2, xi / 2 + 1)
+                let (a, b) = (t[xi / 2], t[xi / 2 + 1]);
+                std::array::from_fn(|c| 0.5 * (a[c] + b[c]))
             };
-            let mut v = [0f32; L];
-            let mut n = 0.0f32;
-            for r in [r0, r1] {
-                if r == usize::MAX {
-                    continue;
-                }
-                for cc in [c0, c1] {
-                    if cc == usize::MAX {
-                        continue;
-                    }
-                    let q = xc[r * wc + cc];
-                    for c in 0..L {
-                        v[c] += q[c];
-                    }
-                    n += 1.0;
-                }
-            }
-            let wt = 1.0 / n;
             for c in 0..L {
-                cell[c] += wt * v[c];
+                out[xi][c] += v[c];
             }
         }
     });
@@ -720,7 +725,7 @@ mod tests {
     /// Coarse rows (or columns) a fine row interpolates from, with weights.
     fn parents(t: usize) -> impl Iterator<Item = (usize, f64)> {
         let (a, b, w) = if t % 2 == 1 {
-            ((t + 1) / 2, usize::MAX, 1.0)
+            (t.div_ceil(2), usize::MAX, 1.0)
         } else {
             (t / 2, t / 2 + 1, 0.5)
         };
@@ -797,7 +802,7 @@ mod tests {
                     "({i},{j}): {s} vs {}",
                     ac[i][j]
                 );
-                assert_eq!(ac[i][j], ac[j][i]);
+                assert_eq!(ac[i][j].to_bits(), ac[j][i].to_bits());
             }
         }
     }

@@ -13,6 +13,7 @@
 //! - `f*_q` the destination value where `q` is outside Ω (Dirichlet), the source value where
 //!   `q` is a `fixed` pixel (Dirichlet, the §5.3 constraint);
 //! - neighbours outside the destination dropped from `N_p` (Neumann: zero normal derivative).
+//!
 //! Source values are read with the source's edge replicated, so a gradient across the
 //! source's border is zero.
 //!
@@ -27,6 +28,9 @@
 //! channels at once; the stopping test is the relative residual `‖b − A f‖ / ‖b‖` of the
 //! system above in every channel. Reductions sum fixed bands of rows in a fixed order, so
 //! the result is bit-identical for any number of threads.
+
+// Lane loops index several arrays in lockstep; the index form is what vectorises.
+#![allow(clippy::needless_range_loop)]
 
 use rayon::prelude::*;
 
@@ -353,22 +357,25 @@ fn sum_lanes<const L: usize>(parts: &[[f64; L]]) -> [f64; L] {
     s
 }
 
-/// `q = A p` on the fine level; returns `⟨p, q⟩` per lane.
-fn apply<const L: usize>(diag: &[f32], w: usize, p: &[[f64; L]], q: &mut [[f64; L]]) -> [f64; L] {
+/// A band of the iterate (`f64`) and of the residual (`f32`).
+type IterateBand<'a, const L: usize> = (&'a mut [[f64; L]], &'a mut [[f32; L]]);
+
+/// `q = A p` on the fine level; returns `⟨p, q⟩` per lane (summed in `f64`).
+fn apply<const L: usize>(diag: &[f32], w: usize, p: &[[f32; L]], q: &mut [[f32; L]]) -> [f64; L] {
     let parts = bands(q, w, |bi, qb| {
         let mut dot = [0f64; L];
         for (k, out) in qb.iter_mut().enumerate() {
             let i = bi * BAND * w + k;
-            let d = f64::from(diag[i]);
+            let d = diag[i];
             if d == 0.0 {
                 *out = [0.0; L];
                 continue;
             }
             let (c0, l, r, u, dn) = (p[i], p[i - 1], p[i + 1], p[i - w], p[i + w]);
-            let mut v = [0f64; L];
+            let mut v = [0f32; L];
             for c in 0..L {
                 v[c] = d * c0[c] - (l[c] + r[c] + u[c] + dn[c]);
-                dot[c] += c0[c] * v[c];
+                dot[c] += f64::from(c0[c]) * f64::from(v[c]);
             }
             *out = v;
         }
@@ -377,9 +384,69 @@ fn apply<const L: usize>(diag: &[f32], w: usize, p: &[[f64; L]], q: &mut [[f64; 
     sum_lanes(&parts)
 }
 
+/// The true residual `r = b − A x` in `f64`, stored as `f32`; returns `‖r‖²` per lane.
+fn true_residual<const L: usize>(
+    diag: &[f32],
+    w: usize,
+    b: &[[f64; L]],
+    x: &[[f64; L]],
+    r: &mut [[f32; L]],
+) -> [f64; L] {
+    let parts = bands(r, w, |bi, rb| {
+        let mut s = [0f64; L];
+        for (k, out) in rb.iter_mut().enumerate() {
+            let i = bi * BAND * w + k;
+            let d = f64::from(diag[i]);
+            if d == 0.0 {
+                *out = [0.0; L];
+                continue;
+            }
+            let (c0, l, rr, u, dn) = (x[i], x[i - 1], x[i + 1], x[i - w], x[i + w]);
+            let mut v = [0f32; L];
+            for c in 0..L {
+                let t = b[i][c] - (d * c0[c] - (l[c] + rr[c] + u[c] + dn[c]));
+                s[c] += t * t;
+                v[c] = t as f32;
+            }
+            *out = v;
+        }
+        s
+    });
+    sum_lanes(&parts)
+}
+
+/// `⟨u, v⟩` per lane, summed in `f64` by bands.
+fn dot<const L: usize>(u: &[[f32; L]], v: &[[f32; L]], w: usize) -> [f64; L] {
+    let job = |(a, b): (&[[f32; L]], &[[f32; L]])| {
+        let mut s = [0f64; L];
+        for (x, y) in a.iter().zip(b) {
+            for c in 0..L {
+                s[c] += f64::from(x[c]) * f64::from(y[c]);
+            }
+        }
+        s
+    };
+    let parts: Vec<[f64; L]> = if u.len() >= 16 * 1024 {
+        u.par_chunks(BAND * w)
+            .zip(v.par_chunks(BAND * w))
+            .map(job)
+            .collect()
+    } else {
+        u.chunks(BAND * w)
+            .zip(v.chunks(BAND * w))
+            .map(job)
+            .collect()
+    };
+    sum_lanes(&parts)
+}
+
 /// Preconditioned conjugate gradients for `A h = b` on the fine level, all lanes at once.
 /// `scale[c]` is the norm the residual of lane `c` is measured against. Returns `(h,
 /// iterations, largest relative true residual)`.
+///
+/// The iterate `h` and the final residual check are `f64`; the residual recurrence, the search
+/// directions and the preconditioner are `f32` (half the memory traffic). When the recurrence
+/// has drifted from the true residual, CG restarts from the true one.
 fn pcg<const L: usize>(
     mg: &Hierarchy,
     diag: &[f32],
@@ -392,38 +459,25 @@ fn pcg<const L: usize>(
     let n = b.len();
     let mut ws = mg.work::<L>();
     let mut x = vec![[0f64; L]; n];
-    let mut r = b.to_vec();
-    let mut rf = vec![[0f32; L]; n];
+    let mut r: Vec<[f32; L]> = b.iter().map(|v| v.map(|t| t as f32)).collect();
     let mut z = vec![[0f32; L]; n];
-    let mut p = vec![[0f64; L]; n];
-    let mut q = vec![[0f64; L]; n];
+    let mut p = vec![[0f32; L]; n];
+    let mut q = vec![[0f32; L]; n];
     let done = |rr: [f64; L]| (0..L).all(|c| rr[c].sqrt() <= tol * scale[c]);
-    let norm2 = |v: &[[f64; L]], rf: &mut [[f32; L]]| {
-        // Also refreshes the f32 copy the preconditioner reads.
-        let parts = bands(rf, w, |bi, rb| {
-            let mut s = [0f64; L];
-            for (k, o) in rb.iter_mut().enumerate() {
-                let t = v[bi * BAND * w + k];
-                for c in 0..L {
-                    s[c] += t[c] * t[c];
-                }
-                *o = t.map(|u| u as f32);
-            }
-            s
-        });
-        sum_lanes(&parts)
-    };
+    let mut rr = sum_lanes(&[b.iter().fold([0f64; L], |mut s, v| {
+        for c in 0..L {
+            s[c] += v[c] * v[c];
+        }
+        s
+    })]);
     let mut it = 0;
-    let mut rr = norm2(&r, &mut rf);
     loop {
         if done(rr) || it >= max_iterations {
             break;
         }
-        mg.vcycle(&mut ws, &rf, &mut z);
-        let mut rz = dot_mixed(&r, &z, w);
-        for (pi, zi) in p.iter_mut().zip(&z) {
-            *pi = zi.map(f64::from);
-        }
+        mg.vcycle(&mut ws, &r, &mut z);
+        let mut rz = dot(&r, &z, w);
+        p.copy_from_slice(&z);
         loop {
             let pq = apply(diag, w, &p, &mut q);
             let alpha: [f64; L] = std::array::from_fn(|c| {
@@ -433,26 +487,20 @@ fn pcg<const L: usize>(
                     0.0
                 }
             });
+            let alpha32 = alpha.map(|a| a as f32);
             let parts = {
                 let (pp, qq) = (&p, &q);
-                let chunks: Vec<_> = x
-                    .chunks_mut(BAND * w)
-                    .zip(r.chunks_mut(BAND * w))
-                    .zip(rf.chunks_mut(BAND * w))
-                    .collect();
-                let job = |(bi, ((xb, rb), fb)): (
-                    usize,
-                    ((&mut [[f64; L]], &mut [[f64; L]]), &mut [[f32; L]]),
-                )| {
+                let chunks: Vec<_> = x.chunks_mut(BAND * w).zip(r.chunks_mut(BAND * w)).collect();
+                let job = |(bi, (xb, rb)): (usize, IterateBand<'_, L>)| {
                     let mut s = [0f64; L];
                     for k in 0..xb.len() {
                         let i = bi * BAND * w + k;
+                        let (pi, qi) = (pp[i], qq[i]);
                         for c in 0..L {
-                            xb[k][c] += alpha[c] * pp[i][c];
-                            rb[k][c] -= alpha[c] * qq[i][c];
-                            s[c] += rb[k][c] * rb[k][c];
+                            xb[k][c] += alpha[c] * f64::from(pi[c]);
+                            rb[k][c] -= alpha32[c] * qi[c];
+                            s[c] += f64::from(rb[k][c]) * f64::from(rb[k][c]);
                         }
-                        fb[k] = rb[k].map(|u| u as f32);
                     }
                     s
                 };
@@ -471,53 +519,32 @@ fn pcg<const L: usize>(
             if done(rr) || it >= max_iterations {
                 break;
             }
-            mg.vcycle(&mut ws, &rf, &mut z);
-            let rz_new = dot_mixed(&r, &z, w);
-            let beta: [f64; L] =
-                std::array::from_fn(|c| if rz[c] > 0.0 { rz_new[c] / rz[c] } else { 0.0 });
+            mg.vcycle(&mut ws, &r, &mut z);
+            let rz_new = dot(&r, &z, w);
+            let beta: [f32; L] = std::array::from_fn(|c| {
+                if rz[c] > 0.0 {
+                    (rz_new[c] / rz[c]) as f32
+                } else {
+                    0.0
+                }
+            });
             rz = rz_new;
             bands(&mut p, w, |bi, pb| {
                 for (k, pi) in pb.iter_mut().enumerate() {
                     let zi = z[bi * BAND * w + k];
                     for c in 0..L {
-                        pi[c] = f64::from(zi[c]) + beta[c] * pi[c];
+                        pi[c] = zi[c] + beta[c] * pi[c];
                     }
                 }
             });
         }
-        // The recurrence drifts from the true residual; check it, and restart from it if the
-        // tolerance is not met after all.
-        apply(diag, w, &x, &mut q);
-        for (ri, (bi, qi)) in r.iter_mut().zip(b.iter().zip(&q)) {
-            for c in 0..L {
-                ri[c] = bi[c] - qi[c];
-            }
-        }
-        rr = norm2(&r, &mut rf);
+        rr = true_residual(diag, w, b, &x, &mut r);
         if done(rr) || it >= max_iterations {
             break;
         }
     }
     let rel = (0..L).map(|c| rr[c].sqrt() / scale[c]).fold(0.0, f64::max);
     (x, it, rel)
-}
-
-/// `⟨r, z⟩` per lane, summed by bands.
-fn dot_mixed<const L: usize>(r: &[[f64; L]], z: &[[f32; L]], w: usize) -> [f64; L] {
-    let parts: Vec<[f64; L]> = r
-        .par_chunks(BAND * w)
-        .zip(z.par_chunks(BAND * w))
-        .map(|(rb, zb)| {
-            let mut s = [0f64; L];
-            for (a, b) in rb.iter().zip(zb) {
-                for c in 0..L {
-                    s[c] += a[c] * f64::from(b[c]);
-                }
-            }
-            s
-        })
-        .collect();
-    sum_lanes(&parts)
 }
 
 /// Blends `src` into `dst` over `mask` (see the module documentation).
@@ -601,21 +628,20 @@ pub fn seamless(input: &BlendInput<'_>, params: &BlendParams) -> Result<Blended>
     })
 }
 
-/// A copy of `img`'s values, failing (naming `name`) at the first non-finite one. One parallel
-/// pass does both.
+/// A copy of `img`'s values, failing (naming `name`) at the first non-finite one.
 fn copy_finite(img: &Image<'_>, name: &'static str) -> Result<Vec<f32>> {
     const CHUNK: usize = 1 << 16;
-    let mut out = vec![0f32; img.data.len()];
-    let bad: Vec<Option<usize>> = out
-        .par_chunks_mut(CHUNK)
-        .zip(img.data.par_chunks(CHUNK))
+    let bad: Option<usize> = img
+        .data
+        .par_chunks(CHUNK)
         .enumerate()
-        .map(|(i, (o, d))| {
-            o.copy_from_slice(d);
-            d.iter().position(|v| !v.is_finite()).map(|k| i * CHUNK + k)
+        .filter_map(|(i, d)| {
+            // A branch-free scan (it vectorises); the position only when something is wrong.
+            let any = d.iter().fold(false, |a, v| a | !v.is_finite());
+            any.then(|| i * CHUNK + d.iter().position(|v| !v.is_finite()).unwrap_or(0))
         })
-        .collect();
-    if let Some(i) = bad.into_iter().flatten().next() {
+        .min();
+    if let Some(i) = bad {
         let p = i / img.c;
         return Err(invalid(
             name,
@@ -627,7 +653,7 @@ fn copy_finite(img: &Image<'_>, name: &'static str) -> Result<Vec<f32>> {
             ),
         ));
     }
-    Ok(out)
+    Ok(img.data.to_vec())
 }
 
 /// Solves channels `c0..c0 + L` and writes them into `out`; returns (iterations, residual).
@@ -718,10 +744,10 @@ fn final_residual<const L: usize>(
     let kind: Vec<u8> = if grid.ncomp > 0 {
         (0..grid.kind.len())
             .map(|p| {
-                if grid.comp[p] != u32::MAX {
-                    UNK
-                } else {
+                if grid.comp[p] == u32::MAX {
                     grid.kind[p]
+                } else {
+                    UNK
                 }
             })
             .collect()
