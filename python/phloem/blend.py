@@ -21,9 +21,10 @@ __all__ = ["interpolate_field", "seamless"]
 
 
 def _tol(tol: Any) -> float:
-    if isinstance(tol, bool) or not isinstance(tol, numbers.Real) or not np.isfinite(tol) or not 0 < tol < 1:
+    t = float(tol) if isinstance(tol, numbers.Real) and not isinstance(tol, bool) else float("nan")
+    if not 0.0 < t < 1.0:  # also rejects NaN
         raise ValueError(f"tol: expected a number in (0, 1), got {tol!r}")
-    return float(tol)
+    return t
 
 
 def _offset(offset: Any) -> tuple[int, int]:
