@@ -77,7 +77,7 @@ fn field(c: &mut Criterion) {
         })
         .collect();
     // Displacements at points along a diagonal stroke, as the skeleton fit of §5.3 gives them.
-    let points: Vec<[i64; 2]> = (0..12).map(|k| [16 + 8 * k, 20 + 7 * k]).collect();
+    let points: Vec<[i64; 2]> = (0..12).map(|k| [24 + 7 * k, 26 + 6 * k]).collect();
     let values: Vec<f64> = (0..24)
         .map(|k| ((k * 37 % 11) as f64 - 5.0) * 0.3)
         .collect();
