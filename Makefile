@@ -17,7 +17,8 @@ lint:  ## rustfmt, clippy and the stub check
 bench:  ## Rust criterion benches and Python benchmarks
 	cargo bench -p phloem-core --bench patch
 	cargo bench -p phloem-core --bench seams
-	pytest benches/bench_patch.py benches/bench_seams.py --benchmark-enable --benchmark-only
+	cargo bench -p phloem-core --bench blend
+	pytest benches/bench_patch.py benches/bench_seams.py benches/bench_blend.py --benchmark-enable --benchmark-only
 
 peers:  ## side-by-side runs against PyPatchMatch, resynthesizer, texture-synthesis
 	python benches/peers.py

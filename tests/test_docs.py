@@ -8,7 +8,9 @@ import importlib
 import pytest
 
 
-@pytest.mark.parametrize("module", ["phloem.io", "phloem.data", "phloem.patch", "phloem.seams", "phloem.texture", "phloem.metrics"])
+@pytest.mark.parametrize(
+    "module", ["phloem.io", "phloem.data", "phloem.patch", "phloem.seams", "phloem.texture", "phloem.metrics", "phloem.blend"]
+)
 def test_docstring_examples(module):
     mod = importlib.import_module(module)
     result = doctest.testmod(mod, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)

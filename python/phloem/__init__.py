@@ -4,6 +4,7 @@ Submodules
 ----------
 io        reading and writing images and result sidecars
 data      small embedded example images
+blend     gradient-domain solvers: seamless (Poisson) blending, smooth field interpolation
 patch     patch matching: PatchMatch and exact fields, k nearest patches, k-coherence, voting
 seams     exact grid max-flow / min-cut and graph-cut seams between overlapping images
 texture   texture synthesis, graph-cut quilting and image completion
@@ -15,7 +16,7 @@ from __future__ import annotations
 
 import os
 
-from . import _core, data, io, metrics, patch, seams, texture
+from . import _core, blend, data, io, metrics, patch, seams, texture
 
 __version__: str = _core.__version__
 
@@ -24,4 +25,4 @@ __version__: str = _core.__version__
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_core._after_fork_in_child)
 
-__all__ = ["__version__", "data", "io", "metrics", "patch", "seams", "texture"]
+__all__ = ["__version__", "blend", "data", "io", "metrics", "patch", "seams", "texture"]

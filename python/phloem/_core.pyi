@@ -9,9 +9,11 @@ __all__ = [
     "coherence_candidates",
     "default_threads",
     "grid_maxflow",
+    "interpolate_field",
     "knn",
     "nnf",
     "seam",
+    "seamless",
     "vote",
 ]
 
@@ -61,6 +63,27 @@ def vote(
     weights: NDArray[np.float32] | None = None,
     threads: int | None = None,
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]: ...
+def seamless(
+    src: NDArray[np.float32],
+    dst: NDArray[np.float32],
+    mask: NDArray[np.bool_],
+    offset: tuple[int, int],
+    *,
+    mixed: bool,
+    tol: float,
+    max_iterations: int,
+    fixed: NDArray[np.bool_] | None = None,
+    threads: int | None = None,
+) -> tuple[NDArray[np.float32], int, float]: ...
+def interpolate_field(
+    region: NDArray[np.bool_],
+    points: NDArray[np.int64],
+    values: NDArray[np.float64],
+    *,
+    tol: float,
+    max_iterations: int,
+    threads: int | None = None,
+) -> tuple[NDArray[np.float32], int, float]: ...
 def default_threads() -> int: ...
 def _after_fork_in_child() -> None: ...
 def grid_maxflow(

@@ -15,12 +15,13 @@ from numpy.typing import NDArray
 __all__ = ["as_image", "as_mask", "check_patch_size", "check_seed", "check_size", "check_threads", "restore_ndim"]
 
 
-def as_image(image: Any, name: str) -> NDArray[np.float32]:
+def as_image(image: Any, name: str, *, finite: bool = True) -> NDArray[np.float32]:
     """Return ``image`` as a C-contiguous ``(H, W, C)`` float32 array.
 
     Integer dtypes are scaled to [0, 1] by their maximum value (uint8 by 255, uint16 by 65535);
     float inputs keep their values. Rejects booleans, complex numbers, the wrong number of
-    dimensions, empty axes and non-finite values.
+    dimensions, empty axes and (unless ``finite=False``, for callees that check while they
+    read the values anyway) non-finite values.
     """
     arr = np.asarray(image)
     if arr.dtype == np.bool_ or not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
@@ -36,7 +37,7 @@ def as_image(image: Any, name: str) -> NDArray[np.float32]:
         out = arr.astype(np.float32) / np.float32(info.max)
     else:
         out = np.ascontiguousarray(arr, dtype=np.float32)
-        bad = ~np.isfinite(out)
+        bad = ~np.isfinite(out) if finite else np.zeros((), bool)
         if bad.any():
             y, x, c = np.argwhere(bad)[0]
             raise ValueError(f"{name}: expected finite values, found {arr[y, x, c]} at (row {y}, col {x}, channel {c})")

@@ -11,13 +11,19 @@
 //! - [`vote`]: weighted patch voting, the M-step of texture optimisation (Kwatra et al. 2005)
 //!   and of image completion (Wexler et al. 2007);
 //! - [`maxflow`]: exact s-t max-flow / min-cut on grid graphs (Boykov & Kolmogorov 2004);
-//! - [`seams`]: graph-cut seams between overlapping images (Kwatra et al. 2003; Luo et al.).
+//! - [`seams`]: graph-cut seams between overlapping images (Kwatra et al. 2003; Luo et al.);
+//! - [`poisson`]: Poisson image editing (Pérez et al. 2003) with normal or mixed gradients and
+//!   fixed pixels, solved by multigrid-preconditioned conjugate gradients;
+//! - [`field`]: smooth fields that interpolate given vectors (Sibbing et al. 2010, §5.3).
 
 pub mod error;
+pub mod field;
 pub mod image;
 pub mod knn;
 pub mod maxflow;
+pub(crate) mod multigrid;
 pub mod patch;
+pub mod poisson;
 pub mod rng;
 pub mod seams;
 pub mod vote;

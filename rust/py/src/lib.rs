@@ -7,6 +7,7 @@
 
 use pyo3::prelude::*;
 
+mod blend;
 mod errors;
 mod patch;
 mod seams;
@@ -21,6 +22,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(patch::vote_py, m)?)?;
     m.add_function(wrap_pyfunction!(seams::grid_maxflow_py, m)?)?;
     m.add_function(wrap_pyfunction!(seams::seam_py, m)?)?;
+    m.add_function(wrap_pyfunction!(blend::seamless_py, m)?)?;
+    m.add_function(wrap_pyfunction!(blend::interpolate_field_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::default_threads_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::after_fork_in_child_py, m)?)?;
     Ok(())

@@ -1,0 +1,103 @@
+//! Criterion benches of the gradient-domain solvers: Poisson blending of 256² and 511² bark
+//! regions into a 1024² water photo (the issue's workload, RGB, tol 1e-6) on 1 and 2 threads,
+//! and smooth field interpolation over a 128² disk.
+//!
+//! `cargo bench -p phloem-core --bench blend`. Throughput is in region pixels per second;
+//! iterations and residuals are printed once per workload.
+
+use std::hint::black_box;
+use std::path::Path;
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use image::imageops::FilterType;
+use phloem_core::field::{interpolate_field, FieldParams};
+use phloem_core::image::Image;
+use phloem_core::poisson::{seamless, BlendInput, BlendParams};
+
+/// An RGB image from the repository, resized to `size × size`, as f32 in [0, 1].
+fn load(rel: &str, size: u32) -> Vec<f32> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let img = image::open(root.join(rel)).expect("bench image").to_rgb8();
+    let img = image::imageops::resize(&img, size, size, FilterType::CatmullRom);
+    img.into_raw()
+        .into_iter()
+        .map(|v| f32::from(v) / 255.0)
+        .collect()
+}
+
+fn pool(n: usize) -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(n)
+        .build()
+        .unwrap()
+}
+
+fn poisson(c: &mut Criterion) {
+    let dst = load("tests/data/water.jpg", 1024);
+    for n in [256usize, 511] {
+        let src = load("python/phloem/data/bark_douglas_fir.png", n as u32);
+        // The whole square but its one-pixel rim, as cv2.seamlessClone uses it.
+        let mask: Vec<bool> = (0..n * n)
+            .map(|i| (1..n - 1).contains(&(i / n)) && (1..n - 1).contains(&(i % n)))
+            .collect();
+        let input = BlendInput {
+            src: Image::new("src", &src, n, n, 3).unwrap(),
+            dst: Image::new("dst", &dst, 1024, 1024, 3).unwrap(),
+            mask: &mask,
+            offset: ((512 - n / 2) as i64, (512 - n / 2) as i64),
+            fixed: None,
+        };
+        let params = BlendParams::default();
+        let b = seamless(&input, &params).unwrap();
+        println!(
+            "poisson {n}x{n} rgb into 1024x1024: {} unknowns, {} iterations, residual {:.2e}",
+            b.unknowns, b.iterations, b.residual
+        );
+        let mut g = c.benchmark_group(format!("poisson_{n}x{n}_rgb_into_1024x1024"));
+        g.sample_size(10)
+            .throughput(Throughput::Elements(((n - 2) * (n - 2)) as u64));
+        for threads in [1, 2] {
+            let p = pool(threads);
+            g.bench_with_input(
+                BenchmarkId::from_parameter(format!("{threads}_threads")),
+                &threads,
+                |bch, _| bch.iter(|| p.install(|| black_box(seamless(&input, &params).unwrap()))),
+            );
+        }
+        g.finish();
+    }
+}
+
+fn field(c: &mut Criterion) {
+    let n = 128usize;
+    let m = (n as f64 - 1.0) / 2.0;
+    let region: Vec<bool> = (0..n * n)
+        .map(|i| {
+            ((i / n) as f64 - m).powi(2) + ((i % n) as f64 - m).powi(2) < (0.48 * n as f64).powi(2)
+        })
+        .collect();
+    // Displacements at points along a diagonal stroke, as the skeleton fit of §5.3 gives them.
+    let points: Vec<[i64; 2]> = (0..12).map(|k| [24 + 7 * k, 26 + 6 * k]).collect();
+    let values: Vec<f64> = (0..24)
+        .map(|k| ((k * 37 % 11) as f64 - 5.0) * 0.3)
+        .collect();
+    let params = FieldParams::default();
+    let f = interpolate_field(&region, n, n, &points, &values, 2, &params).unwrap();
+    println!(
+        "field {n}x{n} disk: {} iterations, residual {:.2e}",
+        f.iterations, f.residual
+    );
+    let mut g = c.benchmark_group(format!("field_{n}x{n}_disk_2d"));
+    g.sample_size(10).throughput(Throughput::Elements(
+        region.iter().filter(|&&r| r).count() as u64
+    ));
+    g.bench_function("tol_1e-10", |b| {
+        b.iter(|| {
+            black_box(interpolate_field(&region, n, n, &points, &values, 2, &params).unwrap())
+        });
+    });
+    g.finish();
+}
+
+criterion_group!(benches, poisson, field);
+criterion_main!(benches);

@@ -1,0 +1,843 @@
+//! Geometric multigrid on masked pixel grids: the preconditioner of the Poisson solves in
+//! [`crate::poisson`].
+//!
+//! Every level is an odd-sized `h × w` grid whose border (a frame one cell wide) holds no
+//! unknowns, so stencils never leave the grid. The finest level is the 5-point pixel
+//! Laplacian of a masked region (diagonal = number of neighbours, −1 to each neighbour that is
+//! an unknown; Dirichlet and Neumann conditions live in the diagonal). Coarse point `i` sits on
+//! fine point `2i − 1`; prolongation `P` is bilinear interpolation restricted to the fine
+//! unknowns, restriction is `Pᵀ`, and coarse operators are Galerkin products `Pᵀ A P`, which
+//! stay 9-point (Wesseling, *An Introduction to Multigrid Methods*, 1992, §6.2; Dendy's
+//! `BoxMG`). Galerkin coarsening needs no rule for irregular boundaries, holes, one-pixel-wide
+//! strands or pinned pixels: the coarse operators inherit them from the fine one. A coarse
+//! operator can be singular where `P` loses rank on thin strands, but the coarse equations are
+//! always consistent (their right-hand sides lie in the range of `Pᵀ`), and the smoother and
+//! the regularised coarsest solve handle that.
+//!
+//! The smoother is multicolour Gauss–Seidel: red–black on the 5-point level, four colours on the
+//! 9-point levels. Points of one colour are independent, so rows are updated in parallel (each
+//! band of rows gets copies of the two rows that border it) and the result does not depend on
+//! the number of threads. Pre-smoothing runs the colours forward and post-smoothing backward,
+//! which makes the V-cycle a symmetric operator, as preconditioned conjugate gradients needs.
+//!
+//! Vectors hold `L` independent right-hand sides per point (`[f32; L]`), so the three colour
+//! channels of an image are smoothed in one sweep with SIMD lanes.
+
+// Lane loops index several arrays in lockstep; the index form is what vectorises.
+#![allow(clippy::needless_range_loop)]
+
+use rayon::prelude::*;
+
+/// Rows per parallel work item. Fixed (not derived from the thread count) so that every
+/// reduction sums the same partial sums in the same order for any number of threads.
+pub(crate) const BAND: usize = 8;
+
+/// Grids with fewer cells than this are processed on the calling thread (same result).
+const PARALLEL_CELLS: usize = 16 * 1024;
+
+/// Coarsening stops once a level has at most this many unknowns; it is solved densely.
+const COARSEST: usize = 64;
+
+/// The operator of one level.
+pub(crate) enum Stencil {
+    /// The pixel Laplacian: `diag[p]·x_p − Σ x_q` over the 4 neighbours; `diag` is 0 off the
+    /// unknowns and `x` is kept 0 there.
+    Five(Vec<f32>),
+    /// Nine coefficients per point over its 3×3 neighbourhood (row-major, centre at 4); zero
+    /// rows and columns off the unknowns.
+    Nine(Vec<[f32; 9]>),
+}
+
+/// One level of the hierarchy.
+pub(crate) struct Level {
+    pub h: usize,
+    pub w: usize,
+    pub stencil: Stencil,
+    /// `1 / diagonal` at the unknowns, 0 elsewhere.
+    pub inv: Vec<f32>,
+    /// Number of unknowns.
+    pub n: usize,
+    /// The row of an unknown whose neighbourhood is all unknowns (the fast path of coarsening).
+    interior: [f32; 9],
+}
+
+impl Level {
+    /// The finest level from a per-cell diagonal (0 off the unknowns).
+    pub fn five(h: usize, w: usize, diag: Vec<f32>) -> Self {
+        debug_assert!(h % 2 == 1 && w % 2 == 1 && diag.len() == h * w);
+        let inv: Vec<f32> = diag
+            .iter()
+            .map(|&d| if d > 0.0 { 1.0 / d } else { 0.0 })
+            .collect();
+        let n = diag.iter().filter(|&&d| d > 0.0).count();
+        Self {
+            h,
+            w,
+            stencil: Stencil::Five(diag),
+            inv,
+            n,
+            interior: [0.0, -1.0, 0.0, -1.0, 4.0, -1.0, 0.0, -1.0, 0.0],
+        }
+    }
+
+    /// Coefficient `k` (3×3 row-major offset, 4 = centre) of row `p`.
+    #[inline]
+    fn coef(&self, p: usize, k: usize) -> f32 {
+        match &self.stencil {
+            Stencil::Nine(a) => a[p][k],
+            Stencil::Five(d) => {
+                if d[p] == 0.0 {
+                    return 0.0;
+                }
+                match k {
+                    4 => d[p],
+                    1 | 3 | 5 | 7 => {
+                        let q = (p + k / 3 * self.w + k % 3) - self.w - 1;
+                        if d[q] > 0.0 {
+                            -1.0
+                        } else {
+                            0.0
+                        }
+                    }
+                    _ => 0.0,
+                }
+            }
+        }
+    }
+
+    /// Row `p` of the operator as 9 coefficients over the 3×3 neighbourhood.
+    #[inline]
+    fn row9(&self, p: usize) -> [f32; 9] {
+        match &self.stencil {
+            Stencil::Nine(a) => a[p],
+            Stencil::Five(d) => {
+                let w = self.w;
+                let off = |q: usize| if d[q] > 0.0 { -1.0 } else { 0.0 };
+                [
+                    0.0,
+                    off(p - w),
+                    0.0,
+                    off(p - 1),
+                    d[p],
+                    off(p + 1),
+                    0.0,
+                    off(p + w),
+                    0.0,
+                ]
+            }
+        }
+    }
+
+    /// Whether row `p` is the level's interior stencil (then so are its neighbours' columns).
+    /// Exact comparison on purpose: the fast path must give the bits the slow one would.
+    #[inline]
+    #[allow(clippy::float_cmp)]
+    fn is_interior(&self, p: usize) -> bool {
+        match &self.stencil {
+            Stencil::Nine(a) => a[p] == self.interior,
+            Stencil::Five(d) => {
+                d[p] == 4.0
+                    && d[p - 1] > 0.0
+                    && d[p + 1] > 0.0
+                    && d[p - self.w] > 0.0
+                    && d[p + self.w] > 0.0
+            }
+        }
+    }
+
+    /// The Galerkin coarse level `Pᵀ A P`.
+    fn coarsen(&self) -> Self {
+        let (hf, wf) = (self.h, self.w);
+        let hc = (hf / 2 + 2) | 1;
+        let wc = (wf / 2 + 2) | 1;
+        // Where the 3×3 fine points under a coarse point all carry the interior stencil, the
+        // coarse row is a constant: compute it once.
+        let interior = galerkin_row(2, 2, |_, _| Some(self.interior));
+        let flags: Vec<bool> = (0..hf * wf)
+            .map(|p| {
+                let (y, x) = (p / wf, p % wf);
+                y > 0
+                    && y < hf - 1
+                    && x > 0
+                    && x < wf - 1
+                    && self.inv[p] > 0.0
+                    && self.is_interior(p)
+            })
+            .collect();
+        let row_at = |fy: usize, fx: usize| {
+            if fy == 0 || fy >= hf - 1 || fx == 0 || fx >= wf - 1 {
+                return None;
+            }
+            let f = fy * wf + fx;
+            (self.inv[f] > 0.0).then(|| self.row9(f))
+        };
+        let mut a = vec![[0f32; 9]; hc * wc];
+        let row = |i: usize, out: &mut [[f32; 9]]| {
+            if i == 0 || 2 * i >= hf {
+                return;
+            }
+            for (j, cell) in out.iter_mut().enumerate().take(wc - 1).skip(1) {
+                if 2 * j >= wf {
+                    break;
+                }
+                let o = (2 * i - 1) * wf + 2 * j - 1;
+                let all = [
+                    o - wf - 1,
+                    o - wf,
+                    o - wf + 1,
+                    o - 1,
+                    o,
+                    o + 1,
+                    o + wf - 1,
+                    o + wf,
+                    o + wf + 1,
+                ]
+                .iter()
+                .all(|&f| flags[f]);
+                *cell = if all {
+                    interior
+                } else {
+                    galerkin_row(i, j, row_at)
+                };
+            }
+        };
+        if hc * wc >= PARALLEL_CELLS / 4 {
+            a.par_chunks_mut(wc)
+                .enumerate()
+                .for_each(|(i, r)| row(i, r));
+        } else {
+            a.chunks_mut(wc).enumerate().for_each(|(i, r)| row(i, r));
+        }
+        // The two halves of each symmetric pair were summed in different orders; make the
+        // stored operator exactly symmetric so the V-cycle is too.
+        for p in 0..hc * wc {
+            for k in 5..9 {
+                let q = p + k / 3 * wc + k % 3 - wc - 1;
+                if q < a.len() {
+                    a[q][8 - k] = a[p][k];
+                }
+            }
+        }
+        let inv: Vec<f32> = a
+            .iter()
+            .map(|s| if s[4] > 0.0 { 1.0 / s[4] } else { 0.0 })
+            .collect();
+        let n = inv.iter().filter(|&&v| v > 0.0).count();
+        Self {
+            h: hc,
+            w: wc,
+            stencil: Stencil::Nine(a),
+            inv,
+            n,
+            interior,
+        }
+    }
+}
+
+/// Row `(i, j)` of the Galerkin product `Pᵀ A P`, from the fine rows `row_at(fy, fx)` (`None`
+/// off the unknowns). Coarse `i` sits on fine `2i − 1`.
+fn galerkin_row(i: usize, j: usize, row_at: impl Fn(usize, usize) -> Option<[f32; 9]>) -> [f32; 9] {
+    // Parents of fine row/column t: (first coarse index, its weight, weight of the next).
+    let par = |t: usize| -> (usize, f64, f64) {
+        if t % 2 == 1 {
+            (t.div_ceil(2), 1.0, 0.0)
+        } else {
+            (t / 2, 0.5, 0.5)
+        }
+    };
+    let mut acc = [0f64; 9];
+    for fy in (2 * i - 2)..=(2 * i) {
+        let wy = if fy == 2 * i - 1 { 1.0 } else { 0.5 };
+        for fx in (2 * j - 2)..=(2 * j) {
+            let Some(st) = row_at(fy, fx) else { continue };
+            let wfi = wy * if fx == 2 * j - 1 { 1.0 } else { 0.5 };
+            for (k, &c) in st.iter().enumerate() {
+                if c == 0.0 {
+                    continue;
+                }
+                let v = wfi * f64::from(c);
+                let (jy, ay, by) = par(fy + k / 3 - 1);
+                let (jx, ax, bx) = par(fx + k % 3 - 1);
+                let (ky, kx) = (jy + 1 - i, jx + 1 - j);
+                acc[ky * 3 + kx] += v * ay * ax;
+                if bx != 0.0 {
+                    acc[ky * 3 + kx + 1] += v * ay * bx;
+                }
+                if by != 0.0 {
+                    acc[ky * 3 + 3 + kx] += v * by * ax;
+                    if bx != 0.0 {
+                        acc[ky * 3 + 3 + kx + 1] += v * by * bx;
+                    }
+                }
+            }
+        }
+    }
+    acc.map(|v| v as f32)
+}
+
+/// A dense Cholesky factor of the coarsest level (regularised: the level may be singular).
+struct Coarsest {
+    /// Grid index of each unknown.
+    cells: Vec<usize>,
+    /// Lower-triangular factor, row-major `n × n`.
+    l: Vec<f64>,
+}
+
+impl Coarsest {
+    fn new(lev: &Level) -> Self {
+        let cells: Vec<usize> = (0..lev.h * lev.w).filter(|&p| lev.inv[p] > 0.0).collect();
+        let n = cells.len();
+        let mut pos = vec![usize::MAX; lev.h * lev.w];
+        for (i, &p) in cells.iter().enumerate() {
+            pos[p] = i;
+        }
+        let mut m = vec![0f64; n * n];
+        let mut dmax = 0f64;
+        for (i, &p) in cells.iter().enumerate() {
+            for k in 0..9 {
+                let c = lev.coef(p, k);
+                if c != 0.0 {
+                    let q = p + k / 3 * lev.w + k % 3 - lev.w - 1;
+                    m[i * n + pos[q]] = f64::from(c);
+                }
+            }
+            dmax = dmax.max(m[i * n + i]);
+        }
+        // A singular coarse operator comes with consistent right-hand sides, and any solution
+        // gives the same prolonged correction; the shift only makes the factor exist.
+        for i in 0..n {
+            m[i * n + i] += 1e-9 * dmax;
+        }
+        for j in 0..n {
+            let mut d = m[j * n + j];
+            for k in 0..j {
+                d -= m[j * n + k] * m[j * n + k];
+            }
+            let d = d.max(1e-12 * dmax).sqrt();
+            m[j * n + j] = d;
+            for i in j + 1..n {
+                let mut s = m[i * n + j];
+                for k in 0..j {
+                    s -= m[i * n + k] * m[j * n + k];
+                }
+                m[i * n + j] = s / d;
+            }
+        }
+        Self { cells, l: m }
+    }
+
+    fn solve<const L: usize>(&self, b: &[[f32; L]], x: &mut [[f32; L]]) {
+        let n = self.cells.len();
+        let mut y = vec![[0f64; L]; n];
+        for i in 0..n {
+            let mut s = b[self.cells[i]].map(f64::from);
+            for k in 0..i {
+                for c in 0..L {
+                    s[c] -= self.l[i * n + k] * y[k][c];
+                }
+            }
+            y[i] = s.map(|v| v / self.l[i * n + i]);
+        }
+        for i in (0..n).rev() {
+            let mut s = y[i];
+            for k in i + 1..n {
+                for c in 0..L {
+                    s[c] -= self.l[k * n + i] * y[k][c];
+                }
+            }
+            y[i] = s.map(|v| v / self.l[i * n + i]);
+        }
+        for (i, &p) in self.cells.iter().enumerate() {
+            x[p] = y[i].map(|v| v as f32);
+        }
+    }
+}
+
+/// The hierarchy: levels from fine to coarse and the factor of the coarsest.
+pub(crate) struct Hierarchy {
+    pub levels: Vec<Level>,
+    coarsest: Coarsest,
+}
+
+/// Per-level vectors of one V-cycle.
+pub(crate) struct Work<const L: usize> {
+    x: Vec<Vec<[f32; L]>>,
+    b: Vec<Vec<[f32; L]>>,
+    r: Vec<Vec<[f32; L]>>,
+}
+
+impl Hierarchy {
+    /// Coarsens `fine` until a level has at most a few hundred unknowns.
+    pub fn new(fine: Level) -> Self {
+        let mut levels = vec![fine];
+        loop {
+            let last = levels.last().expect("at least the fine level");
+            if last.n <= COARSEST || last.h <= 3 && last.w <= 3 {
+                break;
+            }
+            let next = last.coarsen();
+            levels.push(next);
+        }
+        let coarsest = Coarsest::new(levels.last().expect("at least the fine level"));
+        Self { levels, coarsest }
+    }
+
+    /// Zeroed work vectors for `L` lanes.
+    pub fn work<const L: usize>(&self) -> Work<L> {
+        // Level 0's `x` and `b` are the caller's vectors.
+        let z = |fine: bool| {
+            self.levels
+                .iter()
+                .enumerate()
+                .map(|(i, l)| {
+                    if i == 0 && !fine {
+                        Vec::new()
+                    } else {
+                        vec![[0f32; L]; l.h * l.w]
+                    }
+                })
+                .collect::<Vec<_>>()
+        };
+        Work {
+            x: z(false),
+            b: z(false),
+            r: z(true),
+        }
+    }
+
+    /// `z = M⁻¹ r`: one symmetric V(1,1)-cycle from a zero guess. `r` and `z` live on the fine
+    /// grid and are 0 off the unknowns.
+    pub fn vcycle<const L: usize>(&self, ws: &mut Work<L>, r: &[[f32; L]], z: &mut [[f32; L]]) {
+        self.cycle(ws, 0, r, z);
+    }
+
+    fn cycle<const L: usize>(
+        &self,
+        ws: &mut Work<L>,
+        l: usize,
+        b: &[[f32; L]],
+        x: &mut [[f32; L]],
+    ) {
+        let lev = &self.levels[l];
+        if l + 1 == self.levels.len() {
+            self.coarsest.solve(b, x);
+            return;
+        }
+        smooth(lev, x, b, true);
+        residual(lev, x, b, &mut ws.r[l]);
+        let coarse = &self.levels[l + 1];
+        let mut bc = std::mem::take(&mut ws.b[l + 1]);
+        let mut xc = std::mem::take(&mut ws.x[l + 1]);
+        restrict(lev, coarse, &ws.r[l], &mut bc);
+        self.cycle(ws, l + 1, &bc, &mut xc);
+        prolong_add(lev, coarse, &xc, x);
+        ws.b[l + 1] = bc;
+        ws.x[l + 1] = xc;
+        smooth(lev, x, b, false);
+    }
+}
+
+/// Colours of a level: 2 (red–black) for the 5-point operator, 4 for the 9-point ones.
+fn colours(lev: &Level) -> usize {
+    match lev.stencil {
+        Stencil::Five(_) => 2,
+        Stencil::Nine(_) => 4,
+    }
+}
+
+/// One multicolour Gauss–Seidel sweep; `pre` runs the colours forward from a zero `x`
+/// (which it overwrites), otherwise backward from the current `x`.
+fn smooth<const L: usize>(lev: &Level, x: &mut [[f32; L]], b: &[[f32; L]], pre: bool) {
+    let nc = colours(lev);
+    for step in 0..nc {
+        let colour = if pre { step } else { nc - 1 - step };
+        // The first step from zero also writes the zeros of the other colours.
+        sweep(lev, x, b, colour, pre && step == 0);
+    }
+}
+
+/// Updates the points of one colour in place, bands of rows in parallel.
+fn sweep<const L: usize>(
+    lev: &Level,
+    x: &mut [[f32; L]],
+    b: &[[f32; L]],
+    colour: usize,
+    zero: bool,
+) {
+    let (h, w) = (lev.h, lev.w);
+    let band_rows = |y0: usize, band: &mut [[f32; L]], above: &[[f32; L]], below: &[[f32; L]]| {
+        let rows = band.len() / w;
+        for yy in 0..rows {
+            let y = y0 + yy;
+            if y == 0 || y == h - 1 {
+                continue;
+            }
+            let (before, rest) = band.split_at_mut(yy * w);
+            let (cur, after) = rest.split_at_mut(w);
+            let up = if yy == 0 {
+                above
+            } else {
+                &before[before.len() - w..]
+            };
+            let down = if yy + 1 == rows { below } else { &after[..w] };
+            let o = y * w;
+            match &lev.stencil {
+                Stencil::Five(_) if zero => {
+                    let start = if (1 + y) % 2 == colour { 1 } else { 2 };
+                    cur.fill([0.0; L]);
+                    for xi in (start..w - 1).step_by(2) {
+                        let inv = lev.inv[o + xi];
+                        cur[xi] = b[o + xi].map(|t| t * inv);
+                    }
+                }
+                Stencil::Nine(_) if zero => {
+                    cur.fill([0.0; L]);
+                    if y % 2 != colour / 2 {
+                        continue;
+                    }
+                    let start = if colour % 2 == 1 { 1 } else { 2 };
+                    for xi in (start..w - 1).step_by(2) {
+                        let inv = lev.inv[o + xi];
+                        cur[xi] = b[o + xi].map(|t| t * inv);
+                    }
+                }
+                Stencil::Five(_) => {
+                    let start = if (1 + y) % 2 == colour { 1 } else { 2 };
+                    for xi in (start..w - 1).step_by(2) {
+                        let inv = lev.inv[o + xi];
+                        let bb = b[o + xi];
+                        let (l, r, u, d) = (cur[xi - 1], cur[xi + 1], up[xi], down[xi]);
+                        let mut v = [0f32; L];
+                        for c in 0..L {
+                            v[c] = inv * (bb[c] + l[c] + r[c] + u[c] + d[c]);
+                        }
+                        cur[xi] = v;
+                    }
+                }
+                Stencil::Nine(a) => {
+                    if y % 2 != colour / 2 {
+                        continue;
+                    }
+                    let start = if colour % 2 == 1 { 1 } else { 2 };
+                    for xi in (start..w - 1).step_by(2) {
+                        let inv = lev.inv[o + xi];
+                        if inv == 0.0 {
+                            continue;
+                        }
+                        let s = &a[o + xi];
+                        let mut v = b[o + xi];
+                        for k in [0, 1, 2] {
+                            let n = up[xi + k - 1];
+                            let m = down[xi + k - 1];
+                            for c in 0..L {
+                                v[c] -= s[k] * n[c] + s[k + 6] * m[c];
+                            }
+                        }
+                        let (l, r) = (cur[xi - 1], cur[xi + 1]);
+                        for c in 0..L {
+                            v[c] -= s[3] * l[c] + s[5] * r[c];
+                        }
+                        cur[xi] = v.map(|t| t * inv);
+                    }
+                }
+            }
+        }
+    };
+    bands_mut(x, h, w, zero, band_rows);
+}
+
+/// Calls `f(first_row, band, row_above, row_below)` on bands of [`BAND`] rows, in parallel on
+/// large grids. The bordering rows are copies taken before any band runs (empty when `no_halo`
+/// or at the grid edge).
+fn bands_mut<T: Copy + Send + Sync>(
+    x: &mut [T],
+    h: usize,
+    w: usize,
+    no_halo: bool,
+    f: impl Fn(usize, &mut [T], &[T], &[T]) + Sync,
+) {
+    let nb = h.div_ceil(BAND);
+    let halos: Vec<(Vec<T>, Vec<T>)> = if no_halo {
+        Vec::new()
+    } else {
+        (0..nb)
+            .map(|i| {
+                let y0 = i * BAND;
+                let y1 = (y0 + BAND).min(h);
+                let above = if y0 > 0 {
+                    x[(y0 - 1) * w..y0 * w].to_vec()
+                } else {
+                    Vec::new()
+                };
+                let below = if y1 < h {
+                    x[y1 * w..(y1 + 1) * w].to_vec()
+                } else {
+                    Vec::new()
+                };
+                (above, below)
+            })
+            .collect()
+    };
+    let empty: &[T] = &[];
+    let run = |(i, band): (usize, &mut [T])| {
+        let (a, b) = halos
+            .get(i)
+            .map_or((empty, empty), |(a, b)| (a.as_slice(), b.as_slice()));
+        f(i * BAND, band, a, b);
+    };
+    if h * w >= PARALLEL_CELLS {
+        x.par_chunks_mut(BAND * w).enumerate().for_each(run);
+    } else {
+        x.chunks_mut(BAND * w).enumerate().for_each(run);
+    }
+}
+
+/// Calls `f(row, out_row)` for every row of `out`, in parallel on large grids.
+pub(crate) fn rows_mut<T: Send>(
+    out: &mut [T],
+    w: usize,
+    f: impl Fn(usize, &mut [T]) + Sync + Send,
+) {
+    if out.len() >= PARALLEL_CELLS {
+        out.par_chunks_mut(w).enumerate().for_each(|(y, r)| f(y, r));
+    } else {
+        out.chunks_mut(w).enumerate().for_each(|(y, r)| f(y, r));
+    }
+}
+
+/// `r = b − A x` after pre-smoothing, 0 off the unknowns. The colour updated last has a zero
+/// residual (its equations were just solved), so only the others are computed.
+fn residual<const L: usize>(lev: &Level, x: &[[f32; L]], b: &[[f32; L]], r: &mut [[f32; L]]) {
+    let (h, w) = (lev.h, lev.w);
+    rows_mut(r, w, |y, out| {
+        out.fill([0.0; L]);
+        if y == 0 || y == h - 1 {
+            return;
+        }
+        let o = y * w;
+        match &lev.stencil {
+            Stencil::Five(d) => {
+                // Colour 1 (x + y odd) was updated last.
+                for xi in ((2 - y % 2)..w - 1).step_by(2) {
+                    let p = o + xi;
+                    if d[p] == 0.0 {
+                        continue;
+                    }
+                    let (c0, l, rr, u, dn) = (x[p], x[p - 1], x[p + 1], x[p - w], x[p + w]);
+                    let mut v = b[p];
+                    for c in 0..L {
+                        v[c] -= d[p] * c0[c] - (l[c] + rr[c] + u[c] + dn[c]);
+                    }
+                    out[xi] = v;
+                }
+            }
+            Stencil::Nine(a) => {
+                for xi in 1..w - 1 {
+                    let p = o + xi;
+                    // Colour 3 (odd row, odd column) was updated last.
+                    if lev.inv[p] == 0.0 || (y % 2 == 1 && xi % 2 == 1) {
+                        continue;
+                    }
+                    let s = &a[p];
+                    let mut v = b[p];
+                    for k in 0..9 {
+                        let q = x[p + k / 3 * w + k % 3 - w - 1];
+                        for c in 0..L {
+                            v[c] -= s[k] * q[c];
+                        }
+                    }
+                    out[xi] = v;
+                }
+            }
+        }
+    });
+}
+
+/// `bc = Pᵀ rf`.
+fn restrict<const L: usize>(fine: &Level, coarse: &Level, rf: &[[f32; L]], bc: &mut [[f32; L]]) {
+    let (hc, wc, wf) = (coarse.h, coarse.w, fine.w);
+    rows_mut(bc, wc, |i, out| {
+        out.fill([0.0; L]);
+        if i == 0 || i >= hc - 1 {
+            return;
+        }
+        for (j, cell) in out.iter_mut().enumerate().take(wc - 1).skip(1) {
+            if coarse.inv[i * wc + j] == 0.0 {
+                continue;
+            }
+            let mut v = [0f32; L];
+            for (fy, wy) in [(2 * i - 2, 0.5f32), (2 * i - 1, 1.0), (2 * i, 0.5)] {
+                let o = fy * wf;
+                for (fx, wx) in [(2 * j - 2, 0.5f32), (2 * j - 1, 1.0), (2 * j, 0.5)] {
+                    let q = rf[o + fx];
+                    let wt = wy * wx;
+                    for c in 0..L {
+                        v[c] += wt * q[c];
+                    }
+                }
+            }
+            *cell = v;
+        }
+    });
+}
+
+/// `xf += P xc` on the fine unknowns.
+fn prolong_add<const L: usize>(fine: &Level, coarse: &Level, xc: &[[f32; L]], xf: &mut [[f32; L]]) {
+    let (hf, wf, wc) = (fine.h, fine.w, coarse.w);
+    rows_mut(xf, wf, |y, out| {
+        if y == 0 || y == hf - 1 {
+            return;
+        }
+        // The coarse row interpolated to fine row y, then along it.
+        let mut t = vec![[0f32; L]; wc];
+        if y % 2 == 1 {
+            let r = y.div_ceil(2) * wc;
+            t.copy_from_slice(&xc[r..r + wc]);
+        } else {
+            let (r0, r1) = (y / 2 * wc, (y / 2 + 1) * wc);
+            for (k, tk) in t.iter_mut().enumerate() {
+                let (a, b) = (xc[r0 + k], xc[r1 + k]);
+                *tk = std::array::from_fn(|c| 0.5 * (a[c] + b[c]));
+            }
+        }
+        let inv = &fine.inv[y * wf..(y + 1) * wf];
+        for xi in 1..wf - 1 {
+            if inv[xi] == 0.0 {
+                continue;
+            }
+            let v = if xi % 2 == 1 {
+                t[xi.div_ceil(2)]
+            } else {
+                let (a, b) = (t[xi / 2], t[xi / 2 + 1]);
+                std::array::from_fn(|c| 0.5 * (a[c] + b[c]))
+            };
+            for c in 0..L {
+                out[xi][c] += v[c];
+            }
+        }
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Coarse rows (or columns) a fine row interpolates from, with weights.
+    fn parents(t: usize) -> impl Iterator<Item = (usize, f64)> {
+        let (a, b, w) = if t % 2 == 1 {
+            (t.div_ceil(2), usize::MAX, 1.0)
+        } else {
+            (t / 2, t / 2 + 1, 0.5)
+        };
+        [(a, w), (b, w)]
+            .into_iter()
+            .filter(|&(i, _)| i != usize::MAX)
+    }
+
+    /// A disk of unknowns with Dirichlet all round, on an odd grid.
+    fn disk(n: usize) -> Level {
+        let c = n as f32 / 2.0;
+        let diag = (0..n * n)
+            .map(|p| {
+                let (y, x) = ((p / n) as f32, (p % n) as f32);
+                if (y - c).powi(2) + (x - c).powi(2) < (0.4 * n as f32).powi(2) {
+                    4.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        Level::five(n, n, diag)
+    }
+
+    fn dense(lev: &Level) -> Vec<Vec<f64>> {
+        let m = lev.h * lev.w;
+        let mut a = vec![vec![0f64; m]; m];
+        for p in 0..m {
+            for k in 0..9 {
+                let c = lev.coef(p, k);
+                if c != 0.0 {
+                    a[p][p + k / 3 * lev.w + k % 3 - lev.w - 1] = f64::from(c);
+                }
+            }
+        }
+        a
+    }
+
+    #[test]
+    fn galerkin_levels_are_symmetric_and_match_the_explicit_product() {
+        let h = Hierarchy::new(disk(41));
+        assert!(h.levels.len() >= 2);
+        let (f, c) = (&h.levels[0], &h.levels[1]);
+        let a = dense(f);
+        let ac = dense(c);
+        // Build P explicitly.
+        let (mf, mc) = (f.h * f.w, c.h * c.w);
+        let mut p = vec![vec![0f64; mc]; mf];
+        for y in 1..f.h - 1 {
+            for x in 1..f.w - 1 {
+                if f.inv[y * f.w + x] == 0.0 {
+                    continue;
+                }
+                for (i, wy) in parents(y) {
+                    for (j, wx) in parents(x) {
+                        p[y * f.w + x][i * c.w + j] = wy * wx;
+                    }
+                }
+            }
+        }
+        for i in 0..mc {
+            for j in 0..mc {
+                let mut s = 0.0;
+                for u in 0..mf {
+                    if p[u][i] == 0.0 {
+                        continue;
+                    }
+                    for v in 0..mf {
+                        s += p[u][i] * a[u][v] * p[v][j];
+                    }
+                }
+                assert!(
+                    (s - ac[i][j]).abs() < 1e-5,
+                    "({i},{j}): {s} vs {}",
+                    ac[i][j]
+                );
+                assert_eq!(ac[i][j].to_bits(), ac[j][i].to_bits());
+            }
+        }
+    }
+
+    #[test]
+    fn vcycle_is_a_symmetric_operator() {
+        let h = Hierarchy::new(disk(61));
+        let lev = &h.levels[0];
+        let m = lev.h * lev.w;
+        let mut ws = h.work::<1>();
+        let vec_at = |seed: u64| {
+            let mut s = seed;
+            (0..m)
+                .map(|p| {
+                    s = s.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+                    [if lev.inv[p] > 0.0 {
+                        (s >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+                    } else {
+                        0.0
+                    }]
+                })
+                .collect::<Vec<_>>()
+        };
+        let (u, v) = (vec_at(1), vec_at(2));
+        let (mut mu, mut mv) = (vec![[0f32; 1]; m], vec![[0f32; 1]; m]);
+        h.vcycle(&mut ws, &u, &mut mu);
+        h.vcycle(&mut ws, &v, &mut mv);
+        let dot = |a: &[[f32; 1]], b: &[[f32; 1]]| -> f64 {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| f64::from(x[0]) * f64::from(y[0]))
+                .sum()
+        };
+        let (a, b) = (dot(&v, &mu), dot(&u, &mv));
+        assert!((a - b).abs() < 1e-4 * a.abs().max(b.abs()), "{a} vs {b}");
+        assert!(dot(&u, &mu) > 0.0);
+    }
+}

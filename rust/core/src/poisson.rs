@@ -1,0 +1,967 @@
+//! Poisson image editing: seamless cloning with normal or mixed gradients (Pérez, Gangnet,
+//! Blake, "Poisson image editing", SIGGRAPH 2003, Eqs. 7, 11–13), with the extra constraints
+//! of the photometric correction in Sibbing, Pavić, Kobbelt, "Image synthesis for branching
+//! structures", 2010, §5.3: chosen pixels keep their source colours (there, the border of a new
+//! fragment where it has no neighbouring fragment).
+//!
+//! The region Ω is the mask placed at `offset` in the destination (pixels landing outside it
+//! are clipped). For each pixel `p` in Ω and each 4-neighbour `q` inside the destination,
+//! the discrete equation (Pérez Eq. 7) is
+//! `|N_p| f_p − Σ_{q∈N_p∩Ω} f_q = Σ_{q∈N_p∩∂Ω} f*_q + Σ_{q∈N_p} v_pq`, with
+//! - `v_pq = g_p − g_q` (normal cloning, `g` the source) or the one of `g_p − g_q` and
+//!   `f*_p − f*_q` with the larger magnitude (mixed gradients, Eq. 13), per channel;
+//! - `f*_q` the destination value where `q` is outside Ω (Dirichlet), the source value where
+//!   `q` is a `fixed` pixel (Dirichlet, the §5.3 constraint);
+//! - neighbours outside the destination dropped from `N_p` (Neumann: zero normal derivative).
+//!
+//! Source values are read with the source's edge replicated, so a gradient across the
+//! source's border is zero.
+//!
+//! A connected part of Ω with no Dirichlet neighbour (it fills a whole connected region of
+//! the destination) determines `f` only up to a constant; it keeps the mean of the source
+//! over it. Solving with one pixel pinned gives an exact solution of the singular system
+//! (its right-hand side sums to zero), which is then shifted to that mean.
+//!
+//! The unknown is the correction `h = f − g`, which is smooth (harmonic in normal mode), so
+//! zero is a good first guess. It is found by conjugate gradients in `f64`, preconditioned by
+//! one V-cycle of the Galerkin multigrid in [`crate::multigrid`] (in `f32`), for up to four
+//! channels at once; the stopping test is the relative residual `‖b − A f‖ / ‖b‖` of the
+//! system above in every channel. Reductions sum fixed bands of rows in a fixed order, so
+//! the result is bit-identical for any number of threads.
+
+// Lane loops index several arrays in lockstep; the index form is what vectorises.
+#![allow(clippy::needless_range_loop)]
+
+use rayon::prelude::*;
+
+use crate::error::{invalid, Result};
+use crate::image::Image;
+use crate::multigrid::{rows_mut, Hierarchy, Level, BAND};
+
+/// Which guidance field drives the blend.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Mode {
+    /// Source gradients (Pérez Eq. 11).
+    #[default]
+    Normal,
+    /// Per edge and channel the larger-magnitude gradient of source and destination (Eq. 13).
+    Mixed,
+}
+
+/// Solver parameters of [`seamless`].
+#[derive(Clone, Copy, Debug)]
+pub struct BlendParams {
+    /// Guidance field (default [`Mode::Normal`]).
+    pub mode: Mode,
+    /// Stop when the relative residual of every channel is at most this (default `1e-6`).
+    pub tol: f64,
+    /// Most conjugate-gradient iterations (default 200); the result is returned either way
+    /// and [`Blended::residual`] says how far it got.
+    pub max_iterations: usize,
+}
+
+impl Default for BlendParams {
+    fn default() -> Self {
+        Self {
+            mode: Mode::Normal,
+            tol: 1e-6,
+            max_iterations: 200,
+        }
+    }
+}
+
+/// The images of a blend.
+#[derive(Clone, Copy, Debug)]
+pub struct BlendInput<'a> {
+    /// Source `h × w × C`: its gradients are pasted.
+    pub src: Image<'a>,
+    /// Destination `H × W × C`.
+    pub dst: Image<'a>,
+    /// `h × w` region to paste, in source coordinates.
+    pub mask: &'a [bool],
+    /// (row, col) of the source's top-left pixel in the destination; may be negative.
+    pub offset: (i64, i64),
+    /// Optional `h × w` pixels of the mask that keep their source values.
+    pub fixed: Option<&'a [bool]>,
+}
+
+/// Output of [`seamless`].
+#[derive(Clone, Debug)]
+pub struct Blended {
+    /// `H × W × C` result: the destination with the region replaced.
+    pub image: Vec<f32>,
+    /// Conjugate-gradient iterations (the largest over channel groups).
+    pub iterations: usize,
+    /// Largest relative residual `‖b − A f‖ / ‖b‖` over channels, of the `f64` solution.
+    pub residual: f64,
+    /// Number of unknowns (region pixels that are neither fixed nor pinned).
+    pub unknowns: usize,
+}
+
+// Cell kinds on the working grid.
+const OUT: u8 = 0; // outside the destination: Neumann
+const DST: u8 = 1; // destination pixel outside the region: Dirichlet, destination value
+const FIX: u8 = 2; // fixed (or pinned) region pixel: Dirichlet, source value
+const UNK: u8 = 3; // unknown
+
+/// The region on a framed, odd-sized grid over its bounding box in the destination.
+struct Grid {
+    h: usize,
+    w: usize,
+    /// Destination (row, col) of grid cell (0, 0).
+    y0: i64,
+    x0: i64,
+    kind: Vec<u8>,
+    /// For pinned components: per cell the component index (`u32::MAX` elsewhere).
+    comp: Vec<u32>,
+    /// Number of pinned components.
+    ncomp: usize,
+}
+
+impl Grid {
+    fn new(input: &BlendInput<'_>) -> Result<Self> {
+        let (sh, sw) = (input.src.h, input.src.w);
+        let (dh, dw) = (input.dst.h as i64, input.dst.w as i64);
+        let (oy, ox) = input.offset;
+        let inside = |sy: usize, sx: usize| {
+            let (y, x) = (sy as i64 + oy, sx as i64 + ox);
+            (0..dh).contains(&y) && (0..dw).contains(&x)
+        };
+        let (mut y0, mut y1, mut x0, mut x1) = (i64::MAX, i64::MIN, i64::MAX, i64::MIN);
+        let mut any = false;
+        for sy in 0..sh {
+            for sx in 0..sw {
+                if input.mask[sy * sw + sx] {
+                    any = true;
+                    if inside(sy, sx) {
+                        let (y, x) = (sy as i64 + oy, sx as i64 + ox);
+                        y0 = y0.min(y);
+                        y1 = y1.max(y);
+                        x0 = x0.min(x);
+                        x1 = x1.max(x);
+                    }
+                }
+            }
+        }
+        if !any {
+            return Err(invalid("mask", "expected at least one pixel set, got none"));
+        }
+        if y0 == i64::MAX {
+            return Err(invalid(
+                "mask",
+                format!(
+                    "no pixel of the mask lands inside the {dh}×{dw} destination at offset ({oy}, {ox})"
+                ),
+            ));
+        }
+        let h = ((y1 - y0 + 3) as usize) | 1;
+        let w = ((x1 - x0 + 3) as usize) | 1;
+        let (gy0, gx0) = (y0 - 1, x0 - 1);
+        let mut kind = vec![OUT; h * w];
+        for gy in 0..h {
+            let y = gy as i64 + gy0;
+            if !(0..dh).contains(&y) {
+                continue;
+            }
+            for gx in 0..w {
+                if (0..dw).contains(&(gx as i64 + gx0)) {
+                    kind[gy * w + gx] = DST;
+                }
+            }
+        }
+        for sy in 0..sh {
+            for sx in 0..sw {
+                if input.mask[sy * sw + sx] && inside(sy, sx) {
+                    let gy = (sy as i64 + oy - gy0) as usize;
+                    let gx = (sx as i64 + ox - gx0) as usize;
+                    let fixed = input.fixed.is_some_and(|f| f[sy * sw + sx]);
+                    kind[gy * w + gx] = if fixed { FIX } else { UNK };
+                }
+            }
+        }
+        let mut grid = Self {
+            h,
+            w,
+            y0: gy0,
+            x0: gx0,
+            kind,
+            comp: Vec::new(),
+            ncomp: 0,
+        };
+        grid.pin_floating_components();
+        Ok(grid)
+    }
+
+    /// Pins the first pixel of every connected set of unknowns that has no Dirichlet
+    /// neighbour, remembering the set so its mean can be restored.
+    fn pin_floating_components(&mut self) {
+        let (h, w) = (self.h, self.w);
+        let mut seen = vec![false; h * w];
+        let mut stack = Vec::new();
+        let mut members = Vec::new();
+        for start in 0..h * w {
+            if self.kind[start] != UNK || seen[start] {
+                continue;
+            }
+            seen[start] = true;
+            stack.push(start);
+            members.clear();
+            let mut grounded = false;
+            while let Some(p) = stack.pop() {
+                members.push(p);
+                for q in [p - w, p - 1, p + 1, p + w] {
+                    match self.kind[q] {
+                        UNK if !seen[q] => {
+                            seen[q] = true;
+                            stack.push(q);
+                        }
+                        DST | FIX => grounded = true,
+                        _ => {}
+                    }
+                }
+            }
+            if !grounded {
+                if self.comp.is_empty() {
+                    self.comp = vec![u32::MAX; h * w];
+                }
+                for &p in &members {
+                    self.comp[p] = self.ncomp as u32;
+                }
+                // `start` is the component's first cell in raster order.
+                self.kind[start] = FIX;
+                self.ncomp += 1;
+            }
+        }
+    }
+
+    fn diag(&self) -> Vec<f32> {
+        let w = self.w;
+        (0..self.h * w)
+            .map(|p| {
+                if self.kind[p] == UNK {
+                    [p - w, p - 1, p + 1, p + w]
+                        .iter()
+                        .filter(|&&q| self.kind[q] != OUT)
+                        .count() as f32
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    }
+}
+
+/// Source and destination values on the grid for channels `c0..c0 + L`.
+struct Values<const L: usize> {
+    /// Source, its edge replicated beyond its border.
+    g: Vec<[f32; L]>,
+    /// Destination (0 outside it).
+    d: Vec<[f32; L]>,
+}
+
+impl<const L: usize> Values<L> {
+    fn new(input: &BlendInput<'_>, grid: &Grid, c0: usize) -> Self {
+        let (h, w) = (grid.h, grid.w);
+        let (s, dst) = (&input.src, &input.dst);
+        let (oy, ox) = input.offset;
+        let nc = L.min(s.c - c0);
+        let mut g = vec![[0f32; L]; h * w];
+        let mut d = vec![[0f32; L]; h * w];
+        rows_mut(&mut g, w, |gy, row| {
+            let sy = (gy as i64 + grid.y0 - oy).clamp(0, s.h as i64 - 1) as usize;
+            for (gx, v) in row.iter_mut().enumerate() {
+                let sx = (gx as i64 + grid.x0 - ox).clamp(0, s.w as i64 - 1) as usize;
+                v[..nc].copy_from_slice(&s.pixel(sy, sx)[c0..c0 + nc]);
+            }
+        });
+        rows_mut(&mut d, w, |gy, row| {
+            let y = gy as i64 + grid.y0;
+            if !(0..dst.h as i64).contains(&y) {
+                return;
+            }
+            for (gx, v) in row.iter_mut().enumerate() {
+                let x = gx as i64 + grid.x0;
+                if (0..dst.w as i64).contains(&x) {
+                    v[..nc].copy_from_slice(&dst.pixel(y as usize, x as usize)[c0..c0 + nc]);
+                }
+            }
+        });
+        Self { g, d }
+    }
+
+    /// Right-hand side of the row of unknown `p` for the cell kinds `kind`, as `(b_f, b_h)`:
+    /// the system for `f` and for the correction `h = f − g`.
+    #[inline]
+    fn rhs(&self, kind: &[u8], w: usize, mode: Mode, p: usize) -> ([f64; L], [f64; L]) {
+        let (mut bf, mut bh) = ([0f64; L], [0f64; L]);
+        let (gp, fp) = (self.g[p], self.d[p]);
+        for q in [p - w, p - 1, p + 1, p + w] {
+            let kq = kind[q];
+            if kq == OUT {
+                continue;
+            }
+            let (gq, fq) = (self.g[q], self.d[q]);
+            for c in 0..L {
+                let gs = f64::from(gp[c]) - f64::from(gq[c]);
+                let v = match mode {
+                    Mode::Normal => gs,
+                    Mode::Mixed => {
+                        let ds = f64::from(fp[c]) - f64::from(fq[c]);
+                        if ds.abs() > gs.abs() {
+                            ds
+                        } else {
+                            gs
+                        }
+                    }
+                };
+                bf[c] += v;
+                bh[c] += v - gs;
+                if kq != UNK {
+                    let val = if kq == FIX { gq[c] } else { fq[c] };
+                    bf[c] += f64::from(val);
+                    bh[c] += f64::from(val) - f64::from(gq[c]);
+                }
+            }
+        }
+        (bf, bh)
+    }
+}
+
+/// Calls `f(band_index, band)` on bands of [`BAND`] rows of `x` (parallel on large grids) and
+/// returns the results in band order.
+fn bands<T: Send, R: Send>(
+    x: &mut [T],
+    w: usize,
+    f: impl Fn(usize, &mut [T]) -> R + Sync,
+) -> Vec<R> {
+    if x.len() >= 16 * 1024 {
+        x.par_chunks_mut(BAND * w)
+            .enumerate()
+            .map(|(i, b)| f(i, b))
+            .collect()
+    } else {
+        x.chunks_mut(BAND * w)
+            .enumerate()
+            .map(|(i, b)| f(i, b))
+            .collect()
+    }
+}
+
+fn sum_lanes<const L: usize>(parts: &[[f64; L]]) -> [f64; L] {
+    let mut s = [0f64; L];
+    for p in parts {
+        for c in 0..L {
+            s[c] += p[c];
+        }
+    }
+    s
+}
+
+/// A band of the iterate (`f64`) and of the residual (`f32`).
+type IterateBand<'a, const L: usize> = (&'a mut [[f64; L]], &'a mut [[f32; L]]);
+
+/// `q = A p` on the fine level; returns `⟨p, q⟩` per lane (summed in `f64`).
+fn apply<const L: usize>(diag: &[f32], w: usize, p: &[[f32; L]], q: &mut [[f32; L]]) -> [f64; L] {
+    let parts = bands(q, w, |bi, qb| {
+        let mut dot = [0f64; L];
+        for (k, out) in qb.iter_mut().enumerate() {
+            let i = bi * BAND * w + k;
+            let d = diag[i];
+            if d == 0.0 {
+                *out = [0.0; L];
+                continue;
+            }
+            let (c0, l, r, u, dn) = (p[i], p[i - 1], p[i + 1], p[i - w], p[i + w]);
+            let mut v = [0f32; L];
+            for c in 0..L {
+                v[c] = d * c0[c] - (l[c] + r[c] + u[c] + dn[c]);
+                dot[c] += f64::from(c0[c]) * f64::from(v[c]);
+            }
+            *out = v;
+        }
+        dot
+    });
+    sum_lanes(&parts)
+}
+
+/// The true residual `r = b − A x` in `f64`, stored as `f32`; returns `‖r‖²` per lane.
+fn true_residual<const L: usize>(
+    diag: &[f32],
+    w: usize,
+    b: &[[f64; L]],
+    x: &[[f64; L]],
+    r: &mut [[f32; L]],
+) -> [f64; L] {
+    let parts = bands(r, w, |bi, rb| {
+        let mut s = [0f64; L];
+        for (k, out) in rb.iter_mut().enumerate() {
+            let i = bi * BAND * w + k;
+            let d = f64::from(diag[i]);
+            if d == 0.0 {
+                *out = [0.0; L];
+                continue;
+            }
+            let (c0, l, rr, u, dn) = (x[i], x[i - 1], x[i + 1], x[i - w], x[i + w]);
+            let mut v = [0f32; L];
+            for c in 0..L {
+                let t = b[i][c] - (d * c0[c] - (l[c] + rr[c] + u[c] + dn[c]));
+                s[c] += t * t;
+                v[c] = t as f32;
+            }
+            *out = v;
+        }
+        s
+    });
+    sum_lanes(&parts)
+}
+
+/// `⟨u, v⟩` per lane, summed in `f64` by bands.
+fn dot<const L: usize>(u: &[[f32; L]], v: &[[f32; L]], w: usize) -> [f64; L] {
+    let job = |(a, b): (&[[f32; L]], &[[f32; L]])| {
+        let mut s = [0f64; L];
+        for (x, y) in a.iter().zip(b) {
+            for c in 0..L {
+                s[c] += f64::from(x[c]) * f64::from(y[c]);
+            }
+        }
+        s
+    };
+    let parts: Vec<[f64; L]> = if u.len() >= 16 * 1024 {
+        u.par_chunks(BAND * w)
+            .zip(v.par_chunks(BAND * w))
+            .map(job)
+            .collect()
+    } else {
+        u.chunks(BAND * w)
+            .zip(v.chunks(BAND * w))
+            .map(job)
+            .collect()
+    };
+    sum_lanes(&parts)
+}
+
+/// Preconditioned conjugate gradients for `A h = b` on the fine level, all lanes at once.
+/// `scale[c]` is the norm the residual of lane `c` is measured against. Returns `(h,
+/// iterations, largest relative true residual)`.
+///
+/// The iterate `h` and the final residual check are `f64`; the residual recurrence, the search
+/// directions and the preconditioner are `f32` (half the memory traffic). When the recurrence
+/// has drifted from the true residual, CG restarts from the true one.
+fn pcg<const L: usize>(
+    mg: &Hierarchy,
+    diag: &[f32],
+    b: &[[f64; L]],
+    scale: [f64; L],
+    tol: f64,
+    max_iterations: usize,
+) -> (Vec<[f64; L]>, usize, f64) {
+    let w = mg.levels[0].w;
+    let n = b.len();
+    let mut ws = mg.work::<L>();
+    let mut x = vec![[0f64; L]; n];
+    let mut r: Vec<[f32; L]> = b.iter().map(|v| v.map(|t| t as f32)).collect();
+    let mut z = vec![[0f32; L]; n];
+    let mut p = vec![[0f32; L]; n];
+    let mut q = vec![[0f32; L]; n];
+    let done = |rr: [f64; L]| (0..L).all(|c| rr[c].sqrt() <= tol * scale[c]);
+    let mut rr = sum_lanes(&[b.iter().fold([0f64; L], |mut s, v| {
+        for c in 0..L {
+            s[c] += v[c] * v[c];
+        }
+        s
+    })]);
+    let mut it = 0;
+    loop {
+        if done(rr) || it >= max_iterations {
+            break;
+        }
+        mg.vcycle(&mut ws, &r, &mut z);
+        let mut rz = dot(&r, &z, w);
+        p.copy_from_slice(&z);
+        loop {
+            let pq = apply(diag, w, &p, &mut q);
+            let alpha: [f64; L] = std::array::from_fn(|c| {
+                if pq[c] > 0.0 && rz[c] > 0.0 {
+                    rz[c] / pq[c]
+                } else {
+                    0.0
+                }
+            });
+            let alpha32 = alpha.map(|a| a as f32);
+            let parts = {
+                let (pp, qq) = (&p, &q);
+                let chunks: Vec<_> = x.chunks_mut(BAND * w).zip(r.chunks_mut(BAND * w)).collect();
+                let job = |(bi, (xb, rb)): (usize, IterateBand<'_, L>)| {
+                    let mut s = [0f64; L];
+                    for k in 0..xb.len() {
+                        let i = bi * BAND * w + k;
+                        let (pi, qi) = (pp[i], qq[i]);
+                        for c in 0..L {
+                            xb[k][c] += alpha[c] * f64::from(pi[c]);
+                            rb[k][c] -= alpha32[c] * qi[c];
+                            s[c] += f64::from(rb[k][c]) * f64::from(rb[k][c]);
+                        }
+                    }
+                    s
+                };
+                if n >= 16 * 1024 {
+                    chunks
+                        .into_par_iter()
+                        .enumerate()
+                        .map(job)
+                        .collect::<Vec<_>>()
+                } else {
+                    chunks.into_iter().enumerate().map(job).collect::<Vec<_>>()
+                }
+            };
+            rr = sum_lanes(&parts);
+            it += 1;
+            if done(rr) || it >= max_iterations {
+                break;
+            }
+            mg.vcycle(&mut ws, &r, &mut z);
+            let rz_new = dot(&r, &z, w);
+            let beta: [f32; L] = std::array::from_fn(|c| {
+                if rz[c] > 0.0 {
+                    (rz_new[c] / rz[c]) as f32
+                } else {
+                    0.0
+                }
+            });
+            rz = rz_new;
+            bands(&mut p, w, |bi, pb| {
+                for (k, pi) in pb.iter_mut().enumerate() {
+                    let zi = z[bi * BAND * w + k];
+                    for c in 0..L {
+                        pi[c] = zi[c] + beta[c] * pi[c];
+                    }
+                }
+            });
+        }
+        rr = true_residual(diag, w, b, &x, &mut r);
+        if done(rr) || it >= max_iterations {
+            break;
+        }
+    }
+    let rel = (0..L).map(|c| rr[c].sqrt() / scale[c]).fold(0.0, f64::max);
+    (x, it, rel)
+}
+
+/// Blends `src` into `dst` over `mask` (see the module documentation).
+pub fn seamless(input: &BlendInput<'_>, params: &BlendParams) -> Result<Blended> {
+    let (src, dst) = (&input.src, &input.dst);
+    if src.c != dst.c {
+        return Err(invalid(
+            "dst",
+            format!("expected {} channels like src, got {}", src.c, dst.c),
+        ));
+    }
+    if input.mask.len() != src.h * src.w {
+        return Err(invalid(
+            "mask",
+            format!(
+                "expected {}×{} values like src, got {}",
+                src.h,
+                src.w,
+                input.mask.len()
+            ),
+        ));
+    }
+    if let Some(f) = input.fixed {
+        if f.len() != src.h * src.w {
+            return Err(invalid(
+                "fixed",
+                format!(
+                    "expected {}×{} values like src, got {}",
+                    src.h,
+                    src.w,
+                    f.len()
+                ),
+            ));
+        }
+        if let Some(i) = (0..f.len()).find(|&i| f[i] && !input.mask[i]) {
+            return Err(invalid(
+                "fixed",
+                format!(
+                    "pixel (row {}, col {}) is fixed but not in the mask",
+                    i / src.w,
+                    i % src.w
+                ),
+            ));
+        }
+    }
+    if !(params.tol.is_finite() && params.tol > 0.0) {
+        return Err(invalid(
+            "tol",
+            format!("expected a positive tolerance, got {}", params.tol),
+        ));
+    }
+    src.check_finite("src")?;
+    let grid = Grid::new(input)?;
+    let diag = grid.diag();
+    let mg = Hierarchy::new(Level::five(grid.h, grid.w, diag.clone()));
+    let mut out = copy_finite(dst, "dst")?;
+    let (mut iterations, mut residual) = (0, 0.0f64);
+    let c = src.c;
+    match c {
+        1 => {
+            let (i, r) = solve_group::<1>(input, params, &grid, &diag, &mg, 0, &mut out);
+            (iterations, residual) = (i, r);
+        }
+        2 => {
+            let (i, r) = solve_group::<2>(input, params, &grid, &diag, &mg, 0, &mut out);
+            (iterations, residual) = (i, r);
+        }
+        _ => {
+            for c0 in (0..c).step_by(4) {
+                let (i, r) = solve_group::<4>(input, params, &grid, &diag, &mg, c0, &mut out);
+                iterations = iterations.max(i);
+                residual = residual.max(r);
+            }
+        }
+    }
+    Ok(Blended {
+        image: out,
+        iterations,
+        residual,
+        unknowns: mg.levels[0].n,
+    })
+}
+
+/// A copy of `img`'s values, failing (naming `name`) at the first non-finite one.
+fn copy_finite(img: &Image<'_>, name: &'static str) -> Result<Vec<f32>> {
+    const CHUNK: usize = 1 << 16;
+    let bad: Option<usize> = img
+        .data
+        .par_chunks(CHUNK)
+        .enumerate()
+        .filter_map(|(i, d)| {
+            // A branch-free scan (it vectorises); the position only when something is wrong.
+            let any = d.iter().fold(false, |a, v| a | !v.is_finite());
+            any.then(|| i * CHUNK + d.iter().position(|v| !v.is_finite()).unwrap_or(0))
+        })
+        .min();
+    if let Some(i) = bad {
+        let p = i / img.c;
+        return Err(invalid(
+            name,
+            format!(
+                "expected finite values, found {} at pixel (row {}, col {})",
+                img.data[i],
+                p / img.w,
+                p % img.w
+            ),
+        ));
+    }
+    Ok(img.data.to_vec())
+}
+
+/// Solves channels `c0..c0 + L` and writes them into `out`; returns (iterations, residual).
+fn solve_group<const L: usize>(
+    input: &BlendInput<'_>,
+    params: &BlendParams,
+    grid: &Grid,
+    diag: &[f32],
+    mg: &Hierarchy,
+    c0: usize,
+    out: &mut [f32],
+) -> (usize, f64) {
+    let vals = Values::<L>::new(input, grid, c0);
+    let (h, w) = (grid.h, grid.w);
+    let mut b = vec![[0f64; L]; h * w];
+    let parts = bands(&mut b, w, |bi, band| {
+        let mut s = [0f64; L];
+        for (k, cell) in band.iter_mut().enumerate() {
+            let p = bi * BAND * w + k;
+            if grid.kind[p] == UNK {
+                let (f, hh) = vals.rhs(&grid.kind, w, params.mode, p);
+                for c in 0..L {
+                    s[c] += f[c] * f[c];
+                }
+                *cell = hh;
+            }
+        }
+        s
+    });
+    let scale = sum_lanes(&parts).map(|s| if s > 0.0 { s.sqrt() } else { 1.0 });
+    let (mut x, it, mut residual) = pcg(mg, diag, &b, scale, params.tol, params.max_iterations);
+    // Pinned components keep the source's mean: shift their correction to mean zero.
+    if grid.ncomp > 0 {
+        let mut sum = vec![([0f64; L], 0usize); grid.ncomp];
+        for p in 0..h * w {
+            let k = grid.comp[p];
+            if k != u32::MAX {
+                for c in 0..L {
+                    sum[k as usize].0[c] += x[p][c];
+                }
+                sum[k as usize].1 += 1;
+            }
+        }
+        for p in 0..h * w {
+            let k = grid.comp[p];
+            if k != u32::MAX {
+                let (m, n) = sum[k as usize];
+                for c in 0..L {
+                    x[p][c] -= m[c] / n as f64;
+                }
+            }
+        }
+    }
+    if grid.ncomp > 0 {
+        // The solve had one pixel per pinned component as Dirichlet; measure the user's system.
+        // (Otherwise the residual of h is that of f = g + h, already measured.)
+        residual = final_residual(&vals, grid, params.mode, &x);
+    }
+    // f = g + h on the region.
+    let (dw, nc) = (input.dst.w, input.dst.c);
+    let lanes = L.min(nc - c0);
+    for gy in 1..h - 1 {
+        for gx in 1..w - 1 {
+            let p = gy * w + gx;
+            if grid.kind[p] < FIX {
+                continue;
+            }
+            let y = (gy as i64 + grid.y0) as usize;
+            let xx = (gx as i64 + grid.x0) as usize;
+            let o = (y * dw + xx) * nc + c0;
+            for c in 0..lanes {
+                out[o + c] = (f64::from(vals.g[p][c]) + x[p][c]) as f32;
+            }
+        }
+    }
+    (it, residual)
+}
+
+/// Largest relative residual over lanes of `f = g + h` in the system of the user's problem
+/// (pinned pixels counted as unknowns again).
+fn final_residual<const L: usize>(
+    vals: &Values<L>,
+    grid: &Grid,
+    mode: Mode,
+    h: &[[f64; L]],
+) -> f64 {
+    let w = grid.w;
+    let kind: Vec<u8> = if grid.ncomp > 0 {
+        (0..grid.kind.len())
+            .map(|p| {
+                if grid.comp[p] == u32::MAX {
+                    grid.kind[p]
+                } else {
+                    UNK
+                }
+            })
+            .collect()
+    } else {
+        grid.kind.clone()
+    };
+    let f = |p: usize| -> [f64; L] {
+        match kind[p] {
+            UNK | FIX => std::array::from_fn(|c| f64::from(vals.g[p][c]) + h[p][c]),
+            _ => vals.d[p].map(f64::from),
+        }
+    };
+    let row = |gy: usize| {
+        let (mut rr, mut bb) = ([0f64; L], [0f64; L]);
+        for gx in 0..w {
+            let p = gy * w + gx;
+            if kind[p] != UNK {
+                continue;
+            }
+            let (bf, _) = vals.rhs(&kind, w, mode, p);
+            let fp = f(p);
+            let mut af = [0f64; L];
+            for q in [p - w, p - 1, p + 1, p + w] {
+                match kind[q] {
+                    OUT => {}
+                    UNK => {
+                        let fq = f(q);
+                        for c in 0..L {
+                            af[c] += fp[c] - fq[c];
+                        }
+                    }
+                    _ => {
+                        for c in 0..L {
+                            af[c] += fp[c];
+                        }
+                    }
+                }
+            }
+            for c in 0..L {
+                rr[c] += (bf[c] - af[c]).powi(2);
+                bb[c] += bf[c] * bf[c];
+            }
+        }
+        (rr, bb)
+    };
+    let sums: Vec<([f64; L], [f64; L])> = if grid.h * w >= 16 * 1024 {
+        (0..grid.h).into_par_iter().map(row).collect()
+    } else {
+        (0..grid.h).map(row).collect()
+    };
+    let (mut rr, mut bb) = ([0f64; L], [0f64; L]);
+    for (r, b) in &sums {
+        for c in 0..L {
+            rr[c] += r[c];
+            bb[c] += b[c];
+        }
+    }
+    (0..L)
+        .map(|c| {
+            if bb[c] > 0.0 {
+                (rr[c] / bb[c]).sqrt()
+            } else {
+                rr[c].sqrt()
+            }
+        })
+        .fold(0.0, f64::max)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn img(h: usize, w: usize, c: usize, f: impl Fn(usize, usize, usize) -> f32) -> Vec<f32> {
+        (0..h * w * c)
+            .map(|i| f(i / c / w, i / c % w, i % c))
+            .collect()
+    }
+
+    fn disk(n: usize, r: f32) -> Vec<bool> {
+        let m = (n as f32 - 1.0) / 2.0;
+        (0..n * n)
+            .map(|i| ((i / n) as f32 - m).powi(2) + ((i % n) as f32 - m).powi(2) < r * r)
+            .collect()
+    }
+
+    fn blend(
+        src: &[f32],
+        sh: usize,
+        dst: &[f32],
+        dh: usize,
+        c: usize,
+        mask: &[bool],
+        off: (i64, i64),
+        mode: Mode,
+    ) -> Blended {
+        let input = BlendInput {
+            src: Image::new("src", src, sh, sh, c).unwrap(),
+            dst: Image::new("dst", dst, dh, dh, c).unwrap(),
+            mask,
+            offset: off,
+            fixed: None,
+        };
+        seamless(
+            &input,
+            &BlendParams {
+                mode,
+                ..BlendParams::default()
+            },
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn residual_is_below_tolerance_on_a_textured_disk() {
+        let (sh, dh) = (70, 100);
+        let src = img(sh, sh, 3, |y, x, c| {
+            ((y * 7 + x * 13 + c * 5) % 17) as f32 / 17.0
+        });
+        let dst = img(dh, dh, 3, |y, x, c| {
+            (y as f32 * 0.01 + x as f32 * 0.02 + c as f32 * 0.1).sin()
+        });
+        for mode in [Mode::Normal, Mode::Mixed] {
+            let b = blend(&src, sh, &dst, dh, 3, &disk(sh, 30.0), (10, 20), mode);
+            assert!(b.residual < 1e-6, "{mode:?}: residual {}", b.residual);
+            assert!(b.iterations <= 15, "{mode:?}: {} iterations", b.iterations);
+        }
+    }
+
+    #[test]
+    fn self_blend_is_the_identity() {
+        let dh = 50;
+        let dst = img(dh, dh, 2, |y, x, c| {
+            ((y * 3 + x * 5 + c) % 11) as f32 / 11.0
+        });
+        let src: Vec<f32> = (0..30 * 30 * 2)
+            .map(|i| {
+                let (y, x, c) = (i / 2 / 30, i / 2 % 30, i % 2);
+                dst[((y + 5) * dh + x + 12) * 2 + c]
+            })
+            .collect();
+        let b = blend(
+            &src,
+            30,
+            &dst,
+            dh,
+            2,
+            &disk(30, 14.0),
+            (5, 12),
+            Mode::Normal,
+        );
+        assert_eq!(b.image, dst);
+        assert_eq!(b.iterations, 0);
+    }
+
+    #[test]
+    fn whole_destination_keeps_the_source_mean() {
+        // The mask covers all of dst: no Dirichlet pixel, the solution is src shifted to its mean.
+        let n = 20;
+        let src = img(n, n, 1, |y, x, _| (y * x) as f32 / 400.0);
+        let dst = img(n, n, 1, |_, _, _| 0.5);
+        let b = blend(
+            &src,
+            n,
+            &dst,
+            n,
+            1,
+            &vec![true; n * n],
+            (0, 0),
+            Mode::Normal,
+        );
+        for (o, s) in b.image.iter().zip(&src) {
+            assert!((o - s).abs() < 1e-5, "{o} vs {s}");
+        }
+        assert!(b.residual < 1e-6);
+    }
+
+    #[test]
+    fn errors_name_the_argument() {
+        let src = vec![0.0f32; 16];
+        let dst = vec![0.0f32; 64];
+        let mask = vec![true; 16];
+        let input = BlendInput {
+            src: Image::new("src", &src, 4, 4, 1).unwrap(),
+            dst: Image::new("dst", &dst, 8, 8, 1).unwrap(),
+            mask: &mask,
+            offset: (100, 0),
+            fixed: None,
+        };
+        let e = seamless(&input, &BlendParams::default()).unwrap_err();
+        assert!(e.to_string().starts_with("mask:"), "{e}");
+        let none = vec![false; 16];
+        let e = seamless(
+            &BlendInput {
+                mask: &none,
+                offset: (0, 0),
+                ..input
+            },
+            &BlendParams::default(),
+        )
+        .unwrap_err();
+        assert!(e.to_string().starts_with("mask:"), "{e}");
+        let mut fixed = vec![false; 16];
+        fixed[3] = true;
+        let part: Vec<bool> = (0..16).map(|i| i != 3).collect();
+        let e = seamless(
+            &BlendInput {
+                mask: &part,
+                fixed: Some(&fixed),
+                offset: (0, 0),
+                ..input
+            },
+            &BlendParams::default(),
+        )
+        .unwrap_err();
+        assert!(e.to_string().starts_with("fixed:"), "{e}");
+    }
+}
