@@ -49,7 +49,7 @@ def poisson_system(src, dst, mask, offset, mode="normal", fixed=None):
     n = len(uy)
     index = -np.ones((H, W), int)
     index[uy, ux] = np.arange(n)
-    rows, cols, vals = [], [], []
+    rows, cols = [], []
     diag = np.zeros(n)
     b = np.zeros((n, src.shape[2]))
     for dy, dx in NEIGHBOURS:
