@@ -6,7 +6,10 @@ Quilting rows (bark, water, brick): exemplar | quilt with the Kwatra cost | its 
 (each exemplar offset one colour, seams in red) | quilt with the gradient cost | randomly
 placed blocks with straight cuts, for comparison. Seam rows: a disk-shaped fragment (b) laid
 over existing content (a) as in Sibbing et al. §5.3: the overlap | the seam with the
-Kwatra, gradient and Luo costs (a = dark, b = light, seam red) | the composite.
+Kwatra, gradient and Luo costs (a = dark, b = light, seam red) | the composite. Fragment
+row (the whole §5.3 composition): a colour-shifted disk fragment pasted | cut along the seam |
+plus Poisson correction | plus the paper's extra constraint (colours kept where the fragment
+has no neighbour) | the interpolated displacement field of a bent skeleton, applied to a grid.
 """
 
 from __future__ import annotations
@@ -102,6 +105,58 @@ def seam_row(ex: np.ndarray) -> list[np.ndarray]:
     return tiles
 
 
+def fragment_row(ex: np.ndarray) -> list[np.ndarray]:
+    ex = _rgb3(ex)
+    h = w = 160
+    yy, xx = np.mgrid[0:h, 0:w]
+    old = xx < 100
+    new = (yy - 80) ** 2 + (xx - 95) ** 2 < 60**2
+    a = np.zeros((h, w, 3), np.float32)
+    a[old] = ex[:h, :w][old]
+    src = np.clip(ex[60 : 60 + h, 90 : 90 + w] * np.float32([1.25, 1.1, 0.85]), 0, 1)  # the fragment's source
+    b = np.zeros((h, w, 3), np.float32)
+    b[new] = src[new]
+    naive = np.where(new[..., None], b, a)
+    take_b = seam(a, b, old & new, a_mask=old, b_mask=new, cost="gradient")
+    cut = np.where(take_b[..., None], b, a)
+    frag = take_b & new
+    # Poisson: the fragment's gradients, the output's values around it (black where empty).
+    plain = phloem.blend.seamless(src, cut, frag, (0, 0))
+    # Sibbing §5.3: also keep the fragment's colours on its border where no old content is.
+    pad = np.pad(frag, 1)
+    border = frag & ~(pad[:-2, 1:-1] & pad[2:, 1:-1] & pad[1:-1, :-2] & pad[1:-1, 2:])
+    near_old = np.zeros_like(old)
+    near_old[:, 1:] |= old[:, :-1] & ~frag[:, :-1]
+    near_old[:, :-1] |= old[:, 1:] & ~frag[:, 1:]
+    near_old[1:] |= old[:-1] & ~frag[:-1]
+    near_old[:-1] |= old[1:] & ~frag[1:]
+    fixed = border & ~near_old
+    kept = phloem.blend.seamless(src, cut, frag, (0, 0), fixed=fixed)
+    # Displacement field: a straight skeleton bent into an arc; vectors at its points.
+    region = (yy - 80) ** 2 + (xx - 80) ** 2 < 70**2
+    ys = np.arange(20, 141, 10)
+    pts = np.stack([ys, np.full_like(ys, 80)], 1)
+    vec = np.stack([np.zeros(len(ys)), 18 * np.sin(np.pi * (ys - 20) / 120)], 1)
+    field = phloem.blend.interpolate_field(region, pts, vec)
+    grid = np.full((h, w, 3), 0.9, np.float32)
+    grid[(yy % 12 == 0) | (xx % 12 == 0)] = 0.2
+    import cv2
+
+    mx = (xx - np.nan_to_num(field[..., 1])).astype(np.float32)
+    my = (yy - np.nan_to_num(field[..., 0])).astype(np.float32)
+    warped = cv2.remap(grid, mx, my, cv2.INTER_LINEAR)
+    warped[~region] *= 0.5
+    for y, x in pts:
+        cv2.circle(warped, (int(x + 18 * np.sin(np.pi * (y - 20) / 120)), int(y)), 2, (1, 0, 0), -1)
+    return [
+        _label(_fit(naive), "fragment pasted (colour-shifted)"),
+        _label(_fit(cut), "cut along the gradient seam"),
+        _label(_fit(plain), "+ Poisson (empty output = black)"),
+        _label(_fit(kept), "+ colours kept on free border"),
+        _label(_fit(warped), "displacement field on a grid"),
+    ]
+
+
 def main(out: Path) -> None:
     water = phloem.io.read_image(ROOT / "tests" / "data" / "water.jpg")
     rows = [
@@ -109,6 +164,7 @@ def main(out: Path) -> None:
         quilt_row("water", water),
         quilt_row("brick", phloem.data.brick()),
         seam_row(phloem.data.bark()),
+        fragment_row(phloem.data.bark()),
     ]
     sheet = np.concatenate([np.concatenate(r, axis=1) for r in rows], axis=0)
     out.parent.mkdir(parents=True, exist_ok=True)
