@@ -629,14 +629,17 @@ pub fn seamless(input: &BlendInput<'_>, params: &BlendParams) -> Result<Blended>
 }
 
 /// A copy of `img`'s values, failing (naming `name`) at the first non-finite one.
+///
+/// Both passes run in parallel chunks: the check (read-only, branch-free so it vectorises)
+/// and the copy, which rayon writes straight into the new vector's uninitialised capacity
+/// (no zeroing pass first).
 fn copy_finite(img: &Image<'_>, name: &'static str) -> Result<Vec<f32>> {
-    const CHUNK: usize = 1 << 16;
+    const CHUNK: usize = 1 << 15;
     let bad: Option<usize> = img
         .data
         .par_chunks(CHUNK)
         .enumerate()
         .filter_map(|(i, d)| {
-            // A branch-free scan (it vectorises); the position only when something is wrong.
             let any = d.iter().fold(false, |a, v| a | !v.is_finite());
             any.then(|| i * CHUNK + d.iter().position(|v| !v.is_finite()).unwrap_or(0))
         })
@@ -653,7 +656,13 @@ fn copy_finite(img: &Image<'_>, name: &'static str) -> Result<Vec<f32>> {
             ),
         ));
     }
-    Ok(img.data.to_vec())
+    let mut out = Vec::new();
+    img.data
+        .par_iter()
+        .with_min_len(CHUNK)
+        .copied()
+        .collect_into_vec(&mut out);
+    Ok(out)
 }
 
 /// Solves channels `c0..c0 + L` and writes them into `out`; returns (iterations, residual).
