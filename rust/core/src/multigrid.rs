@@ -33,7 +33,7 @@ use rayon::prelude::*;
 pub(crate) const BAND: usize = 8;
 
 /// Grids with fewer cells than this are processed on the calling thread (same result).
-const PARALLEL_CELLS: usize = 16 * 1024;
+const PARALLEL_CELLS: usize = 48 * 1024;
 
 /// Coarsening stops once a level has at most this many unknowns; it is solved densely.
 const COARSEST: usize = 64;
@@ -384,7 +384,8 @@ impl Hierarchy {
 
     /// Zeroed work vectors for `L` lanes.
     pub fn work<const L: usize>(&self) -> Work<L> {
-        // Level 0's `x` and `b` are the caller's vectors.
+        // Level 0's `x` and `b` are the caller's vectors, and its residual is restricted as it
+        // is computed (`restrict_residual_five`).
         let z = |fine: bool| {
             self.levels
                 .iter()
@@ -401,14 +402,49 @@ impl Hierarchy {
         Work {
             x: z(false),
             b: z(false),
-            r: z(true),
+            r: z(false),
         }
     }
 
     /// `z = M⁻¹ r`: one symmetric V(1,1)-cycle from a zero guess. `r` and `z` live on the fine
-    /// grid and are 0 off the unknowns.
-    pub fn vcycle<const L: usize>(&self, ws: &mut Work<L>, r: &[[f32; L]], z: &mut [[f32; L]]) {
-        self.cycle(ws, 0, r, z);
+    /// grid and are 0 off the unknowns. Returns `⟨r, z⟩` per lane, summed in `f64` over bands
+    /// of [`BAND`] rows in a fixed order (computed in the last smoothing sweep).
+    pub fn vcycle<const L: usize>(
+        &self,
+        ws: &mut Work<L>,
+        r: &[[f32; L]],
+        z: &mut [[f32; L]],
+    ) -> [f64; L] {
+        let lev = &self.levels[0];
+        if self.levels.len() == 1 {
+            self.coarsest.solve(r, z);
+            return dot_bands(r, z, lev.w);
+        }
+        let coarse = &self.levels[1];
+        let mut bc = std::mem::take(&mut ws.b[1]);
+        let mut xc = std::mem::take(&mut ws.x[1]);
+        if matches!(lev.stencil, Stencil::Five(_)) {
+            // The first sweeps from zero in one pass, and the residual restricted as it is
+            // computed: the same values as the general path, fewer passes over the fine grid.
+            presmooth_five(lev, r, z);
+            restrict_residual_five(lev, coarse, z, r, &mut bc);
+        } else {
+            smooth(lev, z, r, true);
+            residual(lev, z, r, &mut ws.r[0]);
+            restrict(lev, coarse, &ws.r[0], &mut bc);
+        }
+        self.cycle(ws, 1, &bc, &mut xc);
+        prolong_add(lev, coarse, &xc, z);
+        ws.b[1] = bc;
+        ws.x[1] = xc;
+        let parts = postsmooth(lev, z, r, true);
+        let mut s = [0f64; L];
+        for p in &parts {
+            for c in 0..L {
+                s[c] += p[c];
+            }
+        }
+        s
     }
 
     fn cycle<const L: usize>(
@@ -433,8 +469,25 @@ impl Hierarchy {
         prolong_add(lev, coarse, &xc, x);
         ws.b[l + 1] = bc;
         ws.x[l + 1] = xc;
-        smooth(lev, x, b, false);
+        postsmooth(lev, x, b, false);
     }
+}
+
+/// `⟨u, v⟩` per lane and band of [`BAND`] rows, in `f64`.
+fn dot_bands<const L: usize>(u: &[[f32; L]], v: &[[f32; L]], w: usize) -> [f64; L] {
+    let mut s = [0f64; L];
+    for (a, b) in u.chunks(BAND * w).zip(v.chunks(BAND * w)) {
+        let mut t = [0f64; L];
+        for (x, y) in a.iter().zip(b) {
+            for c in 0..L {
+                t[c] += f64::from(x[c]) * f64::from(y[c]);
+            }
+        }
+        for c in 0..L {
+            s[c] += t[c];
+        }
+    }
+    s
 }
 
 /// Colours of a level: 2 (red–black) for the 5-point operator, 4 for the 9-point ones.
@@ -445,31 +498,51 @@ fn colours(lev: &Level) -> usize {
     }
 }
 
-/// One multicolour Gauss–Seidel sweep; `pre` runs the colours forward from a zero `x`
-/// (which it overwrites), otherwise backward from the current `x`.
+/// One multicolour Gauss–Seidel sweep forward from a zero `x` (which it overwrites).
 fn smooth<const L: usize>(lev: &Level, x: &mut [[f32; L]], b: &[[f32; L]], pre: bool) {
+    debug_assert!(pre);
     let nc = colours(lev);
-    for step in 0..nc {
-        let colour = if pre { step } else { nc - 1 - step };
+    for colour in 0..nc {
         // The first step from zero also writes the zeros of the other colours.
-        sweep(lev, x, b, colour, pre && step == 0);
+        sweep(lev, x, b, colour, colour == 0, false);
     }
 }
 
-/// Updates the points of one colour in place, bands of rows in parallel.
+/// One multicolour Gauss–Seidel sweep backward from the current `x`. With `dot`, also returns
+/// `⟨b, x⟩` of the result per band of [`BAND`] rows (summed row-major within the band, as the
+/// last colour finishes each row); otherwise an empty vector.
+fn postsmooth<const L: usize>(
+    lev: &Level,
+    x: &mut [[f32; L]],
+    b: &[[f32; L]],
+    dot: bool,
+) -> Vec<[f64; L]> {
+    let nc = colours(lev);
+    for step in 0..nc - 1 {
+        sweep(lev, x, b, nc - 1 - step, false, false);
+    }
+    sweep(lev, x, b, 0, false, dot)
+}
+
+/// Updates the points of one colour in place, bands of rows in parallel. With `dot`, returns
+/// `⟨b, x⟩` per band after the update (all colours but this one must be final); otherwise an
+/// empty vector.
 fn sweep<const L: usize>(
     lev: &Level,
     x: &mut [[f32; L]],
     b: &[[f32; L]],
     colour: usize,
     zero: bool,
-) {
+    dot: bool,
+) -> Vec<[f64; L]> {
     let (h, w) = (lev.h, lev.w);
     let band_rows = |y0: usize, band: &mut [[f32; L]], above: &[[f32; L]], below: &[[f32; L]]| {
         let rows = band.len() / w;
+        let mut acc = [0f64; L];
         for yy in 0..rows {
             let y = y0 + yy;
             if y == 0 || y == h - 1 {
+                // Zeros: nothing to update, nothing to add to the dot product.
                 continue;
             }
             let (before, rest) = band.split_at_mut(yy * w);
@@ -481,81 +554,111 @@ fn sweep<const L: usize>(
             };
             let down = if yy + 1 == rows { below } else { &after[..w] };
             let o = y * w;
-            match &lev.stencil {
-                Stencil::Five(_) if zero => {
-                    let start = if (1 + y) % 2 == colour { 1 } else { 2 };
-                    cur.fill([0.0; L]);
-                    for xi in (start..w - 1).step_by(2) {
-                        let inv = lev.inv[o + xi];
-                        cur[xi] = b[o + xi].map(|t| t * inv);
-                    }
-                }
-                Stencil::Nine(_) if zero => {
-                    cur.fill([0.0; L]);
-                    if y % 2 != colour / 2 {
-                        continue;
-                    }
-                    let start = if colour % 2 == 1 { 1 } else { 2 };
-                    for xi in (start..w - 1).step_by(2) {
-                        let inv = lev.inv[o + xi];
-                        cur[xi] = b[o + xi].map(|t| t * inv);
-                    }
-                }
-                Stencil::Five(_) => {
-                    let start = if (1 + y) % 2 == colour { 1 } else { 2 };
-                    for xi in (start..w - 1).step_by(2) {
-                        let inv = lev.inv[o + xi];
-                        let bb = b[o + xi];
-                        let (l, r, u, d) = (cur[xi - 1], cur[xi + 1], up[xi], down[xi]);
-                        let mut v = [0f32; L];
-                        for c in 0..L {
-                            v[c] = inv * (bb[c] + l[c] + r[c] + u[c] + d[c]);
-                        }
-                        cur[xi] = v;
-                    }
-                }
-                Stencil::Nine(a) => {
-                    if y % 2 != colour / 2 {
-                        continue;
-                    }
-                    let start = if colour % 2 == 1 { 1 } else { 2 };
-                    for xi in (start..w - 1).step_by(2) {
-                        let inv = lev.inv[o + xi];
-                        if inv == 0.0 {
-                            continue;
-                        }
-                        let s = &a[o + xi];
-                        let mut v = b[o + xi];
-                        for k in [0, 1, 2] {
-                            let n = up[xi + k - 1];
-                            let m = down[xi + k - 1];
-                            for c in 0..L {
-                                v[c] -= s[k] * n[c] + s[k + 6] * m[c];
-                            }
-                        }
-                        let (l, r) = (cur[xi - 1], cur[xi + 1]);
-                        for c in 0..L {
-                            v[c] -= s[3] * l[c] + s[5] * r[c];
-                        }
-                        cur[xi] = v.map(|t| t * inv);
+            update_row(lev, &mut *cur, up, down, &b[o..o + w], y, colour, zero);
+            if dot {
+                for (xv, bv) in cur.iter().zip(&b[o..o + w]) {
+                    for c in 0..L {
+                        acc[c] += f64::from(bv[c]) * f64::from(xv[c]);
                     }
                 }
             }
         }
+        acc
     };
-    bands_mut(x, h, w, zero, band_rows);
+    let parts = bands_mut(x, h, w, zero, band_rows);
+    if dot {
+        parts
+    } else {
+        Vec::new()
+    }
+}
+
+/// Row `y` (`cur`, with the rows `up` and `down` around it and right-hand side `b`) of a sweep
+/// over `colour`; `zero`: from a zero iterate (the row is overwritten).
+#[inline]
+fn update_row<const L: usize>(
+    lev: &Level,
+    cur: &mut [[f32; L]],
+    up: &[[f32; L]],
+    down: &[[f32; L]],
+    b: &[[f32; L]],
+    y: usize,
+    colour: usize,
+    zero: bool,
+) {
+    let w = lev.w;
+    let inv = &lev.inv[y * w..(y + 1) * w];
+    match &lev.stencil {
+        Stencil::Five(_) if zero => {
+            let start = if (1 + y) % 2 == colour { 1 } else { 2 };
+            cur.fill([0.0; L]);
+            for xi in (start..w - 1).step_by(2) {
+                cur[xi] = b[xi].map(|t| t * inv[xi]);
+            }
+        }
+        Stencil::Nine(_) if zero => {
+            cur.fill([0.0; L]);
+            if y % 2 != colour / 2 {
+                return;
+            }
+            let start = if colour % 2 == 1 { 1 } else { 2 };
+            for xi in (start..w - 1).step_by(2) {
+                cur[xi] = b[xi].map(|t| t * inv[xi]);
+            }
+        }
+        Stencil::Five(_) => {
+            let start = if (1 + y) % 2 == colour { 1 } else { 2 };
+            let (up, down) = (&up[..w], &down[..w]);
+            for xi in (start..w - 1).step_by(2) {
+                let bb = b[xi];
+                let (l, r, u, d) = (cur[xi - 1], cur[xi + 1], up[xi], down[xi]);
+                let mut v = [0f32; L];
+                for c in 0..L {
+                    v[c] = inv[xi] * (bb[c] + l[c] + r[c] + u[c] + d[c]);
+                }
+                cur[xi] = v;
+            }
+        }
+        Stencil::Nine(a) => {
+            if y % 2 != colour / 2 {
+                return;
+            }
+            let a = &a[y * w..(y + 1) * w];
+            let (up, down) = (&up[..w], &down[..w]);
+            let start = if colour % 2 == 1 { 1 } else { 2 };
+            for xi in (start..w - 1).step_by(2) {
+                if inv[xi] == 0.0 {
+                    continue;
+                }
+                let s = &a[xi];
+                let mut v = b[xi];
+                for k in [0, 1, 2] {
+                    let n = up[xi + k - 1];
+                    let m = down[xi + k - 1];
+                    for c in 0..L {
+                        v[c] -= s[k] * n[c] + s[k + 6] * m[c];
+                    }
+                }
+                let (l, r) = (cur[xi - 1], cur[xi + 1]);
+                for c in 0..L {
+                    v[c] -= s[3] * l[c] + s[5] * r[c];
+                }
+                cur[xi] = v.map(|t| t * inv[xi]);
+            }
+        }
+    }
 }
 
 /// Calls `f(first_row, band, row_above, row_below)` on bands of [`BAND`] rows, in parallel on
-/// large grids. The bordering rows are copies taken before any band runs (empty when `no_halo`
+/// large grids, and returns the results in band order. The bordering rows are copies taken before any band runs (empty when `no_halo`
 /// or at the grid edge).
-fn bands_mut<T: Copy + Send + Sync>(
+fn bands_mut<T: Copy + Send + Sync, R: Send>(
     x: &mut [T],
     h: usize,
     w: usize,
     no_halo: bool,
-    f: impl Fn(usize, &mut [T], &[T], &[T]) + Sync,
-) {
+    f: impl Fn(usize, &mut [T], &[T], &[T]) -> R + Sync,
+) -> Vec<R> {
     let nb = h.div_ceil(BAND);
     let halos: Vec<(Vec<T>, Vec<T>)> = if no_halo {
         Vec::new()
@@ -583,12 +686,12 @@ fn bands_mut<T: Copy + Send + Sync>(
         let (a, b) = halos
             .get(i)
             .map_or((empty, empty), |(a, b)| (a.as_slice(), b.as_slice()));
-        f(i * BAND, band, a, b);
+        f(i * BAND, band, a, b)
     };
     if h * w >= PARALLEL_CELLS {
-        x.par_chunks_mut(BAND * w).enumerate().for_each(run);
+        x.par_chunks_mut(BAND * w).enumerate().map(run).collect()
     } else {
-        x.chunks_mut(BAND * w).enumerate().for_each(run);
+        x.chunks_mut(BAND * w).enumerate().map(run).collect()
     }
 }
 
@@ -651,6 +754,141 @@ fn residual<const L: usize>(lev: &Level, x: &[[f32; L]], b: &[[f32; L]], r: &mut
             }
         }
     });
+}
+
+/// The two red–black sweeps of pre-smoothing from a zero iterate on the 5-point level, in one
+/// pass: colour 0 (`x + y` even) gets `b / d`, colour 1 then
+/// `(b + Σ_neighbours b_q / d_q) / d` — the values of [`smooth`], read from `b` alone, so rows
+/// need no halo.
+fn presmooth_five<const L: usize>(lev: &Level, b: &[[f32; L]], x: &mut [[f32; L]]) {
+    let (h, w) = (lev.h, lev.w);
+    let inv = &lev.inv;
+    rows_mut(x, w, |y, out| {
+        out.fill([0.0; L]);
+        if y == 0 || y == h - 1 {
+            return;
+        }
+        let o = y * w;
+        let (bu, bc, bd) = (&b[o - w..o], &b[o..o + w], &b[o + w..o + 2 * w]);
+        let (iu, ic, id) = (&inv[o - w..o], &inv[o..o + w], &inv[o + w..o + 2 * w]);
+        // Colour 0 where x + y is even.
+        for xi in ((2 - y % 2)..w - 1).step_by(2) {
+            out[xi] = bc[xi].map(|t| t * ic[xi]);
+        }
+        for xi in ((1 + y % 2)..w - 1).step_by(2) {
+            let (l, r) = (bc[xi - 1], bc[xi + 1]);
+            let (u, d) = (bu[xi], bd[xi]);
+            let (il, ir, iuu, idd) = (ic[xi - 1], ic[xi + 1], iu[xi], id[xi]);
+            let bb = bc[xi];
+            let mut v = [0f32; L];
+            for c in 0..L {
+                v[c] = ic[xi] * (bb[c] + l[c] * il + r[c] * ir + u[c] * iuu + d[c] * idd);
+            }
+            out[xi] = v;
+        }
+    });
+}
+
+/// `bc = Pᵀ (b − A x)` on the 5-point level right after [`presmooth_five`]: the residual is zero
+/// on colour 1 (just solved), so each coarse point gathers the residual of its fine centre
+/// and, weighted ¼, of its four corners. The residual of each fine row is computed once per
+/// band of coarse rows (plus one shared row at the band's top) and never stored whole.
+fn restrict_residual_five<const L: usize>(
+    fine: &Level,
+    coarse: &Level,
+    x: &[[f32; L]],
+    b: &[[f32; L]],
+    bc: &mut [[f32; L]],
+) {
+    let Stencil::Five(d) = &fine.stencil else {
+        unreachable!("restrict_residual_five on a 9-point level")
+    };
+    let (hf, wf, hc, wc) = (fine.h, fine.w, coarse.h, coarse.w);
+    // Residual at fine (y, 2k) for y even (its colour-0 points), into `out[k]`.
+    let even_row = |y: usize, out: &mut [[f32; L]]| {
+        out.fill([0.0; L]);
+        if y == 0 || y >= hf - 1 {
+            return;
+        }
+        let o = y * wf;
+        for (k, cell) in out.iter_mut().enumerate() {
+            let xi = 2 * k;
+            if xi == 0 || xi >= wf - 1 {
+                continue;
+            }
+            *cell = res_at(d, x, b, o + xi, wf);
+        }
+    };
+    let band = |(bi, rows): (usize, &mut [[f32; L]])| {
+        let i0 = bi * BAND;
+        let mut top = vec![[0f32; L]; wc];
+        let mut bot = vec![[0f32; L]; wc];
+        if i0 >= 1 {
+            even_row(2 * i0 - 2, &mut top);
+        } else {
+            // Coarse row 0 is a border row: it restricts nothing.
+            even_row(0, &mut top);
+        }
+        for (ii, out) in rows.chunks_mut(wc).enumerate() {
+            let i = i0 + ii;
+            out.fill([0.0; L]);
+            if i == 0 {
+                continue;
+            }
+            if i >= hc - 1 || 2 * i >= hf {
+                continue;
+            }
+            even_row(2 * i, &mut bot);
+            let o = (2 * i - 1) * wf;
+            for j in 1..wc - 1 {
+                if 2 * j >= wf {
+                    break;
+                }
+                if coarse.inv[i * wc + j] == 0.0 {
+                    continue;
+                }
+                let centre = res_at(d, x, b, o + 2 * j - 1, wf);
+                let (a, bb, cc, dd) = (top[j - 1], top[j], bot[j - 1], bot[j]);
+                // The order of `restrict` (its zero terms dropped): the same sums.
+                let mut v = [0f32; L];
+                for c in 0..L {
+                    v[c] += 0.25 * a[c];
+                    v[c] += 0.25 * bb[c];
+                    v[c] += centre[c];
+                    v[c] += 0.25 * cc[c];
+                    v[c] += 0.25 * dd[c];
+                }
+                out[j] = v;
+            }
+            std::mem::swap(&mut top, &mut bot);
+        }
+    };
+    if bc.len() >= PARALLEL_CELLS / 4 {
+        bc.par_chunks_mut(BAND * wc).enumerate().for_each(band);
+    } else {
+        bc.chunks_mut(BAND * wc).enumerate().for_each(band);
+    }
+}
+
+/// The residual `b − A x` of the 5-point level at unknown-or-not cell `p` (0 off the unknowns).
+#[inline]
+fn res_at<const L: usize>(
+    d: &[f32],
+    x: &[[f32; L]],
+    b: &[[f32; L]],
+    p: usize,
+    w: usize,
+) -> [f32; L] {
+    let dp = d[p];
+    if dp == 0.0 {
+        return [0.0; L];
+    }
+    let (c0, l, rr, u, dn) = (x[p], x[p - 1], x[p + 1], x[p - w], x[p + w]);
+    let mut v = b[p];
+    for c in 0..L {
+        v[c] -= dp * c0[c] - (l[c] + rr[c] + u[c] + dn[c]);
+    }
+    v
 }
 
 /// `bc = Pᵀ rf`.

@@ -123,28 +123,25 @@ impl Grid {
         let (sh, sw) = (input.src.h, input.src.w);
         let (dh, dw) = (input.dst.h as i64, input.dst.w as i64);
         let (oy, ox) = input.offset;
-        let inside = |sy: usize, sx: usize| {
-            let (y, x) = (sy as i64 + oy, sx as i64 + ox);
-            (0..dh).contains(&y) && (0..dw).contains(&x)
-        };
+        if !input.mask.iter().any(|&m| m) {
+            return Err(invalid("mask", "expected at least one pixel set, got none"));
+        }
+        // Source rows and columns that land inside the destination.
+        let rows = (-oy).clamp(0, sh as i64) as usize..(dh - oy).clamp(0, sh as i64) as usize;
+        let cols = (-ox).clamp(0, sw as i64) as usize..(dw - ox).clamp(0, sw as i64) as usize;
         let (mut y0, mut y1, mut x0, mut x1) = (i64::MAX, i64::MIN, i64::MAX, i64::MIN);
-        let mut any = false;
-        for sy in 0..sh {
-            for sx in 0..sw {
-                if input.mask[sy * sw + sx] {
-                    any = true;
-                    if inside(sy, sx) {
-                        let (y, x) = (sy as i64 + oy, sx as i64 + ox);
-                        y0 = y0.min(y);
-                        y1 = y1.max(y);
-                        x0 = x0.min(x);
-                        x1 = x1.max(x);
-                    }
+        if !cols.is_empty() {
+            for sy in rows.clone() {
+                let row = &input.mask[sy * sw + cols.start..sy * sw + cols.end];
+                if let Some(first) = row.iter().position(|&m| m) {
+                    let last = row.iter().rposition(|&m| m).unwrap_or(first);
+                    let y = sy as i64 + oy;
+                    y0 = y0.min(y);
+                    y1 = y1.max(y);
+                    x0 = x0.min((cols.start + first) as i64 + ox);
+                    x1 = x1.max((cols.start + last) as i64 + ox);
                 }
             }
-        }
-        if !any {
-            return Err(invalid("mask", "expected at least one pixel set, got none"));
         }
         if y0 == i64::MAX {
             return Err(invalid(
@@ -157,25 +154,24 @@ impl Grid {
         let h = ((y1 - y0 + 3) as usize) | 1;
         let w = ((x1 - x0 + 3) as usize) | 1;
         let (gy0, gx0) = (y0 - 1, x0 - 1);
+        // Grid columns inside the destination.
+        let gcols = (-gx0).clamp(0, w as i64) as usize..(dw - gx0).clamp(0, w as i64) as usize;
         let mut kind = vec![OUT; h * w];
-        for gy in 0..h {
+        for (gy, row) in kind.chunks_mut(w).enumerate() {
             let y = gy as i64 + gy0;
             if !(0..dh).contains(&y) {
                 continue;
             }
-            for gx in 0..w {
-                if (0..dw).contains(&(gx as i64 + gx0)) {
-                    kind[gy * w + gx] = DST;
-                }
+            row[gcols.clone()].fill(DST);
+            if !(0..sh as i64).contains(&(y - oy)) {
+                continue;
             }
-        }
-        for sy in 0..sh {
-            for sx in 0..sw {
-                if input.mask[sy * sw + sx] && inside(sy, sx) {
-                    let gy = (sy as i64 + oy - gy0) as usize;
+            let sy = (y - oy) as usize;
+            for sx in cols.clone() {
+                if input.mask[sy * sw + sx] {
                     let gx = (sx as i64 + ox - gx0) as usize;
                     let fixed = input.fixed.is_some_and(|f| f[sy * sw + sx]);
-                    kind[gy * w + gx] = if fixed { FIX } else { UNK };
+                    row[gx] = if fixed { FIX } else { UNK };
                 }
             }
         }
@@ -192,62 +188,118 @@ impl Grid {
         Ok(grid)
     }
 
-    /// Pins the first pixel of every connected set of unknowns that has no Dirichlet
-    /// neighbour, remembering the set so its mean can be restored.
+    /// Pins the first pixel (in raster order) of every connected set of unknowns that has no
+    /// Dirichlet neighbour, remembering the set so its mean can be restored.
+    ///
+    /// Works on runs of unknowns along rows: runs in adjacent rows that overlap are joined
+    /// (union–find), and a run is grounded when a cell at its ends or above or below it is
+    /// Dirichlet. Cost is in runs, plus a byte scan of the rows around them.
     fn pin_floating_components(&mut self) {
         let (h, w) = (self.h, self.w);
-        let mut seen = vec![false; h * w];
-        let mut stack = Vec::new();
-        let mut members = Vec::new();
-        for start in 0..h * w {
-            if self.kind[start] != UNK || seen[start] {
-                continue;
+        let kind = &self.kind;
+        let dirichlet = |k: u8| k == DST || k == FIX;
+        // Runs (row, first, end) in raster order; row_runs[y]..row_runs[y + 1] index row y's.
+        let mut runs: Vec<(usize, usize, usize)> = Vec::new();
+        let mut row_runs = vec![0usize; h + 1];
+        for y in 1..h - 1 {
+            let row = &kind[y * w..(y + 1) * w];
+            let mut x = 1;
+            while x < w - 1 {
+                if row[x] == UNK {
+                    let s = x;
+                    while row[x] == UNK {
+                        x += 1;
+                    }
+                    runs.push((y, s, x));
+                } else {
+                    x += 1;
+                }
             }
-            seen[start] = true;
-            stack.push(start);
-            members.clear();
-            let mut grounded = false;
-            while let Some(p) = stack.pop() {
-                members.push(p);
-                for q in [p - w, p - 1, p + 1, p + w] {
-                    match self.kind[q] {
-                        UNK if !seen[q] => {
-                            seen[q] = true;
-                            stack.push(q);
-                        }
-                        DST | FIX => grounded = true,
-                        _ => {}
+            row_runs[y + 1] = runs.len();
+        }
+        row_runs[h] = runs.len();
+        let mut grounded: Vec<bool> = runs
+            .iter()
+            .map(|&(y, s, e)| {
+                let o = y * w;
+                dirichlet(kind[o + s - 1])
+                    || dirichlet(kind[o + e])
+                    || kind[o - w + s..o - w + e].iter().any(|&k| dirichlet(k))
+                    || kind[o + w + s..o + w + e].iter().any(|&k| dirichlet(k))
+            })
+            .collect();
+        let mut parent: Vec<usize> = (0..runs.len()).collect();
+        fn find(parent: &mut [usize], mut i: usize) -> usize {
+            while parent[i] != i {
+                parent[i] = parent[parent[i]];
+                i = parent[i];
+            }
+            i
+        }
+        for y in 2..h - 1 {
+            let (mut a, a_end) = (row_runs[y - 1], row_runs[y]);
+            let (mut b, b_end) = (row_runs[y], row_runs[y + 1]);
+            while a < a_end && b < b_end {
+                let (_, sa, ea) = runs[a];
+                let (_, sb, eb) = runs[b];
+                if sa < eb && sb < ea {
+                    let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+                    if ra != rb {
+                        // The earlier run stays the root.
+                        let (lo, hi) = (ra.min(rb), ra.max(rb));
+                        parent[hi] = lo;
+                        grounded[lo] |= grounded[hi];
                     }
                 }
+                if ea <= eb {
+                    a += 1;
+                } else {
+                    b += 1;
+                }
             }
-            if !grounded {
-                if self.comp.is_empty() {
-                    self.comp = vec![u32::MAX; h * w];
-                }
-                for &p in &members {
-                    self.comp[p] = self.ncomp as u32;
-                }
-                // `start` is the component's first cell in raster order.
-                self.kind[start] = FIX;
+        }
+        let mut index = vec![u32::MAX; runs.len()];
+        for i in 0..runs.len() {
+            let root = find(&mut parent, i);
+            if grounded[root] {
+                continue;
+            }
+            let (y, s, e) = runs[i];
+            if index[root] == u32::MAX {
+                // The component's first run in raster order: pin its first cell.
+                index[root] = self.ncomp as u32;
                 self.ncomp += 1;
+                self.kind[y * w + s] = FIX;
             }
+            if self.comp.is_empty() {
+                self.comp = vec![u32::MAX; h * w];
+            }
+            self.comp[y * w + s..y * w + e].fill(index[root]);
         }
     }
 
     fn diag(&self) -> Vec<f32> {
-        let w = self.w;
-        (0..self.h * w)
-            .map(|p| {
-                if self.kind[p] == UNK {
-                    [p - w, p - 1, p + 1, p + w]
-                        .iter()
-                        .filter(|&&q| self.kind[q] != OUT)
-                        .count() as f32
-                } else {
-                    0.0
+        let (h, w) = (self.h, self.w);
+        let kind = &self.kind;
+        let mut d = vec![0f32; h * w];
+        rows_mut(&mut d, w, |y, row| {
+            if y == 0 || y == h - 1 {
+                return;
+            }
+            let o = y * w;
+            let (up, cur, dn) = (&kind[o - w..o], &kind[o..o + w], &kind[o + w..o + 2 * w]);
+            for x in 1..w - 1 {
+                if cur[x] == UNK {
+                    row[x] = f32::from(
+                        u8::from(up[x] != OUT)
+                            + u8::from(dn[x] != OUT)
+                            + u8::from(cur[x - 1] != OUT)
+                            + u8::from(cur[x + 1] != OUT),
+                    );
                 }
-            })
-            .collect()
+            }
+        });
+        d
     }
 }
 
@@ -357,27 +409,38 @@ fn sum_lanes<const L: usize>(parts: &[[f64; L]]) -> [f64; L] {
     s
 }
 
-/// A band of the iterate (`f64`) and of the residual (`f32`).
-type IterateBand<'a, const L: usize> = (&'a mut [[f64; L]], &'a mut [[f32; L]]);
+/// A band of the iterate (`f64`), the search direction and the preconditioned residual.
+type StepBand<'a, const L: usize> = (&'a mut [[f64; L]], &'a mut [[f32; L]]);
 
 /// `q = A p` on the fine level; returns `⟨p, q⟩` per lane (summed in `f64`).
 fn apply<const L: usize>(diag: &[f32], w: usize, p: &[[f32; L]], q: &mut [[f32; L]]) -> [f64; L] {
+    let h = diag.len() / w;
     let parts = bands(q, w, |bi, qb| {
         let mut dot = [0f64; L];
-        for (k, out) in qb.iter_mut().enumerate() {
-            let i = bi * BAND * w + k;
-            let d = diag[i];
-            if d == 0.0 {
-                *out = [0.0; L];
+        for (k, out) in qb.chunks_mut(w).enumerate() {
+            let y = bi * BAND + k;
+            if y == 0 || y == h - 1 {
+                out.fill([0.0; L]);
                 continue;
             }
-            let (c0, l, r, u, dn) = (p[i], p[i - 1], p[i + 1], p[i - w], p[i + w]);
-            let mut v = [0f32; L];
-            for c in 0..L {
-                v[c] = d * c0[c] - (l[c] + r[c] + u[c] + dn[c]);
-                dot[c] += f64::from(c0[c]) * f64::from(v[c]);
+            let o = y * w;
+            let (up, cur, dn) = (&p[o - w..o], &p[o..o + w], &p[o + w..o + 2 * w]);
+            let d = &diag[o..o + w];
+            out[0] = [0.0; L];
+            out[w - 1] = [0.0; L];
+            for xi in 1..w - 1 {
+                if d[xi] == 0.0 {
+                    out[xi] = [0.0; L];
+                    continue;
+                }
+                let (c0, l, r, u, dn) = (cur[xi], cur[xi - 1], cur[xi + 1], up[xi], dn[xi]);
+                let mut v = [0f32; L];
+                for c in 0..L {
+                    v[c] = d[xi] * c0[c] - (l[c] + r[c] + u[c] + dn[c]);
+                    dot[c] += f64::from(c0[c]) * f64::from(v[c]);
+                }
+                out[xi] = v;
             }
-            *out = v;
         }
         dot
     });
@@ -415,28 +478,59 @@ fn true_residual<const L: usize>(
     sum_lanes(&parts)
 }
 
-/// `⟨u, v⟩` per lane, summed in `f64` by bands.
-fn dot<const L: usize>(u: &[[f32; L]], v: &[[f32; L]], w: usize) -> [f64; L] {
-    let job = |(a, b): (&[[f32; L]], &[[f32; L]])| {
-        let mut s = [0f64; L];
-        for (x, y) in a.iter().zip(b) {
+/// `x += α p` (the step of the previous iteration) and then `p = z + β p`, in one pass.
+fn step<const L: usize>(
+    x: &mut [[f64; L]],
+    p: &mut [[f32; L]],
+    z: &[[f32; L]],
+    w: usize,
+    alpha: [f64; L],
+    beta: Option<[f32; L]>,
+) {
+    let job = |(bi, (xb, pb)): (usize, StepBand<'_, L>)| {
+        let zb = &z[bi * BAND * w..];
+        for ((xi, pi), zi) in xb.iter_mut().zip(pb.iter_mut()).zip(zb) {
             for c in 0..L {
-                s[c] += f64::from(x[c]) * f64::from(y[c]);
+                xi[c] += alpha[c] * f64::from(pi[c]);
+            }
+            if let Some(beta) = beta {
+                for c in 0..L {
+                    pi[c] = zi[c] + beta[c] * pi[c];
+                }
+            }
+        }
+    };
+    let parallel = x.len() >= 16 * 1024;
+    let chunks = x.chunks_mut(BAND * w).zip(p.chunks_mut(BAND * w));
+    if parallel {
+        chunks
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .enumerate()
+            .for_each(job);
+    } else {
+        chunks.enumerate().for_each(job);
+    }
+}
+
+/// `r −= α q`; returns `‖r‖²` per lane.
+fn update_residual<const L: usize>(
+    r: &mut [[f32; L]],
+    q: &[[f32; L]],
+    w: usize,
+    alpha: [f32; L],
+) -> [f64; L] {
+    let parts = bands(r, w, |bi, rb| {
+        let mut s = [0f64; L];
+        let qb = &q[bi * BAND * w..];
+        for (ri, qi) in rb.iter_mut().zip(qb) {
+            for c in 0..L {
+                ri[c] -= alpha[c] * qi[c];
+                s[c] += f64::from(ri[c]) * f64::from(ri[c]);
             }
         }
         s
-    };
-    let parts: Vec<[f64; L]> = if u.len() >= 16 * 1024 {
-        u.par_chunks(BAND * w)
-            .zip(v.par_chunks(BAND * w))
-            .map(job)
-            .collect()
-    } else {
-        u.chunks(BAND * w)
-            .zip(v.chunks(BAND * w))
-            .map(job)
-            .collect()
-    };
+    });
     sum_lanes(&parts)
 }
 
@@ -446,7 +540,9 @@ fn dot<const L: usize>(u: &[[f32; L]], v: &[[f32; L]], w: usize) -> [f64; L] {
 ///
 /// The iterate `h` and the final residual check are `f64`; the residual recurrence, the search
 /// directions and the preconditioner are `f32` (half the memory traffic). When the recurrence
-/// has drifted from the true residual, CG restarts from the true one.
+/// has drifted from the true residual, CG restarts from the true one. The update of `h` by an
+/// iteration's step is deferred to the pass that updates the search direction of the next
+/// one (the same arithmetic, one pass over the grid less).
 fn pcg<const L: usize>(
     mg: &Hierarchy,
     diag: &[f32],
@@ -475,8 +571,7 @@ fn pcg<const L: usize>(
         if done(rr) || it >= max_iterations {
             break;
         }
-        mg.vcycle(&mut ws, &r, &mut z);
-        let mut rz = dot(&r, &z, w);
+        let mut rz = mg.vcycle(&mut ws, &r, &mut z);
         p.copy_from_slice(&z);
         loop {
             let pq = apply(diag, w, &p, &mut q);
@@ -487,40 +582,13 @@ fn pcg<const L: usize>(
                     0.0
                 }
             });
-            let alpha32 = alpha.map(|a| a as f32);
-            let parts = {
-                let (pp, qq) = (&p, &q);
-                let chunks: Vec<_> = x.chunks_mut(BAND * w).zip(r.chunks_mut(BAND * w)).collect();
-                let job = |(bi, (xb, rb)): (usize, IterateBand<'_, L>)| {
-                    let mut s = [0f64; L];
-                    for k in 0..xb.len() {
-                        let i = bi * BAND * w + k;
-                        let (pi, qi) = (pp[i], qq[i]);
-                        for c in 0..L {
-                            xb[k][c] += alpha[c] * f64::from(pi[c]);
-                            rb[k][c] -= alpha32[c] * qi[c];
-                            s[c] += f64::from(rb[k][c]) * f64::from(rb[k][c]);
-                        }
-                    }
-                    s
-                };
-                if n >= 16 * 1024 {
-                    chunks
-                        .into_par_iter()
-                        .enumerate()
-                        .map(job)
-                        .collect::<Vec<_>>()
-                } else {
-                    chunks.into_iter().enumerate().map(job).collect::<Vec<_>>()
-                }
-            };
-            rr = sum_lanes(&parts);
+            rr = update_residual(&mut r, &q, w, alpha.map(|a| a as f32));
             it += 1;
             if done(rr) || it >= max_iterations {
+                step(&mut x, &mut p, &z, w, alpha, None);
                 break;
             }
-            mg.vcycle(&mut ws, &r, &mut z);
-            let rz_new = dot(&r, &z, w);
+            let rz_new = mg.vcycle(&mut ws, &r, &mut z);
             let beta: [f32; L] = std::array::from_fn(|c| {
                 if rz[c] > 0.0 {
                     (rz_new[c] / rz[c]) as f32
@@ -529,14 +597,7 @@ fn pcg<const L: usize>(
                 }
             });
             rz = rz_new;
-            bands(&mut p, w, |bi, pb| {
-                for (k, pi) in pb.iter_mut().enumerate() {
-                    let zi = z[bi * BAND * w + k];
-                    for c in 0..L {
-                        pi[c] = zi[c] + beta[c] * pi[c];
-                    }
-                }
-            });
+            step(&mut x, &mut p, &z, w, alpha, Some(beta));
         }
         rr = true_residual(diag, w, b, &x, &mut r);
         if done(rr) || it >= max_iterations {
