@@ -59,6 +59,8 @@ pub(crate) struct Level {
     pub n: usize,
     /// The row of an unknown whose neighbourhood is all unknowns (the fast path of coarsening).
     interior: [f32; 9],
+    /// Per cell: an unknown (off the frame) whose row is exactly `interior`.
+    is_interior: Vec<bool>,
 }
 
 impl Level {
@@ -70,6 +72,20 @@ impl Level {
             .map(|&d| if d > 0.0 { 1.0 / d } else { 0.0 })
             .collect();
         let n = diag.iter().filter(|&&d| d > 0.0).count();
+        // Interior rows: diagonal 4 and all four neighbours unknown.
+        let mut is_interior = vec![false; h * w];
+        rows_mut(&mut is_interior, w, |y, row| {
+            if y == 0 || y == h - 1 {
+                return;
+            }
+            let o = y * w;
+            let (up, cur, dn) = (&diag[o - w..o], &diag[o..o + w], &diag[o + w..o + 2 * w]);
+            for x in 1..w - 1 {
+                #[allow(clippy::float_cmp)]
+                let four = cur[x] == 4.0;
+                row[x] = four && cur[x - 1] > 0.0 && cur[x + 1] > 0.0 && up[x] > 0.0 && dn[x] > 0.0;
+            }
+        });
         Self {
             h,
             w,
@@ -77,6 +93,7 @@ impl Level {
             inv,
             n,
             interior: [0.0, -1.0, 0.0, -1.0, 4.0, -1.0, 0.0, -1.0, 0.0],
+            is_interior,
         }
     }
 
@@ -128,23 +145,6 @@ impl Level {
         }
     }
 
-    /// Whether row `p` is the level's interior stencil (then so are its neighbours' columns).
-    /// Exact comparison on purpose: the fast path must give the bits the slow one would.
-    #[inline]
-    #[allow(clippy::float_cmp)]
-    fn is_interior(&self, p: usize) -> bool {
-        match &self.stencil {
-            Stencil::Nine(a) => a[p] == self.interior,
-            Stencil::Five(d) => {
-                d[p] == 4.0
-                    && d[p - 1] > 0.0
-                    && d[p + 1] > 0.0
-                    && d[p - self.w] > 0.0
-                    && d[p + self.w] > 0.0
-            }
-        }
-    }
-
     /// The Galerkin coarse level `Pᵀ A P`.
     fn coarsen(&self) -> Self {
         let (hf, wf) = (self.h, self.w);
@@ -153,17 +153,7 @@ impl Level {
         // Where the 3×3 fine points under a coarse point all carry the interior stencil, the
         // coarse row is a constant: compute it once.
         let interior = galerkin_row(2, 2, |_, _| Some(self.interior));
-        let flags: Vec<bool> = (0..hf * wf)
-            .map(|p| {
-                let (y, x) = (p / wf, p % wf);
-                y > 0
-                    && y < hf - 1
-                    && x > 0
-                    && x < wf - 1
-                    && self.inv[p] > 0.0
-                    && self.is_interior(p)
-            })
-            .collect();
+        let flags = &self.is_interior;
         let row_at = |fy: usize, fx: usize| {
             if fy == 0 || fy >= hf - 1 || fx == 0 || fx >= wf - 1 {
                 return None;
@@ -172,7 +162,8 @@ impl Level {
             (self.inv[f] > 0.0).then(|| self.row9(f))
         };
         let mut a = vec![[0f32; 9]; hc * wc];
-        let row = |i: usize, out: &mut [[f32; 9]]| {
+        let mut fast = vec![false; hc * wc];
+        let row = |i: usize, (out, fast): (&mut [[f32; 9]], &mut [bool])| {
             if i == 0 || 2 * i >= hf {
                 return;
             }
@@ -194,6 +185,7 @@ impl Level {
                 ]
                 .iter()
                 .all(|&f| flags[f]);
+                fast[j] = all;
                 *cell = if all {
                     interior
                 } else {
@@ -203,10 +195,14 @@ impl Level {
         };
         if hc * wc >= PARALLEL_CELLS / 4 {
             a.par_chunks_mut(wc)
+                .zip(fast.par_chunks_mut(wc))
                 .enumerate()
                 .for_each(|(i, r)| row(i, r));
         } else {
-            a.chunks_mut(wc).enumerate().for_each(|(i, r)| row(i, r));
+            a.chunks_mut(wc)
+                .zip(fast.chunks_mut(wc))
+                .enumerate()
+                .for_each(|(i, r)| row(i, r));
         }
         // The two halves of each symmetric pair were summed in different orders; make the
         // stored operator exactly symmetric so the V-cycle is too.
@@ -223,6 +219,15 @@ impl Level {
             .map(|s| if s[4] > 0.0 { 1.0 / s[4] } else { 0.0 })
             .collect();
         let n = inv.iter().filter(|&&v| v > 0.0).count();
+        // Rows that are exactly the interior stencil (exact comparison on purpose: the fast
+        // path must give the bits the slow one would). A row computed the slow way that
+        // happens to equal it is left unflagged: the slow path then gives the same bits.
+        #[allow(clippy::float_cmp)]
+        let is_interior = fast
+            .iter()
+            .zip(&a)
+            .map(|(&f, row)| f && *row == interior)
+            .collect();
         Self {
             h: hc,
             w: wc,
@@ -230,6 +235,7 @@ impl Level {
             inv,
             n,
             interior,
+            is_interior,
         }
     }
 }

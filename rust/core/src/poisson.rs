@@ -229,13 +229,6 @@ impl Grid {
             })
             .collect();
         let mut parent: Vec<usize> = (0..runs.len()).collect();
-        fn find(parent: &mut [usize], mut i: usize) -> usize {
-            while parent[i] != i {
-                parent[i] = parent[parent[i]];
-                i = parent[i];
-            }
-            i
-        }
         for y in 2..h - 1 {
             let (mut a, a_end) = (row_runs[y - 1], row_runs[y]);
             let (mut b, b_end) = (row_runs[y], row_runs[y + 1]);
@@ -301,6 +294,15 @@ impl Grid {
         });
         d
     }
+}
+
+/// The root of `i` in a union–find forest, halving the path on the way.
+fn find(parent: &mut [usize], mut i: usize) -> usize {
+    while parent[i] != i {
+        parent[i] = parent[parent[i]];
+        i = parent[i];
+    }
+    i
 }
 
 /// Source and destination values on the grid for channels `c0..c0 + L`.
@@ -741,10 +743,33 @@ fn solve_group<const L: usize>(
     let mut b = vec![[0f64; L]; h * w];
     let parts = bands(&mut b, w, |bi, band| {
         let mut s = [0f64; L];
+        let kind = &grid.kind;
         for (k, cell) in band.iter_mut().enumerate() {
             let p = bi * BAND * w + k;
-            if grid.kind[p] == UNK {
-                let (f, hh) = vals.rhs(&grid.kind, w, params.mode, p);
+            if kind[p] != UNK {
+                continue;
+            }
+            if params.mode == Mode::Normal
+                && kind[p - w] == UNK
+                && kind[p - 1] == UNK
+                && kind[p + 1] == UNK
+                && kind[p + w] == UNK
+            {
+                // All neighbours unknown: b_h is 0 and b_f the Laplacian of g (the sums of
+                // `Values::rhs`, in its order).
+                let g = &vals.g;
+                let (gp, gu, gl, gr, gd) = (g[p], g[p - w], g[p - 1], g[p + 1], g[p + w]);
+                for c in 0..L {
+                    let gpc = f64::from(gp[c]);
+                    let f = (((gpc - f64::from(gu[c])) + (gpc - f64::from(gl[c])))
+                        + (gpc - f64::from(gr[c])))
+                        + (gpc - f64::from(gd[c]));
+                    s[c] += f * f;
+                }
+                continue;
+            }
+            {
+                let (f, hh) = vals.rhs(kind, w, params.mode, p);
                 for c in 0..L {
                     s[c] += f[c] * f[c];
                 }
@@ -782,22 +807,36 @@ fn solve_group<const L: usize>(
         // (Otherwise the residual of h is that of f = g + h, already measured.)
         residual = final_residual(&vals, grid, params.mode, &x);
     }
-    // f = g + h on the region.
+    // f = g + h on the region, destination rows in parallel. Grid rows 1..h − 1 that hold
+    // region cells lie inside the destination.
     let (dw, nc) = (input.dst.w, input.dst.c);
     let lanes = L.min(nc - c0);
-    for gy in 1..h - 1 {
+    let write_row = |gy: usize, row: &mut [f32]| {
         for gx in 1..w - 1 {
             let p = gy * w + gx;
             if grid.kind[p] < FIX {
                 continue;
             }
-            let y = (gy as i64 + grid.y0) as usize;
-            let xx = (gx as i64 + grid.x0) as usize;
-            let o = (y * dw + xx) * nc + c0;
+            let o = (gx as i64 + grid.x0) as usize * nc + c0;
             for c in 0..lanes {
-                out[o + c] = (f64::from(vals.g[p][c]) + x[p][c]) as f32;
+                row[o + c] = (f64::from(vals.g[p][c]) + x[p][c]) as f32;
             }
         }
+    };
+    let first = (grid.y0 + 1).max(0) as usize;
+    let last = ((grid.y0 + h as i64 - 1) as usize).min(input.dst.h);
+    let rows = out
+        .chunks_mut(dw * nc)
+        .enumerate()
+        .take(last)
+        .skip(first)
+        .map(|(y, row)| ((y as i64 - grid.y0) as usize, row));
+    if h * w >= 16 * 1024 {
+        rows.collect::<Vec<_>>()
+            .into_par_iter()
+            .for_each(|(gy, row)| write_row(gy, row));
+    } else {
+        rows.for_each(|(gy, row)| write_row(gy, row));
     }
     (it, residual)
 }
