@@ -253,24 +253,7 @@ impl Dense {
             }
             dmax = dmax.max(m[i * n + i]);
         }
-        for i in 0..n {
-            m[i * n + i] += 1e-13 * dmax;
-        }
-        for j in 0..n {
-            let mut d = m[j * n + j];
-            for k in 0..j {
-                d -= m[j * n + k] * m[j * n + k];
-            }
-            let d = d.max(1e-14 * dmax).sqrt();
-            m[j * n + j] = d;
-            for i in j + 1..n {
-                let mut s = m[i * n + j];
-                for k in 0..j {
-                    s -= m[i * n + k] * m[j * n + k];
-                }
-                m[i * n + j] = s / d;
-            }
-        }
+        crate::multigrid::cholesky_in_place(&mut m, n, 1e-13 * dmax, 1e-14 * dmax);
         Self { n, l: m }
     }
 

@@ -311,24 +311,7 @@ impl Coarsest {
         }
         // A singular coarse operator comes with consistent right-hand sides, and any solution
         // gives the same prolonged correction; the shift only makes the factor exist.
-        for i in 0..n {
-            m[i * n + i] += 1e-9 * dmax;
-        }
-        for j in 0..n {
-            let mut d = m[j * n + j];
-            for k in 0..j {
-                d -= m[j * n + k] * m[j * n + k];
-            }
-            let d = d.max(1e-12 * dmax).sqrt();
-            m[j * n + j] = d;
-            for i in j + 1..n {
-                let mut s = m[i * n + j];
-                for k in 0..j {
-                    s -= m[i * n + k] * m[j * n + k];
-                }
-                m[i * n + j] = s / d;
-            }
-        }
+        cholesky_in_place(&mut m, n, 1e-9 * dmax, 1e-12 * dmax);
         Self { cells, l: m }
     }
 
@@ -960,6 +943,30 @@ fn prolong_add<const L: usize>(fine: &Level, coarse: &Level, xc: &[[f32; L]], xf
             }
         }
     });
+}
+
+/// Dense Cholesky factorisation of the row-major `n × n` matrix `m`, in place (the lower
+/// triangle becomes `L`). `shift` is added to the diagonal first and pivots are floored at
+/// `floor`, so singular but consistent coarse systems still factor.
+pub(crate) fn cholesky_in_place(m: &mut [f64], n: usize, shift: f64, floor: f64) {
+    for i in 0..n {
+        m[i * n + i] += shift;
+    }
+    for j in 0..n {
+        let mut d = m[j * n + j];
+        for k in 0..j {
+            d -= m[j * n + k] * m[j * n + k];
+        }
+        let d = d.max(floor).sqrt();
+        m[j * n + j] = d;
+        for i in j + 1..n {
+            let mut s = m[i * n + j];
+            for k in 0..j {
+                s -= m[i * n + k] * m[j * n + k];
+            }
+            m[i * n + j] = s / d;
+        }
+    }
 }
 
 #[cfg(test)]
