@@ -116,18 +116,6 @@ impl GridGraph {
         })
     }
 
-    /// Grid height.
-    #[must_use]
-    pub fn height(&self) -> usize {
-        self.h
-    }
-
-    /// Grid width.
-    #[must_use]
-    pub fn width(&self) -> usize {
-        self.w
-    }
-
     #[inline]
     fn node(&self, y: usize, x: usize) -> usize {
         (y + 1) * self.pw + x + 1
@@ -202,21 +190,6 @@ impl GridGraph {
         }
         self.solved = false;
         Ok(())
-    }
-
-    /// Sets the capacity of the edge from pixel `(y, x)` in direction `d` (and, if
-    /// `symmetric`, back). Out-of-grid edges are ignored.
-    pub fn set_edge(&mut self, y: usize, x: usize, d: usize, v: f32, symmetric: bool) {
-        if d >= self.k || !self.inside(y, x, d) {
-            return;
-        }
-        let p = self.node(y, x);
-        self.cap[p * self.k + d] = v;
-        if symmetric {
-            let q = p.wrapping_add_signed(self.offset(d));
-            self.cap[q * self.k + opp(d)] = v;
-        }
-        self.solved = false;
     }
 
     /// Sets the terminal capacities from two `h × w` arrays: `source[i]` from the source to

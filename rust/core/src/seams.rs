@@ -292,13 +292,13 @@ fn grad_mag(img: &Image<'_>, y: usize, x: usize) -> f32 {
 }
 
 /// Symmetric edge costs over the bounding box (`bh × bw × k/2`), zero unless both ends are
-/// in the region.
+/// in the region: the user's costs if given, else the chosen cost function.
 fn edge_costs(inp: &SeamInput<'_>, bb: &Bbox) -> Vec<f32> {
     let (a, b) = (&inp.a, &inp.b);
     let w = a.w;
     let m = inp.connectivity / 2;
     let dirs = &SYMMETRIC_DIRS[..m];
-    let luo = inp.cost == SeamCost::Luo;
+    let luo = inp.cost == SeamCost::Luo && inp.edges.is_none();
     // Per-pixel terms over the box plus a one-pixel ring (neighbours of box pixels).
     let (py0, px0) = (bb.y0.saturating_sub(1), bb.x0.saturating_sub(1));
     let (py1, px1) = ((bb.y0 + bb.h + 1).min(a.h), (bb.x0 + bb.w + 1).min(w));
@@ -312,14 +312,18 @@ fn edge_costs(inp: &SeamInput<'_>, bb: &Bbox) -> Vec<f32> {
         });
         out
     };
-    let dist = per_pixel(&|y, x| {
-        let d = diff(a, b, y, x);
-        if luo {
-            (255.0 * d).powi(4)
-        } else {
-            d
-        }
-    });
+    let dist = if inp.edges.is_some() {
+        Vec::new()
+    } else {
+        per_pixel(&|y, x| {
+            let d = diff(a, b, y, x);
+            if luo {
+                (255.0 * d).powi(4)
+            } else {
+                d
+            }
+        })
+    };
     let delta = if luo {
         per_pixel(&|y, x| 255.0 * (grad_mag(a, y, x) + grad_mag(b, y, x)))
     } else {
@@ -344,6 +348,10 @@ fn edge_costs(inp: &SeamInput<'_>, bb: &Bbox) -> Vec<f32> {
                     }
                     let (ny, nx) = (ny as usize, nx as usize);
                     if !inp.region[ny * w + nx] {
+                        continue;
+                    }
+                    if let Some(e) = inp.edges {
+                        row[c * m + s] = e[(y * w + x) * m + s];
                         continue;
                     }
                     let (ds, dt) = (at(&dist, y, x), at(&dist, ny, nx));
@@ -372,33 +380,7 @@ fn edge_costs(inp: &SeamInput<'_>, bb: &Bbox) -> Vec<f32> {
 pub fn seam(inp: &SeamInput<'_>) -> Result<Seam> {
     let bb = validate(inp)?;
     let (h, w) = (inp.a.h, inp.a.w);
-    let m = inp.connectivity / 2;
-    let edges = match inp.edges {
-        Some(e) => {
-            let mut out = vec![0f32; bb.h * bb.w * m];
-            for r in 0..bb.h {
-                for c in 0..bb.w {
-                    let (y, x) = (bb.y0 + r, bb.x0 + c);
-                    if !inp.region[y * w + x] {
-                        continue;
-                    }
-                    for (s, &d) in SYMMETRIC_DIRS[..m].iter().enumerate() {
-                        let (ny, nx) = (y as isize + DIRS[d].0, x as isize + DIRS[d].1);
-                        if ny >= 0
-                            && nx >= 0
-                            && (ny as usize) < h
-                            && (nx as usize) < w
-                            && inp.region[ny as usize * w + nx as usize]
-                        {
-                            out[(r * bb.w + c) * m + s] = e[(y * w + x) * m + s];
-                        }
-                    }
-                }
-            }
-            out
-        }
-        None => edge_costs(inp, &bb),
-    };
+    let edges = edge_costs(inp, &bb);
     let mut g = GridGraph::new(bb.h, bb.w, inp.connectivity)?;
     g.set_edges("cost", &edges, EdgeLayout::Symmetric)?;
 
