@@ -7,7 +7,7 @@ use phloem_core::image::Image;
 use phloem_core::poisson::{self, BlendInput, BlendParams, Mode};
 use pyo3::prelude::*;
 
-use crate::errors::{guarded, not_contiguous, to_py};
+use crate::errors::{guarded, not_contiguous, opt_slice, to_py};
 use crate::threads::install;
 
 fn image<'a>(name: &'static str, a: &'a PyReadonlyArray3<'_, f32>) -> PyResult<Image<'a>> {
@@ -36,10 +36,7 @@ pub fn seamless_py<'py>(
         dst: image("dst", &dst)?,
         mask: mask.as_slice().map_err(not_contiguous("mask"))?,
         offset,
-        fixed: fixed
-            .as_ref()
-            .map(|f| f.as_slice().map_err(not_contiguous("fixed")))
-            .transpose()?,
+        fixed: opt_slice("fixed", fixed.as_ref())?,
     };
     let params = BlendParams {
         mode: if mixed { Mode::Mixed } else { Mode::Normal },

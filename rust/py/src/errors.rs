@@ -19,6 +19,16 @@ pub fn not_contiguous(name: &'static str) -> impl Fn(AsSliceError) -> PyErr {
     move |_| PyValueError::new_err(format!("{name}: expected a C-contiguous array"))
 }
 
+/// The contiguous data of an optional array argument (`None` stays `None`); a non-contiguous
+/// array is an error naming `name`.
+pub fn opt_slice<'a, T: numpy::Element, D: numpy::ndarray::Dimension>(
+    name: &'static str,
+    a: Option<&'a numpy::PyReadonlyArray<'_, T, D>>,
+) -> pyo3::PyResult<Option<&'a [T]>> {
+    a.map(|a| a.as_slice().map_err(not_contiguous(name)))
+        .transpose()
+}
+
 /// Runs `f`, turning a Rust panic into an `Error::Internal` instead of aborting Python with a
 /// `PanicException`.
 pub fn guarded<T>(f: impl FnOnce() -> phloem_core::Result<T>) -> phloem_core::Result<T> {

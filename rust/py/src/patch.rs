@@ -10,7 +10,7 @@ use phloem_core::patch::{self, Method, NnfInput, NnfParams, NONE};
 use phloem_core::vote;
 use pyo3::prelude::*;
 
-use crate::errors::{guarded, not_contiguous, to_py};
+use crate::errors::{guarded, not_contiguous, opt_slice, to_py};
 use crate::threads::install;
 
 pub(crate) fn image<'a>(
@@ -90,27 +90,12 @@ pub fn nnf_py<'py>(
     let input = NnfInput {
         source: image("source", &source)?,
         target: image("target", &target)?,
-        weights: weights
-            .as_ref()
-            .map(|w| w.as_slice().map_err(not_contiguous("weights")))
-            .transpose()?,
-        source_mask: source_mask
-            .as_ref()
-            .map(|m| m.as_slice().map_err(not_contiguous("source_mask")))
-            .transpose()?,
-        target_mask: target_mask
-            .as_ref()
-            .map(|m| m.as_slice().map_err(not_contiguous("target_mask")))
-            .transpose()?,
-        init: init
-            .as_ref()
-            .map(|m| m.as_slice().map_err(not_contiguous("init")))
-            .transpose()?,
+        weights: opt_slice("weights", weights.as_ref())?,
+        source_mask: opt_slice("source_mask", source_mask.as_ref())?,
+        target_mask: opt_slice("target_mask", target_mask.as_ref())?,
+        init: opt_slice("init", init.as_ref())?,
         source_knn: table.as_ref().map(|(t, k)| (t.as_slice(), *k)),
-        source_cost: source_cost
-            .as_ref()
-            .map(|m| m.as_slice().map_err(not_contiguous("source_cost")))
-            .transpose()?,
+        source_cost: opt_slice("source_cost", source_cost.as_ref())?,
     };
     let method = if exact {
         Method::Exact
@@ -149,10 +134,7 @@ pub fn knn_py<'py>(
     threads: Option<usize>,
 ) -> PyResult<KnnOut<'py>> {
     let img = image("exemplar", &exemplar)?;
-    let weights = weights
-        .as_ref()
-        .map(|w| w.as_slice().map_err(not_contiguous("weights")))
-        .transpose()?;
+    let weights = opt_slice("weights", weights.as_ref())?;
     let params = KnnParams {
         patch_size,
         k,
@@ -247,10 +229,7 @@ pub fn vote_py<'py>(
         patch_size,
     )
     .map_err(to_py)?;
-    let wts = weights
-        .as_ref()
-        .map(|w| w.as_slice().map_err(not_contiguous("weights")))
-        .transpose()?;
+    let wts = opt_slice("weights", weights.as_ref())?;
     let v = py
         .detach(|| guarded(|| install(threads, || vote::vote(&src, &idx, h, w, wts, patch_size))))
         .map_err(to_py)?;

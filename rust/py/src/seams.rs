@@ -7,17 +7,9 @@ use phloem_core::maxflow::{EdgeLayout, GridGraph};
 use phloem_core::seams::{self, SeamCost, SeamInput};
 use pyo3::prelude::*;
 
-use crate::errors::{guarded, not_contiguous, to_py};
+use crate::errors::{guarded, not_contiguous, opt_slice, to_py};
 use crate::patch::image;
 use crate::threads::install;
-
-fn mask<'a>(
-    name: &'static str,
-    m: Option<&'a PyReadonlyArray2<'_, bool>>,
-) -> PyResult<Option<&'a [bool]>> {
-    m.map(|m| m.as_slice().map_err(not_contiguous(name)))
-        .transpose()
-}
 
 type FlowOut<'py> = (f64, Bound<'py, PyArray2<bool>>);
 
@@ -98,16 +90,10 @@ pub fn seam_py<'py>(
     };
     let (h, w, _) = a.as_array().dim();
     let region_s = region.as_slice().map_err(not_contiguous("region"))?;
-    let a_mask_s = mask("a_mask", a_mask.as_ref())?;
-    let b_mask_s = mask("b_mask", b_mask.as_ref())?;
-    let seeds_s = seeds
-        .as_ref()
-        .map(|s| s.as_slice().map_err(not_contiguous("seeds")))
-        .transpose()?;
-    let edges_s = edges
-        .as_ref()
-        .map(|e| e.as_slice().map_err(not_contiguous("cost")))
-        .transpose()?;
+    let a_mask_s = opt_slice("a_mask", a_mask.as_ref())?;
+    let b_mask_s = opt_slice("b_mask", b_mask.as_ref())?;
+    let seeds_s = opt_slice("seeds", seeds.as_ref())?;
+    let edges_s = opt_slice("cost", edges.as_ref())?;
     let input = SeamInput {
         a: image("a", &a)?,
         b: image("b", &b)?,
