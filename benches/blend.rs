@@ -5,32 +5,15 @@
 //! `cargo bench -p phloem-core --bench blend`. Throughput is in region pixels per second;
 //! iterations and residuals are printed once per workload.
 
-use std::hint::black_box;
-use std::path::Path;
+mod common;
 
+use std::hint::black_box;
+
+use common::{load, pool};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use image::imageops::FilterType;
 use phloem_core::field::{interpolate_field, FieldParams};
 use phloem_core::image::Image;
 use phloem_core::poisson::{seamless, BlendInput, BlendParams};
-
-/// An RGB image from the repository, resized to `size × size`, as f32 in [0, 1].
-fn load(rel: &str, size: u32) -> Vec<f32> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let img = image::open(root.join(rel)).expect("bench image").to_rgb8();
-    let img = image::imageops::resize(&img, size, size, FilterType::CatmullRom);
-    img.into_raw()
-        .into_iter()
-        .map(|v| f32::from(v) / 255.0)
-        .collect()
-}
-
-fn pool(n: usize) -> rayon::ThreadPool {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(n)
-        .build()
-        .unwrap()
-}
 
 fn poisson(c: &mut Criterion) {
     let dst = load("tests/data/water.jpg", 1024);

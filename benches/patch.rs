@@ -4,40 +4,23 @@
 //! `cargo bench -p phloem-core --bench patch`. Throughput is in target pixels per second;
 //! candidate evaluations per second are printed once per workload.
 
+mod common;
+
 use std::hint::black_box;
-use std::path::Path;
 use std::time::Instant;
 
+use common::{load, pool};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use image::imageops::FilterType;
 use phloem_core::image::Image;
 use phloem_core::knn::{knn, KnnParams};
 use phloem_core::patch::{nnf, Method, NnfInput, NnfParams};
 use phloem_core::vote::vote;
-
-/// An RGB image from the repository, resized to `size × size`, as f32 in [0, 1].
-fn load(rel: &str, size: u32) -> Vec<f32> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let img = image::open(root.join(rel)).expect("bench image").to_rgb8();
-    let img = image::imageops::resize(&img, size, size, FilterType::CatmullRom);
-    img.into_raw()
-        .into_iter()
-        .map(|v| f32::from(v) / 255.0)
-        .collect()
-}
 
 fn input<'a>(src: &'a [f32], tgt: &'a [f32], n: usize) -> NnfInput<'a> {
     NnfInput::new(
         Image::new("source", src, n, n, 3).unwrap(),
         Image::new("target", tgt, n, n, 3).unwrap(),
     )
-}
-
-fn pool(n: usize) -> rayon::ThreadPool {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(n)
-        .build()
-        .unwrap()
 }
 
 fn patchmatch(c: &mut Criterion) {

@@ -5,9 +5,11 @@
 //! `cargo bench -p phloem-core --bench seams`. Throughput is in pixels per second. The same
 //! workloads against PyMaxflow: `python benches/bench_seams.py`.
 
-use std::hint::black_box;
-use std::path::Path;
+mod common;
 
+use std::hint::black_box;
+
+use common::pool;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use phloem_core::image::Image;
 use phloem_core::maxflow::{EdgeLayout, GridGraph};
@@ -16,8 +18,7 @@ use phloem_core::seams::{seam, SeamInput};
 /// The embedded bark, mirror-tiled to `h × w`, starting at `(y0, x0)` of the tiling, as RGB
 /// f32 in [0, 1] (the overlaps of `bench_seams.py`).
 fn bark(h: usize, w: usize, y0: usize, x0: usize, flip: bool) -> Vec<f32> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let img = image::open(root.join("python/phloem/data/bark_douglas_fir.png"))
+    let img = image::open(common::root().join("python/phloem/data/bark_douglas_fir.png"))
         .expect("bench image")
         .to_rgb8();
     let (bh, bw) = (img.height() as usize, img.width() as usize);
@@ -91,13 +92,6 @@ fn problem(h: usize, w: usize) -> Problem {
         source,
         sink,
     }
-}
-
-fn pool(n: usize) -> rayon::ThreadPool {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(n)
-        .build()
-        .unwrap()
 }
 
 fn maxflow(c: &mut Criterion) {
