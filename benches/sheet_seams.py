@@ -27,6 +27,15 @@ sys.path.insert(0, str(Path(__file__).parent))
 from sheet_texture import ROOT, TILE, _fit, _label  # noqa: E402
 
 
+def _edges(labels: np.ndarray, valid: np.ndarray | None = None) -> np.ndarray:
+    """Pixels whose right or lower neighbour has another label (both inside ``valid``)."""
+    ok = np.ones(labels.shape, bool) if valid is None else valid
+    edge = np.zeros(labels.shape, bool)
+    edge[:, 1:] |= (labels[:, 1:] != labels[:, :-1]) & ok[:, 1:] & ok[:, :-1]
+    edge[1:, :] |= (labels[1:, :] != labels[:-1, :]) & ok[1:, :] & ok[:-1, :]
+    return edge
+
+
 def _pieces(src: np.ndarray) -> np.ndarray:
     yy, xx = np.mgrid[0 : src.shape[0], 0 : src.shape[1]]
     off = (src[..., 0] - yy) * 4096 + (src[..., 1] - xx)
@@ -35,19 +44,13 @@ def _pieces(src: np.ndarray) -> np.ndarray:
     rng = np.random.default_rng(0)
     colours = rng.uniform(0.25, 0.9, (ids.max() + 1, 3)).astype(np.float32)
     vis = colours[ids]
-    edge = np.zeros(off.shape, bool)
-    edge[:, 1:] |= off[:, 1:] != off[:, :-1]
-    edge[1:, :] |= off[1:, :] != off[:-1, :]
-    vis[edge] = (1, 0, 0)
+    vis[_edges(off)] = (1, 0, 0)
     return vis
 
 
 def _seam_overlay(img: np.ndarray, labels: np.ndarray, valid: np.ndarray) -> np.ndarray:
     vis = img.copy()
-    edge = np.zeros(labels.shape, bool)
-    edge[:, 1:] |= (labels[:, 1:] != labels[:, :-1]) & valid[:, 1:] & valid[:, :-1]
-    edge[1:, :] |= (labels[1:, :] != labels[:-1, :]) & valid[1:, :] & valid[:-1, :]
-    vis[edge] = (1, 0, 0)
+    vis[_edges(labels, valid)] = (1, 0, 0)
     return vis
 
 
@@ -82,37 +85,39 @@ def quilt_row(name: str, ex: np.ndarray) -> list[np.ndarray]:
     ]
 
 
-def seam_row(ex: np.ndarray) -> list[np.ndarray]:
-    ex = _rgb3(ex)
-    h = w = 160
-    yy, xx = np.mgrid[0:h, 0:w]
+def _disk_scene(ex: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Old content left of column 100 (a) and a disk fragment's footprint (new), 160²."""
+    yy, xx = np.mgrid[0:160, 0:160]
     old = xx < 100
     new = (yy - 80) ** 2 + (xx - 95) ** 2 < 60**2
-    a = np.zeros((h, w, 3), np.float32)
-    b = np.zeros((h, w, 3), np.float32)
-    a[old] = ex[:h, :w][old]
-    b[new] = ex[60 : 60 + h, 90 : 90 + w][new]
+    a = np.zeros((160, 160, 3), np.float32)
+    a[old] = ex[:160, :160][old]
+    return a, old, new
+
+
+def seam_row(ex: np.ndarray) -> list[np.ndarray]:
+    ex = _rgb3(ex)
+    a, old, new = _disk_scene(ex)
+    b = np.zeros_like(a)
+    b[new] = ex[60:220, 90:250][new]
     region = old & new
     over = 0.35 * a + 0.65 * b
     over[~region] *= 0.4
     tiles = [_label(_fit(over), "overlap (bright) of a and disk b")]
+    composites = {}
     for cost in ("kwatra", "gradient", "luo"):
         take_b = seam(a, b, region, a_mask=old, b_mask=new, cost=cost)
-        comp = np.where(take_b[..., None], b, a)
-        tiles.append(_label(_fit(_seam_overlay(comp, take_b, old | new)), f"seam, {cost} cost"))
-    take_b = seam(a, b, region, a_mask=old, b_mask=new, cost="gradient")
-    tiles.append(_label(_fit(np.where(take_b[..., None], b, a)), "composite (gradient)"))
+        composites[cost] = np.where(take_b[..., None], b, a)
+        tiles.append(_label(_fit(_seam_overlay(composites[cost], take_b, old | new)), f"seam, {cost} cost"))
+    tiles.append(_label(_fit(composites["gradient"]), "composite (gradient)"))
     return tiles
 
 
 def fragment_row(ex: np.ndarray) -> list[np.ndarray]:
     ex = _rgb3(ex)
+    a, old, new = _disk_scene(ex)
     h = w = 160
     yy, xx = np.mgrid[0:h, 0:w]
-    old = xx < 100
-    new = (yy - 80) ** 2 + (xx - 95) ** 2 < 60**2
-    a = np.zeros((h, w, 3), np.float32)
-    a[old] = ex[:h, :w][old]
     src = np.clip(ex[60 : 60 + h, 90 : 90 + w] * np.float32([1.25, 1.1, 0.85]), 0, 1)  # the fragment's source
     b = np.zeros((h, w, 3), np.float32)
     b[new] = src[new]

@@ -558,7 +558,8 @@ def quilt(
     for n, (i, j) in enumerate((i, j) for i in range(ny) for j in range(nx)):
         y, x = i * step, j * step
         old = filled[y : y + b, x : x + b]
-        if not old.any():
+        first = not old.any()
+        if first:
             ty, tx = int(rng.integers(eh - b + 1)), int(rng.integers(ew - b + 1))
         else:
             c = _masked_ssd(ex, canvas[y : y + b, x : x + b], old) / float(old.sum())
@@ -570,7 +571,7 @@ def quilt(
             ty, tx = divmod(flat, c.shape[1])
         piece = ex[ty : ty + b, tx : tx + b]
         take = np.ones((b, b), bool)
-        if old.any():
+        if not first:
             # The seam is cut in a window one pixel wider than the block, so the region pixels
             # that border old-only or new-only pixels are tied to that side.
             y0, x0, y1, x1 = max(y - 1, 0), max(x - 1, 0), min(y + b + 1, hc), min(x + b + 1, wc)
