@@ -16,9 +16,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pytest
-
 import phloem
+import pytest
 from phloem import bark
 
 pytestmark = pytest.mark.filterwarnings("ignore::pytest_benchmark.logger.PytestBenchmarkWarning")

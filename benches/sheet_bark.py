@@ -17,12 +17,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 import phloem
 from phloem import bark
 
 sys.path.insert(0, str(Path(__file__).parent))
-from sheet_texture import ROOT, TILE, _fit, _label  # noqa: E402
+from sheet_texture import ROOT, TILE, _fit, _label
 
 SHARED = ROOT.parent / "shared" / "data" / "bark"
 RUNS = ("bark1", "bark2", "eucalyptus", "eucap5")

@@ -7,9 +7,8 @@ import itertools
 
 import cv2
 import numpy as np
-import pytest
-
 import phloem
+import pytest
 from phloem import bark
 
 THESIS_RUNS = ("bark1", "bark2", "eucalyptus", "eucap5")
