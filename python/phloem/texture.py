@@ -765,7 +765,9 @@ def by_numbers(
         ``z`` of Eq. 3.3 (default 8, the thesis' bark value; Fan et al. used 3).
     features : "auto", None or (M, N[, F]) array_like, optional
         Feature distance map of the exemplar: ``"auto"`` computes
-        :func:`feature_distance_map`, ``None`` leaves the term out, an array supplies it.
+        :func:`feature_distance_map`, scaled to the standard deviation of the exemplar's gray
+        values (so that ``z`` weighs it like a colour channel, as with the thesis' maps);
+        ``None`` leaves the term out; an array supplies it as is.
     levels : int, optional
         Pyramid levels (default: as many as keep the coarsest images 40 pixels wide, at most 5).
     iterations : int, optional
@@ -829,7 +831,12 @@ def by_numbers(
     if isinstance(features, str):
         if features != "auto":
             raise ValueError(f"features: expected 'auto', None or an array, got {features!r}")
-        fdm: NDArray[np.float32] | None = feature_distance_map(ex) if z > 0 else None
+        fdm: NDArray[np.float32] | None = None
+        if z > 0:
+            # The thesis' z = 8 was tuned with a feature channel on the photo's own scale; the
+            # [0, 1] map is rescaled to the exemplar's gray standard deviation to match.
+            fdm = feature_distance_map(ex)
+            fdm *= np.float32(float(ex.mean(axis=2).std()) / max(float(fdm.std()), 1e-6))
     elif features is None:
         fdm = None
     else:

@@ -9,7 +9,8 @@
 //!
 //! 1. k-coherence candidate sets (§3.3.6) from the current references and the exemplar's
 //!    `(k − 1)` nearest patches ([`crate::knn`]);
-//! 2. M-step (Eq. 3.4): on a sparse grid `X†` of output pixels, the candidate whose `N_lr`
+//! 2. M-step (Eq. 3.4): on a sparse grid `X†` of output pixels (every other row and column;
+//!    all pixels at the finest level), the candidate whose `N_lr`
 //!    neighbourhood in `concat(A, A')` is nearest to the output's in `concat(B, B'_ref)`;
 //!    phloem adds a PatchMatch-style random search (Barnes et al. 2009) among same-label
 //!    exemplar pixels around the best candidate;
@@ -564,17 +565,23 @@ impl<'a> Level<'a> {
         let (cands, m) =
             coherence_candidates(refs, h, w, eh, ew, self.knn.as_ref(), p, self.params.wrap)?;
         let s = self.output_image(refs);
-        // X†: every other row and column, at an offset drawn per iteration.
+        // X†: every other row and column, at an offset drawn per iteration, at the coarse
+        // levels; every pixel at the finest, which decides the output's fine coherence
+        // (measured on the thesis' bark runs: patch coherence 1.4 → 1.2 × the thesis' result).
+        let st = if self.level == 0 { 1 } else { 2 };
         let mut grid_rng = Rng::keyed(seed, key, u64::MAX);
-        let (gy, gx) = (grid_rng.below(2) as usize, grid_rng.below(2) as usize);
-        let in_grid = |i: usize| (i / w) % 2 == gy && (i % w) % 2 == gx;
+        let (gy, gx) = (
+            grid_rng.below(st as u64) as usize,
+            grid_rng.below(st as u64) as usize,
+        );
+        let in_grid = |i: usize| (i / w) % st == gy && (i % w) % st == gx;
         let labels_in = &self.el.labels;
         let labels_out = self.labels_out;
 
         // M-step (Eq. 3.4).
         let mut matches = vec![NONE; h * w];
         matches.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            if y % 2 != gy {
+            if y % st != gy {
                 return;
             }
             for (x, slot) in row.iter_mut().enumerate() {
