@@ -19,9 +19,8 @@ from typing import Any
 
 import cv2
 import numpy as np
-import pytest
-
 import phloem
+import pytest
 from phloem.metrics import label_histogram_distance, patch_coherence
 
 pytestmark = pytest.mark.filterwarnings("ignore::pytest_benchmark.logger.PytestBenchmarkWarning")
@@ -73,7 +72,11 @@ def patchmatch_by_numbers(
         es = (exemplar.shape[1] // f, exemplar.shape[0] // f)
         os_ = (labels_out.shape[1] // f, labels_out.shape[0] // f)
         ex_l = cv2.resize(exemplar, es, interpolation=cv2.INTER_AREA)
-        src = np.ascontiguousarray(np.concatenate([ex_l, cv2.resize(onehot_a, es, interpolation=cv2.INTER_NEAREST).reshape(*ex_l.shape[:2], -1)], 2))
+        src = np.ascontiguousarray(
+            np.concatenate(
+                [ex_l, cv2.resize(onehot_a, es, interpolation=cv2.INTER_NEAREST).reshape(*ex_l.shape[:2], -1)], 2
+            )
+        )
         ob = cv2.resize(onehot_b, os_, interpolation=cv2.INTER_NEAREST).reshape(os_[1], os_[0], -1)
         if out is None:
             means = np.stack([exemplar[la == k].mean(axis=0) for k in range(values.size)])
@@ -86,7 +89,14 @@ def patchmatch_by_numbers(
             if field is not None and field.shape[:2] == tgt.shape[:2]:
                 init = field
             field, _ = phloem.patch.nnf(
-                src, tgt, patch_size=patch_size, iterations=5, weights=weights, init=init, seed=seed + it, threads=threads
+                src,
+                tgt,
+                patch_size=patch_size,
+                iterations=5,
+                weights=weights,
+                init=init,
+                seed=seed + it,
+                threads=threads,
             )
             out, _ = phloem.patch.vote(ex_l, field, patch_size=patch_size, threads=threads)
         field = None  # a fresh field per level (the sizes change)
@@ -129,7 +139,9 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2)
     args = ap.parse_args()
     name, ex, a, b = workload()
-    print(f"{name}: exemplar {ex.shape[0]}×{ex.shape[1]}, output {b.shape[0]}×{b.shape[1]}, {args.threads} threads, {args.runs} runs")
+    print(
+        f"{name}: exemplar {ex.shape[0]}×{ex.shape[1]}, output {b.shape[0]}×{b.shape[1]}, {args.threads} threads, {args.runs} runs"
+    )
     print(f"{'method':<24} {'best':>7} {'median':>7} {'px/s':>9} {'coherence':>10} {'hist':>6}")
     rows = {
         "phloem.by_numbers": lambda: phloem.texture.by_numbers(ex, a, b, threads=args.threads),

@@ -18,7 +18,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-
 import phloem
 from phloem.metrics import label_histogram_distance, patch_coherence
 

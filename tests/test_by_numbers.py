@@ -4,14 +4,12 @@ pixel from an exemplar pixel of its own label, deterministically, and coherently
 from __future__ import annotations
 
 import numpy as np
-import pytest
-
 import phloem
+import pytest
+from conftest import shared_file
 from phloem import _core
 from phloem.metrics import label_histogram_distance, patch_coherence
 from phloem.texture import by_numbers, feature_distance_map
-
-from conftest import shared_file
 
 
 def _labels2(img: np.ndarray) -> np.ndarray:
@@ -76,7 +74,7 @@ def test_labels_are_matched_by_value_not_position(scene):
     # The same maps with other label values (and a third label absent from the output).
     a2, b2 = np.where(a == 1, 70, -3), np.where(b == 1, 70, -3)
     a2[:3, :3] = 12
-    out, src = by_numbers(ex, a2, b2, seed=1, return_sources=True)
+    _out, src = by_numbers(ex, a2, b2, seed=1, return_sources=True)
     np.testing.assert_array_equal(a2[src[..., 0], src[..., 1]], b2)
 
 
@@ -122,7 +120,7 @@ def test_feature_options(scene):
 
 def test_tileable_output(scene):
     ex, a, b = scene
-    out, src = by_numbers(ex, a, b, tileable=True, seed=1, return_sources=True)
+    _out, src = by_numbers(ex, a, b, tileable=True, seed=1, return_sources=True)
     np.testing.assert_array_equal(a[src[..., 0], src[..., 1]], b)
 
 

@@ -21,9 +21,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import _core, seams
-
 from ._progress import Progress
-from ._validate import as_image, as_mask, check_float, check_int, check_patch_size, check_seed, check_size, check_threads, restore_ndim
+from ._validate import (
+    as_image,
+    as_mask,
+    check_float,
+    check_int,
+    check_patch_size,
+    check_seed,
+    check_size,
+    check_threads,
+    restore_ndim,
+)
 
 __all__ = ["by_numbers", "complete", "feature_distance_map", "quilt", "synthesize"]
 

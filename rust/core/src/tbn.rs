@@ -369,6 +369,12 @@ fn auto_levels(min_side: usize) -> usize {
 /// Synthesises an image of references by texture-by-numbers (see the module docs).
 ///
 /// `progress(done, total)` is called after every solver iteration.
+///
+/// # Errors
+/// [`crate::Error::InvalidArgument`] naming the parameter for bad sizes, labels or values.
+///
+/// # Panics
+/// Never on checked input (the pyramid always holds its finest level).
 pub fn by_numbers(
     input: &TbnInput<'_>,
     params: &TbnParams,
@@ -476,9 +482,9 @@ struct Level<'a> {
     c0: usize,
     p: usize,
     ex_pad: Padded,
-    knn: Option<Knn>,
+    table: Option<Knn>,
     params: &'a TbnParams,
-    level: usize,
+    depth: usize,
     lv: f32,
 }
 
@@ -528,9 +534,9 @@ impl<'a> Level<'a> {
                 w: el.w,
                 c: ca,
             },
-            knn: table,
+            table,
             params,
-            level,
+            depth: level,
             lv: (params.label_weight / 2.0).sqrt(),
         })
     }
@@ -564,14 +570,14 @@ impl<'a> Level<'a> {
         let (eh, ew) = (self.el.h, self.el.w);
         let r = (p / 2) as i64;
         let seed = self.params.seed;
-        let key = (self.level as u64) << 32 | it as u64;
+        let key = (self.depth as u64) << 32 | it as u64;
         let (cands, m) =
-            coherence_candidates(refs, h, w, eh, ew, self.knn.as_ref(), p, self.params.wrap)?;
+            coherence_candidates(refs, h, w, eh, ew, self.table.as_ref(), p, self.params.wrap)?;
         let s = self.output_image(refs);
         // X†: every other row and column, at an offset drawn per iteration, at the coarse
         // levels; every pixel at the finest, which decides the output's fine coherence
         // (measured on the thesis' bark runs: patch coherence 1.4 → 1.2 × the thesis' result).
-        let st = if self.level == 0 { 1 } else { 2 };
+        let st = if self.depth == 0 { 1 } else { 2 };
         let mut grid_rng = Rng::keyed(seed, key, u64::MAX);
         let (gy, gx) = (
             grid_rng.below(st as u64) as usize,
@@ -671,7 +677,7 @@ impl<'a> Level<'a> {
             for (x, slot) in row.iter_mut().enumerate() {
                 let i = y * w + x;
                 let lb = labels_out[i];
-                avg.iter_mut().for_each(|v| *v = 0.0);
+                avg.fill(0.0);
                 votes.clear();
                 let mut wsum = 0f32;
                 for dy in -r..=r {
@@ -700,7 +706,9 @@ impl<'a> Level<'a> {
                 let mut bd = f32::INFINITY;
                 if !votes.is_empty() {
                     let inv = 1.0 / wsum;
-                    avg.iter_mut().for_each(|v| *v *= inv);
+                    for v in &mut avg {
+                        *v *= inv;
+                    }
                     let cs = cands[i * m..(i + 1) * m].iter().take_while(|&&c| c != NONE);
                     for &c in votes.iter().chain(cs) {
                         if labels_in[c as usize] != lb {

@@ -12,7 +12,7 @@ use crate::errors::{guarded, not_contiguous, opt_slice, to_py};
 use crate::patch::image;
 use crate::threads::install;
 
-fn labels<'a>(name: &'static str, a: &'a PyReadonlyArray2<'_, i32>) -> PyResult<Vec<u32>> {
+fn labels(name: &'static str, a: &PyReadonlyArray2<'_, i32>) -> PyResult<Vec<u32>> {
     a.as_slice()
         .map_err(not_contiguous(name))?
         .iter()

@@ -171,7 +171,8 @@ pub fn smart_init(a: &LabelMap<'_>, b: &LabelMap<'_>, patch_size: usize, seed: u
             .reduce(
                 || (usize::MAX, f32::INFINITY),
                 |x, y| {
-                    if y.1 < x.1 || (y.1 == x.1 && y.0 < x.0) {
+                    // Ties go to the lower index, so the result never depends on the split.
+                    if y.1.total_cmp(&x.1).then(y.0.cmp(&x.0)).is_lt() {
                         y
                     } else {
                         x
