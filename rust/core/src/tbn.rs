@@ -23,6 +23,10 @@
 //! are one-hot channels scaled by `sqrt(w / 2)`). phloem adds a hard label constraint: every
 //! output pixel references an exemplar pixel of its own label.
 
+// `#[inline(always)]` on the distance helpers is deliberate: only code inlined into
+// `m_pixel_avx2` is compiled with AVX2 enabled (see `knn`).
+#![allow(clippy::inline_always)]
+
 pub mod init;
 pub mod pyramid;
 
@@ -31,7 +35,9 @@ use rayon::prelude::*;
 use crate::error::{invalid, Result};
 use crate::image::{prescale, Image};
 use crate::knn::{coherence_candidates, knn, mirror_pad, Knn, KnnParams};
-use crate::patch::NONE;
+#[cfg(target_arch = "x86_64")]
+use crate::patch::Avx2;
+use crate::patch::{avx2_enabled, Kernel, Portable, NONE};
 use crate::rng::Rng;
 use pyramid::{level_sizes, upsample_refs, Step};
 
@@ -242,18 +248,32 @@ fn ssd(a: &[f32], b: &[f32]) -> f32 {
 }
 
 /// `N_lr` distance (the patch without its centre) between output pixel `i` of `s` and
-/// exemplar pixel `j` of `e`, stopping early once past `cutoff`.
-#[inline]
-fn patch_dist(s: &Padded, i: usize, e: &Padded, j: usize, p: usize, cutoff: f32) -> f32 {
+/// exemplar pixel `j` of `e`, stopping early once past `cutoff` (checked every other row; the
+/// centre is subtracted from the start, so a partial sum never overestimates).
+#[inline(always)]
+fn patch_dist<K: Kernel>(s: &Padded, i: usize, e: &Padded, j: usize, p: usize, cutoff: f32) -> f32 {
     let r = p / 2;
-    let mut d = -ssd(s.centre(i, r), e.centre(j, r));
+    let centre = ssd(s.centre(i, r), e.centre(j, r));
+    let mut acc = K::zero();
     for k in 0..p {
-        d += ssd(s.row(i, k, p), e.row(j, k, p));
-        if d >= cutoff && k + 1 < p {
-            return d;
+        K::add_row(&mut acc, s.row(i, k, p), e.row(j, k, p));
+        if k % 2 == 1 && k + 1 < p {
+            let partial = K::total(&acc) - centre;
+            if partial >= cutoff {
+                return partial;
+            }
         }
     }
-    d
+    K::total(&acc) - centre
+}
+
+/// What the M-step of one iteration shares.
+struct MStep<'b> {
+    s: &'b Padded,
+    cands: &'b [u32],
+    m: usize,
+    refs: &'b [u32],
+    key: u64,
 }
 
 /// One pyramid level's exemplar side.
@@ -565,6 +585,73 @@ impl<'a> Level<'a> {
         }
     }
 
+    /// Eq. 3.4 for output pixel `i`: the best same-label candidate and its distance, or
+    /// `NONE` when neither a candidate nor the current reference has the pixel's label.
+    #[inline(always)]
+    fn m_pixel_with<K: Kernel>(&self, ms: &MStep<'_>, i: usize) -> (u32, f32) {
+        let (p, eh, ew) = (self.p, self.el.h, self.el.w);
+        let lb = self.labels_out[i];
+        let mut best = NONE;
+        let mut bd = f32::INFINITY;
+        for &c in &ms.cands[i * ms.m..(i + 1) * ms.m] {
+            if c == NONE {
+                break;
+            }
+            if self.el.labels[c as usize] != lb {
+                continue;
+            }
+            let d = patch_dist::<K>(ms.s, i, &self.ex_pad, c as usize, p, bd);
+            if d < bd {
+                bd = d;
+                best = c;
+            }
+        }
+        if best == NONE {
+            let cur = ms.refs[i];
+            if self.el.labels[cur as usize] != lb {
+                return (NONE, f32::INFINITY);
+            }
+            best = cur;
+            bd = patch_dist::<K>(ms.s, i, &self.ex_pad, cur as usize, p, f32::INFINITY);
+        }
+        if self.params.random_search {
+            let mut rng = Rng::keyed(self.params.seed, ms.key, i as u64);
+            let (by, bx) = ((best as usize / ew) as i64, (best as usize % ew) as i64);
+            let mut rad = eh.max(ew) as i64;
+            while rad >= 1 {
+                let y = rng.range_inclusive((by - rad).max(0), (by + rad).min(eh as i64 - 1));
+                let x = rng.range_inclusive((bx - rad).max(0), (bx + rad).min(ew as i64 - 1));
+                let c = y as usize * ew + x as usize;
+                if self.el.labels[c] == lb {
+                    let d = patch_dist::<K>(ms.s, i, &self.ex_pad, c, p, bd);
+                    if d < bd {
+                        bd = d;
+                        best = c as u32;
+                    }
+                }
+                rad /= 2;
+            }
+        }
+        (best, bd)
+    }
+
+    /// [`Self::m_pixel_with`] with the fastest kernel the CPU has.
+    fn m_pixel(&self, ms: &MStep<'_>, i: usize, fast: bool) -> (u32, f32) {
+        #[cfg(target_arch = "x86_64")]
+        if fast {
+            // SAFETY: `fast` is only true when the CPU supports AVX2 (`avx2_enabled`).
+            return unsafe { self.m_pixel_avx2(ms, i) };
+        }
+        let _ = fast;
+        self.m_pixel_with::<Portable>(ms, i)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn m_pixel_avx2(&self, ms: &MStep<'_>, i: usize) -> (u32, f32) {
+        self.m_pixel_with::<Avx2>(ms, i)
+    }
+
     /// One M-step + E-step.
     fn iterate(&self, refs: &[u32], it: usize) -> Result<Vec<u32>> {
         let (h, w, p) = (self.h, self.w, self.p);
@@ -589,6 +676,14 @@ impl<'a> Level<'a> {
         let labels_out = self.labels_out;
 
         // M-step (Eq. 3.4).
+        let ms = MStep {
+            s: &s,
+            cands: &cands,
+            m,
+            refs,
+            key,
+        };
+        let fast = avx2_enabled();
         let mut matches = vec![NONE; h * w];
         let mut mdist = vec![f32::INFINITY; h * w];
         matches
@@ -604,49 +699,9 @@ impl<'a> Level<'a> {
                     if !in_grid(i) {
                         continue;
                     }
-                    let lb = labels_out[i];
-                    let mut best = NONE;
-                    let mut bd = f32::INFINITY;
-                    for &c in &cands[i * m..(i + 1) * m] {
-                        if c == NONE {
-                            break;
-                        }
-                        if labels_in[c as usize] != lb {
-                            continue;
-                        }
-                        let d = patch_dist(&s, i, &self.ex_pad, c as usize, p, bd);
-                        if d < bd {
-                            bd = d;
-                            best = c;
-                        }
-                    }
+                    let (best, bd) = self.m_pixel(&ms, i, fast);
                     if best == NONE {
-                        let cur = refs[i];
-                        if labels_in[cur as usize] != lb {
-                            continue;
-                        }
-                        best = cur;
-                        bd = patch_dist(&s, i, &self.ex_pad, cur as usize, p, f32::INFINITY);
-                    }
-                    if self.params.random_search {
-                        let mut rng = Rng::keyed(seed, key, i as u64);
-                        let (by, bx) = ((best as usize / ew) as i64, (best as usize % ew) as i64);
-                        let mut rad = eh.max(ew) as i64;
-                        while rad >= 1 {
-                            let y = rng
-                                .range_inclusive((by - rad).max(0), (by + rad).min(eh as i64 - 1));
-                            let x = rng
-                                .range_inclusive((bx - rad).max(0), (bx + rad).min(ew as i64 - 1));
-                            let c = y as usize * ew + x as usize;
-                            if labels_in[c] == lb {
-                                let d = patch_dist(&s, i, &self.ex_pad, c, p, bd);
-                                if d < bd {
-                                    bd = d;
-                                    best = c as u32;
-                                }
-                            }
-                            rad /= 2;
-                        }
+                        continue;
                     }
                     *slot = best;
                     drow[i % w] = bd;
@@ -911,6 +966,20 @@ mod tests {
             init::random_init(&lb, &init::pixels_by_label(&la, 2), 0, 0x1A17)
         };
         assert!(coherent(&t.refs, 52, 48) > 5 * coherent(&start, 52, 48).max(10));
+    }
+
+    #[test]
+    fn simd_and_portable_paths_agree() {
+        use crate::patch::FORCE_PORTABLE;
+        use std::sync::atomic::Ordering;
+        let params = TbnParams {
+            levels: Some(2),
+            ..TbnParams::default()
+        };
+        FORCE_PORTABLE.store(true, Ordering::Relaxed);
+        let portable = run(&params).0.refs;
+        FORCE_PORTABLE.store(false, Ordering::Relaxed);
+        assert_eq!(portable, run(&params).0.refs);
     }
 
     #[test]
