@@ -724,6 +724,16 @@ impl<'a> Level<'a> {
                 (*d.select_nth_unstable_by(n / 2, f32::total_cmp).1 * 0.1).max(1e-8)
             }
         };
+        let vote_weight: Vec<f32> = mdist
+            .par_iter()
+            .map(|d| {
+                if d.is_finite() {
+                    d.max(floor).powf(-pw)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
         let (ca, c0) = (self.ca, self.c0);
         let aug = &self.el.aug;
         let mut out = vec![NONE; h * w];
@@ -747,7 +757,7 @@ impl<'a> Level<'a> {
                         if e == NONE {
                             continue;
                         }
-                        let wt = mdist[j].max(floor).powf(-pw);
+                        let wt = vote_weight[j];
                         for (a, v) in avg
                             .iter_mut()
                             .zip(&aug[e as usize * ca..e as usize * ca + c0])
