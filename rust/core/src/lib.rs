@@ -14,7 +14,10 @@
 //! - [`seams`]: graph-cut seams between overlapping images (Kwatra et al. 2003; Luo et al.);
 //! - [`poisson`]: Poisson image editing (Pérez et al. 2003) with normal or mixed gradients and
 //!   fixed pixels, solved by multigrid-preconditioned conjugate gradients;
-//! - [`field`]: smooth fields that interpolate given vectors (Sibbing et al. 2010, §5.3).
+//! - [`field`]: smooth fields that interpolate given vectors (Sibbing et al. 2010, §5.3);
+//! - [`tbn`]: texture-by-numbers (Fan et al. 2012 as in Laitoch 2018, §3.3–3.4): pyramid of
+//!   reference images, k-coherence discrete solver, smart initialisation with chamfer 3-4
+//!   distance maps.
 
 pub mod error;
 pub mod field;
@@ -26,6 +29,7 @@ pub mod patch;
 pub mod poisson;
 pub mod rng;
 pub mod seams;
+pub mod tbn;
 pub mod vote;
 
 pub use error::{Error, Result};
