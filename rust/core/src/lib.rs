@@ -14,7 +14,9 @@
 //! - [`seams`]: graph-cut seams between overlapping images (Kwatra et al. 2003; Luo et al.);
 //! - [`poisson`]: Poisson image editing (Pérez et al. 2003) with normal or mixed gradients and
 //!   fixed pixels, solved by multigrid-preconditioned conjugate gradients;
-//! - [`field`]: smooth fields that interpolate given vectors (Sibbing et al. 2010, §5.3).
+//! - [`field`]: smooth fields that interpolate given vectors (Sibbing et al. 2010, §5.3);
+//! - [`shapes`]: boundary-patch shape synthesis of binary shapes and label maps, layered or
+//!   joint (Rosenberger et al. 2009), and the shape similarity of its Eq. 3.9.
 
 pub mod error;
 pub mod field;
@@ -26,6 +28,7 @@ pub mod patch;
 pub mod poisson;
 pub mod rng;
 pub mod seams;
+pub mod shapes;
 pub mod vote;
 
 pub use error::{Error, Result};

@@ -1,0 +1,379 @@
+//! Quota-balanced greedy boundary patch matching (Rosenberger et al. 2009; thesis §3.6.2).
+//!
+//! Every synthesised boundary patch gets one exemplar boundary patch. With
+//! `|B_S| = Q·|B_E| + R`, each exemplar patch is used exactly `Q` times, or `Q + 1` times if it
+//! is among `R` chosen at random, so the output uses the exemplar's boundaries evenly. The
+//! greedy assignment takes the closest (synthesised, exemplar) pairs first: each round every
+//! unmatched synthesised patch proposes its `k` nearest exemplar patches that still have
+//! quota, the proposals are accepted in order of distance while quota lasts, and the rest
+//! try again among the patches with quota left.
+//!
+//! Nearest patches come from an [`Index`]: exemplar patches under their four rotations,
+//! sorted by how many pixels carry one key label. That count differs by at most the distance
+//! between two patches, so a search that walks outwards from the query's count can stop as
+//! soon as the count gap reaches the `k`-th best distance. Identical queries are searched
+//! once and their results cached for the level. Searches run in parallel; each is sequential
+//! and ties break on fixed indices, so the result does not depend on the thread count.
+
+use std::collections::HashMap;
+
+use rayon::prelude::*;
+
+use super::patches::{Geometry, Patch};
+use crate::rng::Rng;
+
+/// Marks an unmatched patch.
+pub const NONE: u32 = u32::MAX;
+
+/// Candidates kept per query in one round.
+pub const K: usize = 4;
+
+/// Rounds of the greedy assignment before the last few patches take any free quota.
+const MAX_ROUNDS: usize = 64;
+
+/// Exemplar patches under their rotations, sorted for pruned nearest-neighbour search.
+#[derive(Clone, Debug)]
+pub struct Index {
+    /// The (rotated) patch of each entry.
+    pub patches: Vec<Patch>,
+    /// The exemplar patch (unique id) each entry comes from.
+    pub ids: Vec<u32>,
+    /// How many 90° turns each entry is rotated by.
+    pub rots: Vec<u8>,
+    /// Each entry's index in the full index (itself, unless this is a [`Index::subset`]).
+    pub entry: Vec<u32>,
+    keys: Vec<u32>,
+    key_label: u8,
+}
+
+impl Index {
+    /// The index of `unique` exemplar patches, each under 4 rotations (`rotations`) or as is.
+    #[must_use]
+    pub fn new(g: &Geometry, unique: &[Patch], rotations: bool, key_label: u8) -> Self {
+        let turns = if rotations { 4 } else { 1 };
+        let mut e: Vec<(u32, u32, u8, Patch)> = Vec::with_capacity(unique.len() * turns);
+        for (id, p) in unique.iter().enumerate() {
+            let mut q = *p;
+            for r in 0..turns {
+                e.push((
+                    g.label_mask(&q, key_label).count_ones(),
+                    id as u32,
+                    r as u8,
+                    q,
+                ));
+                if r + 1 < turns {
+                    q = g.rotate(&q);
+                }
+            }
+        }
+        e.sort_unstable_by_key(|a| (a.0, a.1, a.2));
+        Self {
+            keys: e.iter().map(|a| a.0).collect(),
+            ids: e.iter().map(|a| a.1).collect(),
+            rots: e.iter().map(|a| a.2).collect(),
+            patches: e.iter().map(|a| a.3).collect(),
+            entry: (0..e.len() as u32).collect(),
+            key_label,
+        }
+    }
+
+    /// Number of entries.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.keys.len()
+    }
+
+    /// Whether the index has no entries.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.keys.is_empty()
+    }
+
+    /// The entries whose exemplar patch still has quota (`quota[id] > 0`).
+    #[must_use]
+    pub fn subset(&self, quota: &[u32]) -> Self {
+        let keep: Vec<usize> = (0..self.len())
+            .filter(|&i| quota[self.ids[i] as usize] > 0)
+            .collect();
+        Self {
+            patches: keep.iter().map(|&i| self.patches[i]).collect(),
+            ids: keep.iter().map(|&i| self.ids[i]).collect(),
+            rots: keep.iter().map(|&i| self.rots[i]).collect(),
+            entry: keep.iter().map(|&i| self.entry[i]).collect(),
+            keys: keep.iter().map(|&i| self.keys[i]).collect(),
+            key_label: self.key_label,
+        }
+    }
+
+    /// The `k` nearest entries to `q` as `(distance, full-index entry)`, ascending by
+    /// `(distance, position)`.
+    #[must_use]
+    pub fn knn(&self, g: &Geometry, q: &Patch, k: usize) -> Vec<(u32, u32)> {
+        let kq = g.label_mask(q, self.key_label).count_ones();
+        let n = self.keys.len();
+        let start = self.keys.partition_point(|&x| x < kq);
+        let mut best: Vec<(u32, u32)> = Vec::with_capacity(k + 1);
+        let (mut lo, mut hi) = (start, start);
+        loop {
+            let worst = if best.len() == k {
+                best[k - 1].0
+            } else {
+                u32::MAX
+            };
+            let dlo = if lo > 0 {
+                kq - self.keys[lo - 1]
+            } else {
+                u32::MAX
+            };
+            let dhi = if hi < n { self.keys[hi] - kq } else { u32::MAX };
+            let i = if dlo <= dhi {
+                if dlo == u32::MAX || dlo >= worst {
+                    break;
+                }
+                lo -= 1;
+                lo
+            } else {
+                if dhi >= worst {
+                    break;
+                }
+                hi += 1;
+                hi - 1
+            };
+            let d = g.dist(q, &self.patches[i]);
+            let cand = (d, i as u32);
+            if best.len() < k || cand < best[k - 1] {
+                let at = best.partition_point(|b| *b < cand);
+                best.insert(at, cand);
+                best.truncate(k);
+            }
+        }
+        best.into_iter()
+            .map(|(d, i)| (d, self.entry[i as usize]))
+            .collect()
+    }
+}
+
+/// Quota of each exemplar patch: `mult[u]` copies of patch `u` in the exemplar, `n_s`
+/// synthesised patches to serve. With `n_s = Q·Σmult + R`, every copy serves `Q` and `R`
+/// copies drawn at random (from `seed`) one more, so the quotas sum to `n_s`.
+#[must_use]
+pub fn quotas(n_s: usize, mult: &[u32], seed: u64) -> Vec<u32> {
+    let n_e: usize = mult.iter().map(|&m| m as usize).sum();
+    if n_e == 0 {
+        return vec![0; mult.len()];
+    }
+    let (q, r) = ((n_s / n_e) as u32, n_s % n_e);
+    let mut out: Vec<u32> = mult.iter().map(|&m| m * q).collect();
+    let mut inst: Vec<u32> = mult
+        .iter()
+        .enumerate()
+        .flat_map(|(u, &m)| std::iter::repeat_n(u as u32, m as usize))
+        .collect();
+    let mut rng = Rng::keyed(seed, 0x9007a, n_s as u64);
+    for i in 0..r {
+        let j = i + rng.below((n_e - i) as u64) as usize;
+        inst.swap(i, j);
+        out[inst[i] as usize] += 1;
+    }
+    out
+}
+
+/// One greedy round: `edges` are `(distance, query, entry)`; in ascending order, a query
+/// without a match takes the entry if its exemplar patch has quota left.
+pub fn assign(
+    edges: &mut [(u32, u32, u32)],
+    ids: &[u32],
+    quota: &mut [u32],
+    out: &mut [(u32, u32)],
+) {
+    edges.par_sort_unstable();
+    for &(d, s, e) in edges.iter() {
+        let id = ids[e as usize] as usize;
+        if out[s as usize].0 == NONE && quota[id] > 0 {
+            out[s as usize] = (e, d);
+            quota[id] -= 1;
+        }
+    }
+}
+
+/// Matches every query to an index entry under the quotas: `(entry, distance)` per query.
+/// `cache` holds first-round search results per query patch, valid while `index` is.
+pub fn match_all(
+    g: &Geometry,
+    index: &Index,
+    queries: &[Patch],
+    mut quota: Vec<u32>,
+    k: usize,
+    cache: &mut HashMap<Patch, Vec<(u32, u32)>>,
+) -> Vec<(u32, u32)> {
+    let n = queries.len();
+    let mut out = vec![(NONE, 0u32); n];
+    if index.is_empty() || n == 0 {
+        return out;
+    }
+    let mut uniq: Vec<Patch> = queries.to_vec();
+    uniq.par_sort_unstable();
+    uniq.dedup();
+    let missing: Vec<Patch> = uniq
+        .into_iter()
+        .filter(|p| !cache.contains_key(p))
+        .collect();
+    let found: Vec<Vec<(u32, u32)>> = missing.par_iter().map(|q| index.knn(g, q, k)).collect();
+    cache.extend(missing.into_iter().zip(found));
+    let mut edges: Vec<(u32, u32, u32)> = queries
+        .iter()
+        .enumerate()
+        .flat_map(|(s, q)| cache[q].iter().map(move |&(d, e)| (d, s as u32, e)))
+        .collect();
+    assign(&mut edges, &index.ids, &mut quota, &mut out);
+    for round in 0.. {
+        let left: Vec<u32> = (0..n as u32)
+            .filter(|&s| out[s as usize].0 == NONE)
+            .collect();
+        if left.is_empty() {
+            break;
+        }
+        let sub = index.subset(&quota);
+        if sub.is_empty() {
+            break;
+        }
+        if round >= MAX_ROUNDS {
+            // A long tail of contested patches: each takes its nearest patch with quota left.
+            for &s in &left {
+                let cands = sub.knn(g, &queries[s as usize], sub.len());
+                if let Some(&(d, e)) = cands
+                    .iter()
+                    .find(|c| quota[index.ids[c.1 as usize] as usize] > 0)
+                {
+                    out[s as usize] = (e, d);
+                    quota[index.ids[e as usize] as usize] -= 1;
+                }
+            }
+            break;
+        }
+        let mut lq: Vec<Patch> = left.iter().map(|&s| queries[s as usize]).collect();
+        lq.par_sort_unstable();
+        lq.dedup();
+        let res: HashMap<Patch, Vec<(u32, u32)>> =
+            lq.par_iter().map(|q| (*q, sub.knn(g, q, k))).collect();
+        let mut edges: Vec<(u32, u32, u32)> = left
+            .iter()
+            .flat_map(|&s| {
+                res[&queries[s as usize]]
+                    .iter()
+                    .map(move |&(d, e)| (d, s, e))
+            })
+            .collect();
+        assign(&mut edges, &index.ids, &mut quota, &mut out);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn random_patches(g: &Geometry, n: usize, seed: u64, k: u64) -> Vec<Patch> {
+        let mut r = Rng::keyed(seed, 1, 2);
+        (0..n)
+            .map(|_| {
+                let map: Vec<u8> = (0..g.p * g.p).map(|_| r.below(k) as u8).collect();
+                g.extract(&map, g.p, g.p, g.p / 2, g.p / 2, false)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn knn_equals_brute_force() {
+        for (k_lab, rot) in [(2u64, true), (3, false), (5, true)] {
+            let g = Geometry::new(5, k_lab as usize);
+            let ex = random_patches(&g, 60, 1, k_lab);
+            let idx = Index::new(&g, &ex, rot, 1);
+            for q in random_patches(&g, 30, 2, k_lab) {
+                let mut all: Vec<(u32, u32)> = (0..idx.len())
+                    .map(|i| (g.dist(&q, &idx.patches[i]), i as u32))
+                    .collect();
+                all.sort_unstable();
+                let got = idx.knn(&g, &q, 3);
+                let dists: Vec<u32> = got.iter().map(|a| a.0).collect();
+                let want: Vec<u32> = all[..3].iter().map(|a| a.0).collect();
+                assert_eq!(dists, want);
+                for &(d, e) in &got {
+                    assert_eq!(g.dist(&q, &idx.patches[e as usize]), d);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn quotas_sum_and_balance() {
+        let mult = [1, 3, 2, 1];
+        for n_s in [0, 3, 7, 8, 23] {
+            let q = quotas(n_s, &mult, 5);
+            assert_eq!(q.iter().sum::<u32>() as usize, n_s);
+            let base = (n_s / 7) as u32;
+            for (qu, m) in q.iter().zip(mult) {
+                assert!(*qu >= base * m && *qu <= (base + 1) * m, "{q:?}");
+            }
+        }
+    }
+
+    /// The thesis' greedy, by brute force: repeatedly take the globally closest pair of an
+    /// unmatched query and an entry whose patch has quota.
+    fn brute_force(
+        g: &Geometry,
+        idx: &Index,
+        qs: &[Patch],
+        mut quota: Vec<u32>,
+    ) -> Vec<(u32, u32)> {
+        let mut out = vec![(NONE, 0); qs.len()];
+        loop {
+            let mut best: Option<(u32, u32, u32)> = None;
+            for (s, q) in qs.iter().enumerate() {
+                if out[s].0 != NONE {
+                    continue;
+                }
+                for e in 0..idx.len() {
+                    if quota[idx.ids[e] as usize] == 0 {
+                        continue;
+                    }
+                    let c = (g.dist(q, &idx.patches[e]), s as u32, e as u32);
+                    if best.is_none_or(|b| c < b) {
+                        best = Some(c);
+                    }
+                }
+            }
+            let Some((d, s, e)) = best else { break };
+            out[s as usize] = (e, d);
+            quota[idx.ids[e as usize] as usize] -= 1;
+        }
+        out
+    }
+
+    #[test]
+    fn greedy_respects_quota_and_matches_brute_force() {
+        let g = Geometry::new(3, 2);
+        let ex = random_patches(&g, 7, 3, 2);
+        let idx = Index::new(&g, &ex, true, 1);
+        let qs = random_patches(&g, 23, 4, 2);
+        let mult = vec![1u32; ex.len()];
+        let quota = quotas(qs.len(), &mult, 9);
+        // With every entry as a candidate the first round is the brute-force greedy.
+        let mut cache = HashMap::new();
+        let got = match_all(&g, &idx, &qs, quota.clone(), idx.len(), &mut cache);
+        assert_eq!(got, brute_force(&g, &idx, &qs, quota.clone()));
+        // With few candidates it takes more rounds, but every query is matched and every
+        // exemplar patch is used exactly its quota.
+        for k in [1, 2, 4] {
+            let mut cache = HashMap::new();
+            let got = match_all(&g, &idx, &qs, quota.clone(), k, &mut cache);
+            let mut used = vec![0u32; ex.len()];
+            for (s, &(e, d)) in got.iter().enumerate() {
+                assert_ne!(e, NONE);
+                assert_eq!(g.dist(&qs[s], &idx.patches[e as usize]), d);
+                used[idx.ids[e as usize] as usize] += 1;
+            }
+            assert_eq!(used, quota);
+        }
+    }
+}
