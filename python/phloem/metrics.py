@@ -2,8 +2,9 @@
 
 So far: patch coherence to an exemplar (how well every patch of an output is explained by some
 patch of the exemplar — the quantity texture optimisation minimises, Kwatra et al. 2005, Eq. 1),
-and repetition (how strongly an output repeats itself at a distance, which coherence cannot see:
-a tiled copy of the exemplar is perfectly coherent).
+repetition (how strongly an output repeats itself at a distance, which coherence cannot see:
+a tiled copy of the exemplar is perfectly coherent), and the shape similarity of binary shapes and
+label maps (Rosenberger et al. 2009, thesis Eq. 3.9).
 """
 
 from __future__ import annotations
@@ -14,9 +15,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import patch as _patch
+from . import shapes as _shapes
 from ._validate import as_image, as_mask, check_patch_size
 
-__all__ = ["coherence_map", "patch_coherence", "repetition"]
+__all__ = ["coherence_map", "patch_coherence", "repetition", "shape_similarity"]
 
 
 def coherence_map(
@@ -135,3 +137,19 @@ def repetition(image: Any, *, min_shift: int = 16) -> float:
     valid = far & (n > 0.25 * h * w)
     corr = ac[valid] / np.sqrt(np.maximum(e1[valid] * e2[valid], 1e-24))
     return float(corr.max()) if corr.size else 0.0
+
+
+def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool = True) -> float:
+    """Boundary-patch distance of two shapes or label maps (thesis Eq. 3.9); lower is better.
+
+    The same function as :func:`phloem.shapes.shape_similarity`, listed here with the other
+    measures.
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> a = np.zeros((32, 32), int); a[8:20, 4:12] = 1
+    >>> phloem.metrics.shape_similarity(a, np.rot90(a))
+    0.0
+    """
+    return _shapes.shape_similarity(a, b, patch_size=patch_size, rotations=rotations)

@@ -11,6 +11,7 @@ mod blend;
 mod errors;
 mod patch;
 mod seams;
+mod shapes;
 mod threads;
 
 #[pymodule(gil_used = false)]
@@ -24,6 +25,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(seams::seam_py, m)?)?;
     m.add_function(wrap_pyfunction!(blend::seamless_py, m)?)?;
     m.add_function(wrap_pyfunction!(blend::interpolate_field_py, m)?)?;
+    m.add_function(wrap_pyfunction!(shapes::synthesize_py, m)?)?;
+    m.add_function(wrap_pyfunction!(shapes::synthesize_labels_py, m)?)?;
+    m.add_function(wrap_pyfunction!(shapes::similarity_py, m)?)?;
+    m.add_function(wrap_pyfunction!(shapes::layer_order_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::default_threads_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::after_fork_in_child_py, m)?)?;
     Ok(())
