@@ -143,7 +143,9 @@ def test_label_values_order_and_layer_order():
 def test_progress_is_reported_and_can_stop_the_run():
     ex = blobs(48, 48, 1, 3)
     seen: list[tuple[int, int]] = []
-    shapes.synthesize_labels(ex, 48, method="layered", patch_size=5, levels=2, iterations=2, progress=lambda d, t: seen.append((d, t)))
+    shapes.synthesize_labels(
+        ex, 48, method="layered", patch_size=5, levels=2, iterations=2, progress=lambda d, t: seen.append((d, t))
+    )
     assert seen[-1] == (2 * 2 * 2, 2 * 2 * 2)
     assert all(b >= a for (a, _), (b, _) in itertools.pairwise(seen))
 

@@ -316,4 +316,8 @@ def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool = T
         raise ValueError(f"b: expected at most {MAX_LABELS} labels in a and b together, got {len(union)}")
     ua = np.searchsorted(union, va).astype(np.uint8)[la]
     ub = np.searchsorted(union, vb).astype(np.uint8)[lb]
-    return float(_core.shape_similarity(np.ascontiguousarray(ua), np.ascontiguousarray(ub), patch_size=p, rotations=bool(rotations)))
+    return float(
+        _core.shape_similarity(
+            np.ascontiguousarray(ua), np.ascontiguousarray(ub), patch_size=p, rotations=bool(rotations)
+        )
+    )

@@ -42,8 +42,10 @@ pub struct Index {
     pub rots: Vec<u8>,
     /// Each entry's index in the full index (itself, unless this is a [`Index::subset`]).
     pub entry: Vec<u32>,
+    /// `(left count << 16) | right count` of each entry, ascending.
     keys: Vec<u32>,
     key_label: u8,
+    left: u128,
 }
 
 impl Index {
@@ -51,16 +53,16 @@ impl Index {
     #[must_use]
     pub fn new(g: &Geometry, unique: &[Patch], rotations: bool, key_label: u8) -> Self {
         let turns = if rotations { 4 } else { 1 };
+        let left = (0..g.p * g.p)
+            .filter(|i| i % g.p < g.p / 2)
+            .fold(0u128, |m, i| m | (1u128 << i));
         let mut e: Vec<(u32, u32, u8, Patch)> = Vec::with_capacity(unique.len() * turns);
         for (id, p) in unique.iter().enumerate() {
             let mut q = *p;
             for r in 0..turns {
-                e.push((
-                    g.label_mask(&q, key_label).count_ones(),
-                    id as u32,
-                    r as u8,
-                    q,
-                ));
+                let m = g.label_mask(&q, key_label);
+                let key = ((m & left).count_ones() << 16) | (m & !left).count_ones();
+                e.push((key, id as u32, r as u8, q));
                 if r + 1 < turns {
                     q = g.rotate(&q);
                 }
@@ -74,6 +76,7 @@ impl Index {
             patches: e.iter().map(|a| a.3).collect(),
             entry: (0..e.len() as u32).collect(),
             key_label,
+            left,
         }
     }
 
@@ -102,49 +105,84 @@ impl Index {
             entry: keep.iter().map(|&i| self.entry[i]).collect(),
             keys: keep.iter().map(|&i| self.keys[i]).collect(),
             key_label: self.key_label,
+            left: self.left,
         }
+    }
+
+    /// The two-part key of a patch: pixels of the key label in the left columns, and in the
+    /// others.
+    #[inline]
+    fn key(&self, g: &Geometry, q: &Patch) -> (u32, u32) {
+        let m = g.label_mask(q, self.key_label);
+        ((m & self.left).count_ones(), (m & !self.left).count_ones())
     }
 
     /// The `k` nearest entries to `q` as `(distance, full-index entry)`, ascending by
     /// `(distance, position)`.
     #[must_use]
     pub fn knn(&self, g: &Geometry, q: &Patch, k: usize) -> Vec<(u32, u32)> {
-        let kq = g.label_mask(q, self.key_label).count_ones();
-        let n = self.keys.len();
-        let start = self.keys.partition_point(|&x| x < kq);
+        let (qa, qb) = self.key(g, q);
+        let max_a = self.keys.last().map_or(0, |&x| x >> 16);
         let mut best: Vec<(u32, u32)> = Vec::with_capacity(k + 1);
-        let (mut lo, mut hi) = (start, start);
-        loop {
-            let worst = if best.len() == k {
+        let worst = |best: &Vec<(u32, u32)>| {
+            if best.len() == k {
                 best[k - 1].0
             } else {
                 u32::MAX
-            };
-            let dlo = if lo > 0 {
-                kq - self.keys[lo - 1]
-            } else {
-                u32::MAX
-            };
-            let dhi = if hi < n { self.keys[hi] - kq } else { u32::MAX };
-            let i = if dlo <= dhi {
-                if dlo == u32::MAX || dlo >= worst {
-                    break;
+            }
+        };
+        // Visit the blocks of equal left count in order of their gap to the query's, and
+        // inside a block walk outwards from the query's right count; the sum of the two gaps
+        // is a lower bound of the distance.
+        for delta in 0..=qa.max(max_a) {
+            if delta >= worst(&best) {
+                break;
+            }
+            for a in [qa.checked_sub(delta), (delta > 0).then_some(qa + delta)]
+                .into_iter()
+                .flatten()
+            {
+                if a > max_a {
+                    continue;
                 }
-                lo -= 1;
-                lo
-            } else {
-                if dhi >= worst {
-                    break;
+                let lo_block = self.keys.partition_point(|&x| x < a << 16);
+                let hi_block = self.keys.partition_point(|&x| x < (a + 1) << 16);
+                let start = lo_block
+                    + self.keys[lo_block..hi_block].partition_point(|&x| (x & 0xffff) < qb);
+                let (mut lo, mut hi) = (start, start);
+                loop {
+                    let w = worst(&best);
+                    let dlo = if lo > lo_block {
+                        qb - (self.keys[lo - 1] & 0xffff)
+                    } else {
+                        u32::MAX
+                    };
+                    let dhi = if hi < hi_block {
+                        (self.keys[hi] & 0xffff) - qb
+                    } else {
+                        u32::MAX
+                    };
+                    let i = if dlo <= dhi {
+                        if dlo == u32::MAX || delta + dlo >= w {
+                            break;
+                        }
+                        lo -= 1;
+                        lo
+                    } else {
+                        if delta + dhi >= w {
+                            break;
+                        }
+                        hi += 1;
+                        hi - 1
+                    };
+                    let d = g.dist(q, &self.patches[i]);
+                    let cand = (d, i as u32);
+                    if best.len() < k || cand < best[k - 1] {
+                        let at = best.partition_point(|b| *b < cand);
+                        best.insert(at, cand);
+                        best.truncate(k);
+                    }
                 }
-                hi += 1;
-                hi - 1
-            };
-            let d = g.dist(q, &self.patches[i]);
-            let cand = (d, i as u32);
-            if best.len() < k || cand < best[k - 1] {
-                let at = best.partition_point(|b| *b < cand);
-                best.insert(at, cand);
-                best.truncate(k);
             }
         }
         best.into_iter()
