@@ -19,7 +19,7 @@ use std::collections::HashMap;
 
 use rayon::prelude::*;
 
-use super::patches::{Geometry, Patch};
+use super::patches::{coord, Geometry, Patch};
 use crate::rng::Rng;
 
 /// Marks an unmatched patch.
@@ -27,6 +27,165 @@ pub const NONE: u32 = u32::MAX;
 
 /// Candidates kept per query in one round.
 pub const K: usize = 4;
+
+/// Exact search while queries × entries stays below this; above it, propagation and
+/// random samples.
+pub const EXACT_WORK: usize = 2_000_000;
+
+/// Random entries tried per query by the approximate searches.
+const SAMPLES: usize = 48;
+
+/// Inserts `cand` into the ascending top-`k` list `best` unless its entry is there already.
+#[inline]
+fn insert(best: &mut Vec<(u32, u32)>, cand: (u32, u32), k: usize) {
+    if best.iter().any(|b| b.1 == cand.1) || (best.len() == k && cand >= best[k - 1]) {
+        return;
+    }
+    let at = best.partition_point(|b| *b < cand);
+    best.insert(at, cand);
+    best.truncate(k);
+}
+
+/// Where an exemplar pixel's patch sits in an [`Index`].
+#[derive(Clone, Debug)]
+pub struct Lookup {
+    /// Unique patch id of each exemplar pixel (`NONE` if not in the index).
+    pub pix_id: Vec<u32>,
+    /// Entry of each `(id, rotation)`, at `id * 4 + rotation` (`NONE` if absent).
+    pub id_rot: Vec<u32>,
+    /// Exemplar height.
+    pub h: usize,
+    /// Exemplar width.
+    pub w: usize,
+}
+
+impl Lookup {
+    /// The lookup of `index`, whose unique patch `pixel_ids[j].1` shows at exemplar pixel
+    /// `pixel_ids[j].0`.
+    #[must_use]
+    pub fn new(index: &Index, pixel_ids: &[(u32, u32)], h: usize, w: usize) -> Self {
+        let mut pix_id = vec![NONE; h * w];
+        for &(px, id) in pixel_ids {
+            pix_id[px as usize] = id;
+        }
+        let n_ids = index.ids.iter().map(|&i| i as usize + 1).max().unwrap_or(0);
+        let mut id_rot = vec![NONE; n_ids * 4];
+        for e in 0..index.len() {
+            id_rot[index.ids[e] as usize * 4 + index.rots[e] as usize] = e as u32;
+        }
+        Self {
+            pix_id,
+            id_rot,
+            h,
+            w,
+        }
+    }
+}
+
+/// Approximate first-round candidates by PatchMatch-style search over boundary patches
+/// (Barnes et al. 2009): each query tries the exemplar pixel its own pixel matched last
+/// time, the pixels its 4 neighbours matched shifted back by their offset (under the four
+/// rotations of the offset), pixels at halving radii around its best, and random entries.
+/// `field` holds, per output pixel (`h × w`), the exemplar pixel and rotation of its last
+/// match (`NONE` if none); it is updated in place. Passes are Jacobi-style (each reads the
+/// previous pass), and every query draws from its own random stream, so the result does not
+/// depend on the thread count.
+#[allow(clippy::too_many_arguments)]
+pub fn propagate(
+    g: &Geometry,
+    index: &Index,
+    lookup: &Lookup,
+    rep: &[u32],
+    queries: &[Patch],
+    centres: &[u32],
+    (h, w, wrap): (usize, usize, bool),
+    field: &mut [(u32, u8)],
+    passes: usize,
+    k: usize,
+    seed: u64,
+) -> Vec<Vec<(u32, u32)>> {
+    let n = queries.len();
+    let mut best: Vec<Vec<(u32, u32)>> = vec![Vec::new(); n];
+    let (eh, ew) = (lookup.h as isize, lookup.w as isize);
+    for pass in 0..passes {
+        let f: &[(u32, u8)] = field;
+        best = (0..n)
+            .into_par_iter()
+            .map(|i| {
+                let q = &queries[i];
+                let c = centres[i] as usize;
+                let (y, x) = ((c / w) as isize, (c % w) as isize);
+                let mut b = best[i].clone();
+                let mut rng = Rng::keyed(seed, pass as u64, c as u64);
+                let try_px = |b: &mut Vec<(u32, u32)>, py: isize, px: isize, rot: u8| {
+                    if py < 0 || px < 0 || py >= eh || px >= ew {
+                        return;
+                    }
+                    let id = lookup.pix_id[(py * ew + px) as usize];
+                    if id == NONE {
+                        return;
+                    }
+                    let e = lookup.id_rot[id as usize * 4 + rot as usize];
+                    if e != NONE && !b.iter().any(|c| c.1 == e) {
+                        insert(b, (g.dist(q, &index.patches[e as usize]), e), k);
+                    }
+                };
+                if f[c].0 != NONE {
+                    let (p, r) = f[c];
+                    try_px(
+                        &mut b,
+                        (p as usize / lookup.w) as isize,
+                        (p as usize % lookup.w) as isize,
+                        r,
+                    );
+                }
+                for (dy, dx) in [(-1isize, 0isize), (0, -1), (0, 1), (1, 0)] {
+                    let (ny, nx) = (y + dy, x + dx);
+                    if !wrap && (ny < 0 || nx < 0 || ny >= h as isize || nx >= w as isize) {
+                        continue;
+                    }
+                    let nb = coord(ny, h, true) * w + coord(nx, w, true);
+                    let (p, r) = f[nb];
+                    if p == NONE {
+                        continue;
+                    }
+                    let (py, px) = (
+                        (p as usize / lookup.w) as isize,
+                        (p as usize % lookup.w) as isize,
+                    );
+                    for (oy, ox) in [(dy, dx), (dx, -dy), (-dy, -dx), (-dx, dy)] {
+                        try_px(&mut b, py - oy, px - ox, r);
+                    }
+                }
+                if let Some(&(_, e)) = b.first() {
+                    let p = rep[index.ids[e as usize] as usize] as usize;
+                    let (py, px) = ((p / lookup.w) as isize, (p % lookup.w) as isize);
+                    let r = index.rots[e as usize];
+                    let mut radius = eh.max(ew);
+                    while radius >= 1 {
+                        let oy = rng.range_inclusive(-(radius as i64), radius as i64) as isize;
+                        let ox = rng.range_inclusive(-(radius as i64), radius as i64) as isize;
+                        try_px(&mut b, py + oy, px + ox, r);
+                        radius /= 2;
+                    }
+                }
+                let samples = if pass == 0 { SAMPLES / 3 } else { SAMPLES / 8 };
+                for _ in 0..samples {
+                    let e = rng.below(index.len() as u64) as u32;
+                    insert(&mut b, (g.dist(q, &index.patches[e as usize]), e), k);
+                }
+                b
+            })
+            .collect();
+        for (i, b) in best.iter().enumerate() {
+            if let Some(&(_, e)) = b.first() {
+                field[centres[i] as usize] =
+                    (rep[index.ids[e as usize] as usize], index.rots[e as usize]);
+            }
+        }
+    }
+    best
+}
 
 /// Rounds of the greedy assignment before the last few patches take any free quota.
 const MAX_ROUNDS: usize = 64;
@@ -234,21 +393,15 @@ pub fn assign(
     }
 }
 
-/// Matches every query to an index entry under the quotas: `(entry, distance)` per query.
-/// `cache` holds first-round search results per query patch, valid while `index` is.
-pub fn match_all(
+/// The first-round candidates of [`match_all`] by exact search: the `k` nearest entries of
+/// each query. `cache` holds results per query patch, valid while `index` is.
+pub fn exact_candidates(
     g: &Geometry,
     index: &Index,
     queries: &[Patch],
-    mut quota: Vec<u32>,
     k: usize,
     cache: &mut HashMap<Patch, Vec<(u32, u32)>>,
-) -> Vec<(u32, u32)> {
-    let n = queries.len();
-    let mut out = vec![(NONE, 0u32); n];
-    if index.is_empty() || n == 0 {
-        return out;
-    }
+) -> Vec<Vec<(u32, u32)>> {
     let mut uniq: Vec<Patch> = queries.to_vec();
     uniq.par_sort_unstable();
     uniq.dedup();
@@ -258,10 +411,31 @@ pub fn match_all(
         .collect();
     let found: Vec<Vec<(u32, u32)>> = missing.par_iter().map(|q| index.knn(g, q, k)).collect();
     cache.extend(missing.into_iter().zip(found));
-    let mut edges: Vec<(u32, u32, u32)> = queries
+    queries.iter().map(|q| cache[q].clone()).collect()
+}
+
+/// Matches every query to an index entry under the quotas: `(entry, distance)` per query.
+/// `first` holds each query's candidates `(distance, entry)` for the first round; later
+/// rounds search the entries with quota left, exactly while that is cheap, else among
+/// random samples (keyed by `seed`).
+pub fn match_all(
+    g: &Geometry,
+    index: &Index,
+    queries: &[Patch],
+    mut quota: Vec<u32>,
+    k: usize,
+    first: &[Vec<(u32, u32)>],
+    seed: u64,
+) -> Vec<(u32, u32)> {
+    let n = queries.len();
+    let mut out = vec![(NONE, 0u32); n];
+    if index.is_empty() || n == 0 {
+        return out;
+    }
+    let mut edges: Vec<(u32, u32, u32)> = first
         .iter()
         .enumerate()
-        .flat_map(|(s, q)| cache[q].iter().map(move |&(d, e)| (d, s as u32, e)))
+        .flat_map(|(s, c)| c.iter().map(move |&(d, e)| (d, s as u32, e)))
         .collect();
     assign(&mut edges, &index.ids, &mut quota, &mut out);
     for round in 0.. {
@@ -292,8 +466,23 @@ pub fn match_all(
         let mut lq: Vec<Patch> = left.iter().map(|&s| queries[s as usize]).collect();
         lq.par_sort_unstable();
         lq.dedup();
-        let res: HashMap<Patch, Vec<(u32, u32)>> =
-            lq.par_iter().map(|q| (*q, sub.knn(g, q, k))).collect();
+        let exact = lq.len() * sub.len() <= EXACT_WORK;
+        let res: HashMap<Patch, Vec<(u32, u32)>> = lq
+            .par_iter()
+            .enumerate()
+            .map(|(j, q)| {
+                if exact {
+                    return (*q, sub.knn(g, q, k));
+                }
+                let mut rng = Rng::keyed(seed, 0x5ab + round as u64, j as u64);
+                let mut best: Vec<(u32, u32)> = Vec::with_capacity(k + 1);
+                for _ in 0..SAMPLES {
+                    let i = rng.below(sub.len() as u64) as usize;
+                    insert(&mut best, (g.dist(q, &sub.patches[i]), sub.entry[i]), k);
+                }
+                (*q, best)
+            })
+            .collect();
         let mut edges: Vec<(u32, u32, u32)> = left
             .iter()
             .flat_map(|&s| {
@@ -398,13 +587,15 @@ mod tests {
         let quota = quotas(qs.len(), &mult, 9);
         // With every entry as a candidate the first round is the brute-force greedy.
         let mut cache = HashMap::new();
-        let got = match_all(&g, &idx, &qs, quota.clone(), idx.len(), &mut cache);
+        let first = exact_candidates(&g, &idx, &qs, idx.len(), &mut cache);
+        let got = match_all(&g, &idx, &qs, quota.clone(), idx.len(), &first, 0);
         assert_eq!(got, brute_force(&g, &idx, &qs, quota.clone()));
         // With few candidates it takes more rounds, but every query is matched and every
         // exemplar patch is used exactly its quota.
         for k in [1, 2, 4] {
             let mut cache = HashMap::new();
-            let got = match_all(&g, &idx, &qs, quota.clone(), k, &mut cache);
+            let first = exact_candidates(&g, &idx, &qs, k, &mut cache);
+            let got = match_all(&g, &idx, &qs, quota.clone(), k, &first, 0);
             let mut used = vec![0u32; ex.len()];
             for (s, &(e, d)) in got.iter().enumerate() {
                 assert_ne!(e, NONE);

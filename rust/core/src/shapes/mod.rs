@@ -30,7 +30,9 @@ use rayon::prelude::*;
 use crate::error::{invalid, Error, Result};
 use crate::rng::{mix64, Rng};
 use adjust::{decide, falloff, votes, Overlay};
-use matching::{match_all, quotas, Index, K, NONE};
+use matching::{
+    exact_candidates, match_all, propagate, quotas, Index, Lookup, EXACT_WORK, K, NONE,
+};
 use patches::{boundary, other_label, Geometry, Patch};
 
 pub use patches::MAX_PATCH;
@@ -265,15 +267,23 @@ struct Group {
     mult: Vec<u32>,
     /// One exemplar pixel showing each unique patch.
     rep: Vec<u32>,
+    lookup: Lookup,
     cache: HashMap<Patch, Vec<(u32, u32)>>,
 }
 
 impl Group {
-    /// `items` sorted by patch: `(patch, exemplar pixel)`.
-    fn new(g: &Geometry, items: &[(Patch, u32)], rotations: bool, key_label: u8) -> Self {
+    /// `items` sorted by patch: `(patch, exemplar pixel)` of an `eh × ew` exemplar.
+    fn new(
+        g: &Geometry,
+        items: &[(Patch, u32)],
+        rotations: bool,
+        key_label: u8,
+        (eh, ew): (usize, usize),
+    ) -> Self {
         let mut unique = Vec::new();
         let mut mult = Vec::new();
         let mut rep = Vec::new();
+        let mut pixel_ids = Vec::with_capacity(items.len());
         for (i, it) in items.iter().enumerate() {
             if i > 0 && items[i - 1].0 == it.0 {
                 *mult.last_mut().expect("a previous patch") += 1;
@@ -282,11 +292,15 @@ impl Group {
                 mult.push(1);
                 rep.push(it.1);
             }
+            pixel_ids.push((it.1, unique.len() as u32 - 1));
         }
+        let index = Index::new(g, &unique, rotations, key_label);
+        let lookup = Lookup::new(&index, &pixel_ids, eh, ew);
         Self {
-            index: Index::new(g, &unique, rotations, key_label),
+            index,
             mult,
             rep,
+            lookup,
             cache: HashMap::new(),
         }
     }
@@ -362,13 +376,16 @@ impl Engine<'_> {
             let j = i + items[i..].partition_point(|it| it.0 == key);
             let group: Vec<(Patch, u32)> = items[i..j].iter().map(|it| (it.1, it.2)).collect();
             let low = (key / MAX_LABELS as u16) as u8;
-            groups.insert(key, Group::new(g, &group, self.params.rotations, low));
+            groups.insert(
+                key,
+                Group::new(g, &group, self.params.rotations, low, (ex.h, ex.w)),
+            );
             i = j;
         }
         let global = (self.k > 2 && !items.is_empty()).then(|| {
             let mut flat: Vec<(Patch, u32)> = items.iter().map(|it| (it.1, it.2)).collect();
             flat.par_sort_unstable();
-            Group::new(g, &flat, self.params.rotations, 0)
+            Group::new(g, &flat, self.params.rotations, 0, (ex.h, ex.w))
         });
         (groups, global)
     }
@@ -419,6 +436,7 @@ impl Engine<'_> {
         }
         let mut cur: Option<LabelMap> = None;
         let mut last = LastMatch::default();
+        let mut field: Vec<(u32, u8)> = Vec::new();
         for l in (0..self.levels).rev() {
             let (hl, wl) = (ceil_shift(h, l), ceil_shift(w, l));
             let al: Option<Vec<bool>> = allowed.map(|a| {
@@ -452,6 +470,29 @@ impl Engine<'_> {
                 }
             };
             let (mut groups, mut global) = self.groups(&exs[l]);
+            // The previous level's matches, scaled up, seed this level's search.
+            field = if field.is_empty() {
+                vec![(NONE, 0u8); hl * wl]
+            } else {
+                let (ch, cw) = (ceil_shift(h, l + 1), ceil_shift(w, l + 1));
+                let (eh, ew) = (exs[l].h, exs[l].w);
+                let cew = exs[l + 1].w;
+                (0..hl * wl)
+                    .map(|i| {
+                        let (y, x) = (i / wl, i % wl);
+                        let (p, r) = field[(y / 2).min(ch - 1) * cw + (x / 2).min(cw - 1)];
+                        if p == NONE {
+                            return (NONE, 0);
+                        }
+                        let (py, px) = (p as usize / cew, p as usize % cew);
+                        (
+                            ((2 * py + y % 2).min(eh - 1) * ew + (2 * px + x % 2).min(ew - 1))
+                                as u32,
+                            r,
+                        )
+                    })
+                    .collect()
+            };
             let mut its = 0;
             for it in 0..self.params.iterations {
                 let key = mix64(self.params.seed ^ mix64(level_key ^ (it as u64) << 20));
@@ -496,7 +537,34 @@ impl Engine<'_> {
                     };
                     let queries: Vec<Patch> = members.iter().map(|&i| qs[i].1).collect();
                     let quota = quotas(queries.len(), &grp.mult, key ^ u64::from(*b));
-                    let m = match_all(&self.g, &grp.index, &queries, quota, K, &mut grp.cache);
+                    let first = if queries.len() * grp.index.len() <= EXACT_WORK {
+                        exact_candidates(&self.g, &grp.index, &queries, K, &mut grp.cache)
+                    } else {
+                        let cs: Vec<u32> = members.iter().map(|&i| centres[i]).collect();
+                        let passes = if it == 0 { 3 } else { 2 };
+                        propagate(
+                            &self.g,
+                            &grp.index,
+                            &grp.lookup,
+                            &grp.rep,
+                            &queries,
+                            &cs,
+                            (hl, wl, wrap),
+                            &mut field,
+                            passes,
+                            K,
+                            key ^ u64::from(*b),
+                        )
+                    };
+                    let m = match_all(
+                        &self.g,
+                        &grp.index,
+                        &queries,
+                        quota,
+                        K,
+                        &first,
+                        key ^ u64::from(*b),
+                    );
                     for (j, &i) in members.iter().enumerate() {
                         let (e, d) = m[j];
                         if e != NONE {
@@ -508,6 +576,9 @@ impl Engine<'_> {
                     }
                 }
                 let keep: Vec<usize> = (0..n).filter(|&i| src[i].0 != NONE).collect();
+                for &i in &keep {
+                    field[centres[i] as usize] = src[i];
+                }
                 let centres: Vec<u32> = keep.iter().map(|&i| centres[i]).collect();
                 let matched: Vec<Patch> = keep.iter().map(|&i| matched[i]).collect();
                 let dists: Vec<u32> = keep.iter().map(|&i| dists[i]).collect();
