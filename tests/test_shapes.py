@@ -131,9 +131,12 @@ def test_label_values_order_and_layer_order():
     ex = blobs(64, 64, 3, 3)
     values = np.array([7, -2, 30])[ex]
     order = shapes.layer_order(values)
-    counts = {v: (values == v).sum() for v in (7, -2, 30)}
     assert sorted(order) == [-2, 7, 30]
-    assert [counts[v] for v in order] == sorted(counts.values(), reverse=True)
+    # blobs() cuts one smooth field at two levels: the middle label (1, here -2) separates
+    # the others, so it is the middle layer.
+    assert order[1] == -2
+    counts = {v: (values == v).sum() for v in (7, 30)}
+    assert counts[order[0]] >= counts[order[2]]
     for method, kw in [("layered", {"order": [30, 7, -2]}), ("joint", {})]:
         out = shapes.synthesize_labels(values, 48, method=method, patch_size=5, seed=0, **kw)
         assert out.dtype == np.int32
@@ -214,7 +217,7 @@ def thesis_map(run: str, name: str) -> np.ndarray:
 
 # Where phloem's layered maps score worse than the thesis' own output (README of benches).
 _WHY = "nested binary layers lose the joint boundaries between upper layers (thesis §4.4)"
-LAYERED_LOSES: dict[str, str] = {run: _WHY for run in THESIS_RUNS}
+LAYERED_LOSES: dict[str, str] = {run: _WHY for run in ["bark2", "eucalyptus", "eucap5"]}
 
 
 @pytest.mark.shared

@@ -162,14 +162,19 @@ def synthesize(
 def layer_order(labels: Any) -> list[int]:
     """The layer order :func:`synthesize_labels` infers for ``labels``, bottom layer first.
 
-    Labels are ordered by decreasing area: the largest label is taken as the ground the
-    others lie on (ties by label value).
+    In a map of nested layers, boundaries run between consecutive layers; the order chosen is
+    the one whose boundaries between non-consecutive layers are shortest (all orders are tried
+    for up to 7 labels), with its larger end at the bottom. Beyond 7 labels, and among equally
+    good orders, labels go by decreasing area (the largest is the ground the others lie on).
 
     Examples
     --------
     >>> import numpy as np, phloem
-    >>> phloem.shapes.layer_order(np.array([[0, 1, 1], [2, 1, 1]]))
-    [1, 0, 2]
+    >>> yy, xx = np.mgrid[:40, :40]
+    >>> r2 = (yy - 20) ** 2 + (xx - 20) ** 2
+    >>> rings = np.where(r2 < 64, 5, np.where(r2 < 100, 9, 0))   # 5 inside 9 on 0
+    >>> phloem.shapes.layer_order(rings)
+    [0, 9, 5]
     """
     lab, values = _labels(labels, "labels")
     order = _core.shape_layer_order(lab, k=len(values))

@@ -40,6 +40,9 @@ pub use patches::MAX_PATCH;
 /// The largest number of labels of a label map.
 pub const MAX_LABELS: usize = 64;
 
+/// [`layer_order`] searches all orders of up to this many labels.
+pub const MAX_ORDER_SEARCH: usize = 7;
+
 /// The most pyramid levels chosen automatically.
 const MAX_AUTO_LEVELS: usize = 6;
 
@@ -766,17 +769,75 @@ pub fn synthesize(
     Ok(e.optimise(shape, h, w, mask, &[1.0 - f, f], 0)?.0)
 }
 
-/// The inferred layer order of a map with `k` labels, bottom first: by decreasing area (the
-/// largest label is the ground the others lie on), ties by label.
+/// The inferred layer order of a map with `k` labels, bottom first. In a map of nested layers
+/// boundaries run between consecutive layers, so the order is the one whose boundaries
+/// between non-consecutive layers are shortest (searched over all orders for up to
+/// [`MAX_ORDER_SEARCH`] labels); its bottom is the larger end. Beyond that, and on ties,
+/// labels go by decreasing area (the largest label is the ground the others lie on).
 #[must_use]
 pub fn layer_order(labels: &LabelMap, k: usize) -> Vec<u8> {
+    let (h, w) = (labels.h, labels.w);
     let mut counts = vec![0usize; k];
-    for &l in &labels.data {
-        counts[l as usize] += 1;
+    let mut adj = vec![0usize; k * k];
+    for y in 0..h {
+        for x in 0..w {
+            let l = labels.data[y * w + x] as usize;
+            counts[l] += 1;
+            if x + 1 < w {
+                let m = labels.data[y * w + x + 1] as usize;
+                adj[l * k + m] += 1;
+                adj[m * k + l] += 1;
+            }
+            if y + 1 < h {
+                let m = labels.data[(y + 1) * w + x] as usize;
+                adj[l * k + m] += 1;
+                adj[m * k + l] += 1;
+            }
+        }
     }
     let mut order: Vec<u8> = (0..k as u8).collect();
     order.sort_by_key(|&l| (std::cmp::Reverse(counts[l as usize]), l));
-    order
+    if k > MAX_ORDER_SEARCH {
+        return order;
+    }
+    let cost = |o: &[u8]| -> usize {
+        let mut c = 0;
+        for i in 0..o.len() {
+            for j in i + 2..o.len() {
+                c += adj[o[i] as usize * k + o[j] as usize];
+            }
+        }
+        c
+    };
+    // Heap's algorithm over the area order, keeping the first cheapest (so ties stay by area).
+    let mut best = (cost(&order), order.clone());
+    let mut p = order.clone();
+    let mut c = vec![0usize; k];
+    let mut i = 1;
+    while i < k {
+        if c[i] < i {
+            if i % 2 == 0 {
+                p.swap(0, i);
+            } else {
+                p.swap(c[i], i);
+            }
+            let oriented = if counts[p[0] as usize] >= counts[p[k - 1] as usize] {
+                p.clone()
+            } else {
+                p.iter().rev().copied().collect()
+            };
+            let cc = cost(&oriented);
+            if cc < best.0 {
+                best = (cc, oriented);
+            }
+            c[i] += 1;
+            i = 1;
+        } else {
+            c[i] = 0;
+            i += 1;
+        }
+    }
+    best.1
 }
 
 /// A `k`-label map of `h × w` pixels synthesised like `labels` (labels `0..k`, each present).
@@ -1007,6 +1068,26 @@ mod tests {
                 assert!((fa - fb).abs() < 0.02, "{method:?} label {l}: {fa} vs {fb}");
             }
         }
+    }
+
+    #[test]
+    fn layer_order_follows_nesting_not_area() {
+        // Background 1, rings of 2 around cores of 0; label 2 has the least area.
+        let (h, w) = (60, 60);
+        let mut data = vec![1u8; h * w];
+        for (cy, cx) in [(15isize, 15isize), (15, 45), (45, 15), (45, 45)] {
+            for y in 0..h as isize {
+                for x in 0..w as isize {
+                    let d2 = (y - cy).pow(2) + (x - cx).pow(2);
+                    if d2 <= 100 {
+                        data[y as usize * w + x as usize] = if d2 <= 64 { 0 } else { 2 };
+                    }
+                }
+            }
+        }
+        let m = LabelMap { data, h, w };
+        assert!(m.count(2) < m.count(0));
+        assert_eq!(layer_order(&m, 3), vec![1, 2, 0]);
     }
 
     #[test]
