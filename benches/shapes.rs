@@ -89,7 +89,7 @@ fn similarity_bench(c: &mut Criterion) {
     g.throughput(Throughput::Elements((256 * 256) as u64));
     let pool = pool(2);
     g.bench_function("256", |bch| {
-        bch.iter(|| pool.install(|| black_box(similarity(&ex, &out, 7, true).unwrap())))
+        bch.iter(|| pool.install(|| black_box(similarity(&ex, &out, 7, true).unwrap())));
     });
     g.finish();
 }

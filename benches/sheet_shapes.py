@@ -20,8 +20,8 @@ import phloem
 from phloem import shapes
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_shapes import bark_labels  # noqa: E402
-from sheet_texture import ROOT, _fit, _label  # noqa: E402
+from bench_shapes import bark_labels
+from sheet_texture import ROOT, _fit, _label
 
 RUNS = ["bark1", "bark2", "eucalyptus", "eucap5"]
 SHARED = ROOT.parent / "shared" / "data" / "bark" / "thesis_runs"

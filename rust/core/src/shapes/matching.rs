@@ -395,6 +395,7 @@ pub fn assign(
 
 /// The first-round candidates of [`match_all`] by exact search: the `k` nearest entries of
 /// each query. `cache` holds results per query patch, valid while `index` is.
+#[allow(clippy::implicit_hasher)]
 pub fn exact_candidates(
     g: &Geometry,
     index: &Index,
@@ -418,6 +419,7 @@ pub fn exact_candidates(
 /// `first` holds each query's candidates `(distance, entry)` for the first round; later
 /// rounds search the entries with quota left, exactly while that is cheap, else among
 /// random samples (keyed by `seed`).
+#[must_use]
 pub fn match_all(
     g: &Geometry,
     index: &Index,
