@@ -84,15 +84,13 @@ impl Lookup {
 
 /// Approximate first-round candidates by PatchMatch-style search over boundary patches
 /// (Barnes et al. 2009): each query tries the exemplar pixel its own pixel matched last
-/// time, the pixels its 4 neighbours matched shifted back by their offset (under the four
-/// rotations of the offset), pixels at halving radii around its best, and random entries.
+/// time, the pixels its 4 neighbours matched shifted back by their (rotated) offset, pixels at halving radii around its best, and random entries.
 /// `field` holds, per output pixel (`h × w`), the exemplar pixel and rotation of its last
 /// match (`NONE` if none); it is updated in place. Passes are Jacobi-style (each reads the
 /// previous pass), and every query draws from its own random stream, so the result does not
 /// depend on the thread count.
 #[allow(clippy::too_many_arguments)]
 pub fn propagate(
-    g: &Geometry,
     index: &Index,
     lookup: &Lookup,
     rep: &[u32],
@@ -127,7 +125,7 @@ pub fn propagate(
                     }
                     let e = lookup.id_rot[id as usize * 4 + rot as usize];
                     if e != NONE && !b.iter().any(|c| c.1 == e) {
-                        insert(b, (g.dist(q, &index.patches[e as usize]), e), k);
+                        insert(b, (index.dist(q, e as usize), e), k);
                     }
                 };
                 if f[c].0 != NONE {
@@ -153,9 +151,15 @@ pub fn propagate(
                         (p as usize / lookup.w) as isize,
                         (p as usize % lookup.w) as isize,
                     );
-                    for (oy, ox) in [(dy, dx), (dx, -dy), (-dy, -dx), (-dx, dy)] {
-                        try_px(&mut b, py - oy, px - ox, r);
-                    }
+                    // The entry shows the exemplar turned `r` times by 90°, so the step from
+                    // the neighbour back to this pixel turns with it.
+                    let (oy, ox) = match r {
+                        0 => (dy, dx),
+                        1 => (-dx, dy),
+                        2 => (-dy, -dx),
+                        _ => (dx, -dy),
+                    };
+                    try_px(&mut b, py - oy, px - ox, r);
                 }
                 if let Some(&(_, e)) = b.first() {
                     let p = rep[index.ids[e as usize] as usize] as usize;
@@ -169,10 +173,16 @@ pub fn propagate(
                         radius /= 2;
                     }
                 }
-                let samples = if pass == 0 { SAMPLES / 3 } else { SAMPLES / 8 };
+                // Random entries cost a cache miss each: many only on a cold start (more than two
+                // passes), a couple otherwise, where the neighbours' matches carry the search.
+                let samples = if pass == 0 && passes > 2 {
+                    SAMPLES / 3
+                } else {
+                    2
+                };
                 for _ in 0..samples {
                     let e = rng.below(index.len() as u64) as u32;
-                    insert(&mut b, (g.dist(q, &index.patches[e as usize]), e), k);
+                    insert(&mut b, (index.dist(q, e as usize), e), k);
                 }
                 b
             })
@@ -201,6 +211,10 @@ pub struct Index {
     pub rots: Vec<u8>,
     /// Each entry's index in the full index (itself, unless this is a [`Index::subset`]).
     pub entry: Vec<u32>,
+    /// The entries' bit planes back to back (`planes` words each): a third to a sixth of the
+    /// memory of `patches`, so the searches' random reads miss the cache less.
+    flat: Vec<u128>,
+    planes: usize,
     /// `(left count << 16) | right count` of each entry, ascending.
     keys: Vec<u32>,
     key_label: u8,
@@ -232,11 +246,28 @@ impl Index {
             keys: e.iter().map(|a| a.0).collect(),
             ids: e.iter().map(|a| a.1).collect(),
             rots: e.iter().map(|a| a.2).collect(),
+            flat: e
+                .iter()
+                .flat_map(|a| a.3 .0[..g.planes].iter().copied())
+                .collect(),
+            planes: g.planes,
             patches: e.iter().map(|a| a.3).collect(),
             entry: (0..e.len() as u32).collect(),
             key_label,
             left,
         }
+    }
+
+    /// Number of differing pixels between `q` and entry `i`.
+    #[inline]
+    #[must_use]
+    pub fn dist(&self, q: &Patch, i: usize) -> u32 {
+        let e = &self.flat[i * self.planes..(i + 1) * self.planes];
+        let mut m = 0u128;
+        for (a, b) in q.0.iter().zip(e) {
+            m |= a ^ b;
+        }
+        m.count_ones()
     }
 
     /// Number of entries.
@@ -258,6 +289,15 @@ impl Index {
             .filter(|&i| quota[self.ids[i] as usize] > 0)
             .collect();
         Self {
+            flat: keep
+                .iter()
+                .flat_map(|&i| {
+                    self.flat[i * self.planes..(i + 1) * self.planes]
+                        .iter()
+                        .copied()
+                })
+                .collect(),
+            planes: self.planes,
             patches: keep.iter().map(|&i| self.patches[i]).collect(),
             ids: keep.iter().map(|&i| self.ids[i]).collect(),
             rots: keep.iter().map(|&i| self.rots[i]).collect(),
@@ -334,7 +374,7 @@ impl Index {
                         hi += 1;
                         hi - 1
                     };
-                    let d = g.dist(q, &self.patches[i]);
+                    let d = self.dist(q, i);
                     let cand = (d, i as u32);
                     if best.len() < k || cand < best[k - 1] {
                         let at = best.partition_point(|b| *b < cand);
@@ -480,7 +520,7 @@ pub fn match_all(
                 let mut best: Vec<(u32, u32)> = Vec::with_capacity(k + 1);
                 for _ in 0..SAMPLES {
                     let i = rng.below(sub.len() as u64) as usize;
-                    insert(&mut best, (g.dist(q, &sub.patches[i]), sub.entry[i]), k);
+                    insert(&mut best, (sub.dist(q, i), sub.entry[i]), k);
                 }
                 (*q, best)
             })

@@ -546,7 +546,6 @@ impl Engine<'_> {
                         let cs: Vec<u32> = members.iter().map(|&i| centres[i]).collect();
                         let passes = if it == 0 { 3 } else { 2 };
                         propagate(
-                            &self.g,
                             &grp.index,
                             &grp.lookup,
                             &grp.rep,
