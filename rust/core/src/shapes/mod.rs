@@ -31,7 +31,7 @@ use crate::error::{invalid, Error, Result};
 use crate::rng::{mix64, Rng};
 use adjust::{decide, falloff, votes, Overlay};
 use matching::{
-    exact_candidates, match_all, propagate, quotas, Index, Lookup, EXACT_WORK, K, NONE,
+    exact_candidates, match_all, propagate, quotas, Index, Lookup, EXACT_WORK, K, NONE, QUOTA_SLACK,
 };
 use patches::{boundary, other_label, Geometry, Patch};
 
@@ -539,7 +539,7 @@ impl Engine<'_> {
                         continue;
                     };
                     let queries: Vec<Patch> = members.iter().map(|&i| qs[i].1).collect();
-                    let quota = quotas(queries.len(), &grp.mult, key ^ u64::from(*b));
+                    let quota = quotas(queries.len(), &grp.mult, QUOTA_SLACK, key ^ u64::from(*b));
                     let first = if queries.len() * grp.index.len() <= EXACT_WORK {
                         exact_candidates(&self.g, &grp.index, &queries, K, &mut grp.cache)
                     } else {
