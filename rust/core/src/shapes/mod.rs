@@ -340,8 +340,8 @@ impl Engine<'_> {
     }
 
     /// The exemplar's boundary patches grouped by label pair, and (for more than two labels)
-    /// all of them together, for output pairs the exemplar lacks.
-    fn groups(&self, ex: &LabelMap) -> (BTreeMap<u16, Group>, Option<Group>) {
+    /// all of them sorted by patch, for a group of output pairs the exemplar lacks.
+    fn groups(&self, ex: &LabelMap) -> (BTreeMap<u16, Group>, Vec<(Patch, u32)>) {
         let g = &self.g;
         let r = g.p / 2;
         let all = boundary(&ex.data, ex.h, ex.w, false);
@@ -385,12 +385,12 @@ impl Engine<'_> {
             );
             i = j;
         }
-        let global = (self.k > 2 && !items.is_empty()).then(|| {
-            let mut flat: Vec<(Patch, u32)> = items.iter().map(|it| (it.1, it.2)).collect();
-            flat.par_sort_unstable();
-            Group::new(g, &flat, self.params.rotations, 0, (ex.h, ex.w))
-        });
-        (groups, global)
+        let mut all: Vec<(Patch, u32)> = Vec::new();
+        if self.k > 2 {
+            all = items.iter().map(|it| (it.1, it.2)).collect();
+            all.par_sort_unstable();
+        }
+        (groups, all)
     }
 
     fn random_init(
@@ -472,7 +472,9 @@ impl Engine<'_> {
                     m
                 }
             };
-            let (mut groups, mut global) = self.groups(&exs[l]);
+            let (mut groups, all) = self.groups(&exs[l]);
+            // Built on first use only: most iterations have no pair the exemplar lacks.
+            let mut global: Option<Group> = None;
             // The previous level's matches, scaled up, seed this level's search.
             field = if field.is_empty() {
                 vec![(NONE, 0u8); hl * wl]
@@ -531,6 +533,10 @@ impl Engine<'_> {
                 let mut matched = vec![Patch::default(); n];
                 let mut dists = vec![0u32; n];
                 for (b, members) in &buckets {
+                    if *b == u16::MAX && global.is_none() && !all.is_empty() {
+                        let dims = (exs[l].h, exs[l].w);
+                        global = Some(Group::new(&self.g, &all, self.params.rotations, 0, dims));
+                    }
                     let Some(grp) = (if *b == u16::MAX {
                         global.as_mut()
                     } else {
