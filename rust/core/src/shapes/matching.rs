@@ -1,19 +1,24 @@
 //! Quota-balanced greedy boundary patch matching (Rosenberger et al. 2009; thesis §3.6.2).
 //!
 //! Every synthesised boundary patch gets one exemplar boundary patch. With
-//! `|B_S| = Q·|B_E| + R`, each exemplar patch is used exactly `Q` times, or `Q + 1` times if it
-//! is among `R` chosen at random, so the output uses the exemplar's boundaries evenly. The
-//! greedy assignment takes the closest (synthesised, exemplar) pairs first: each round every
-//! unmatched synthesised patch proposes its `k` nearest exemplar patches that still have
-//! quota, the proposals are accepted in order of distance while quota lasts, and the rest
-//! try again among the patches with quota left.
+//! `|B_S| = Q·|B_E| + R`, the thesis uses each exemplar patch exactly `Q` times, or `Q + 1`
+//! times if it is among `R` chosen at random, so the output uses the exemplar's boundaries
+//! evenly. phloem allows [`QUOTA_SLACK`] more uses per patch, so the quota caps how often a
+//! patch is used without forcing rare ones in ([`quotas`] with slack 0 is the thesis' rule).
+//! The greedy assignment takes the closest (synthesised, exemplar) pairs first: each round
+//! every unmatched synthesised patch proposes its `k` nearest exemplar patches that still
+//! have quota, the proposals are accepted in order of distance while quota lasts, and the
+//! rest try again among the patches with quota left.
 //!
 //! Nearest patches come from an [`Index`]: exemplar patches under their four rotations,
-//! sorted by how many pixels carry one key label. That count differs by at most the distance
-//! between two patches, so a search that walks outwards from the query's count can stop as
-//! soon as the count gap reaches the `k`-th best distance. Identical queries are searched
-//! once and their results cached for the level. Searches run in parallel; each is sequential
-//! and ties break on fixed indices, so the result does not depend on the thread count.
+//! sorted by how many pixels carry one key label in the left columns and in the rest. Those
+//! counts differ by at most the distance between two patches, so a search that walks
+//! outwards from the query's counts stops as soon as the count gap reaches the `k`-th best
+//! distance ([`Index::knn`], exact). Above [`EXACT_WORK`] the first round's candidates come
+//! from a PatchMatch-style search instead ([`propagate`]). Identical queries are searched
+//! once and exact results cached for the level. Searches run in parallel; each is sequential,
+//! draws from its own random stream and breaks ties on fixed indices, so the result does not
+//! depend on the thread count.
 
 use std::collections::HashMap;
 

@@ -5,7 +5,7 @@
 //! A shape (a binary map) is synthesised like a texture (Kwatra et al. 2005), but only its
 //! boundaries are compared: starting from random noise with the exemplar's area fraction, on
 //! an image pyramid from coarse to fine, each iteration matches every boundary patch of the
-//! output to an exemplar boundary patch under a quota ([`matching`]), lets the matched patches
+//! output to an exemplar boundary patch under a (capped) quota ([`matching`]), lets the matched patches
 //! vote for each pixel and re-labels the pixels under an area constraint ([`adjust`]). A level
 //! ends after `iterations` iterations or as soon as the shape stops changing.
 //!
