@@ -3,7 +3,8 @@
     python benches/sheet_shapes.py out/shapes_sheet.png
 
 Bark row: the embedded bark | its 3-label map (k-means, as in bench_shapes.py) | phloem layered
-and joint outputs at 256² | joint at 512² (shown reduced). One row per thesis run when
+and joint outputs at 256² | joint at 512² (shown reduced) | joint at 256² without rotations
+(which keeps the furrows vertical). One row per thesis run when
 ../shared/data is present: the input label map a | the thesis' output b | phloem layered |
 phloem joint, each output at b's size, with its Eq. 3.9 distance to a (lower is better) and
 the seconds it took. Labels are drawn as evenly spaced grays (darkest = lowest label).
@@ -48,10 +49,16 @@ def _timed(fn, *args, **kw):  # type: ignore[no-untyped-def]
 def bark_row() -> list[np.ndarray]:
     lab = bark_labels()
     tiles = [_label(_fit(phloem.data.bark()), "embedded bark"), _label(_fit(_gray(lab)), "k-means labels (3)")]
-    for method, size in [("layered", 256), ("joint", 256), ("joint", 512)]:
-        out, dt = _timed(shapes.synthesize_labels, lab, size, method=method, seed=0)
+    for method, size, rot in [
+        ("layered", 256, True),
+        ("joint", 256, True),
+        ("joint", 512, True),
+        ("joint", 256, False),
+    ]:
+        out, dt = _timed(shapes.synthesize_labels, lab, size, method=method, rotations=rot, seed=0)
         sim = shapes.shape_similarity(lab, out)
-        tiles.append(_label(_fit(_gray(out)), f"{method} {size}: D={sim:.3f} {dt:.1f}s"))
+        name = f"{method} {size}" + ("" if rot else " no rot.")
+        tiles.append(_label(_fit(_gray(out)), f"{name}: D={sim:.3f} {dt:.1f}s"))
     return tiles
 
 
@@ -62,8 +69,7 @@ def thesis_row(run: str) -> list[np.ndarray]:
     for method in shapes.METHODS:
         out, dt = _timed(shapes.synthesize_labels, a, b.shape, method=method, seed=0)
         tiles.append(_label(_fit(_gray(out)), f"{method}: D={shapes.shape_similarity(a, out):.3f} {dt:.1f}s"))
-    tiles.append(np.ones_like(tiles[0]))
-    return tiles
+    return tiles + [np.ones_like(tiles[0])] * 2
 
 
 def main(out: Path) -> None:
