@@ -132,25 +132,27 @@ pub fn decide(
             cap[l as usize] -= 1;
         }
     }
-    let mut entries: Vec<(u32, u8, f32, f32)> = rows
+    // Highest share first, then strongest vote, then a random order (not raster order, which
+    // would grow shapes towards the top-left). Keys are built once, not per comparison.
+    let mut order: Vec<(u32, u32, u64, u32, u8)> = rows
         .into_iter()
         .flat_map(|r| r.entries)
         .filter(|e| ok(e.0 as usize))
+        .map(|e| {
+            (
+                u32::MAX - e.2.to_bits(),
+                u32::MAX - e.3.to_bits(),
+                mix64(key ^ (u64::from(e.0) * 64 + u64::from(e.1))),
+                e.0,
+                e.1,
+            )
+        })
         .collect();
-    // Highest share first, then strongest vote, then a random order (not raster order, which
-    // would grow shapes towards the top-left).
-    entries.par_sort_unstable_by_key(|e| {
-        (
-            std::cmp::Reverse(e.2.to_bits()),
-            std::cmp::Reverse(e.3.to_bits()),
-            mix64(key ^ (u64::from(e.0) * 64 + u64::from(e.1))),
-            e.0,
-            e.1,
-        )
-    });
+    order.par_sort_unstable();
+    let entries = order.into_iter().map(|(_, _, _, i, l)| (i, l));
     let mut out = map.to_vec();
     let mut done = vec![false; map.len()];
-    for &(i, l, _, _) in &entries {
+    for (i, l) in entries {
         let i = i as usize;
         if !done[i] && cap[l as usize] > 0 {
             out[i] = l;

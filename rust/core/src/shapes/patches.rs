@@ -117,18 +117,38 @@ impl Geometry {
     /// (`wrap`) or repeat the nearest border pixel.
     #[must_use]
     pub fn extract(&self, map: &[u8], h: usize, w: usize, y: usize, x: usize, wrap: bool) -> Patch {
-        let r = (self.p / 2) as isize;
+        let p = self.p;
+        let r = p / 2;
         let mut out = Patch::default();
-        let mut bit = 0;
-        for dy in -r..=r {
-            let yy = coord(y as isize + dy, h, wrap);
-            let row = &map[yy * w..(yy + 1) * w];
-            for dx in -r..=r {
-                let l = row[coord(x as isize + dx, w, wrap)];
-                for j in 0..self.planes {
-                    out.0[j] |= u128::from((l >> j) & 1) << bit;
+        let mut put = |l: u8, bit: usize| {
+            let (mut l, mut j) = (l, 0);
+            while l != 0 {
+                if l & 1 != 0 {
+                    out.0[j] |= 1u128 << bit;
                 }
-                bit += 1;
+                l >>= 1;
+                j += 1;
+            }
+        };
+        let interior = y >= r && x >= r && y + r < h && x + r < w;
+        let mut bit = 0;
+        for dy in 0..p {
+            let yy = if interior {
+                y + dy - r
+            } else {
+                coord((y + dy) as isize - r as isize, h, wrap)
+            };
+            let row = &map[yy * w..(yy + 1) * w];
+            if interior {
+                for &l in &row[x - r..=x + r] {
+                    put(l, bit);
+                    bit += 1;
+                }
+            } else {
+                for dx in 0..p {
+                    put(row[coord((x + dx) as isize - r as isize, w, wrap)], bit);
+                    bit += 1;
+                }
             }
         }
         out
