@@ -193,6 +193,8 @@ def test_errors_name_the_argument():
         shapes.synthesize_labels(ex, 40, order=[0, 1, 1])
     with pytest.raises(ValueError, match="^order"):
         shapes.synthesize_labels(ex, 40, order=[0, 1])
+    with pytest.raises(ValueError, match="^order"):
+        shapes.synthesize_labels(ex, 40, method="joint", order=[0, 1, 5])
     with pytest.raises(ValueError, match="^labels"):
         shapes.synthesize_labels(np.full((20, 20), 3), 40)
     with pytest.raises(ValueError, match="^labels"):

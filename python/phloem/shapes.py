@@ -211,7 +211,8 @@ def synthesize_labels(
         ``"joint"``: all labels are optimised together, boundary patches matched within each
         pair of labels that meet; better for more than two or three labels.
     order : sequence of int, optional
-        The label values bottom layer first (layered only); default :func:`layer_order`.
+        The label values bottom layer first; default :func:`layer_order`. Used by the layered
+        method only (checked, then ignored, by the joint one).
     patch_size, levels, iterations, rotations, tileable, seed, threads, progress
         As in :func:`synthesize`.
 
@@ -245,8 +246,6 @@ def synthesize_labels(
         raise ValueError(f"labels: expected at least {p}×{p} pixels (patch_size), got {lab.shape[0]}×{lab.shape[1]}")
     idx: list[int] | None = None
     if order is not None:
-        if method != "layered":
-            raise ValueError("order: only used by method='layered'")
         try:
             items = list(order)
         except TypeError:
