@@ -8,7 +8,8 @@ data      small embedded example images
 blend     gradient-domain solvers: seamless (Poisson) blending, smooth field interpolation
 patch     patch matching: PatchMatch and exact fields, k nearest patches, k-coherence, voting
 seams     exact grid max-flow / min-cut and graph-cut seams between overlapping images
-texture   texture synthesis, graph-cut quilting and image completion
+texture   texture synthesis, texture-by-numbers, graph-cut quilting and image completion
+shapes    boundary-patch synthesis of binary shapes and label maps (Rosenberger et al. 2009)
 metrics   measures of result quality
 cli       the ``phloem`` command
 """
@@ -17,7 +18,7 @@ from __future__ import annotations
 
 import os
 
-from . import _core, bark, blend, data, io, metrics, patch, seams, texture
+from . import _core, bark, blend, data, io, metrics, patch, seams, shapes, texture
 
 __version__: str = _core.__version__
 
@@ -26,4 +27,4 @@ __version__: str = _core.__version__
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_core._after_fork_in_child)
 
-__all__ = ["__version__", "bark", "blend", "data", "io", "metrics", "patch", "seams", "texture"]
+__all__ = ["__version__", "bark", "blend", "data", "io", "metrics", "patch", "seams", "shapes", "texture"]

@@ -1,5 +1,5 @@
 # Hand-written stub of the native module; checked with `python -m mypy.stubtest phloem._core`.
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,6 +17,10 @@ __all__ = [
     "nnf",
     "seam",
     "seamless",
+    "shape_layer_order",
+    "shape_similarity",
+    "shape_synthesize",
+    "shape_synthesize_labels",
     "tbn_downsample",
     "tbn_upsample",
     "vote",
@@ -136,3 +140,39 @@ def seam(
     edges: NDArray[np.float32] | None = None,
     threads: int | None = None,
 ) -> tuple[NDArray[np.bool_], float, tuple[int, int]]: ...
+def shape_synthesize(
+    shape: NDArray[np.uint8],
+    *,
+    height: int,
+    width: int,
+    patch_size: int,
+    levels: int,
+    iterations: int,
+    rotations: bool,
+    tileable: bool,
+    seed: int,
+    mask: NDArray[np.bool_] | None = None,
+    threads: int | None = None,
+    progress: Callable[[int, int], object] | None = None,
+) -> NDArray[np.uint8]: ...
+def shape_synthesize_labels(
+    labels: NDArray[np.uint8],
+    *,
+    k: int,
+    height: int,
+    width: int,
+    method: str,
+    patch_size: int,
+    levels: int,
+    iterations: int,
+    rotations: bool,
+    tileable: bool,
+    seed: int,
+    order: Sequence[int] | None = None,
+    threads: int | None = None,
+    progress: Callable[[int, int], object] | None = None,
+) -> NDArray[np.uint8]: ...
+def shape_similarity(
+    a: NDArray[np.uint8], b: NDArray[np.uint8], *, patch_size: int, rotations: bool, threads: int | None = None
+) -> float: ...
+def shape_layer_order(labels: NDArray[np.uint8], *, k: int) -> list[int]: ...

@@ -3,8 +3,9 @@
 So far: per-label colour histogram distance (does each labelled region of a texture-by-numbers
 output have the colours of the same label in the exemplar), patch coherence to an exemplar (how well every patch of an output is explained by some
 patch of the exemplar — the quantity texture optimisation minimises, Kwatra et al. 2005, Eq. 1),
-and repetition (how strongly an output repeats itself at a distance, which coherence cannot see:
-a tiled copy of the exemplar is perfectly coherent).
+repetition (how strongly an output repeats itself at a distance, which coherence cannot see:
+a tiled copy of the exemplar is perfectly coherent), and the shape similarity of binary shapes and
+label maps (Rosenberger et al. 2009, thesis Eq. 3.9).
 """
 
 from __future__ import annotations
@@ -15,9 +16,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import patch as _patch
+from . import shapes as _shapes
+from . import shapes as _shapes
 from ._validate import as_image, as_mask, check_patch_size
 
-__all__ = ["coherence_map", "label_histogram_distance", "patch_coherence", "repetition"]
+__all__ = ["coherence_map", "label_histogram_distance", "patch_coherence", "repetition", "shape_similarity"]
 
 
 def coherence_map(
@@ -195,3 +198,19 @@ def label_histogram_distance(image: Any, labels: Any, exemplar: Any, exemplar_la
             hb = np.histogram(b[:, c], bins=bins, range=(0.0, 1.0))[0] / len(b)
             dists.append(0.5 * float(np.abs(ha - hb).sum()))
     return float(np.mean(dists))
+
+
+def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool = True) -> float:
+    """Boundary-patch distance of two shapes or label maps (thesis Eq. 3.9); lower is better.
+
+    The same function as :func:`phloem.shapes.shape_similarity`, listed here with the other
+    measures.
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> a = np.zeros((32, 32), int); a[8:20, 4:12] = 1
+    >>> phloem.metrics.shape_similarity(a, np.rot90(a))
+    0.0
+    """
+    return _shapes.shape_similarity(a, b, patch_size=patch_size, rotations=rotations)

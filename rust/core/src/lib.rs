@@ -15,6 +15,8 @@
 //! - [`poisson`]: Poisson image editing (Pérez et al. 2003) with normal or mixed gradients and
 //!   fixed pixels, solved by multigrid-preconditioned conjugate gradients;
 //! - [`field`]: smooth fields that interpolate given vectors (Sibbing et al. 2010, §5.3);
+//! - [`shapes`]: boundary-patch shape synthesis of binary shapes and label maps, layered or
+//!   joint (Rosenberger et al. 2009), and the shape similarity of its Eq. 3.9.
 //! - [`tbn`]: texture-by-numbers (Fan et al. 2012 as in Laitoch 2018, §3.3–3.4): pyramid of
 //!   reference images, k-coherence discrete solver, smart initialisation with chamfer 3-4
 //!   distance maps.
@@ -29,6 +31,7 @@ pub mod patch;
 pub mod poisson;
 pub mod rng;
 pub mod seams;
+pub mod shapes;
 pub mod tbn;
 pub mod vote;
 

@@ -11,6 +11,7 @@ mod blend;
 mod errors;
 mod patch;
 mod seams;
+mod shapes;
 mod tbn;
 mod threads;
 
@@ -28,6 +29,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(tbn::by_numbers_py, m)?)?;
     m.add_function(wrap_pyfunction!(tbn::tbn_upsample_py, m)?)?;
     m.add_function(wrap_pyfunction!(tbn::tbn_downsample_py, m)?)?;
+    m.add_function(wrap_pyfunction!(shapes::synthesize_py, m)?)?;
+    m.add_function(wrap_pyfunction!(shapes::synthesize_labels_py, m)?)?;
+    m.add_function(wrap_pyfunction!(shapes::similarity_py, m)?)?;
+    m.add_function(wrap_pyfunction!(shapes::layer_order_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::default_threads_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::after_fork_in_child_py, m)?)?;
     Ok(())

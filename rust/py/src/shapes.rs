@@ -1,0 +1,163 @@
+//! Bindings of `phloem_core::shapes` for `phloem.shapes`.
+
+use std::sync::Mutex;
+
+use ndarray::Array2;
+use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
+use phloem_core::error::invalid;
+use phloem_core::shapes::{self, LabelMap, Method, ShapeParams};
+use pyo3::prelude::*;
+
+use crate::errors::{guarded, not_contiguous, opt_slice, to_py};
+use crate::threads::install;
+
+fn label_map(name: &'static str, a: &PyReadonlyArray2<'_, u8>, k: usize) -> PyResult<LabelMap> {
+    let (h, w) = a.as_array().dim();
+    let data = a.as_slice().map_err(not_contiguous(name))?.to_vec();
+    LabelMap::new(name, data, h, w, k).map_err(to_py)
+}
+
+/// Runs `f` with a progress callback that calls `progress` under the GIL; an exception it
+/// raises cancels the run and is re-raised.
+fn with_progress<T: Send>(
+    py: Python<'_>,
+    progress: Option<Py<PyAny>>,
+    threads: Option<usize>,
+    f: impl FnOnce(shapes::Progress<'_>) -> phloem_core::Result<T> + Send,
+) -> PyResult<T> {
+    let failure: Mutex<Option<PyErr>> = Mutex::new(None);
+    let call = |done: usize, total: usize| -> bool {
+        let Some(cb) = progress.as_ref() else {
+            return true;
+        };
+        Python::attach(|py| match cb.call1(py, (done, total)) {
+            Ok(_) => true,
+            Err(e) => {
+                if let Ok(mut slot) = failure.lock() {
+                    *slot = Some(e);
+                }
+                false
+            }
+        })
+    };
+    let cb: &(dyn Fn(usize, usize) -> bool + Sync) = &call;
+    let r = py.detach(|| guarded(|| install(threads, || f(progress.is_some().then_some(cb)))));
+    if let Some(e) = failure.lock().ok().and_then(|mut s| s.take()) {
+        return Err(e);
+    }
+    r.map_err(to_py)
+}
+
+fn params(
+    patch_size: usize,
+    levels: usize,
+    iterations: usize,
+    rotations: bool,
+    tileable: bool,
+    seed: u64,
+) -> ShapeParams {
+    ShapeParams {
+        patch_size,
+        levels,
+        iterations,
+        rotations,
+        tileable,
+        seed,
+    }
+}
+
+#[pyfunction]
+#[pyo3(name = "shape_synthesize", signature = (shape, *, height, width, patch_size, levels, iterations, rotations, tileable, seed, mask=None, threads=None, progress=None))]
+pub fn synthesize_py<'py>(
+    py: Python<'py>,
+    shape: PyReadonlyArray2<'py, u8>,
+    height: usize,
+    width: usize,
+    patch_size: usize,
+    levels: usize,
+    iterations: usize,
+    rotations: bool,
+    tileable: bool,
+    seed: u64,
+    mask: Option<PyReadonlyArray2<'py, bool>>,
+    threads: Option<usize>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyArray2<u8>>> {
+    let ex = label_map("shape", &shape, 2)?;
+    let mask = opt_slice("mask", mask.as_ref())?;
+    let p = params(patch_size, levels, iterations, rotations, tileable, seed);
+    let out = with_progress(py, progress, threads, |cb| {
+        shapes::synthesize(&ex, height, width, mask, &p, cb)
+    })?;
+    Ok(Array2::from_shape_vec((out.h, out.w), out.data)
+        .expect("shape")
+        .into_pyarray(py))
+}
+
+#[pyfunction]
+#[pyo3(name = "shape_synthesize_labels", signature = (labels, *, k, height, width, method, patch_size, levels, iterations, rotations, tileable, seed, order=None, threads=None, progress=None))]
+pub fn synthesize_labels_py<'py>(
+    py: Python<'py>,
+    labels: PyReadonlyArray2<'py, u8>,
+    k: usize,
+    height: usize,
+    width: usize,
+    method: &str,
+    patch_size: usize,
+    levels: usize,
+    iterations: usize,
+    rotations: bool,
+    tileable: bool,
+    seed: u64,
+    order: Option<Vec<u8>>,
+    threads: Option<usize>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyArray2<u8>>> {
+    let method = match method {
+        "layered" => Method::Layered,
+        "joint" => Method::Joint,
+        other => {
+            return Err(to_py(invalid(
+                "method",
+                format!("expected 'layered' or 'joint', got {other:?}"),
+            )))
+        }
+    };
+    let ex = label_map("labels", &labels, shapes::MAX_LABELS)?;
+    let p = params(patch_size, levels, iterations, rotations, tileable, seed);
+    let out = with_progress(py, progress, threads, |cb| {
+        shapes::synthesize_labels(&ex, k, height, width, method, order.as_deref(), &p, cb)
+    })?;
+    Ok(Array2::from_shape_vec((out.h, out.w), out.data)
+        .expect("shape")
+        .into_pyarray(py))
+}
+
+#[pyfunction]
+#[pyo3(name = "shape_similarity", signature = (a, b, *, patch_size, rotations, threads=None))]
+pub fn similarity_py(
+    py: Python<'_>,
+    a: PyReadonlyArray2<'_, u8>,
+    b: PyReadonlyArray2<'_, u8>,
+    patch_size: usize,
+    rotations: bool,
+    threads: Option<usize>,
+) -> PyResult<f64> {
+    let a = label_map("a", &a, shapes::MAX_LABELS)?;
+    let b = label_map("b", &b, shapes::MAX_LABELS)?;
+    py.detach(|| {
+        guarded(|| {
+            install(threads, || {
+                shapes::similarity(&a, &b, patch_size, rotations)
+            })
+        })
+    })
+    .map_err(to_py)
+}
+
+#[pyfunction]
+#[pyo3(name = "shape_layer_order", signature = (labels, *, k))]
+pub fn layer_order_py(labels: PyReadonlyArray2<'_, u8>, k: usize) -> PyResult<Vec<u8>> {
+    let m = label_map("labels", &labels, k)?;
+    Ok(shapes::layer_order(&m, k))
+}
