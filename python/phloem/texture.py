@@ -724,8 +724,8 @@ def by_numbers(
     labels_in: Any,
     labels_out: Any,
     *,
-    patch_size: int = 5,
-    k: int = 2,
+    patch_size: int = 7,
+    k: int = 1,
     label_weight: float = 3.0,
     feature_weight: float = 8.0,
     features: Any = "auto",
@@ -764,10 +764,13 @@ def by_numbers(
     labels_out : (H, W) array_like of int
         ``B``; defines the output size. Every value must occur in ``labels_in``.
     patch_size : int, optional
-        Neighbourhood side, odd (default 5).
+        Neighbourhood side, odd (default 7).
     k : int, optional
         k of k-coherence search: every coherence candidate brings its ``k − 1`` nearest
-        exemplar patches (default 2).
+        exemplar patches (default 1: coherence candidates only). ``patch_size=7, k=1``
+        measured more coherent and closer in per-label histograms than ``5, 2`` on the thesis'
+        bark runs, at the same time; larger patches or ``k`` raise coherence and lower
+        histogram fidelity, at up to twice the time.
     label_weight : float, optional
         ``w`` of Eq. 3.3 (default 3, the thesis' bark value; Fan et al. used 1).
     feature_weight : float, optional
