@@ -106,7 +106,8 @@ def test_progress_counts_every_iteration(scene):
     ex, a, b = scene
     calls: list[tuple[int, int]] = []
     by_numbers(ex, a, b, levels=2, iterations=2, progress=lambda d, t: calls.append((d, t)))
-    assert calls == [(1, 4), (2, 4), (3, 4), (4, 4)]
+    # The coarser level runs two more iterations than the finest.
+    assert calls == [(d, 6) for d in range(1, 7)]
 
 
 def test_feature_options(scene):
@@ -144,7 +145,7 @@ def test_output_is_far_more_coherent_than_a_label_shuffle(bark):
     a, b = _labels2(ex), _labels2(bark[:, 128:])
     out = by_numbers(ex, a, b, seed=0)
     ours, shuffled = patch_coherence(out, ex), patch_coherence(_shuffle(ex, a, b), ex)
-    # Measured 0.0086 vs 0.031; the real right half scores 0.017 (it holds new patterns).
+    # Measured 0.0083 vs 0.031; the real right half scores 0.017 (it holds new patterns).
     assert ours < 0.4 * shuffled, (ours, shuffled)
     # Its regions have their own label's colours, not the other label's (0.18 vs 0.70).
     assert label_histogram_distance(out, b, ex, a) < 0.4 * label_histogram_distance(out, 1 - b, ex, a)
@@ -165,12 +166,12 @@ def _thesis_run(name):
 # Ratios phloem / thesis result (bi) measured with seed 0; the limits leave a little room for
 # the approximate coherence search. Do not loosen them to make a change pass.
 THESIS_LIMITS = {
-    # name: (coherence ratio, histogram ratio); measured with patch_size=7, k=1:
-    # 1.26/0.57, 1.23/0.35, 0.98/0.52, 1.03/0.53
-    "bark1": (1.30, 0.62),
-    "bark2": (1.28, 0.40),
-    "eucalyptus": (1.03, 0.57),
-    "eucap5": (1.07, 0.58),
+    # name: (coherence ratio, histogram ratio); measured with patch_size=7, k=1 and two extra
+    # coarse iterations: 1.18/0.53, 1.18/0.35, 0.94/0.49, 0.99/0.55
+    "bark1": (1.22, 0.58),
+    "bark2": (1.22, 0.40),
+    "eucalyptus": (0.98, 0.54),
+    "eucap5": (1.03, 0.60),
 }
 
 
