@@ -7,6 +7,7 @@ absent.
 
 Run for figures:   pytest benches/bench_tbn.py --benchmark-enable --benchmark-only
 Same-run table:    python benches/bench_tbn.py [--runs 5] [--threads 2]
+Pipeline scale:    python benches/bench_tbn.py --pipeline   (embedded bark, 2 labels, 512×512)
 In the default test run the benchmarks execute once each (``--benchmark-disable``).
 """
 
@@ -104,6 +105,23 @@ def patchmatch_by_numbers(
     return out
 
 
+def pipeline_workload() -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
+    """The bark pipeline's scale: the embedded bark photo, a two-label map (dark furrows and
+    plates: ``phloem.bark.input_labels`` where present, else a median split of the smoothed
+    luminance) and a 512×512 output map made by mirroring it."""
+    ex = np.ascontiguousarray(phloem.data.bark()[..., :3])
+    try:
+        from phloem.bark import input_labels  # type: ignore[import-not-found]
+
+        a = np.asarray(input_labels(ex, 2), np.int32)
+    except ImportError:
+        g = cv2.GaussianBlur(ex.mean(axis=2), (0, 0), 2.0)
+        a = (g > np.median(g)).astype(np.int32)
+    b = np.concatenate([a, a[:, ::-1]], axis=1)
+    b = np.ascontiguousarray(np.concatenate([b, b[::-1]], axis=0)[:512, :512])
+    return "embedded bark → 512²", ex, a, b
+
+
 @pytest.fixture(scope="module")
 def scene() -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
     return workload()
@@ -137,8 +155,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--pipeline", action="store_true", help="the bark pipeline's 512² scale (phloem only)")
     args = ap.parse_args()
-    name, ex, a, b = workload()
+    name, ex, a, b = pipeline_workload() if args.pipeline else workload()
     print(
         f"{name}: exemplar {ex.shape[0]}×{ex.shape[1]}, output {b.shape[0]}×{b.shape[1]}, {args.threads} threads, {args.runs} runs"
     )
@@ -147,6 +166,8 @@ def main() -> None:
         "phloem.by_numbers": lambda: phloem.texture.by_numbers(ex, a, b, threads=args.threads),
         "patchmatch_by_numbers": lambda: patchmatch_by_numbers(ex, a, b, threads=args.threads),
     }
+    if args.pipeline:
+        del rows["patchmatch_by_numbers"]
     for label, fn in rows.items():
         best, med, out = _time(fn, args.runs)
         coh = patch_coherence(out, ex)

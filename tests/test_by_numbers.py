@@ -106,7 +106,8 @@ def test_progress_counts_every_iteration(scene):
     ex, a, b = scene
     calls: list[tuple[int, int]] = []
     by_numbers(ex, a, b, levels=2, iterations=2, progress=lambda d, t: calls.append((d, t)))
-    assert calls == [(1, 4), (2, 4), (3, 4), (4, 4)]
+    # The coarser level runs two more iterations than the finest.
+    assert calls == [(d, 6) for d in range(1, 7)]
 
 
 def test_feature_options(scene):
@@ -144,9 +145,9 @@ def test_output_is_far_more_coherent_than_a_label_shuffle(bark):
     a, b = _labels2(ex), _labels2(bark[:, 128:])
     out = by_numbers(ex, a, b, seed=0)
     ours, shuffled = patch_coherence(out, ex), patch_coherence(_shuffle(ex, a, b), ex)
-    # Measured 0.0087 vs 0.031; the real right half scores 0.017 (it holds new patterns).
+    # Measured 0.0083 vs 0.031; the real right half scores 0.017 (it holds new patterns).
     assert ours < 0.4 * shuffled, (ours, shuffled)
-    # Its regions have their own label's colours, not the other label's (0.20 vs 0.71).
+    # Its regions have their own label's colours, not the other label's (0.18 vs 0.70).
     assert label_histogram_distance(out, b, ex, a) < 0.4 * label_histogram_distance(out, 1 - b, ex, a)
 
 
@@ -165,11 +166,12 @@ def _thesis_run(name):
 # Ratios phloem / thesis result (bi) measured with seed 0; the limits leave a little room for
 # the approximate coherence search. Do not loosen them to make a change pass.
 THESIS_LIMITS = {
-    # name: (coherence ratio, histogram ratio); measured 1.27/0.61, 1.30/0.33, 1.04/0.62, 1.09/0.76
-    "bark1": (1.32, 0.70),
-    "bark2": (1.36, 0.40),
-    "eucalyptus": (1.10, 0.70),
-    "eucap5": (1.14, 0.85),
+    # name: (coherence ratio, histogram ratio); measured with patch_size=7, k=1 and two extra
+    # coarse iterations: 1.18/0.53, 1.18/0.35, 0.94/0.49, 0.99/0.55
+    "bark1": (1.22, 0.58),
+    "bark2": (1.22, 0.40),
+    "eucalyptus": (0.98, 0.54),
+    "eucap5": (1.03, 0.60),
 }
 
 

@@ -4,6 +4,8 @@
 //! (Borgefors 1988), the label-and-distance metric of Eq. 3.6, and flood-fill region growth
 //! from random seeds that copies coherent exemplar regions.
 
+use std::sync::atomic::{AtomicU32, Ordering};
+
 use rayon::prelude::*;
 
 use crate::patch::NONE;
@@ -123,6 +125,21 @@ impl<'a> LabelMap<'a> {
 /// distance-map differences over it; neighbourhoods are clamped at the borders.
 #[must_use]
 pub fn eq36(a: &LabelMap<'_>, pa: usize, b: &LabelMap<'_>, pb: usize, r: i64) -> f32 {
+    eq36_below(a, pa, b, pb, r, f32::INFINITY)
+}
+
+/// [`eq36`], or, as soon as a partial sum (checked after every row) exceeds `cutoff`, that
+/// partial sum: a value above `cutoff` and at most Eq. 3.6. Values within `cutoff` are
+/// bit-identical to [`eq36`]'s.
+#[inline]
+fn eq36_below(
+    a: &LabelMap<'_>,
+    pa: usize,
+    b: &LabelMap<'_>,
+    pb: usize,
+    r: i64,
+    cutoff: f32,
+) -> f32 {
     let (ay, ax) = ((pa / a.w) as i64, (pa % a.w) as i64);
     let (by, bx) = ((pb / b.w) as i64, (pb % b.w) as i64);
     let mut mismatch = 0u32;
@@ -134,6 +151,10 @@ pub fn eq36(a: &LabelMap<'_>, pa: usize, b: &LabelMap<'_>, pb: usize, r: i64) ->
             mismatch += u32::from(a.labels[i] != b.labels[j]);
             let d = a.dist[i] - b.dist[j];
             ssd += d * d;
+        }
+        let partial = SMART_LABEL_WEIGHT * mismatch as f32 + ssd.sqrt();
+        if partial > cutoff {
+            return partial;
         }
     }
     SMART_LABEL_WEIGHT * mismatch as f32 + ssd.sqrt()
@@ -164,10 +185,22 @@ pub fn smart_init(a: &LabelMap<'_>, b: &LabelMap<'_>, patch_size: usize, seed: u
             }
         };
         let lb = b.labels[pb];
+        // Exhaustive, but a candidate stops once its partial sum exceeds the best distance
+        // found so far by any thread. Only candidates strictly worse than the minimum stop,
+        // so the result (ties to the lower index) is the same as without pruning.
+        let best_bits = AtomicU32::new(f32::INFINITY.to_bits());
         let (best, dbest) = (0..a.labels.len())
             .into_par_iter()
             .filter(|&pa| a.labels[pa] == lb)
-            .map(|pa| (pa, eq36(a, pa, b, pb, r)))
+            .map(|pa| {
+                // Non-negative floats order like their bit patterns.
+                let cutoff = f32::from_bits(best_bits.load(Ordering::Relaxed));
+                let d = eq36_below(a, pa, b, pb, r, cutoff);
+                if d <= cutoff {
+                    best_bits.fetch_min(d.to_bits(), Ordering::Relaxed);
+                }
+                (pa, d)
+            })
             .reduce(
                 || (usize::MAX, f32::INFINITY),
                 |x, y| {
@@ -326,6 +359,30 @@ mod tests {
         assert!(coherent as f64 > 0.8 * (h * (w - 1)) as f64, "{coherent}");
         // Different seeds give different outputs.
         assert_ne!(refs, smart_init(&a, &b, 5, 8));
+        // The same on one thread as on several (the pruned search is exact).
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        assert_eq!(refs, pool.install(|| smart_init(&a, &b, 5, 7)));
+    }
+
+    #[test]
+    fn pruned_eq36_is_exact_within_the_cutoff() {
+        let (h, w) = (24, 30);
+        let (la, lb) = (stripes(h, w, 6, 0), stripes(h, w, 7, 2));
+        let (a, b) = (LabelMap::new(&la, h, w), LabelMap::new(&lb, h, w));
+        for (pa, pb) in [(0, 0), (37, 400), (301, 55), (719, 719)] {
+            let full = eq36(&a, pa, &b, pb, 2);
+            assert_eq!(
+                eq36_below(&a, pa, &b, pb, 2, full).to_bits(),
+                full.to_bits()
+            );
+            if full > 0.0 {
+                let cut = eq36_below(&a, pa, &b, pb, 2, full * 0.5);
+                assert!(cut > full * 0.5 && cut <= full, "{cut} {full}");
+            }
+        }
     }
 
     #[test]
