@@ -24,9 +24,10 @@ bench:  ## Rust criterion benches and Python benchmarks
 peers:  ## side-by-side runs against PyPatchMatch, resynthesizer, texture-synthesis
 	python benches/peers.py
 
-sheet:  ## contact sheets of the texture, graph-cut and shape jobs (out/*_sheet.png)
+sheet:  ## contact sheets of the texture, graph-cut, shape and bark jobs (out/*_sheet.png)
 	python benches/sheet_texture.py out/texture_sheet.png
 	python benches/sheet_seams.py out/seams_sheet.png
 	python benches/sheet_shapes.py out/shapes_sheet.png
+	python benches/sheet_bark.py out/bark_sheet.png
 
 .PHONY: help install test lint bench peers sheet

@@ -20,7 +20,7 @@ def exemplar_png(tmp_path, bark):
     return p
 
 
-@pytest.mark.parametrize("cmd", [[], ["synthesize"], ["quilt"], ["complete"], ["nnf"], ["demo"]])
+@pytest.mark.parametrize("cmd", [[], ["synthesize"], ["quilt"], ["complete"], ["nnf"], ["bark"], ["demo"]])
 def test_help_explains_every_option(cmd, capsys):
     with pytest.raises(SystemExit) as e:
         main([*cmd, "--help"])
@@ -138,3 +138,52 @@ def test_demo_runs_on_embedded_data(tmp_path):
     out = tmp_path / "bark.png"
     assert main(["demo", "--out", str(out), "--size", "64x64", "-q"]) == 0
     assert io.read_image(out).shape == (64, 64, 3)
+
+
+def test_bark_writes_texture_maps_preview_and_sidecar(tmp_path, exemplar_png):
+    out = tmp_path / "b.png"
+    hm = tmp_path / "hm.png"
+    io.write_image(hm, io.read_image(exemplar_png).mean(axis=2))
+    prev = tmp_path / "trunk.png"
+    args = ["bark", str(exemplar_png), "--size", "56x40", "--out", str(out), "--height-map", str(hm),
+            "--keep-intermediates", "--cylinder-preview", str(prev), "--seed", "3", "-q"]  # fmt: skip
+    assert main(args) == 0
+    assert io.read_image(out).shape == (40, 56, 3)
+    maps = {name: io.read_image(tmp_path / f"b_{name}.png") for name in ("labels_in", "labels_out", "height")}
+    assert maps["labels_in"].shape == (64, 64) and len(np.unique(maps["labels_in"])) == 2
+    assert maps["labels_out"].shape == (40, 56) and maps["height"].shape == (40, 56)
+    assert io.read_image(prev).shape[0] == 40
+    meta = json.loads(io.sidecar_path(out).read_text())
+    assert meta["command"] == "bark" and meta["seed"] == 3 and meta["parameters"]["labels"] == 2
+    assert set(meta["parameters"]["files"]) == {"labels_in", "labels_out", "height", "cylinder"}
+    # everything exists now: a second run refuses before computing, and leaves the files alone
+    before = out.stat().st_mtime_ns
+    assert main(args) == 2
+    assert out.stat().st_mtime_ns == before
+
+
+def test_bark_resumes_from_an_edited_label_map(tmp_path, exemplar_png):
+    first = tmp_path / "first.png"
+    assert main(["bark", str(exemplar_png), "--size", "48x32", "--out", str(first), "--keep-intermediates", "-q"]) == 0
+    edited = io.read_image(tmp_path / "first_labels_out.png")
+    edited[:, :20] = 0.0  # paint the left part with the darker region
+    io.write_image(tmp_path / "edited.png", edited)
+    out = tmp_path / "second.png"
+    args = ["bark", str(exemplar_png), "--labels-in", str(tmp_path / "first_labels_in.png"),
+            "--labels-out", str(tmp_path / "edited.png"), "--out", str(out), "-q"]  # fmt: skip
+    assert main(args) == 0
+    assert io.read_image(out).shape == (32, 48, 3)
+
+
+def test_bark_errors_name_the_problem(tmp_path, exemplar_png, capsys):
+    io.write_image(tmp_path / "noisy.png", np.random.default_rng(0).random((20, 20)).astype(np.float32))
+    cases = [
+        (["bark", str(exemplar_png), "--out", str(tmp_path / "o.png")], "size: required"),
+        (["bark", str(exemplar_png), "--labels-out", str(tmp_path / "noisy.png"), "--out", str(tmp_path / "o.png")], "distinct colours"),
+        (["bark", str(exemplar_png), "--size", "32x32", "--out", str(tmp_path / "o.png"), "--cylinder-preview", str(tmp_path / "o.png")], "different files"),
+    ]
+    for argv, message in cases:
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err
+    assert not (tmp_path / "o.png").exists()

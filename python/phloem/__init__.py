@@ -2,6 +2,7 @@
 
 Submodules
 ----------
+bark      the bark pipeline: label maps, shape synthesis, texture-by-numbers
 io        reading and writing images and result sidecars
 data      small embedded example images
 blend     gradient-domain solvers: seamless (Poisson) blending, smooth field interpolation
@@ -17,7 +18,7 @@ from __future__ import annotations
 
 import os
 
-from . import _core, blend, data, io, metrics, patch, seams, shapes, texture
+from . import _core, bark, blend, data, io, metrics, patch, seams, shapes, texture
 
 __version__: str = _core.__version__
 
@@ -26,4 +27,4 @@ __version__: str = _core.__version__
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_core._after_fork_in_child)
 
-__all__ = ["__version__", "blend", "data", "io", "metrics", "patch", "seams", "shapes", "texture"]
+__all__ = ["__version__", "bark", "blend", "data", "io", "metrics", "patch", "seams", "shapes", "texture"]

@@ -8,6 +8,7 @@ __version__: str
 __all__ = [
     "__version__",
     "_after_fork_in_child",
+    "by_numbers",
     "coherence_candidates",
     "default_threads",
     "grid_maxflow",
@@ -20,6 +21,8 @@ __all__ = [
     "shape_similarity",
     "shape_synthesize",
     "shape_synthesize_labels",
+    "tbn_downsample",
+    "tbn_upsample",
     "vote",
 ]
 
@@ -61,6 +64,28 @@ def coherence_candidates(
     knn_idx: NDArray[np.int32] | None = None,
     threads: int | None = None,
 ) -> NDArray[np.int32]: ...
+def by_numbers(
+    exemplar: NDArray[np.float32],
+    labels_in: NDArray[np.int32],
+    labels_out: NDArray[np.int32],
+    *,
+    patch_size: int,
+    k: int,
+    label_weight: float,
+    levels: int | None,
+    iterations: int,
+    init: str,
+    wrap: bool,
+    tileable: bool,
+    seed: int,
+    weights: NDArray[np.float32] | None = None,
+    threads: int | None = None,
+    progress: Callable[[int, int], object] | None = None,
+) -> NDArray[np.int32]: ...
+def tbn_upsample(
+    refs: NDArray[np.int32], out_shape: tuple[int, int], exemplar_shape: tuple[int, int], *, wrap: bool
+) -> NDArray[np.int32]: ...
+def tbn_downsample(refs: NDArray[np.int32], exemplar_shape: tuple[int, int]) -> NDArray[np.int32]: ...
 def vote(
     source: NDArray[np.float32],
     field: NDArray[np.int32],

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["as_image", "as_mask", "check_patch_size", "check_seed", "check_size", "check_threads", "restore_ndim"]
+__all__ = ["as_image", "as_mask", "check_float", "check_patch_size", "check_seed", "check_size", "check_threads", "restore_ndim"]
 
 
 def as_image(image: Any, name: str, *, finite: bool = True) -> NDArray[np.float32]:
@@ -88,6 +88,16 @@ def check_int(value: Any, name: str, minimum: int) -> int:
     if int(value) < minimum:
         raise ValueError(f"{name}: expected an integer >= {minimum}, got {value}")
     return int(value)
+
+
+def check_float(value: Any, name: str, minimum: float, *, inclusive: bool = True) -> float:
+    """Return ``value`` as a finite float, checking it is at least (or above) ``minimum``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name}: expected a number, got {value!r}")
+    v = float(value)
+    if not np.isfinite(v) or v < minimum or (not inclusive and v == minimum):
+        raise ValueError(f"{name}: expected a finite value {'>=' if inclusive else '>'} {minimum}, got {value}")
+    return v
 
 
 def check_seed(seed: Any) -> int:

@@ -16,7 +16,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from . import __version__, data, io, patch, texture
+from . import __version__, bark, data, io, patch, texture
 from ._progress import Bar
 
 __all__ = ["main"]
@@ -153,15 +153,71 @@ def _cmd_nnf(args: argparse.Namespace) -> None:
         print(f"nnf: {time.perf_counter() - t0:.2f} s, mean distance {float(dist.mean()):.4g}; wrote {out}", file=sys.stderr)
 
 
+def _bark_targets(args: argparse.Namespace) -> dict[str, Path]:
+    """The extra files ``phloem bark`` writes beside OUT, by role."""
+    out = Path(args.out)
+    stem = out.with_suffix("")
+    files: dict[str, Path] = {}
+    if args.keep_intermediates:
+        files["labels_in"] = Path(f"{stem}_labels_in.png")
+        files["labels_out"] = Path(f"{stem}_labels_out.png")
+    if args.height_map is not None:
+        files["height"] = Path(f"{stem}_height.png")
+    if args.cylinder_preview is not None:
+        files["cylinder"] = Path(args.cylinder_preview)
+    return files
+
+
+def _cmd_bark(args: argparse.Namespace) -> None:
+    _preflight(args)
+    extra = _bark_targets(args)
+    for path in extra.values():
+        io._encode(path, np.zeros((1, 1), np.float32), args.bit_depth)
+        io._check_target(path, args.force)
+    if len({Path(args.out).resolve(), *(p.resolve() for p in extra.values())}) != len(extra) + 1:
+        raise ValueError("out: OUT, the intermediate maps and the preview must be different files")
+    if args.input is None:
+        photo = data.bark()
+    else:
+        photo = io.read_image(args.input, max_pixels=args.max_pixels)
+    hm = None if args.height_map is None else io.read_image(args.height_map, max_pixels=args.max_pixels)
+    if hm is not None and hm.ndim == 3:
+        hm = hm[..., :3].mean(axis=2)
+    lab_in = None if args.labels_in is None else bark.decode_labels(io.read_image(args.labels_in, max_pixels=args.max_pixels))
+    lab_out = None if args.labels_out is None else bark.decode_labels(io.read_image(args.labels_out, max_pixels=args.max_pixels))
+    res = _run(
+        "bark",
+        args,
+        lambda bar: bark.generate(
+            photo, args.size, labels=args.labels, height_map=hm, labels_in=lab_in, labels_out=lab_out,
+            method=args.method, edge_label=args.edge_label, tileable=args.tileable, seed=args.seed,
+            threads=args.threads, progress=bar, return_intermediates=True,
+        ),  # fmt: skip
+    )
+    written = {role: str(p) for role, p in extra.items()}
+    _save(args, "bark", res.texture, input=args.input or "phloem.data.bark()", files=written)
+    maps = {"labels_in": res.labels_in, "labels_out": res.labels_out}
+    for role, path in extra.items():
+        if role in maps:
+            img = bark.encode_labels(maps[role])
+        elif role == "height":
+            assert res.height is not None
+            img = res.height
+        else:
+            img = bark.cylinder_preview(res.texture, height=res.height)
+        io.write_image(path, img, overwrite=args.force, bit_depth=16 if role == "height" else args.bit_depth)
+        if not args.quiet:
+            print(f"wrote {path}", file=sys.stderr)
+
+
 def _cmd_demo(args: argparse.Namespace) -> None:
     _preflight(args)
-    ex = data.bark()[..., :3]
     out = _run(
         "demo: bark texture",
         args,
-        lambda bar: texture.synthesize(ex, args.size, seed=args.seed, threads=args.threads, progress=bar),
+        lambda bar: bark.generate(data.bark(), args.size, seed=args.seed, threads=args.threads, progress=bar),
     )
-    _save(args, "demo", out, input="phloem.data.bark()")
+    _save(args, "demo", out, input="phloem.data.bark()", pipeline="phloem.bark.generate")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -225,8 +281,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="replace OUT if it exists")
     p.set_defaults(func=_cmd_nnf)
 
-    p = sub.add_parser("demo", help="the main job on embedded data: a bark texture from the built-in Douglas-fir exemplar",
-                       description="Synthesises a bark texture from phloem's embedded CC0 Douglas-fir bark photo.")  # fmt: skip
+    p = sub.add_parser("bark", help="a bark texture of any size from one bark photo (the bark thesis' pipeline)",
+                       description="Input label map (non-local means, CIELAB, k-means, §3.5), a new label map of the output size "
+                                   "(Rosenberger et al. shape synthesis, §3.6), then texture-by-numbers (Fan et al. 2012, §3.3-3.4). "
+                                   "Write the label maps with --keep-intermediates, edit them, and resume with --labels-in/--labels-out.")  # fmt: skip
+    p.add_argument("input", metavar="IN", nargs="?", default=None, help="bark photo (PNG, JPEG or TIFF; default: phloem's embedded Douglas-fir bark)")
+    p.add_argument("--size", type=_size, default=None, metavar="WxH", help="output width x height, e.g. 512x512 (required unless --labels-out is given)")
+    p.add_argument("--out", required=True, metavar="OUT", help="output texture (.png, .jpg, .tif)")
+    p.add_argument("--labels", type=_positive, default=2, metavar="K", help="regions of the input label map (default 2; 2-3 work best)")
+    p.add_argument("--method", choices=("layered", "joint"), default="layered",
+                   help="label-map synthesis: the thesis' nested layers or phloem's joint multi-label variant (default layered)")  # fmt: skip
+    p.add_argument("--edge-label", action="store_true", help="add a region for the borders between regions to both label maps (§3.5.5)")
+    p.add_argument("--height-map", metavar="HM", default=None, help="height map of IN, synthesised along; written as OUT_height.png (16-bit)")
+    p.add_argument("--tileable", action="store_true", help="make the label map and the texture wrap around so OUT tiles")
+    p.add_argument("--cylinder-preview", metavar="PNG", default=None, help="also write the texture wrapped around a trunk to PNG")
+    p.add_argument("--keep-intermediates", action="store_true", help="also write the label maps as OUT_labels_in.png and OUT_labels_out.png")
+    p.add_argument("--labels-in", metavar="PNG", default=None, help="use this input label map (flat colours, same size as IN) instead of computing it")
+    p.add_argument("--labels-out", metavar="PNG", default=None, help="use this output label map instead of synthesising one (sets the size)")
+    _common(p)
+    p.set_defaults(func=_cmd_bark)
+
+    p = sub.add_parser("demo", help="the main job on embedded data: a bark texture from the built-in Douglas-fir photo",
+                       description="Runs the bark pipeline (phloem bark) on phloem's embedded CC0 Douglas-fir bark photo.")  # fmt: skip
     p.add_argument("--out", default="bark.png", metavar="OUT", help="output image (default bark.png)")
     p.add_argument("--size", type=_size, default=(512, 512), metavar="WxH", help="output size (default 512x512)")
     _common(p)

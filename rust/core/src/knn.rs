@@ -72,7 +72,7 @@ pub struct Knn {
 }
 
 /// The exemplar mirrored by `r` pixels on every side (`abcd` → `cb|abcd|cb` for r = 2).
-fn mirror_pad(data: &[f32], h: usize, w: usize, c: usize, r: usize) -> Vec<f32> {
+pub(crate) fn mirror_pad(data: &[f32], h: usize, w: usize, c: usize, r: usize) -> Vec<f32> {
     let (ph, pw) = (h + 2 * r, w + 2 * r);
     let reflect = |i: i64, n: usize| -> usize {
         if n == 1 {

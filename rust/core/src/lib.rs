@@ -16,7 +16,10 @@
 //!   fixed pixels, solved by multigrid-preconditioned conjugate gradients;
 //! - [`field`]: smooth fields that interpolate given vectors (Sibbing et al. 2010, §5.3);
 //! - [`shapes`]: boundary-patch shape synthesis of binary shapes and label maps, layered or
-//!   joint (Rosenberger et al. 2009), and the shape similarity of its Eq. 3.9.
+//!   joint (Rosenberger et al. 2009), and the shape similarity of its Eq. 3.9;
+//! - [`tbn`]: texture-by-numbers (Fan et al. 2012 as in Laitoch 2018, §3.3–3.4): pyramid of
+//!   reference images, k-coherence discrete solver, smart initialisation with chamfer 3-4
+//!   distance maps.
 
 pub mod error;
 pub mod field;
@@ -29,6 +32,7 @@ pub mod poisson;
 pub mod rng;
 pub mod seams;
 pub mod shapes;
+pub mod tbn;
 pub mod vote;
 
 pub use error::{Error, Result};

@@ -12,6 +12,7 @@ mod errors;
 mod patch;
 mod seams;
 mod shapes;
+mod tbn;
 mod threads;
 
 #[pymodule(gil_used = false)]
@@ -29,6 +30,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(shapes::synthesize_labels_py, m)?)?;
     m.add_function(wrap_pyfunction!(shapes::similarity_py, m)?)?;
     m.add_function(wrap_pyfunction!(shapes::layer_order_py, m)?)?;
+    m.add_function(wrap_pyfunction!(tbn::by_numbers_py, m)?)?;
+    m.add_function(wrap_pyfunction!(tbn::tbn_upsample_py, m)?)?;
+    m.add_function(wrap_pyfunction!(tbn::tbn_downsample_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::default_threads_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::after_fork_in_child_py, m)?)?;
     Ok(())

@@ -1,0 +1,118 @@
+"""Contact sheet of texture-by-numbers: look at it before trusting any number.
+
+    python benches/sheet_by_numbers.py out/by_numbers_sheet.png
+
+One row per thesis run in ``../shared/data/bark/thesis_runs`` (Laitoch 2018; skipped when the
+folder is absent): the photo ``ai``, its label map ``a``, the output label map ``b``, the
+thesis' result ``bi`` and phloem's, with patch coherence to ``ai`` (lower is better) and the
+per-label histogram distance (lower is better) of both; then a row on the embedded bark with
+a two-label map. The last panel of every row shows phloem's sources (red = exemplar row,
+green = column): smooth patches are coherent copies, speckle is pixel-wise mixing.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import phloem
+from phloem.metrics import label_histogram_distance, patch_coherence
+
+RUNS = Path(__file__).resolve().parents[2] / "shared" / "data" / "bark" / "thesis_runs"
+TILE = 256
+
+
+def _rgb(img: np.ndarray) -> np.ndarray:
+    img = img[..., :3] if img.ndim == 3 else img
+    return np.repeat(img[..., None], 3, axis=2) if img.ndim == 2 else img
+
+
+def _fit(img: np.ndarray) -> np.ndarray:
+    img = _rgb(img).astype(np.float32)
+    s = TILE / max(img.shape[:2])
+    out = cv2.resize(img, (round(img.shape[1] * s), round(img.shape[0] * s)), interpolation=cv2.INTER_NEAREST)
+    tile = np.ones((TILE, TILE, 3), np.float32)
+    tile[: out.shape[0], : out.shape[1]] = out
+    return tile
+
+
+def _label(tile: np.ndarray, text: str) -> np.ndarray:
+    t8 = (np.clip(tile, 0, 1) * 255).astype(np.uint8)
+    cv2.rectangle(t8, (0, 0), (TILE, 16), (255, 255, 255), -1)
+    cv2.putText(t8, text, (3, 12), cv2.FONT_HERSHEY_SIMPLEX, 0.36, (0, 0, 0), 1, cv2.LINE_AA)
+    return t8.astype(np.float32) / 255
+
+
+def _labelmap(lab: np.ndarray) -> np.ndarray:
+    values = np.unique(lab)
+    return (np.searchsorted(values, lab) / max(values.size - 1, 1)).astype(np.float32)
+
+
+def _sources(src: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    vis = np.zeros((*src.shape[:2], 3), np.float32)
+    vis[..., 0] = src[..., 0] / shape[0]
+    vis[..., 1] = src[..., 1] / shape[1]
+    vis[..., 2] = 0.3
+    return vis
+
+
+def row(name: str, ai: np.ndarray, a: np.ndarray, b: np.ndarray, bi: np.ndarray | None) -> tuple[np.ndarray, str]:
+    t0 = time.perf_counter()
+    out, src = phloem.texture.by_numbers(ai, a, b, seed=0, return_sources=True)
+    dt = time.perf_counter() - t0
+    coh, hist = patch_coherence(out, ai), label_histogram_distance(out, b, ai, a)
+    tiles = [
+        _label(_fit(ai), f"{name} ai {ai.shape[1]}x{ai.shape[0]}"),
+        _label(_fit(_labelmap(a)), f"a: {np.unique(a).size} labels"),
+        _label(_fit(_labelmap(b)), f"b {b.shape[1]}x{b.shape[0]}"),
+    ]
+    line = f"{name}: phloem {dt:.2f} s, coherence {coh:.5f}, hist {hist:.3f}"
+    if bi is not None:
+        cb, hb = patch_coherence(bi, ai), label_histogram_distance(bi, b, ai, a)
+        tiles.append(_label(_fit(bi), f"thesis bi: coh {cb * 1e3:.3f}e-3 hist {hb:.3f}"))
+        line += f"; thesis bi coherence {cb:.5f}, hist {hb:.3f}; ratios {coh / cb:.2f}, {hist / hb:.2f}"
+    else:
+        tiles.append(_label(np.ones((TILE, TILE, 3), np.float32), "(no thesis result)"))
+    tiles.append(_label(_fit(out), f"phloem {dt:.2f}s: coh {coh * 1e3:.3f}e-3 hist {hist:.3f}"))
+    tiles.append(_label(_fit(_sources(src, ai.shape)), "phloem sources (R row, G col)"))
+    return np.concatenate(tiles, axis=1), line
+
+
+def _gray_labels(p: Path) -> np.ndarray:
+    g = phloem.io.read_image(p)
+    g = g[..., :3].mean(axis=2) if g.ndim == 3 else g
+    return np.round(g * 255).astype(np.int32)
+
+
+def main(out_path: str) -> None:
+    rows, lines = [], []
+    if RUNS.exists():
+        for name in ["bark1", "bark2", "eucalyptus", "eucap5"]:
+            d = RUNS / name
+            ai = phloem.io.read_image(next(d.glob("ai.*")))[..., :3]
+            bi = phloem.io.read_image(d / "bi.png")[..., :3]
+            r, line = row(name, ai, _gray_labels(d / "a.png"), _gray_labels(d / "b.png"), bi)
+            rows.append(r)
+            lines.append(line)
+    bark = phloem.data.bark()[..., :3]
+    ex = np.ascontiguousarray(bark[:, :128])
+
+    def two(img: np.ndarray) -> np.ndarray:
+        g = cv2.GaussianBlur(img.mean(axis=2), (0, 0), 2.0)
+        return (g > np.median(g)).astype(np.int32)
+
+    r, line = row("embedded bark", ex, two(ex), two(bark[:, 128:]), None)
+    rows.append(r)
+    lines.append(line)
+    sheet = np.concatenate(rows, axis=0)
+    Path(out_path).parent.mkdir(parents=True, exist_ok=True)
+    phloem.io.write_image(out_path, sheet, overwrite=True)
+    print("\n".join(lines))
+    print(f"wrote {out_path}")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1] if len(sys.argv) > 1 else "out/by_numbers_sheet.png")
