@@ -11,7 +11,7 @@ import argparse
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -63,7 +63,10 @@ def _params(args: argparse.Namespace, skip: Sequence[str] = ()) -> dict[str, Any
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items() if k not in drop}
 
 
-def _run(label: str, args: argparse.Namespace, work: Callable[[Any], np.ndarray]) -> np.ndarray:
+T = TypeVar("T")
+
+
+def _run(label: str, args: argparse.Namespace, work: Callable[[Any], T]) -> T:
     bar = Bar(label, enabled=not args.quiet)
     t0 = time.perf_counter()
     try:
@@ -190,7 +193,7 @@ def _cmd_bark(args: argparse.Namespace) -> None:
         args,
         lambda bar: bark.generate(
             photo, args.size, labels=args.labels, height_map=hm, labels_in=lab_in, labels_out=lab_out,
-            method=args.method, edge_label=args.edge_label, tileable=args.tileable, seed=args.seed,
+            method=args.method, rotations=args.rotations, edge_label=args.edge_label, tileable=args.tileable, seed=args.seed,
             threads=args.threads, progress=bar, return_intermediates=True,
         ),  # fmt: skip
     )
@@ -289,8 +292,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--size", type=_size, default=None, metavar="WxH", help="output width x height, e.g. 512x512 (required unless --labels-out is given)")
     p.add_argument("--out", required=True, metavar="OUT", help="output texture (.png, .jpg, .tif)")
     p.add_argument("--labels", type=_positive, default=2, metavar="K", help="regions of the input label map (default 2; 2-3 work best)")
-    p.add_argument("--method", choices=("layered", "joint"), default="layered",
-                   help="label-map synthesis: the thesis' nested layers or phloem's joint multi-label variant (default layered)")  # fmt: skip
+    p.add_argument("--method", choices=("layered", "joint"), default="joint",
+                   help="label-map synthesis: phloem's joint multi-label variant (default) or the thesis' nested layers")  # fmt: skip
+    p.add_argument("--rotations", action="store_true",
+                   help="let the new label map turn the photo's shapes by 90 degrees (for bark without a grain, e.g. plane trees; "
+                        "off by default because bark grows along the trunk)")  # fmt: skip
     p.add_argument("--edge-label", action="store_true", help="add a region for the borders between regions to both label maps (§3.5.5)")
     p.add_argument("--height-map", metavar="HM", default=None, help="height map of IN, synthesised along; written as OUT_height.png (16-bit)")
     p.add_argument("--tileable", action="store_true", help="make the label map and the texture wrap around so OUT tiles")
