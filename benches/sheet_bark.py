@@ -1,7 +1,7 @@
 """Contact sheet of the bark pipeline (thesis Laitoch 2018), to judge by eye.
 
-One row per photo: the photo, phloem's input label map, the synthesised output label map (layered
-and joint), the texture painted from each, the cylinder preview, and a 2×2 tiling of the
+One row per photo: the photo, phloem's input label map, the synthesised output label map (joint,
+the default, and layered), the texture painted from each, the cylinder preview, and a 2×2 tiling of the
 ``tileable`` texture. With ``../shared/data`` a second block compares phloem with the thesis'
 own runs from the *same* inputs (photo ``ai``, labels ``a`` and ``b``): the thesis' result
 ``bi`` next to phloem's texture-by-numbers, with patch coherence to the photo (lower is better)
@@ -31,23 +31,24 @@ def _labels_rgb(labels: np.ndarray) -> np.ndarray:
     return bark.encode_labels(labels)
 
 
-def pipeline_row(name: str, photo: np.ndarray, k: int, size: tuple[int, int]) -> list[np.ndarray]:
+def pipeline_row(name: str, photo: np.ndarray, k: int, size: tuple[int, int], rotations: bool = False) -> list[np.ndarray]:
+    opts = {"labels": k, "rotations": rotations}
     t0 = time.perf_counter()
-    lay = bark.generate(photo, size, labels=k, seed=1, return_intermediates=True)
-    t_lay = time.perf_counter() - t0
-    joint = bark.generate(photo, size, labels=k, method="joint", seed=1, return_intermediates=True)
-    tile = bark.generate(photo, (size[0] // 2, size[1] // 2), labels=k, tileable=True, seed=2)
+    joint = bark.generate(photo, size, seed=1, return_intermediates=True, **opts)
+    t_joint = time.perf_counter() - t0
+    lay = bark.generate(photo, size, method="layered", seed=1, return_intermediates=True, **opts)
+    tile = bark.generate(photo, (size[0] // 2, size[1] // 2), tileable=True, seed=2, **opts)
     tiled = np.tile(tile, (2, 2, 1))
-    sim_l = phloem.metrics.shape_similarity(lay.labels_in, lay.labels_out)
-    sim_j = phloem.metrics.shape_similarity(joint.labels_in, joint.labels_out)
+    sim_l = phloem.metrics.shape_similarity(lay.labels_in, lay.labels_out, rotations=rotations)
+    sim_j = phloem.metrics.shape_similarity(joint.labels_in, joint.labels_out, rotations=rotations)
     return [
         _label(_fit(photo), f"{name} photo {photo.shape[1]}x{photo.shape[0]}"),
-        _label(_fit(_labels_rgb(lay.labels_in)), f"input labels k={k}"),
-        _label(_fit(_labels_rgb(lay.labels_out)), f"layered labels D={sim_l:.2f}"),
-        _label(_fit(lay.texture), f"texture {size[1]}x{size[0]} {t_lay:.1f}s"),
+        _label(_fit(_labels_rgb(joint.labels_in)), f"input labels k={k}"),
         _label(_fit(_labels_rgb(joint.labels_out)), f"joint labels D={sim_j:.2f}"),
-        _label(_fit(joint.texture), "texture from joint labels"),
-        _label(_fit(bark.cylinder_preview(lay.texture)), "on a trunk"),
+        _label(_fit(joint.texture), f"texture {size[1]}x{size[0]} {t_joint:.1f}s"),
+        _label(_fit(_labels_rgb(lay.labels_out)), f"layered labels D={sim_l:.2f}"),
+        _label(_fit(lay.texture), "texture from layered labels"),
+        _label(_fit(bark.cylinder_preview(joint.texture)), "on a trunk"),
         _label(_fit(tiled), "tileable, 2x2"),
     ]
 
@@ -87,7 +88,7 @@ def main(out: Path) -> None:
     if SHARED.exists():
         for run in RUNS:
             ai = phloem.io.read_image(next((SHARED / "thesis_runs" / run).glob("ai.*")))[..., :3].copy()
-            rows.append(pipeline_row(run, ai, 2, (384, 384)))
+            rows.append(pipeline_row(run, ai, 3, (384, 384), rotations=True))  # plane-tree bark has no grain
         rows.extend(thesis_row(run) for run in RUNS)
     sheet = np.concatenate([np.concatenate(r, axis=1) for r in rows], axis=0)
     out.parent.mkdir(parents=True, exist_ok=True)
