@@ -156,7 +156,7 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--pipeline", action="store_true", help="the bark pipeline's 512² scale (phloem only)")
-    ap.add_argument("--selection", nargs="+", default=["hybrid"], help="E-step selections to time (phloem)")
+    ap.add_argument("--selection", nargs="+", default=["medoid"], help="E-step selections to time (phloem)")
     args = ap.parse_args()
     name, ex, a, b = pipeline_workload() if args.pipeline else workload()
     print(

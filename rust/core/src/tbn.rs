@@ -63,8 +63,7 @@ pub enum Selection {
     /// patch-coherent.
     Medoid,
     /// [`Selection::Medoid`] at every iteration but the finest level's last, which takes
-    /// [`Selection::Average`]: nearly the medoid's sharpness with much of the average's
-    /// coherence.
+    /// [`Selection::Average`]: sharpness and coherence in between.
     Hybrid,
 }
 
@@ -89,7 +88,8 @@ pub struct TbnParams {
     pub iterations: usize,
     /// Initialisation. Default [`Init::Smart`].
     pub init: Init,
-    /// E-step selection. Default [`Selection::Hybrid`] (sharp output; see [`Selection`]).
+    /// E-step selection. Default [`Selection::Medoid`] (the only one that keeps the exemplar's
+    /// sharpness; see [`Selection`]).
     pub selection: Selection,
     /// Forward shifts that leave the exemplar wrap around (true) or are dropped. Default true.
     pub wrap: bool,
@@ -111,7 +111,7 @@ impl Default for TbnParams {
             levels: None,
             iterations: 3,
             init: Init::Smart,
-            selection: Selection::Hybrid,
+            selection: Selection::Medoid,
             wrap: true,
             tileable: false,
             random_search: true,
@@ -811,7 +811,9 @@ impl<'a> Level<'a> {
         //   1.34/0.26, 1.32/0.35, crisp but pixel-wise mixed;
         // - (now `Selection`, measured with 5 coarse iterations: average 1.18/0.53, 1.18/0.35,
         //   0.94/0.49, 0.99/0.55; medoid 1.67/0.43, 1.55/0.36, 1.15/0.28, 1.19/0.33; hybrid
-        //   1.35/0.45, 1.33/0.36, 1.02/0.30, 1.00/0.36.) Also tried: medoid at the finest level
+        //   1.35/0.45, 1.33/0.36, 1.02/0.30, 1.00/0.36; two or three averaging iterations at
+        //   the end, 1.28/0.47, 1.26/0.37, 0.98/0.31, 0.96/0.39 and 1.23/0.48, 1.22/0.37,
+        //   0.95/0.35, 0.93/0.41, softer still.) Also tried: medoid at the finest level
         //   only, 1.62/0.44, 1.50/0.30, 1.17/0.36, 1.24/0.38; medoid only at the last finest
         //   iteration, 1.53/0.46, 1.43/0.31; medoid among the 9 (4) heaviest votes,
         //   1.70/0.42, 1.54/0.36 (1.79/0.43, 1.66/0.36); Σ w·ssd^0.75 or Σ w·ssd instead of

@@ -56,7 +56,7 @@ fn flat(
 }
 
 #[pyfunction]
-#[pyo3(name = "by_numbers", signature = (exemplar, labels_in, labels_out, *, patch_size, k, label_weight, levels, iterations, init, wrap, tileable, seed, selection="hybrid", weights=None, threads=None, progress=None))]
+#[pyo3(name = "by_numbers", signature = (exemplar, labels_in, labels_out, *, patch_size, k, label_weight, levels, iterations, init, wrap, tileable, seed, selection="medoid", weights=None, threads=None, progress=None))]
 pub fn by_numbers_py<'py>(
     py: Python<'py>,
     exemplar: PyReadonlyArray3<'py, f32>,
@@ -107,7 +107,7 @@ pub fn by_numbers_py<'py>(
         other => {
             return Err(to_py(invalid(
                 "selection",
-                format!("expected 'hybrid', 'medoid' or 'average', got {other:?}"),
+                format!("expected 'medoid', 'hybrid' or 'average', got {other:?}"),
             )))
         }
     };
