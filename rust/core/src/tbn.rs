@@ -819,7 +819,8 @@ impl<'a> Level<'a> {
         //   1.70/0.42, 1.54/0.36 (1.79/0.43, 1.66/0.36); Σ w·ssd^0.75 or Σ w·ssd instead of
         //   Σ w·ssd^0.5, 1.56/0.47 and 1.54/0.51 on bark1, softer; a Gaussian-kernel mode,
         //   1.68/0.43, oversharp (Laplacian variance 1.2× the photo's); the coherence
-        //   candidates as medoid candidates too: within noise;
+        //   candidates as medoid candidates too: within noise; medoid vote-weight exponents 0,
+        //   0.3, 1: 1.70/0.47, 1.63/0.45, 1.76/0.44 on bark1, no clear gain;
         // - a bonus for votes many neighbours agree on (Han et al. 2006), d·(1 − ½·share):
         //   within the seed-to-seed noise (±0.03);
         // - a final pass taking every pixel's M-step match directly: 2.03/0.43, 2.01/0.27;
