@@ -156,14 +156,18 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--pipeline", action="store_true", help="the bark pipeline's 512² scale (phloem only)")
+    ap.add_argument("--selection", nargs="+", default=["medoid"], help="E-step selections to time (phloem)")
     args = ap.parse_args()
     name, ex, a, b = pipeline_workload() if args.pipeline else workload()
     print(
         f"{name}: exemplar {ex.shape[0]}×{ex.shape[1]}, output {b.shape[0]}×{b.shape[1]}, {args.threads} threads, {args.runs} runs"
     )
-    print(f"{'method':<24} {'best':>7} {'median':>7} {'px/s':>9} {'coherence':>10} {'hist':>6}")
-    rows = {
-        "phloem.by_numbers": lambda: phloem.texture.by_numbers(ex, a, b, threads=args.threads),
+    print(f"{'method':<32} {'best':>7} {'median':>7} {'px/s':>9} {'coherence':>10} {'hist':>6}")
+    rows: dict = {
+        f"phloem.by_numbers {sel}": lambda sel=sel: phloem.texture.by_numbers(ex, a, b, threads=args.threads, selection=sel)
+        for sel in args.selection
+    }
+    rows |= {
         "patchmatch_by_numbers": lambda: patchmatch_by_numbers(ex, a, b, threads=args.threads),
     }
     if args.pipeline:
@@ -172,7 +176,7 @@ def main() -> None:
         best, med, out = _time(fn, args.runs)
         coh = patch_coherence(out, ex)
         hist = label_histogram_distance(np.clip(out, 0, 1), b, ex, a)
-        print(f"{label:<24} {best:>6.2f}s {med:>6.2f}s {b.size / best:>9.0f} {coh:>10.5f} {hist:>6.3f}")
+        print(f"{label:<32} {best:>6.2f}s {med:>6.2f}s {b.size / best:>9.0f} {coh:>10.5f} {hist:>6.3f}")
 
 
 if __name__ == "__main__":

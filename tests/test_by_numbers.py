@@ -60,9 +60,10 @@ def test_upsampling_a_verbatim_copy_gives_a_verbatim_copy():
 
 @pytest.mark.parametrize("init", ["smart", "random"])
 @pytest.mark.parametrize("wrap", [True, False])
-def test_every_pixel_is_a_copy_from_its_own_label(scene, init, wrap):
+@pytest.mark.parametrize("selection", ["medoid", "hybrid", "average"])
+def test_every_pixel_is_a_copy_from_its_own_label(scene, init, wrap, selection):
     ex, a, b = scene
-    out, src = by_numbers(ex, a, b, init=init, wrap=wrap, seed=2, return_sources=True)
+    out, src = by_numbers(ex, a, b, init=init, wrap=wrap, selection=selection, seed=2, return_sources=True)
     assert out.shape == (*b.shape, 3) and out.dtype == np.float32
     assert src.shape == (*b.shape, 2) and src.dtype == np.int32
     np.testing.assert_array_equal(out, ex[src[..., 0], src[..., 1]])
@@ -78,12 +79,31 @@ def test_labels_are_matched_by_value_not_position(scene):
     np.testing.assert_array_equal(a2[src[..., 0], src[..., 1]], b2)
 
 
-def test_deterministic_across_threads_and_seeds(scene):
+@pytest.mark.parametrize("selection", ["medoid", "hybrid", "average"])
+def test_deterministic_across_threads_and_seeds(scene, selection):
     ex, a, b = scene
-    one = by_numbers(ex, a, b, seed=4, threads=1)
-    two = by_numbers(ex, a, b, seed=4, threads=2)
+    one = by_numbers(ex, a, b, seed=4, threads=1, selection=selection)
+    two = by_numbers(ex, a, b, seed=4, threads=2, selection=selection)
     np.testing.assert_array_equal(one, two)
-    assert not np.array_equal(one, by_numbers(ex, a, b, seed=5, threads=2))
+    assert not np.array_equal(one, by_numbers(ex, a, b, seed=5, threads=2, selection=selection))
+
+
+def test_medoid_selection_keeps_the_exemplars_contrast(bark):
+    # Synthesising the embedded bark's own (flipped) label map: the Laplacian variance of the
+    # gray output (fine detail) measured 0.118 with the medoid, 0.087 hybrid, 0.063 average,
+    # against the photo's 0.119 — the averaging E-step blurs, as Laitoch 2018 reports.
+    import cv2
+
+    ex = np.ascontiguousarray(bark[:, :, :3])
+    a = _labels2(ex)
+    b = np.ascontiguousarray(a[::-1, ::-1][:160, :160])
+    photo = cv2.Laplacian(ex.mean(axis=2), cv2.CV_32F).var()
+    lap = {}
+    for sel in ("medoid", "hybrid", "average"):
+        g = by_numbers(ex, a, b, seed=0, selection=sel).mean(axis=2)
+        lap[sel] = cv2.Laplacian(g, cv2.CV_32F).var()
+    assert lap["medoid"] > 0.9 * photo, (lap, photo)
+    assert lap["average"] < lap["hybrid"] < lap["medoid"], lap
 
 
 def test_extra_channels_follow_the_same_sources(scene):
@@ -166,24 +186,30 @@ def _thesis_run(name):
 # Ratios phloem / thesis result (bi) measured with seed 0; the limits leave a little room for
 # the approximate coherence search. Do not loosen them to make a change pass.
 THESIS_LIMITS = {
-    # name: (coherence ratio, histogram ratio); measured with patch_size=7, k=1 and two extra
-    # coarse iterations: 1.18/0.53, 1.18/0.35, 0.94/0.49, 0.99/0.55
-    "bark1": (1.22, 0.58),
-    "bark2": (1.22, 0.40),
-    "eucalyptus": (0.98, 0.54),
-    "eucap5": (1.03, 0.60),
+    # (name, selection): (coherence ratio, histogram ratio); measured with patch_size=7, k=1
+    # and two extra coarse iterations.
+    # medoid (the default): 1.67/0.43, 1.55/0.36, 1.15/0.28, 1.19/0.33
+    ("bark1", "medoid"): (1.71, 0.48),
+    ("bark2", "medoid"): (1.59, 0.41),
+    ("eucalyptus", "medoid"): (1.19, 0.33),
+    ("eucap5", "medoid"): (1.23, 0.38),
+    # average (more coherent, softer): 1.18/0.53, 1.18/0.35, 0.94/0.49, 0.99/0.55
+    ("bark1", "average"): (1.22, 0.58),
+    ("bark2", "average"): (1.22, 0.40),
+    ("eucalyptus", "average"): (0.98, 0.54),
+    ("eucap5", "average"): (1.03, 0.60),
 }
 
 
 @pytest.mark.shared
-@pytest.mark.parametrize("name", sorted(THESIS_LIMITS))
-def test_thesis_runs(name):
+@pytest.mark.parametrize(("name", "selection"), sorted(THESIS_LIMITS))
+def test_thesis_runs(name, selection):
     ai, a, b, bi = _thesis_run(name)
-    out = by_numbers(ai, a, b, seed=0)
+    out = by_numbers(ai, a, b, seed=0, selection=selection)
     coh = patch_coherence(out, ai) / patch_coherence(bi, ai)
     hist = label_histogram_distance(out, b, ai, a) / label_histogram_distance(bi, b, ai, a)
-    max_coh, max_hist = THESIS_LIMITS[name]
-    assert coh < max_coh and hist < max_hist, (name, coh, hist)
+    max_coh, max_hist = THESIS_LIMITS[name, selection]
+    assert coh < max_coh and hist < max_hist, (name, selection, coh, hist)
 
 
 # --- feature distance map and the histogram metric ------------------------------------------
@@ -241,6 +267,8 @@ def test_errors_name_the_argument(scene):
         by_numbers(ex.astype(complex), a, b)
     with pytest.raises(ValueError, match="^init"):
         by_numbers(ex, a, b, init="clever")  # type: ignore[call-overload]
+    with pytest.raises(ValueError, match="^selection"):
+        by_numbers(ex, a, b, selection="mean")  # type: ignore[call-overload]
     with pytest.raises(ValueError, match="^features"):
         by_numbers(ex, a, b, features=np.zeros((5, 5)))
     with pytest.raises(ValueError, match="^label_weight"):

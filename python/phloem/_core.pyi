@@ -78,6 +78,7 @@ def by_numbers(
     wrap: bool,
     tileable: bool,
     seed: int,
+    selection: str = "medoid",
     weights: NDArray[np.float32] | None = None,
     threads: int | None = None,
     progress: Callable[[int, int], object] | None = None,

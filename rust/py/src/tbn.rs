@@ -5,7 +5,7 @@ use std::sync::Mutex;
 use ndarray::Array3;
 use numpy::{IntoPyArray, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use phloem_core::error::invalid;
-use phloem_core::tbn::{self, pyramid, Init, TbnInput, TbnParams};
+use phloem_core::tbn::{self, pyramid, Init, Selection, TbnInput, TbnParams};
 use pyo3::prelude::*;
 
 use crate::errors::{guarded, not_contiguous, opt_slice, to_py};
@@ -56,7 +56,7 @@ fn flat(
 }
 
 #[pyfunction]
-#[pyo3(name = "by_numbers", signature = (exemplar, labels_in, labels_out, *, patch_size, k, label_weight, levels, iterations, init, wrap, tileable, seed, weights=None, threads=None, progress=None))]
+#[pyo3(name = "by_numbers", signature = (exemplar, labels_in, labels_out, *, patch_size, k, label_weight, levels, iterations, init, wrap, tileable, seed, selection="medoid", weights=None, threads=None, progress=None))]
 pub fn by_numbers_py<'py>(
     py: Python<'py>,
     exemplar: PyReadonlyArray3<'py, f32>,
@@ -71,6 +71,7 @@ pub fn by_numbers_py<'py>(
     wrap: bool,
     tileable: bool,
     seed: u64,
+    selection: &str,
     weights: Option<PyReadonlyArray1<'py, f32>>,
     threads: Option<usize>,
     progress: Option<Py<PyAny>>,
@@ -99,6 +100,17 @@ pub fn by_numbers_py<'py>(
             )))
         }
     };
+    let selection = match selection {
+        "average" => Selection::Average,
+        "medoid" => Selection::Medoid,
+        "hybrid" => Selection::Hybrid,
+        other => {
+            return Err(to_py(invalid(
+                "selection",
+                format!("expected 'medoid', 'hybrid' or 'average', got {other:?}"),
+            )))
+        }
+    };
     let input = TbnInput {
         exemplar: ex,
         weights: opt_slice("weights", weights.as_ref())?,
@@ -114,6 +126,7 @@ pub fn by_numbers_py<'py>(
         levels,
         iterations,
         init,
+        selection,
         wrap,
         tileable,
         random_search: true,
