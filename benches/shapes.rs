@@ -11,7 +11,9 @@ use std::hint::black_box;
 
 use common::{load, pool};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use phloem_core::shapes::{similarity, synthesize_labels, LabelMap, Method, ShapeParams};
+use phloem_core::shapes::{
+    similarity, synthesize_labels, LabelMap, Method, Rotations, ShapeParams,
+};
 
 /// The embedded bark at 256², box-blurred gray cut at its tertiles into labels 0..3.
 fn bark_labels() -> LabelMap {
@@ -89,7 +91,7 @@ fn similarity_bench(c: &mut Criterion) {
     g.throughput(Throughput::Elements((256 * 256) as u64));
     let pool = pool(2);
     g.bench_function("256", |bch| {
-        bch.iter(|| pool.install(|| black_box(similarity(&ex, &out, 7, true).unwrap())));
+        bch.iter(|| pool.install(|| black_box(similarity(&ex, &out, 7, Rotations::All).unwrap())));
     });
     g.finish();
 }

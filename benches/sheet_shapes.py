@@ -4,7 +4,8 @@
 
 Bark row: the embedded bark | its 3-label map (k-means, as in bench_shapes.py) | phloem layered
 and joint outputs at 256² | joint at 512² (shown reduced) | joint at 256² without rotations
-(which keeps the furrows vertical). One row per thesis run when
+and with the half-turn only (both keep the furrows vertical). Each output tile also shows its
+chord length (``c``, :func:`phloem.shapes.chord_length`) next to the input's. One row per thesis run when
 ../shared/data is present: the input label map a | the thesis' output b | phloem layered |
 phloem joint, each output at b's size, with its Eq. 3.9 distance to a (lower is better) and
 the seconds it took. Labels are drawn as evenly spaced grays (darkest = lowest label).
@@ -48,28 +49,33 @@ def _timed(fn, *args, **kw):  # type: ignore[no-untyped-def]
 
 def bark_row() -> list[np.ndarray]:
     lab = bark_labels()
-    tiles = [_label(_fit(phloem.data.bark()), "embedded bark"), _label(_fit(_gray(lab)), "k-means labels (3)")]
+    tiles = [
+        _label(_fit(phloem.data.bark()), "embedded bark"),
+        _label(_fit(_gray(lab)), f"k-means labels (3) c={shapes.chord_length(lab):.0f}"),
+    ]
     for method, size, rot in [
         ("layered", 256, True),
         ("joint", 256, True),
         ("joint", 512, True),
         ("joint", 256, False),
+        ("joint", 256, "half"),
     ]:
         out, dt = _timed(shapes.synthesize_labels, lab, size, method=method, rotations=rot, seed=0)
         sim = shapes.shape_similarity(lab, out)
-        name = f"{method} {size}" + ("" if rot else " no rot.")
-        tiles.append(_label(_fit(_gray(out)), f"{name}: D={sim:.3f} {dt:.1f}s"))
+        name = f"{method} {size}" + {True: "", False: " no rot.", "half": " half"}[rot]
+        tiles.append(_label(_fit(_gray(out)), f"{name}: D={sim:.2f} c={shapes.chord_length(out):.0f} {dt:.1f}s"))
     return tiles
 
 
 def thesis_row(run: str) -> list[np.ndarray]:
     a, b = thesis_map(run, "a"), thesis_map(run, "b")
-    tiles = [_label(_fit(_gray(a)), f"{run} a ({a.max() + 1} labels)")]
-    tiles.append(_label(_fit(_gray(b)), f"thesis b: D={shapes.shape_similarity(a, b):.3f}"))
+    tiles = [_label(_fit(_gray(a)), f"{run} a ({a.max() + 1} labels) c={shapes.chord_length(a):.0f}")]
+    tiles.append(_label(_fit(_gray(b)), f"thesis b: D={shapes.shape_similarity(a, b):.2f} c={shapes.chord_length(b):.0f}"))
     for method in shapes.METHODS:
         out, dt = _timed(shapes.synthesize_labels, a, b.shape, method=method, seed=0)
-        tiles.append(_label(_fit(_gray(out)), f"{method}: D={shapes.shape_similarity(a, out):.3f} {dt:.1f}s"))
-    return tiles + [np.ones_like(tiles[0])] * 2
+        d, c = shapes.shape_similarity(a, out), shapes.chord_length(out)
+        tiles.append(_label(_fit(_gray(out)), f"{method}: D={d:.2f} c={c:.0f} {dt:.1f}s"))
+    return tiles + [np.ones_like(tiles[0])] * 3
 
 
 def main(out: Path) -> None:

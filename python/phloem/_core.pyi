@@ -149,7 +149,7 @@ def shape_synthesize(
     patch_size: int,
     levels: int,
     iterations: int,
-    rotations: bool,
+    rotations: int,
     tileable: bool,
     seed: int,
     mask: NDArray[np.bool_] | None = None,
@@ -166,7 +166,7 @@ def shape_synthesize_labels(
     patch_size: int,
     levels: int,
     iterations: int,
-    rotations: bool,
+    rotations: int,
     tileable: bool,
     seed: int,
     order: Sequence[int] | None = None,
@@ -174,6 +174,6 @@ def shape_synthesize_labels(
     progress: Callable[[int, int], object] | None = None,
 ) -> NDArray[np.uint8]: ...
 def shape_similarity(
-    a: NDArray[np.uint8], b: NDArray[np.uint8], *, patch_size: int, rotations: bool, threads: int | None = None
+    a: NDArray[np.uint8], b: NDArray[np.uint8], *, patch_size: int, rotations: int, threads: int | None = None
 ) -> float: ...
 def shape_layer_order(labels: NDArray[np.uint8], *, k: int) -> list[int]: ...

@@ -200,7 +200,7 @@ def label_histogram_distance(image: Any, labels: Any, exemplar: Any, exemplar_la
     return float(np.mean(dists))
 
 
-def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool = True) -> float:
+def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool | Literal["half"] = True) -> float:
     """Boundary-patch distance of two shapes or label maps (thesis Eq. 3.9); lower is better.
 
     The same function as :func:`phloem.shapes.shape_similarity`, listed here with the other

@@ -22,7 +22,7 @@ from . import _core
 from ._progress import Progress
 from ._validate import as_mask, check_int, check_patch_size, check_seed, check_size, check_threads
 
-__all__ = ["MAX_LABELS", "MAX_PATCH", "METHODS", "layer_order", "shape_similarity", "synthesize", "synthesize_labels"]
+__all__ = ["MAX_LABELS", "MAX_PATCH", "METHODS", "chord_length", "layer_order", "shape_similarity", "synthesize", "synthesize_labels"]
 
 #: The largest patch side (121 pixels fit in one 128-bit word).
 MAX_PATCH = 11
@@ -54,6 +54,15 @@ def _labels(labels: Any, name: str) -> tuple[NDArray[np.uint8], NDArray[Any]]:
     return np.ascontiguousarray(inverse.reshape(arr.shape).astype(np.uint8)), values
 
 
+def _turns(rotations: Any) -> int:
+    """How many 90° turns ``rotations`` allows: 4 (True), 1 (False) or 2 (``"half"``)."""
+    if rotations is True or rotations is False or isinstance(rotations, np.bool_):
+        return 4 if rotations else 1
+    if isinstance(rotations, str) and rotations == "half":
+        return 2
+    raise ValueError(f"rotations: expected True, False or 'half', got {rotations!r}")
+
+
 def _options(patch_size: Any, levels: Any, iterations: Any, size: Any) -> tuple[int, int, int, int, int]:
     p = check_patch_size(patch_size)
     if p > MAX_PATCH:
@@ -73,7 +82,7 @@ def synthesize(
     patch_size: int = 11,
     levels: int | None = None,
     iterations: int = 5,
-    rotations: bool = True,
+    rotations: bool | Literal["half"] = True,
     tileable: bool = False,
     mask: Any = None,
     seed: int | np.random.Generator = 0,
@@ -97,9 +106,11 @@ def synthesize(
     iterations : int, optional
         Matching and adjustment steps per level (default 5); a level stops early once the
         shape no longer changes.
-    rotations : bool, optional
-        Compare boundary patches under the four 90° rotations (default True); turn off for
-        shapes with a preferred direction (e.g. vertical bark furrows).
+    rotations : bool or "half", optional
+        The turns under which boundary patches are compared: ``True`` (default, the paper)
+        all four 90° rotations; ``False`` none, for shapes with a preferred direction;
+        ``"half"`` 0° and 180° only, which keeps a vertical axis vertical (e.g. bark furrows
+        along the trunk) while still mirroring their ends.
     tileable : bool, optional
         Make the output wrap around (toroidal), so it tiles seamlessly.
     mask : (H, W) array_like of bool, optional
@@ -149,7 +160,7 @@ def synthesize(
         patch_size=p,
         levels=lev,
         iterations=its,
-        rotations=bool(rotations),
+        rotations=_turns(rotations),
         tileable=bool(tileable),
         seed=check_seed(seed),
         mask=m,
@@ -190,7 +201,7 @@ def synthesize_labels(
     patch_size: int = 11,
     levels: int | None = None,
     iterations: int = 5,
-    rotations: bool = True,
+    rotations: bool | Literal["half"] = True,
     tileable: bool = False,
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
@@ -265,7 +276,7 @@ def synthesize_labels(
         patch_size=p,
         levels=lev,
         iterations=its,
-        rotations=bool(rotations),
+        rotations=_turns(rotations),
         tileable=bool(tileable),
         seed=check_seed(seed),
         order=idx,
@@ -275,7 +286,7 @@ def synthesize_labels(
     return np.asarray(values.astype(np.int32)[out], dtype=np.int32)
 
 
-def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool = True) -> float:
+def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool | Literal["half"] = True) -> float:
     """The shape distance of Rosenberger et al. (thesis Eq. 3.7–3.9); lower is more alike.
 
     For every boundary pixel of either map (a pixel with a 4-neighbour of another label), the
@@ -291,8 +302,9 @@ def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool = T
         The two maps.
     patch_size : int, optional
         Odd patch side, at most :data:`MAX_PATCH` (default 7).
-    rotations : bool, optional
-        Minimise over the rotations of the other map's patch (Eq. 3.7).
+    rotations : bool or "half", optional
+        Minimise over the four 90° rotations of the other map's patch (Eq. 3.7; ``True``),
+        none (``False``) or the half-turn only (``"half"``).
 
     Returns
     -------
@@ -311,6 +323,7 @@ def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool = T
     p = check_patch_size(patch_size)
     if p > MAX_PATCH:
         raise ValueError(f"patch_size: expected an odd size <= {MAX_PATCH}, got {p}")
+    turns = _turns(rotations)
     arr_a, arr_b = np.asarray(a), np.asarray(b)
     # Compare label values as given: map both through the union of their values.
     la, va = _labels(arr_a, "a")
@@ -322,6 +335,43 @@ def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool = T
     ub = np.searchsorted(union, vb).astype(np.uint8)[lb]
     return float(
         _core.shape_similarity(
-            np.ascontiguousarray(ua), np.ascontiguousarray(ub), patch_size=p, rotations=bool(rotations)
+            np.ascontiguousarray(ua), np.ascontiguousarray(ub), patch_size=p, rotations=turns
         )
     )
+
+
+def chord_length(labels: Any) -> float:
+    """The scale of a shape or label map: its pixel-weighted mean chord length, in pixels.
+
+    A chord is a maximal run of equal labels along a row or a column; each pixel counts the
+    length of the two chords through it (runs cut by the border count as they are), and the
+    mean is over all pixels and both directions, i.e. ``Σ L² / Σ L`` over all chords. Large
+    smooth regions give long chords, speckle short ones; weighting by pixels keeps a few
+    specks from hiding the large regions. Compare an output's value with its exemplar's to
+    see whether the synthesis kept the exemplar's blob size.
+
+    Parameters
+    ----------
+    labels : (M, N) array_like of int or bool
+        A shape or label map.
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> stripes = (np.arange(40)[None, :] // 4 % 2).repeat(40, axis=0)   # 4-px columns
+    >>> phloem.shapes.chord_length(stripes)                             # (40 + 4) / 2
+    22.0
+    """
+    lab, _ = _labels(labels, "labels")
+    total, count = 0.0, 0
+    for a in (lab, lab.T):
+        start = np.ones(a.shape, dtype=bool)  # where a run starts; every row starts one
+        start[:, 1:] = a[:, 1:] != a[:, :-1]
+        runs = np.diff(np.append(np.flatnonzero(start.ravel()), a.size))
+        total += float((runs.astype(np.float64) ** 2).sum())
+        count += int(runs.sum())
+    return total / count

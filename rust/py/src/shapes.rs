@@ -5,7 +5,7 @@ use std::sync::Mutex;
 use ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
 use phloem_core::error::invalid;
-use phloem_core::shapes::{self, LabelMap, Method, ShapeParams};
+use phloem_core::shapes::{self, LabelMap, Method, Rotations, ShapeParams};
 use pyo3::prelude::*;
 
 use crate::errors::{guarded, not_contiguous, opt_slice, to_py};
@@ -52,18 +52,18 @@ fn params(
     patch_size: usize,
     levels: usize,
     iterations: usize,
-    rotations: bool,
+    rotations: usize,
     tileable: bool,
     seed: u64,
-) -> ShapeParams {
-    ShapeParams {
+) -> PyResult<ShapeParams> {
+    Ok(ShapeParams {
         patch_size,
         levels,
         iterations,
-        rotations,
+        rotations: Rotations::from_count(rotations).map_err(to_py)?,
         tileable,
         seed,
-    }
+    })
 }
 
 #[pyfunction]
@@ -76,7 +76,7 @@ pub fn synthesize_py<'py>(
     patch_size: usize,
     levels: usize,
     iterations: usize,
-    rotations: bool,
+    rotations: usize,
     tileable: bool,
     seed: u64,
     mask: Option<PyReadonlyArray2<'py, bool>>,
@@ -85,7 +85,7 @@ pub fn synthesize_py<'py>(
 ) -> PyResult<Bound<'py, PyArray2<u8>>> {
     let ex = label_map("shape", &shape, 2)?;
     let mask = opt_slice("mask", mask.as_ref())?;
-    let p = params(patch_size, levels, iterations, rotations, tileable, seed);
+    let p = params(patch_size, levels, iterations, rotations, tileable, seed)?;
     let out = with_progress(py, progress, threads, |cb| {
         shapes::synthesize(&ex, height, width, mask, &p, cb)
     })?;
@@ -106,7 +106,7 @@ pub fn synthesize_labels_py<'py>(
     patch_size: usize,
     levels: usize,
     iterations: usize,
-    rotations: bool,
+    rotations: usize,
     tileable: bool,
     seed: u64,
     order: Option<Vec<u8>>,
@@ -124,7 +124,7 @@ pub fn synthesize_labels_py<'py>(
         }
     };
     let ex = label_map("labels", &labels, shapes::MAX_LABELS)?;
-    let p = params(patch_size, levels, iterations, rotations, tileable, seed);
+    let p = params(patch_size, levels, iterations, rotations, tileable, seed)?;
     let out = with_progress(py, progress, threads, |cb| {
         shapes::synthesize_labels(&ex, k, height, width, method, order.as_deref(), &p, cb)
     })?;
@@ -140,11 +140,12 @@ pub fn similarity_py(
     a: PyReadonlyArray2<'_, u8>,
     b: PyReadonlyArray2<'_, u8>,
     patch_size: usize,
-    rotations: bool,
+    rotations: usize,
     threads: Option<usize>,
 ) -> PyResult<f64> {
     let a = label_map("a", &a, shapes::MAX_LABELS)?;
     let b = label_map("b", &b, shapes::MAX_LABELS)?;
+    let rotations = Rotations::from_count(rotations).map_err(to_py)?;
     py.detach(|| {
         guarded(|| {
             install(threads, || {

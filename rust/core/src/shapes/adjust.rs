@@ -11,7 +11,7 @@
 
 use rayon::prelude::*;
 
-use super::patches::{coord, Geometry, Patch};
+use super::patches::{coord, Geometry, Patch, MAX_PATCH};
 use crate::rng::mix64;
 
 /// The Gaussian falloff over a `p × p` patch, `σ = p / 4`.
@@ -79,16 +79,37 @@ pub fn votes(
                     let weight = 1.0 / (1.0 + ov.dists[c] as f32);
                     let patch = &ov.patches[c];
                     let row_bit = ((dy + r) as usize) * p;
+                    // This patch row's labels, all planes at once.
+                    let mut labels = [0u8; MAX_PATCH];
+                    for j in 0..g.planes {
+                        let bits = (patch.0[j] >> row_bit) as u32;
+                        for (dx, l) in labels[..p].iter_mut().enumerate() {
+                            *l |= (((bits >> dx) & 1) as u8) << j;
+                        }
+                    }
+                    let wrow = &fall[row_bit..row_bit + p];
+                    if sx >= r as usize && sx + (r as usize) < w {
+                        // Interior: no wrapping or clipping.
+                        let x0 = sx - r as usize;
+                        for (i, (&l, &f)) in labels[..p].iter().zip(wrow).enumerate() {
+                            let l = l as usize;
+                            if l < k {
+                                acc[(x0 + i) * k + l] += weight * f;
+                                voted[x0 + i] = true;
+                            }
+                        }
+                        continue;
+                    }
                     for dx in -r..=r {
                         let x = sx as isize + dx;
                         if !wrap && (x < 0 || x >= w as isize) {
                             continue;
                         }
                         let x = coord(x, w, true);
-                        let bit = row_bit + (dx + r) as usize;
-                        let l = g.label_at(patch, bit) as usize;
+                        let i = (dx + r) as usize;
+                        let l = labels[i] as usize;
                         if l < k {
-                            acc[x * k + l] += weight * fall[bit];
+                            acc[x * k + l] += weight * wrow[i];
                             voted[x] = true;
                         }
                     }

@@ -25,6 +25,7 @@ use std::collections::HashMap;
 use rayon::prelude::*;
 
 use super::patches::{coord, Geometry, Patch};
+use super::Rotations;
 use crate::rng::Rng;
 
 /// Marks an unmatched patch.
@@ -234,23 +235,25 @@ pub struct Index {
 }
 
 impl Index {
-    /// The index of `unique` exemplar patches, each under 4 rotations (`rotations`) or as is.
+    /// The index of `unique` exemplar patches, each under the turns `rotations` allows.
     #[must_use]
-    pub fn new(g: &Geometry, unique: &[Patch], rotations: bool, key_label: u8) -> Self {
-        let turns = if rotations { 4 } else { 1 };
+    pub fn new(g: &Geometry, unique: &[Patch], rotations: Rotations, key_label: u8) -> Self {
+        let turns = rotations.turns();
         let left = (0..g.p * g.p)
             .filter(|i| i % g.p < g.p / 2)
             .fold(0u128, |m, i| m | (1u128 << i));
-        let mut e: Vec<(u32, u32, u8, Patch)> = Vec::with_capacity(unique.len() * turns);
+        let mut e: Vec<(u32, u32, u8, Patch)> = Vec::with_capacity(unique.len() * turns.len());
         for (id, p) in unique.iter().enumerate() {
             let mut q = *p;
-            for r in 0..turns {
+            let mut at = 0u8;
+            for &r in turns {
+                while at < r {
+                    q = g.rotate(&q);
+                    at += 1;
+                }
                 let m = g.label_mask(&q, key_label);
                 let key = ((m & left).count_ones() << 16) | (m & !left).count_ones();
-                e.push((key, id as u32, r as u8, q));
-                if r + 1 < turns {
-                    q = g.rotate(&q);
-                }
+                e.push((key, id as u32, r, q));
             }
         }
         e.sort_unstable_by_key(|a| (a.0, a.1, a.2));
@@ -567,7 +570,11 @@ mod tests {
 
     #[test]
     fn knn_equals_brute_force() {
-        for (k_lab, rot) in [(2u64, true), (3, false), (5, true)] {
+        for (k_lab, rot) in [
+            (2u64, Rotations::All),
+            (3, Rotations::None),
+            (5, Rotations::Half),
+        ] {
             let g = Geometry::new(5, k_lab as usize);
             let ex = random_patches(&g, 60, 1, k_lab);
             let idx = Index::new(&g, &ex, rot, 1);
@@ -640,7 +647,7 @@ mod tests {
     fn greedy_respects_quota_and_matches_brute_force() {
         let g = Geometry::new(3, 2);
         let ex = random_patches(&g, 7, 3, 2);
-        let idx = Index::new(&g, &ex, true, 1);
+        let idx = Index::new(&g, &ex, Rotations::All, 1);
         let qs = random_patches(&g, 23, 4, 2);
         let mult = vec![1u32; ex.len()];
         let quota = quotas(qs.len(), &mult, 0, 9);

@@ -46,9 +46,50 @@ pub const MAX_ORDER_SEARCH: usize = 7;
 /// The most pyramid levels chosen automatically.
 const MAX_AUTO_LEVELS: usize = 6;
 
+/// Automatic pyramids stop at the level where the exemplar and output are this many patches
+/// wide: with one, a patch covers a whole blob of the exemplar at the coarsest level (with
+/// three, outputs' blobs came out about half the exemplar's chord length).
+const AUTO_MIN_PATCHES: usize = 1;
+
 /// A pixel near a layer boundary leaves the next layer's mask when less than this share of
 /// the votes of the previous layer's matched exemplar patches shows the next layer there.
 const SHRINK_SHARE: f32 = 0.1;
+
+/// Which 90° turns of the exemplar's boundary patches may match (Eq. 3.7).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rotations {
+    /// The patches as they are: directions are kept (e.g. vertical bark furrows).
+    None,
+    /// The patches and their half-turns (0° and 180°): a vertical axis stays vertical.
+    Half,
+    /// All four 90° turns (the paper).
+    All,
+}
+
+impl Rotations {
+    /// The allowed turns, in quarter turns.
+    #[must_use]
+    pub fn turns(self) -> &'static [u8] {
+        match self {
+            Self::None => &[0],
+            Self::Half => &[0, 2],
+            Self::All => &[0, 1, 2, 3],
+        }
+    }
+
+    /// From the number of allowed turns: 1, 2 or 4; errors name `rotations`.
+    pub fn from_count(n: usize) -> Result<Self> {
+        match n {
+            1 => Ok(Self::None),
+            2 => Ok(Self::Half),
+            4 => Ok(Self::All),
+            _ => Err(invalid(
+                "rotations",
+                format!("expected 1, 2 or 4 turns, got {n}"),
+            )),
+        }
+    }
+}
 
 /// How a label map with more than two labels is synthesised.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -65,13 +106,15 @@ pub struct ShapeParams {
     /// Side of the square boundary patches; odd, at most [`MAX_PATCH`]. Default 11.
     pub patch_size: usize,
     /// Pyramid levels; 0 (the default) picks as many as keep the coarsest exemplar and output
-    /// at least three patches wide (at most 6).
+    /// at least one patch wide (three for [`Method::Layered`]; at most 6), so that at the
+    /// coarsest level a patch covers a whole blob and the random start grows blobs of the
+    /// exemplar's scale.
     pub levels: usize,
     /// Matching + adjustment iterations per level (fewer if the shape stops changing).
     /// Default 5.
     pub iterations: usize,
-    /// Compare boundary patches under the four 90° rotations (Eq. 3.7). Default true.
-    pub rotations: bool,
+    /// The 90° turns under which boundary patches are compared (Eq. 3.7). Default all four.
+    pub rotations: Rotations,
     /// The output wraps around (toroidal), so it tiles seamlessly. Default false.
     pub tileable: bool,
     /// Seed of every random choice (initialisation, quota draws, tie-breaks).
@@ -84,7 +127,7 @@ impl Default for ShapeParams {
             patch_size: 11,
             levels: 0,
             iterations: 5,
-            rotations: true,
+            rotations: Rotations::All,
             tileable: false,
             seed: 0,
         }
@@ -145,6 +188,7 @@ fn check(
     ex: &LabelMap,
     h: usize,
     w: usize,
+    min_patches: usize,
 ) -> Result<usize> {
     let p = params.patch_size;
     check_patch(p)?;
@@ -172,7 +216,7 @@ fn check(
     let m = h.min(w).min(ex.h).min(ex.w);
     if params.levels == 0 {
         Ok(1 + (1..MAX_AUTO_LEVELS)
-            .take_while(|&l| (m >> l) >= 3 * p)
+            .take_while(|&l| (m >> l) >= min_patches * p)
             .count())
     } else if (m >> (params.levels - 1)) < p {
         Err(invalid(
@@ -279,7 +323,7 @@ impl Group {
     fn new(
         g: &Geometry,
         items: &[(Patch, u32)],
-        rotations: bool,
+        rotations: Rotations,
         key_label: u8,
         (eh, ew): (usize, usize),
     ) -> Self {
@@ -739,7 +783,7 @@ pub fn synthesize(
     params: &ShapeParams,
     progress: Progress<'_>,
 ) -> Result<LabelMap> {
-    let levels = check(params, "shape", shape, h, w)?;
+    let levels = check(params, "shape", shape, h, w, AUTO_MIN_PATCHES)?;
     if let Some(&l) = shape.data.iter().find(|&&l| l > 1) {
         return Err(invalid("shape", format!("expected 0/1 values, found {l}")));
     }
@@ -858,7 +902,14 @@ pub fn synthesize_labels(
     params: &ShapeParams,
     progress: Progress<'_>,
 ) -> Result<LabelMap> {
-    let levels = check(params, "labels", labels, h, w)?;
+    // Deeper pyramids make the layered method's nested masks coarse and cost it Eq. 3.9
+    // (eucalyptus: 3.29 at 5 levels against 2.10 at 3), so it keeps three patches.
+    let min_patches = if method == Method::Layered {
+        3
+    } else {
+        AUTO_MIN_PATCHES
+    };
+    let levels = check(params, "labels", labels, h, w, min_patches)?;
     if !(2..=MAX_LABELS).contains(&k) {
         return Err(invalid(
             "labels",
@@ -940,7 +991,12 @@ pub fn synthesize_labels(
 /// (Eq. 3.8). The boundary sets belong to different maps, so `|B1 ∪ B2| = |B1| + |B2|`.
 /// Patches reaching past a border repeat the border pixels. 0 when neither map has a
 /// boundary, infinite when only one has. Lower is better.
-pub fn similarity(a: &LabelMap, b: &LabelMap, patch_size: usize, rotations: bool) -> Result<f64> {
+pub fn similarity(
+    a: &LabelMap,
+    b: &LabelMap,
+    patch_size: usize,
+    rotations: Rotations,
+) -> Result<f64> {
     check_patch(patch_size)?;
     let k = a.data.iter().chain(&b.data).copied().max().unwrap_or(0) as usize + 1;
     if k > MAX_LABELS {
@@ -971,7 +1027,7 @@ pub fn similarity(a: &LabelMap, b: &LabelMap, patch_size: usize, rotations: bool
 }
 
 /// `Σ_{x ∈ from} D(x, to)` (Eq. 3.8), duplicates searched once.
-fn one_way(g: &Geometry, from: &[Patch], to: &[Patch], rotations: bool) -> u64 {
+fn one_way(g: &Geometry, from: &[Patch], to: &[Patch], rotations: Rotations) -> u64 {
     let mut to_u = to.to_vec();
     to_u.par_sort_unstable();
     to_u.dedup();
@@ -1028,7 +1084,7 @@ mod tests {
     #[test]
     fn similarity_is_zero_to_itself_and_to_its_rotation() {
         let a = blobs(40, 30, 1, 3);
-        assert!(similarity(&a, &a, 7, true).unwrap().abs() < 1e-12);
+        assert!(similarity(&a, &a, 7, Rotations::All).unwrap().abs() < 1e-12);
         let mut rot = vec![0u8; 40 * 30];
         for y in 0..40 {
             for x in 0..30 {
@@ -1040,8 +1096,11 @@ mod tests {
             h: 30,
             w: 40,
         };
-        assert!(similarity(&a, &r, 7, true).unwrap().abs() < 1e-12);
-        assert!(similarity(&a, &r, 7, false).unwrap() > similarity(&a, &r, 7, true).unwrap());
+        assert!(similarity(&a, &r, 7, Rotations::All).unwrap().abs() < 1e-12);
+        assert!(
+            similarity(&a, &r, 7, Rotations::None).unwrap()
+                > similarity(&a, &r, 7, Rotations::All).unwrap()
+        );
     }
 
     #[test]

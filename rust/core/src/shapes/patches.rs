@@ -120,18 +120,8 @@ impl Geometry {
         let p = self.p;
         let r = p / 2;
         let mut out = Patch::default();
-        let mut put = |l: u8, bit: usize| {
-            let (mut l, mut j) = (l, 0);
-            while l != 0 {
-                if l & 1 != 0 {
-                    out.0[j] |= 1u128 << bit;
-                }
-                l >>= 1;
-                j += 1;
-            }
-        };
         let interior = y >= r && x >= r && y + r < h && x + r < w;
-        let mut bit = 0;
+        let mut cells = [0u8; MAX_PATCH];
         for dy in 0..p {
             let yy = if interior {
                 y + dy - r
@@ -140,16 +130,22 @@ impl Geometry {
             };
             let row = &map[yy * w..(yy + 1) * w];
             if interior {
-                for &l in &row[x - r..=x + r] {
-                    put(l, bit);
-                    bit += 1;
-                }
+                cells[..p].copy_from_slice(&row[x - r..=x + r]);
             } else {
-                for dx in 0..p {
-                    put(row[coord((x + dx) as isize - r as isize, w, wrap)], bit);
-                    bit += 1;
+                for (dx, c) in cells[..p].iter_mut().enumerate() {
+                    *c = row[coord((x + dx) as isize - r as isize, w, wrap)];
                 }
             }
+            // One row's bits of each plane at once (labels are below 2^planes).
+            let shift = dy * p;
+            for (j, plane) in out.0[..self.planes].iter_mut().enumerate() {
+                let mut bits = 0u32;
+                for (dx, &l) in cells[..p].iter().enumerate() {
+                    bits |= u32::from((l >> j) & 1) << dx;
+                }
+                *plane |= u128::from(bits) << shift;
+            }
+            debug_assert!(cells[..p].iter().all(|&l| (l as usize) < 1 << self.planes));
         }
         out
     }
