@@ -31,7 +31,7 @@ def _labels_rgb(labels: np.ndarray) -> np.ndarray:
     return bark.encode_labels(labels)
 
 
-def pipeline_row(name: str, photo: np.ndarray, k: int, size: tuple[int, int], rotations: bool = False) -> list[np.ndarray]:
+def pipeline_row(name: str, photo: np.ndarray, k: int, size: tuple[int, int], rotations: bool | str = "half") -> list[np.ndarray]:
     opts = {"labels": k, "rotations": rotations}
     t0 = time.perf_counter()
     joint = bark.generate(photo, size, seed=1, return_intermediates=True, **opts)

@@ -40,7 +40,7 @@ __all__ = [
     "synthesize_labels",
 ]
 
-Rotations = bool
+Rotations = bool | Literal["half"]
 Progress = Callable[[int, int], None]
 
 
@@ -270,7 +270,7 @@ def synthesize_labels(
     *,
     method: Literal["layered", "joint"] = "joint",
     order: Sequence[int] | None = None,
-    rotations: Rotations = False,
+    rotations: Rotations = "half",
     tileable: bool = False,
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
@@ -280,8 +280,8 @@ def synthesize_labels(
     """A new label map of any size with the shapes of ``labels`` (thesis §3.6).
 
     The bark-pipeline name of :func:`phloem.shapes.synthesize_labels` (Rosenberger et al. 2009
-    boundary-patch shape synthesis) with the bark pipeline's defaults: the joint method, and no
-    90° turns of the photo's shapes (bark grows along the trunk). See there for ``method``,
+    boundary-patch shape synthesis) with the bark pipeline's defaults: the joint method, and only
+    half turns of the photo's shapes (bark grows along the trunk). See there for ``method``,
     ``order``, ``rotations`` and ``options`` (``patch_size``, ``levels``, ``iterations``).
 
     Examples
@@ -363,7 +363,7 @@ def generate(
     labels_in: Any = None,
     labels_out: Any = None,
     method: Literal["layered", "joint"] = "joint",
-    rotations: Rotations = False,
+    rotations: Rotations = "half",
     edge_label: bool = False,
     tileable: bool = False,
     denoise: float = 10.0,
@@ -404,10 +404,11 @@ def generate(
         multi-label variant (default), or the thesis' nested layers (§3.6.4). Joint scores
         better on Eq. 3.9 on all four of the thesis' runs and does not degrade beyond three
         labels as layers do (§4.4).
-    rotations : bool, optional
-        Let label-map synthesis turn the photo's shapes by 90° (Eq. 3.7; see
-        :func:`phloem.shapes.synthesize`). Default False: bark grows along the trunk, and turned
-        furrows look woven. Set True for photos without a grain, such as plane-tree bark.
+    rotations : {"half", True, False}, optional
+        Which turns of the photo's shapes label-map synthesis may use (Eq. 3.7; see
+        :func:`phloem.shapes.synthesize`). Default "half" (0° and 180°): bark grows along the
+        trunk, and shapes turned by 90° make furrows look woven. True allows all four turns,
+        for bark without a grain such as plane trees; False none.
     edge_label : bool, optional
         Add the §3.5.5 edge region to both maps before texture-by-numbers (default False).
     tileable : bool, optional

@@ -171,6 +171,9 @@ def _bark_targets(args: argparse.Namespace) -> dict[str, Path]:
     return files
 
 
+_ROTATIONS: dict[str, bark.Rotations] = {"half": "half", "all": True, "none": False}
+
+
 def _cmd_bark(args: argparse.Namespace) -> None:
     _preflight(args)
     extra = _bark_targets(args)
@@ -193,7 +196,7 @@ def _cmd_bark(args: argparse.Namespace) -> None:
         args,
         lambda bar: bark.generate(
             photo, args.size, labels=args.labels, height_map=hm, labels_in=lab_in, labels_out=lab_out,
-            method=args.method, rotations=args.rotations, edge_label=args.edge_label, tileable=args.tileable, seed=args.seed,
+            method=args.method, rotations=_ROTATIONS[args.rotations], edge_label=args.edge_label, tileable=args.tileable, seed=args.seed,
             threads=args.threads, progress=bar, return_intermediates=True,
         ),  # fmt: skip
     )
@@ -294,9 +297,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--labels", type=_positive, default=2, metavar="K", help="regions of the input label map (default 2; 2-3 work best)")
     p.add_argument("--method", choices=("layered", "joint"), default="joint",
                    help="label-map synthesis: phloem's joint multi-label variant (default) or the thesis' nested layers")  # fmt: skip
-    p.add_argument("--rotations", action="store_true",
-                   help="let the new label map turn the photo's shapes by 90 degrees (for bark without a grain, e.g. plane trees; "
-                        "off by default because bark grows along the trunk)")  # fmt: skip
+    p.add_argument("--rotations", choices=("half", "all", "none"), default="half",
+                   help="turns of the photo's shapes the new label map may use: half (0 and 180 degrees, default: bark grows "
+                        "along the trunk), all (also 90 degrees, for bark without a grain such as plane trees) or none")  # fmt: skip
     p.add_argument("--edge-label", action="store_true", help="add a region for the borders between regions to both label maps (§3.5.5)")
     p.add_argument("--height-map", metavar="HM", default=None, help="height map of IN, synthesised along; written as OUT_height.png (16-bit)")
     p.add_argument("--tileable", action="store_true", help="make the label map and the texture wrap around so OUT tiles")

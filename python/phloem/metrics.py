@@ -20,7 +20,7 @@ from . import shapes as _shapes
 from . import shapes as _shapes
 from ._validate import as_image, as_mask, check_patch_size
 
-__all__ = ["coherence_map", "label_histogram_distance", "patch_coherence", "repetition", "shape_similarity"]
+__all__ = ["chord_length", "coherence_map", "label_histogram_distance", "patch_coherence", "repetition", "shape_similarity"]
 
 
 def coherence_map(
@@ -214,3 +214,18 @@ def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool | L
     0.0
     """
     return _shapes.shape_similarity(a, b, patch_size=patch_size, rotations=rotations)
+
+
+def chord_length(labels: Any) -> float:
+    """The scale of a shape or label map: its pixel-weighted mean chord length, in pixels.
+
+    The same function as :func:`phloem.shapes.chord_length`, listed here with the other
+    measures; compare an output's with its exemplar's to check that blob size was kept.
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> phloem.metrics.chord_length(np.zeros((8, 8), int))
+    8.0
+    """
+    return _shapes.chord_length(labels)
