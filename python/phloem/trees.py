@@ -133,14 +133,17 @@ def normalize(rgba: Any, *, size: int = 1024, alpha_threshold: float = 0.5) -> F
     return np.ascontiguousarray(out)
 
 
-def split_atlas(rgba: Any, *, min_area: int = 64, alpha_threshold: float = 0.5, gap: int = 1) -> list[F32]:
+def split_atlas(
+    rgba: Any, *, min_area: int = 64, alpha_threshold: float = 0.5, gap: int = 1, join: int = 8
+) -> list[F32]:
     """Cut an atlas of several tree billboards into single trees.
 
     The alpha mask (after a 3 x 3 closing) is split recursively into bands of rows and columns
     separated by fully transparent lines at least ``gap`` pixels wide (an X-Y cut), first
     across the rows, then across the columns of each band, until no cut remains. Each piece is
-    one tree, so branches that the mask shows disconnected from their tree stay with it.
-    Pieces with fewer than ``min_area`` opaque pixels are dropped.
+    one tree, so branches that the mask shows disconnected from their tree stay with it. A piece
+    with fewer than ``min_area`` opaque pixels (a twig cut off by a transparent line) joins the
+    nearest tree at most ``join`` pixels away, or is dropped.
 
     Parameters
     ----------
@@ -152,6 +155,8 @@ def split_atlas(rgba: Any, *, min_area: int = 64, alpha_threshold: float = 0.5, 
         Alpha below this is transparent.
     gap : int, optional
         Smallest width of a transparent line that separates two trees.
+    join : int, optional
+        Largest distance (between bounding boxes) over which a small piece joins a tree.
 
     Returns
     -------
@@ -176,6 +181,7 @@ def split_atlas(rgba: Any, *, min_area: int = 64, alpha_threshold: float = 0.5, 
     img = _rgba(rgba)
     min_area = check_int(min_area, "min_area", 1)
     gap = check_int(gap, "gap", 1)
+    join = check_int(join, "join", 0)
     t = _threshold(alpha_threshold)
     opaque = img[..., 3] >= t
     closed = cv2.morphologyEx(opaque.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)) > 0
@@ -213,12 +219,24 @@ def split_atlas(rgba: Any, *, min_area: int = 64, alpha_threshold: float = 0.5, 
                 cut(y0, y1, x0 + a, x0 + b, 0)
 
     cut(0, closed.shape[0], 0, closed.shape[1], 0)
+    area = [int(opaque[y0:y1, x0:x1].sum()) for y0, y1, x0, x1 in boxes]
+    big = [i for i, a in enumerate(area) if a >= min_area]
+    merged = {i: list(boxes[i]) for i in big}
+    for i, (y0, y1, x0, x1) in enumerate(boxes):
+        if area[i] >= min_area or not big:
+            continue
+        # A small piece (a twig cut off by a transparent line) joins the nearest tree within `join`.
+        dist = [max(by0 - y1, y0 - by1, bx0 - x1, x0 - bx1, 0) for by0, by1, bx0, bx1 in (boxes[j] for j in big)]
+        j = big[int(np.argmin(dist))]
+        if min(dist) <= join:
+            box = merged[j]
+            merged[j] = [min(box[0], y0), max(box[1], y1), min(box[2], x0), max(box[3], x1)]
     trees = []
-    for y0, y1, x0, x1 in boxes:
-        if int(opaque[y0:y1, x0:x1].sum()) >= min_area:
-            piece = img[y0:y1, x0:x1].copy()
-            piece[~opaque[y0:y1, x0:x1]] = 0.0
-            trees.append(piece)
+    for i in big:
+        y0, y1, x0, x1 = merged[i]
+        piece = img[y0:y1, x0:x1].copy()
+        piece[~opaque[y0:y1, x0:x1]] = 0.0
+        trees.append(piece)
     if not trees:
         raise ValueError(f"rgba: found no tree with at least min_area={min_area} opaque pixels")
     return trees
@@ -316,6 +334,7 @@ def segment(
     alpha_threshold: float = 0.5,
     jump: float = 2.5,
     min_crown_width: float = 0.2,
+    taper: float = 3.0,
     smooth: float = 0.01,
 ) -> Mask:
     """Segment the trunk from the crown without training (replaces the paper's FCN, §4.3).
@@ -340,6 +359,9 @@ def segment(
         How many times wider than the trunk a row must be to belong to the crown.
     min_crown_width : float, optional
         Smallest crown row width, as a fraction of the widest row.
+    taper : float, optional
+        Below the jump, rows wider than ``taper`` times the trunk width still belong to the
+        crown (its underside narrowing into the trunk).
     smooth : float, optional
         Median filter length as a fraction of the image height.
 
@@ -361,6 +383,7 @@ def segment(
     img = _rgba(rgba)
     t = _threshold(alpha_threshold)
     jump = check_float(jump, "jump", 1.0, inclusive=False)
+    taper = check_float(taper, "taper", 1.0)
     min_crown_width = check_float(min_crown_width, "min_crown_width", 0.0)
     smooth = check_float(smooth, "smooth", 0.0)
     opaque = img[..., 3] >= t
@@ -376,15 +399,26 @@ def segment(
         padded = np.pad(width, k // 2, mode="edge")
         width = np.median(np.lib.stride_tricks.sliding_window_view(padded, k), axis=1)
     height = bottom - top + 1
-    base = width[max(top, bottom - max(1, int(0.02 * height)) + 1) : bottom + 1]
-    trunk_width = float(np.median(base))
-    limit = max(jump * trunk_width, min_crown_width * float(width[top : bottom + 1].max()))
-    if trunk_width >= min_crown_width * float(width[top : bottom + 1].max()):
+    # A low quantile over the lowest tenth ignores a flared foot and the crown rows it may hold.
+    base = width[max(top, bottom - max(1, int(0.1 * height)) + 1) : bottom + 1]
+    trunk_width = float(np.quantile(base, 0.3))
+    widest = float(width[top : bottom + 1].max())
+    if trunk_width >= min_crown_width * widest:
         return trunk  # the bottom is already crown-wide: no visible trunk
-    above = np.flatnonzero(width[top : bottom + 1] > limit)
-    if above.size == 0:
+    limit = max(jump * trunk_width, min_crown_width * widest)
+    # Climb from the bottom: past the foot into the trunk, then up to the first crown-wide row.
+    y = bottom
+    while y > top and width[y] > 1.5 * trunk_width:
+        y -= 1
+    while y > top and width[y] <= limit:
+        y -= 1
+    if y <= top:
         return trunk
-    baseline = top + int(above[-1])  # lowest crown row
+    # The crown's underside tapers into the trunk: step down through rows still clearly wider
+    # than the trunk so that the baseline is the lowest crown row, not the row of the jump.
+    while y < bottom and width[y + 1] > taper * trunk_width:
+        y += 1
+    baseline = y  # lowest crown row
     below = opaque.copy()
     below[: baseline + 1] = False
     _, labels = cv2.connectedComponents(below.astype(np.uint8), connectivity=8)
