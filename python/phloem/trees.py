@@ -503,11 +503,12 @@ def pin_points(points: Any, trunk: Any) -> tuple[int, int, int]:
     return b, l_, r
 
 
-def _chord_walk(seg: F64, count: int, step: float) -> list[tuple[float, float]]:
-    """Points at chord distance ``step`` from each other along the polyline ``seg``, at most ``count``."""
+def _chord_walk(seg: F64, cum: list[float], count: int, step: float) -> list[float]:
+    """Arc-length positions of points at chord distance ``step`` from each other along the
+    polyline ``seg`` (``cum`` its cumulative arc length), at most ``count`` of them."""
     xs, ys = seg[:, 0].tolist(), seg[:, 1].tolist()
     px, py = xs[0], ys[0]
-    out = [(px, py)]
+    out = [0.0]
     i, m, s2 = 1, len(xs), step * step
     while len(out) < count and i < m:
         qx, qy = xs[i], ys[i]
@@ -524,17 +525,12 @@ def _chord_walk(seg: F64, count: int, step: float) -> list[tuple[float, float]]:
         tt = (-qb + math.sqrt(max(qb * qb - 4 * qa * qc, 0.0))) / (2 * qa) if qa > 0 else 1.0
         tt = min(max(tt, 0.0), 1.0)
         px, py = ax + tt * dx, ay + tt * dy
-        out.append((px, py))
+        out.append(cum[i - 1] + tt * (cum[i] - cum[i - 1]))
     return out
 
 
-def _arc_resample(seg: F64, count: int) -> F64:
-    d = np.sqrt((np.diff(seg, axis=0) ** 2).sum(axis=1))
-    s = np.concatenate([[0.0], np.cumsum(d)])
-    if s[-1] == 0:
-        return np.repeat(seg[:1], count, axis=0)
-    u = np.arange(count) * (s[-1] / count)
-    return np.stack([np.interp(u, s, seg[:, 0]), np.interp(u, s, seg[:, 1])], axis=1)
+def _at(seg: F64, cum: F64, u: Any) -> F64:
+    return np.stack([np.interp(u, cum, seg[:, 0]), np.interp(u, cum, seg[:, 1])], axis=1)
 
 
 def _segment_resample(seg: F64, count: int) -> F64:
@@ -542,28 +538,32 @@ def _segment_resample(seg: F64, count: int) -> F64:
 
     Bisection finds the smallest chord length that fits only ``count`` steps into the polyline,
     so the last gap (to the end point, the next segment's first sample) is close to the others.
-    Falls back to uniform arc-length samples when the polyline defeats the walk.
+    Where a jagged polyline makes the count jump past ``count`` (a chord skipping a narrow
+    spike), the missing points go to the arc-length middles of the longest gaps.
     """
-    arc = _arc_resample(seg, count)
-    total = float(np.sqrt((np.diff(seg, axis=0) ** 2).sum(axis=1)).sum())
+    cum = np.concatenate([[0.0], np.cumsum(np.sqrt((np.diff(seg, axis=0) ** 2).sum(axis=1)))])
+    total = float(cum[-1])
     if total == 0 or count == 1:
-        return arc
+        return _at(seg, cum, np.arange(count) * (total / count))
+    cl = cum.tolist()
     lo, hi = 0.0, total / count * 1.0000001
     # hi must make the walk reach the end with at most `count` points: widen until it does.
     for _ in range(60):
-        if len(_chord_walk(seg, count + 1, hi)) <= count:
+        if len(_chord_walk(seg, cl, count + 1, hi)) <= count:
             break
         lo, hi = hi, hi * 1.5
     for _ in range(40):
         mid = 0.5 * (lo + hi)
-        if len(_chord_walk(seg, count + 1, mid)) <= count:
+        if len(_chord_walk(seg, cl, count + 1, mid)) <= count:
             hi = mid
         else:
             lo = mid
-    pts = _chord_walk(seg, count, hi)
-    if len(pts) < count:
-        return arc
-    return np.asarray(pts, dtype=np.float64)
+    u = _chord_walk(seg, cl, count, hi)
+    while len(u) < count:
+        ends = [*u[1:], total]
+        k = int(np.argmax(np.subtract(ends, u)))
+        u.insert(k + 1, 0.5 * (u[k] + ends[k]))
+    return _at(seg, cum, np.asarray(u))
 
 
 def resample(points: Any, pins: tuple[int, int, int], *, split: tuple[int, int, int] = (1600, 200, 200)) -> F64:
