@@ -64,6 +64,15 @@ def test_normalize_transparent_pixels_are_black():
     assert np.all(out[clear] == 0.0)
 
 
+def test_normalize_does_not_bleed_transparent_colour():
+    img = np.zeros((20, 20, 4), np.float32)
+    img[..., 0] = 1.0  # red, but transparent
+    img[5:15, 8:12] = (0.0, 1.0, 0.0, 1.0)  # a cross: its bounding box holds transparent corners
+    img[8:11, 4:16] = (0.0, 1.0, 0.0, 1.0)
+    out = trees.normalize(img, size=200)
+    assert out[..., 0].max() == 0.0
+
+
 def test_normalize_accepts_uint8():
     img = np.zeros((30, 30, 4), np.uint8)
     img[5:25, 10:20] = 255
@@ -150,7 +159,12 @@ def test_split_flightgear_atlas_counts(name):
 def test_contour_longest_exterior_ccw_on_boundary():
     m = np.zeros((120, 160), np.uint8)
     cv2.circle(m, (50, 60), 40, 1, -1)  # big blob...
-    cv2.circle(m, (50, 60), 15, 0, -1)  # ...with a hole (interior contour, long but interior)
+    # ...with a star-shaped hole whose outline (an interior contour) is longer than the disk's
+    star = [
+        (50 + r * np.cos(a), 60 + r * np.sin(a))
+        for a, r in zip(np.linspace(0, 2 * np.pi, 24, endpoint=False), [34, 6] * 12, strict=True)
+    ]
+    cv2.fillPoly(m, [np.round(star).astype(np.int32)], 0)
     cv2.rectangle(m, (110, 20), (150, 100), 1, -1)  # second, smaller blob (perimeter 160)
     mask = m > 0
     c = trees.contour(mask)
@@ -314,6 +328,22 @@ def test_resample_counts_pins_and_uniform_chords():
         assert seg.max() / seg.min() < 1.5, (lo, seg.min(), seg.max())
         assert np.median(seg) > 0
     assert trees.signed_area(cr) > 0
+
+
+def test_resample_jagged_contour_exact_count_no_repeats():
+    # A disk with thin spokes: the equal-chord walk skips a spoke and comes one point short at
+    # n=50; the missing point must still be a new point on the contour.
+    rng = np.random.default_rng(1)
+    m = np.zeros((200, 200), np.uint8)
+    cv2.circle(m, (100, 100), 60, 1, -1)
+    for a in rng.uniform(0, 2 * np.pi, 40):
+        cv2.line(m, (100, 100), (int(100 + 90 * np.cos(a)), int(100 + 90 * np.sin(a))), 1, 1)
+    c = trees.contour(m > 0)
+    for n in (50, 100, 300):
+        cr = trees.resample(c, (0, 0, 0), split=(n, 1, 1))
+        d = _chords(cr[:n])[:-1]
+        assert cr.shape == (n + 2, 2) and d.min() > 0.5
+        assert np.percentile(d, 95) / np.percentile(d, 5) < 1.01
 
 
 def test_resample_split_and_errors():
