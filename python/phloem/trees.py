@@ -23,8 +23,8 @@ project's convention). *Counter-clockwise* means as seen on the screen, so the p
 
 References
 ----------
-.. [1] O. Argudo, C. Andújar, A. Chica, E. Guérin, J. Digne, A. Peytavie, E. Galin,
-   "Coherent multi-layer landscape synthesis" / "Tree Variations", CEIG 2017.
+.. [1] O. Argudo, C. Andújar, A. Chica, "Tree Variations", Spanish Computer Graphics
+   Conference (CEIG) 2017.
 """
 
 from __future__ import annotations
