@@ -23,8 +23,8 @@ project's convention). *Counter-clockwise* means as seen on the screen, so the p
 
 References
 ----------
-.. [1] O. Argudo, C. Andújar, A. Chica, "Tree Variations", Spanish Computer Graphics
-   Conference (CEIG) 2017.
+.. [1] O. Argudo, C. Andújar, A. Chica, "Tree Variations", CEIG 2017 (Eurographics
+   Proceedings), doi:10.2312/ceig.20171218.
 """
 
 from __future__ import annotations
