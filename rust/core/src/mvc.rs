@@ -14,7 +14,7 @@
 //! edge it interpolates the edge's two ends linearly — the limits of the formula there.
 //!
 //! The warp: every pixel centre `x` of a target image (pixel `(row, col)` has centre
-//! `(x, y) = (col, row)`, as in OpenCV contours) is mapped to `q = Σ λ_i(x) u_i` with `λ`
+//! `(x, y) = (col, row)`, as in `OpenCV` contours) is mapped to `q = Σ λ_i(x) u_i` with `λ`
 //! taken w.r.t. the target contour `v` and `u` the source contour, and the source is sampled
 //! bilinearly at `q`. Mathematically `q = x + Σ λ_i (u_i − v_i)` (linear precision), and that
 //! is how it is computed: rounding then scales with the displacement, not the coordinates,
@@ -27,6 +27,8 @@
 
 // Lane loops index several arrays in lockstep; the index form is what vectorises.
 #![allow(clippy::needless_range_loop)]
+// The lane kernel must be inlined into its AVX2 copy to be compiled for AVX2.
+#![allow(clippy::inline_always)]
 
 use rayon::prelude::*;
 
@@ -64,7 +66,8 @@ pub fn check_contour(name: &'static str, contour: &[Point]) -> Result<()> {
     }
     for i in 0..n {
         let j = (i + 1) % n;
-        if contour[i] == contour[j] {
+        // A zero-length edge (the values are finite, so this is exact equality).
+        if contour[j][0] - contour[i][0] == 0.0 && contour[j][1] - contour[i][1] == 0.0 {
             return Err(invalid(
                 name,
                 format!(
@@ -216,6 +219,9 @@ impl Mapping {
 
     /// Source positions of pixels `x0 .. x0 + L` of row `y`: `qx[k][l]`, `qy[k][l]`.
     /// Returns a bit mask of the lanes the `f32` arithmetic cannot be trusted with.
+    ///
+    /// One division per vertex: with `z = 1 / (den_i r_{i+1})` of edge `(i, i + 1)`,
+    /// `tan(α_i/2) = num_i r_{i+1} z` and `1 / r_{i+1} = den_i z`.
     #[inline(always)]
     fn lanes(&self, x0: usize, y: f32, qx: &mut [[f32; L]], qy: &mut [[f32; L]]) -> u32 {
         let n = self.vx.len();
@@ -225,7 +231,6 @@ impl Mapping {
             px[l] = (x0 + l) as f32;
         }
         let mut suspect = [false; L];
-        // Vertex 0's quantities, kept to close the polygon.
         let vertex = |i: usize, sx: &mut [f32; L], sy: &mut [f32; L], r: &mut [f32; L]| {
             let (vx, vy) = (self.vx[i], self.vy[i]);
             for l in 0..L {
@@ -234,56 +239,73 @@ impl Mapping {
                 r[l] = (sx[l] * sx[l] + sy[l] * sy[l]).sqrt();
             }
         };
+        // Edge from vertex a to vertex b: tan(α/2) and 1 / r_b.
+        let edge = |a: (&[f32; L], &[f32; L], &[f32; L]),
+                    b: (&[f32; L], &[f32; L], &[f32; L]),
+                    t: &mut [f32; L],
+                    inv: &mut [f32; L],
+                    suspect: &mut [bool; L]| {
+            for l in 0..L {
+                let cross = a.0[l] * b.1[l] - a.1[l] * b.0[l];
+                let dot = a.0[l] * b.0[l] + a.1[l] * b.1[l];
+                let rr = a.2[l] * b.2[l];
+                let pos = dot >= 0.0;
+                let num = if pos { cross } else { rr - dot };
+                let den = if pos { rr + dot } else { cross };
+                suspect[l] |= (!pos && cross.abs() <= 1e-3 * rr) || b.2[l] < 0.1;
+                let z = 1.0 / (den * b.2[l]);
+                t[l] = num * b.2[l] * z;
+                inv[l] = den * z;
+            }
+        };
         let (mut sx0, mut sy0, mut r0) = ([0.0f32; L], [0.0f32; L], [0.0f32; L]);
+        let (mut sxp, mut syp, mut rp) = ([0.0f32; L], [0.0f32; L], [0.0f32; L]);
         vertex(0, &mut sx0, &mut sy0, &mut r0);
-        let mut inv0 = [0.0f32; L];
-        for l in 0..L {
-            inv0[l] = 1.0 / r0[l];
-            suspect[l] |= r0[l] < 0.1;
-        }
-        let (mut sxp, mut syp, mut rp, mut invp) = (sx0, sy0, r0, inv0);
+        vertex(n - 1, &mut sxp, &mut syp, &mut rp);
+        let (mut t_prev, mut inv0) = ([0.0f32; L], [0.0f32; L]);
+        edge(
+            (&sxp, &syp, &rp),
+            (&sx0, &sy0, &r0),
+            &mut t_prev,
+            &mut inv0,
+            &mut suspect,
+        );
+        let (mut sxc, mut syc, mut rc, mut invc) = (sx0, sy0, r0, inv0);
         let mut wsum = [0.0f32; L];
         for k in 0..k_count {
             qx[k] = [0.0; L];
             qy[k] = [0.0; L];
         }
-        for i in 1..=n {
-            let (mut sx, mut sy, mut r, mut inv) = (sx0, sy0, r0, inv0);
-            if i < n {
-                vertex(i, &mut sx, &mut sy, &mut r);
-                for l in 0..L {
-                    inv[l] = 1.0 / r[l];
-                    suspect[l] |= r[l] < 0.1;
-                }
+        let (mut sx, mut sy, mut r) = ([0.0f32; L], [0.0f32; L], [0.0f32; L]);
+        let (mut t, mut inv) = ([0.0f32; L], [0.0f32; L]);
+        for i in 0..n {
+            // Vertex i is (sxc, syc, rc, invc); edge (i, i + 1) gives its second tangent.
+            if i + 1 < n {
+                vertex(i + 1, &mut sx, &mut sy, &mut r);
+            } else {
+                (sx, sy, r) = (sx0, sy0, r0);
             }
-            // Edge (i − 1, i): tan of half its angle, spread to both ends over r.
-            let mut cp = [0.0f32; L];
-            let mut cc = [0.0f32; L];
+            edge(
+                (&sxc, &syc, &rc),
+                (&sx, &sy, &r),
+                &mut t,
+                &mut inv,
+                &mut suspect,
+            );
+            let mut w = [0.0f32; L];
             for l in 0..L {
-                let cross = sxp[l] * sy[l] - syp[l] * sx[l];
-                let dot = sxp[l] * sx[l] + syp[l] * sy[l];
-                let rr = rp[l] * r[l];
-                let pos = dot >= 0.0;
-                let num = if pos { cross } else { rr - dot };
-                let den = if pos { rr + dot } else { cross };
-                suspect[l] |= !pos && cross.abs() <= 1e-3 * rr;
-                let t = num / den;
-                cp[l] = t * invp[l];
-                cc[l] = t * inv[l];
-                wsum[l] += cp[l] + cc[l];
+                w[l] = (t_prev[l] + t[l]) * invc[l];
+                wsum[l] += w[l];
             }
-            let ip = i - 1;
-            let ic = i % n;
             for k in 0..k_count {
-                let (dxp, dyp) = (self.dx[k * n + ip], self.dy[k * n + ip]);
-                let (dxc, dyc) = (self.dx[k * n + ic], self.dy[k * n + ic]);
+                let (dx, dy) = (self.dx[k * n + i], self.dy[k * n + i]);
                 let (ax, ay) = (&mut qx[k], &mut qy[k]);
                 for l in 0..L {
-                    ax[l] += cp[l] * dxp + cc[l] * dxc;
-                    ay[l] += cp[l] * dyp + cc[l] * dyc;
+                    ax[l] += w[l] * dx;
+                    ay[l] += w[l] * dy;
                 }
             }
-            (sxp, syp, rp, invp) = (sx, sy, r, inv);
+            (sxc, syc, rc, invc, t_prev) = (sx, sy, r, inv, t);
         }
         let mut bad = 0u32;
         for k in 0..k_count {
@@ -315,7 +337,27 @@ impl Mapping {
     }
 
     /// Source positions of every pixel of row `y` (`width` pixels): `out[k * width + x]`.
+    ///
+    /// Compiled twice, for the baseline and for AVX2, and chosen at run time. No fused
+    /// multiply-adds are used, so both give bit-identical results.
     fn row(&self, y: usize, width: usize, out: &mut [(f32, f32)]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2, checked just above.
+            unsafe { self.row_avx2(y, width, out) };
+            return;
+        }
+        self.row_any(y, width, out);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn row_avx2(&self, y: usize, width: usize, out: &mut [(f32, f32)]) {
+        self.row_any(y, width, out);
+    }
+
+    #[inline(always)]
+    fn row_any(&self, y: usize, width: usize, out: &mut [(f32, f32)]) {
         let k_count = self.disp.len();
         let mut qx = vec![[0.0f32; L]; k_count];
         let mut qy = vec![[0.0f32; L]; k_count];
@@ -343,7 +385,7 @@ impl Mapping {
 /// Bilinear sample of `img` at `(x, y)` into `out`. The image covers `[−0.5, w − 0.5) ×
 /// [−0.5, h − 0.5)`: outside it the result is zero in every channel (transparent), inside it
 /// the edge pixels are replicated up to the border.
-#[inline]
+#[inline(always)]
 fn sample(img: &Image<'_>, x: f32, y: f32, out: &mut [f32]) {
     let (w, h) = (img.w as f32, img.h as f32);
     if !(x >= -0.5 && x < w - 0.5 && y >= -0.5 && y < h - 0.5) {
@@ -352,15 +394,20 @@ fn sample(img: &Image<'_>, x: f32, y: f32, out: &mut [f32]) {
     }
     let xc = x.clamp(0.0, w - 1.0);
     let yc = y.clamp(0.0, h - 1.0);
-    let (x0, y0) = (xc.floor() as usize, yc.floor() as usize);
-    let (x1, y1) = ((x0 + 1).min(img.w - 1), (y0 + 1).min(img.h - 1));
+    // Truncation is the floor here (both are >= 0) and, unlike `floor`, needs no libm call.
+    let (x0, y0) = (xc as usize, yc as usize);
     let (fx, fy) = (xc - x0 as f32, yc - y0 as f32);
-    let (a, b) = (img.pixel(y0, x0), img.pixel(y0, x1));
-    let (c, d) = (img.pixel(y1, x0), img.pixel(y1, x1));
-    for ch in 0..out.len() {
-        let top = a[ch] + fx * (b[ch] - a[ch]);
-        let bot = c[ch] + fx * (d[ch] - c[ch]);
-        out[ch] = top + fy * (bot - top);
+    let c = img.c;
+    let step_x = if x0 + 1 < img.w { c } else { 0 };
+    let step_y = if y0 + 1 < img.h { img.w * c } else { 0 };
+    let o = (y0 * img.w + x0) * c;
+    let d = &img.data[o..o + step_y + step_x + c];
+    for (ch, v) in out.iter_mut().enumerate().take(c) {
+        let (a, b) = (d[ch], d[ch + step_x]);
+        let (e, f) = (d[ch + step_y], d[ch + step_y + step_x]);
+        let top = a + fx * (b - a);
+        let bot = e + fx * (f - e);
+        *v = top + fy * (bot - top);
     }
 }
 
