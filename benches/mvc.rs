@@ -53,7 +53,7 @@ fn mvc(c: &mut Criterion) {
             BenchmarkId::new("one_source", format!("{threads}_threads")),
             &threads,
             |bch, _| {
-                bch.iter(|| p.install(|| black_box(warp(&[sa], &[&ca], &target, n, n).unwrap())))
+                bch.iter(|| p.install(|| black_box(warp(&[sa], &[&ca], &target, n, n).unwrap())));
             },
         );
         g.bench_with_input(

@@ -11,6 +11,7 @@ seams     exact grid max-flow / min-cut and graph-cut seams between overlapping 
 texture   texture synthesis, texture-by-numbers, graph-cut quilting and image completion
 shapes    boundary-patch synthesis of binary shapes and label maps (Rosenberger et al. 2009)
 metrics   measures of result quality
+warp      image warps between contours by mean value coordinates (Hormann & Floater 2006)
 cli       the ``phloem`` command
 """
 
@@ -18,7 +19,7 @@ from __future__ import annotations
 
 import os
 
-from . import _core, bark, blend, data, io, metrics, patch, seams, shapes, texture
+from . import _core, bark, blend, data, io, metrics, patch, seams, shapes, texture, warp
 
 __version__: str = _core.__version__
 
@@ -27,4 +28,4 @@ __version__: str = _core.__version__
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_core._after_fork_in_child)
 
-__all__ = ["__version__", "bark", "blend", "data", "io", "metrics", "patch", "seams", "shapes", "texture"]
+__all__ = ["__version__", "bark", "blend", "data", "io", "metrics", "patch", "seams", "shapes", "texture", "warp"]

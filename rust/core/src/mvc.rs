@@ -747,7 +747,11 @@ mod tests {
         let t = l_shape();
         let out = warp_combine(&[ia, ib], &[&t, &t], &t, &[0.25, 0.75], h, w).unwrap();
         for p in out.chunks_exact(3) {
-            assert!((p[0] - 0.25).abs() < 1e-6 && (p[1] - 0.75).abs() < 1e-6 && p[2] == 0.8);
+            assert!(
+                (p[0] - 0.25).abs() < 1e-6
+                    && (p[1] - 0.75).abs() < 1e-6
+                    && p[2].to_bits() == 0.8f32.to_bits()
+            );
         }
     }
 }
