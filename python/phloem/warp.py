@@ -47,6 +47,12 @@ def _points(points: Any, name: str, *, polygon: bool) -> NDArray[np.float64]:
                 f"{name}: points {i} and {(i + 1) % len(out)} are equal {tuple(out[i].tolist())}; "
                 "consecutive points must differ (do not repeat the first point at the end)"
             )
+        rel = out - out[0]
+        area2 = np.sum(rel[:-1, 0] * rel[1:, 1] - rel[:-1, 1] * rel[1:, 0])
+        if abs(area2) <= 1e-12 * np.abs(rel).max() ** 2:
+            raise ValueError(
+                f"{name}: expected a polygon with non-zero area, got a degenerate one (all points on a line)"
+            )
     return out
 
 
@@ -65,11 +71,18 @@ def _weights(weights: Any, count: int) -> NDArray[np.float64]:
 
 
 def _sources(
-    images: Sequence[Any], source_contours: Sequence[Any], target_contour: Any, size: Any
+    images: Sequence[Any],
+    source_contours: Sequence[Any],
+    target_contour: Any,
+    size: Any,
+    *,
+    single: bool = False,
 ) -> tuple[list[NDArray[np.float32]], list[NDArray[np.float64]], NDArray[np.float64], tuple[int, int]]:
     if isinstance(images, np.ndarray) or not isinstance(images, Sequence) or len(images) == 0:
         raise TypeError("images: expected a non-empty list of images")
-    imgs = [as_image(im, f"images[{k}]") for k, im in enumerate(images)]
+    image_name = (lambda k: "image") if single else (lambda k: f"images[{k}]")
+    contour_name = (lambda k: "source_contour") if single else (lambda k: f"source_contours[{k}]")
+    imgs = [as_image(im, image_name(k)) for k, im in enumerate(images)]
     for k, im in enumerate(imgs):
         if im.shape[2] != imgs[0].shape[2]:
             raise ValueError(f"images[{k}]: expected {imgs[0].shape[2]} channels like images[0], got {im.shape[2]}")
@@ -79,10 +92,10 @@ def _sources(
         n = len(source_contours) if isinstance(source_contours, Sequence) else type(source_contours).__name__
         raise ValueError(f"source_contours: expected one contour per image ({len(imgs)}), got {n}")
     target = _points(target_contour, "target_contour", polygon=True)
-    conts = [_points(c, f"source_contours[{k}]", polygon=True) for k, c in enumerate(source_contours)]
+    conts = [_points(c, contour_name(k), polygon=True) for k, c in enumerate(source_contours)]
     for k, c in enumerate(conts):
         if len(c) != len(target):
-            raise ValueError(f"source_contours[{k}]: expected {len(target)} points like target_contour, got {len(c)}")
+            raise ValueError(f"{contour_name(k)}: expected {len(target)} points like target_contour, got {len(c)}")
     return imgs, conts, target, check_size(size)
 
 
@@ -187,7 +200,7 @@ def mvc(
     True
     """
     hw = np.shape(image)[:2] if size is None else size
-    imgs, conts, target, hw = _sources([image], [source_contour], target_contour, hw)
+    imgs, conts, target, hw = _sources([image], [source_contour], target_contour, hw, single=True)
     out = _core.mvc_warp(imgs, conts, target, hw, threads=check_threads(threads))[0]
     return out[:, :, 0] if np.ndim(image) == 2 else out
 
