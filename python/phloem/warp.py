@@ -80,8 +80,13 @@ def _sources(
 ) -> tuple[list[NDArray[np.float32]], list[NDArray[np.float64]], NDArray[np.float64], tuple[int, int]]:
     if isinstance(images, np.ndarray) or not isinstance(images, Sequence) or len(images) == 0:
         raise TypeError("images: expected a non-empty list of images")
-    image_name = (lambda k: "image") if single else (lambda k: f"images[{k}]")
-    contour_name = (lambda k: "source_contour") if single else (lambda k: f"source_contours[{k}]")
+
+    def image_name(k: int) -> str:
+        return "image" if single else f"images[{k}]"
+
+    def contour_name(k: int) -> str:
+        return "source_contour" if single else f"source_contours[{k}]"
+
     imgs = [as_image(im, image_name(k)) for k, im in enumerate(images)]
     for k, im in enumerate(imgs):
         if im.shape[2] != imgs[0].shape[2]:
