@@ -553,6 +553,7 @@ pub fn warp_combine(
     }
     let k_count = sources.len();
     let map = Mapping::new(target, source_contours);
+    let wf: Vec<f32> = weights.iter().map(|&w| w as f32).collect();
     let mut out = vec![0.0f32; height * width * c];
     out.par_chunks_mut(width * c)
         .enumerate()
@@ -560,36 +561,48 @@ pub fn warp_combine(
             let mut q = vec![(0.0f32, 0.0f32); k_count * width];
             map.row(y, width, &mut q);
             let mut px = vec![0.0f32; c];
-            let mut acc = vec![0.0f64; c - 1];
-            let mut plain = vec![0.0f64; c - 1];
             for (x, dst) in o.chunks_exact_mut(c).enumerate() {
-                acc.fill(0.0);
-                plain.fill(0.0);
-                let (mut wsum, mut count, mut alpha) = (0.0f64, 0usize, 0.0f32);
+                // Colour accumulates in the output pixel itself.
+                dst.fill(0.0);
+                let (mut wsum, mut count, mut alpha) = (0.0f32, 0u32, 0.0f32);
                 for (k, src) in sources.iter().enumerate() {
                     let (qx, qy) = q[k * width + x];
                     sample(src, qx, qy, &mut px);
                     let a = px[c - 1];
                     if a > 0.0 {
                         alpha = alpha.max(a);
+                        let wk = wf[k];
                         for ch in 0..c - 1 {
-                            acc[ch] += weights[k] * px[ch] as f64;
-                            plain[ch] += px[ch] as f64;
+                            dst[ch] += wk * px[ch];
                         }
-                        wsum += weights[k];
+                        wsum += wk;
                         count += 1;
                     }
                 }
                 if count == 0 {
-                    dst.fill(0.0);
                     continue;
                 }
-                for ch in 0..c - 1 {
-                    dst[ch] = if wsum > 0.0 {
-                        (acc[ch] / wsum) as f32
-                    } else {
-                        (plain[ch] / count as f64) as f32
-                    };
+                if wsum > 0.0 {
+                    let inv = 1.0 / wsum;
+                    for v in &mut dst[..c - 1] {
+                        *v *= inv;
+                    }
+                } else {
+                    // The visible sources all have weight 0: their plain mean (rare, so the
+                    // samples are simply taken again).
+                    for (k, src) in sources.iter().enumerate() {
+                        let (qx, qy) = q[k * width + x];
+                        sample(src, qx, qy, &mut px);
+                        if px[c - 1] > 0.0 {
+                            for ch in 0..c - 1 {
+                                dst[ch] += px[ch];
+                            }
+                        }
+                    }
+                    let inv = 1.0 / count as f32;
+                    for v in &mut dst[..c - 1] {
+                        *v *= inv;
+                    }
                 }
                 dst[c - 1] = alpha;
             }
