@@ -385,8 +385,9 @@ impl Mapping {
 /// Bilinear sample of `img` at `(x, y)` into `out`. The image covers `[−0.5, w − 0.5) ×
 /// [−0.5, h − 0.5)`: outside it the result is zero in every channel (transparent), inside it
 /// the edge pixels are replicated up to the border.
+/// `C` is the channel count when known at compile time, 0 to read it from `img`.
 #[inline(always)]
-fn sample(img: &Image<'_>, x: f32, y: f32, out: &mut [f32]) {
+fn sample<const C: usize>(img: &Image<'_>, x: f32, y: f32, out: &mut [f32]) {
     let (w, h) = (img.w as f32, img.h as f32);
     if !(x >= -0.5 && x < w - 0.5 && y >= -0.5 && y < h - 0.5) {
         out.fill(0.0);
@@ -397,7 +398,7 @@ fn sample(img: &Image<'_>, x: f32, y: f32, out: &mut [f32]) {
     // Truncation is the floor here (both are >= 0) and, unlike `floor`, needs no libm call.
     let (x0, y0) = (xc as usize, yc as usize);
     let (fx, fy) = (xc - x0 as f32, yc - y0 as f32);
-    let c = img.c;
+    let c = if C == 0 { img.c } else { C };
     let step_x = if x0 + 1 < img.w { c } else { 0 };
     let step_y = if y0 + 1 < img.h { img.w * c } else { 0 };
     let o = (y0 * img.w + x0) * c;
@@ -408,6 +409,16 @@ fn sample(img: &Image<'_>, x: f32, y: f32, out: &mut [f32]) {
         let top = a + fx * (b - a);
         let bot = e + fx * (f - e);
         *v = top + fy * (bot - top);
+    }
+}
+
+/// [`sample`] with the channel loop unrolled for RGBA, the common case.
+#[inline(always)]
+fn sample_any(img: &Image<'_>, x: f32, y: f32, out: &mut [f32]) {
+    if img.c == 4 {
+        sample::<4>(img, x, y, out);
+    } else {
+        sample::<0>(img, x, y, out);
     }
 }
 
@@ -487,7 +498,7 @@ pub fn warp(
                 let o = &mut out[k * width * c..(k + 1) * width * c];
                 for (x, px) in o.chunks_exact_mut(c).enumerate() {
                     let (qx, qy) = q[k * width + x];
-                    sample(src, qx, qy, px);
+                    sample_any(src, qx, qy, px);
                 }
             }
         });
@@ -567,7 +578,7 @@ pub fn warp_combine(
                 let (mut wsum, mut count, mut alpha) = (0.0f32, 0u32, 0.0f32);
                 for (k, src) in sources.iter().enumerate() {
                     let (qx, qy) = q[k * width + x];
-                    sample(src, qx, qy, &mut px);
+                    sample_any(src, qx, qy, &mut px);
                     let a = px[c - 1];
                     if a > 0.0 {
                         alpha = alpha.max(a);
@@ -592,7 +603,7 @@ pub fn warp_combine(
                     // samples are simply taken again).
                     for (k, src) in sources.iter().enumerate() {
                         let (qx, qy) = q[k * width + x];
-                        sample(src, qx, qy, &mut px);
+                        sample_any(src, qx, qy, &mut px);
                         if px[c - 1] > 0.0 {
                             for ch in 0..c - 1 {
                                 dst[ch] += px[ch];
