@@ -20,8 +20,9 @@
 //! is how it is computed: rounding then scales with the displacement, not the coordinates,
 //! and equal contours map every pixel exactly to itself. The fast path evaluates the
 //! coordinates of 16 pixels at a time in `f32` lanes (one `sqrt` and one division per
-//! vertex and pixel; compiled for AVX2 too and chosen at run time, with identical results); pixels on or within about `10⁻³` of an edge, within `0.1` px of a
-//! vertex, or with a non-finite result are redone in `f64` with the exact rules above.
+//! vertex and pixel; compiled for AVX2 too and chosen at run time, with identical results).
+//! Pixels on or within about `10⁻³` of an edge, within `0.1` px of a vertex, or with a
+//! non-finite result are redone in `f64` with the exact rules above.
 //! Rows run in parallel and each pixel's arithmetic is fixed, so the result is the same for
 //! any number of threads.
 
