@@ -12,6 +12,7 @@ texture   texture synthesis, texture-by-numbers, graph-cut quilting and image co
 shapes    boundary-patch synthesis of binary shapes and label maps (Rosenberger et al. 2009)
 trees     tree billboards: atlas splitting, contours, crown/trunk, pin points (Argudo et al. 2017)
 metrics   measures of result quality
+warp      image warps between contours by mean value coordinates (Hormann & Floater 2006)
 cli       the ``phloem`` command
 """
 
@@ -19,7 +20,7 @@ from __future__ import annotations
 
 import os
 
-from . import _core, bark, blend, data, io, metrics, patch, seams, shapes, texture, trees
+from . import _core, bark, blend, data, io, metrics, patch, seams, shapes, texture, trees, warp
 
 __version__: str = _core.__version__
 
@@ -28,4 +29,4 @@ __version__: str = _core.__version__
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_core._after_fork_in_child)
 
-__all__ = ["__version__", "bark", "blend", "data", "io", "metrics", "patch", "seams", "shapes", "texture", "trees"]
+__all__ = ["__version__", "bark", "blend", "data", "io", "metrics", "patch", "seams", "shapes", "texture", "trees", "warp"]

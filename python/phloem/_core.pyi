@@ -14,6 +14,9 @@ __all__ = [
     "grid_maxflow",
     "interpolate_field",
     "knn",
+    "mvc_combine",
+    "mvc_warp",
+    "mvc_weights",
     "nnf",
     "seam",
     "seamless",
@@ -116,6 +119,26 @@ def interpolate_field(
     max_iterations: int,
     threads: int | None = None,
 ) -> tuple[NDArray[np.float32], int, float]: ...
+def mvc_weights(
+    polygon: NDArray[np.float64], points: NDArray[np.float64], *, threads: int | None = None
+) -> NDArray[np.float64]: ...
+def mvc_warp(
+    sources: Sequence[NDArray[np.float32]],
+    source_contours: Sequence[NDArray[np.float64]],
+    target_contour: NDArray[np.float64],
+    size: tuple[int, int],
+    *,
+    threads: int | None = None,
+) -> list[NDArray[np.float32]]: ...
+def mvc_combine(
+    sources: Sequence[NDArray[np.float32]],
+    source_contours: Sequence[NDArray[np.float64]],
+    target_contour: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    size: tuple[int, int],
+    *,
+    threads: int | None = None,
+) -> NDArray[np.float32]: ...
 def default_threads() -> int: ...
 def _after_fork_in_child() -> None: ...
 def grid_maxflow(

@@ -20,6 +20,9 @@
 //! - [`tbn`]: texture-by-numbers (Fan et al. 2012 as in Laitoch 2018, §3.3–3.4): pyramid of
 //!   reference images, k-coherence discrete solver, smart initialisation with chamfer 3-4
 //!   distance maps.
+//! - [`mvc`]: mean value coordinates for arbitrary planar polygons, inside and outside
+//!   (Hormann & Floater 2006), and the contour-to-contour image warp and multi-source colour
+//!   transfer they define (Argudo et al. 2017, §5.2).
 
 pub mod error;
 pub mod field;
@@ -27,6 +30,7 @@ pub mod image;
 pub mod knn;
 pub mod maxflow;
 pub(crate) mod multigrid;
+pub mod mvc;
 pub mod patch;
 pub mod poisson;
 pub mod rng;

@@ -14,6 +14,7 @@ mod seams;
 mod shapes;
 mod tbn;
 mod threads;
+mod warp;
 
 #[pymodule(gil_used = false)]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -33,6 +34,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(shapes::synthesize_labels_py, m)?)?;
     m.add_function(wrap_pyfunction!(shapes::similarity_py, m)?)?;
     m.add_function(wrap_pyfunction!(shapes::layer_order_py, m)?)?;
+    m.add_function(wrap_pyfunction!(warp::mvc_weights_py, m)?)?;
+    m.add_function(wrap_pyfunction!(warp::mvc_warp_py, m)?)?;
+    m.add_function(wrap_pyfunction!(warp::mvc_combine_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::default_threads_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::after_fork_in_child_py, m)?)?;
     Ok(())

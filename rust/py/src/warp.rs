@@ -1,0 +1,124 @@
+//! Bindings of `phloem_core::mvc` for `phloem.warp`.
+
+use ndarray::{Array2, Array3};
+use numpy::{
+    IntoPyArray, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+};
+use phloem_core::error::invalid;
+use phloem_core::image::Image;
+use phloem_core::mvc::{self, Point};
+use pyo3::prelude::*;
+
+use crate::errors::{guarded, not_contiguous, to_py};
+use crate::threads::install;
+
+fn points(name: &'static str, a: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<Point>> {
+    let (n, two) = a.as_array().dim();
+    if two != 2 {
+        return Err(to_py(invalid(
+            name,
+            format!("expected shape (N, 2), got ({n}, {two})"),
+        )));
+    }
+    Ok(a.as_slice()
+        .map_err(not_contiguous(name))?
+        .chunks_exact(2)
+        .map(|p| [p[0], p[1]])
+        .collect())
+}
+
+fn images<'a>(name: &'static str, a: &'a [PyReadonlyArray3<'_, f32>]) -> PyResult<Vec<Image<'a>>> {
+    a.iter()
+        .map(|s| {
+            let (h, w, c) = s.as_array().dim();
+            Image::new(name, s.as_slice().map_err(not_contiguous(name))?, h, w, c).map_err(to_py)
+        })
+        .collect()
+}
+
+fn contours(name: &'static str, a: &[PyReadonlyArray2<'_, f64>]) -> PyResult<Vec<Vec<Point>>> {
+    a.iter().map(|c| points(name, c)).collect()
+}
+
+#[pyfunction]
+#[pyo3(name = "mvc_weights", signature = (polygon, points, *, threads=None))]
+pub fn mvc_weights_py<'py>(
+    py: Python<'py>,
+    polygon: PyReadonlyArray2<'py, f64>,
+    points: PyReadonlyArray2<'py, f64>,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let poly = self::points("polygon", &polygon)?;
+    let pts = self::points("points", &points)?;
+    let w = py
+        .detach(|| {
+            guarded(|| {
+                install(threads, || {
+                    mvc::weights_many(&poly, &pts, "polygon", "points")
+                })
+            })
+        })
+        .map_err(to_py)?;
+    let out = Array2::from_shape_vec((pts.len(), poly.len()), w).expect("weights shape");
+    Ok(out.into_pyarray(py))
+}
+
+#[pyfunction]
+#[pyo3(name = "mvc_warp", signature = (sources, source_contours, target_contour, size, *, threads=None))]
+pub fn mvc_warp_py<'py>(
+    py: Python<'py>,
+    sources: Vec<PyReadonlyArray3<'py, f32>>,
+    source_contours: Vec<PyReadonlyArray2<'py, f64>>,
+    target_contour: PyReadonlyArray2<'py, f64>,
+    size: (usize, usize),
+    threads: Option<usize>,
+) -> PyResult<Vec<Bound<'py, PyArray3<f32>>>> {
+    let srcs = images("sources", &sources)?;
+    let conts = contours("source_contours", &source_contours)?;
+    let target = points("target_contour", &target_contour)?;
+    let refs: Vec<&[Point]> = conts.iter().map(Vec::as_slice).collect();
+    let (h, w) = size;
+    let out = py
+        .detach(|| guarded(|| install(threads, || mvc::warp(&srcs, &refs, &target, h, w))))
+        .map_err(to_py)?;
+    let c = srcs[0].c;
+    Ok(out
+        .into_iter()
+        .map(|img| {
+            Array3::from_shape_vec((h, w, c), img)
+                .expect("warp shape")
+                .into_pyarray(py)
+        })
+        .collect())
+}
+
+#[pyfunction]
+#[pyo3(name = "mvc_combine", signature = (sources, source_contours, target_contour, weights, size, *, threads=None))]
+pub fn mvc_combine_py<'py>(
+    py: Python<'py>,
+    sources: Vec<PyReadonlyArray3<'py, f32>>,
+    source_contours: Vec<PyReadonlyArray2<'py, f64>>,
+    target_contour: PyReadonlyArray2<'py, f64>,
+    weights: PyReadonlyArray1<'py, f64>,
+    size: (usize, usize),
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    let srcs = images("sources", &sources)?;
+    let conts = contours("source_contours", &source_contours)?;
+    let target = points("target_contour", &target_contour)?;
+    let wts = weights.as_slice().map_err(not_contiguous("weights"))?;
+    let refs: Vec<&[Point]> = conts.iter().map(Vec::as_slice).collect();
+    let (h, w) = size;
+    let out = py
+        .detach(|| {
+            guarded(|| {
+                install(threads, || {
+                    mvc::warp_combine(&srcs, &refs, &target, wts, h, w)
+                })
+            })
+        })
+        .map_err(to_py)?;
+    let c = srcs.first().map_or(0, |s| s.c);
+    let img = Array3::from_shape_vec((h, w, c), out).expect("combine shape");
+    Ok(img.into_pyarray(py))
+}
