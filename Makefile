@@ -20,16 +20,18 @@ bench:  ## Rust criterion benches and Python benchmarks
 	cargo bench -p phloem-core --bench blend
 	cargo bench -p phloem-core --bench shapes
 	cargo bench -p phloem-core --bench tbn
-	pytest benches/bench_patch.py benches/bench_seams.py benches/bench_blend.py benches/bench_shapes.py benches/bench_tbn.py benches/bench_bark.py --benchmark-enable --benchmark-only
+	cargo bench -p phloem-core --bench mvc
+	pytest benches/bench_patch.py benches/bench_seams.py benches/bench_blend.py benches/bench_shapes.py benches/bench_tbn.py benches/bench_bark.py benches/bench_trees.py benches/bench_warp.py --benchmark-enable --benchmark-only
 
 peers:  ## side-by-side runs against PyPatchMatch, resynthesizer, texture-synthesis
 	python benches/peers.py
 
-sheet:  ## contact sheets of the texture, graph-cut, shape and bark jobs (out/*_sheet.png)
+sheet:  ## contact sheets of the texture, graph-cut, shape, bark and tree jobs (out/*_sheet.png)
 	python benches/sheet_texture.py out/texture_sheet.png
 	python benches/sheet_seams.py out/seams_sheet.png
 	python benches/sheet_bark.py out/bark_sheet.png
 	python benches/sheet_shapes.py out/shapes_sheet.png
 	python benches/sheet_by_numbers.py out/by_numbers_sheet.png
+	python benches/sheet_trees.py out/trees_sheet.png
 
 .PHONY: help install test lint bench peers sheet
