@@ -21,42 +21,16 @@ import numpy as np
 import phloem
 from phloem.metrics import label_histogram_distance, patch_coherence
 
+sys.path.insert(0, str(Path(__file__).parent))
+from sheet_texture import TILE, _fit, _label
+from sheet_texture import _field_colour as _sources
+
 RUNS = Path(__file__).resolve().parents[2] / "shared" / "data" / "bark" / "thesis_runs"
-TILE = 256
-
-
-def _rgb(img: np.ndarray) -> np.ndarray:
-    img = img[..., :3] if img.ndim == 3 else img
-    return np.repeat(img[..., None], 3, axis=2) if img.ndim == 2 else img
-
-
-def _fit(img: np.ndarray) -> np.ndarray:
-    img = _rgb(img).astype(np.float32)
-    s = TILE / max(img.shape[:2])
-    out = cv2.resize(img, (round(img.shape[1] * s), round(img.shape[0] * s)), interpolation=cv2.INTER_NEAREST)
-    tile = np.ones((TILE, TILE, 3), np.float32)
-    tile[: out.shape[0], : out.shape[1]] = out
-    return tile
-
-
-def _label(tile: np.ndarray, text: str) -> np.ndarray:
-    t8 = (np.clip(tile, 0, 1) * 255).astype(np.uint8)
-    cv2.rectangle(t8, (0, 0), (TILE, 16), (255, 255, 255), -1)
-    cv2.putText(t8, text, (3, 12), cv2.FONT_HERSHEY_SIMPLEX, 0.36, (0, 0, 0), 1, cv2.LINE_AA)
-    return t8.astype(np.float32) / 255
 
 
 def _labelmap(lab: np.ndarray) -> np.ndarray:
     values = np.unique(lab)
     return (np.searchsorted(values, lab) / max(values.size - 1, 1)).astype(np.float32)
-
-
-def _sources(src: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
-    vis = np.zeros((*src.shape[:2], 3), np.float32)
-    vis[..., 0] = src[..., 0] / shape[0]
-    vis[..., 1] = src[..., 1] / shape[1]
-    vis[..., 2] = 0.3
-    return vis
 
 
 def row(name: str, ai: np.ndarray, a: np.ndarray, b: np.ndarray, bi: np.ndarray | None) -> tuple[np.ndarray, str]:
