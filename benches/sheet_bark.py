@@ -21,7 +21,7 @@ import phloem
 from phloem import bark
 
 sys.path.insert(0, str(Path(__file__).parent))
-from sheet_texture import ROOT, TILE, _fit, _label
+from sheet_texture import ROOT, TILE, _fit, _label, write_sheet
 
 SHARED = ROOT.parent / "shared" / "data" / "bark"
 RUNS = ("bark1", "bark2", "eucalyptus", "eucap5")
@@ -90,9 +90,7 @@ def main(out: Path) -> None:
             ai = phloem.io.read_image(next((SHARED / "thesis_runs" / run).glob("ai.*")))[..., :3].copy()
             rows.append(pipeline_row(run, ai, 3, (384, 384), rotations=True))  # plane-tree bark has no grain
         rows.extend(thesis_row(run) for run in RUNS)
-    sheet = np.concatenate([np.concatenate(r, axis=1) for r in rows], axis=0)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    phloem.io.write_image(out, sheet, overwrite=True)
+    sheet = write_sheet(rows, out)
     print(f"wrote {out} ({sheet.shape[1]}x{sheet.shape[0]}); tile {TILE}px")
 
 

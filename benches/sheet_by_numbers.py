@@ -22,7 +22,7 @@ import phloem
 from phloem.metrics import label_histogram_distance, patch_coherence
 
 sys.path.insert(0, str(Path(__file__).parent))
-from sheet_texture import TILE, _fit, _label
+from sheet_texture import TILE, _fit, _label, write_sheet
 from sheet_texture import _field_colour as _sources
 
 RUNS = Path(__file__).resolve().parents[2] / "shared" / "data" / "bark" / "thesis_runs"
@@ -81,9 +81,7 @@ def main(out_path: str) -> None:
     r, line = row("embedded bark", ex, two(ex), two(bark[:, 128:]), None)
     rows.append(r)
     lines.append(line)
-    sheet = np.concatenate(rows, axis=0)
-    Path(out_path).parent.mkdir(parents=True, exist_ok=True)
-    phloem.io.write_image(out_path, sheet, overwrite=True)
+    write_sheet(rows, out_path)
     print("\n".join(lines))
     print(f"wrote {out_path}")
 

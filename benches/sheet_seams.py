@@ -24,7 +24,7 @@ import phloem
 from phloem.seams import seam
 
 sys.path.insert(0, str(Path(__file__).parent))
-from sheet_texture import ROOT, TILE, _fit, _label  # noqa: E402
+from sheet_texture import ROOT, TILE, _fit, _label, write_sheet  # noqa: E402
 
 
 def _edges(labels: np.ndarray, valid: np.ndarray | None = None) -> np.ndarray:
@@ -171,9 +171,7 @@ def main(out: Path) -> None:
         seam_row(phloem.data.bark()),
         fragment_row(phloem.data.bark()),
     ]
-    sheet = np.concatenate([np.concatenate(r, axis=1) for r in rows], axis=0)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    phloem.io.write_image(out, sheet, overwrite=True)
+    sheet = write_sheet(rows, out)
     print(f"wrote {out} ({sheet.shape[1]}x{sheet.shape[0]}); tile {TILE}px")
 
 

@@ -23,7 +23,7 @@ from phloem import shapes
 
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_shapes import bark_labels
-from sheet_texture import ROOT, _fit, _label
+from sheet_texture import ROOT, _fit, _label, write_sheet
 
 RUNS = ["bark1", "bark2", "eucalyptus", "eucap5"]
 SHARED = ROOT.parent / "shared" / "data" / "bark" / "thesis_runs"
@@ -82,9 +82,7 @@ def main(out: Path) -> None:
     rows = [bark_row()]
     if SHARED.exists():
         rows += [thesis_row(r) for r in RUNS]
-    sheet = np.concatenate([np.concatenate(r, axis=1) for r in rows], axis=0)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    phloem.io.write_image(out, sheet, overwrite=True)
+    sheet = write_sheet(rows, out)
     print(f"wrote {out} ({sheet.shape[1]}x{sheet.shape[0]})")
 
 

@@ -63,6 +63,14 @@ def _heat(d: np.ndarray) -> np.ndarray:
     return cv2.applyColorMap((v * 255).astype(np.uint8), cv2.COLORMAP_INFERNO)[..., ::-1].astype(np.float32) / 255
 
 
+def write_sheet(rows: list[np.ndarray] | list[list[np.ndarray]], out: str | Path) -> np.ndarray:
+    """Stack ``rows`` (each an image or a list of tiles) top to bottom and write the sheet to ``out``."""
+    sheet = np.concatenate([r if isinstance(r, np.ndarray) else np.concatenate(r, axis=1) for r in rows], axis=0)
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    phloem.io.write_image(out, sheet, overwrite=True)
+    return sheet
+
+
 def synthesis_row(name: str, ex: np.ndarray) -> tuple[np.ndarray, str]:
     t0 = time.perf_counter()
     out = phloem.texture.synthesize(ex, (384, 384), seed=0)
@@ -119,9 +127,7 @@ def main(out_path: str) -> None:
         r, line = completion_row(name, np.ascontiguousarray(img), hole)
         rows.append(r)
         lines.append(line)
-    sheet = np.concatenate(rows, axis=0)
-    Path(out_path).parent.mkdir(parents=True, exist_ok=True)
-    phloem.io.write_image(out_path, sheet, overwrite=True)
+    write_sheet(rows, out_path)
     print("\n".join(lines))
     print(f"wrote {out_path}")
 
