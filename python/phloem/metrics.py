@@ -17,7 +17,6 @@ from numpy.typing import NDArray
 
 from . import patch as _patch
 from . import shapes as _shapes
-from . import shapes as _shapes
 from ._validate import as_image, as_mask, check_patch_size
 
 __all__ = ["chord_length", "coherence_map", "label_histogram_distance", "patch_coherence", "repetition", "shape_similarity"]
