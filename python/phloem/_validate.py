@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["as_image", "as_mask", "check_float", "check_patch_size", "check_seed", "check_size", "check_threads", "restore_ndim"]
+__all__ = ["as_image", "as_labels", "as_mask", "check_float", "check_patch_size", "check_seed", "check_size", "check_threads", "restore_ndim"]
 
 
 def as_image(image: Any, name: str, *, finite: bool = True) -> NDArray[np.float32]:
@@ -47,6 +47,24 @@ def as_image(image: Any, name: str, *, finite: bool = True) -> NDArray[np.float3
 def restore_ndim(out: NDArray[np.float32], like: Any) -> NDArray[np.float32]:
     """Drop the channel axis again if the user passed a 2-D image."""
     return out[:, :, 0] if np.ndim(like) == 2 else out
+
+
+def as_labels(labels: Any, name: str) -> NDArray[np.int32]:
+    """Return ``labels`` as a C-contiguous ``(H, W)`` int32 label map."""
+    arr = np.asarray(labels)
+    if arr.ndim == 3 and arr.shape[2] == 1:
+        arr = arr[:, :, 0]
+    if arr.ndim != 2:
+        raise ValueError(f"{name}: expected an (H, W) label map, got shape {arr.shape}")
+    if 0 in arr.shape:
+        raise ValueError(f"{name}: expected a non-empty label map, got shape {arr.shape}")
+    if arr.dtype == np.bool_:
+        arr = arr.astype(np.int32)
+    if not np.issubdtype(arr.dtype, np.integer):
+        raise TypeError(f"{name}: expected an integer label map, got dtype {arr.dtype}")
+    if arr.min() < np.iinfo(np.int32).min or arr.max() > np.iinfo(np.int32).max:
+        raise ValueError(f"{name}: label values must fit in int32")
+    return np.ascontiguousarray(arr, dtype=np.int32)
 
 
 def as_mask(mask: Any, name: str, shape: tuple[int, int]) -> NDArray[np.bool_]:

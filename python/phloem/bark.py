@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from ._validate import as_image, check_int, check_seed, check_size, check_threads
+from ._validate import as_image, as_labels, check_int, check_seed, check_size, check_threads
 
 __all__ = [
     "BarkResult",
@@ -42,24 +42,6 @@ __all__ = [
 
 Rotations = bool | Literal["half"]
 Progress = Callable[[int, int], None]
-
-
-def as_labels(labels: Any, name: str) -> NDArray[np.int32]:
-    """Return ``labels`` as a C-contiguous ``(H, W)`` int32 label map."""
-    arr = np.asarray(labels)
-    if arr.ndim == 3 and arr.shape[2] == 1:
-        arr = arr[:, :, 0]
-    if arr.ndim != 2:
-        raise ValueError(f"{name}: expected an (H, W) label map, got shape {arr.shape}")
-    if 0 in arr.shape:
-        raise ValueError(f"{name}: expected a non-empty label map, got shape {arr.shape}")
-    if arr.dtype == np.bool_:
-        arr = arr.astype(np.int32)
-    if not np.issubdtype(arr.dtype, np.integer):
-        raise TypeError(f"{name}: expected an integer label map, got dtype {arr.dtype}")
-    if arr.min() < np.iinfo(np.int32).min or arr.max() > np.iinfo(np.int32).max:
-        raise ValueError(f"{name}: label values must fit in int32")
-    return np.ascontiguousarray(arr, dtype=np.int32)
 
 
 def _kmeans(x: NDArray[np.float32], k: int, rng: np.random.Generator, restarts: int = 3, max_iter: int = 100) -> tuple[NDArray[np.int32], NDArray[np.float32]]:
