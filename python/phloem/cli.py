@@ -50,12 +50,18 @@ def _common(p: argparse.ArgumentParser, *, writes: bool = True) -> None:
         g.add_argument("--bit-depth", type=int, choices=(8, 16), default=8, help="bits per channel of OUT (16 for PNG/TIFF only; default 8)")
 
 
-def _preflight(args: argparse.Namespace) -> None:
-    """Fail before computing if the output cannot be written."""
+def _check_writable(path: Path, args: argparse.Namespace) -> None:
+    io._encode(path, np.zeros((1, 1), np.float32), args.bit_depth)  # extension and bit depth
+    io._check_target(path, args.force)
+
+
+def _preflight(args: argparse.Namespace, extra: Sequence[Path] = ()) -> None:
+    """Fail before computing if the output, its sidecar or an ``extra`` file cannot be written."""
     out = Path(args.out)
-    io._encode(out, np.zeros((1, 1), np.float32), args.bit_depth)  # extension and bit depth
-    io._check_target(out, args.force)
+    _check_writable(out, args)
     io._check_target(io.sidecar_path(out), args.force)
+    for path in extra:
+        _check_writable(path, args)
 
 
 def _params(args: argparse.Namespace, skip: Sequence[str] = ()) -> dict[str, Any]:
@@ -175,11 +181,8 @@ _ROTATIONS: dict[str, bark.Rotations] = {"half": "half", "all": True, "none": Fa
 
 
 def _cmd_bark(args: argparse.Namespace) -> None:
-    _preflight(args)
     extra = _bark_targets(args)
-    for path in extra.values():
-        io._encode(path, np.zeros((1, 1), np.float32), args.bit_depth)
-        io._check_target(path, args.force)
+    _preflight(args, list(extra.values()))
     if len({Path(args.out).resolve(), *(p.resolve() for p in extra.values())}) != len(extra) + 1:
         raise ValueError("out: OUT, the intermediate maps and the preview must be different files")
     if args.input is None:
