@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, overload
 
@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from ._progress import Progress
 from ._validate import as_image, as_labels, check_int, check_seed, check_size, check_threads
 
 __all__ = [
@@ -41,7 +42,6 @@ __all__ = [
 ]
 
 Rotations = bool | Literal["half"]
-Progress = Callable[[int, int], None]
 
 
 def _kmeans(x: NDArray[np.float32], k: int, rng: np.random.Generator, restarts: int = 3, max_iter: int = 100) -> tuple[NDArray[np.int32], NDArray[np.float32]]:
@@ -256,7 +256,7 @@ def synthesize_labels(
     tileable: bool = False,
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
-    progress: Progress | None = None,
+    progress: Progress = None,
     **options: Any,
 ) -> NDArray[np.int32]:
     """A new label map of any size with the shapes of ``labels`` (thesis §3.6).
@@ -307,7 +307,7 @@ class BarkResult:
     sources: NDArray[np.int32]
 
 
-def _stage(progress: Progress | None, lo: int, hi: int) -> Progress | None:
+def _stage(progress: Progress, lo: int, hi: int) -> Progress:
     """A progress callback that maps a stage's ``done/total`` into ``lo … hi`` of 100."""
     if progress is None:
         return None
@@ -325,7 +325,7 @@ def generate(
     edge_label: bool = ...,
     tileable: bool = ..., denoise: float = ..., label_weight: float = ..., feature_weight: float = ...,
     init: Literal["smart", "random"] = ..., seed: int | np.random.Generator = ..., threads: int | None = ...,
-    progress: Progress | None = ..., return_intermediates: Literal[False] = ...,
+    progress: Progress = ..., return_intermediates: Literal[False] = ...,
 ) -> NDArray[np.float32]: ...
 @overload
 def generate(
@@ -334,7 +334,7 @@ def generate(
     edge_label: bool = ...,
     tileable: bool = ..., denoise: float = ..., label_weight: float = ..., feature_weight: float = ...,
     init: Literal["smart", "random"] = ..., seed: int | np.random.Generator = ..., threads: int | None = ...,
-    progress: Progress | None = ..., return_intermediates: Literal[True],
+    progress: Progress = ..., return_intermediates: Literal[True],
 ) -> BarkResult: ...
 def generate(
     image: Any,
@@ -354,7 +354,7 @@ def generate(
     init: Literal["smart", "random"] = "smart",
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
-    progress: Progress | None = None,
+    progress: Progress = None,
     return_intermediates: bool = False,
 ) -> NDArray[np.float32] | BarkResult:
     """A bark texture of any size from one small bark photo: the whole pipeline of the thesis.
