@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from . import shapes, texture
 from ._progress import Progress
 from ._validate import as_image, as_labels, check_int, check_seed, check_size, check_threads
 
@@ -274,8 +275,6 @@ def synthesize_labels(
     >>> new.shape, sorted(np.unique(new).tolist())
     ((96, 128), [0, 1])
     """
-    from . import shapes
-
     return shapes.synthesize_labels(
         labels, size, method=method, order=order, rotations=rotations, tileable=tileable, seed=seed, threads=threads,
         progress=progress, **options,
@@ -423,8 +422,6 @@ def generate(
     >>> out.shape, out.dtype
     ((96, 128, 3), dtype('float32'))
     """
-    from . import texture
-
     img = as_image(image, "image")
     if img.shape[2] in (2, 4):
         img = img[..., :-1]
