@@ -27,10 +27,6 @@ SHARED = ROOT.parent / "shared" / "data" / "bark"
 RUNS = ("bark1", "bark2", "eucalyptus", "eucap5")
 
 
-def _labels_rgb(labels: np.ndarray) -> np.ndarray:
-    return bark.encode_labels(labels)
-
-
 def pipeline_row(name: str, photo: np.ndarray, k: int, size: tuple[int, int], rotations: bool | str = "half") -> list[np.ndarray]:
     opts = {"labels": k, "rotations": rotations}
     t0 = time.perf_counter()
@@ -43,10 +39,10 @@ def pipeline_row(name: str, photo: np.ndarray, k: int, size: tuple[int, int], ro
     sim_j = phloem.metrics.shape_similarity(joint.labels_in, joint.labels_out, rotations=rotations)
     return [
         _label(_fit(photo), f"{name} photo {photo.shape[1]}x{photo.shape[0]}"),
-        _label(_fit(_labels_rgb(joint.labels_in)), f"input labels k={k}"),
-        _label(_fit(_labels_rgb(joint.labels_out)), f"joint labels D={sim_j:.2f}"),
+        _label(_fit(bark.encode_labels(joint.labels_in)), f"input labels k={k}"),
+        _label(_fit(bark.encode_labels(joint.labels_out)), f"joint labels D={sim_j:.2f}"),
         _label(_fit(joint.texture), f"texture {size[1]}x{size[0]} {t_joint:.1f}s"),
-        _label(_fit(_labels_rgb(lay.labels_out)), f"layered labels D={sim_l:.2f}"),
+        _label(_fit(bark.encode_labels(lay.labels_out)), f"layered labels D={sim_l:.2f}"),
         _label(_fit(lay.texture), "texture from layered labels"),
         _label(_fit(bark.cylinder_preview(joint.texture)), "on a trunk"),
         _label(_fit(tiled), "tileable, 2x2"),
@@ -72,8 +68,8 @@ def thesis_row(run: str) -> list[np.ndarray]:
 
     return [
         _label(_fit(photo), f"thesis {run}: ai"),
-        _label(_fit(_labels_rgb(a)), "thesis a"),
-        _label(_fit(_labels_rgb(b)), "thesis b"),
+        _label(_fit(bark.encode_labels(a)), "thesis a"),
+        _label(_fit(bark.encode_labels(b)), "thesis b"),
         _label(_fit(bi), "thesis bi " + scores(bi)),
         _label(_fit(ours), f"phloem {dt:.2f}s " + scores(ours)),
         _label(_fit(bi[: TILE // 2, : TILE // 2]), "bi 1:1 crop"),

@@ -28,11 +28,6 @@ from sheet_texture import _field_colour as _sources
 RUNS = Path(__file__).resolve().parents[2] / "shared" / "data" / "bark" / "thesis_runs"
 
 
-def _labelmap(lab: np.ndarray) -> np.ndarray:
-    values = np.unique(lab)
-    return (np.searchsorted(values, lab) / max(values.size - 1, 1)).astype(np.float32)
-
-
 def row(name: str, ai: np.ndarray, a: np.ndarray, b: np.ndarray, bi: np.ndarray | None) -> tuple[np.ndarray, str]:
     t0 = time.perf_counter()
     out, src = phloem.texture.by_numbers(ai, a, b, seed=0, return_sources=True)
@@ -40,8 +35,8 @@ def row(name: str, ai: np.ndarray, a: np.ndarray, b: np.ndarray, bi: np.ndarray 
     coh, hist = patch_coherence(out, ai), label_histogram_distance(out, b, ai, a)
     tiles = [
         _label(_fit(ai), f"{name} ai {ai.shape[1]}x{ai.shape[0]}"),
-        _label(_fit(_labelmap(a)), f"a: {np.unique(a).size} labels"),
-        _label(_fit(_labelmap(b)), f"b {b.shape[1]}x{b.shape[0]}"),
+        _label(_fit(phloem.bark.encode_labels(a)), f"a: {np.unique(a).size} labels"),
+        _label(_fit(phloem.bark.encode_labels(b)), f"b {b.shape[1]}x{b.shape[0]}"),
     ]
     line = f"{name}: phloem {dt:.2f} s, coherence {coh:.5f}, hist {hist:.3f}"
     if bi is not None:
