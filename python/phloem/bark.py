@@ -516,9 +516,9 @@ def cylinder_preview(
     inside = np.abs(xs) < 1
     theta = np.arcsin(np.clip(xs, -1, 1))
     u = (theta / (2 * math.pi) + 0.25) * w  # the front half shows columns w/4 … 3w/4 around the centre w/2
-    mapx = np.broadcast_to((u - 0.5).astype(np.float32), (h, out_w))
-    mapy = np.broadcast_to(np.arange(h, dtype=np.float32)[:, None], (h, out_w))
-    img = cv2.remap(tex, np.ascontiguousarray(mapx), np.ascontiguousarray(mapy), cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+    mapx = np.ascontiguousarray(np.broadcast_to((u - 0.5).astype(np.float32), (h, out_w)))
+    mapy = np.ascontiguousarray(np.broadcast_to(np.arange(h, dtype=np.float32)[:, None], (h, out_w)))
+    img = cv2.remap(tex, mapx, mapy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
     if img.ndim == 2:
         img = img[:, :, None]
     nx = np.broadcast_to(np.sin(theta), (h, out_w)).copy()
@@ -528,7 +528,7 @@ def cylinder_preview(
         hm = as_image(height, "height")
         if hm.shape[:2] != (h, w):
             raise ValueError(f"height: expected shape {(h, w)} to match texture, got {hm.shape[:2]}")
-        hv = cv2.remap(hm[..., 0], np.ascontiguousarray(mapx), np.ascontiguousarray(mapy), cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+        hv = cv2.remap(hm[..., 0], mapx, mapy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
         du = np.gradient(hv, axis=1) * bump
         dv = np.gradient(hv, axis=0) * bump
         # tangent frame: around the trunk (cos θ, 0, -sin θ) and up (0, 1, 0); image rows grow downwards
