@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import _core
-from ._validate import as_image, check_size, check_threads
+from ._validate import as_image, check_size, check_threads, restore_ndim
 
 __all__ = ["mvc", "mvc_combine", "mvc_weights"]
 
@@ -207,7 +207,7 @@ def mvc(
     hw = np.shape(image)[:2] if size is None else size
     imgs, conts, target, hw = _sources([image], [source_contour], target_contour, hw, single=True)
     out = _core.mvc_warp(imgs, conts, target, hw, threads=check_threads(threads))[0]
-    return out[:, :, 0] if np.ndim(image) == 2 else out
+    return restore_ndim(out, image)
 
 
 def mvc_combine(
