@@ -63,15 +63,26 @@ def _turns(rotations: Any) -> int:
     raise ValueError(f"rotations: expected True, False or 'half', got {rotations!r}")
 
 
-def _options(patch_size: Any, levels: Any, iterations: Any, size: Any) -> tuple[int, int, int, int, int]:
+def _patch_size(patch_size: Any) -> int:
     p = check_patch_size(patch_size)
     if p > MAX_PATCH:
         raise ValueError(f"patch_size: expected an odd size <= {MAX_PATCH}, got {p}")
+    return p
+
+
+def _options(
+    patch_size: Any, levels: Any, iterations: Any, size: Any, example: tuple[int, ...], name: str
+) -> tuple[int, int, int, int, int]:
+    """Checked ``(patch_size, levels, iterations, height, width)``; the output ``size`` and the
+    example map ``name`` of shape ``example`` must both hold a patch."""
+    p = _patch_size(patch_size)
     lev = 0 if levels is None else check_int(levels, "levels", 1)
     its = check_int(iterations, "iterations", 1)
     h, w = check_size(size)
     if h < p or w < p:
         raise ValueError(f"size: expected at least {p}×{p} (patch_size), got {h}×{w}")
+    if example[0] < p or example[1] < p:
+        raise ValueError(f"{name}: expected at least {p}×{p} pixels (patch_size), got {example[0]}×{example[1]}")
     return p, lev, its, h, w
 
 
@@ -149,9 +160,7 @@ def synthesize(
     ex = (np.asarray(shape) != 0).astype(np.uint8)
     if ex.all() or not ex.any():
         raise ValueError("shape: expected both inside and outside pixels, the shape is empty or full")
-    p, lev, its, h, w = _options(patch_size, levels, iterations, size)
-    if ex.shape[0] < p or ex.shape[1] < p:
-        raise ValueError(f"shape: expected at least {p}×{p} pixels (patch_size), got {ex.shape[0]}×{ex.shape[1]}")
+    p, lev, its, h, w = _options(patch_size, levels, iterations, size, ex.shape, "shape")
     m = None if mask is None else as_mask(mask, "mask", (h, w))
     out = _core.shape_synthesize(
         np.ascontiguousarray(ex),
@@ -252,9 +261,7 @@ def synthesize_labels(
     k = len(values)
     if k < 2:
         raise ValueError("labels: expected at least 2 distinct labels, got 1 (the map is empty)")
-    p, lev, its, h, w = _options(patch_size, levels, iterations, size)
-    if lab.shape[0] < p or lab.shape[1] < p:
-        raise ValueError(f"labels: expected at least {p}×{p} pixels (patch_size), got {lab.shape[0]}×{lab.shape[1]}")
+    p, lev, its, h, w = _options(patch_size, levels, iterations, size, lab.shape, "labels")
     idx: list[int] | None = None
     if order is not None:
         try:
@@ -320,9 +327,7 @@ def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool | L
     >>> phloem.shapes.shape_similarity(a, np.rot90(a), rotations=False) > 1
     True
     """
-    p = check_patch_size(patch_size)
-    if p > MAX_PATCH:
-        raise ValueError(f"patch_size: expected an odd size <= {MAX_PATCH}, got {p}")
+    p = _patch_size(patch_size)
     turns = _turns(rotations)
     arr_a, arr_b = np.asarray(a), np.asarray(b)
     # Compare label values as given: map both through the union of their values.
