@@ -22,6 +22,7 @@ import phloem
 from phloem.metrics import label_histogram_distance, patch_coherence
 
 sys.path.insert(0, str(Path(__file__).parent))
+from bench_tbn import _labels as _gray_labels
 from sheet_texture import TILE, _fit, _label, write_sheet
 from sheet_texture import _field_colour as _sources
 
@@ -48,12 +49,6 @@ def row(name: str, ai: np.ndarray, a: np.ndarray, b: np.ndarray, bi: np.ndarray 
     tiles.append(_label(_fit(out), f"phloem {dt:.2f}s: coh {coh * 1e3:.3f}e-3 hist {hist:.3f}"))
     tiles.append(_label(_fit(_sources(src, ai.shape)), "phloem sources (R row, G col)"))
     return np.concatenate(tiles, axis=1), line
-
-
-def _gray_labels(p: Path) -> np.ndarray:
-    g = phloem.io.read_image(p)
-    g = g[..., :3].mean(axis=2) if g.ndim == 3 else g
-    return np.round(g * 255).astype(np.int32)
 
 
 def main(out_path: str) -> None:
