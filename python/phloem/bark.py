@@ -75,7 +75,8 @@ def _kmeans(x: NDArray[np.float32], k: int, rng: np.random.Generator, restarts: 
             mass = np.bincount(assign, weights=wts, minlength=k)
             for j in range(k):
                 if mass[j] > 0:
-                    centres[j] = (pts[assign == j] * wts[assign == j, None]).sum(0) / mass[j]
+                    sel = assign == j
+                    centres[j] = (pts[sel] * wts[sel, None]).sum(0) / mass[j]
                 else:  # an empty cluster restarts at the point farthest from its centre
                     far = int(dist[np.arange(n), assign].argmax())
                     centres[j] = pts[far]
