@@ -42,6 +42,23 @@ pub type Point = [f64; 2];
 /// Pixels per lane group of the fast path.
 const L: usize = 16;
 
+/// Checks that every point of `points` has finite coordinates.
+fn check_finite(name: &'static str, points: &[Point]) -> Result<()> {
+    match points
+        .iter()
+        .position(|p| !(p[0].is_finite() && p[1].is_finite()))
+    {
+        Some(i) => Err(invalid(
+            name,
+            format!(
+                "expected finite coordinates, found ({}, {}) at point {i}",
+                points[i][0], points[i][1]
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
 /// Checks that `contour` is a usable polygon: at least 3 finite points, no two consecutive
 /// ones equal (the last and the first count as consecutive: do not repeat the first point at
 /// the end), and a non-zero area.
@@ -53,18 +70,7 @@ pub fn check_contour(name: &'static str, contour: &[Point]) -> Result<()> {
             format!("expected at least 3 points, got {n}"),
         ));
     }
-    if let Some(i) = contour
-        .iter()
-        .position(|p| !(p[0].is_finite() && p[1].is_finite()))
-    {
-        return Err(invalid(
-            name,
-            format!(
-                "expected finite coordinates, found ({}, {}) at point {i}",
-                contour[i][0], contour[i][1]
-            ),
-        ));
-    }
+    check_finite(name, contour)?;
     for i in 0..n {
         let j = (i + 1) % n;
         // A zero-length edge (the values are finite, so this is exact equality).
@@ -166,18 +172,7 @@ pub fn weights_many(
     points_name: &'static str,
 ) -> Result<Vec<f64>> {
     check_contour(polygon_name, polygon)?;
-    if let Some(i) = points
-        .iter()
-        .position(|p| !(p[0].is_finite() && p[1].is_finite()))
-    {
-        return Err(invalid(
-            points_name,
-            format!(
-                "expected finite coordinates, found ({}, {}) at point {i}",
-                points[i][0], points[i][1]
-            ),
-        ));
-    }
+    check_finite(points_name, points)?;
     let n = polygon.len();
     let mut out = vec![0.0; points.len() * n];
     out.par_chunks_mut(n)
