@@ -484,27 +484,25 @@ pub fn warp(
     let c = sources[0].c;
     let k_count = sources.len();
     let map = Mapping::new(target, source_contours);
-    let mut rows = vec![0.0f32; height * k_count * width * c];
-    rows.par_chunks_mut(k_count * width * c)
-        .enumerate()
-        .for_each(|(y, out)| {
-            let mut q = vec![(0.0f32, 0.0f32); k_count * width];
-            map.row(y, width, &mut q);
-            for (k, src) in sources.iter().enumerate() {
-                let o = &mut out[k * width * c..(k + 1) * width * c];
-                for (x, px) in o.chunks_exact_mut(c).enumerate() {
-                    let (qx, qy) = q[k * width + x];
-                    sample_any(src, qx, qy, px);
-                }
-            }
-        });
-    // Rows hold the K images side by side; split them into one image per source.
-    let mut out = vec![Vec::with_capacity(height * width * c); k_count];
-    for row in rows.chunks_exact(k_count * width * c) {
-        for (k, img) in out.iter_mut().enumerate() {
-            img.extend_from_slice(&row[k * width * c..(k + 1) * width * c]);
+    let mut out = vec![vec![0.0f32; height * width * c]; k_count];
+    // Row `y` of every image, written straight into its output (no side-by-side buffer to
+    // split afterwards).
+    let mut rows: Vec<Vec<&mut [f32]>> = (0..height).map(|_| Vec::with_capacity(k_count)).collect();
+    for img in &mut out {
+        for (row, part) in rows.iter_mut().zip(img.chunks_exact_mut(width * c)) {
+            row.push(part);
         }
     }
+    rows.into_par_iter().enumerate().for_each(|(y, mut parts)| {
+        let mut q = vec![(0.0f32, 0.0f32); k_count * width];
+        map.row(y, width, &mut q);
+        for (k, (src, o)) in sources.iter().zip(&mut parts).enumerate() {
+            for (x, px) in o.chunks_exact_mut(c).enumerate() {
+                let (qx, qy) = q[k * width + x];
+                sample_any(src, qx, qy, px);
+            }
+        }
+    });
     Ok(out)
 }
 
