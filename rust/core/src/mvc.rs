@@ -42,6 +42,23 @@ pub type Point = [f64; 2];
 /// Pixels per lane group of the fast path.
 const L: usize = 16;
 
+/// Checks that every point of `points` has finite coordinates.
+fn check_finite(name: &'static str, points: &[Point]) -> Result<()> {
+    match points
+        .iter()
+        .position(|p| !(p[0].is_finite() && p[1].is_finite()))
+    {
+        Some(i) => Err(invalid(
+            name,
+            format!(
+                "expected finite coordinates, found ({}, {}) at point {i}",
+                points[i][0], points[i][1]
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
 /// Checks that `contour` is a usable polygon: at least 3 finite points, no two consecutive
 /// ones equal (the last and the first count as consecutive: do not repeat the first point at
 /// the end), and a non-zero area.
@@ -53,18 +70,7 @@ pub fn check_contour(name: &'static str, contour: &[Point]) -> Result<()> {
             format!("expected at least 3 points, got {n}"),
         ));
     }
-    if let Some(i) = contour
-        .iter()
-        .position(|p| !(p[0].is_finite() && p[1].is_finite()))
-    {
-        return Err(invalid(
-            name,
-            format!(
-                "expected finite coordinates, found ({}, {}) at point {i}",
-                contour[i][0], contour[i][1]
-            ),
-        ));
-    }
+    check_finite(name, contour)?;
     for i in 0..n {
         let j = (i + 1) % n;
         // A zero-length edge (the values are finite, so this is exact equality).
@@ -166,18 +172,7 @@ pub fn weights_many(
     points_name: &'static str,
 ) -> Result<Vec<f64>> {
     check_contour(polygon_name, polygon)?;
-    if let Some(i) = points
-        .iter()
-        .position(|p| !(p[0].is_finite() && p[1].is_finite()))
-    {
-        return Err(invalid(
-            points_name,
-            format!(
-                "expected finite coordinates, found ({}, {}) at point {i}",
-                points[i][0], points[i][1]
-            ),
-        ));
-    }
+    check_finite(points_name, points)?;
     let n = polygon.len();
     let mut out = vec![0.0; points.len() * n];
     out.par_chunks_mut(n)
@@ -489,27 +484,25 @@ pub fn warp(
     let c = sources[0].c;
     let k_count = sources.len();
     let map = Mapping::new(target, source_contours);
-    let mut rows = vec![0.0f32; height * k_count * width * c];
-    rows.par_chunks_mut(k_count * width * c)
-        .enumerate()
-        .for_each(|(y, out)| {
-            let mut q = vec![(0.0f32, 0.0f32); k_count * width];
-            map.row(y, width, &mut q);
-            for (k, src) in sources.iter().enumerate() {
-                let o = &mut out[k * width * c..(k + 1) * width * c];
-                for (x, px) in o.chunks_exact_mut(c).enumerate() {
-                    let (qx, qy) = q[k * width + x];
-                    sample_any(src, qx, qy, px);
-                }
-            }
-        });
-    // Rows hold the K images side by side; split them into one image per source.
-    let mut out = vec![Vec::with_capacity(height * width * c); k_count];
-    for row in rows.chunks_exact(k_count * width * c) {
-        for (k, img) in out.iter_mut().enumerate() {
-            img.extend_from_slice(&row[k * width * c..(k + 1) * width * c]);
+    let mut out = vec![vec![0.0f32; height * width * c]; k_count];
+    // Row `y` of every image, written straight into its output (no side-by-side buffer to
+    // split afterwards).
+    let mut rows: Vec<Vec<&mut [f32]>> = (0..height).map(|_| Vec::with_capacity(k_count)).collect();
+    for img in &mut out {
+        for (row, part) in rows.iter_mut().zip(img.chunks_exact_mut(width * c)) {
+            row.push(part);
         }
     }
+    rows.into_par_iter().enumerate().for_each(|(y, mut parts)| {
+        let mut q = vec![(0.0f32, 0.0f32); k_count * width];
+        map.row(y, width, &mut q);
+        for (k, (src, o)) in sources.iter().zip(&mut parts).enumerate() {
+            for (x, px) in o.chunks_exact_mut(c).enumerate() {
+                let (qx, qy) = q[k * width + x];
+                sample_any(src, qx, qy, px);
+            }
+        }
+    });
     Ok(out)
 }
 

@@ -18,7 +18,7 @@ fn label_map(name: &'static str, a: &PyReadonlyArray2<'_, u8>, k: usize) -> PyRe
 }
 
 /// Runs `f` with a progress callback that calls `progress` under the GIL; an exception it
-/// raises cancels the run and is re-raised.
+/// raises cancels the run and is re-raised. With `progress` None, `f` gets no callback.
 fn with_progress<T: Send>(
     py: Python<'_>,
     progress: Option<Py<PyAny>>,
@@ -66,6 +66,12 @@ fn params(
     })
 }
 
+fn to_array(py: Python<'_>, m: LabelMap) -> Bound<'_, PyArray2<u8>> {
+    Array2::from_shape_vec((m.h, m.w), m.data)
+        .expect("shape")
+        .into_pyarray(py)
+}
+
 #[pyfunction]
 #[pyo3(name = "shape_synthesize", signature = (shape, *, height, width, patch_size, levels, iterations, rotations, tileable, seed, mask=None, threads=None, progress=None))]
 pub fn synthesize_py<'py>(
@@ -89,9 +95,7 @@ pub fn synthesize_py<'py>(
     let out = with_progress(py, progress, threads, |cb| {
         shapes::synthesize(&ex, height, width, mask, &p, cb)
     })?;
-    Ok(Array2::from_shape_vec((out.h, out.w), out.data)
-        .expect("shape")
-        .into_pyarray(py))
+    Ok(to_array(py, out))
 }
 
 #[pyfunction]
@@ -128,9 +132,7 @@ pub fn synthesize_labels_py<'py>(
     let out = with_progress(py, progress, threads, |cb| {
         shapes::synthesize_labels(&ex, k, height, width, method, order.as_deref(), &p, cb)
     })?;
-    Ok(Array2::from_shape_vec((out.h, out.w), out.data)
-        .expect("shape")
-        .into_pyarray(py))
+    Ok(to_array(py, out))
 }
 
 #[pyfunction]
@@ -146,14 +148,9 @@ pub fn similarity_py(
     let a = label_map("a", &a, shapes::MAX_LABELS)?;
     let b = label_map("b", &b, shapes::MAX_LABELS)?;
     let rotations = Rotations::from_count(rotations).map_err(to_py)?;
-    py.detach(|| {
-        guarded(|| {
-            install(threads, || {
-                shapes::similarity(&a, &b, patch_size, rotations)
-            })
-        })
+    with_progress(py, None, threads, |_| {
+        shapes::similarity(&a, &b, patch_size, rotations)
     })
-    .map_err(to_py)
 }
 
 #[pyfunction]

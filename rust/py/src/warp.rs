@@ -10,6 +10,7 @@ use phloem_core::mvc::{self, Point};
 use pyo3::prelude::*;
 
 use crate::errors::{guarded, not_contiguous, to_py};
+use crate::patch::image;
 use crate::threads::install;
 
 fn points(name: &'static str, a: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<Point>> {
@@ -28,12 +29,7 @@ fn points(name: &'static str, a: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<Poi
 }
 
 fn images<'a>(name: &'static str, a: &'a [PyReadonlyArray3<'_, f32>]) -> PyResult<Vec<Image<'a>>> {
-    a.iter()
-        .map(|s| {
-            let (h, w, c) = s.as_array().dim();
-            Image::new(name, s.as_slice().map_err(not_contiguous(name))?, h, w, c).map_err(to_py)
-        })
-        .collect()
+    a.iter().map(|s| image(name, s)).collect()
 }
 
 fn contours(name: &'static str, a: &[PyReadonlyArray2<'_, f64>]) -> PyResult<Vec<Vec<Point>>> {

@@ -120,13 +120,13 @@ pub fn propagate(
     let (eh, ew) = (lookup.h as isize, lookup.w as isize);
     for pass in 0..passes {
         let f: &[(u32, u8)] = field;
-        best = (0..n)
+        best = std::mem::take(&mut best)
             .into_par_iter()
-            .map(|i| {
+            .enumerate()
+            .map(|(i, mut b)| {
                 let q = &queries[i];
                 let c = centres[i] as usize;
                 let (y, x) = ((c / w) as isize, (c % w) as isize);
-                let mut b = best[i].clone();
                 let mut rng = Rng::keyed(seed, pass as u64, c as u64);
                 let try_px = |b: &mut Vec<(u32, u32)>, py: isize, px: isize, rot: u8| {
                     if py < 0 || px < 0 || py >= eh || px >= ew {

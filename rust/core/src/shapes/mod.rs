@@ -372,7 +372,27 @@ struct Engine<'a> {
     total: usize,
 }
 
-impl Engine<'_> {
+impl<'a> Engine<'a> {
+    /// An engine for `k` labels whose progress counts `runs` optimisations of `levels`
+    /// levels each.
+    fn new(
+        k: usize,
+        params: &'a ShapeParams,
+        levels: usize,
+        progress: Progress<'a>,
+        runs: usize,
+    ) -> Self {
+        Engine {
+            g: Geometry::new(params.patch_size, k),
+            k,
+            params,
+            levels,
+            progress,
+            done: 0,
+            total: runs * levels * params.iterations,
+        }
+    }
+
     fn tick(&mut self, n: usize) -> Result<()> {
         self.done += n;
         if let Some(f) = self.progress {
@@ -806,15 +826,7 @@ pub fn synthesize(
         }
     }
     let f = fg as f64 / shape.data.len() as f64;
-    let mut e = Engine {
-        g: Geometry::new(params.patch_size, 2),
-        k: 2,
-        params,
-        levels,
-        progress,
-        done: 0,
-        total: levels * params.iterations,
-    };
+    let mut e = Engine::new(2, params, levels, progress, 1);
     Ok(e.optimise(shape, h, w, mask, &[1.0 - f, f], 0)?.0)
 }
 
@@ -957,28 +969,12 @@ pub fn synthesize_labels(
     let n = labels.data.len() as f64;
     match method {
         Method::Layered => {
-            let mut e = Engine {
-                g: Geometry::new(params.patch_size, 2),
-                k: 2,
-                params,
-                levels,
-                progress,
-                done: 0,
-                total: (k - 1) * levels * params.iterations,
-            };
+            let mut e = Engine::new(2, params, levels, progress, k - 1);
             e.layered(labels, k, h, w, &order)
         }
         Method::Joint => {
             let fracs: Vec<f64> = counts.iter().map(|&c| c as f64 / n).collect();
-            let mut e = Engine {
-                g: Geometry::new(params.patch_size, k),
-                k,
-                params,
-                levels,
-                progress,
-                done: 0,
-                total: levels * params.iterations,
-            };
+            let mut e = Engine::new(k, params, levels, progress, 1);
             Ok(e.optimise(labels, h, w, None, &fracs, 0)?.0)
         }
     }
