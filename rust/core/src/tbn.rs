@@ -872,16 +872,19 @@ impl<'a> Level<'a> {
                             continue;
                         }
                         let wt = vote_weight[j];
-                        for (a, v) in avg
-                            .iter_mut()
-                            .zip(&aug[e as usize * ca..e as usize * ca + c0])
-                        {
-                            *a += wt * v;
-                        }
-                        wsum += wt;
-                        votes.push(e);
-                        if labels_in[e as usize] == lb {
-                            wvotes.push((e, wt));
+                        if medoid {
+                            if labels_in[e as usize] == lb {
+                                wvotes.push((e, wt));
+                            }
+                        } else {
+                            for (a, v) in avg
+                                .iter_mut()
+                                .zip(&aug[e as usize * ca..e as usize * ca + c0])
+                            {
+                                *a += wt * v;
+                            }
+                            wsum += wt;
+                            votes.push(e);
                         }
                     }
                 }
