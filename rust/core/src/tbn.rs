@@ -760,7 +760,6 @@ impl<'a> Level<'a> {
             grid_rng.below(st as u64) as usize,
             grid_rng.below(st as u64) as usize,
         );
-        let in_grid = |i: usize| (i / w) % st == gy && (i % w) % st == gx;
         let labels_in = &self.el.labels;
         let labels_out = self.labels_out;
 
@@ -783,17 +782,12 @@ impl<'a> Level<'a> {
                 if y % st != gy {
                     return;
                 }
-                for (x, slot) in row.iter_mut().enumerate() {
-                    let i = y * w + x;
-                    if !in_grid(i) {
-                        continue;
+                for x in (gx..w).step_by(st) {
+                    let (best, bd) = self.m_pixel(&ms, y * w + x, fast);
+                    if best != NONE {
+                        row[x] = best;
+                        drow[x] = bd;
                     }
-                    let (best, bd) = self.m_pixel(&ms, i, fast);
-                    if best == NONE {
-                        continue;
-                    }
-                    *slot = best;
-                    drow[i % w] = bd;
                 }
             });
 
