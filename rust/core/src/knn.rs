@@ -73,8 +73,7 @@ pub struct Knn {
 
 /// The exemplar mirrored by `r` pixels on every side (`abcd` → `cb|abcd|cb` for r = 2).
 pub(crate) fn mirror_pad(data: &[f32], h: usize, w: usize, c: usize, r: usize) -> Vec<f32> {
-    let (ph, pw) = (h + 2 * r, w + 2 * r);
-    let reflect = |i: i64, n: usize| -> usize {
+    pad_with(data, h, w, c, r, |i, n| {
         if n == 1 {
             return 0;
         }
@@ -85,12 +84,25 @@ pub(crate) fn mirror_pad(data: &[f32], h: usize, w: usize, c: usize, r: usize) -
             i = if i < 0 { -i } else { 2 * (n - 1) - i };
         }
         i as usize
-    };
+    })
+}
+
+/// The `h × w × c` buffer `data` grown by `r` pixels on every side, the pixel at padded
+/// `(y, x)` copied from `(at(y − r, h), at(x − r, w))`.
+pub(crate) fn pad_with(
+    data: &[f32],
+    h: usize,
+    w: usize,
+    c: usize,
+    r: usize,
+    at: impl Fn(i64, usize) -> usize,
+) -> Vec<f32> {
+    let (ph, pw) = (h + 2 * r, w + 2 * r);
     let mut out = Vec::with_capacity(ph * pw * c);
     for y in 0..ph {
-        let sy = reflect(y as i64 - r as i64, h);
+        let sy = at(y as i64 - r as i64, h);
         for x in 0..pw {
-            let sx = reflect(x as i64 - r as i64, w);
+            let sx = at(x as i64 - r as i64, w);
             out.extend_from_slice(&data[(sy * w + sx) * c..][..c]);
         }
     }

@@ -35,7 +35,7 @@ use rayon::prelude::*;
 
 use crate::error::{invalid, Result};
 use crate::image::{prescale, Image};
-use crate::knn::{coherence_candidates, knn, mirror_pad, Knn, KnnParams};
+use crate::knn::{coherence_candidates, knn, mirror_pad, pad_with, Knn, KnnParams};
 #[cfg(target_arch = "x86_64")]
 use crate::patch::Avx2;
 use crate::patch::{avx2_enabled, Kernel, Portable, NONE};
@@ -224,15 +224,7 @@ fn out_index(y: i64, x: i64, h: usize, w: usize, tileable: bool) -> Option<usize
 
 /// The `r`-pixel border of a `h × w × c` buffer made by wrapping around.
 fn wrap_pad(data: &[f32], h: usize, w: usize, c: usize, r: usize) -> Vec<f32> {
-    let mut out = Vec::with_capacity((h + 2 * r) * (w + 2 * r) * c);
-    for y in 0..h + 2 * r {
-        let sy = (y as i64 - r as i64).rem_euclid(h as i64) as usize;
-        for x in 0..w + 2 * r {
-            let sx = (x as i64 - r as i64).rem_euclid(w as i64) as usize;
-            out.extend_from_slice(&data[(sy * w + sx) * c..][..c]);
-        }
-    }
-    out
+    pad_with(data, h, w, c, r, |i, n| i.rem_euclid(n as i64) as usize)
 }
 
 /// A padded image whose `p × p` patches are contiguous rows of `p · c` values.
