@@ -472,12 +472,10 @@ pub fn by_numbers(
     let ex = &input.exemplar;
     let (oh, ow) = (input.out_h, input.out_w);
     let p = params.patch_size;
-    let levels = params
-        .levels
-        .unwrap_or_else(|| auto_levels(ex.h.min(ex.w).min(oh).min(ow)));
+    let min_side = ex.h.min(ex.w).min(oh).min(ow);
+    let mut levels = params.levels.unwrap_or_else(|| auto_levels(min_side));
     // Coarsest sizes must still hold a patch.
-    let mut levels = levels;
-    while levels > 1 && level_sizes(ex.h.min(ex.w).min(oh).min(ow), levels)[levels - 1] < p {
+    while levels > 1 && level_sizes(min_side, levels)[levels - 1] < p {
         levels -= 1;
     }
 
