@@ -493,12 +493,12 @@ pub fn by_numbers(
     // Pyramids: steps from level l to l + 1, and each level's data.
     let (eys, exs) = (level_sizes(ex.h, levels), level_sizes(ex.w, levels));
     let (oys, oxs) = (level_sizes(oh, levels), level_sizes(ow, levels));
-    let ex_steps: Vec<Step> = (0..levels - 1)
-        .map(|l| Step::new(eys[l], exs[l], eys[l + 1], exs[l + 1]))
-        .collect();
-    let out_steps: Vec<Step> = (0..levels - 1)
-        .map(|l| Step::new(oys[l], oxs[l], oys[l + 1], oxs[l + 1]))
-        .collect();
+    let steps = |ys: &[usize], xs: &[usize]| -> Vec<Step> {
+        (0..levels - 1)
+            .map(|l| Step::new(ys[l], xs[l], ys[l + 1], xs[l + 1]))
+            .collect()
+    };
+    let (ex_steps, out_steps) = (steps(&eys, &exs), steps(&oys, &oxs));
     let mut ex_levels = vec![ExLevel {
         h: ex.h,
         w: ex.w,
