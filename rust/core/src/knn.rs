@@ -71,6 +71,24 @@ pub struct Knn {
     pub dist: Vec<f32>,
 }
 
+/// Moves exemplar pixel `e` by `(dy, dx)`: wrapped around an `eh × ew` exemplar, or [`NONE`]
+/// when it leaves it without `wrap`.
+#[inline]
+#[must_use]
+pub fn shift(e: u32, dy: i64, dx: i64, eh: usize, ew: usize, wrap: bool) -> u32 {
+    if e == NONE {
+        return NONE;
+    }
+    let (mut y, mut x) = ((e as usize / ew) as i64 + dy, (e as usize % ew) as i64 + dx);
+    if wrap {
+        y = y.rem_euclid(eh as i64);
+        x = x.rem_euclid(ew as i64);
+    } else if y < 0 || x < 0 || y >= eh as i64 || x >= ew as i64 {
+        return NONE;
+    }
+    (y as usize * ew + x as usize) as u32
+}
+
 /// The exemplar mirrored by `r` pixels on every side (`abcd` → `cb|abcd|cb` for r = 2).
 pub(crate) fn mirror_pad(data: &[f32], h: usize, w: usize, c: usize, r: usize) -> Vec<f32> {
     pad_with(data, h, w, c, r, |i, n| {
@@ -453,15 +471,10 @@ pub fn coherence_candidates(
                 if e == NONE {
                     continue;
                 }
-                let (mut ey, mut ex) =
-                    ((e as usize / ew) as i64 - oy, (e as usize % ew) as i64 - ox);
-                if wrap {
-                    ey = ey.rem_euclid(eh as i64);
-                    ex = ex.rem_euclid(ew as i64);
-                } else if ey < 0 || ex < 0 || ey >= eh as i64 || ex >= ew as i64 {
+                let cand = shift(e, -oy, -ox, eh, ew, wrap);
+                if cand == NONE {
                     continue;
                 }
-                let cand = (ey as usize * ew + ex as usize) as u32;
                 push(cand, set);
                 if let Some(t) = knn {
                     for &b in &t.idx[cand as usize * t.k..][..t.k] {

@@ -35,7 +35,7 @@ use rayon::prelude::*;
 
 use crate::error::{invalid, Result};
 use crate::image::{prescale, Image};
-use crate::knn::{coherence_candidates, knn, mirror_pad, pad_with, Knn, KnnParams};
+use crate::knn::{coherence_candidates, knn, mirror_pad, pad_with, shift, Knn, KnnParams};
 #[cfg(target_arch = "x86_64")]
 use crate::patch::Avx2;
 use crate::patch::{avx2_enabled, Kernel, Portable, NONE};
@@ -161,24 +161,6 @@ pub struct Tbn {
     pub w: usize,
     /// `h × w` flat indices into the exemplar (`row · exemplar_w + col`).
     pub refs: Vec<u32>,
-}
-
-/// Moves exemplar pixel `e` by `(dy, dx)`: wrapped around an `eh × ew` exemplar, or [`NONE`]
-/// when it leaves it without `wrap`.
-#[inline]
-#[must_use]
-pub fn shift(e: u32, dy: i64, dx: i64, eh: usize, ew: usize, wrap: bool) -> u32 {
-    if e == NONE {
-        return NONE;
-    }
-    let (mut y, mut x) = ((e as usize / ew) as i64 + dy, (e as usize % ew) as i64 + dx);
-    if wrap {
-        y = y.rem_euclid(eh as i64);
-        x = x.rem_euclid(ew as i64);
-    } else if y < 0 || x < 0 || y >= eh as i64 || x >= ew as i64 {
-        return NONE;
-    }
-    (y as usize * ew + x as usize) as u32
 }
 
 /// The forward-shifted `N_lmr` neighbourhood of output pixel `(y, x)` (§3.3.1, Fig. 3.1): for
