@@ -884,9 +884,7 @@ impl<'a> Level<'a> {
                     best = if labels_in[cur as usize] == lb {
                         cur
                     } else {
-                        let list = &self.el.by_label[lb as usize];
-                        list[Rng::keyed(seed, key ^ 0xE, i as u64).below(list.len() as u64)
-                            as usize]
+                        init::pick(&self.el.by_label, lb, seed, key ^ 0xE, i)
                     };
                 }
                 *slot = best;
