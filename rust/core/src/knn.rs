@@ -71,10 +71,27 @@ pub struct Knn {
     pub dist: Vec<f32>,
 }
 
+/// Moves exemplar pixel `e` by `(dy, dx)`: wrapped around an `eh × ew` exemplar, or [`NONE`]
+/// when it leaves it without `wrap`.
+#[inline]
+#[must_use]
+pub fn shift(e: u32, dy: i64, dx: i64, eh: usize, ew: usize, wrap: bool) -> u32 {
+    if e == NONE {
+        return NONE;
+    }
+    let (mut y, mut x) = ((e as usize / ew) as i64 + dy, (e as usize % ew) as i64 + dx);
+    if wrap {
+        y = y.rem_euclid(eh as i64);
+        x = x.rem_euclid(ew as i64);
+    } else if y < 0 || x < 0 || y >= eh as i64 || x >= ew as i64 {
+        return NONE;
+    }
+    (y as usize * ew + x as usize) as u32
+}
+
 /// The exemplar mirrored by `r` pixels on every side (`abcd` → `cb|abcd|cb` for r = 2).
 pub(crate) fn mirror_pad(data: &[f32], h: usize, w: usize, c: usize, r: usize) -> Vec<f32> {
-    let (ph, pw) = (h + 2 * r, w + 2 * r);
-    let reflect = |i: i64, n: usize| -> usize {
+    pad_with(data, h, w, c, r, |i, n| {
         if n == 1 {
             return 0;
         }
@@ -85,12 +102,25 @@ pub(crate) fn mirror_pad(data: &[f32], h: usize, w: usize, c: usize, r: usize) -
             i = if i < 0 { -i } else { 2 * (n - 1) - i };
         }
         i as usize
-    };
+    })
+}
+
+/// The `h × w × c` buffer `data` grown by `r` pixels on every side, the pixel at padded
+/// `(y, x)` copied from `(at(y − r, h), at(x − r, w))`.
+pub(crate) fn pad_with(
+    data: &[f32],
+    h: usize,
+    w: usize,
+    c: usize,
+    r: usize,
+    at: impl Fn(i64, usize) -> usize,
+) -> Vec<f32> {
+    let (ph, pw) = (h + 2 * r, w + 2 * r);
     let mut out = Vec::with_capacity(ph * pw * c);
     for y in 0..ph {
-        let sy = reflect(y as i64 - r as i64, h);
+        let sy = at(y as i64 - r as i64, h);
         for x in 0..pw {
-            let sx = reflect(x as i64 - r as i64, w);
+            let sx = at(x as i64 - r as i64, w);
             out.extend_from_slice(&data[(sy * w + sx) * c..][..c]);
         }
     }
@@ -441,15 +471,10 @@ pub fn coherence_candidates(
                 if e == NONE {
                     continue;
                 }
-                let (mut ey, mut ex) =
-                    ((e as usize / ew) as i64 - oy, (e as usize % ew) as i64 - ox);
-                if wrap {
-                    ey = ey.rem_euclid(eh as i64);
-                    ex = ex.rem_euclid(ew as i64);
-                } else if ey < 0 || ex < 0 || ey >= eh as i64 || ex >= ew as i64 {
+                let cand = shift(e, -oy, -ox, eh, ew, wrap);
+                if cand == NONE {
                     continue;
                 }
-                let cand = (ey as usize * ew + ex as usize) as u32;
                 push(cand, set);
                 if let Some(t) = knn {
                     for &b in &t.idx[cand as usize * t.k..][..t.k] {

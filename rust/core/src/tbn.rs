@@ -35,7 +35,7 @@ use rayon::prelude::*;
 
 use crate::error::{invalid, Result};
 use crate::image::{prescale, Image};
-use crate::knn::{coherence_candidates, knn, mirror_pad, Knn, KnnParams};
+use crate::knn::{coherence_candidates, knn, mirror_pad, pad_with, shift, Knn, KnnParams};
 #[cfg(target_arch = "x86_64")]
 use crate::patch::Avx2;
 use crate::patch::{avx2_enabled, Kernel, Portable, NONE};
@@ -163,24 +163,6 @@ pub struct Tbn {
     pub refs: Vec<u32>,
 }
 
-/// Moves exemplar pixel `e` by `(dy, dx)`: wrapped around an `eh × ew` exemplar, or [`NONE`]
-/// when it leaves it without `wrap`.
-#[inline]
-#[must_use]
-pub fn shift(e: u32, dy: i64, dx: i64, eh: usize, ew: usize, wrap: bool) -> u32 {
-    if e == NONE {
-        return NONE;
-    }
-    let (mut y, mut x) = ((e as usize / ew) as i64 + dy, (e as usize % ew) as i64 + dx);
-    if wrap {
-        y = y.rem_euclid(eh as i64);
-        x = x.rem_euclid(ew as i64);
-    } else if y < 0 || x < 0 || y >= eh as i64 || x >= ew as i64 {
-        return NONE;
-    }
-    (y as usize * ew + x as usize) as u32
-}
-
 /// The forward-shifted `N_lmr` neighbourhood of output pixel `(y, x)` (§3.3.1, Fig. 3.1): for
 /// every offset `o` of the `patch_size` window in row-major order, the reference of the
 /// output pixel at `(y, x) + o` moved by `−o`, i.e. the exemplar pixel that would continue it
@@ -224,15 +206,7 @@ fn out_index(y: i64, x: i64, h: usize, w: usize, tileable: bool) -> Option<usize
 
 /// The `r`-pixel border of a `h × w × c` buffer made by wrapping around.
 fn wrap_pad(data: &[f32], h: usize, w: usize, c: usize, r: usize) -> Vec<f32> {
-    let mut out = Vec::with_capacity((h + 2 * r) * (w + 2 * r) * c);
-    for y in 0..h + 2 * r {
-        let sy = (y as i64 - r as i64).rem_euclid(h as i64) as usize;
-        for x in 0..w + 2 * r {
-            let sx = (x as i64 - r as i64).rem_euclid(w as i64) as usize;
-            out.extend_from_slice(&data[(sy * w + sx) * c..][..c]);
-        }
-    }
-    out
+    pad_with(data, h, w, c, r, |i, n| i.rem_euclid(n as i64) as usize)
 }
 
 /// A padded image whose `p × p` patches are contiguous rows of `p · c` values.
@@ -480,12 +454,10 @@ pub fn by_numbers(
     let ex = &input.exemplar;
     let (oh, ow) = (input.out_h, input.out_w);
     let p = params.patch_size;
-    let levels = params
-        .levels
-        .unwrap_or_else(|| auto_levels(ex.h.min(ex.w).min(oh).min(ow)));
+    let min_side = ex.h.min(ex.w).min(oh).min(ow);
+    let mut levels = params.levels.unwrap_or_else(|| auto_levels(min_side));
     // Coarsest sizes must still hold a patch.
-    let mut levels = levels;
-    while levels > 1 && level_sizes(ex.h.min(ex.w).min(oh).min(ow), levels)[levels - 1] < p {
+    while levels > 1 && level_sizes(min_side, levels)[levels - 1] < p {
         levels -= 1;
     }
 
@@ -503,12 +475,12 @@ pub fn by_numbers(
     // Pyramids: steps from level l to l + 1, and each level's data.
     let (eys, exs) = (level_sizes(ex.h, levels), level_sizes(ex.w, levels));
     let (oys, oxs) = (level_sizes(oh, levels), level_sizes(ow, levels));
-    let ex_steps: Vec<Step> = (0..levels - 1)
-        .map(|l| Step::new(eys[l], exs[l], eys[l + 1], exs[l + 1]))
-        .collect();
-    let out_steps: Vec<Step> = (0..levels - 1)
-        .map(|l| Step::new(oys[l], oxs[l], oys[l + 1], oxs[l + 1]))
-        .collect();
+    let steps = |ys: &[usize], xs: &[usize]| -> Vec<Step> {
+        (0..levels - 1)
+            .map(|l| Step::new(ys[l], xs[l], ys[l + 1], xs[l + 1]))
+            .collect()
+    };
+    let (ex_steps, out_steps) = (steps(&eys, &exs), steps(&oys, &oxs));
     let mut ex_levels = vec![ExLevel {
         h: ex.h,
         w: ex.w,
@@ -760,7 +732,6 @@ impl<'a> Level<'a> {
             grid_rng.below(st as u64) as usize,
             grid_rng.below(st as u64) as usize,
         );
-        let in_grid = |i: usize| (i / w) % st == gy && (i % w) % st == gx;
         let labels_in = &self.el.labels;
         let labels_out = self.labels_out;
 
@@ -783,17 +754,12 @@ impl<'a> Level<'a> {
                 if y % st != gy {
                     return;
                 }
-                for (x, slot) in row.iter_mut().enumerate() {
-                    let i = y * w + x;
-                    if !in_grid(i) {
-                        continue;
+                for x in (gx..w).step_by(st) {
+                    let (best, bd) = self.m_pixel(&ms, y * w + x, fast);
+                    if best != NONE {
+                        row[x] = best;
+                        drow[x] = bd;
                     }
-                    let (best, bd) = self.m_pixel(&ms, i, fast);
-                    if best == NONE {
-                        continue;
-                    }
-                    *slot = best;
-                    drow[i % w] = bd;
                 }
             });
 
@@ -872,16 +838,19 @@ impl<'a> Level<'a> {
                             continue;
                         }
                         let wt = vote_weight[j];
-                        for (a, v) in avg
-                            .iter_mut()
-                            .zip(&aug[e as usize * ca..e as usize * ca + c0])
-                        {
-                            *a += wt * v;
-                        }
-                        wsum += wt;
-                        votes.push(e);
-                        if labels_in[e as usize] == lb {
-                            wvotes.push((e, wt));
+                        if medoid {
+                            if labels_in[e as usize] == lb {
+                                wvotes.push((e, wt));
+                            }
+                        } else {
+                            for (a, v) in avg
+                                .iter_mut()
+                                .zip(&aug[e as usize * ca..e as usize * ca + c0])
+                            {
+                                *a += wt * v;
+                            }
+                            wsum += wt;
+                            votes.push(e);
                         }
                     }
                 }
@@ -915,9 +884,7 @@ impl<'a> Level<'a> {
                     best = if labels_in[cur as usize] == lb {
                         cur
                     } else {
-                        let list = &self.el.by_label[lb as usize];
-                        list[Rng::keyed(seed, key ^ 0xE, i as u64).below(list.len() as u64)
-                            as usize]
+                        init::pick(&self.el.by_label, lb, seed, key ^ 0xE, i)
                     };
                 }
                 *slot = best;

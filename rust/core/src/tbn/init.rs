@@ -83,11 +83,16 @@ pub fn random_init(labels_out: &[u32], by_label: &[Vec<u32>], seed: u64, key: u6
     labels_out
         .par_iter()
         .enumerate()
-        .map(|(i, &l)| {
-            let list = &by_label[l as usize];
-            list[Rng::keyed(seed, key, i as u64).below(list.len() as u64) as usize]
-        })
+        .map(|(i, &l)| pick(by_label, l, seed, key, i))
         .collect()
+}
+
+/// A random exemplar pixel of label `l` for output pixel `i`, drawn from the stream
+/// `(seed, key, i)`.
+#[inline]
+pub(crate) fn pick(by_label: &[Vec<u32>], l: u32, seed: u64, key: u64, i: usize) -> u32 {
+    let list = &by_label[l as usize];
+    list[Rng::keyed(seed, key, i as u64).below(list.len() as u64) as usize]
 }
 
 /// A label map with its chamfer distances (in pixels), for Eq. 3.6.
