@@ -3,6 +3,7 @@
 Submodules
 ----------
 bark      the bark pipeline: label maps, shape synthesis, texture-by-numbers
+branching branching structures: skeletons, bending/furcation models, fragment synthesis
 io        reading and writing images and result sidecars
 data      small embedded example images
 blend     gradient-domain solvers: seamless (Poisson) blending, smooth field interpolation
@@ -20,7 +21,7 @@ from __future__ import annotations
 
 import os
 
-from . import _core, bark, blend, data, io, metrics, patch, seams, shapes, texture, trees, warp
+from . import _core, bark, branching, blend, data, io, metrics, patch, seams, shapes, texture, trees, warp
 
 __version__: str = _core.__version__
 
@@ -29,4 +30,4 @@ __version__: str = _core.__version__
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_core._after_fork_in_child)
 
-__all__ = ["__version__", "bark", "blend", "data", "io", "metrics", "patch", "seams", "shapes", "texture", "trees", "warp"]
+__all__ = ["__version__", "bark", "branching", "blend", "data", "io", "metrics", "patch", "seams", "shapes", "texture", "trees", "warp"]

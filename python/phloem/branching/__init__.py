@@ -1,0 +1,17 @@
+"""Branching structures: Sibbing, Pick, Kobbelt 2010, *Image Synthesis for Branching Structures*.
+
+Learn the bending and branching of rivers, cracks, lightning, ridges or vessels from one
+example image with its skeleton, grow new skeletons with the same character, and compose a new
+image from fragments of the input.
+
+References
+----------
+.. [1] D. Sibbing, D. Pick, L. Kobbelt, "Image Synthesis for Branching Structures",
+   Computer Graphics Forum 29(7), 2010 (Pacific Graphics).
+"""
+
+from __future__ import annotations
+
+from .skeleton import Branch, Skeleton, SkeletonError
+
+__all__ = ["Branch", "Skeleton", "SkeletonError"]

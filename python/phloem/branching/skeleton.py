@@ -1,0 +1,459 @@
+"""The skeleton of a branching structure (Sibbing et al. 2010, §4.1) and its JSON file format.
+
+A :class:`Skeleton` is a list of :class:`Branch` polylines. Every branch holds its vertices as
+``(x, y)`` pixel positions (origin top-left, the project's convention), a thickness (radius, in
+pixels) per vertex, and the branch and vertex it grows out of (``parent``; ``None`` for a root).
+A parent always comes before its children in the list, so a skeleton is a forest by
+construction.
+
+After :meth:`Skeleton.resample` every edge of every branch has the same length ``h``; the
+signed turning angles between successive edges (:meth:`Branch.angles`) and the thicknesses then
+define each branch up to a rigid motion (§4.1), which is what the bending and furcation models
+learn from.
+
+The file format is JSON::
+
+    {"format": "phloem.skeleton", "version": 1,
+     "shape": [H, W],                      # optional: the image the skeleton belongs to
+     "branches": [
+        {"points": [[x, y], ...], "thickness": [r, ...], "parent": null},
+        {"points": [[x, y], ...], "thickness": [r, ...], "parent": [0, 17]}
+     ]}
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from .._validate import as_image, check_float
+
+__all__ = ["Branch", "Skeleton", "SkeletonError"]
+
+F64 = NDArray[np.float64]
+FORMAT = "phloem.skeleton"
+VERSION = 1
+
+
+class SkeletonError(ValueError):
+    """A skeleton (or skeleton file) that is malformed or does not fit its image."""
+
+
+def _as_points(points: Any, where: str) -> F64:
+    try:
+        arr = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise SkeletonError(f"{where}: points must be a list of [x, y] pairs ({exc})") from None
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise SkeletonError(f"{where}: points must have shape (n, 2), got {arr.shape}")
+    if arr.shape[0] < 2:
+        raise SkeletonError(f"{where}: a branch needs at least 2 points, got {arr.shape[0]}")
+    if not np.isfinite(arr).all():
+        raise SkeletonError(f"{where}: points contain NaN or infinity")
+    return np.ascontiguousarray(arr)
+
+
+def _as_thickness(thickness: Any, n: int, where: str) -> F64:
+    try:
+        arr = np.asarray(thickness, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise SkeletonError(f"{where}: thickness must be a list of numbers ({exc})") from None
+    if arr.ndim == 0:
+        arr = np.full(n, float(arr))
+    if arr.shape != (n,):
+        raise SkeletonError(f"{where}: thickness must have one value per point ({n}), got shape {arr.shape}")
+    if not np.isfinite(arr).all() or (arr < 0).any():
+        raise SkeletonError(f"{where}: thickness must be finite and >= 0")
+    return np.ascontiguousarray(arr)
+
+
+@dataclass
+class Branch:
+    """One polyline of a skeleton.
+
+    Attributes
+    ----------
+    points : ndarray of float64, shape (n, 2)
+        Vertices as ``(x, y)`` pixel positions, ``n >= 2``.
+    thickness : ndarray of float64, shape (n,)
+        Branch radius at each vertex, in pixels.
+    parent : tuple of int or None
+        ``(branch index, vertex index)`` of the parent vertex this branch grows out of, or
+        ``None`` for a root branch.
+    """
+
+    points: F64
+    thickness: F64
+    parent: tuple[int, int] | None = None
+
+    def __post_init__(self) -> None:
+        self.points = _as_points(self.points, "branch")
+        self.thickness = _as_thickness(self.thickness, len(self.points), "branch")
+        if self.parent is not None:
+            self.parent = (int(self.parent[0]), int(self.parent[1]))
+
+    def __len__(self) -> int:
+        return int(self.points.shape[0])
+
+    def length(self) -> float:
+        """Arc length of the polyline in pixels."""
+        return float(np.linalg.norm(np.diff(self.points, axis=0), axis=1).sum())
+
+    def angles(self) -> F64:
+        """Signed turning angles ``α_i`` at the interior vertices, in radians in ``(-π, π]``.
+
+        ``α_i`` (``i = 1 .. n-2``) is the angle from edge ``x_i - x_(i-1)`` to edge
+        ``x_(i+1) - x_i``; positive turns are counter-clockwise on the screen (towards ``-y``).
+        The result has ``n - 2`` entries. :meth:`from_angles` inverts it.
+
+        Examples
+        --------
+        >>> b = Branch([[0, 0], [1, 0], [1, -1]], [1, 1, 1])
+        >>> b.angles().round(4)
+        array([1.5708])
+        """
+        d = np.diff(self.points, axis=0)
+        # Screen y grows downwards, so a counter-clockwise turn on screen has a negative cross
+        # product in (x, y); flip the sign so that positive means counter-clockwise as seen.
+        heading = np.arctan2(-d[:, 1], d[:, 0])
+        turn = np.diff(heading)
+        return np.asarray(np.pi - (np.pi - turn) % (2 * np.pi), dtype=np.float64)
+
+    def heading(self) -> float:
+        """Direction of the first edge, in radians, counter-clockwise on screen from ``+x``."""
+        d = self.points[1] - self.points[0]
+        return float(math.atan2(-d[1], d[0]))
+
+    @classmethod
+    def from_angles(
+        cls,
+        start: Sequence[float],
+        heading: float,
+        angles: Any,
+        thickness: Any,
+        h: float,
+        parent: tuple[int, int] | None = None,
+    ) -> Branch:
+        """Rebuild a branch from its start, first heading, turning angles and edge length ``h``.
+
+        Examples
+        --------
+        >>> b = Branch([[0, 0], [2, 0], [2, 2], [4, 2]], [1, 2, 3, 4])
+        >>> c = Branch.from_angles(b.points[0], b.heading(), b.angles(), b.thickness, 2.0)
+        >>> bool(np.allclose(c.points, b.points))
+        True
+        """
+        angles = np.asarray(angles, dtype=np.float64)
+        headings = heading + np.concatenate([[0.0], np.cumsum(angles)])
+        steps = h * np.stack([np.cos(headings), -np.sin(headings)], axis=1)
+        pts = np.vstack([np.asarray(start, dtype=np.float64)[None, :], np.asarray(start, dtype=np.float64) + np.cumsum(steps, axis=0)])
+        return cls(pts, thickness, parent)
+
+    def resample(self, h: float) -> Branch:
+        """Resample to constant edge length ``h`` by arc length.
+
+        Vertices are placed at arc lengths ``0, h, 2h, ...``; a remainder shorter than ``h`` at
+        the end is dropped (a branch shorter than ``h`` keeps its two end points). Thickness is
+        interpolated linearly by arc length.
+        """
+        seg = np.linalg.norm(np.diff(self.points, axis=0), axis=1)
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        total = float(cum[-1])
+        count = int(math.floor(total / h + 1e-9)) + 1
+        if count < 2:
+            return Branch(self.points[[0, -1]].copy(), self.thickness[[0, -1]].copy(), self.parent)
+        # Points at arc lengths k*h would leave chords shorter than h where the polyline turns;
+        # walk by chords instead so that every edge has length exactly h (fewer vertices where
+        # the polyline is very curved).
+        pts = _chord_walk(self.points, count, h)
+        if len(pts) < 2:
+            pts = self.points[[0, -1]].copy()
+        # Thickness by the arc length of each new vertex's projection on the old polyline.
+        s = _arc_positions(self.points, cum, pts)
+        thick = np.interp(s, cum, self.thickness)
+        return Branch(pts, thick, self.parent)
+
+
+def _chord_walk(points: F64, count: int, h: float) -> F64:
+    """Up to ``count`` vertices along the polyline with consecutive distance exactly ``h``.
+
+    From the current vertex ``c`` the next one is where the polyline first leaves the circle of
+    radius ``h`` around ``c``: on the current segment that is the larger root of
+    ``|a + t d - c|^2 = h^2``; if it lies beyond the segment's end, the end is still inside
+    the circle and the search moves on to the next segment.
+    """
+    out = [points[0].copy()]
+    seg = 0
+    n = len(points)
+    while len(out) < count and seg < n - 1:
+        a, d = points[seg], points[seg + 1] - points[seg]
+        f = a - out[-1]
+        qa = float(d @ d)
+        if qa == 0.0:
+            seg += 1
+            continue
+        qb = float(f @ d)
+        disc = qb * qb - qa * (float(f @ f) - h * h)
+        t = (-qb + math.sqrt(max(disc, 0.0))) / qa
+        if t <= 1.0:
+            out.append(a + t * d)
+        else:
+            seg += 1
+    return np.asarray(out)
+
+
+def _arc_positions(points: F64, cum: F64, query: F64) -> F64:
+    """Arc length of each query point's nearest point on the polyline, monotone along it."""
+    out = np.empty(len(query))
+    seg = 0
+    for i, q in enumerate(query):
+        best, best_s, best_seg = math.inf, 0.0, seg
+        for j in range(seg, len(points) - 1):
+            a, d = points[j], points[j + 1] - points[j]
+            qa = float(d @ d)
+            t = 0.0 if qa == 0.0 else min(max(float((q - a) @ d) / qa, 0.0), 1.0)
+            e = a + t * d - q
+            dist = float(e @ e)
+            if dist < best - 1e-12:
+                best, best_s, best_seg = dist, float(cum[j] + t * (cum[j + 1] - cum[j])), j
+            if dist < 1e-12:
+                break
+        out[i], seg = best_s, best_seg
+    return out
+
+
+@dataclass
+class Skeleton:
+    """A branching structure: branches with thickness, each child attached to a parent vertex.
+
+    Parameters
+    ----------
+    branches : list of Branch
+        Parents come before their children.
+    shape : tuple of int, optional
+        ``(H, W)`` of the image the skeleton belongs to; when given, every vertex must lie
+        inside it.
+
+    Examples
+    --------
+    >>> sk = Skeleton([Branch([[0, 0], [5, 0], [10, 0]], 2.0), Branch([[5, 0], [5, 8]], 1.0, parent=(0, 1))])
+    >>> r = sk.resample(1.0)
+    >>> [len(b) for b in r.branches], r.branches[1].parent
+    ([11, 9], (0, 5))
+    >>> Skeleton.from_json(sk.to_json()) == sk
+    True
+    """
+
+    branches: list[Branch] = field(default_factory=list)
+    shape: tuple[int, int] | None = None
+
+    def __post_init__(self) -> None:
+        self.branches = list(self.branches)
+        if self.shape is not None:
+            self.shape = (int(self.shape[0]), int(self.shape[1]))
+        self.validate()
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Skeleton) or self.shape != other.shape or len(self.branches) != len(other.branches):
+            return False
+        return all(
+            a.parent == b.parent and np.array_equal(a.points, b.points) and np.array_equal(a.thickness, b.thickness)
+            for a, b in zip(self.branches, other.branches)
+        )
+
+    def validate(self) -> None:
+        """Raise :class:`SkeletonError` if parents are out of order or vertices leave the image."""
+        for i, b in enumerate(self.branches):
+            if not isinstance(b, Branch):
+                raise SkeletonError(f"branches[{i}] must be a Branch, got {type(b).__name__}")
+            if b.parent is not None:
+                pb, pv = b.parent
+                if not 0 <= pb < i:
+                    raise SkeletonError(f"branches[{i}].parent: branch index {pb} must refer to an earlier branch (0..{i - 1})")
+                if not 0 <= pv < len(self.branches[pb]):
+                    raise SkeletonError(f"branches[{i}].parent: vertex {pv} is outside branch {pb} ({len(self.branches[pb])} vertices)")
+            if self.shape is not None:
+                h, w = self.shape
+                x, y = b.points[:, 0], b.points[:, 1]
+                bad = (x < -0.5) | (y < -0.5) | (x > w - 0.5) | (y > h - 0.5)
+                if bad.any():
+                    j = int(np.argmax(bad))
+                    raise SkeletonError(
+                        f"branches[{i}].points[{j}] = ({x[j]:.1f}, {y[j]:.1f}) is outside the {w}x{h} image"
+                    )
+
+    # -- geometry ---------------------------------------------------------------------------
+
+    def children(self) -> dict[int, list[tuple[int, int]]]:
+        """For each branch index, its ``(vertex index, child branch index)`` furcations."""
+        out: dict[int, list[tuple[int, int]]] = {i: [] for i in range(len(self.branches))}
+        for i, b in enumerate(self.branches):
+            if b.parent is not None:
+                out[b.parent[0]].append((b.parent[1], i))
+        return out
+
+    def total_length(self) -> float:
+        """Sum of all branch lengths in pixels."""
+        return float(sum(b.length() for b in self.branches))
+
+    def resample(self, h: float) -> Skeleton:
+        """Every branch resampled to constant edge length ``h`` (§4.1); attachments remapped.
+
+        A child's parent vertex becomes the resampled parent vertex nearest to the old one.
+        """
+        h = check_float(h, "h", 0.0, inclusive=False)
+        new = [b.resample(h) for b in self.branches]
+        for b in new:
+            if b.parent is not None:
+                pb, pv = b.parent
+                old = self.branches[pb].points[pv]
+                b.parent = (pb, int(np.argmin(np.linalg.norm(new[pb].points - old, axis=1))))
+        return Skeleton(new, self.shape)
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(x_min, y_min, x_max, y_max)`` over all vertices."""
+        pts = np.vstack([b.points for b in self.branches])
+        return float(pts[:, 0].min()), float(pts[:, 1].min()), float(pts[:, 0].max()), float(pts[:, 1].max())
+
+    # -- drawing ----------------------------------------------------------------------------
+
+    def mask(self, shape: tuple[int, int] | None = None) -> NDArray[np.bool_]:
+        """The structure as a boolean ``(H, W)`` mask: every edge drawn with its thickness."""
+        shape = shape or self.shape
+        if shape is None:
+            raise SkeletonError("mask: the skeleton has no shape; pass shape=(H, W)")
+        out = np.zeros(shape, np.uint8)
+        for b in self.branches:
+            for (p, q), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
+                r = max(0.5 * (r0 + r1), 0.5)
+                cv2.line(out, _pt(p), _pt(q), 1, thickness=max(1, int(round(2 * r))), lineType=cv2.LINE_8, shift=4)
+        return out.astype(bool)
+
+    def draw(self, image: Any = None, *, shape: tuple[int, int] | None = None, color: Sequence[float] = (1.0, 0.2, 0.1), width: int = 1, vertices: bool = False) -> NDArray[np.float32]:
+        """Draw the skeleton's centre lines (and optionally vertices) over an image.
+
+        Parameters
+        ----------
+        image : array, optional
+            ``(H, W)`` or ``(H, W, C)`` float image in ``[0, 1]``; a black canvas of ``shape``
+            (or the skeleton's shape) when omitted.
+        color : sequence of float
+            RGB colour of the lines.
+        width : int
+            Line width in pixels.
+        vertices : bool
+            Also mark every vertex with a small dot.
+
+        Returns
+        -------
+        ndarray of float32, shape (H, W, 3)
+        """
+        if image is None:
+            shape = shape or self.shape
+            if shape is None:
+                raise SkeletonError("draw: pass an image or shape=(H, W)")
+            canvas = np.zeros((*shape, 3), np.float32)
+        else:
+            img = as_image(image, "image")
+            canvas = np.repeat(img, 3, axis=2) if img.shape[2] == 1 else np.ascontiguousarray(img[:, :, :3]).copy()
+        col = tuple(float(c) for c in color)
+        for b in self.branches:
+            pts = np.round(b.points * 16).astype(np.int32)
+            cv2.polylines(canvas, [pts], False, col, thickness=int(width), lineType=cv2.LINE_AA, shift=4)
+            if vertices:
+                for p in b.points:
+                    cv2.circle(canvas, _pt(p), 16 * max(1, width), col, -1, cv2.LINE_AA, shift=4)
+        return canvas
+
+    # -- files ------------------------------------------------------------------------------
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON-ready dictionary of the file format."""
+        return {
+            "format": FORMAT,
+            "version": VERSION,
+            "shape": list(self.shape) if self.shape is not None else None,
+            "branches": [
+                {
+                    "points": b.points.tolist(),
+                    "thickness": b.thickness.tolist(),
+                    "parent": list(b.parent) if b.parent is not None else None,
+                }
+                for b in self.branches
+            ],
+        }
+
+    def to_json(self) -> str:
+        """The skeleton as a JSON string."""
+        return json.dumps(self.to_dict())
+
+    @classmethod
+    def from_dict(cls, data: Any) -> Skeleton:
+        """Build a skeleton from the file format's dictionary, with errors that say what is wrong."""
+        if not isinstance(data, dict):
+            raise SkeletonError(f"a skeleton must be a JSON object, got {type(data).__name__}")
+        if data.get("format", FORMAT) != FORMAT:
+            raise SkeletonError(f"format must be {FORMAT!r}, got {data.get('format')!r}")
+        if data.get("version", VERSION) != VERSION:
+            raise SkeletonError(f"unsupported skeleton version {data.get('version')!r} (this phloem reads {VERSION})")
+        branches = data.get("branches")
+        if not isinstance(branches, list) or not branches:
+            raise SkeletonError("'branches' must be a non-empty list")
+        out = []
+        for i, b in enumerate(branches):
+            where = f"branches[{i}]"
+            if not isinstance(b, dict) or "points" not in b:
+                raise SkeletonError(f"{where} must be an object with 'points' (and 'thickness', 'parent')")
+            pts = _as_points(b["points"], where)
+            thick = _as_thickness(b.get("thickness", 1.0), len(pts), where)
+            parent = b.get("parent")
+            if parent is not None:
+                if not (isinstance(parent, (list, tuple)) and len(parent) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in parent)):
+                    raise SkeletonError(f"{where}.parent must be null or [branch index, vertex index], got {parent!r}")
+                parent = (parent[0], parent[1])
+            out.append(Branch(pts, thick, parent))
+        shape = data.get("shape")
+        if shape is not None:
+            if not (isinstance(shape, (list, tuple)) and len(shape) == 2 and all(isinstance(v, int) and v > 0 for v in shape)):
+                raise SkeletonError(f"'shape' must be [H, W] with positive integers, got {shape!r}")
+            shape = (shape[0], shape[1])
+        return cls(out, shape)
+
+    @classmethod
+    def from_json(cls, text: str) -> Skeleton:
+        """Parse the JSON file format."""
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise SkeletonError(f"not a valid JSON skeleton: {exc}") from None
+        return cls.from_dict(data)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> Skeleton:
+        """Read a skeleton file."""
+        p = Path(path)
+        if p.stat().st_size > 256 * 1024 * 1024:
+            raise SkeletonError(f"{p}: skeleton file is larger than 256 MiB")
+        try:
+            return cls.from_json(p.read_text(encoding="utf-8"))
+        except SkeletonError as exc:
+            raise SkeletonError(f"{p}: {exc}") from None
+
+    def save(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> None:
+        """Write the skeleton file atomically; refuses to overwrite unless asked."""
+        from ..io import _atomic_write
+
+        _atomic_write(Path(path), self.to_json().encode("utf-8"), overwrite)
+
+
+def _pt(p: F64) -> tuple[int, int]:
+    return int(round(p[0] * 16)), int(round(p[1] * 16))
