@@ -12,6 +12,7 @@ References
 
 from __future__ import annotations
 
+from .image import Fragment, RenderResult, fragments, render, rigid_align
 from .skeleton import Branch, Skeleton, SkeletonError
 
-__all__ = ["Branch", "Skeleton", "SkeletonError"]
+__all__ = ["Branch", "Fragment", "RenderResult", "Skeleton", "SkeletonError", "fragments", "render", "rigid_align"]
