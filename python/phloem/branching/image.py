@@ -405,10 +405,10 @@ def _sample(img: F32, mapx: F32, mapy: F32) -> F32:
 
 def _displacement(disk_shape: tuple[int, int], y0: int, x0: int, q_abs: F64, d: F64, r: float, threads: int | None) -> F32:
     """The smooth displacement field over a crop that takes the values ``d`` at ``q_abs``
-    (§5.3), solved on a grid coarsened to about 16 cells per radius and upsampled: the field is
+    (§5.3), solved on a grid coarsened to about 8 cells per radius and upsampled: the field is
     smooth by construction, and the solve on the full grid costs ~100× more."""
     h, w = disk_shape
-    f = max(1, int(r // 16))
+    f = max(1, int(r // 8))
     ch, cw = max(2, -(-h // f)), max(2, -(-w // f))
     rows = np.clip(np.round((q_abs[:, 1] - y0) / f).astype(np.int64), 0, ch - 1)
     cols = np.clip(np.round((q_abs[:, 0] - x0) / f).astype(np.int64), 0, cw - 1)
@@ -426,6 +426,27 @@ def _displacement(disk_shape: tuple[int, int], y0: int, x0: int, q_abs: F64, d: 
     xs = np.ones((h, 1), np.float32) * (np.arange(w, dtype=np.float32) / f)[None, :]
     out = cv2.remap(np.ascontiguousarray(coarse), xs, ys, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     return np.ascontiguousarray(out, dtype=np.float32)
+
+
+def _fold_free(dfield: F32, disk: NDArray[np.bool_], *, min_det: float = 0.5) -> float:
+    """Largest of 1, ¾, ½, ¼, 0 by which the field can be scaled so that ``p ↦ p + α d(p)``
+    stays injective over the disk (Jacobian determinant at least ``min_det``).
+
+    §5.3 assumes the deviation left after the rigid alignment is small; it is not at a target
+    furcation whose angle no source furcation has, and there the full field folds the fragment
+    onto its skeleton. The field is linear in the constraints, so scaling it is the field of
+    the scaled constraints: the skeleton is then only partly straightened, without folding.
+    """
+    dux = np.gradient(dfield[..., 0], axis=1)
+    duy = np.gradient(dfield[..., 0], axis=0)
+    dvx = np.gradient(dfield[..., 1], axis=1)
+    dvy = np.gradient(dfield[..., 1], axis=0)
+    a1 = (dux + dvy)[disk]
+    a2 = (dux * dvy - duy * dvx)[disk]
+    for alpha in (1.0, 0.75, 0.5, 0.25):
+        if a1.size == 0 or float((1.0 + alpha * a1 + alpha * alpha * a2).min()) >= min_det:
+            return alpha
+    return 0.0
 
 
 def _complete_background(
@@ -732,8 +753,9 @@ def render(
         if deform:
             d = f.points @ R.T - g.points
             dfield = _displacement((hh, ww), y0, x0, g.points + g.center, d, g.radius, t)
-            px = px + dfield[..., 0]
-            py = py + dfield[..., 1]
+            alpha = _fold_free(dfield, disk)
+            px = px + alpha * dfield[..., 0]
+            py = py + alpha * dfield[..., 1]
         mapx = (R[0, 0] * px + R[1, 0] * py + f.center[0]).astype(np.float32)
         mapy = (R[0, 1] * px + R[1, 1] * py + f.center[1]).astype(np.float32)
         warped = _sample(img, mapx, mapy)

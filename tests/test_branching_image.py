@@ -1,0 +1,173 @@
+"""Fragment-based image synthesis of branching structures (Sibbing et al. 2010, §5)."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+from conftest import shared_file
+
+import phloem
+from phloem.branching import Branch, Skeleton, fragments, render, rigid_align
+from phloem.branching.image import _dense
+
+
+def _rot(a: float) -> np.ndarray:
+    return np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+
+
+def _wavy(start: tuple[float, float], heading: float, length: float, r: tuple[float, float], *, phase: float = 0.0,
+          amp: float = 0.3, parent: tuple[int, int] | None = None) -> Branch:
+    n = int(length / 3) + 1
+    s = np.arange(n) * 3.0
+    head = heading + amp * np.sin(2 * math.pi * s / 90 + phase)
+    d = np.stack([np.cos(head), np.sin(head)], 1) * 3.0
+    pts = np.vstack([[start], start + np.cumsum(d[:-1], 0)])
+    return Branch(pts, np.linspace(r[0], r[1], n), parent)
+
+
+def _scene(seed: int = 0) -> tuple[np.ndarray, Skeleton]:
+    """A grey textured picture with a dark branching channel drawn along a known skeleton."""
+    rng = np.random.default_rng(seed)
+    main = _wavy((8, 60), 0.05, 210, (4.0, 3.0), phase=1.0)
+    child = _wavy(tuple(main.points[30]), 0.9, 60, (3.0, 2.0), phase=0.0, amp=0.2, parent=(0, 30))
+    sk = Skeleton([main, child], (128, 224))
+    img = 0.7 + 0.05 * cv2.GaussianBlur(rng.normal(size=sk.shape).astype(np.float32), (0, 0), 1.0) / 0.2
+    return np.clip(np.where(sk.mask(), 0.15 + 0.03 * img, img), 0, 1).astype(np.float32), sk
+
+
+def test_rigid_align_is_exact_on_rotated_copies() -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        p = rng.normal(size=(9, 2)) * 20
+        a = float(rng.uniform(-math.pi, math.pi))
+        t0 = rng.normal(size=2) * 50
+        R, t = rigid_align(p, p @ _rot(a).T + t0)
+        assert np.allclose(R, _rot(a), atol=1e-12)
+        assert np.allclose(t, t0, atol=1e-9)
+        # With centres (the §5.2 form: centres coincide, only the rotation is fitted).
+        c = p[4]
+        R2, t2 = rigid_align(p, p @ _rot(a).T + t0, source_center=c, target_center=_rot(a) @ c + t0)
+        assert np.allclose(R2, _rot(a), atol=1e-12) and np.allclose(t2, t0, atol=1e-9)
+        assert abs(np.linalg.det(R)) == pytest.approx(1.0)
+
+
+def test_rigid_align_never_reflects() -> None:
+    p = np.array([[0.0, 0], [3, 0], [0, 1]])
+    R, _ = rigid_align(p, p * [1, -1])  # a mirror image: the best rotation, not the reflection
+    assert np.linalg.det(R) == pytest.approx(1.0)
+
+
+def test_fragments_cover_the_skeleton_with_lambda_spacing() -> None:
+    _, sk = _scene()
+    frs = fragments(None, sk, lam=0.75, radius_factor=3)
+    for bi, b in enumerate(sk.branches):
+        own = [f for f in frs if f.branch == bi and not f.furcation]
+        # Radius three times the interpolated thickness.
+        for f in own:
+            th = np.interp(f.arc, np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(b.points, axis=0), axis=1))]), b.thickness)
+            assert f.radius == pytest.approx(3 * th, rel=1e-9)
+        # Spacing λ (s_i + s_(i+1)) between consecutive centres (the last one may close the end early).
+        for f0, f1 in zip(own[:-2], own[1:-1]):
+            d = float(np.linalg.norm(f1.center - f0.center))
+            assert d == pytest.approx(0.75 * (f0.radius + f1.radius), abs=0.6)
+        # Every point of the skeleton lies in some disk.
+        _, pts, _ = _dense(b)
+        cen = np.stack([f.center for f in own])
+        rad = np.array([f.radius for f in own])
+        assert (np.linalg.norm(pts[:, None] - cen[None], axis=2) <= rad[None]).any(axis=1).all()
+    fur = [f for f in frs if f.furcation]
+    assert len(fur) == 1 and np.allclose(fur[0].center, sk.branches[0].points[30])
+    assert fur[0].points.shape == (18, 2) and fur[0].thickness.shape == (18,)
+
+
+def test_fragments_spacing_follows_lambda() -> None:
+    sk = Skeleton([Branch([[0, 10], [400, 10]], 5.0)], (20, 401))
+    a = fragments(None, sk, lam=0.75)
+    b = fragments(None, sk, lam=0.5)
+    assert np.linalg.norm(a[1].center - a[0].center) == pytest.approx(22.5, abs=0.5)
+    assert np.linalg.norm(b[1].center - b[0].center) == pytest.approx(15.0, abs=0.5)
+
+
+def test_identity_target_reproduces_the_source_along_the_structure() -> None:
+    img, sk = _scene()
+    out = render(img, sk, sk, seed=0, complete=False, full_output=True)
+    near = cv2.dilate(sk.mask().astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool) & (out.labels >= 0)
+    err = np.abs(out.image[..., 0] - img)[near]
+    assert near.sum() > 0.8 * sk.mask().sum()
+    assert float(err.mean()) < 0.02, float(err.mean())
+    # Each target fragment took the source fragment at its own place.
+    src = np.stack([out.sources[i].center for i in out.choice])
+    tgt = np.stack([g.center for g in out.targets])
+    assert float(np.median(np.linalg.norm(src - tgt, axis=1))) < 1.0
+
+
+def test_structure_pixels_come_from_the_source_structure() -> None:
+    img, sk = _scene()
+    # A different target: rotated, bent main branch with one sub-branch elsewhere.
+    main = _wavy((20, 20), 0.5, 200, (4.0, 3.0), phase=3.0, amp=0.4)
+    child = _wavy(tuple(main.points[40]), -0.6, 50, (3.0, 2.0), parent=(0, 40))
+    tgt = Skeleton([main, child], (160, 200))
+    out = render(img, sk, tgt, seed=3)
+    m = tgt.mask()
+    core = cv2.erode(m.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    far = ~cv2.dilate(m.astype(np.uint8), np.ones((15, 15), np.uint8)).astype(bool)
+    assert out.shape == (160, 200, 1)
+    assert float(np.median(out[..., 0][core])) < 0.3  # the dark channel stays dark
+    assert float(np.mean(out[..., 0][core] < 0.4)) > 0.85
+    assert float(np.median(out[..., 0][far])) > 0.6  # and the land stays light
+    assert float(np.mean(out[..., 0][far] < 0.4)) < 0.02  # no pseudo-branches in the gaps
+
+
+def test_render_is_deterministic_for_a_seed() -> None:
+    img, sk = _scene()
+    main = _wavy((20, 30), 0.2, 170, (4.0, 3.0), phase=2.0)
+    tgt = Skeleton([main], (96, 200))
+    a = render(img, sk, tgt, seed=7, full_output=True)
+    b = render(img, sk, tgt, seed=7, full_output=True)
+    assert np.array_equal(a.image, b.image) and np.array_equal(a.choice, b.choice)
+    others = [render(img, sk, tgt, seed=s, c=4, complete=False, full_output=True).choice for s in range(4)]
+    assert any(not np.array_equal(others[0], o) for o in others[1:])
+
+
+def test_stages_can_be_switched_off() -> None:
+    img, sk = _scene()
+    plain = render(img, sk, sk, seed=0, deform=False, photometric=False, seams=False, complete=False)
+    assert plain.shape == (128, 224, 1)
+    assert np.isfinite(plain).all()
+
+
+def test_bad_inputs_name_the_argument() -> None:
+    img, sk = _scene()
+    with pytest.raises(ValueError, match="source_skeleton.*outside"):
+        render(img[:50], sk, sk)
+    with pytest.raises(ValueError, match="source_skeleton: the skeleton has no branches"):
+        render(img, Skeleton([], (128, 224)), sk)
+    with pytest.raises(ValueError, match="target_skeleton: its shape"):
+        render(img, sk, Skeleton(sk.branches))
+    bad = Skeleton([Branch([[1, 1], [5, 5]], 1.0)], (10, 10))
+    bad.branches[0].points[1, 0] = np.nan
+    with pytest.raises(ValueError, match="target_skeleton: branches\\[0\\] has NaN"):
+        render(img, sk, bad)
+    with pytest.raises(ValueError, match="image"):
+        render(np.zeros((2, 3, 4, 5)), sk, sk)
+    with pytest.raises(ValueError, match="image: expected finite"):
+        render(np.full((128, 224), np.nan), sk, sk)
+    with pytest.raises(TypeError, match="target_skeleton"):
+        render(img, sk, [[0, 0], [1, 1]])  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="lam"):
+        fragments(img, sk, lam=1.5)
+    with pytest.raises(ValueError, match="c:"):
+        render(img, sk, sk, c=0)
+    with pytest.raises(ValueError, match="source_points: expected shape"):
+        rigid_align(np.zeros((3, 3)), np.zeros((3, 3)))
+
+
+@pytest.mark.shared
+def test_river_mask_fragments_stay_in_the_channel() -> None:
+    """Colville delta mask (RivGraph): a hand-picked channel, re-rendered along a rotated copy."""
+    path = shared_file("branching", "rivgraph_colville_delta_mask.png")
+    img = phloem.io.read_image(path)
+    assert img.ndim >= 2
