@@ -19,9 +19,8 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from branching_scene import picture, tree  # noqa: E402
-
-from phloem.branching import fragments, render  # noqa: E402
+from branching_scene import picture, tree
+from phloem.branching import fragments, render
 
 
 def workload() -> tuple:
@@ -44,14 +43,18 @@ def main() -> None:
     img, src, tgt = workload()
     fs, ft = fragments(img, src), fragments(None, tgt)
     radius = sum(f.radius for f in ft) / len(ft)
-    print(f"source {img.shape[1]}x{img.shape[0]}: {len(fs)} fragments; target {tgt.shape[1]}x{tgt.shape[0]}: "
-          f"{len(ft)} fragments, mean radius {radius:.1f} px")
+    print(
+        f"source {img.shape[1]}x{img.shape[0]}: {len(fs)} fragments; target {tgt.shape[1]}x{tgt.shape[0]}: "
+        f"{len(ft)} fragments, mean radius {radius:.1f} px"
+    )
     best = float("inf")
     for _ in range(args.repeat):
         t0 = time.perf_counter()
         render(img, src, tgt, seed=0, complete=False, threads=args.threads)
         best = min(best, time.perf_counter() - t0)
-    print(f"structure synthesis (paper's IS: 30.6 s): {best:.2f} s, {len(ft) / best:.0f} fragments/s (best of {args.repeat})")
+    print(
+        f"structure synthesis (paper's IS: 30.6 s): {best:.2f} s, {len(ft) / best:.0f} fragments/s (best of {args.repeat})"
+    )
     if args.complete:
         t0 = time.perf_counter()
         render(img, src, tgt, seed=0, threads=args.threads)

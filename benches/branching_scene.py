@@ -11,12 +11,21 @@ import math
 
 import cv2
 import numpy as np
-
 from phloem.branching import Branch, Skeleton
 
 
-def meander(start: tuple[float, float], heading: float, length: float, thickness: tuple[float, float], *, amp: float = 0.25,
-            wavelength: float = 200.0, phase: float = 0.0, step: float = 4.0, parent: tuple[int, int] | None = None) -> Branch:
+def meander(
+    start: tuple[float, float],
+    heading: float,
+    length: float,
+    thickness: tuple[float, float],
+    *,
+    amp: float = 0.25,
+    wavelength: float = 200.0,
+    phase: float = 0.0,
+    step: float = 4.0,
+    parent: tuple[int, int] | None = None,
+) -> Branch:
     """A sinuous polyline: the heading oscillates by ``amp`` radians with the given wavelength."""
     n = max(2, int(length / step) + 1)
     s = np.arange(n) * step
@@ -26,20 +35,44 @@ def meander(start: tuple[float, float], heading: float, length: float, thickness
     return Branch(pts, np.linspace(thickness[0], thickness[1], n), parent)
 
 
-def tree(shape: tuple[int, int], *, scale: float = 1.0, seed: int = 0, children: int = 2, heading: float = 0.05,
-         amp: float = 0.25) -> Skeleton:
+def tree(
+    shape: tuple[int, int],
+    *,
+    scale: float = 1.0,
+    seed: int = 0,
+    children: int = 2,
+    heading: float = 0.05,
+    amp: float = 0.25,
+) -> Skeleton:
     """A main branch across the image with ``children`` sub-branches, sized by ``scale``."""
     rng = np.random.default_rng(seed)
     h, w = shape
-    main = meander((0.04 * w, 0.45 * h), heading, 0.9 * w, (7 * scale, 5 * scale), amp=amp,
-                   wavelength=220 * scale, phase=float(rng.uniform(0, 6)), step=4 * scale)
+    main = meander(
+        (0.04 * w, 0.45 * h),
+        heading,
+        0.9 * w,
+        (7 * scale, 5 * scale),
+        amp=amp,
+        wavelength=220 * scale,
+        phase=float(rng.uniform(0, 6)),
+        step=4 * scale,
+    )
     branches = [main]
     for c in range(children):
         v = int(len(main) * (0.3 + 0.4 * c / max(children - 1, 1)))
         side = 1 if c % 2 == 0 else -1
         hd = math.atan2(*(main.points[v + 1] - main.points[v])[::-1]) + side * float(rng.uniform(0.6, 0.9))
-        b = meander(tuple(main.points[v]), hd, 0.35 * min(h, w) / max(abs(math.sin(hd)), 0.5), (4 * scale, 2.5 * scale),
-                    amp=amp, wavelength=160 * scale, phase=float(rng.uniform(0, 6)), step=4 * scale, parent=(0, v))
+        b = meander(
+            tuple(main.points[v]),
+            hd,
+            0.35 * min(h, w) / max(abs(math.sin(hd)), 0.5),
+            (4 * scale, 2.5 * scale),
+            amp=amp,
+            wavelength=160 * scale,
+            phase=float(rng.uniform(0, 6)),
+            step=4 * scale,
+            parent=(0, v),
+        )
         pts = b.points
         inside = (pts[:, 0] > 2) & (pts[:, 0] < w - 3) & (pts[:, 1] > 2) & (pts[:, 1] < h - 3)
         n = int(np.argmin(inside)) if not inside.all() else len(pts)
@@ -57,13 +90,22 @@ def picture(skeleton: Skeleton, *, seed: int = 0) -> np.ndarray:
     smooth /= smooth.std() + 1e-6
     fine = cv2.GaussianBlur(rng.normal(size=(h, w)).astype(np.float32), (0, 0), 1.2)
     fine /= fine.std() + 1e-6
-    land = np.stack([0.45 + 0.06 * smooth + 0.04 * fine, 0.52 + 0.05 * smooth + 0.04 * fine, 0.30 + 0.03 * smooth + 0.03 * fine], -1)
+    land = np.stack(
+        [0.45 + 0.06 * smooth + 0.04 * fine, 0.52 + 0.05 * smooth + 0.04 * fine, 0.30 + 0.03 * smooth + 0.03 * fine], -1
+    )
     water = np.zeros((h, w), np.float32)
     for b in skeleton.branches:
         for (p, q), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
             r = 0.5 * (r0 + r1)
-            cv2.line(water, tuple(int(round(v * 16)) for v in p), tuple(int(round(v * 16)) for v in q), 1.0,
-                     thickness=max(1, int(round(2 * r))), lineType=cv2.LINE_AA, shift=4)
+            cv2.line(
+                water,
+                tuple(round(v * 16) for v in p),
+                tuple(round(v * 16) for v in q),
+                1.0,
+                thickness=max(1, round(2 * r)),
+                lineType=cv2.LINE_AA,
+                shift=4,
+            )
     water = cv2.GaussianBlur(water, (0, 0), 1.5)[..., None]
     river = np.stack([0.10 + 0.02 * fine, 0.18 + 0.03 * fine, 0.35 + 0.04 * smooth], -1)
     # A lighter sandy bank just outside the water.

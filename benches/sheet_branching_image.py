@@ -21,10 +21,9 @@ import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from branching_scene import picture, tree  # noqa: E402
-from sheet_texture import _fit, _label, write_sheet  # noqa: E402
-
-from phloem.branching import Skeleton, fragments, render  # noqa: E402
+from branching_scene import picture, tree
+from phloem.branching import Skeleton, fragments, render
+from sheet_texture import _fit, _label, write_sheet
 
 
 def _rgb(img: np.ndarray) -> np.ndarray:
@@ -36,8 +35,15 @@ def _disks(img: np.ndarray, sk: Skeleton) -> np.ndarray:
     out = sk.draw(img, width=2)
     for f in fragments(img, sk):
         col = (1.0, 1.0, 0.0) if not f.furcation else (0.0, 1.0, 1.0)
-        cv2.circle(out, (int(round(f.center[0] * 16)), int(round(f.center[1] * 16))), int(round(f.radius * 16)), col, 1,
-                   cv2.LINE_AA, shift=4)
+        cv2.circle(
+            out,
+            (round(f.center[0] * 16), round(f.center[1] * 16)),
+            round(f.radius * 16),
+            col,
+            1,
+            cv2.LINE_AA,
+            shift=4,
+        )
     return out
 
 

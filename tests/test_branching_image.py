@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import cv2
 import numpy as np
+import phloem
 import pytest
 from conftest import shared_file
-
-import phloem
 from phloem.branching import Branch, Skeleton, fragments, render, rigid_align
 from phloem.branching.image import _dense
 
@@ -18,8 +18,16 @@ def _rot(a: float) -> np.ndarray:
     return np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
 
 
-def _wavy(start: tuple[float, float], heading: float, length: float, r: tuple[float, float], *, phase: float = 0.0,
-          amp: float = 0.3, parent: tuple[int, int] | None = None) -> Branch:
+def _wavy(
+    start: tuple[float, float],
+    heading: float,
+    length: float,
+    r: tuple[float, float],
+    *,
+    phase: float = 0.0,
+    amp: float = 0.3,
+    parent: tuple[int, int] | None = None,
+) -> Branch:
     n = int(length / 3) + 1
     s = np.arange(n) * 3.0
     head = heading + amp * np.sin(2 * math.pi * s / 90 + phase)
@@ -67,10 +75,12 @@ def test_fragments_cover_the_skeleton_with_lambda_spacing() -> None:
         own = [f for f in frs if f.branch == bi and not f.furcation]
         # Radius three times the interpolated thickness.
         for f in own:
-            th = np.interp(f.arc, np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(b.points, axis=0), axis=1))]), b.thickness)
+            th = np.interp(
+                f.arc, np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(b.points, axis=0), axis=1))]), b.thickness
+            )
             assert f.radius == pytest.approx(3 * th, rel=1e-9)
         # Spacing λ (s_i + s_(i+1)) between consecutive centres (the last one may close the end early).
-        for f0, f1 in zip(own[:-2], own[1:-1]):
+        for f0, f1 in itertools.pairwise(own[:-1]):
             d = float(np.linalg.norm(f1.center - f0.center))
             assert d == pytest.approx(0.75 * (f0.radius + f1.radius), abs=0.6)
         # Every point of the skeleton lies in some disk.

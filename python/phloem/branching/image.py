@@ -200,7 +200,7 @@ def _dense(branch: Branch, step: float = 0.5) -> tuple[F64, F64, F64]:
     seg = np.linalg.norm(np.diff(branch.points, axis=0), axis=1)
     cum = np.concatenate([[0.0], np.cumsum(seg)])
     total = float(cum[-1])
-    s = np.linspace(0.0, total, max(2, int(math.ceil(total / step)) + 1))
+    s = np.linspace(0.0, total, max(2, math.ceil(total / step) + 1))
     pts = np.stack([np.interp(s, cum, branch.points[:, 0]), np.interp(s, cum, branch.points[:, 1])], axis=1)
     return s, pts, np.interp(s, cum, branch.thickness)
 
@@ -261,11 +261,15 @@ def _check_skeleton(skeleton: Any, name: str, shape: tuple[int, int] | None) -> 
             bad = (x < -0.5) | (y < -0.5) | (x > w - 0.5) | (y > h - 0.5)
             if bad.any():
                 j = int(np.argmax(bad))
-                raise ValueError(f"{name}: branches[{i}].points[{j}] = ({x[j]:.1f}, {y[j]:.1f}) is outside the {w}x{h} image")
+                raise ValueError(
+                    f"{name}: branches[{i}].points[{j}] = ({x[j]:.1f}, {y[j]:.1f}) is outside the {w}x{h} image"
+                )
     return skeleton
 
 
-def _fragments(skeleton: Skeleton, lam: float, rf: float, k: int, *, order: bool, furcations: bool = True) -> list[Fragment]:
+def _fragments(
+    skeleton: Skeleton, lam: float, rf: float, k: int, *, order: bool, furcations: bool = True
+) -> list[Fragment]:
     """Fragments of every branch; with ``order``, in synthesis order (a furcation fragment
     replaces the first fragment of its child branch and follows the parent's fragments).
     Without ``furcations`` no furcation fragments are made."""
@@ -358,8 +362,8 @@ def fragments(
 def _disk(shape: tuple[int, int], c: F64, r: float) -> tuple[slice, slice, NDArray[np.bool_], int, int]:
     """Crop around a disk (clipped to ``shape``) and the disk mask inside it."""
     h, w = shape
-    x0, x1 = max(0, int(math.floor(c[0] - r))), min(w, int(math.ceil(c[0] + r)) + 1)
-    y0, y1 = max(0, int(math.floor(c[1] - r))), min(h, int(math.ceil(c[1] + r)) + 1)
+    x0, x1 = max(0, math.floor(c[0] - r)), min(w, math.ceil(c[0] + r) + 1)
+    y0, y1 = max(0, math.floor(c[1] - r)), min(h, math.ceil(c[1] + r) + 1)
     yy, xx = np.mgrid[y0:y1, x0:x1]
     disk = (xx - c[0]) ** 2 + (yy - c[1]) ** 2 <= r * r
     return slice(y0, y1), slice(x0, x1), disk, y0, x0
@@ -390,7 +394,9 @@ class _Library:
         return self._score(self.groups[m], P, self.T[m], g.points, g.thickness, theta, omega_s)
 
     @staticmethod
-    def _score(idx: NDArray[np.int64], P: F64, T: F64, q: F64, nu: F64, theta: F64, omega_s: float) -> tuple[NDArray[np.int64], F64, F64]:
+    def _score(
+        idx: NDArray[np.int64], P: F64, T: F64, q: F64, nu: F64, theta: F64, omega_s: float
+    ) -> tuple[NDArray[np.int64], F64, F64]:
         c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
         rx = c * P[..., 0] - s * P[..., 1]
         ry = s * P[..., 0] + c * P[..., 1]
@@ -403,7 +409,9 @@ def _sample(img: F32, mapx: F32, mapy: F32) -> F32:
     return np.ascontiguousarray(out.reshape(*mapx.shape, img.shape[2]), dtype=np.float32)
 
 
-def _displacement(disk_shape: tuple[int, int], y0: int, x0: int, q_abs: F64, d: F64, r: float, threads: int | None) -> F32:
+def _displacement(
+    disk_shape: tuple[int, int], y0: int, x0: int, q_abs: F64, d: F64, r: float, threads: int | None
+) -> F32:
     """The smooth displacement field over a crop that takes the values ``d`` at ``q_abs``
     (§5.3), solved on a grid coarsened to about 8 cells per radius and upsampled: the field is
     smooth by construction, and the solve on the full grid costs ~100× more."""
@@ -424,7 +432,9 @@ def _displacement(disk_shape: tuple[int, int], y0: int, x0: int, q_abs: F64, d: 
     # Coarse cell (i, j) sits at fine pixel (i f, j f): map fine pixels back to coarse coordinates.
     ys = (np.arange(h, dtype=np.float32) / f)[:, None] * np.ones((1, w), np.float32)
     xs = np.ones((h, 1), np.float32) * (np.arange(w, dtype=np.float32) / f)[None, :]
-    out = cv2.remap(np.ascontiguousarray(coarse), xs, ys, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    out = cv2.remap(
+        np.ascontiguousarray(coarse), xs, ys, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+    )
     return np.ascontiguousarray(out, dtype=np.float32)
 
 
@@ -503,7 +513,9 @@ def _complete_background(
             break
         pyr.append((img_l, hole_l, need, smask))
     if not pyr:
-        raise ValueError("source_skeleton: the input image has no background region free of branches to complete the gaps from")
+        raise ValueError(
+            "source_skeleton: the input image has no background region free of branches to complete the gaps from"
+        )
     fieldv: NDArray[np.int32] | None = None
     cur: F32 | None = None
     for lv in range(len(pyr) - 1, -1, -1):
@@ -539,7 +551,7 @@ def _complete_background(
             cur[fill] = voted[fill]
             init = fieldv
     assert cur is not None
-    out = canvas.copy()
+    out: F32 = canvas.copy()
     out[hole] = cur[:H, :W][hole]
     return out
 
@@ -791,9 +803,11 @@ def render(
         for b in src_sk.branches:
             for (a, bb), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
                 rr = max(rf * 0.5 * (r0 + r1), MIN_RADIUS)
-                cv2.line(zone, _pt(a), _pt(bb), 1, thickness=max(1, int(round(2 * rr))), lineType=cv2.LINE_8, shift=4)
+                cv2.line(zone, _pt(a), _pt(bb), 1, thickness=max(1, round(2 * rr)), lineType=cv2.LINE_8, shift=4)
         allowed = zone == 0
-        canvas = _complete_background(canvas, ~filled, img, allowed, patch_size=p, iterations=c_iters, seed=s, threads=t)
+        canvas = _complete_background(
+            canvas, ~filled, img, allowed, patch_size=p, iterations=c_iters, seed=s, threads=t
+        )
     if progress is not None:
         progress(len(targets) + 1, len(targets) + 1)
     if full_output:
@@ -802,5 +816,4 @@ def render(
 
 
 def _pt(p: F64) -> tuple[int, int]:
-    return int(round(p[0] * 16)), int(round(p[1] * 16))
-
+    return round(p[0] * 16), round(p[1] * 16)
