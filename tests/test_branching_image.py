@@ -11,7 +11,7 @@ import phloem
 import pytest
 from conftest import shared_file
 from phloem.branching import Branch, Skeleton, fragments, render, rigid_align
-from phloem.branching.image import _dense
+from phloem.branching.image import _dense, _smooth_field
 
 
 def _rot(a: float) -> np.ndarray:
@@ -147,6 +147,27 @@ def test_stages_can_be_switched_off() -> None:
     plain = render(img, sk, sk, seed=0, deform=False, photometric=False, seams=False, complete=False)
     assert plain.shape == (128, 224, 1)
     assert np.isfinite(plain).all()
+
+
+def test_displacement_solve_matches_the_field_engine() -> None:
+    """The direct solve of the §5.3 field is the system of phloem.blend.interpolate_field."""
+    rng = np.random.default_rng(1)
+    for h, w in ((15, 15), (9, 13)):
+        pts = np.unique(rng.integers(0, [h, w], size=(10, 2)), axis=0)
+        vals = rng.normal(size=(len(pts), 2)) * 5
+        ref = phloem.blend.interpolate_field(np.ones((h, w), bool), pts, vals, tol=1e-12, max_iterations=5000)
+        got = _smooth_field(h, w, pts, vals)
+        assert np.abs(got - ref).max() < 1e-4
+        assert np.allclose(got[pts[:, 0], pts[:, 1]], vals)
+
+
+def test_docstring_examples() -> None:
+    import doctest
+
+    import phloem.branching.image as mod
+
+    res = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
+    assert res.attempted > 0 and res.failed == 0
 
 
 def test_bad_inputs_name_the_argument() -> None:

@@ -29,6 +29,7 @@ Perspective rectification (Fig. 8) is not implemented.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any, Literal, overload
@@ -409,36 +410,31 @@ def _sample(img: F32, mapx: F32, mapy: F32) -> F32:
     return np.ascontiguousarray(out.reshape(*mapx.shape, img.shape[2]), dtype=np.float32)
 
 
-_NORMAL: dict[tuple[int, int], Any] = {}
-
-
-def _grid_normal(h: int, w: int) -> Any:
-    """Sparse ``LᵀL`` of the 4-neighbour graph Laplacian of an ``h × w`` grid (cached per
-    size): the energy ``E = ‖L d‖²`` of §5.3, with only in-grid neighbours at the border, as in
+@functools.lru_cache(maxsize=64)
+def _grid_normal(h: int, w: int) -> F64:
+    """``LᵀL`` of the 4-neighbour graph Laplacian of an ``h × w`` grid (cached per size): the
+    energy ``E = ‖L d‖²`` of §5.3, with only in-grid neighbours at the border, as in
     :func:`phloem.blend.interpolate_field`."""
-    from scipy import sparse
-
-    key = (h, w)
-    if key not in _NORMAL:
-        idx = np.arange(h * w).reshape(h, w)
-        a = np.concatenate([idx[:, :-1].ravel(), idx[:-1, :].ravel()])
-        b = np.concatenate([idx[:, 1:].ravel(), idx[1:, :].ravel()])
-        adj = sparse.coo_matrix((np.ones(len(a)), (a, b)), shape=(h * w, h * w))
-        adj = (adj + adj.T).tocsr()
-        L = sparse.diags(np.asarray(adj.sum(axis=1)).ravel()) - adj
-        _NORMAL[key] = (L.T @ L).tocsc()
-    return _NORMAL[key]
+    n = h * w
+    idx = np.arange(n).reshape(h, w)
+    a = np.concatenate([idx[:, :-1].ravel(), idx[:-1, :].ravel()])
+    b = np.concatenate([idx[:, 1:].ravel(), idx[1:, :].ravel()])
+    L = np.zeros((n, n))
+    L[a, b] = L[b, a] = -1.0
+    L[np.arange(n), np.arange(n)] = -L.sum(axis=1)
+    out: F64 = L.T @ L
+    out.flags.writeable = False
+    return out
 
 
 def _smooth_field(h: int, w: int, pts: NDArray[np.int64], vals: F64) -> F64:
-    """Minimiser of ``‖L d‖²`` over an ``h × w`` grid with ``d[pts] = vals``, by a sparse direct solve.
+    """Minimiser of ``‖L d‖²`` over an ``h × w`` grid with ``d[pts] = vals``, by a direct solve.
 
     The same system as :func:`phloem.blend.interpolate_field` (the tests compare them); on the
-    few hundred cells of a coarsened fragment a direct solve takes well under a millisecond
-    where the engine's iterative solver spends ~5 ms in set-up.
+    few hundred cells of a coarsened fragment a dense Cholesky solve takes under a millisecond,
+    where the engine's iterative solver spends ~5 ms in set-up. (``cv2.solve``: LAPACK's
+    threads fight the engines' for 2 cores and were 30× slower under load.)
     """
-    from scipy.sparse.linalg import spsolve
-
     A = _grid_normal(h, w)
     n = h * w
     fixed = pts[:, 0] * w + pts[:, 1]
@@ -448,8 +444,13 @@ def _smooth_field(h: int, w: int, pts: NDArray[np.int64], vals: F64) -> F64:
     out[fixed] = vals
     if free.any():
         fi = np.nonzero(free)[0]
-        rhs = -(A[fi][:, fixed] @ vals)
-        out[fi] = np.asarray(spsolve(A[fi][:, fi].tocsc(), rhs)).reshape(len(fi), -1)
+        rhs = -(A[np.ix_(fi, fixed)] @ vals)
+        ok, sol = cv2.solve(
+            np.ascontiguousarray(A[np.ix_(fi, fi)]), np.ascontiguousarray(rhs), flags=cv2.DECOMP_CHOLESKY
+        )
+        if not ok:  # pragma: no cover - A_ff is positive definite once one cell is fixed
+            raise RuntimeError("displacement field: the constrained system is singular")
+        out[fi] = sol
     return out.reshape(h, w, vals.shape[1])
 
 
