@@ -107,7 +107,10 @@ def test_identity_target_reproduces_the_source_along_the_structure() -> None:
     near = cv2.dilate(sk.mask().astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool) & (out.labels >= 0)
     err = np.abs(out.image[..., 0] - img)[near]
     assert near.sum() > 0.8 * sk.mask().sum()
-    assert float(err.mean()) < 0.02, float(err.mean())
+    # Fragments holding a junction are kept for the furcation fragments only, so pixels near
+    # the junction come from elsewhere; everywhere else the copy is exact.
+    assert float(err.mean()) < 0.04, float(err.mean())
+    assert float(np.mean(err < 0.01)) > 0.7, float(np.mean(err < 0.01))
     # Each target fragment took the source fragment at its own place.
     src = np.stack([out.sources[i].center for i in out.choice])
     tgt = np.stack([g.center for g in out.targets])

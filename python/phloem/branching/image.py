@@ -106,6 +106,8 @@ class RenderResult:
         The source fragments and the target fragments, in synthesis order.
     choice : ndarray of int64
         ``sources`` index chosen for each target fragment.
+    mirrored : ndarray of bool
+        Whether that source fragment was used mirrored (furcations only, see ``mirror``).
     structure : ndarray of float32, shape (H, W, C)
         The image before gap completion (unpainted pixels are 0).
     """
@@ -115,6 +117,7 @@ class RenderResult:
     sources: list[Fragment]
     targets: list[Fragment]
     choice: NDArray[np.int64]
+    mirrored: NDArray[np.bool_]
     structure: F32 = field(repr=False)
 
 
@@ -376,19 +379,36 @@ def _rot(theta: float) -> F64:
 
 
 class _Library:
-    """Source fragments stacked for vectorised shape distances."""
+    """Source fragments stacked for vectorised shape distances.
 
-    def __init__(self, frs: list[Fragment]) -> None:
+    Entries are fragments, plus (with ``mirror``) every furcation fragment mirrored: its shape
+    reflected in the fragment's local frame, and its pixels read through the same reflection.
+    """
+
+    def __init__(self, frs: list[Fragment], *, mirror: bool, exclude: NDArray[np.bool_] | None = None) -> None:
         self.frs = frs
+        frag = [i for i in range(len(frs)) if exclude is None or not exclude[i]]
+        flip = [False] * len(frag)
+        if mirror:
+            extra = [i for i, f in enumerate(frs) if f.furcation]
+            frag += extra
+            flip += [True] * len(extra)
+        self.frag = np.array(frag, dtype=np.int64)
+        self.flip = np.array(flip, dtype=bool)
+        self.points = [frs[i].points * ([1.0, -1.0] if fl else [1.0, 1.0]) for i, fl in zip(frag, flip, strict=True)]
         self.groups: dict[int, NDArray[np.int64]] = {}
         for m in {len(f.points) for f in frs}:
-            self.groups[m] = np.array([i for i, f in enumerate(frs) if len(f.points) == m], dtype=np.int64)
-        self.P = {m: np.stack([frs[i].points for i in idx]) for m, idx in self.groups.items()}
-        self.T = {m: np.stack([frs[i].thickness for i in idx]) for m, idx in self.groups.items()}
-        self.center = np.stack([f.center for f in frs])
+            self.groups[m] = np.array([e for e, i in enumerate(frag) if len(frs[i].points) == m], dtype=np.int64)
+        self.P = {m: np.stack([self.points[e] for e in idx]) for m, idx in self.groups.items()}
+        self.T = {m: np.stack([frs[frag[e]].thickness for e in idx]) for m, idx in self.groups.items()}
+
+    def to_source(self, e: int, theta: float) -> F64:
+        """Linear part of the map from target offsets to source offsets for entry ``e``."""
+        Rt: F64 = _rot(theta).T
+        return Rt * np.array([[1.0], [-1.0]]) if self.flip[e] else Rt
 
     def shape_distance(self, g: Fragment, omega_s: float) -> tuple[NDArray[np.int64], F64, F64]:
-        """Candidates, their S (Eq. 1) and their rotation angles for target fragment ``g``."""
+        """Entries, their S (Eq. 1) and their rotation angles for target fragment ``g``."""
         m = len(g.points)
         P = self.P[m]
         theta = _best_angles(P, g.points)
@@ -577,7 +597,9 @@ def _complete_background(
             if rest.any():
                 cur = _fill_inward(cur, rest)
             init = up
-        for it in range(iterations):
+        # Full resolution only sharpens what the coarser levels laid out: one pass is enough there
+        # and saves over half the completion time.
+        for it in range(iterations if lv > 0 else 1):
             fieldv, dist, _ = _core.nnf(
                 cur, cur, patch_size=p, iterations=3, levels=1, exact=False,
                 seed=seed + 7919 * (lv * 64 + it + 1), source_mask=smask, target_mask=need,
@@ -613,6 +635,7 @@ def render(
     deform: bool = ...,
     photometric: bool = ...,
     seams: bool = ...,
+    mirror: bool = ...,
     complete: bool = ...,
     patch_size: int = ...,
     completion_iterations: int = ...,
@@ -636,6 +659,7 @@ def render(
     deform: bool = ...,
     photometric: bool = ...,
     seams: bool = ...,
+    mirror: bool = ...,
     complete: bool = ...,
     patch_size: int = ...,
     completion_iterations: int = ...,
@@ -660,6 +684,7 @@ def render(
     deform: bool = True,
     photometric: bool = True,
     seams: bool = True,
+    mirror: bool = True,
     complete: bool = True,
     patch_size: int = 7,
     completion_iterations: int = 4,
@@ -703,6 +728,11 @@ def render(
         Gradient-domain pasting with boundary constraints (default True).
     seams : bool, optional
         Graph-cut seams between overlapping fragments (default True).
+    mirror : bool, optional
+        Also offer every source furcation fragment mirrored (default True). An extension: the
+        paper aligns by rotation only, so with few source furcations a target sub-branch on the
+        other side of its parent finds no match and is painted with a stub on the wrong side.
+        ``False`` is the paper's behaviour.
     complete : bool, optional
         Fill the gaps between the branches (§5.4, default True); without it they stay 0.
     patch_size : int, optional
@@ -759,13 +789,19 @@ def render(
     sources = _fragments(src_sk, lam_f, rf, k, order=False)
     # Without furcation fragments in the source a target furcation is painted by branch fragments.
     targets = _fragments(tgt_sk, lam_f, rf, k, order=True, furcations=any(f.furcation for f in sources))
-    lib = _Library(sources)
+    lib = _Library(sources, mirror=mirror, exclude=_foreign(src_sk, sources, keep=max(3, c_n)))
     H, W = out_shape
     C = img.shape[2]
     canvas = np.zeros((H, W, C), np.float32)
     filled = np.zeros((H, W), bool)
     labels = np.full((H, W), -1, np.int32)
+    # Which target branch's structure each pixel lies on, and which branch painted it: a
+    # sub-branch must cross its parent's already painted banks (Fig. 6), where a colour seam
+    # would cut it off and the Poisson boundary would fade it into the bank.
+    struct = _branch_map(tgt_sk, (H, W))
+    owner = np.full((H, W), -1, np.int32)
     choice = np.zeros(len(targets), np.int64)
+    mirrored = np.zeros(len(targets), bool)
     n_eval = max(4 * c_n, 8)
 
     for j, g in enumerate(targets):
@@ -785,32 +821,35 @@ def render(
             rel = np.stack([ox + x0 - g.center[0], oy + y0 - g.center[1]], axis=1)
             painted = canvas[ys, xs][oy, ox]
             for n, cand in enumerate(order):
-                f = lib.frs[int(idx[cand])]
-                Rt = _rot(float(theta[cand])).T  # target → source rotation
-                sp = rel @ Rt.T + f.center
+                e = int(idx[cand])
+                f = lib.frs[int(lib.frag[e])]
+                sp = rel @ lib.to_source(e, float(theta[cand])).T + f.center
                 vals = _sample(img, sp[:, 0].astype(np.float32)[None], sp[:, 1].astype(np.float32)[None])[0]
                 obj[n] += w_c * k * g.radius**2 * float(((vals - painted) ** 2).sum(axis=1).mean())
         best = np.argsort(obj, kind="stable")[:c_n]
         wts = 1.0 / np.maximum(obj[best], 1e-9)
         pick = int(best[rng.choice(len(best), p=wts / wts.sum())]) if len(best) > 1 else int(best[0])
         cand = int(order[pick])
-        si = int(idx[cand])
+        e = int(idx[cand])
+        si = int(lib.frag[e])
         f = lib.frs[si]
         choice[j] = si
+        mirrored[j] = bool(lib.flip[e])
         R = _rot(float(theta[cand]))
+        M = lib.to_source(e, float(theta[cand]))  # target offsets → source offsets
 
         # Target pixel → source position: rigid inverse of (p + d(p)), d the displacement field.
         hh, ww = disk.shape
         gy, gx = np.mgrid[y0 : y0 + hh, x0 : x0 + ww].astype(np.float64)
         px, py = gx - g.center[0], gy - g.center[1]
         if deform:
-            d = f.points @ R.T - g.points
+            d = lib.points[e] @ R.T - g.points
             dfield = _displacement((hh, ww), y0, x0, g.points + g.center, d, g.radius)
             alpha = _fold_free(dfield, disk)
             px = px + alpha * dfield[..., 0]
             py = py + alpha * dfield[..., 1]
-        mapx = (R[0, 0] * px + R[1, 0] * py + f.center[0]).astype(np.float32)
-        mapy = (R[0, 1] * px + R[1, 1] * py + f.center[1]).astype(np.float32)
+        mapx = (M[0, 0] * px + M[0, 1] * py + f.center[0]).astype(np.float32)
+        mapy = (M[1, 0] * px + M[1, 1] * py + f.center[1]).astype(np.float32)
         warped = _sample(img, mapx, mapy)
 
         region = disk & fill_c
@@ -818,7 +857,12 @@ def render(
             # The cut only needs the overlap and its 1-pixel ring (where the border ties live).
             ry, rx = np.nonzero(region)
             sub = (slice(max(0, ry.min() - 1), ry.max() + 2), slice(max(0, rx.min() - 1), rx.max() + 2))
-            take = seam(canvas[ys, xs][sub], warped[sub], region[sub], a_mask=fill_c[sub], b_mask=disk[sub], threads=t)
+            cross = region & (struct[ys, xs] == g.branch) & (owner[ys, xs] != g.branch)
+            seeds = np.where(cross, 2, 0).astype(np.uint8)[sub] if cross.any() else None
+            take = seam(
+                canvas[ys, xs][sub], warped[sub], region[sub], a_mask=fill_c[sub], b_mask=disk[sub], seeds=seeds,
+                border_weight=None if seeds is None else 1e4, threads=t,
+            )  # fmt: skip
             new = disk & ~fill_c
             new[sub] |= region[sub] & take
         else:
@@ -830,6 +874,11 @@ def render(
             pad = np.pad(known, 1, constant_values=True)
             nb_ok = pad[:-2, 1:-1] & pad[2:, 1:-1] & pad[1:-1, :-2] & pad[1:-1, 2:]
             fixed = new & ~nb_ok
+            # Where this branch's own structure meets what another branch painted, keep its
+            # colours too: that border is structure against bank, not a colour mismatch.
+            foreign = np.pad(fill_c & ~new & (owner[ys, xs] != g.branch), 1, constant_values=False)
+            touch = foreign[:-2, 1:-1] | foreign[2:, 1:-1] | foreign[1:-1, :-2] | foreign[1:-1, 2:]
+            fixed |= new & touch & (struct[ys, xs] == g.branch)
             dst = canvas[ys, xs].copy()
             dst[~fill_c] = warped[~fill_c]
             res = seamless(warped, dst, new, (0, 0), fixed=fixed, tol=1e-4, max_iterations=100, threads=t)
@@ -838,9 +887,14 @@ def render(
             canvas[ys, xs][new] = warped[new]
         filled[ys, xs] |= new
         labels[ys, xs][new] = j
+        owner[ys, xs][new] = g.branch
         if progress is not None:
             progress(j + 1, len(targets) + 1)
 
+    # The gradient-domain paste can overshoot where a fragment's border mismatches strongly;
+    # keep the output within the input's range.
+    lo, hi = img.reshape(-1, C).min(axis=0), img.reshape(-1, C).max(axis=0)
+    np.clip(canvas, lo, hi, out=canvas)
     structure = canvas.copy() if full_output else canvas
     labels[~filled] = -1
     if complete and (~filled).any():
@@ -856,8 +910,41 @@ def render(
     if progress is not None:
         progress(len(targets) + 1, len(targets) + 1)
     if full_output:
-        return RenderResult(canvas, labels, sources, targets, choice, structure)
+        return RenderResult(canvas, labels, sources, targets, choice, mirrored, structure)
     return canvas
+
+
+def _foreign(skeleton: Skeleton, frs: list[Fragment], *, keep: int) -> NDArray[np.bool_]:
+    """Branch fragments whose disk holds part of another branch (the start of a sub-branch,
+    or the parent next to a child's first fragment). Pasted along a plain target branch they
+    leave a stub of a branch that is not there, so they are left out, unless fewer than
+    ``keep`` branch fragments would remain; furcations have their own fragments."""
+    dense = [_dense(b, 1.0) for b in skeleton.branches]
+    out = np.zeros(len(frs), bool)
+    for i, f in enumerate(frs):
+        if f.furcation:
+            continue
+        for bi, (_, pts, th) in enumerate(dense):
+            if bi != f.branch and (np.linalg.norm(pts - f.center, axis=1) - th < f.radius).any():
+                out[i] = True
+                break
+    plain = sum(1 for f in frs if not f.furcation)
+    if plain - int(out.sum()) < keep:
+        out[:] = False
+    return out
+
+
+def _branch_map(skeleton: Skeleton, shape: tuple[int, int]) -> NDArray[np.int32]:
+    """Index of the branch whose structure (thickness plus 2 px) covers each pixel, else -1;
+    children are drawn over their parents."""
+    out = np.full(shape, -1, np.int32)
+    for i, b in enumerate(skeleton.branches):
+        m = np.zeros(shape, np.uint8)
+        for (a, bb), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
+            r = max(0.5 * (r0 + r1), 0.5) + 2.0
+            cv2.line(m, _pt(a), _pt(bb), 1, thickness=max(1, round(2 * r)), lineType=cv2.LINE_8, shift=4)
+        out[m > 0] = i
+    return out
 
 
 def _pt(p: F64) -> tuple[int, int]:
