@@ -7,7 +7,10 @@ target skeleton | structure synthesis (§5.1–5.3, gaps black) | final image wi
 completed (§5.4) | fragment placement map (one colour per target fragment, white = completed).
 Rows: a synthetic river (drawn from a known skeleton) re-rendered along a new skeleton;
 the same with every §5.3 stage switched off (plain rigid copy); a grey vessel picture along a
-rotated, bent skeleton; identity (target = source).
+rotated, bent skeleton; identity (target = source); when ../shared/data is there, one real
+channel of the Colville delta water mask painted along its 180°-turned copy. Last row: 2×
+crops around two furcations of the river: full pipeline (with the target skeleton), full
+pipeline, and without §5.3.
 """
 
 from __future__ import annotations
@@ -16,14 +19,16 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
+import phloem
 from branching_scene import picture, tree
-from phloem.branching import Skeleton, fragments, render
-from sheet_texture import _fit, _label, write_sheet
+from phloem.branching import Branch, RenderResult, Skeleton, fragments, render
+from sheet_texture import ROOT, _fit, _label, write_sheet
 
 
 def _rgb(img: np.ndarray) -> np.ndarray:
@@ -57,11 +62,15 @@ def _labels(lab: np.ndarray) -> np.ndarray:
     return vis
 
 
-def row(name: str, img: np.ndarray, src: Skeleton, tgt: Skeleton, **kw: object) -> list[np.ndarray]:
+def row(
+    name: str, img: np.ndarray, src: Skeleton, tgt: Skeleton, keep: list[RenderResult] | None = None, **kw: Any
+) -> list[np.ndarray]:
     t0 = time.perf_counter()
-    res = render(img, src, tgt, seed=0, full_output=True, **kw)  # type: ignore[call-overload]
+    res = render(img, src, tgt, seed=0, full_output=True, **kw)
     dt = time.perf_counter() - t0
     print(f"{name}: {len(res.targets)} target fragments from {len(res.sources)}, {dt:.2f} s")
+    if keep is not None:
+        keep.append(res)
     return [
         _label(_fit(img), f"{name}: input"),
         _label(_fit(_disks(_rgb(img), src)), "source skeleton + fragments"),
@@ -82,6 +91,34 @@ def vessels() -> tuple[np.ndarray, Skeleton, Skeleton]:
     return img, sk, Skeleton([main, child], (160, 200))
 
 
+def colville() -> tuple[np.ndarray, Skeleton, Skeleton] | None:
+    """The Colville delta water mask (RivGraph, ../shared/data; never committed): one channel
+    traced automatically (as in the shared test), painted along its 180°-turned copy."""
+    path = ROOT.parent / "shared" / "data" / "branching" / "rivgraph_colville_delta_mask.png"
+    if not path.exists():
+        return None
+    sys.path.insert(0, str(ROOT / "tests"))
+    from test_branching_image import _longest_path
+
+    m = phloem.io.read_image(path)
+    water = (m[..., 0] if m.ndim == 3 else m) > 0.5
+    y0, y1, x0, x1 = 540, 1000, 280, 420
+    _, lab, stats, _ = cv2.connectedComponentsWithStats(water[y0:y1, x0:x1].astype(np.uint8), connectivity=8)
+    big = lab == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    pts = _longest_path(big)[::6]
+    thick = cv2.distanceTransform(big.astype(np.uint8), cv2.DIST_L2, 5)[pts[:, 0].astype(int), pts[:, 1].astype(int)]
+    xy = pts[:, ::-1] + [x0, y0]
+    crop = (slice(400, 1150), slice(100, 700))
+    off = np.array([100.0, 400.0])
+    src = Skeleton([Branch(xy - off, thick)], (750, 600))
+    tgt = Skeleton([Branch(2 * xy.mean(axis=0) - xy - off, thick)], (750, 600))
+    return np.ascontiguousarray(m[crop]), src, tgt
+
+
+def _zoom(a: np.ndarray, crop: tuple[slice, slice]) -> np.ndarray:
+    return cv2.resize(np.ascontiguousarray(a[crop]), (256, 256), interpolation=cv2.INTER_NEAREST)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default="out/branching_image_sheet.png")
@@ -90,12 +127,28 @@ def main() -> None:
     img = picture(src, seed=1)
     tgt = tree((340, 560), seed=5, children=3, heading=-0.1, amp=0.35)
     vimg, vsrc, vtgt = vessels()
+    kept: list[RenderResult] = []
     rows = [
-        row("river", img, src, tgt),
-        row("river, no 5.3", img, src, tgt, deform=False, photometric=False, seams=False),
+        row("river", img, src, tgt, kept),
+        row("river, no 5.3", img, src, tgt, kept, deform=False, photometric=False, seams=False),
         row("vessels", vimg, vsrc, vtgt),
         row("identity", img, src, src),
     ]
+    real = colville()
+    if real is not None:
+        rows.append(row("Colville channel", *real))
+    # 2x crops around the first furcations: seams and junctions are invisible at sheet scale.
+    full, plain = kept
+    tiles = []
+    for g in [g for g in full.targets if g.furcation][:2]:
+        y0, x0 = max(0, int(g.center[1]) - 64), max(0, int(g.center[0]) - 64)
+        crop = (slice(y0, y0 + 128), slice(x0, x0 + 128))
+        tiles += [
+            _label(_zoom(tgt.draw(full.image), crop), "zoom x2: output + skeleton"),
+            _label(_zoom(full.image, crop), "zoom x2: output"),
+            _label(_zoom(plain.image, crop), "zoom x2: no 5.3"),
+        ]
+    rows.append(tiles)
     write_sheet(rows, args.out)
     print(f"wrote {args.out}")
 

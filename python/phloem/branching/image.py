@@ -582,7 +582,11 @@ def _complete_background(
     for lv in range(len(pyr) - 1, -1, -1):
         orig, hole_l, need, smask = pyr[lv]
         depth = cv2.distanceTransform(hole_l.astype(np.uint8), cv2.DIST_L2, 3)
-        conf = np.power(WEXLER_GAMMA, -depth).astype(np.float32)
+        # Wexler's confidence γ^−d, with d capped: gaps between branches are hundreds of pixels
+        # wide and the weights deep inside underflowed float32 (pixels voted 0, black specks).
+        # Patches voting on one pixel have depths within a patch width, so the cap only
+        # flattens their relative weights where all are deep.
+        conf = np.power(WEXLER_GAMMA, -np.minimum(depth, 40.0)).astype(np.float32)
         cur = orig.copy()
         init = None
         if fieldv is not None:
@@ -591,7 +595,7 @@ def _complete_background(
             bad = ~smask[np.maximum(up[..., 0], 0), np.maximum(up[..., 1], 0)] & need
             up[bad] = -1
             voted, wsum = _core.vote(orig, up, patch_size=p, threads=threads)
-            fill = hole_l & (wsum > 0)
+            fill = hole_l & (wsum > 1e-30)
             cur[fill] = voted[fill]
             rest = hole_l & ~fill
             if rest.any():
@@ -610,7 +614,7 @@ def _complete_background(
             wvote = np.zeros(dist.shape, np.float32)
             wvote[need] = np.exp(-dd / (2.0 * sigma2)) * conf[need]
             voted, wsum = _core.vote(cur, fieldv, patch_size=p, weights=wvote, threads=threads)
-            fill = hole_l & (wsum > 0)
+            fill = hole_l & (wsum > 1e-30)
             cur[fill] = voted[fill]
             init = fieldv
     assert cur is not None
@@ -894,7 +898,7 @@ def render(
     # The gradient-domain paste can overshoot where a fragment's border mismatches strongly;
     # keep the output within the input's range.
     lo, hi = img.reshape(-1, C).min(axis=0), img.reshape(-1, C).max(axis=0)
-    np.clip(canvas, lo, hi, out=canvas)
+    canvas[filled] = np.clip(canvas[filled], lo, hi)
     structure = canvas.copy() if full_output else canvas
     labels[~filled] = -1
     if complete and (~filled).any():
