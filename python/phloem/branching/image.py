@@ -605,7 +605,7 @@ def _complete_background(
         # and saves over half the completion time.
         for it in range(iterations if lv > 0 else 1):
             fieldv, dist, _ = _core.nnf(
-                cur, cur, patch_size=p, iterations=3, levels=1, exact=False,
+                cur, cur, patch_size=p, iterations=3 if lv > 0 else 1, levels=1, exact=False,
                 seed=seed + 7919 * (lv * 64 + it + 1), source_mask=smask, target_mask=need,
                 init=init, threads=threads,
             )  # fmt: skip
