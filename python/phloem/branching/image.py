@@ -14,15 +14,27 @@ paints the target structure with disk-shaped fragments of the input:
    difference with what is already painted in the overlap; one of the ``c`` best is drawn
    with probability inversely proportional to its objective.
 3. The chosen fragment is deformed by the smooth displacement field that carries its skeleton
-   samples onto the target's (:func:`phloem.blend.interpolate_field`), cut against the
-   painted pixels along a minimum-cost seam (:func:`phloem.seams.seam`) and pasted in the
-   gradient domain with its colours held fixed where it borders unpainted pixels
-   (:func:`phloem.blend.seamless` with ``fixed``, §5.3). Before a sub-branch starts, the disk
-   of its furcation fragment is deleted from the output and repainted by a furcation fragment
-   (Fig. 6).
+   samples onto the target's (the energy of :func:`phloem.blend.interpolate_field`, solved
+   directly on a grid of ~8 cells per radius and upsampled; scaled down where it would fold
+   the fragment), cut against the painted pixels along a minimum-cost seam
+   (:func:`phloem.seams.seam`) and pasted in the gradient domain with its colours held fixed
+   where it borders unpainted pixels (:func:`phloem.blend.seamless` with ``fixed``, §5.3).
+   Before a sub-branch starts, the disk of its furcation fragment is deleted from the output
+   and repainted by a furcation fragment (Fig. 6).
 4. The gaps between the branches are completed automatically (§5.4) by patch-based
-   completion whose patches may come only from the input image's background: the source
-   structure, dilated to the fragment radius, is excluded, so no pseudo-branches appear.
+   completion (Wexler et al.) whose patches may come only from the input image's background:
+   the source structure, dilated to the fragment radius, is excluded, so no pseudo-branches
+   of the traced structure appear.
+
+Beyond the paper (each needed for clean junctions, see the tests):
+
+- a sub-branch crosses the banks its parent's fragments painted; there the seam must give
+  the sub-branch's own structure pixels to the new fragment, and the Poisson paste keeps
+  their colours (a colour seam cut the sub-branch off, the Poisson boundary faded it out);
+- source branch fragments that hold part of another branch (a sub-branch's start) are left
+  to the furcation fragments: pasted along a plain target branch they left stubs;
+- furcation fragments are also offered mirrored (``mirror=True``), since with rotations only
+  a target sub-branch on the other side of its parent may have no match.
 
 Perspective rectification (Fig. 8) is not implemented.
 """
