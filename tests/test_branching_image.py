@@ -141,6 +141,8 @@ def test_render_is_deterministic_for_a_seed() -> None:
     a = render(img, sk, tgt, seed=7, full_output=True)
     b = render(img, sk, tgt, seed=7, full_output=True)
     assert np.array_equal(a.image, b.image) and np.array_equal(a.choice, b.choice)
+    one = render(img, sk, tgt, seed=7, threads=1)
+    assert np.array_equal(one, a.image)  # whatever the number of threads
     others = [render(img, sk, tgt, seed=s, c=4, complete=False, full_output=True).choice for s in range(4)]
     assert any(not np.array_equal(others[0], o) for o in others[1:])
 
