@@ -829,6 +829,9 @@ def render(
 
     for j, g in enumerate(targets):
         ys, xs, disk, y0, x0 = _disk((H, W), g.center, g.radius)
+        # Colour consistency is measured against what is painted, including the parent's
+        # pixels a furcation fragment is about to replace: they are the best colour reference.
+        over = disk & filled[ys, xs]
         if g.furcation:
             # Fig. 6: the parent's fragments are deleted where the furcation fragment goes.
             filled[ys, xs] &= ~disk
@@ -836,7 +839,6 @@ def render(
         idx, S, theta = lib.shape_distance(g, w_s)
         order = np.argsort(S, kind="stable")[:n_eval]
         obj = S[order].copy()
-        over = disk & fill_c
         if w_c > 0 and over.any():
             oy, ox = np.nonzero(over)
             step = max(1, int(math.sqrt(len(oy) / 400)))
@@ -891,6 +893,8 @@ def render(
         else:
             new = disk.copy()
         if not new.any():
+            if progress is not None:
+                progress(j + 1, len(targets) + 1)
             continue
         if photometric and (fill_c & ~new).any():
             known = new | (fill_c & ~new)
