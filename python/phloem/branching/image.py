@@ -760,7 +760,9 @@ def render(
         full-resolution level copies pixels through the upsampled half-resolution field
         without a search of its own.
     threads : int, optional
-        Worker threads of the engines.
+        Worker threads of the gap completion. The per-fragment seam and Poisson solves run on
+        one thread: on crops of a few 10⁴ pixels more threads only add overhead (measured:
+        1.20 s with one thread against 1.64 s with two on the river-size bench).
     progress : callable, optional
         Called as ``progress(done, total)`` after each target fragment (and once at the end).
     full_output : bool, optional
@@ -886,7 +888,7 @@ def render(
             seeds = np.where(cross, 2, 0).astype(np.uint8)[sub] if cross.any() else None
             take = seam(
                 canvas[ys, xs][sub], warped[sub], region[sub], a_mask=fill_c[sub], b_mask=disk[sub], seeds=seeds,
-                border_weight=None if seeds is None else 1e4, threads=t,
+                border_weight=None if seeds is None else 1e4, threads=1,
             )  # fmt: skip
             new = disk & ~fill_c
             new[sub] |= region[sub] & take
@@ -908,7 +910,7 @@ def render(
             fixed |= new & touch & (struct[ys, xs] == g.branch)
             dst = canvas[ys, xs].copy()
             dst[~fill_c] = warped[~fill_c]
-            res = seamless(warped, dst, new, (0, 0), fixed=fixed, tol=1e-4, max_iterations=100, threads=t)
+            res = seamless(warped, dst, new, (0, 0), fixed=fixed, tol=1e-4, max_iterations=100, threads=1)
             # The gradient-domain paste can overshoot where a border mismatches strongly; keep
             # the output within the input's range.
             canvas[ys, xs][new] = np.clip(res.reshape(hh, ww, C)[new], lo, hi)  # basic slices: a view of canvas
