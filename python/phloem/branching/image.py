@@ -908,12 +908,15 @@ def render(
             foreign = np.pad(fill_c & ~new & (owner[ys, xs] != g.branch), 1, constant_values=False)
             touch = foreign[:-2, 1:-1] | foreign[2:, 1:-1] | foreign[1:-1, :-2] | foreign[1:-1, 2:]
             fixed |= new & touch & (struct[ys, xs] == g.branch)
-            dst = canvas[ys, xs].copy()
-            dst[~fill_c] = warped[~fill_c]
-            res = seamless(warped, dst, new, (0, 0), fixed=fixed, tol=1e-4, max_iterations=100, threads=1)
+            # Solve on the box of the new pixels and their 1-pixel ring only (the same system).
+            ny, nx = np.nonzero(new)
+            bx = (slice(max(0, ny.min() - 1), ny.max() + 2), slice(max(0, nx.min() - 1), nx.max() + 2))
+            dst = canvas[ys, xs][bx].copy()
+            dst[~fill_c[bx]] = warped[bx][~fill_c[bx]]
+            res = seamless(warped[bx], dst, new[bx], (0, 0), fixed=fixed[bx], tol=1e-4, max_iterations=100, threads=1)
             # The gradient-domain paste can overshoot where a border mismatches strongly; keep
-            # the output within the input's range.
-            canvas[ys, xs][new] = np.clip(res.reshape(hh, ww, C)[new], lo, hi)  # basic slices: a view of canvas
+            # the output within the input's range. (Basic slices: views of canvas.)
+            canvas[ys, xs][bx][new[bx]] = np.clip(res.reshape(*dst.shape)[new[bx]], lo, hi)
         else:
             canvas[ys, xs][new] = warped[new]
         filled[ys, xs] |= new
