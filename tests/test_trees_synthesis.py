@@ -200,7 +200,7 @@ def test_variation_deterministic_for_seed_and_threads(library):
     assert len(set(a.sources)) == 2
     assert 0.3 <= a.weights[0] <= 0.7 and a.weights.sum() == pytest.approx(1.0)
     rec = a.describe(library)
-    assert set(rec["sources"]) <= {"a", "b", "c", "d"}
+    assert set(rec["exemplars"]) <= {"a", "b", "c", "d"}
 
 
 @pytest.mark.parametrize("colors", ["random", "contour", "single"])

@@ -44,6 +44,7 @@ from ._validate import as_image, as_mask, check_float, check_int
 
 __all__ = [
     "Library",
+    "morph_table",
     "Tree",
     "Variation",
     "cages",
@@ -1086,9 +1087,11 @@ def morph(
     1. ``C_r' = Σ w_i C_r,i`` (:func:`combine_contours`);
     2. the preliminary alpha: ``C_r'`` drawn and flood-filled from outside (:func:`fill_contour`);
     3. matching cages ``C_s'`` and ``C_s,i`` (:func:`cages`);
-    4. every source warped onto the target cage by mean value coordinates and combined:
-       alpha is the largest warped alpha, colour the ``color_weights`` combination of the
-       sources that are not transparent there (:func:`phloem.warp.mvc_combine`);
+    4. every source with a non-zero colour weight warped onto the target cage by mean value
+       coordinates and combined: alpha is the largest warped alpha, colour the
+       ``color_weights`` combination of the sources that are not transparent there
+       (:func:`phloem.warp.mvc_combine`); a source with colour weight 0 shapes the contour
+       only (as in the paper's Fig. 14 and the "sampling one of the two images" of Fig. 16);
     5. pixels farther than ``dilation`` from the preliminary alpha are cleared, so the
        transferred alpha refines the contour's shape but cannot leave its cage.
 
@@ -1099,7 +1102,7 @@ def morph(
     weights : (len(trees),) array_like
         Contour weights: non-negative, summing to 1.
     color_weights : (len(trees),) array_like, optional
-        Colour weights (default: ``weights``).
+        Colour weights (default: ``weights``); at least one must be positive.
     m, dilation : int, optional
         Cage points and dilation (see :func:`simplify`).
     threads : int, optional
@@ -1132,13 +1135,15 @@ def morph(
     cw = w if color_weights is None else _convex_weights(color_weights, len(ts), "color_weights")
     target = combine_contours([t.resampled for t in ts], w)
     mask = fill_contour(target, shape)
-    tc, scs = cages(target, ts, shape, m=m, dilation=dilation, mask=mask)
+    keep = [i for i in range(len(ts)) if cw[i] > 0]
+    tc, scs = cages(target, [ts[i] for i in keep], shape, m=m, dilation=dilation, mask=mask)
     from . import warp
 
     # `dilation` 3 x 3 dilations are one square dilation of side 2 * dilation + 1.
     side = 2 * dilation + 1
     region = cv2.dilate(mask.astype(np.uint8), np.ones((side, side), np.uint8)) > 0
-    return warp.mvc_combine([t.image for t in ts], scs, tc, cw, shape, region=region, threads=threads)
+    ck = cw[keep] / cw[keep].sum()
+    return warp.mvc_combine([ts[i].image for i in keep], scs, tc, ck, shape, region=region, threads=threads)
 
 
 @dataclass
@@ -1319,7 +1324,7 @@ class Variation:
     def describe(self, library: Library) -> dict[str, Any]:
         """A JSON-ready record (names and weights) for a result sidecar."""
         return {
-            "sources": [library.names[i] for i in self.sources],
+            "exemplars": [library.names[i] for i in self.sources],
             "weights": [round(float(v), 6) for v in self.weights],
             "color_weights": [round(float(v), 6) for v in self.color_weights],
             "histogram_reference": None if self.reference is None else library.names[self.reference],
@@ -1514,4 +1519,77 @@ def vary(
         w = np.concatenate([[wt], (1.0 - wt) * _draw_weights(rng, k - 1, spread)])
         cw = _color_weights(rng, w, colors, spread)
         out.append(_make(library, idx, w, cw, rng, histogram, threads, extra=t))
+    return out
+
+
+def morph_table(
+    trees: Sequence[Tree],
+    *,
+    tile: int = 192,
+    colors: bool = True,
+    background: tuple[float, float, float] = (0.8, 0.8, 0.8),
+    threads: int | None = None,
+) -> F32:
+    """The paper's combination tables (Fig. 13 and Fig. 14) for a few exemplars, as one image.
+
+    Row ``i``, column ``j`` (``i != j``) shows the contour ``w_i C_i + w_j C_j`` with weights
+    2/3 and 1/3 in the lower triangle and 1/3 and 2/3 in the upper one, filled with the colours
+    of the row's tree only (Fig. 14) or, with ``colors=False``, as a silhouette (Fig. 13). The
+    diagonal shows the exemplars, and the first row and column repeat them as headers.
+
+    Parameters
+    ----------
+    trees : sequence of Tree
+        Two or more exemplars (the paper shows seven).
+    tile : int, optional
+        Side of each cell in pixels.
+    colors : bool, optional
+        Colour transfer (Fig. 14) or silhouettes of the combined contours (Fig. 13).
+    background : (float, float, float), optional
+        RGB shown behind transparent pixels.
+    threads : int, optional
+        Worker threads for the warps.
+
+    Returns
+    -------
+    ((k + 1) * tile, (k + 1) * tile, 3) float32 ndarray
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> a = np.zeros((120, 80, 4), np.float32); a[10:70, 10:70] = 1.0; a[70:110, 35:45] = 1.0
+    >>> ts = [phloem.trees.prepare(x, size=96, split=(160, 20, 20), m=30) for x in (a, a[:, ::-1])]
+    >>> phloem.trees.morph_table(ts, tile=32).shape
+    (96, 96, 3)
+    """
+    ts = list(trees)
+    if len(ts) < 2:
+        raise ValueError(f"trees: a combination table needs at least two exemplars, got {len(ts)}")
+    tile = check_int(tile, "tile", 8)
+    k = len(ts)
+    bg = np.asarray(background, np.float32)
+    out = np.empty(((k + 1) * tile, (k + 1) * tile, 3), np.float32)
+    out[:] = bg
+
+    def put(r: int, c: int, rgba: F32) -> None:
+        small = cv2.resize(rgba, (tile, tile), interpolation=cv2.INTER_AREA)
+        a = small[..., 3:4]
+        out[r * tile : (r + 1) * tile, c * tile : (c + 1) * tile] = small[..., :3] * a + bg * (1 - a)
+
+    m = len(ts[0].simplified)
+    for i, t in enumerate(ts):
+        put(0, i + 1, t.image)
+        put(i + 1, 0, t.image)
+        for j, u in enumerate(ts):
+            if i == j:
+                cell = t.image
+            else:
+                w = [2 / 3, 1 / 3] if i > j else [1 / 3, 2 / 3]
+                if colors:
+                    cell = morph([t, u], w, color_weights=[1.0, 0.0], m=m, threads=threads)
+                else:
+                    sil = fill_contour(combine_contours([t.resampled, u.resampled], w), t.image.shape[:2])
+                    cell = np.zeros((*sil.shape, 4), np.float32)
+                    cell[sil] = (0.15, 0.35, 0.15, 1.0)
+            put(i + 1, j + 1, cell)
     return out
