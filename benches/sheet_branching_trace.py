@@ -24,7 +24,7 @@ SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "branching"
 
 # name -> trace() arguments that suit it
 CASES: dict[str, dict[str, Any]] = {
-    "skimage_retina.jpg": {"kind": "dark", "channel": 1, "sigmas": (1.5, 3.0)},
+    "skimage_retina.jpg": {"kind": "dark", "channel": 1, "sigmas": (1.5, 3.0, 5.0)},
     "rivgraph_colville_delta_mask.png": {"kind": "mask"},
     "rivgraph_brahmaputra_braided_mask.png": {"kind": "mask"},
     "rivgraph_mouse_brain_vessels.png": {"kind": "dark", "sigmas": (1.5, 3.0)},
