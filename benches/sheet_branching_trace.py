@@ -27,8 +27,8 @@ CASES: dict[str, dict[str, Any]] = {
     "skimage_retina.jpg": {"kind": "dark", "channel": 1, "sigmas": (1.5, 3.0, 5.0)},
     "rivgraph_colville_delta_mask.png": {"kind": "mask"},
     "rivgraph_brahmaputra_braided_mask.png": {"kind": "mask"},
-    "rivgraph_mouse_brain_vessels.png": {"kind": "dark", "sigmas": (1.5, 3.0)},
-    "mpl_jacksboro_fault_dem_u16.png": {"kind": "bright", "sigmas": (1.5, 3.0)},
+    "rivgraph_mouse_brain_vessels.png": {"kind": "dark", "sigmas": (1.5, 3.0, 5.0)},
+    "mpl_jacksboro_fault_dem_u16.png": {"kind": "bright", "sigmas": (3.0, 6.0)},
     "skimage_microaneurysms.png": {"kind": "dark", "sigmas": (1.5, 3.0)},
 }
 
