@@ -211,6 +211,12 @@ def test_photo_of_a_tree_traced_by_ridge_filter(dark):
     assert np.percentile(d, 95) <= 2.0
     # most of the structure is found
     assert sk.total_length() > 0.8 * sum(np.hypot(*(b - a)) for a, b, _, _ in TREE.segs) - 40
+    # thickness by maximum gradient: right within a pixel away from forks and tips
+    thick = np.concatenate([b.thickness for b in sk.branches])
+    keep = ~_near(pts, [*JUNCTIONS, *TREE_TIPS.values(), (100, 190)], 10.0)
+    _, r = TREE.nearest(pts[keep])
+    assert np.median(np.abs(thick[keep] - r)) < 0.5
+    assert np.percentile(np.abs(thick[keep] - r), 90) < 1.0
 
 
 def test_photo_rim_is_not_a_ridge_and_broken_vessels_are_bridged():
@@ -275,6 +281,8 @@ def test_estimate_thickness_keeps_structure():
         (Y_SHAPE.mask(), {"root": (500, 5)}, ValueError, "root"),
         (Y_SHAPE.mask(), {"channel": 2}, ValueError, "channel"),
         (Y_SHAPE.mask(), {"h": 0.0}, ValueError, "h"),
+        (Y_SHAPE.mask(), {"thickness": "dt"}, ValueError, "thickness"),
+        (Y_SHAPE.mask(), {"gap": -1.0}, ValueError, "gap"),
         (Y_SHAPE.mask(), {"kind": "mask", "threshold": 2.0}, ValueError, "image: nothing to trace"),
     ],
 )

@@ -10,7 +10,8 @@ dark curvilinear structures) with a multi-scale Hessian filter and thresholded. 
 cleaned, skeletonised, turned into a pixel graph, cut into a forest (braided rivers have
 cycles), and every tree is decomposed into branches by longest paths: the longest path from the
 root is the main branch, and each other subtree hanging off it becomes a child branch, its own
-longest path first, recursively. Thickness comes from the distance transform of the mask.
+longest path first, recursively. Thickness comes from the distance transform of a mask, and
+from :func:`estimate_thickness` on a photo.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ __all__ = ["estimate_thickness", "trace"]
 F64 = NDArray[np.float64]
 F32 = NDArray[np.float32]
 Kind = Literal["auto", "bright", "dark", "mask"]
+Thickness = Literal["auto", "mask", "gradient"]
 _KINDS = ("auto", "bright", "dark", "mask")
 
 
@@ -431,6 +433,7 @@ def trace(
     root: tuple[float, float] | None = None,
     channel: int | None = None,
     gap: float | None = None,
+    thickness: Thickness = "auto",
 ) -> Skeleton:
     """Trace the skeleton of a branching structure in an image (beyond [1]_, its future work).
 
@@ -460,6 +463,11 @@ def trace(
     6. **Polylines.** Pixel chains are smoothed by a Gaussian of ``smooth`` vertices (the first
        vertex is kept so children stay attached), thickness likewise, and resampled to edge
        length ``h`` when given.
+    7. **Thickness.** ``thickness="mask"`` keeps the distance-transform radius (default for
+       masks). ``"gradient"`` (default for photos, whose ridge masks are narrower than the
+       structure) replaces it by :func:`estimate_thickness` on the gray image with
+       ``max_radius = 2 max(sigmas) + 2``, median-filtered over 5 vertices and smoothed like
+       the points (before the resampling of 6.).
 
     Parameters
     ----------
@@ -489,6 +497,8 @@ def trace(
         Join skeleton ends to another piece up to this far ahead (px; see ``_bridge``):
         ridge filters break vessels where they cross or fork. Default ``2 max(sigmas) + 3`` for
         photos, 0 (off) for masks.
+    thickness : {"auto", "mask", "gradient"}
+        Where the radii come from, see 7.
 
     Returns
     -------
@@ -521,6 +531,8 @@ def trace(
 
     if kind not in _KINDS:
         raise ValueError(f"kind: expected one of {_KINDS}, got {kind!r}")
+    if thickness not in ("auto", "mask", "gradient"):
+        raise ValueError(f"thickness: expected 'auto', 'mask' or 'gradient', got {thickness!r}")
     gray = _gray(image, channel)
     shape = (int(gray.shape[0]), int(gray.shape[1]))
     sig = _sigmas(sigmas)
@@ -607,6 +619,12 @@ def trace(
     if not branches:
         raise ValueError(f"image: nothing to trace, every branch is shorter than min_length={min_length}")
     sk = Skeleton(branches, shape)
+    if thickness == "gradient" or (thickness == "auto" and kind != "mask"):
+        sk = estimate_thickness(gray, sk, max_radius=2.0 * max(sig) + 2.0)
+        for b in sk.branches:
+            if len(b) > 2:
+                t = ndimage.median_filter(b.thickness, size=5, mode="nearest")
+                b.thickness = ndimage.gaussian_filter1d(t, smooth, mode="nearest") if smooth > 0 else t
     return sk.resample(h) if h is not None else sk
 
 
