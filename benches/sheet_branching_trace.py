@@ -3,7 +3,8 @@
     python benches/sheet_branching_trace.py --out OUT.png [--tile 640]
 
 Each tile is one image of ../shared/data/branching (skipped when absent) with the traced skeleton
-drawn over it: root branches in red, children in yellow, grandchildren and deeper in cyan. The
+drawn over it: root branches in red, children in yellow, grandchildren and deeper in cyan, and
+the outline of the structure as the traced radii describe it in green. The
 tile caption gives the image name, branch count, total length and the trace time.
 """
 
@@ -44,6 +45,9 @@ def overlay(img: np.ndarray, sk: Skeleton, width: int) -> np.ndarray:
     gray = img[..., :3].mean(axis=2) if img.ndim == 3 else img
     gray = (gray - gray.min()) / max(float(gray.max() - gray.min()), 1e-9)
     canvas = np.repeat((0.25 + 0.6 * gray)[..., None], 3, axis=2).astype(np.float32)
+    # the thickness: outline of the skeleton drawn with its radii, in green
+    cnt, _ = cv2.findContours(sk.mask().astype(np.uint8), cv2.RETR_LIST, cv2.CHAIN_APPROX_NONE)
+    cv2.drawContours(canvas, cnt, -1, (0.1, 0.8, 0.2), width)
     colors = [(1.0, 0.1, 0.1), (1.0, 0.9, 0.0), (0.0, 0.9, 1.0)]
     d = depth(sk)
     for level in range(3):
