@@ -611,6 +611,8 @@ def trace(
                 continue
             thick = r[path].astype(np.float64)
             pts = _smooth_path(p, smooth)
+            # the end reflection can push a bent chain at the border a little outside the image
+            np.clip(pts, 0.0, [shape[1] - 1, shape[0] - 1], out=pts)
             if smooth > 0 and len(thick) > 2:
                 thick = ndimage.gaussian_filter1d(thick, smooth, mode="nearest")
             par = None if parent is None else (new_index[parent], at)
