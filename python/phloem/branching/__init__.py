@@ -13,5 +13,6 @@ References
 from __future__ import annotations
 
 from .skeleton import Branch, Skeleton, SkeletonError
+from .trace import estimate_thickness, trace
 
-__all__ = ["Branch", "Skeleton", "SkeletonError"]
+__all__ = ["Branch", "Skeleton", "SkeletonError", "estimate_thickness", "trace"]
