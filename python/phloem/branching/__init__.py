@@ -13,5 +13,12 @@ References
 from __future__ import annotations
 
 from .skeleton import Branch, Skeleton, SkeletonError
+from .structure import (
+    BendingModel, FurcationModel, angle_histogram, default_h, extend, grow, histogram_distance, synthetic_skeleton,
+    thickness_histogram,
+)
 
-__all__ = ["Branch", "Skeleton", "SkeletonError"]
+__all__ = [
+    "BendingModel", "Branch", "FurcationModel", "Skeleton", "SkeletonError", "angle_histogram", "default_h", "extend",
+    "grow", "histogram_distance", "synthetic_skeleton", "thickness_histogram",
+]

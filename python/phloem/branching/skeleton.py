@@ -168,7 +168,7 @@ class Branch:
         seg = np.linalg.norm(np.diff(self.points, axis=0), axis=1)
         cum = np.concatenate([[0.0], np.cumsum(seg)])
         total = float(cum[-1])
-        count = int(math.floor(total / h + 1e-9)) + 1
+        count = math.floor(total / h + 1e-9) + 1
         if count < 2:
             return Branch(self.points[[0, -1]].copy(), self.thickness[[0, -1]].copy(), self.parent)
         # Points at arc lengths k*h would leave chords shorter than h where the polyline turns;
@@ -335,7 +335,7 @@ class Skeleton:
         for b in self.branches:
             for (p, q), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
                 r = max(0.5 * (r0 + r1), 0.5)
-                cv2.line(out, _pt(p), _pt(q), 1, thickness=max(1, int(round(2 * r))), lineType=cv2.LINE_8, shift=4)
+                cv2.line(out, _pt(p), _pt(q), 1, thickness=max(1, round(2 * r)), lineType=cv2.LINE_8, shift=4)
         return out.astype(bool)
 
     def draw(self, image: Any = None, *, shape: tuple[int, int] | None = None, color: Sequence[float] = (1.0, 0.2, 0.1), width: int = 1, vertices: bool = False) -> NDArray[np.float32]:
@@ -456,4 +456,4 @@ class Skeleton:
 
 
 def _pt(p: F64) -> tuple[int, int]:
-    return int(round(p[0] * 16)), int(round(p[1] * 16))
+    return round(p[0] * 16), round(p[1] * 16)
