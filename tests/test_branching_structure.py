@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 import pytest
-
 from phloem.branching import (
     BendingModel,
     Branch,
@@ -47,7 +46,7 @@ def forest(seed: int, sigma: float = 0.25, branches: int = 3) -> Skeleton:
         assert p.shape is not None
         y0 += p.shape[0]
         width = max(width, p.shape[1])
-    return Skeleton(out, (int(math.ceil(y0)), width))
+    return Skeleton(out, (math.ceil(y0), width))
 
 
 def segments(sk: Skeleton) -> tuple[np.ndarray, np.ndarray]:
@@ -156,6 +155,21 @@ def test_grown_histograms_match_the_input(source: Skeleton, models: tuple[Bendin
     other = forest(40, sigma=0.6)
     wild = grow(BendingModel.fit(other, h=H), shape=(400, 400), seed=2, generations=1)
     assert histogram_distance(angle_histogram(wild, range=ra)[0], bend.hist_alpha) > bound_a
+
+
+def test_histogram_matching_brings_histograms_closer(source: Skeleton, models: tuple[BendingModel, FurcationModel]):
+    bend, fur = models
+    plain = BendingModel.fit(source, h=H, omega_g=0.0)
+
+    def distance(model: BendingModel) -> float:
+        total = 0.0
+        for seed in range(3):
+            out = grow(model, fur, shape=(400, 400), seed=seed, generations=2)
+            total += histogram_distance(angle_histogram(out, range=bend.range_alpha)[0], bend.hist_alpha)
+            total += histogram_distance(thickness_histogram(out, range=bend.range_r)[0], bend.hist_r)
+        return total
+
+    assert distance(bend) < 0.7 * distance(plain)
 
 
 def test_no_crossings_with_colonisation(models: tuple[BendingModel, FurcationModel]):

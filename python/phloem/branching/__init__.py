@@ -14,7 +14,14 @@ from __future__ import annotations
 
 from .skeleton import Branch, Skeleton, SkeletonError
 from .structure import (
-    BendingModel, FurcationModel, angle_histogram, default_h, extend, grow, histogram_distance, synthetic_skeleton,
+    BendingModel,
+    FurcationModel,
+    angle_histogram,
+    default_h,
+    extend,
+    grow,
+    histogram_distance,
+    synthetic_skeleton,
     thickness_histogram,
 )
 
