@@ -814,6 +814,9 @@ class _World:
         self.guide = guide
         self.rng = rng
         self.dist = np.full(shape, np.inf, np.float32) if colonize else None
+        # which branch vertex each pixel's distance comes from, to ignore where a child starts
+        self.owner_branch = np.full(shape, -1, np.int32) if colonize else None
+        self.owner_vertex = np.full(shape, -1, np.int32) if colonize else None
         self.seg_a: list[F64] = []
         self.seg_b: list[F64] = []
         self._segs: tuple[F64, F64] | None = None
@@ -842,9 +845,12 @@ class _World:
         np.add.at(self.counts_alpha, _bin(alpha, *m.range_alpha, m.bins), 1.0)
         np.add.at(self.counts_r, _bin(r, *m.range_r, m.bins), 1.0)
 
-    def stamp(self, pts: F64, thick: F64) -> None:
-        """Write segments into the distance map, only within ``3ρ`` of them (§4.4 local update)."""
-        if self.dist is None or len(pts) < 2:
+    def stamp(self, pts: F64, thick: F64, branch: int, first: int) -> None:
+        """Write segments into the distance map, only within ``3ρ`` of them (§4.4 local update).
+
+        ``pts`` are vertices ``first, first + 1, ...`` of branch ``branch``.
+        """
+        if self.dist is None or self.owner_branch is None or self.owner_vertex is None or len(pts) < 2:
             return
         H, W = self.shape
         reach = 3.0 * self.rho + float(thick.max())
@@ -857,14 +863,22 @@ class _World:
         yy, xx = np.mgrid[y0:y1, x0:x1]
         grid = np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float64)
         best = np.full(len(grid), np.inf)
+        which = np.zeros(len(grid), np.int32)
         for j in range(len(pts) - 1):
             a, d = pts[j], pts[j + 1] - pts[j]
             dd = float(d @ d)
             t = np.zeros(len(grid)) if dd == 0 else np.clip((grid - a) @ d / dd, 0.0, 1.0)
             e = np.linalg.norm(grid - (a + t[:, None] * d), axis=1) - (thick[j] + t * (thick[j + 1] - thick[j]))
-            np.minimum(best, np.maximum(e, 0.0), out=best)
+            e = np.maximum(e, 0.0)
+            closer = e < best
+            best[closer] = e[closer]
+            which[closer] = j + np.rint(t[closer]).astype(np.int32)
         view = self.dist[y0:y1, x0:x1]
-        np.minimum(view, best.reshape(view.shape).astype(np.float32), out=view)
+        new = best.reshape(view.shape).astype(np.float32)
+        closer2 = new < view
+        view[closer2] = new[closer2]
+        self.owner_branch[y0:y1, x0:x1][closer2] = branch
+        self.owner_vertex[y0:y1, x0:x1][closer2] = first + which.reshape(view.shape)[closer2]
 
     def density_mean(self) -> float:
         if self.dist is None:
@@ -959,6 +973,8 @@ class _Grower:
         self.world = world
         self.model = model
         self.cum_alpha = np.cumsum(model.next_alpha, axis=1)
+        # vertices around a child's attachment on its parent that its density lookups ignore
+        self.near = math.ceil(3.0 * world.rho / model.h) + 1
 
     def step(self, br: _Growing) -> bool:
         """Append one extension of ``m`` elements to ``br``; False when no candidate is valid."""
@@ -980,7 +996,7 @@ class _Grower:
             length = 3.0 * m.m * m.h
             samples = max(3 * m.m, 4)
             if w.colonize and w.dist is not None:
-                q -= np.log(w.ray_max(_DensityView(w), tip, direction, length, samples) + _EPS)
+                q -= np.log(w.ray_max(_DensityView(w, br.parent, self.near), tip, direction, length, samples) + _EPS)
             if w.guide is not None:
                 q -= np.log(w.ray_max(w.guide, tip, direction, length, samples) + _EPS)
         choice = self._choose(q, tip, ext)
@@ -1038,20 +1054,34 @@ class _Grower:
         if upto > br.inserted:
             pts = np.asarray(br.points[br.inserted : upto + 1])
             th = np.asarray(br.thickness[br.inserted : upto + 1])
-            w.stamp(pts, th)
+            w.stamp(pts, th, br.index, br.inserted)
             br.inserted = upto
 
 
 class _DensityView:
-    """``D = exp(-d²/ρ²)`` read lazily from the distance map (indexing only, no full-map copy)."""
+    """``D = exp(-d²/ρ²)`` read lazily from the distance map (indexing only, no full-map copy).
 
-    def __init__(self, world: _World) -> None:
+    A child starts on its parent, so every direction would see ``D = 1`` there and the
+    density could not tell directions apart; pixels whose nearest structure is the parent
+    within ``near`` vertices of the attachment read as empty (the child's own last ``3ρ``
+    are held back from the map for the same reason).
+    """
+
+    def __init__(self, world: _World, parent: tuple[int, int] | None = None, near: int = 0) -> None:
         self.world = world
+        self.parent = parent
+        self.near = near
 
     def __getitem__(self, key: Any) -> Any:
-        assert self.world.dist is not None
-        d = self.world.dist[key].astype(np.float64)
-        return np.exp(-(d**2) / self.world.rho**2)
+        w = self.world
+        assert w.dist is not None and w.owner_branch is not None and w.owner_vertex is not None
+        d = w.dist[key].astype(np.float64)
+        out = np.exp(-(d**2) / w.rho**2)
+        if self.parent is not None:
+            pb, pv = self.parent
+            skip = (w.owner_branch[key] == pb) & (np.abs(w.owner_vertex[key] - pv) <= self.near)
+            out[skip] = 0.0
+        return out
 
 
 def _points_for(br: _Growing, alpha: F64, h: float) -> F64:
@@ -1382,9 +1412,9 @@ def extend(
     hold = math.ceil(3.0 * rho / h) + 1
     for j, b in enumerate(skeleton.branches):
         if j != bi:
-            world.stamp(b.points, b.thickness)
+            world.stamp(b.points, b.thickness, j, 0)
         elif len(b) - 1 - hold > 0:
-            world.stamp(b.points[: len(b) - hold], b.thickness[: len(b) - hold])
+            world.stamp(b.points[: len(b) - hold], b.thickness[: len(b) - hold], j, 0)
     br.inserted = max(len(target) - 1 - hold, 0)
     n0 = len(target)
     keep = float(target.thickness[-1])
