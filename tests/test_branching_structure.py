@@ -309,10 +309,13 @@ def test_guided_growth_follows_the_path(models: tuple[BendingModel, FurcationMod
         return float(np.mean(vals))
 
     assert spread(line) < 0.5 * spread(None)
-    # a map works like the polyline
+    # a map works like the polyline, and so does a painted path mask
     g = np.ones((300, 300))
     g[140:161, :] = 0.0
     assert spread(g) < 0.5 * spread(None)
+    painted = np.zeros((300, 300), bool)
+    painted[150, 10:290] = True
+    assert spread(painted) < 0.5 * spread(None)
 
 
 def test_extend_appends_to_one_branch(models: tuple[BendingModel, FurcationModel]):

@@ -476,14 +476,11 @@ def _gaps(n: int, furcations: Sequence[int]) -> tuple[F64, F64]:
     """Index distances ``n⁻, n⁺`` of every vertex to the previous / next furcation (or end point)."""
     marks = np.array(sorted({0, n - 1, *[int(f) for f in furcations]}), dtype=np.int64)
     i = np.arange(n)
-    fur = np.zeros(n, bool)
-    fur[[int(f) for f in furcations if 0 <= int(f) < n]] = True
-    # previous mark strictly before i unless i itself is an end point; same for next
+    # the mark strictly before / after i (a furcation at i does not count for itself)
     prev_pos = np.searchsorted(marks, i, side="left") - 1
     next_pos = np.searchsorted(marks, i, side="right")
     prev = np.where(prev_pos >= 0, marks[np.clip(prev_pos, 0, len(marks) - 1)], 0)
     nxt = np.where(next_pos < len(marks), marks[np.clip(next_pos, 0, len(marks) - 1)], n - 1)
-    del fur
     return (i - prev).astype(np.float64), (nxt - i).astype(np.float64)
 
 
@@ -753,7 +750,8 @@ def _linear_svm(Z: NDArray[np.float32], y: NDArray[np.int32], svm_c: float) -> t
     # OpenCV's raw output sign is not tied to the label order; orient by the predicted labels.
     lab = svm.predict(Z)[1].ravel()
     f = Z.astype(np.float64) @ w + b
-    if np.any(lab > 0) and np.mean(f[lab > 0]) < np.mean(f[lab < 0]) or (not np.any(lab > 0) and np.mean(f[y > 0]) < np.mean(f[y < 0])):
+    ref = lab if (lab > 0).any() and (lab < 0).any() else y
+    if f[ref > 0].mean() < f[ref < 0].mean():
         w, b = -w, -b
     return w, float(b)
 
@@ -941,20 +939,36 @@ def _cross(P: F64, Q: F64, A: F64, B: F64) -> NDArray[np.bool_]:
 
 
 def _guide_map(guide: Any, shape: tuple[int, int], width: float) -> tuple[F64, F64 | None]:
-    """The guidance map ``G`` (§4.5) and, for a polyline guide, the polyline."""
-    arr = np.asarray(guide, dtype=np.float64)
-    if arr.ndim == 2 and arr.shape == tuple(shape) and not (arr.shape[1] == 2 and arr.shape[0] != shape[0]):
-        if not np.isfinite(arr).all():
+    """The guidance map ``G`` (§4.5) and, for a polyline guide, the polyline.
+
+    A boolean ``(H, W)`` mask marks the path; an ``(n, 2)`` array is an ``(x, y)`` polyline;
+    both become ``G = 1 - exp(-d² / width²)`` with ``d`` the distance to the path. Any other
+    real ``(H, W)`` array is ``G`` itself (integers scaled by their dtype's maximum).
+    """
+    arr = np.asarray(guide)
+    if arr.ndim == 2 and arr.shape == tuple(shape):
+        if arr.dtype == np.bool_:
+            if not arr.any():
+                raise ValueError("guide: the path mask is empty")
+            d = cv2.distanceTransform(np.where(arr, 0, 255).astype(np.uint8), cv2.DIST_L2, 5).astype(np.float64)
+            return 1.0 - np.exp(-(d**2) / width**2), None
+        if not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+            raise TypeError(f"guide: expected a real-valued or boolean map, got dtype {arr.dtype}")
+        g = arr.astype(np.float64)
+        if np.issubdtype(arr.dtype, np.integer):
+            g /= float(np.iinfo(arr.dtype).max)
+        if not np.isfinite(g).all():
             raise ValueError("guide: the guidance map contains NaN or infinity")
-        return np.clip(arr, 0.0, 1.0), None
+        return np.clip(g, 0.0, 1.0), None
     if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < 2:
-        raise ValueError(f"guide: expected an (H, W) = {tuple(shape)} map or an (n, 2) polyline of (x, y), got shape {arr.shape}")
-    if not np.isfinite(arr).all():
+        raise ValueError(f"guide: expected an (H, W) = {tuple(shape)} map or mask, or an (n, 2) polyline of (x, y), got shape {arr.shape}")
+    line = arr.astype(np.float64)
+    if not np.isfinite(line).all():
         raise ValueError("guide: the polyline contains NaN or infinity")
     mask = np.full(shape, 255, np.uint8)
-    cv2.polylines(mask, [np.round(arr * 16).astype(np.int32)], False, 0, thickness=1, lineType=cv2.LINE_8, shift=4)
+    cv2.polylines(mask, [np.round(line * 16).astype(np.int32)], False, 0, thickness=1, lineType=cv2.LINE_8, shift=4)
     d = cv2.distanceTransform(mask, cv2.DIST_L2, 5).astype(np.float64)
-    return 1.0 - np.exp(-(d**2) / width**2), arr
+    return 1.0 - np.exp(-(d**2) / width**2), line
 
 
 def _check_start(start: Any) -> tuple[float, float, float | None] | None:
@@ -1211,8 +1225,11 @@ def grow(
     rho : float, optional
         Density width ``ρ`` in pixels; default ``m h`` (one bending feature).
     guide : (H, W) array or (n, 2) array, optional
-        Guidance (§4.5): a map ``G`` in ``[0, 1]`` (low = attractive) or an ``(x, y)`` polyline,
-        turned into ``G = 1 - exp(-d² / w²)`` with a valley of width ``w = guide_width``.
+        Guidance (§4.5): an ``(x, y)`` polyline or a boolean ``(H, W)`` path mask, turned into
+        ``G = 1 - exp(-d² / w²)`` (a valley of width ``w = guide_width`` along the path), or a
+        real ``(H, W)`` map used as ``G`` directly (values in ``[0, 1]``, low = attractive).
+        Candidate qualities are divided by ``G_i + ε`` with ``G_i`` the maximum of ``G`` along
+        the candidate's direction, as for the density.
     guide_width : float, optional
         Valley width; default ``3 m h``.
     min_spacing : int, optional
