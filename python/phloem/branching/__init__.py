@@ -13,6 +13,20 @@ References
 from __future__ import annotations
 
 from .skeleton import Branch, Skeleton, SkeletonError
+from .structure import (
+    BendingModel,
+    FurcationModel,
+    angle_histogram,
+    default_h,
+    extend,
+    grow,
+    histogram_distance,
+    synthetic_skeleton,
+    thickness_histogram,
+)
 from .trace import estimate_thickness, trace
 
-__all__ = ["Branch", "Skeleton", "SkeletonError", "estimate_thickness", "trace"]
+__all__ = [
+    "BendingModel", "Branch", "FurcationModel", "Skeleton", "SkeletonError", "angle_histogram", "default_h",
+    "estimate_thickness", "extend", "grow", "histogram_distance", "synthetic_skeleton", "thickness_histogram", "trace",
+]
