@@ -8,6 +8,7 @@ and checks all of that before the (possibly long) computation starts.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -223,14 +224,17 @@ def _cmd_bark(args: argparse.Namespace) -> None:
 def _tree_library(args: argparse.Namespace, bar: Any) -> trees.Library:
     src = Path(args.library)
     atlas = {"auto": None, "yes": True, "no": False}[args.atlas]
+    clf = None
+    if args.trunk_model is not None:
+        clf = trees.TrunkClassifier.from_dict(json.loads(Path(args.trunk_model).read_text(encoding="utf-8")))
     if src.is_dir():
-        return trees.Library.from_folder(src, atlas=atlas, size=args.size, skip_bad=args.skip_bad, progress=bar)
+        return trees.Library.from_folder(src, atlas=atlas, size=args.size, skip_bad=args.skip_bad, classifier=clf, progress=bar)
     img = io.read_image(src, max_pixels=args.max_pixels)
     if img.ndim != 3 or img.shape[2] != 4:
         raise ValueError(f"library: {src} has no alpha channel; tree billboards must be RGBA")
     pieces = [img] if atlas is False else trees.split_atlas(img)
     names = [src.name] if len(pieces) == 1 else [f"{src.name}[{i}]" for i in range(len(pieces))]
-    return trees.Library.from_images(pieces, names=names, size=args.size, progress=bar)
+    return trees.Library.from_images(pieces, names=names, size=args.size, classifier=clf, progress=bar)
 
 
 def _cmd_trees(args: argparse.Namespace) -> None:
@@ -430,6 +434,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: random; contour with --like)")  # fmt: skip
     p.add_argument("--histogram", action="store_true", help="match each tree's colour histogram to another library tree (§5.3)")
     p.add_argument("--atlas", choices=("auto", "yes", "no"), default="auto", help="split library images into single trees: auto (default), yes, no")
+    p.add_argument("--trunk-model", metavar="JSON", default=None,
+                   help="crown/trunk segmentation by a classifier trained with phloem.trees.TrunkClassifier.fit and saved with "
+                        "to_dict (default: the training-free width-profile segmenter)")  # fmt: skip
     p.add_argument("--skip-bad", action="store_true", help="skip library images that cannot be used (no alpha, empty) instead of stopping")
     p.add_argument("--sheet", metavar="PNG", default=None,
                    help="also write a contact sheet: the combination tables of the paper's Fig. 13-14 for six library trees, then the new trees")  # fmt: skip
