@@ -37,6 +37,10 @@ def test_every_subcommand_option_has_help():
     for name, p in sub.choices.items():
         for action in p._actions:
             assert action.help, f"{name}: {action.dest} has no help"
+            if action.dest == "action":  # nested sub-commands (phloem branching ...)
+                for inner, q in action.choices.items():
+                    for a in q._actions:
+                        assert a.help, f"{name} {inner}: {a.dest} has no help"
 
 
 def test_synthesize_writes_image_and_sidecar(tmp_path, exemplar_png):
@@ -281,3 +285,54 @@ def test_trees_bad_library_is_a_clean_error(tmp_path, capsys):
     assert main(["trees", str(one), "--count", "1", "--out-dir", str(tmp_path / "o2"), "--size", "96", "-q"]) == 2
     assert "library: has 1 tree(s) but sources=2" in capsys.readouterr().err
     assert not list((tmp_path / "o2").glob("*.png"))
+
+
+def _river_png(path) -> None:
+    import cv2
+
+    img = np.zeros((160, 200), np.uint8)
+    cv2.line(img, (10, 150), (100, 80), 255, 9)
+    cv2.line(img, (100, 80), (190, 20), 255, 7)
+    cv2.line(img, (100, 80), (120, 150), 255, 5)
+    cv2.line(img, (60, 112), (30, 60), 255, 5)
+    io.write_image(path, img.astype(np.float32) / 255)
+
+
+def test_branching_trace_and_grow_write_skeletons_with_sidecars(tmp_path, capsys):
+    from phloem.branching import Skeleton
+
+    _river_png(tmp_path / "river.png")
+    skel = tmp_path / "river.json"
+    assert main(["branching", "trace", str(tmp_path / "river.png"), "--kind", "mask", "--out", str(skel),
+                 "--overlay", str(tmp_path / "overlay.png"), "-q"]) == 0  # fmt: skip
+    sk = Skeleton.load(skel)
+    assert sk.shape == (160, 200) and len(sk.branches) >= 3
+    assert json.loads((tmp_path / "river.json.json").read_text())["command"] == "branching trace"
+    assert io.read_image(tmp_path / "overlay.png").shape == (160, 200, 3)
+    new = tmp_path / "new.json"
+    args = ["branching", "grow", str(skel), "--out", str(new), "--seed", "5", "--histograms", str(tmp_path / "h.png"), "-q"]
+    assert main(args) == 0
+    grown = Skeleton.load(new)
+    assert grown.shape == (160, 200) and len(grown.branches) >= 1
+    assert json.loads((tmp_path / "new.json.json").read_text())["seed"] == 5
+    # Same seed, same skeleton; no silent overwrite.
+    assert main(["branching", "grow", str(skel), "--out", str(tmp_path / "again.json"), "--seed", "5", "-q"]) == 0
+    assert Skeleton.load(tmp_path / "again.json") == grown
+    assert main(args) == 2
+    assert "already exists" in capsys.readouterr().err
+
+
+def test_branching_errors_name_the_problem(tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"branches": [{"points": [[1, 2]]}]}')
+    assert main(["branching", "grow", str(bad), "--out", str(tmp_path / "x.json"), "-q"]) == 2
+    assert "branches[0]: a branch needs at least 2 points" in capsys.readouterr().err
+    bad.write_text("{not json")
+    assert main(["branching", "grow", str(bad), "--out", str(tmp_path / "x.json"), "-q"]) == 2
+    assert "not a valid JSON skeleton" in capsys.readouterr().err
+    io.write_image(tmp_path / "blank.png", np.zeros((40, 40), np.float32))
+    assert main(["branching", "trace", str(tmp_path / "blank.png"), "--out", str(tmp_path / "y.json"), "-q"]) == 2
+    assert "nothing to trace" in capsys.readouterr().err
+    assert main(["branching", "trace", str(tmp_path / "blank.png"), "--out", str(tmp_path / "y.png"), "-q"]) == 2
+    assert "expected a .json file" in capsys.readouterr().err
+    assert not list(tmp_path.glob("x.json*")) and not list(tmp_path.glob("y.*"))

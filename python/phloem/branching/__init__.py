@@ -12,6 +12,7 @@ References
 
 from __future__ import annotations
 
+from .figures import histogram_figure
 from .skeleton import Branch, Skeleton, SkeletonError
 from .structure import (
     BendingModel,
@@ -28,5 +29,5 @@ from .trace import estimate_thickness, trace
 
 __all__ = [
     "BendingModel", "Branch", "FurcationModel", "Skeleton", "SkeletonError", "angle_histogram", "default_h",
-    "estimate_thickness", "extend", "grow", "histogram_distance", "synthetic_skeleton", "thickness_histogram", "trace",
+    "estimate_thickness", "extend", "grow", "histogram_distance", "histogram_figure", "synthetic_skeleton", "thickness_histogram", "trace",
 ]
