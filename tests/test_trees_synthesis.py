@@ -282,3 +282,19 @@ def test_flightgear_variations_are_tree_like():
         lo, hi = min(s.sum() for s in srcs), max(s.sum() for s in srcs)
         assert 0.75 * lo <= a.sum() <= 1.25 * hi
         assert a[-3:].any()
+
+
+def test_degenerate_exemplars_give_valid_trees_or_clear_errors(library):
+    stick = np.zeros((120, 60, 4), np.float32)
+    stick[5:118, 30] = (0.9, 0.9, 0.8, 1.0)  # a one-pixel stick: a contour without area
+    t = trees.prepare(stick, size=SIZE)
+    assert np.isfinite(t.resampled).all() and len(t.resampled) == 2000
+    lib = trees.Library([t, library[0]], ["stick", "a"])
+    out = trees.variation(lib, seed=0).image
+    assert np.isfinite(out).all() and out[..., 3].max() > 0
+    with pytest.raises(ValueError, match=r"^rgba: expected some pixels with alpha"):
+        trees.prepare(np.zeros((30, 30, 4), np.float32))
+    with pytest.raises(ValueError, match=r"^rgba: expected an RGBA image"):
+        trees.prepare(np.ones((30, 30, 3), np.float32))
+    with pytest.raises(ValueError, match=r"^target: the contour is degenerate"):
+        trees.cages(np.zeros((2000, 2)), [t], (SIZE, SIZE))
