@@ -53,7 +53,9 @@ fn mvc(c: &mut Criterion) {
             BenchmarkId::new("one_source", format!("{threads}_threads")),
             &threads,
             |bch, _| {
-                bch.iter(|| p.install(|| black_box(warp(&[sa], &[&ca], &target, n, n).unwrap())));
+                bch.iter(|| {
+                    p.install(|| black_box(warp(&[sa], &[&ca], &target, n, n, None).unwrap()))
+                });
             },
         );
         g.bench_with_input(
@@ -61,7 +63,9 @@ fn mvc(c: &mut Criterion) {
             &threads,
             |bch, _| {
                 bch.iter(|| {
-                    p.install(|| black_box(warp(&[sa, sb], &[&ca, &cb], &target, n, n).unwrap()))
+                    p.install(|| {
+                        black_box(warp(&[sa, sb], &[&ca, &cb], &target, n, n, None).unwrap())
+                    })
                 });
             },
         );
@@ -72,7 +76,7 @@ fn mvc(c: &mut Criterion) {
                 bch.iter(|| {
                     p.install(|| {
                         black_box(
-                            warp_combine(&[sa, sb], &[&ca, &cb], &target, &[0.4, 0.6], n, n)
+                            warp_combine(&[sa, sb], &[&ca, &cb], &target, &[0.4, 0.6], n, n, None)
                                 .unwrap(),
                         )
                     })

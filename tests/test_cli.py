@@ -37,6 +37,10 @@ def test_every_subcommand_option_has_help():
     for name, p in sub.choices.items():
         for action in p._actions:
             assert action.help, f"{name}: {action.dest} has no help"
+            if action.dest == "action":  # nested sub-commands (phloem branching ...)
+                for inner, q in action.choices.items():
+                    for a in q._actions:
+                        assert a.help, f"{name} {inner}: {a.dest} has no help"
 
 
 def test_synthesize_writes_image_and_sidecar(tmp_path, exemplar_png):
@@ -179,11 +183,156 @@ def test_bark_errors_name_the_problem(tmp_path, exemplar_png, capsys):
     io.write_image(tmp_path / "noisy.png", np.random.default_rng(0).random((20, 20)).astype(np.float32))
     cases = [
         (["bark", str(exemplar_png), "--out", str(tmp_path / "o.png")], "size: required"),
-        (["bark", str(exemplar_png), "--labels-out", str(tmp_path / "noisy.png"), "--out", str(tmp_path / "o.png")], "distinct colours"),
-        (["bark", str(exemplar_png), "--size", "32x32", "--out", str(tmp_path / "o.png"), "--cylinder-preview", str(tmp_path / "o.png")], "different files"),
+        (
+            ["bark", str(exemplar_png), "--labels-out", str(tmp_path / "noisy.png"), "--out", str(tmp_path / "o.png")],
+            "distinct colours",
+        ),
+        (
+            [
+                "bark",
+                str(exemplar_png),
+                "--size",
+                "32x32",
+                "--out",
+                str(tmp_path / "o.png"),
+                "--cylinder-preview",
+                str(tmp_path / "o.png"),
+            ],
+            "different files",
+        ),
     ]
     for argv, message in cases:
         assert main(argv) == 2
         err = capsys.readouterr().err
         assert message in err and "Traceback" not in err
     assert not (tmp_path / "o.png").exists()
+
+
+def _tree_png(path, crown: int, trunk: int) -> None:
+    img = np.zeros((120, 100, 4), np.float32)
+    yy, xx = np.mgrid[:120, :100]
+    img[(yy - 45) ** 2 + (xx - 50) ** 2 < crown**2] = (0.1, 0.6, 0.2, 1.0)
+    img[70:118, 50 - trunk : 50 + trunk] = (0.4, 0.3, 0.1, 1.0)
+    io.write_image(path, img)
+
+
+def test_trees_writes_variations_sidecars_and_sheet(tmp_path, capsys):
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    for i, (c, t) in enumerate([(30, 4), (40, 6), (25, 3)]):
+        _tree_png(lib / f"t{i}.png", c, t)
+    out = tmp_path / "out"
+    sheet = tmp_path / "sheet.png"
+    args = ["trees", str(lib), "--count", "3", "--out-dir", str(out), "--size", "128", "--seed", "4", "-q"]
+    assert main([*args, "--sheet", str(sheet)]) == 0
+    files = sorted(p.name for p in out.iterdir())
+    assert files == [f"tree_{i:04d}.png{s}" for i in range(3) for s in ("", ".json")]
+    meta = json.loads((out / "tree_0001.png.json").read_text())
+    assert meta["seed"] == 4 and meta["parameters"]["sources"] == 2
+    assert len(meta["parameters"]["exemplars"]) == 2 and set(meta["parameters"]["exemplars"]) <= {
+        "t0.png",
+        "t1.png",
+        "t2.png",
+    }
+    img = io.read_image(out / "tree_0001.png")
+    assert img.shape == (128, 128, 4)
+    # The sidecar's variation seed reproduces the file through the Python API.
+    from phloem import trees
+
+    library = trees.Library.from_folder(lib, size=128)
+    v = trees.variation(library, seed=meta["parameters"]["variation_seed"])
+    assert np.abs(v.image - img).max() <= 1 / 255 + 1e-6
+    assert io.read_image(sheet).shape[2] == 3
+    # No silent overwrite, and nothing half-written on refusal.
+    before = (out / "tree_0000.png").read_bytes()
+    assert main(args) == 2
+    assert "already exists" in capsys.readouterr().err
+    assert (out / "tree_0000.png").read_bytes() == before
+    # Variations of a given tree.
+    like = tmp_path / "mine.png"
+    _tree_png(like, 35, 5)
+    assert (
+        main(
+            [
+                "trees",
+                str(lib),
+                "--count",
+                "2",
+                "--out-dir",
+                str(tmp_path / "like"),
+                "--size",
+                "128",
+                "--like",
+                str(like),
+                "-q",
+            ]
+        )
+        == 0
+    )
+    meta = json.loads((tmp_path / "like" / "tree_0000.png.json").read_text())
+    assert meta["parameters"]["exemplars"][0] == str(like) and meta["parameters"]["colors"] == "contour"
+    assert 0.6 <= meta["parameters"]["weights"][0] <= 0.9
+
+
+def test_trees_bad_library_is_a_clean_error(tmp_path, capsys):
+    rgb = tmp_path / "rgb.png"
+    io.write_image(rgb, np.ones((40, 40, 3), np.float32))
+    assert main(["trees", str(rgb), "--count", "1", "--out-dir", str(tmp_path / "o"), "-q"]) == 2
+    assert "no alpha channel" in capsys.readouterr().err
+    one = tmp_path / "one"
+    one.mkdir()
+    _tree_png(one / "t.png", 30, 4)
+    assert main(["trees", str(one), "--count", "1", "--out-dir", str(tmp_path / "o2"), "--size", "96", "-q"]) == 2
+    assert "library: has 1 tree(s) but sources=2" in capsys.readouterr().err
+    assert not list((tmp_path / "o2").glob("*.png"))
+
+
+def _river_png(path) -> None:
+    import cv2
+
+    img = np.zeros((160, 200), np.uint8)
+    cv2.line(img, (10, 150), (100, 80), 255, 9)
+    cv2.line(img, (100, 80), (190, 20), 255, 7)
+    cv2.line(img, (100, 80), (120, 150), 255, 5)
+    cv2.line(img, (60, 112), (30, 60), 255, 5)
+    io.write_image(path, img.astype(np.float32) / 255)
+
+
+def test_branching_trace_and_grow_write_skeletons_with_sidecars(tmp_path, capsys):
+    from phloem.branching import Skeleton
+
+    _river_png(tmp_path / "river.png")
+    skel = tmp_path / "river.json"
+    assert main(["branching", "trace", str(tmp_path / "river.png"), "--kind", "mask", "--out", str(skel),
+                 "--overlay", str(tmp_path / "overlay.png"), "-q"]) == 0  # fmt: skip
+    sk = Skeleton.load(skel)
+    assert sk.shape == (160, 200) and len(sk.branches) >= 3
+    assert json.loads((tmp_path / "river.json.json").read_text())["command"] == "branching trace"
+    assert io.read_image(tmp_path / "overlay.png").shape == (160, 200, 3)
+    new = tmp_path / "new.json"
+    args = ["branching", "grow", str(skel), "--out", str(new), "--seed", "5", "--histograms", str(tmp_path / "h.png"), "-q"]
+    assert main(args) == 0
+    grown = Skeleton.load(new)
+    assert grown.shape == (160, 200) and len(grown.branches) >= 1
+    assert json.loads((tmp_path / "new.json.json").read_text())["seed"] == 5
+    # Same seed, same skeleton; no silent overwrite.
+    assert main(["branching", "grow", str(skel), "--out", str(tmp_path / "again.json"), "--seed", "5", "-q"]) == 0
+    assert Skeleton.load(tmp_path / "again.json") == grown
+    assert main(args) == 2
+    assert "already exists" in capsys.readouterr().err
+
+
+def test_branching_errors_name_the_problem(tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"branches": [{"points": [[1, 2]]}]}')
+    assert main(["branching", "grow", str(bad), "--out", str(tmp_path / "x.json"), "-q"]) == 2
+    assert "branches[0]: a branch needs at least 2 points" in capsys.readouterr().err
+    bad.write_text("{not json")
+    assert main(["branching", "grow", str(bad), "--out", str(tmp_path / "x.json"), "-q"]) == 2
+    assert "not a valid JSON skeleton" in capsys.readouterr().err
+    io.write_image(tmp_path / "blank.png", np.zeros((40, 40), np.float32))
+    assert main(["branching", "trace", str(tmp_path / "blank.png"), "--out", str(tmp_path / "y.json"), "-q"]) == 2
+    assert "nothing to trace" in capsys.readouterr().err
+    assert main(["branching", "trace", str(tmp_path / "blank.png"), "--out", str(tmp_path / "y.png"), "-q"]) == 2
+    assert "expected a .json file" in capsys.readouterr().err
+    assert not list(tmp_path.glob("x.json*")) and not list(tmp_path.glob("y.*"))

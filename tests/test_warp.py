@@ -306,3 +306,19 @@ def test_core_checks_hold_without_the_python_layer():
         _core.mvc_combine([IMG, IMG], [sq, sq], sq, np.array([0.2, 0.2]), (8, 8))
     with pytest.raises(ValueError, match="^sources: expected at least one"):
         _core.mvc_warp([], [], sq, (8, 8))
+
+
+def test_region_computes_only_its_pixels():
+    rng = np.random.default_rng(7)
+    img = rng.random((40, 50, 4)).astype(np.float32)
+    src = [(5, 5), (44, 6), (40, 35), (25, 20), (6, 33)]
+    dst = [(7, 4), (45, 8), (38, 36), (24, 23), (4, 30)]
+    region = rng.random((40, 50)) < 0.4
+    full = mvc(img, src, dst)
+    part = mvc(img, src, dst, region=region)
+    assert np.array_equal(part[region], full[region]) and not part[~region].any()
+    both = mvc_combine([img, img[::-1].copy()], [src, src], dst, [0.5, 0.5], (40, 50))
+    both_part = mvc_combine([img, img[::-1].copy()], [src, src], dst, [0.5, 0.5], (40, 50), region=region)
+    assert np.array_equal(both_part[region], both[region]) and not both_part[~region].any()
+    with pytest.raises(ValueError, match=r"^region: expected shape \(40, 50\)"):
+        mvc(img, src, dst, region=np.ones((4, 5), bool))

@@ -128,6 +128,7 @@ def mvc_warp(
     target_contour: NDArray[np.float64],
     size: tuple[int, int],
     *,
+    region: NDArray[np.bool_] | None = None,
     threads: int | None = None,
 ) -> list[NDArray[np.float32]]: ...
 def mvc_combine(
@@ -137,6 +138,7 @@ def mvc_combine(
     weights: NDArray[np.float64],
     size: tuple[int, int],
     *,
+    region: NDArray[np.bool_] | None = None,
     threads: int | None = None,
 ) -> NDArray[np.float32]: ...
 def default_threads() -> int: ...

@@ -8,15 +8,17 @@ and checks all of that before the (possibly long) computation starts.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
 from typing import Any, TypeVar
 from collections.abc import Callable, Sequence
 
+import cv2
 import numpy as np
 
-from . import __version__, bark, data, io, patch, texture
+from . import __version__, bark, branching, data, io, patch, texture, trees
 from ._progress import Bar
 
 __all__ = ["main"]
@@ -219,6 +221,219 @@ def _cmd_bark(args: argparse.Namespace) -> None:
             print(f"wrote {path}", file=sys.stderr)
 
 
+def _tree_library(args: argparse.Namespace, bar: Any) -> trees.Library:
+    src = Path(args.library)
+    atlas = {"auto": None, "yes": True, "no": False}[args.atlas]
+    clf = None
+    if args.trunk_model is not None:
+        clf = trees.TrunkClassifier.from_dict(json.loads(Path(args.trunk_model).read_text(encoding="utf-8")))
+    if src.is_dir():
+        return trees.Library.from_folder(src, atlas=atlas, size=args.size, skip_bad=args.skip_bad, classifier=clf, progress=bar)
+    img = io.read_image(src, max_pixels=args.max_pixels)
+    if img.ndim != 3 or img.shape[2] != 4:
+        raise ValueError(f"library: {src} has no alpha channel; tree billboards must be RGBA")
+    pieces = [img] if atlas is False else trees.split_atlas(img)
+    names = [src.name] if len(pieces) == 1 else [f"{src.name}[{i}]" for i in range(len(pieces))]
+    return trees.Library.from_images(pieces, names=names, size=args.size, classifier=clf, progress=bar)
+
+
+def _cmd_trees(args: argparse.Namespace) -> None:
+    out_dir = Path(args.out_dir)
+    targets = [out_dir / f"{args.prefix}{i:04d}.png" for i in range(args.count)]
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ValueError(f"out-dir: {out_dir} exists and is not a folder")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for t in targets:
+        _check_writable(t, args)
+        io._check_target(io.sidecar_path(t), args.force)
+    if args.sheet is not None:
+        _check_writable(Path(args.sheet), args)
+    like = None if args.like is None else io.read_image(args.like, max_pixels=args.max_pixels)
+    lib = _run("trees: library", args, lambda bar: _tree_library(args, bar))
+    if not args.quiet:
+        print(f"library: {len(lib)} trees", file=sys.stderr)
+
+    colors = args.colors or ("contour" if like is not None else "random")
+
+    def make(bar: Any) -> list[trees.Variation]:
+        if like is not None:
+            own = trees.prepare(like, size=args.size)
+            out = []
+            # One variation at a time so the bar moves; vary's draws for variation i depend only on (seed, i).
+            for i in range(args.count):
+                out += trees.vary(own, lib, n=1, seed=_sub_seed(args.seed, i), sources=args.sources, colors=colors,
+                                  histogram=args.histogram, threads=args.threads)  # fmt: skip
+                bar(i + 1, args.count)
+            return out
+        res = []
+        for i in range(args.count):
+            res.append(trees.variation(lib, sources=args.sources, seed=_sub_seed(args.seed, i), colors=colors,
+                                       histogram=args.histogram, threads=args.threads))  # fmt: skip
+            bar(i + 1, args.count)
+        return res
+
+    variations = _run("trees: variations", args, make)
+    for i, (v, path) in enumerate(zip(variations, targets)):
+        rec = v.describe(lib)
+        if like is not None:
+            rec["exemplars"] = [str(args.like), *rec["exemplars"]]
+        io.write_result(
+            path, v.image, command="trees",
+            parameters={**_params(args), "colors": colors, **rec, "variation_seed": _sub_seed(args.seed, i)},
+            seed=args.seed, overwrite=args.force, bit_depth=args.bit_depth,
+        )  # fmt: skip
+    if not args.quiet:
+        print(f"wrote {len(targets)} trees (and their .json) to {out_dir}", file=sys.stderr)
+    if args.sheet is not None:
+        sheet = _run("trees: sheet", args, lambda bar: _tree_sheet(lib, variations, args))
+        io.write_image(args.sheet, sheet, overwrite=args.force, bit_depth=args.bit_depth)
+        if not args.quiet:
+            print(f"wrote {args.sheet}", file=sys.stderr)
+
+
+def _sub_seed(seed: int, i: int) -> int:
+    """The seed of variation ``i`` of a run with ``--seed seed`` (recorded in its sidecar)."""
+    return int(np.random.SeedSequence([seed, i]).generate_state(1)[0])
+
+
+def _tree_sheet(lib: trees.Library, variations: Sequence[trees.Variation], args: argparse.Namespace) -> np.ndarray:
+    """Fig. 13 and Fig. 14 tables for up to six exemplars, then a row of the new trees."""
+    rng = np.random.default_rng(args.seed)
+    k = min(6, len(lib))
+    picks = sorted(int(i) for i in rng.choice(len(lib), size=k, replace=False))
+    chosen = [lib[i] for i in picks]
+    tile = 160
+    if k >= 2:
+        tables = [trees.morph_table(chosen, tile=tile, colors=False, threads=args.threads),
+                  trees.morph_table(chosen, tile=tile, threads=args.threads)]  # fmt: skip
+        top = np.concatenate(tables, axis=1)
+    else:
+        top = np.full((tile, tile, 3), 0.8, np.float32)
+    width = top.shape[1]
+    per_row = max(1, width // tile)
+    rows = []
+    for r in range(0, len(variations), per_row):
+        row = np.full((tile, width, 3), 0.8, np.float32)
+        for c, v in enumerate(variations[r : r + per_row]):
+            small = cv2.resize(v.image, (tile, tile), interpolation=cv2.INTER_AREA)
+            a = small[..., 3:4]
+            row[:, c * tile : (c + 1) * tile] = small[..., :3] * a + 0.8 * (1 - a)
+        rows.append(row)
+    return np.concatenate([top, *rows], axis=0)
+
+
+_TRACE_KINDS = ("auto", "bright", "dark", "mask")
+
+
+def _trace_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("tracing (when no skeleton file is given)")
+    g.add_argument("--kind", choices=_TRACE_KINDS, default="auto",
+                   help="what the structure looks like: a binary mask, bright ridges (lightning, ridges of an elevation model) "
+                        "or dark ones (vessels, cracks, rivers on land); auto decides (default)")  # fmt: skip
+    g.add_argument("--sigmas", type=float, nargs="+", default=[1.0, 2.0, 3.0], metavar="S",
+                   help="ridge-filter scales in pixels, about the radii of the structures to find (default 1 2 3)")  # fmt: skip
+    g.add_argument("--channel", type=int, default=None, help="trace this channel of a colour image (e.g. 1 = green for retinas; default: luminance)")
+    g.add_argument("--min-length", type=float, default=8.0, help="drop traced branches shorter than this many pixels (default 8)")
+
+
+def _trace(args: argparse.Namespace, image: np.ndarray) -> branching.Skeleton:
+    return branching.trace(image, kind=args.kind, sigmas=tuple(args.sigmas), channel=args.channel, min_length=args.min_length)
+
+
+def _write_skeleton(path: Path, sk: branching.Skeleton, args: argparse.Namespace, command: str, **extra: Any) -> None:
+    """A skeleton file and its sidecar, both checked before either is written."""
+    side = io.sidecar_path(path)
+    io._check_target(path, args.force)
+    io._check_target(side, args.force)
+    sk.save(path, overwrite=args.force)
+    meta = {"phloem_version": __version__, "command": command, "seed": getattr(args, "seed", None),
+            "parameters": {**_params(args), **extra}, "output": path.name}  # fmt: skip
+    io._atomic_write(side, (json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n").encode(), args.force)
+    if not args.quiet:
+        print(f"wrote {path} and {side}", file=sys.stderr)
+
+
+def _check_json_target(path: Path, args: argparse.Namespace) -> None:
+    if path.suffix.lower() != ".json":
+        raise ValueError(f"out: expected a .json file for the skeleton, got {path.name}")
+    io._check_target(path, args.force)
+    io._check_target(io.sidecar_path(path), args.force)
+
+
+def _cmd_branching_trace(args: argparse.Namespace) -> None:
+    out = Path(args.out)
+    _check_json_target(out, args)
+    if args.overlay is not None:
+        _check_writable(Path(args.overlay), args)
+    img = io.read_image(args.input, max_pixels=args.max_pixels)
+    sk = _run("branching trace", args, lambda bar: _trace(args, img))
+    _write_skeleton(out, sk, args, "branching trace", branches=len(sk.branches), total_length=round(sk.total_length(), 1))
+    if args.overlay is not None:
+        io.write_image(args.overlay, sk.draw(img, width=2), overwrite=args.force, bit_depth=args.bit_depth)
+        if not args.quiet:
+            print(f"wrote {args.overlay}", file=sys.stderr)
+
+
+def _models(args: argparse.Namespace, source: branching.Skeleton) -> tuple[Any, Any]:
+    bend = branching.BendingModel.fit(source, h=args.h, k=args.k, m=args.m, c=args.c)
+    has_children = any(b.parent is not None for b in source.branches)
+    fur = branching.FurcationModel.fit(source, h=bend.h, k=args.k, c=args.c) if has_children else None
+    return bend, fur
+
+
+def _guide(path: str | None, args: argparse.Namespace) -> Any:
+    if path is None:
+        return None
+    p = Path(path)
+    if p.suffix.lower() == ".json":
+        pts = np.asarray(json.loads(p.read_text(encoding="utf-8")), dtype=np.float64)
+        if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2:
+            raise ValueError(f"guide: {p} must hold a JSON list of at least two [x, y] points")
+        return pts
+    g = io.read_image(p, max_pixels=args.max_pixels)
+    return (g.mean(axis=2) if g.ndim == 3 else g) > 0.5
+
+
+def _grow_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("structure synthesis (§4)")
+    g.add_argument("--h", type=float, default=None, help="resampling step in pixels (default: the input's median thickness)")
+    g.add_argument("--k", type=_positive, default=3, help="order of the Markov bending model (paper: 3)")
+    g.add_argument("--m", type=_positive, default=None, help="elements appended per step, the feature size s/h (default 4)")
+    g.add_argument("--c", type=_positive, default=2, help="candidates: 1 follows the input exactly, more gives more variety (paper: 2)")
+    g.add_argument("--generations", type=_positive, default=3, help="branch generations to grow (default 3)")
+    g.add_argument("--max-length", type=float, default=None, help="stop at this total branch length in pixels")
+    g.add_argument("--no-colonize", action="store_true", help="turn off space colonisation (§4.4; crossings are still refused)")
+    g.add_argument("--guide", metavar="PATH", default=None,
+                   help="guided synthesis (§4.5): a JSON list of [x, y] points or a mask image the structure should follow")  # fmt: skip
+
+
+def _grow(args: argparse.Namespace, bend: Any, fur: Any, shape: tuple[int, int], bar: Any) -> branching.Skeleton:
+    return branching.grow(
+        bend, fur, shape=shape, seed=args.seed, generations=args.generations, max_length=args.max_length,
+        colonize=not args.no_colonize, guide=_guide(args.guide, args), progress=bar,
+    )  # fmt: skip
+
+
+def _cmd_branching_grow(args: argparse.Namespace) -> None:
+    out = Path(args.out)
+    _check_json_target(out, args)
+    extra = [Path(x) for x in (args.preview, args.histograms) if x is not None]
+    for x in extra:
+        _check_writable(x, args)
+    source = branching.Skeleton.load(args.skeleton)
+    shape = args.size or source.shape
+    if shape is None:
+        raise ValueError("size: the skeleton file has no shape; pass --size WxH")
+    bend, fur = _models(args, source)
+    new = _run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
+    _write_skeleton(out, new, args, "branching grow", h=bend.h, branches=len(new.branches))
+    if args.preview is not None:
+        io.write_image(args.preview, new.draw(shape=shape, color=(1.0, 1.0, 1.0), width=2), overwrite=args.force, bit_depth=args.bit_depth)
+    if args.histograms is not None:
+        fig = branching.histogram_figure(source, new, h=bend.h)
+        io.write_image(args.histograms, fig, overwrite=args.force, bit_depth=args.bit_depth)
+
+
 def _cmd_demo(args: argparse.Namespace) -> None:
     _preflight(args)
     out = _run(
@@ -313,6 +528,59 @@ def build_parser() -> argparse.ArgumentParser:
     _common(p)
     p.set_defaults(func=_cmd_bark)
 
+    p = sub.add_parser("trees", help="new tree billboards from a library of RGBA trees (Argudo et al. 2017)",
+                       description="Every tree of LIBRARY is normalised, segmented into crown and trunk and described by a "
+                                   "2000-point contour (§4). Each new tree's contour is a random convex combination of the "
+                                   "contours of --sources trees, filled by mean value coordinate colour transfer from them (§5). "
+                                   "Writes DIR/PREFIX0000.png ... with a .json sidecar naming the sources and weights.")  # fmt: skip
+    p.add_argument("library", metavar="LIBRARY", help="folder of RGBA tree images (atlases of several trees are split), or one atlas image")
+    p.add_argument("--count", type=_positive, required=True, metavar="N", help="number of new trees")
+    p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for the new trees (created if missing)")
+    p.add_argument("--prefix", default="tree_", help="file name prefix of the new trees (default tree_)")
+    p.add_argument("--like", metavar="TREE", default=None,
+                   help="make variations of this RGBA tree: it gets weight 0.6-0.9 and the library trees the rest (§3)")  # fmt: skip
+    p.add_argument("--size", type=_positive, default=1024, help="side of the square output images; the library is normalised to it (default 1024)")
+    p.add_argument("--sources", type=_positive, default=2, help="trees combined in each new tree, --like included (default 2)")
+    p.add_argument("--colors", choices=("random", "contour", "single"), default=None,
+                   help="colour weights: an independent random convex combination (§5.2), the contour's weights, or one source "
+                        "(default: random; contour with --like)")  # fmt: skip
+    p.add_argument("--histogram", action="store_true", help="match each tree's colour histogram to another library tree (§5.3)")
+    p.add_argument("--atlas", choices=("auto", "yes", "no"), default="auto", help="split library images into single trees: auto (default), yes, no")
+    p.add_argument("--trunk-model", metavar="JSON", default=None,
+                   help="crown/trunk segmentation by a classifier trained with phloem.trees.TrunkClassifier.fit and saved with "
+                        "to_dict (default: the training-free width-profile segmenter)")  # fmt: skip
+    p.add_argument("--skip-bad", action="store_true", help="skip library images that cannot be used (no alpha, empty) instead of stopping")
+    p.add_argument("--sheet", metavar="PNG", default=None,
+                   help="also write a contact sheet: the combination tables of the paper's Fig. 13-14 for six library trees, then the new trees")  # fmt: skip
+    _common(p)
+    p.set_defaults(func=_cmd_trees)
+
+    p = sub.add_parser("branching", help="branching structures: trace, learn and grow skeletons, render images (Sibbing et al. 2010)",
+                       description="Rivers, cracks, lightning, ridges and vessels from one example image: trace or load its skeleton, "
+                                   "learn how it bends and branches (§4), grow a new skeleton and compose a new image from "
+                                   "fragments of the example (§5).")  # fmt: skip
+    bsub = p.add_subparsers(dest="action", metavar="ACTION", required=True, help="each has its own --help")
+    q = bsub.add_parser("trace", help="trace the skeleton of a structure in an image into a skeleton JSON file",
+                        description="Ridge filter (or a binary mask), skeletonisation, and a tree of branches with parents; "
+                                    "thickness from the image (the paper's §3 operator).")  # fmt: skip
+    q.add_argument("input", metavar="IN", help="image of the structure (PNG, JPEG or TIFF)")
+    q.add_argument("--out", required=True, metavar="SKEL.json", help="skeleton file to write")
+    q.add_argument("--overlay", metavar="PNG", default=None, help="also draw the traced skeleton over IN into PNG")
+    _trace_options(q)
+    _common(q)
+    q.set_defaults(func=_cmd_branching_trace)
+    q = bsub.add_parser("grow", help="learn an example skeleton's bending and branching and grow a new one",
+                        description="Markov bending model with histogram matching (§4.2), SVM furcation model (§4.3), "
+                                    "space colonisation (§4.4) and optional guidance (§4.5).")  # fmt: skip
+    q.add_argument("skeleton", metavar="SKEL.json", help="the example skeleton (phloem.skeleton JSON)")
+    q.add_argument("--out", required=True, metavar="NEW.json", help="new skeleton file to write")
+    q.add_argument("--size", type=_size, default=None, metavar="WxH", help="size of the new structure's image (default: the example's)")
+    q.add_argument("--preview", metavar="PNG", default=None, help="also draw the new skeleton into PNG")
+    q.add_argument("--histograms", metavar="PNG", default=None, help="also write the input and output angle and thickness histograms (Fig. 7)")
+    _grow_options(q)
+    _common(q)
+    q.set_defaults(func=_cmd_branching_grow)
+
     p = sub.add_parser("demo", help="the main job on embedded data: a bark texture from the built-in Douglas-fir photo",
                        description="Runs the bark pipeline (phloem bark) on phloem's embedded CC0 Douglas-fir bark photo.")  # fmt: skip
     p.add_argument("--out", default="bark.png", metavar="OUT", help="output image (default bark.png)")
@@ -329,7 +597,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args.func(args)
     except (ValueError, TypeError, FileExistsError, FileNotFoundError, io.ImageReadError) as e:
-        print(f"phloem {args.command}: error: {e}", file=sys.stderr)
+        name = f"{args.command} {args.action}" if getattr(args, "action", None) else args.command
+        print(f"phloem {name}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"phloem {args.command}: interrupted; nothing was written", file=sys.stderr)

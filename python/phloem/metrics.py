@@ -5,7 +5,9 @@ output have the colours of the same label in the exemplar), patch coherence to a
 patch of the exemplar — the quantity texture optimisation minimises, Kwatra et al. 2005, Eq. 1),
 repetition (how strongly an output repeats itself at a distance, which coherence cannot see:
 a tiled copy of the exemplar is perfectly coherent), and the shape similarity of binary shapes and
-label maps (Rosenberger et al. 2009, thesis Eq. 3.9).
+label maps (Rosenberger et al. 2009, thesis Eq. 3.9), and the angle and thickness histograms of
+branching structures with their L1 distance (Sibbing et al. 2010, Fig. 7; defined in
+:mod:`phloem.branching.structure` and re-exported here).
 """
 
 from __future__ import annotations
@@ -18,8 +20,19 @@ from numpy.typing import NDArray
 from . import patch as _patch
 from . import shapes as _shapes
 from ._validate import as_image, as_mask, check_patch_size
+from .branching.structure import angle_histogram, histogram_distance, thickness_histogram
 
-__all__ = ["chord_length", "coherence_map", "label_histogram_distance", "patch_coherence", "repetition", "shape_similarity"]
+__all__ = [
+    "angle_histogram",
+    "chord_length",
+    "coherence_map",
+    "histogram_distance",
+    "label_histogram_distance",
+    "patch_coherence",
+    "repetition",
+    "shape_similarity",
+    "thickness_histogram",
+]
 
 
 def coherence_map(

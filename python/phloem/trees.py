@@ -30,7 +30,10 @@ References
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import cv2
@@ -40,8 +43,17 @@ from numpy.typing import NDArray
 from ._validate import as_image, as_mask, check_float, check_int
 
 __all__ = [
+    "Library",
     "Tree",
+    "TrunkClassifier",
+    "Variation",
+    "cages",
+    "combine_contours",
     "contour",
+    "fill_contour",
+    "match_histograms",
+    "morph",
+    "morph_table",
     "normalize",
     "pin_points",
     "prepare",
@@ -50,6 +62,8 @@ __all__ = [
     "signed_area",
     "simplify",
     "split_atlas",
+    "variation",
+    "vary",
 ]
 
 F32 = NDArray[np.float32]
@@ -427,6 +441,237 @@ def segment(
     return np.ascontiguousarray(trunk)
 
 
+def _trunk_features(img: F32, opaque: Mask, prior: Mask) -> F64:
+    """Per-pixel features of the opaque pixels (rows of the result, in ``np.nonzero`` order).
+
+    Position (relative height, offset from the trunk's foot), the smoothed width profile (as a
+    fraction of the widest row and against the foot's width), thickness (distance to the
+    transparent background), CIELAB colour, local lightness contrast, and the training-free
+    segmenter's answer with the signed height above its crown baseline.
+    """
+    h, w = opaque.shape
+    ys, xs = np.nonzero(opaque)
+    rows = np.flatnonzero(opaque.any(axis=1))
+    top, bottom = int(rows[0]), int(rows[-1])
+    height = float(bottom - top + 1)
+    width = opaque.sum(axis=1).astype(np.float64)
+    k = max(1, round(0.01 * h)) | 1
+    padded = np.pad(width, k // 2, mode="edge")
+    width = np.median(np.lib.stride_tricks.sliding_window_view(padded, k), axis=1)
+    widest = max(float(width.max()), 1.0)
+    base = width[max(top, bottom - max(1, int(0.1 * height)) + 1) : bottom + 1]
+    foot = max(float(np.quantile(base, 0.3)), 1.0)
+    low = ys >= bottom - max(1, int(0.02 * height))
+    cx = float(np.median(xs[low])) if low.any() else w / 2
+    dt = cv2.distanceTransform(opaque.astype(np.uint8), cv2.DIST_L2, 5)
+    lab = cv2.cvtColor(np.ascontiguousarray(img[..., :3]), cv2.COLOR_RGB2Lab)
+    lum: F32 = np.ascontiguousarray(lab[..., 0] / 100.0, dtype=np.float32)
+    mean = cv2.blur(lum, (7, 7))
+    contrast = np.sqrt(np.maximum(cv2.blur(np.square(lum), (7, 7)) - mean * mean, 0.0))
+    prows = np.flatnonzero((opaque & ~prior).any(axis=1))
+    baseline = int(prows[-1]) if prows.size else bottom
+    f = np.stack(
+        [
+            (ys - top) / height,
+            np.abs(xs - cx) / widest,
+            width[ys] / widest,
+            np.log(np.maximum(width[ys], 1.0) / foot),
+            dt[ys, xs] / widest,
+            lum[ys, xs],
+            lab[ys, xs, 1] / 128.0,
+            lab[ys, xs, 2] / 128.0,
+            contrast[ys, xs],
+            prior[ys, xs].astype(np.float64),
+            (ys - baseline) / height,
+        ],
+        axis=1,
+    )
+    return np.asarray(f, dtype=np.float64)
+
+
+def _quadratic(f: F64) -> F64:
+    iu = np.triu_indices(f.shape[1])
+    return np.hstack([np.ones((len(f), 1)), f, f[:, iu[0]] * f[:, iu[1]]])
+
+
+def _trunk_from_rows(opaque: Mask, raw: Mask) -> Mask:
+    """The trunk as :func:`segment` defines it, from a per-pixel guess: climbing from the bottom,
+    the crown baseline is the first row where under half of the opaque pixels are trunk; the
+    trunk is the opaque part below it that touches the bottom row."""
+    rows = np.flatnonzero(opaque.any(axis=1))
+    bottom = int(rows[-1])
+    n_op = opaque.sum(axis=1)
+    n_tr = (raw & opaque).sum(axis=1)
+    y = bottom
+    while y >= rows[0] and n_op[y] > 0 and n_tr[y] * 2 >= n_op[y]:
+        y -= 1
+    out = np.zeros(opaque.shape, np.bool_)
+    if y >= bottom:
+        return out
+    below = opaque.copy()
+    below[: y + 1] = False
+    _, labels = cv2.connectedComponents(below.astype(np.uint8), connectivity=8)
+    keep = np.unique(labels[bottom][below[bottom]])
+    return np.ascontiguousarray(np.isin(labels, keep[keep > 0]))
+
+
+@dataclass(frozen=True)
+class TrunkClassifier:
+    """A small trunk/crown pixel classifier trained on a few user-labelled exemplars (§4.3).
+
+    The paper fine-tuned an FCN on 55 hand-segmented trees. This is the light-weight
+    counterpart: logistic regression on quadratic terms of a dozen per-pixel features
+    (position, width profile, thickness, CIELAB colour, local contrast and the training-free
+    :func:`segment`'s answer), fitted by Newton's method with a small L2 penalty. Its pixel
+    guesses become a trunk the way :func:`segment` defines one: everything below the crown
+    baseline that touches the bottom. Train it with :meth:`fit` on a few of your own trees
+    when :func:`segment` fails on a library's style, and pass it to :func:`prepare` or
+    :class:`Library`.
+
+    Attributes
+    ----------
+    coef : (d,) float64 ndarray
+        Weights of the quadratic features.
+    mean, scale : (11,) float64 ndarray
+        Feature standardisation.
+    alpha_threshold : float
+        Alpha at or above this is opaque.
+    """
+
+    coef: F64
+    mean: F64
+    scale: F64
+    alpha_threshold: float = 0.5
+
+    @classmethod
+    def fit(
+        cls,
+        images: Sequence[Any],
+        trunks: Sequence[Any],
+        *,
+        samples: int = 20000,
+        l2: float = 1e-3,
+        seed: int = 0,
+        alpha_threshold: float = 0.5,
+    ) -> TrunkClassifier:
+        """Train on normalised exemplars and their trunk masks.
+
+        Parameters
+        ----------
+        images : sequence of (S, S, 4) ndarray
+            Normalised exemplars (see :func:`normalize`).
+        trunks : sequence of (S, S) bool ndarray
+            Their trunk masks (``True`` on trunk pixels).
+        samples : int, optional
+            Opaque pixels drawn per image, half trunk and half crown where possible.
+        l2 : float, optional
+            Ridge penalty on the weights.
+        seed : int, optional
+            Seed of the pixel sampling.
+        alpha_threshold : float, optional
+
+        Returns
+        -------
+        TrunkClassifier
+
+        Examples
+        --------
+        >>> import numpy as np, phloem
+        >>> img = np.zeros((100, 100, 4), np.float32); img[20:60, 20:80] = (0.1, 0.6, 0.1, 1.0)
+        >>> img[60:100, 45:55] = (0.4, 0.3, 0.1, 1.0)
+        >>> truth = np.zeros((100, 100), bool); truth[60:, 45:55] = True
+        >>> clf = phloem.trees.TrunkClassifier.fit([img], [truth])
+        >>> bool((clf.predict(img) == truth).all())
+        True
+        """
+        imgs = list(images)
+        masks = list(trunks)
+        if not imgs or len(imgs) != len(masks):
+            raise ValueError(f"trunks: expected one trunk mask per image, got {len(masks)} for {len(imgs)} images")
+        samples = check_int(samples, "samples", 10)
+        l2 = check_float(l2, "l2", 0.0)
+        t = _threshold(alpha_threshold)
+        rng = np.random.default_rng(check_int(seed, "seed", 0))
+        xs_, ys_ = [], []
+        for i, (im, tm) in enumerate(zip(imgs, masks)):
+            img = _rgba(im, f"images[{i}]")
+            opaque = img[..., 3] >= t
+            if not opaque.any():
+                raise ValueError(f"images[{i}]: every pixel is transparent")
+            truth = as_mask(tm, f"trunks[{i}]", opaque.shape)[opaque]
+            f = _trunk_features(img, opaque, segment(img, alpha_threshold=t))
+            pick = []
+            for cls_ in (True, False):
+                idx = np.flatnonzero(truth == cls_)
+                if idx.size:
+                    pick.append(rng.choice(idx, size=min(idx.size, samples // 2), replace=False))
+            sel = np.sort(np.concatenate(pick))
+            xs_.append(f[sel])
+            ys_.append(truth[sel].astype(np.float64))
+        x = np.vstack(xs_)
+        y = np.concatenate(ys_)
+        mean = x.mean(axis=0)
+        scale = x.std(axis=0)
+        scale[scale < 1e-9] = 1.0
+        q = _quadratic((x - mean) / scale)
+        coef = np.zeros(q.shape[1])
+        reg = l2 * len(y) * np.eye(q.shape[1])
+        reg[0, 0] = 0.0
+        for _ in range(30):
+            p = 1.0 / (1.0 + np.exp(-np.clip(q @ coef, -30, 30)))
+            grad = q.T @ (p - y) + reg @ coef
+            hess = (q * (p * (1 - p))[:, None]).T @ q + reg + 1e-9 * np.eye(q.shape[1])
+            step = np.linalg.solve(hess, grad)
+            coef -= step
+            if float(np.abs(step).max()) < 1e-6:
+                break
+        return cls(coef=coef, mean=mean, scale=scale, alpha_threshold=t)
+
+    def probability(self, rgba: Any) -> F32:
+        """Per-pixel trunk probability (0 on transparent pixels)."""
+        img = _rgba(rgba)
+        opaque = img[..., 3] >= self.alpha_threshold
+        out = np.zeros(opaque.shape, np.float32)
+        if not opaque.any():
+            return out
+        f = _trunk_features(img, opaque, segment(img, alpha_threshold=self.alpha_threshold))
+        z = _quadratic((f - self.mean) / self.scale) @ self.coef
+        out[opaque] = 1.0 / (1.0 + np.exp(-np.clip(z, -30, 30)))
+        return out
+
+    def predict(self, rgba: Any) -> Mask:
+        """The trunk mask of a normalised exemplar, as :func:`segment` returns one."""
+        img = _rgba(rgba)
+        opaque = img[..., 3] >= self.alpha_threshold
+        if not opaque.any():
+            return np.zeros(opaque.shape, np.bool_)
+        return _trunk_from_rows(opaque, self.probability(img) >= 0.5)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready parameters (see :meth:`from_dict`)."""
+        return {
+            "format": "phloem.trees.TrunkClassifier",
+            "version": 1,
+            "coef": self.coef.tolist(),
+            "mean": self.mean.tolist(),
+            "scale": self.scale.tolist(),
+            "alpha_threshold": self.alpha_threshold,
+        }
+
+    @classmethod
+    def from_dict(cls, data: Any) -> TrunkClassifier:
+        """Rebuild a classifier saved with :meth:`to_dict`."""
+        if not isinstance(data, dict) or data.get("format") != "phloem.trees.TrunkClassifier":
+            raise ValueError("data: not a phloem.trees.TrunkClassifier record")
+        coef = np.asarray(data["coef"], np.float64)
+        mean = np.asarray(data["mean"], np.float64)
+        scale = np.asarray(data["scale"], np.float64)
+        d = mean.size
+        if scale.shape != (d,) or coef.shape != (1 + d + d * (d + 1) // 2,):
+            raise ValueError("data: coefficient sizes do not match")
+        return cls(coef=coef, mean=mean, scale=scale, alpha_threshold=float(data["alpha_threshold"]))
+
+
 def crown_baseline(trunk: Any, alpha: Any, *, alpha_threshold: float = 0.5) -> int:
     """Row of the crown baseline: the lowest row holding an opaque non-trunk pixel."""
     t = _threshold(alpha_threshold)
@@ -617,6 +862,15 @@ def resample(points: Any, pins: tuple[int, int, int], *, split: tuple[int, int, 
     if len(counts) != 3 or min(counts) < 1:
         raise ValueError(f"split: expected three counts >= 1, got {split!r}")
 
+    return _resample_parts(p, (b, l_, r), counts, _segment_resample)
+
+
+def _resample_parts(p: F64, pins: tuple[int, int, int], counts: tuple[int, ...], how: Any) -> F64:
+    """Cut the closed contour at the pins into crown (R to L), left (L to B) and right (B to R)
+    and resample each part with ``how(part, count)``."""
+    b, l_, r = pins
+    n = len(p)
+
     def path(i: int, j: int, full: bool) -> F64:
         # Contour from index i forwards to index j inclusive (the whole loop when i == j and full).
         k = (j - i) % n
@@ -625,12 +879,8 @@ def resample(points: Any, pins: tuple[int, int, int], *, split: tuple[int, int, 
         idx = (i + np.arange(k + 1)) % n
         return p[idx]
 
-    crown = path(r, l_, full=True)
-    left = path(l_, b, full=False)
-    right = path(b, r, full=False)
-    return np.concatenate(
-        [_segment_resample(crown, counts[0]), _segment_resample(left, counts[1]), _segment_resample(right, counts[2])]
-    )
+    parts = (path(r, l_, full=True), path(l_, b, full=False), path(b, r, full=False))
+    return np.concatenate([how(part, c) for part, c in zip(parts, counts)])
 
 
 def simplify(mask: Any, *, m: int = 100, dilation: int = 8) -> F64:
@@ -700,6 +950,11 @@ class Tree:
         ``C_s``: the dilated, simplified contour for mean value coordinates.
     split : (int, int, int)
         Points of ``resampled`` on the crown and the two trunk sides.
+    outline : (L, 2) float64 ndarray
+        The dilated outline of the interior of ``resampled`` that ``simplified`` samples and
+        that :func:`cages` matches against (about one point per pixel).
+    dilation : int
+        The dilation ``outline`` and ``simplified`` were made with.
     """
 
     image: F32
@@ -709,6 +964,8 @@ class Tree:
     resampled: F64
     simplified: F64
     split: tuple[int, int, int]
+    outline: F64
+    dilation: int = 8
 
     @property
     def vector(self) -> F64:
@@ -721,6 +978,7 @@ def prepare(
     rgba: Any,
     *,
     trunk: Any = None,
+    classifier: TrunkClassifier | None = None,
     size: int = 1024,
     alpha_threshold: float = 0.5,
     split: tuple[int, int, int] = (1600, 200, 200),
@@ -736,6 +994,8 @@ def prepare(
         The exemplar.
     trunk : (S, S) bool ndarray, optional
         A trunk mask for the *normalised* image, e.g. drawn by hand; :func:`segment` otherwise.
+    classifier : TrunkClassifier, optional
+        Segment with this trained classifier instead of :func:`segment` (ignored with ``trunk``).
     size, alpha_threshold : optional
         See :func:`normalize`.
     split : optional
@@ -759,15 +1019,820 @@ def prepare(
     ((128, 128, 4), (200, 2), (30, 2), (400,))
     """
     img = _rgba(rgba) if normalized else normalize(rgba, size=size, alpha_threshold=alpha_threshold)
-    if trunk is None:
+    if trunk is None and classifier is not None:
+        tm = classifier.predict(img)
+    elif trunk is None:
         tm = segment(img, alpha_threshold=alpha_threshold)
     else:
         tm = as_mask(trunk, "trunk", img.shape[:2])
     c = contour(img[..., 3], alpha_threshold=alpha_threshold)
     pins = pin_points(c, tm)
     cr = resample(c, pins, split=split)
-    interior = np.zeros(img.shape[:2], np.uint8)
-    cv2.fillPoly(interior, [np.round(cr).astype(np.int32)], 1)
-    cs = simplify(interior > 0, m=m, dilation=dilation)
+    interior = fill_contour(cr, img.shape[:2])
+    cs = simplify(interior, m=m, dilation=dilation)
     counts = (int(split[0]), int(split[1]), int(split[2]))
-    return Tree(image=img, trunk=tm, contour=c, pins=pins, resampled=cr, simplified=cs, split=counts)
+    outline = _dilated_contour(interior, dilation)
+    return Tree(
+        image=img,
+        trunk=tm,
+        contour=c,
+        pins=pins,
+        resampled=cr,
+        simplified=cs,
+        split=counts,
+        outline=outline,
+        dilation=dilation,
+    )
+
+
+# -- synthesis (§5) --------------------------------------------------------------------------
+
+
+def fill_contour(points: Any, shape: tuple[int, int]) -> Mask:
+    """Preliminary alpha of a synthesised contour: draw it, then clear from outside (§5.1).
+
+    The closed polyline is drawn onto an all-opaque canvas, and a flood fill from outside the
+    image clears everything reachable without crossing it. Unlike a polygon fill this stays
+    correct where a combined contour intersects itself: every pixel enclosed by some part of
+    the curve is kept.
+
+    Parameters
+    ----------
+    points : (K, 2) ndarray
+        Closed contour, ``(x, y)``.
+    shape : (int, int)
+        ``(H, W)`` of the mask.
+
+    Returns
+    -------
+    (H, W) bool ndarray
+        ``True`` inside (and on) the contour.
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> bowtie = [(2, 2), (12, 12), (12, 2), (2, 12)]     # self-intersecting
+    >>> m = phloem.trees.fill_contour(bowtie, (15, 15))
+    >>> bool(m[7, 3]), bool(m[7, 11]), bool(m[3, 7]), bool(m[0, 0])
+    (True, True, False, False)
+    """
+    p = _points(points, "points")
+    h, w = (int(s) for s in shape)
+    if h < 1 or w < 1:
+        raise ValueError(f"shape: expected a positive (H, W), got {shape!r}")
+    # The curve on an empty canvas with a one-pixel margin: the margin connects every outside
+    # region to the seed, so whatever the fill reaches is outside; the rest (the curve and all
+    # it encloses) is inside.
+    # The canvas also covers the parts of the curve outside the image (up to one image size
+    # beyond each edge; farther points are clamped there), so that no gap lets the fill in.
+    lim = np.array([w, h], np.float64)
+    p = np.clip(p, -lim, 2 * lim - 1)
+    x0, y0 = (min(0, int(np.floor(v))) - 1 for v in p.min(axis=0))
+    x1, y1 = (max(n - 1, int(np.ceil(v))) + 1 for n, v in zip((w, h), p.max(axis=0)))
+    canvas = np.zeros((y1 - y0 + 1, x1 - x0 + 1), np.uint8)
+    pts = np.round((p - [x0, y0]) * 16).astype(np.int32)
+    cv2.polylines(canvas, [pts], True, 1, thickness=1, lineType=cv2.LINE_8, shift=4)
+    flood = np.zeros((canvas.shape[0] + 2, canvas.shape[1] + 2), np.uint8)
+    cv2.floodFill(canvas, flood, (0, 0), 2, loDiff=0, upDiff=0, flags=4 | (1 << 8))
+    reached = flood[1 - y0 : 1 - y0 + h, 1 - x0 : 1 - x0 + w] > 0
+    return np.asarray(~reached)
+
+
+def combine_contours(contours: Sequence[Any], weights: Any) -> F64:
+    """A convex combination ``Σ w_i C_i`` of resampled contours (paper §5.1).
+
+    The paper combines the mean-subtracted vectors ``u_i``; combining the contours themselves
+    gives the same shape, placed at the combined centroid, so a tree standing on the bottom
+    edge of every exemplar still stands there.
+
+    Parameters
+    ----------
+    contours : sequence of (N, 2) ndarray
+        Resampled contours ``C_r`` with the same number of points (:attr:`Tree.resampled`).
+    weights : (len(contours),) array_like
+        Non-negative, summing to 1 (negative weights would mirror shapes).
+
+    Returns
+    -------
+    (N, 2) float64 ndarray
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> a = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0]]); b = a * 2
+    >>> phloem.trees.combine_contours([a, b], [0.5, 0.5]).tolist()
+    [[0.0, 0.0], [6.0, 0.0], [6.0, 6.0]]
+    """
+    if len(contours) < 1:
+        raise ValueError("contours: expected at least one contour")
+    cs = [_points(c, f"contours[{i}]") for i, c in enumerate(contours)]
+    if len({c.shape for c in cs}) != 1:
+        raise ValueError(f"contours: expected the same number of points in each, got {[len(c) for c in cs]}")
+    w = _convex_weights(weights, len(cs), "weights")
+    return np.asarray(np.tensordot(w, np.stack(cs), axes=1), dtype=np.float64)
+
+
+def _convex_weights(weights: Any, count: int, name: str) -> F64:
+    w = np.asarray(weights, dtype=np.float64).reshape(-1)
+    if w.shape != (count,):
+        raise ValueError(f"{name}: expected {count} weights, got shape {np.shape(weights)}")
+    if not np.isfinite(w).all() or (w < 0).any():
+        raise ValueError(f"{name}: expected finite non-negative weights, got {w.tolist()}")
+    if abs(float(w.sum()) - 1.0) > 1e-6:
+        raise ValueError(f"{name}: expected weights summing to 1, got sum {float(w.sum()):.6g}")
+    return w
+
+
+def _dilated_contour(mask: Mask, dilation: int) -> F64:
+    """The longest exterior contour of ``mask`` dilated ``dilation`` times (3 x 3 square)."""
+    u8: NDArray[Any] = mask.astype(np.uint8)
+    if dilation:
+        u8 = cv2.copyMakeBorder(u8, dilation, dilation, dilation, dilation, cv2.BORDER_CONSTANT, value=0)
+        u8 = cv2.dilate(u8, np.ones((2 * dilation + 1, 2 * dilation + 1), np.uint8))
+    return contour(np.asarray(u8) > 0) - dilation
+
+
+def _monotone_match(anchors: F64, loop: F64) -> F64:
+    """Points of the closed polyline ``loop`` matched to ``anchors`` in order (a cage).
+
+    The first anchor takes its nearest loop point; the others take loop points in strictly
+    increasing (counter-clockwise) order from there, minimising the sum of squared distances
+    (dynamic programming over the loop, O(len(anchors) * len(loop))). The result follows the
+    loop without folding back, has no repeated point, and corresponds to the anchors.
+    """
+    m = len(anchors)
+    # About ten loop points per anchor are plenty (the cost is O(m * len(loop))).
+    loop = loop[:: max(1, len(loop) // (10 * m))]
+    if len(loop) < 4 * m:  # densify a short loop so that every anchor finds its own point
+        closed = np.vstack([loop, loop[:1]])
+        cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))])
+        loop = _at(closed, cum, np.arange(4 * m) * (cum[-1] / (4 * m)))
+    start = int(np.argmin(((loop - anchors[0]) ** 2).sum(axis=1)))
+    c = np.roll(loop, -start, axis=0)
+    n = len(c)
+    d = ((anchors[:, None, :] - c[None, :, :]) ** 2).sum(axis=2)
+    cost = np.full(n, np.inf)
+    cost[0] = 0.0
+    ar = np.arange(n)
+    back = np.empty((m, n), np.int64)
+    for i in range(1, m):
+        best = np.minimum.accumulate(cost)
+        arg = np.maximum.accumulate(np.where(cost <= best, ar, 0))
+        prev = np.concatenate([[np.inf], best[:-1]])
+        back[i] = np.concatenate([[0], arg[:-1]])
+        cost = d[i] + prev
+    idx = np.empty(m, np.int64)
+    idx[-1] = int(np.argmin(cost))
+    for i in range(m - 1, 0, -1):
+        idx[i - 1] = back[i, idx[i]]
+    return np.asarray(c[idx], dtype=np.float64)
+
+
+def cages(
+    target: Any,
+    sources: Sequence[Tree],
+    shape: tuple[int, int],
+    *,
+    m: int = 100,
+    dilation: int = 8,
+    mask: Any = None,
+) -> tuple[F64, list[F64]]:
+    """Matching simplified contours ``C_s'`` (target) and ``C_s`` (each source) for the warp (§4.6, §5.2).
+
+    Each cage has ``m`` points on the contour of its tree's interior dilated ``dilation``
+    times, as in §4.6. For the warp the cages must correspond point by point; the resampled
+    contours ``C_r`` already do (same index, same part of the tree). So ``m`` indices into
+    ``C_r`` are chosen at equal arc length along the target ``C_r'``, and every cage takes, in
+    order, the points of its dilated outline nearest to its own ``C_r`` at those indices
+    (a monotone matching, so a cage never folds back or repeats a point, even where the
+    dilation has filled a concave notch or a tree has no visible trunk).
+
+    Parameters
+    ----------
+    target : (N, 2) ndarray
+        The synthesised resampled contour ``C_r'``, with the sources' number of points.
+    sources : sequence of Tree
+        The source exemplars.
+    shape : (int, int)
+        ``(H, W)`` of the images.
+    m, dilation : int, optional
+        Cage points (the paper's M = 100) and dilation iterations (8 in the paper).
+    mask : (H, W) bool ndarray, optional
+        The target's preliminary alpha (:func:`fill_contour` of ``target`` if omitted).
+
+    Returns
+    -------
+    target_cage : (m, 2) float64 ndarray
+    source_cages : list of (m, 2) float64 ndarray
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> img = np.zeros((120, 80, 4), np.float32)
+    >>> img[10:70, 10:70] = 1.0; img[70:110, 35:45] = 1.0
+    >>> tree = phloem.trees.prepare(img, size=128, split=(160, 20, 20), m=30)
+    >>> tc, (sc,) = phloem.trees.cages(tree.resampled, [tree], (128, 128), m=30)
+    >>> tc.shape, bool(np.allclose(tc, sc))
+    ((30, 2), True)
+    """
+    cr = _points(target, "target")
+    if not sources:
+        raise ValueError("sources: expected at least one Tree")
+    n = len(sources[0].resampled)
+    if len(cr) != n:
+        raise ValueError(f"target: expected {n} points like the sources' resampled contours, got {len(cr)}")
+    m = check_int(m, "m", 3)
+    dilation = check_int(dilation, "dilation", 0)
+    h, w = (int(s) for s in shape)
+    tmask = fill_contour(cr, (h, w)) if mask is None else as_mask(mask, "mask", (h, w))
+    closed = np.vstack([cr, cr[:1]])
+    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))])
+    if cum[-1] <= 0:
+        raise ValueError("target: the contour is degenerate (all points equal)")
+    picks = np.searchsorted(cum, np.arange(m) * (cum[-1] / m), side="right") - 1
+    picks = np.clip(picks, 0, n - 1)
+    target_cage = _monotone_match(cr[picks], _dilated_contour(tmask, dilation))
+    out = []
+    for t in sources:
+        if len(t.resampled) != n:
+            raise ValueError(f"sources: every tree needs {n} resampled points, got {len(t.resampled)}")
+        outline = t.outline if t.dilation == dilation else _dilated_contour(fill_contour(t.resampled, (h, w)), dilation)
+        out.append(_monotone_match(t.resampled[picks], outline))
+    return target_cage, out
+
+
+def match_histograms(image: Any, reference: Any, *, alpha_threshold: float = 0.0) -> F32:
+    """Histogram transfer of each colour channel, ignoring transparent pixels (paper §5.3).
+
+    For each of the first three channels, the cumulative histograms of ``image`` and
+    ``reference`` are computed over their pixels with alpha above ``alpha_threshold``; every
+    distinct value of ``image`` is mapped to the value of ``reference`` at the same quantile,
+    interpolating linearly between ``reference``'s distinct values (Gonzalez & Woods). Alpha
+    and transparent pixels are left unchanged.
+
+    Parameters
+    ----------
+    image, reference : (H, W, 4) ndarray
+        RGBA images (sizes may differ).
+    alpha_threshold : float, optional
+        Pixels with alpha at or below it are ignored.
+
+    Returns
+    -------
+    (H, W, 4) float32 ndarray
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> img = np.ones((2, 2, 4), np.float32); img[..., 0] = [[0.1, 0.2], [0.3, 0.4]]
+    >>> ref = np.ones((2, 2, 4), np.float32); ref[..., 0] = [[0.5, 0.6], [0.7, 0.9]]
+    >>> phloem.trees.match_histograms(img, ref)[..., 0].astype(float).round(2).tolist()
+    [[0.5, 0.6], [0.7, 0.9]]
+    """
+    img = _rgba(image, "image")
+    ref = _rgba(reference, "reference")
+    t = check_float(alpha_threshold, "alpha_threshold", 0.0)
+    src_on = img[..., 3] > t
+    ref_on = ref[..., 3] > t
+    if not src_on.any():
+        raise ValueError("image: every pixel is transparent; nothing to match")
+    if not ref_on.any():
+        raise ValueError("reference: every pixel is transparent; it has no colour histogram")
+    out: F32 = img.copy()
+    for ch in range(3):
+        s = img[..., ch][src_on]
+        _, s_idx, s_counts = np.unique(s, return_inverse=True, return_counts=True)
+        r_values, r_counts = np.unique(ref[..., ch][ref_on], return_counts=True)
+        s_q = np.cumsum(s_counts) / s.size
+        r_q = np.cumsum(r_counts) / r_counts.sum()
+        mapped = np.interp(s_q, r_q, r_values)
+        out[..., ch][src_on] = mapped[s_idx].astype(np.float32)
+    return out
+
+
+def morph(
+    trees: Sequence[Tree],
+    weights: Any,
+    *,
+    color_weights: Any = None,
+    m: int = 100,
+    dilation: int = 8,
+    threads: int | None = None,
+) -> F32:
+    """A new tree from several exemplars: combined contour, filled by MVC colour transfer (§5.1–5.2).
+
+    1. ``C_r' = Σ w_i C_r,i`` (:func:`combine_contours`);
+    2. the preliminary alpha: ``C_r'`` drawn and flood-filled from outside (:func:`fill_contour`);
+    3. matching cages ``C_s'`` and ``C_s,i`` (:func:`cages`);
+    4. every source with a non-zero colour weight warped onto the target cage by mean value
+       coordinates and combined: alpha is the largest warped alpha, colour the
+       ``color_weights`` combination of the sources that are not transparent there
+       (:func:`phloem.warp.mvc_combine`); a source with colour weight 0 shapes the contour
+       only (as in the paper's Fig. 14 and the "sampling one of the two images" of Fig. 16);
+    5. pixels farther than ``dilation`` from the preliminary alpha are cleared, so the
+       transferred alpha refines the contour's shape but cannot leave its cage.
+
+    Parameters
+    ----------
+    trees : sequence of Tree
+        The exemplars, all preprocessed at the same size and split.
+    weights : (len(trees),) array_like
+        Contour weights: non-negative, summing to 1.
+    color_weights : (len(trees),) array_like, optional
+        Colour weights (default: ``weights``); at least one must be positive.
+    m, dilation : int, optional
+        Cage points and dilation (see :func:`simplify`).
+    threads : int, optional
+        Worker threads for the warp.
+
+    Returns
+    -------
+    (S, S, 4) float32 ndarray
+        The new RGBA tree, transparent pixels black.
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> a = np.zeros((120, 80, 4), np.float32); a[..., 1] = 0.6; a[..., 3] = 0
+    >>> a[10:70, 10:70, 3] = 1.0; a[70:110, 35:45, 3] = 1.0
+    >>> b = np.zeros((120, 120, 4), np.float32); b[..., 0] = 0.5
+    >>> b[5:60, 5:115, 3] = 1.0; b[60:118, 52:68, 3] = 1.0
+    >>> ta, tb = (phloem.trees.prepare(x, size=128, split=(160, 20, 20), m=30) for x in (a, b))
+    >>> out = phloem.trees.morph([ta, tb], [0.5, 0.5], m=30)
+    >>> out.shape, bool(out[..., 3].max() == 1.0), bool(out[0, 0, 3] == 0.0)
+    ((128, 128, 4), True, True)
+    """
+    ts = list(trees)
+    if not ts or not all(isinstance(t, Tree) for t in ts):
+        raise TypeError("trees: expected a non-empty sequence of phloem.trees.Tree")
+    shape = ts[0].image.shape[:2]
+    if any(t.image.shape != ts[0].image.shape for t in ts):
+        raise ValueError(f"trees: expected exemplars of one size, got {sorted({t.image.shape[:2] for t in ts})}")
+    w = _convex_weights(weights, len(ts), "weights")
+    cw = w if color_weights is None else _convex_weights(color_weights, len(ts), "color_weights")
+    target = combine_contours([t.resampled for t in ts], w)
+    mask = fill_contour(target, shape)
+    keep = [i for i in range(len(ts)) if cw[i] > 0]
+    tc, scs = cages(target, [ts[i] for i in keep], shape, m=m, dilation=dilation, mask=mask)
+    from . import warp
+
+    # `dilation` 3 x 3 dilations are one square dilation of side 2 * dilation + 1.
+    side = 2 * dilation + 1
+    region = cv2.dilate(mask.astype(np.uint8), np.ones((side, side), np.uint8)) > 0
+    ck = cw[keep] / cw[keep].sum()
+    return warp.mvc_combine([ts[i].image for i in keep], scs, tc, ck, shape, region=region, threads=threads)
+
+
+@dataclass
+class Library:
+    """A library of preprocessed tree exemplars (paper §3: the library ``L``).
+
+    Build one with :meth:`from_images` or :meth:`from_folder`; all trees share one size and
+    one contour split, so their contours can be combined.
+
+    Attributes
+    ----------
+    trees : list of Tree
+    names : list of str
+        One name per tree (file name, with ``[i]`` for the i-th tree of an atlas).
+    """
+
+    trees: list[Tree]
+    names: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.trees = list(self.trees)
+        if not self.trees:
+            raise ValueError("trees: a library needs at least one tree")
+        if not all(isinstance(t, Tree) for t in self.trees):
+            raise TypeError("trees: expected phloem.trees.Tree objects (see phloem.trees.prepare)")
+        self.names = list(self.names) or [f"tree{i}" for i in range(len(self.trees))]
+        if len(self.names) != len(self.trees):
+            raise ValueError(f"names: expected {len(self.trees)} names, got {len(self.names)}")
+        first = self.trees[0]
+        for name, t in zip(self.names, self.trees):
+            if (
+                t.image.shape != first.image.shape
+                or t.split != first.split
+                or len(t.simplified) != len(first.simplified)
+            ):
+                raise ValueError(f"trees: {name!r} was prepared with another size, split or m than {self.names[0]!r}")
+
+    def __len__(self) -> int:
+        return len(self.trees)
+
+    def __getitem__(self, i: int) -> Tree:
+        return self.trees[i]
+
+    @property
+    def size(self) -> int:
+        """Side of the (square) normalised images."""
+        return int(self.trees[0].image.shape[0])
+
+    @classmethod
+    def from_images(
+        cls,
+        images: Sequence[Any],
+        *,
+        names: Sequence[str] | None = None,
+        size: int = 1024,
+        alpha_threshold: float = 0.5,
+        classifier: TrunkClassifier | None = None,
+        progress: Any = None,
+    ) -> Library:
+        """Preprocess RGBA images (one tree each) into a library.
+
+        Parameters
+        ----------
+        images : sequence of (M, N, 4) ndarray
+        names : sequence of str, optional
+        size, alpha_threshold : optional
+            See :func:`normalize`.
+        classifier : TrunkClassifier, optional
+            Crown/trunk segmentation by this classifier instead of :func:`segment`.
+        progress : callable, optional
+            ``progress(done, total)`` after each tree.
+
+        Examples
+        --------
+        >>> import numpy as np, phloem
+        >>> img = np.zeros((120, 80, 4), np.float32)
+        >>> img[10:70, 10:70] = 1.0; img[70:110, 35:45] = 1.0
+        >>> lib = phloem.trees.Library.from_images([img, img[:, ::-1]], size=128)
+        >>> len(lib), lib.size, lib.names
+        (2, 128, ['tree0', 'tree1'])
+        """
+        imgs = list(images)
+        out = []
+        for i, img in enumerate(imgs):
+            try:
+                out.append(prepare(img, size=size, alpha_threshold=alpha_threshold, classifier=classifier))
+            except ValueError as exc:
+                label = names[i] if names is not None and i < len(names) else f"images[{i}]"
+                raise ValueError(f"{label}: {exc}") from None
+            if progress is not None:
+                progress(i + 1, len(imgs))
+        return cls(out, list(names) if names is not None else [])
+
+    @classmethod
+    def from_folder(
+        cls,
+        path: str | os.PathLike[str],
+        *,
+        atlas: bool | None = None,
+        size: int = 1024,
+        alpha_threshold: float = 0.5,
+        skip_bad: bool = False,
+        classifier: TrunkClassifier | None = None,
+        progress: Any = None,
+    ) -> Library:
+        """Read every PNG/TIFF/WebP image of a folder (sorted by name) into a library.
+
+        Parameters
+        ----------
+        path : path-like
+            The folder.
+        atlas : bool, optional
+            ``True``: every image is an atlas of several trees (:func:`split_atlas`);
+            ``False``: one tree per image; ``None`` (default): split every image and keep
+            all its pieces (an image of one tree gives one piece).
+        size, alpha_threshold : optional
+            See :func:`normalize`.
+        skip_bad : bool, optional
+            Skip images that cannot be used (no alpha, fully transparent, no usable contour)
+            instead of raising.
+        classifier : TrunkClassifier, optional
+            Crown/trunk segmentation by this classifier instead of :func:`segment`.
+        progress : callable, optional
+            ``progress(done, total)`` after each image.
+
+        Raises
+        ------
+        ValueError
+            If an image cannot be used (unless ``skip_bad``) or no tree is found.
+        """
+        from . import io
+
+        folder = Path(path)
+        if not folder.is_dir():
+            raise ValueError(f"path: {folder} is not a folder")
+        files = sorted(p for p in folder.iterdir() if p.suffix.lower() in {".png", ".tif", ".tiff", ".webp"})
+        if not files:
+            raise ValueError(f"path: {folder} has no PNG, TIFF or WebP images")
+        trees_: list[Tree] = []
+        names: list[str] = []
+        for k, f in enumerate(files):
+            try:
+                img = io.read_image(f)
+                if img.ndim != 3 or img.shape[2] != 4:
+                    raise ValueError("expected an RGBA image (trees need an alpha channel)")
+                pieces = [img] if atlas is False else split_atlas(img, alpha_threshold=alpha_threshold)
+                for i, piece in enumerate(pieces):
+                    trees_.append(prepare(piece, size=size, alpha_threshold=alpha_threshold, classifier=classifier))
+                    names.append(f.name if len(pieces) == 1 else f"{f.name}[{i}]")
+            except ValueError as exc:
+                if not skip_bad:
+                    raise ValueError(f"{f}: {exc}") from None
+            if progress is not None:
+                progress(k + 1, len(files))
+        if not trees_:
+            raise ValueError(f"path: no usable tree in {folder}")
+        return cls(trees_, names)
+
+
+@dataclass
+class Variation:
+    """One synthesised tree and how it was made.
+
+    Attributes
+    ----------
+    image : (S, S, 4) float32 ndarray
+        The new RGBA tree.
+    sources : list of int
+        Library indices of the exemplars combined.
+    weights : (k,) float64 ndarray
+        Their contour weights.
+    color_weights : (k,) float64 ndarray
+        Their colour weights.
+    reference : int or None
+        Library index of the histogram reference, if any.
+    """
+
+    image: F32
+    sources: list[int]
+    weights: F64
+    color_weights: F64
+    reference: int | None = None
+
+    def describe(self, library: Library) -> dict[str, Any]:
+        """A JSON-ready record (names and weights) for a result sidecar."""
+        return {
+            "exemplars": [library.names[i] for i in self.sources],
+            "weights": [round(float(v), 6) for v in self.weights],
+            "color_weights": [round(float(v), 6) for v in self.color_weights],
+            "histogram_reference": None if self.reference is None else library.names[self.reference],
+        }
+
+
+_COLORS = ("random", "contour", "single")
+
+
+def _draw_weights(rng: np.random.Generator, k: int, spread: float) -> F64:
+    # (1 - spread)/k + spread * Dirichlet(1): for two sources w_1 is uniform on
+    # [(1 - spread)/2, (1 + spread)/2], i.e. [0.3, 0.7] for the default spread as in Fig. 16.
+    return np.asarray((1.0 - spread) / k + spread * rng.dirichlet(np.ones(k)), dtype=np.float64)
+
+
+def _color_weights(rng: np.random.Generator, w: F64, colors: str, spread: float) -> F64:
+    if colors == "contour":
+        return w
+    if colors == "single":
+        out = np.zeros_like(w)
+        out[int(rng.choice(len(w), p=w))] = 1.0
+        return out
+    return _draw_weights(rng, len(w), spread)
+
+
+def _check_variation_args(library: Any, sources: Any, spread: Any, colors: Any) -> tuple[int, float]:
+    if not isinstance(library, Library):
+        raise TypeError(f"library: expected a phloem.trees.Library, got {type(library).__name__}")
+    k = check_int(sources, "sources", 1)
+    spread = check_float(spread, "spread", 0.0)
+    if spread > 1.0:
+        raise ValueError(f"spread: expected a value in [0, 1], got {spread}")
+    if colors not in _COLORS:
+        raise ValueError(f"colors: expected one of {_COLORS}, got {colors!r}")
+    return k, spread
+
+
+def variation(
+    library: Library,
+    *,
+    sources: int = 2,
+    seed: int = 0,
+    spread: float = 0.4,
+    colors: str = "random",
+    histogram: bool = False,
+    threads: int | None = None,
+) -> Variation:
+    """A new tree from ``sources`` exemplars drawn at random from the library (paper §3, §5).
+
+    The contour is a random convex combination of the exemplars' contours (§5.1) and is filled
+    by RGBA colour transfer from all of them (§5.2); see :func:`morph`.
+
+    Parameters
+    ----------
+    library : Library
+    sources : int, optional
+        How many distinct exemplars to combine (2 in the paper's Fig. 16).
+    seed : int, optional
+        Seed of the random choices; the same seed gives the same tree.
+    spread : float, optional
+        Contour weights are ``(1 - spread)/k + spread * Dirichlet(1, ..., 1)``; with two sources
+        and the default 0.4, ``w_1`` is uniform on [0.3, 0.7] as in the paper's Fig. 16.
+    colors : {"random", "contour", "single"}, optional
+        Colour weights: a second random convex combination (§5.2, the default), the contour's
+        weights, or one source picked with probability equal to its weight (both in Fig. 16).
+    histogram : bool, optional
+        Match the colour histogram to another random exemplar of the library (§5.3).
+    threads : int, optional
+        Worker threads for the warp.
+
+    Returns
+    -------
+    Variation
+
+    Raises
+    ------
+    ValueError
+        If the library holds fewer than ``sources`` trees.
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> img = np.zeros((120, 80, 4), np.float32); img[..., 1] = 0.5
+    >>> img[..., 3] = 0; img[10:70, 10:70, 3] = 1.0; img[70:110, 35:45, 3] = 1.0
+    >>> lib = phloem.trees.Library.from_images([img, img[:, ::-1], img[20:]], size=128)
+    >>> v = phloem.trees.variation(lib, seed=3)
+    >>> v.image.shape, len(v.sources), bool(abs(v.weights.sum() - 1) < 1e-9)
+    ((128, 128, 4), 2, True)
+    """
+    k, spread = _check_variation_args(library, sources, spread, colors)
+    if len(library) < k:
+        raise ValueError(
+            f"library: has {len(library)} tree(s) but sources={k}; a variation combines {k} distinct exemplars"
+        )
+    rng = np.random.default_rng(check_int(seed, "seed", 0))
+    idx = [int(i) for i in rng.choice(len(library), size=k, replace=False)]
+    w = _draw_weights(rng, k, spread)
+    cw = _color_weights(rng, w, colors, spread)
+    return _make(library, idx, w, cw, rng, histogram, threads)
+
+
+def _make(
+    library: Library,
+    idx: list[int],
+    w: F64,
+    cw: F64,
+    rng: np.random.Generator,
+    histogram: bool,
+    threads: int | None,
+    extra: Tree | None = None,
+) -> Variation:
+    ts = ([extra] if extra is not None else []) + [library.trees[i] for i in idx]
+    img = morph(ts, w, color_weights=cw, m=len(ts[0].simplified), threads=threads)
+    ref = None
+    if histogram:
+        choices = [i for i in range(len(library)) if i not in idx] or list(range(len(library)))
+        ref = int(rng.choice(choices))
+        if img[..., 3].any():
+            img = match_histograms(img, library.trees[ref].image)
+    return Variation(img, idx, w, cw, ref)
+
+
+def vary(
+    tree: Any,
+    library: Library,
+    *,
+    n: int,
+    seed: int = 0,
+    sources: int = 2,
+    weight: tuple[float, float] = (0.6, 0.9),
+    spread: float = 0.4,
+    colors: str = "contour",
+    histogram: bool = False,
+    threads: int | None = None,
+) -> list[Variation]:
+    """``n`` variations of one tree ``T``, combined with library exemplars at a lower weight (§3).
+
+    ``T`` is preprocessed like the exemplars (an RGBA image, or a :class:`Tree` made at the
+    library's size), then each variation combines ``T`` with ``sources - 1`` random library
+    exemplars. ``T``'s contour weight is drawn uniformly from ``weight``; the rest is shared
+    among the others as in :func:`variation`. By default the colour weights equal the contour
+    weights, so the variations keep ``T``'s look.
+
+    Parameters
+    ----------
+    tree : (M, N, 4) ndarray or Tree
+        The user's tree ``T``.
+    library : Library
+    n : int
+        Number of variations.
+    seed : int, optional
+    sources : int, optional
+        Trees per variation, ``T`` included (at least 2).
+    weight : (float, float), optional
+        Range of ``T``'s contour weight.
+    spread, colors, histogram, threads : optional
+        As in :func:`variation`.
+
+    Returns
+    -------
+    list of Variation
+        ``sources`` lists the library exemplars only; ``weights[0]`` is ``T``'s.
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> img = np.zeros((120, 80, 4), np.float32); img[..., 1] = 0.5
+    >>> img[..., 3] = 0; img[10:70, 10:70, 3] = 1.0; img[70:110, 35:45, 3] = 1.0
+    >>> lib = phloem.trees.Library.from_images([img[:, ::-1], img[20:]], size=128)
+    >>> vs = phloem.trees.vary(img, lib, n=2, seed=1)
+    >>> len(vs), [bool(0.6 <= v.weights[0] <= 0.9) for v in vs]
+    (2, [True, True])
+    """
+    k, spread = _check_variation_args(library, sources, spread, colors)
+    n = check_int(n, "n", 1)
+    if k < 2:
+        raise ValueError(f"sources: a variation of a tree combines it with at least one exemplar, got {k}")
+    if len(library) < k - 1:
+        raise ValueError(f"library: has {len(library)} tree(s) but sources={k} needs {k - 1} besides the tree")
+    lo, hi = (check_float(v, "weight", 0.0) for v in weight)
+    if not lo <= hi <= 1.0:
+        raise ValueError(f"weight: expected 0 <= low <= high <= 1, got {weight!r}")
+    t = tree if isinstance(tree, Tree) else prepare(tree, size=library.size)
+    first = library.trees[0]
+    if t.image.shape != first.image.shape or t.split != first.split:
+        raise ValueError("tree: prepared with another size or split than the library's trees")
+    rng = np.random.default_rng(check_int(seed, "seed", 0))
+    out = []
+    for _ in range(n):
+        idx = [int(i) for i in rng.choice(len(library), size=k - 1, replace=False)]
+        wt = float(rng.uniform(lo, hi))
+        w = np.concatenate([[wt], (1.0 - wt) * _draw_weights(rng, k - 1, spread)])
+        cw = _color_weights(rng, w, colors, spread)
+        out.append(_make(library, idx, w, cw, rng, histogram, threads, extra=t))
+    return out
+
+
+def morph_table(
+    trees: Sequence[Tree],
+    *,
+    tile: int = 192,
+    colors: bool = True,
+    background: tuple[float, float, float] = (0.8, 0.8, 0.8),
+    threads: int | None = None,
+) -> F32:
+    """The paper's combination tables (Fig. 13 and Fig. 14) for a few exemplars, as one image.
+
+    Row ``i``, column ``j`` (``i != j``) shows the contour ``w_i C_i + w_j C_j`` with weights
+    2/3 and 1/3 in the lower triangle and 1/3 and 2/3 in the upper one, filled with the colours
+    of the row's tree only (Fig. 14) or, with ``colors=False``, as a silhouette (Fig. 13). The
+    diagonal shows the exemplars, and the first row and column repeat them as headers.
+
+    Parameters
+    ----------
+    trees : sequence of Tree
+        Two or more exemplars (the paper shows seven).
+    tile : int, optional
+        Side of each cell in pixels.
+    colors : bool, optional
+        Colour transfer (Fig. 14) or silhouettes of the combined contours (Fig. 13).
+    background : (float, float, float), optional
+        RGB shown behind transparent pixels.
+    threads : int, optional
+        Worker threads for the warps.
+
+    Returns
+    -------
+    ((k + 1) * tile, (k + 1) * tile, 3) float32 ndarray
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> a = np.zeros((120, 80, 4), np.float32); a[10:70, 10:70] = 1.0; a[70:110, 35:45] = 1.0
+    >>> ts = [phloem.trees.prepare(x, size=96, split=(160, 20, 20), m=30) for x in (a, a[:, ::-1])]
+    >>> phloem.trees.morph_table(ts, tile=32).shape
+    (96, 96, 3)
+    """
+    ts = list(trees)
+    if len(ts) < 2:
+        raise ValueError(f"trees: a combination table needs at least two exemplars, got {len(ts)}")
+    tile = check_int(tile, "tile", 8)
+    k = len(ts)
+    bg = np.asarray(background, np.float32)
+    out = np.empty(((k + 1) * tile, (k + 1) * tile, 3), np.float32)
+    out[:] = bg
+
+    def put(r: int, c: int, rgba: F32) -> None:
+        small = cv2.resize(rgba, (tile, tile), interpolation=cv2.INTER_AREA)
+        a = small[..., 3:4]
+        out[r * tile : (r + 1) * tile, c * tile : (c + 1) * tile] = small[..., :3] * a + bg * (1 - a)
+
+    m = len(ts[0].simplified)
+    for i, t in enumerate(ts):
+        put(0, i + 1, t.image)
+        put(i + 1, 0, t.image)
+        for j, u in enumerate(ts):
+            if i == j:
+                cell = t.image
+            else:
+                w = [2 / 3, 1 / 3] if i > j else [1 / 3, 2 / 3]
+                if colors:
+                    cell = morph([t, u], w, color_weights=[1.0, 0.0], m=m, threads=threads)
+                else:
+                    sil = fill_contour(combine_contours([t.resampled, u.resampled], w), t.image.shape[:2])
+                    cell = np.zeros((*sil.shape, 4), np.float32)
+                    cell[sil] = (0.15, 0.35, 0.15, 1.0)
+            put(i + 1, j + 1, cell)
+    return out

@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import _core
-from ._validate import as_image, check_size, check_threads, restore_ndim
+from ._validate import as_image, as_mask, check_size, check_threads, restore_ndim
 
 __all__ = ["mvc", "mvc_combine", "mvc_weights"]
 
@@ -156,6 +156,7 @@ def mvc(
     target_contour: Any,
     size: int | tuple[int, int] | None = None,
     *,
+    region: Any = None,
     threads: int | None = None,
 ) -> NDArray[np.float32]:
     """Warp ``image`` so that ``source_contour`` lands on ``target_contour``.
@@ -180,6 +181,8 @@ def mvc(
         The matching contour in the result, with the same number of points.
     size : int or (int, int), optional
         (height, width) of the result (default: the size of ``image``).
+    region : (H, W) bool array_like, optional
+        Compute only these pixels of the result; the others are 0 (and cost nothing).
     threads : int, optional
         Worker threads (default: ``PHLOEM_NUM_THREADS`` or all cores).
 
@@ -206,7 +209,8 @@ def mvc(
     """
     hw = np.shape(image)[:2] if size is None else size
     imgs, conts, target, hw = _sources([image], [source_contour], target_contour, hw, single=True)
-    out = _core.mvc_warp(imgs, conts, target, hw, threads=check_threads(threads))[0]
+    reg = None if region is None else as_mask(region, "region", hw)
+    out = _core.mvc_warp(imgs, conts, target, hw, region=reg, threads=check_threads(threads))[0]
     return restore_ndim(out, image)
 
 
@@ -217,6 +221,7 @@ def mvc_combine(
     weights: Any,
     size: int | tuple[int, int],
     *,
+    region: Any = None,
     threads: int | None = None,
 ) -> NDArray[np.float32]:
     """Fill ``target_contour`` from several images at once (Argudo et al. 2017, §5.2).
@@ -239,6 +244,8 @@ def mvc_combine(
         Non-negative colour weights summing to 1.
     size : int or (int, int)
         (height, width) of the result.
+    region : (H, W) bool array_like, optional
+        Compute only these pixels of the result; the others are 0 (and cost nothing).
     threads : int, optional
         Worker threads (default: ``PHLOEM_NUM_THREADS`` or all cores).
 
@@ -266,4 +273,5 @@ def mvc_combine(
             f"images: expected colour channels and a last alpha channel (C >= 2), got C = {imgs[0].shape[2]}"
         )
     w = _weights(weights, len(imgs))
-    return _core.mvc_combine(imgs, conts, target, w, hw, threads=check_threads(threads))
+    reg = None if region is None else as_mask(region, "region", hw)
+    return _core.mvc_combine(imgs, conts, target, w, hw, region=reg, threads=check_threads(threads))

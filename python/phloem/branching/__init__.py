@@ -12,7 +12,24 @@ References
 
 from __future__ import annotations
 
+from .figures import histogram_figure
 from .image import Fragment, RenderResult, fragments, render, rigid_align
 from .skeleton import Branch, Skeleton, SkeletonError
+from .structure import (
+    BendingModel,
+    FurcationModel,
+    angle_histogram,
+    default_h,
+    extend,
+    grow,
+    histogram_distance,
+    synthetic_skeleton,
+    thickness_histogram,
+)
+from .trace import estimate_thickness, trace
 
-__all__ = ["Branch", "Fragment", "RenderResult", "Skeleton", "SkeletonError", "fragments", "render", "rigid_align"]
+__all__ = [
+    "BendingModel", "Branch", "Fragment", "FurcationModel", "RenderResult", "Skeleton", "SkeletonError", "angle_histogram",
+    "default_h", "estimate_thickness", "extend", "fragments", "grow", "histogram_distance", "histogram_figure", "render",
+    "rigid_align", "synthetic_skeleton", "thickness_histogram", "trace",
+]

@@ -155,7 +155,12 @@ class Branch:
         angles = np.asarray(angles, dtype=np.float64)
         headings = heading + np.concatenate([[0.0], np.cumsum(angles)])
         steps = h * np.stack([np.cos(headings), -np.sin(headings)], axis=1)
-        pts = np.vstack([np.asarray(start, dtype=np.float64)[None, :], np.asarray(start, dtype=np.float64) + np.cumsum(steps, axis=0)])
+        pts = np.vstack(
+            [
+                np.asarray(start, dtype=np.float64)[None, :],
+                np.asarray(start, dtype=np.float64) + np.cumsum(steps, axis=0),
+            ]
+        )
         return cls(pts, thickness, parent)
 
     def resample(self, h: float) -> Branch:
@@ -168,7 +173,7 @@ class Branch:
         seg = np.linalg.norm(np.diff(self.points, axis=0), axis=1)
         cum = np.concatenate([[0.0], np.cumsum(seg)])
         total = float(cum[-1])
-        count = int(math.floor(total / h + 1e-9)) + 1
+        count = math.floor(total / h + 1e-9) + 1
         if count < 2:
             return Branch(self.points[[0, -1]].copy(), self.thickness[[0, -1]].copy(), self.parent)
         # Points at arc lengths k*h would leave chords shorter than h where the polyline turns;
@@ -278,9 +283,13 @@ class Skeleton:
             if b.parent is not None:
                 pb, pv = b.parent
                 if not 0 <= pb < i:
-                    raise SkeletonError(f"branches[{i}].parent: branch index {pb} must refer to an earlier branch (0..{i - 1})")
+                    raise SkeletonError(
+                        f"branches[{i}].parent: branch index {pb} must refer to an earlier branch (0..{i - 1})"
+                    )
                 if not 0 <= pv < len(self.branches[pb]):
-                    raise SkeletonError(f"branches[{i}].parent: vertex {pv} is outside branch {pb} ({len(self.branches[pb])} vertices)")
+                    raise SkeletonError(
+                        f"branches[{i}].parent: vertex {pv} is outside branch {pb} ({len(self.branches[pb])} vertices)"
+                    )
             if self.shape is not None:
                 h, w = self.shape
                 x, y = b.points[:, 0], b.points[:, 1]
@@ -335,10 +344,18 @@ class Skeleton:
         for b in self.branches:
             for (p, q), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
                 r = max(0.5 * (r0 + r1), 0.5)
-                cv2.line(out, _pt(p), _pt(q), 1, thickness=max(1, int(round(2 * r))), lineType=cv2.LINE_8, shift=4)
+                cv2.line(out, _pt(p), _pt(q), 1, thickness=max(1, round(2 * r)), lineType=cv2.LINE_8, shift=4)
         return out.astype(bool)
 
-    def draw(self, image: Any = None, *, shape: tuple[int, int] | None = None, color: Sequence[float] = (1.0, 0.2, 0.1), width: int = 1, vertices: bool = False) -> NDArray[np.float32]:
+    def draw(
+        self,
+        image: Any = None,
+        *,
+        shape: tuple[int, int] | None = None,
+        color: Sequence[float] = (1.0, 0.2, 0.1),
+        width: int = 1,
+        vertices: bool = False,
+    ) -> NDArray[np.float32]:
         """Draw the skeleton's centre lines (and optionally vertices) over an image.
 
         Parameters
@@ -417,13 +434,21 @@ class Skeleton:
             thick = _as_thickness(b.get("thickness", 1.0), len(pts), where)
             parent = b.get("parent")
             if parent is not None:
-                if not (isinstance(parent, (list, tuple)) and len(parent) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in parent)):
+                if not (
+                    isinstance(parent, (list, tuple))
+                    and len(parent) == 2
+                    and all(isinstance(v, int) and not isinstance(v, bool) for v in parent)
+                ):
                     raise SkeletonError(f"{where}.parent must be null or [branch index, vertex index], got {parent!r}")
                 parent = (parent[0], parent[1])
             out.append(Branch(pts, thick, parent))
         shape = data.get("shape")
         if shape is not None:
-            if not (isinstance(shape, (list, tuple)) and len(shape) == 2 and all(isinstance(v, int) and v > 0 for v in shape)):
+            if not (
+                isinstance(shape, (list, tuple))
+                and len(shape) == 2
+                and all(isinstance(v, int) and v > 0 for v in shape)
+            ):
                 raise SkeletonError(f"'shape' must be [H, W] with positive integers, got {shape!r}")
             shape = (shape[0], shape[1])
         return cls(out, shape)
@@ -456,4 +481,4 @@ class Skeleton:
 
 
 def _pt(p: F64) -> tuple[int, int]:
-    return int(round(p[0] * 16)), int(round(p[1] * 16))
+    return round(float(p[0]) * 16), round(float(p[1]) * 16)

@@ -406,7 +406,9 @@ pub fn knn(exemplar: &Image<'_>, weights: Option<&[f32]>, params: &KnnParams) ->
 /// copied from (or [`NONE`]). For each output pixel `p0` and each `p` in its `patch_size`
 /// window, the reference of `p` forward-shifted by `p0 − p` is a coherence candidate; with
 /// `knn`, each candidate's neighbours join the set. With `wrap`, shifts that leave the
-/// exemplar wrap around; without, they are dropped. Returns `h × w × m` indices, each set
+/// exemplar wrap around; without, they are dropped. With `out_wrap` the window itself wraps
+/// around the output (a tileable output: the pixels across its edges are neighbours too).
+/// Returns `h × w × m` indices, each set
 /// deduplicated in discovery order and padded with [`NONE`], where
 /// `m = patch_size² × (1 + knn.k)`.
 pub fn coherence_candidates(
@@ -418,6 +420,7 @@ pub fn coherence_candidates(
     knn: Option<&Knn>,
     patch_size: usize,
     wrap: bool,
+    out_wrap: bool,
 ) -> Result<(Vec<u32>, usize)> {
     if patch_size == 0 || patch_size % 2 == 0 {
         return Err(invalid(
@@ -463,8 +466,11 @@ pub fn coherence_candidates(
         };
         for oy in -r..=r {
             for ox in -r..=r {
-                let (y, x) = (y0 + oy, x0 + ox);
-                if y < 0 || x < 0 || y >= h as i64 || x >= w as i64 {
+                let (mut y, mut x) = (y0 + oy, x0 + ox);
+                if out_wrap {
+                    y = y.rem_euclid(h as i64);
+                    x = x.rem_euclid(w as i64);
+                } else if y < 0 || x < 0 || y >= h as i64 || x >= w as i64 {
                     continue;
                 }
                 let e = refs[y as usize * w + x as usize];
@@ -582,12 +588,31 @@ mod tests {
         let refs: Vec<u32> = (0..9)
             .map(|i| ((5 + i / 3) * ew + 5 + i % 3) as u32)
             .collect();
-        let (c, m) = coherence_candidates(&refs, 3, 3, eh, ew, None, 3, false).unwrap();
+        let (c, m) = coherence_candidates(&refs, 3, 3, eh, ew, None, 3, false, false).unwrap();
         assert_eq!(m, 9);
         for i in 0..9 {
             assert_eq!(c[i * m], refs[i]);
             assert!(c[i * m + 1..(i + 1) * m].iter().all(|v| *v == NONE));
         }
+    }
+
+    #[test]
+    fn candidates_wrap_around_a_tileable_output() {
+        // A 4×4 output copied as a block from (2, 2) of a 10×10 exemplar. Across the output's
+        // left edge, pixel (1, 3) is the neighbour (1, -1) of (1, 0): its reference shifted one
+        // column right, (3, 6), is a candidate of (1, 0) only when the output wraps.
+        let (eh, ew) = (10usize, 10usize);
+        let refs: Vec<u32> = (0..16)
+            .map(|i| ((2 + i / 4) * ew + 2 + i % 4) as u32)
+            .collect();
+        let across = (3 * ew + 6) as u32;
+        let (plain, m) = coherence_candidates(&refs, 4, 4, eh, ew, None, 3, false, false).unwrap();
+        let (wrapped, _) = coherence_candidates(&refs, 4, 4, eh, ew, None, 3, false, true).unwrap();
+        let at = |c: &[u32]| c[4 * m..5 * m].to_vec();
+        assert!(!at(&plain).contains(&across));
+        assert!(at(&wrapped).contains(&across));
+        // Inside the output both agree.
+        assert_eq!(plain[5 * m..6 * m], wrapped[5 * m..6 * m]);
     }
 
     #[test]

@@ -336,32 +336,40 @@ impl Mapping {
     ///
     /// Compiled twice, for the baseline and for AVX2, and chosen at run time. No fused
     /// multiply-adds are used, so both give bit-identical results.
-    fn row(&self, y: usize, width: usize, out: &mut [(f32, f32)]) {
+    /// Source positions of pixels `span.0 .. span.1` of row `y` (a row `width` long) into
+    /// `out[k * width + x]`; the rest of `out` is left as it is.
+    fn row(&self, y: usize, width: usize, span: (usize, usize), out: &mut [(f32, f32)]) {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2, checked just above.
-            unsafe { self.row_avx2(y, width, out) };
+            unsafe { self.row_avx2(y, width, span, out) };
             return;
         }
-        self.row_any(y, width, out);
+        self.row_any(y, width, span, out);
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn row_avx2(&self, y: usize, width: usize, out: &mut [(f32, f32)]) {
-        self.row_any(y, width, out);
+    unsafe fn row_avx2(
+        &self,
+        y: usize,
+        width: usize,
+        span: (usize, usize),
+        out: &mut [(f32, f32)],
+    ) {
+        self.row_any(y, width, span, out);
     }
 
     #[inline(always)]
-    fn row_any(&self, y: usize, width: usize, out: &mut [(f32, f32)]) {
+    fn row_any(&self, y: usize, width: usize, span: (usize, usize), out: &mut [(f32, f32)]) {
         let k_count = self.disp.len();
         let mut qx = vec![[0.0f32; L]; k_count];
         let mut qy = vec![[0.0f32; L]; k_count];
         let mut lam = vec![0.0; self.vx.len()];
         let mut q = vec![(0.0f32, 0.0f32); k_count];
-        for x0 in (0..width).step_by(L) {
+        for x0 in (span.0..span.1).step_by(L) {
             let bad = self.lanes(x0, y as f32, &mut qx, &mut qy);
-            for l in 0..L.min(width - x0) {
+            for l in 0..L.min(span.1 - x0) {
                 let x = x0 + l;
                 if bad & (1 << l) != 0 {
                     self.exact(x as f64, y as f64, &mut lam, &mut q);
@@ -415,6 +423,34 @@ fn sample_any(img: &Image<'_>, x: f32, y: f32, out: &mut [f32]) {
         sample::<4>(img, x, y, out);
     } else {
         sample::<0>(img, x, y, out);
+    }
+}
+
+/// The columns `first .. last + 1` of the set pixels of row `y` of `region` (all of the row
+/// without a region; `(0, 0)` for a row with none set).
+fn span(region: Option<&[bool]>, y: usize, width: usize) -> (usize, usize) {
+    match region {
+        None => (0, width),
+        Some(r) => {
+            let row = &r[y * width..(y + 1) * width];
+            match row.iter().position(|&b| b) {
+                None => (0, 0),
+                Some(a) => (a, width - row.iter().rev().position(|&b| b).unwrap_or(0)),
+            }
+        }
+    }
+}
+
+fn check_region(region: Option<&[bool]>, height: usize, width: usize) -> Result<()> {
+    match region {
+        Some(r) if r.len() != height * width => Err(invalid(
+            "region",
+            format!(
+                "expected a ({height}, {width}) mask like the result, got {} pixels",
+                r.len()
+            ),
+        )),
+        _ => Ok(()),
     }
 }
 
@@ -472,15 +508,18 @@ fn check_sources(
 /// Warps each source onto a `height × width` target: the pixel at `x` of warped image `k`
 /// is source `k` sampled bilinearly at `Σ λ_i(x) u^k_i`, `λ` the mean value coordinates of
 /// `x` w.r.t. `target` and `u^k` = `source_contours[k]` (same length as `target`). Returns
-/// one `height × width × C` buffer per source.
+/// one `height × width × C` buffer per source. With a `region` (`height × width`, row-major)
+/// only its pixels are computed; the others are zero.
 pub fn warp(
     sources: &[Image<'_>],
     source_contours: &[&[Point]],
     target: &[Point],
     height: usize,
     width: usize,
+    region: Option<&[bool]>,
 ) -> Result<Vec<Vec<f32>>> {
     check_sources(sources, source_contours, target, height, width)?;
+    check_region(region, height, width)?;
     let c = sources[0].c;
     let k_count = sources.len();
     let map = Mapping::new(target, source_contours);
@@ -494,10 +533,14 @@ pub fn warp(
         }
     }
     rows.into_par_iter().enumerate().for_each(|(y, mut parts)| {
+        let sp = span(region, y, width);
         let mut q = vec![(0.0f32, 0.0f32); k_count * width];
-        map.row(y, width, &mut q);
+        map.row(y, width, sp, &mut q);
         for (k, (src, o)) in sources.iter().zip(&mut parts).enumerate() {
-            for (x, px) in o.chunks_exact_mut(c).enumerate() {
+            for (x, px) in o.chunks_exact_mut(c).enumerate().take(sp.1).skip(sp.0) {
+                if region.is_some_and(|r| !r[y * width + x]) {
+                    continue;
+                }
                 let (qx, qy) = q[k * width + x];
                 sample_any(src, qx, qy, px);
             }
@@ -538,7 +581,8 @@ pub fn check_weights(name: &'static str, weights: &[f64], count: usize) -> Resul
 /// channel is alpha, the output alpha is the largest source alpha, and the other channels
 /// are `Σ ω_k c_k / Σ ω_k` over the sources whose alpha is above zero at that pixel
 /// (`ω` = `weights`; if those sources all have weight zero, their plain mean). Where every
-/// source is transparent the pixel is zero. Sources need at least 2 channels.
+/// source is transparent the pixel is zero. Sources need at least 2 channels. With a
+/// `region` only its pixels are computed; the others are zero.
 pub fn warp_combine(
     sources: &[Image<'_>],
     source_contours: &[&[Point]],
@@ -546,8 +590,10 @@ pub fn warp_combine(
     weights: &[f64],
     height: usize,
     width: usize,
+    region: Option<&[bool]>,
 ) -> Result<Vec<f32>> {
     check_sources(sources, source_contours, target, height, width)?;
+    check_region(region, height, width)?;
     check_weights("weights", weights, sources.len())?;
     let c = sources[0].c;
     if c < 2 {
@@ -563,10 +609,14 @@ pub fn warp_combine(
     out.par_chunks_mut(width * c)
         .enumerate()
         .for_each(|(y, o)| {
+            let sp = span(region, y, width);
             let mut q = vec![(0.0f32, 0.0f32); k_count * width];
-            map.row(y, width, &mut q);
+            map.row(y, width, sp, &mut q);
             let mut px = vec![0.0f32; c];
-            for (x, dst) in o.chunks_exact_mut(c).enumerate() {
+            for (x, dst) in o.chunks_exact_mut(c).enumerate().take(sp.1).skip(sp.0) {
+                if region.is_some_and(|r| !r[y * width + x]) {
+                    continue;
+                }
                 // Colour accumulates in the output pixel itself.
                 dst.fill(0.0);
                 let (mut wsum, mut count, mut alpha) = (0.0f32, 0u32, 0.0f32);
@@ -718,7 +768,7 @@ mod tests {
         let mut worst = 0.0f32;
         for y in 0..h {
             let mut row = vec![(0.0, 0.0); w];
-            map.row(y, w, &mut row);
+            map.row(y, w, (0, w), &mut row);
             for x in 0..w {
                 map.exact(x as f64, y as f64, &mut lam, &mut q);
                 worst = worst
@@ -741,10 +791,10 @@ mod tests {
         let data = ramp(h, w);
         let img = Image::new("sources", &data, h, w, 3).unwrap();
         let target = l_shape();
-        let same = warp(&[img], &[&target], &target, h, w).unwrap();
+        let same = warp(&[img], &[&target], &target, h, w, None).unwrap();
         assert_eq!(same[0], data);
         let shifted: Vec<Point> = target.iter().map(|v| [v[0] + 5.0, v[1] - 2.0]).collect();
-        let moved = &warp(&[img], &[&shifted], &target, h, w).unwrap()[0];
+        let moved = &warp(&[img], &[&shifted], &target, h, w, None).unwrap()[0];
         for y in 2..h {
             for x in 0..w - 5 {
                 let p = &moved[(y * w + x) * 3..(y * w + x) * 3 + 3];
@@ -763,7 +813,7 @@ mod tests {
         let ia = Image::new("sources", &a, h, w, 3).unwrap();
         let ib = Image::new("sources", &b, h, w, 3).unwrap();
         let t = l_shape();
-        let out = warp_combine(&[ia, ib], &[&t, &t], &t, &[0.25, 0.75], h, w).unwrap();
+        let out = warp_combine(&[ia, ib], &[&t, &t], &t, &[0.25, 0.75], h, w, None).unwrap();
         for p in out.chunks_exact(3) {
             assert!(
                 (p[0] - 0.25).abs() < 1e-6
@@ -771,5 +821,33 @@ mod tests {
                     && p[2].to_bits() == 0.8f32.to_bits()
             );
         }
+    }
+
+    #[test]
+    fn region_limits_work_to_its_pixels_and_matches_the_full_warp() {
+        let (h, w) = (30, 40);
+        let data = ramp(h, w);
+        let img = Image::new("sources", &data, h, w, 3).unwrap();
+        let target = l_shape();
+        let shifted: Vec<Point> = target.iter().map(|v| [v[0] + 1.5, v[1] + 0.5]).collect();
+        let region: Vec<bool> = (0..h * w).map(|i| (i % w + 2 * (i / w)) % 7 < 3).collect();
+        let full = &warp(&[img], &[&shifted], &target, h, w, None).unwrap()[0];
+        let part = &warp(&[img], &[&shifted], &target, h, w, Some(&region)).unwrap()[0];
+        let comb = warp_combine(&[img], &[&shifted], &target, &[1.0], h, w, Some(&region)).unwrap();
+        for (i, &inside) in region.iter().enumerate() {
+            let (f, p, c) = (
+                &full[i * 3..i * 3 + 3],
+                &part[i * 3..i * 3 + 3],
+                &comb[i * 3..i * 3 + 3],
+            );
+            if inside {
+                assert_eq!(f, p);
+                assert_eq!(&f[..2], &c[..2]);
+            } else {
+                assert!(p.iter().chain(c).all(|&v| v == 0.0));
+            }
+        }
+        let short = vec![true; 5];
+        assert!(warp(&[img], &[&shifted], &target, h, w, Some(&short)).is_err());
     }
 }

@@ -573,7 +573,12 @@ impl<'a> Level<'a> {
         level: usize,
     ) -> Result<Self> {
         let r = p / 2;
-        let table = if params.k > 1 {
+        // A coarse level can be too small to hold k - 1 neighbours outside each patch's
+        // excluded window; it then searches coherence candidates only (k = 1). Every other
+        // k-NN failure is an error, not a silent fallback.
+        let excluded = (2 * r + 1).min(el.h) * (2 * r + 1).min(el.w);
+        let fits = el.h * el.w > excluded && el.h * el.w - excluded >= params.k.saturating_sub(1);
+        let table = if params.k > 1 && fits {
             let img = Image::new("exemplar", &el.aug, el.h, el.w, ca)?;
             knn(
                 &img,
@@ -587,7 +592,7 @@ impl<'a> Level<'a> {
                     seed: params.seed ^ (level as u64).wrapping_mul(0x9E37),
                 },
             )
-            .ok()
+            .map(Some)?
         } else {
             None
         };
@@ -720,8 +725,17 @@ impl<'a> Level<'a> {
         let r = (p / 2) as i64;
         let seed = self.params.seed;
         let key = (self.depth as u64) << 32 | it as u64;
-        let (cands, m) =
-            coherence_candidates(refs, h, w, eh, ew, self.table.as_ref(), p, self.params.wrap)?;
+        let (cands, m) = coherence_candidates(
+            refs,
+            h,
+            w,
+            eh,
+            ew,
+            self.table.as_ref(),
+            p,
+            self.params.wrap,
+            self.params.wrap,
+        )?;
         let s = self.output_image(refs);
         // X†: every other row and column, at an offset drawn per iteration, at the coarse
         // levels; every pixel at the finest, which decides the output's fine coherence

@@ -193,7 +193,17 @@ pub fn coherence_candidates_py<'py>(
         .detach(|| {
             guarded(|| {
                 install(threads, || {
-                    knn::coherence_candidates(&r, h, w, eh, ew, table.as_ref(), patch_size, wrap)
+                    knn::coherence_candidates(
+                        &r,
+                        h,
+                        w,
+                        eh,
+                        ew,
+                        table.as_ref(),
+                        patch_size,
+                        wrap,
+                        false,
+                    )
                 })
             })
         })

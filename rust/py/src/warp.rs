@@ -9,7 +9,7 @@ use phloem_core::image::Image;
 use phloem_core::mvc::{self, Point};
 use pyo3::prelude::*;
 
-use crate::errors::{guarded, not_contiguous, to_py};
+use crate::errors::{guarded, not_contiguous, opt_slice, to_py};
 use crate::patch::image;
 use crate::threads::install;
 
@@ -60,22 +60,24 @@ pub fn mvc_weights_py<'py>(
 }
 
 #[pyfunction]
-#[pyo3(name = "mvc_warp", signature = (sources, source_contours, target_contour, size, *, threads=None))]
+#[pyo3(name = "mvc_warp", signature = (sources, source_contours, target_contour, size, *, region=None, threads=None))]
 pub fn mvc_warp_py<'py>(
     py: Python<'py>,
     sources: Vec<PyReadonlyArray3<'py, f32>>,
     source_contours: Vec<PyReadonlyArray2<'py, f64>>,
     target_contour: PyReadonlyArray2<'py, f64>,
     size: (usize, usize),
+    region: Option<PyReadonlyArray2<'py, bool>>,
     threads: Option<usize>,
 ) -> PyResult<Vec<Bound<'py, PyArray3<f32>>>> {
+    let reg = opt_slice("region", region.as_ref())?;
     let srcs = images("sources", &sources)?;
     let conts = contours("source_contours", &source_contours)?;
     let target = points("target_contour", &target_contour)?;
     let refs: Vec<&[Point]> = conts.iter().map(Vec::as_slice).collect();
     let (h, w) = size;
     let out = py
-        .detach(|| guarded(|| install(threads, || mvc::warp(&srcs, &refs, &target, h, w))))
+        .detach(|| guarded(|| install(threads, || mvc::warp(&srcs, &refs, &target, h, w, reg))))
         .map_err(to_py)?;
     let c = srcs[0].c;
     Ok(out
@@ -89,7 +91,7 @@ pub fn mvc_warp_py<'py>(
 }
 
 #[pyfunction]
-#[pyo3(name = "mvc_combine", signature = (sources, source_contours, target_contour, weights, size, *, threads=None))]
+#[pyo3(name = "mvc_combine", signature = (sources, source_contours, target_contour, weights, size, *, region=None, threads=None))]
 pub fn mvc_combine_py<'py>(
     py: Python<'py>,
     sources: Vec<PyReadonlyArray3<'py, f32>>,
@@ -97,8 +99,10 @@ pub fn mvc_combine_py<'py>(
     target_contour: PyReadonlyArray2<'py, f64>,
     weights: PyReadonlyArray1<'py, f64>,
     size: (usize, usize),
+    region: Option<PyReadonlyArray2<'py, bool>>,
     threads: Option<usize>,
 ) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    let reg = opt_slice("region", region.as_ref())?;
     let srcs = images("sources", &sources)?;
     let conts = contours("source_contours", &source_contours)?;
     let target = points("target_contour", &target_contour)?;
@@ -109,7 +113,7 @@ pub fn mvc_combine_py<'py>(
         .detach(|| {
             guarded(|| {
                 install(threads, || {
-                    mvc::warp_combine(&srcs, &refs, &target, wts, h, w)
+                    mvc::warp_combine(&srcs, &refs, &target, wts, h, w, reg)
                 })
             })
         })

@@ -1,0 +1,1496 @@
+"""Statistical structure synthesis for branching structures (Sibbing, Pick, Kobbelt 2010, §4).
+
+Three models learned from one example :class:`~phloem.branching.Skeleton`, and a grower that
+uses them:
+
+* :class:`BendingModel` (§4.2): a Markov process of order ``k`` over the per-vertex turning
+  angles ``α_i`` and thicknesses ``r_i`` of uniformly resampled branches. A branch is extended
+  by ``m`` elements at a time, copied from the input sub-sequence whose ``k + 1`` preceding
+  elements best match the branch's history; one of the ``c`` best candidates is chosen with
+  probability proportional to its quality. The quality is adapted so that the angle and
+  thickness histograms of the synthesised structure follow the input's (histogram matching).
+* :class:`FurcationModel` (§4.3): a linear SVM over non-causal neighbourhoods
+  ``(α_{i-k..i+k}, r_{i-k..i+k}, n⁻, n⁺)`` that gives each vertex of a finished branch a
+  furcation probability; the child's first segment is copied from the input furcation whose
+  non-causal neighbourhood matches best.
+* Space colonisation (§4.4) and guided synthesis (§4.5) inside :func:`grow`: a density map
+  ``D(p) = exp(-d(p, B)² / ρ²)`` of the structure grown so far scales the candidate qualities
+  by ``1 / (D_i + ε)`` and an optional guidance map ``G`` by ``1 / (G_i + ε)``; extensions that
+  would cross an existing branch get quality zero.
+
+All randomness comes from ``numpy.random.default_rng(seed)``, so a seed fixes the output.
+
+Angles are compared in radians, thicknesses in units of the resampling step ``h`` (so that
+the distance is scale-free, §2 "Contributions").
+
+References
+----------
+.. [1] D. Sibbing, D. Pick, L. Kobbelt, "Image Synthesis for Branching Structures",
+   Computer Graphics Forum 29(7), 2010.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from .._validate import check_float, check_int, check_seed
+from .skeleton import Branch, Skeleton
+
+__all__ = [
+    "BendingModel",
+    "FurcationModel",
+    "angle_histogram",
+    "default_h",
+    "extend",
+    "grow",
+    "histogram_distance",
+    "synthetic_skeleton",
+    "thickness_histogram",
+]
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+Progress = Callable[[int, int], None] | None
+
+#: ``1/ε`` of §4.4: the largest factor by which an empty region can raise a candidate's quality.
+INV_EPS = 1e3
+_EPS = 1.0 / INV_EPS
+
+
+# ------------------------------------------------------------------------------------------
+# shared helpers
+# ------------------------------------------------------------------------------------------
+
+
+def _check_skeleton(skeleton: Any, name: str = "skeleton") -> Skeleton:
+    if not isinstance(skeleton, Skeleton):
+        raise TypeError(f"{name}: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
+    if not skeleton.branches:
+        raise ValueError(f"{name}: the skeleton has no branches")
+    return skeleton
+
+
+def default_h(skeleton: Skeleton) -> float:
+    """The default resampling step ``h`` for a skeleton: its median thickness.
+
+    A step of about one branch radius keeps the turning angles at the scale of the branch's
+    own width (finer steps would sample the hand-drawn polyline's noise). For skeletons
+    without thickness (all zero) it falls back to 1/100 of the total length.
+
+    Examples
+    --------
+    >>> sk = Skeleton([Branch([[0, 0], [100, 0]], 3.0)])
+    >>> default_h(sk)
+    3.0
+    """
+    _check_skeleton(skeleton)
+    r = np.concatenate([b.thickness for b in skeleton.branches])
+    h = float(np.median(r))
+    if not h > 0:
+        h = skeleton.total_length() / 100.0
+    if not h > 0:
+        raise ValueError("skeleton: has zero total length, cannot choose a step h")
+    return h
+
+
+def _dist(x: F64, y: F64) -> F64:
+    """The paper's ``dist(X, Y) = 1 / (||X - Y|| + 1) + 1`` along the last axis (> 1, no singularity)."""
+    return np.asarray(1.0 / (np.linalg.norm(x - y, axis=-1) + 1.0) + 1.0, dtype=np.float64)
+
+
+def _elements(branch: Branch) -> tuple[F64, F64]:
+    """The per-vertex elements ``(α_i, r_i)`` at the interior vertices of a resampled branch."""
+    if len(branch) < 3:
+        return np.zeros(0), np.zeros(0)
+    return branch.angles(), branch.thickness[1:-1].copy()
+
+
+def _generations(skeleton: Skeleton) -> list[int]:
+    gen: list[int] = []
+    for b in skeleton.branches:
+        gen.append(0 if b.parent is None else gen[b.parent[0]] + 1)
+    return gen
+
+
+def _bin(values: F64, lo: float, hi: float, bins: int) -> I64:
+    t = (values - lo) / (hi - lo) * bins
+    return np.clip(np.floor(np.nan_to_num(t)), 0, bins - 1).astype(np.int64)
+
+
+def _range(values: F64) -> tuple[float, float]:
+    lo, hi = float(values.min()), float(values.max())
+    if hi - lo < 1e-12:
+        lo, hi = lo - 0.5, hi + 0.5
+    return lo, hi
+
+
+def _direction(theta: float | F64) -> F64:
+    """Unit step for a heading counter-clockwise on screen (``y`` grows downwards)."""
+    t = np.asarray(theta, dtype=np.float64)
+    return np.stack([np.cos(t), -np.sin(t)], axis=-1)
+
+
+def _wrap(a: float) -> float:
+    return float(math.pi - (math.pi - a) % (2 * math.pi))
+
+
+def _check_k(k: Any) -> int:
+    return check_int(k, "k", 1)
+
+
+# ------------------------------------------------------------------------------------------
+# histograms (metrics)
+# ------------------------------------------------------------------------------------------
+
+
+def _all_angles(skeleton: Skeleton, h: float | None) -> F64:
+    sk = skeleton.resample(h) if h is not None else skeleton
+    parts = [b.angles() for b in sk.branches if len(b) >= 3]
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def _hist(values: F64, bins: int, range_: tuple[float, float] | None, name: str) -> tuple[F64, F64]:
+    bins = check_int(bins, "bins", 1)
+    if values.size == 0:
+        raise ValueError(f"{name}: the skeleton has no values to histogram")
+    lo, hi = _range(values) if range_ is None else (float(range_[0]), float(range_[1]))
+    if not (np.isfinite(lo) and np.isfinite(hi) and hi > lo):
+        raise ValueError(f"range: expected (low, high) with low < high, got {range_!r}")
+    counts = np.bincount(_bin(values, lo, hi, bins), minlength=bins).astype(np.float64)
+    return counts / counts.sum(), np.linspace(lo, hi, bins + 1)
+
+
+def angle_histogram(
+    skeleton: Skeleton, bins: int = 16, *, range: tuple[float, float] | None = None, h: float | None = None
+) -> tuple[F64, F64]:
+    """Normalised histogram of the turning angles of all branches (the paper's Fig. 7 evaluation).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        The structure; resampled to step ``h`` first when ``h`` is given (angles only mean
+        something for a fixed step).
+    bins : int
+        Number of bins (the paper uses 16).
+    range : (float, float), optional
+        Interval split into the bins; values outside go to the end bins. Defaults to the
+        data's minimum and maximum; pass the input's range to compare two structures.
+    h : float, optional
+        Resampling step.
+
+    Returns
+    -------
+    hist : ndarray of float64, shape (bins,)
+        Fractions summing to 1.
+    edges : ndarray of float64, shape (bins + 1,)
+
+    Examples
+    --------
+    >>> sk = Skeleton([Branch([[0, 0], [1, 0], [1, -1], [2, -1]], 1.0)])
+    >>> hist, edges = angle_histogram(sk, bins=2)
+    >>> hist.tolist(), edges.round(2).tolist()
+    ([0.5, 0.5], [-1.57, 0.0, 1.57])
+    """
+    _check_skeleton(skeleton)
+    return _hist(_all_angles(skeleton, h), bins, range, "skeleton")
+
+
+def thickness_histogram(
+    skeleton: Skeleton, bins: int = 16, *, range: tuple[float, float] | None = None, h: float | None = None
+) -> tuple[F64, F64]:
+    """Normalised histogram of the vertex thicknesses of all branches.
+
+    Parameters and return values as in :func:`angle_histogram`.
+
+    Examples
+    --------
+    >>> sk = Skeleton([Branch([[0, 0], [1, 0], [2, 0]], [1.0, 2.0, 2.0])])
+    >>> thickness_histogram(sk, bins=2)[0].tolist()
+    [0.3333333333333333, 0.6666666666666666]
+    """
+    _check_skeleton(skeleton)
+    sk = skeleton.resample(h) if h is not None else skeleton
+    return _hist(np.concatenate([b.thickness for b in sk.branches]), bins, range, "skeleton")
+
+
+def histogram_distance(a: Any, b: Any) -> float:
+    """L1 distance of two histograms after normalising each to sum 1 (0 = equal, 2 = disjoint).
+
+    Examples
+    --------
+    >>> histogram_distance([1, 1, 0], [0, 2, 2])
+    1.0
+    """
+    x = np.asarray(a, dtype=np.float64)
+    y = np.asarray(b, dtype=np.float64)
+    if x.ndim != 1 or x.shape != y.shape:
+        raise ValueError(f"a, b: expected two 1-D histograms of the same length, got {x.shape} and {y.shape}")
+    if not (np.isfinite(x).all() and np.isfinite(y).all()) or (x < 0).any() or (y < 0).any():
+        raise ValueError("a, b: histograms must be finite and non-negative")
+    if x.sum() <= 0 or y.sum() <= 0:
+        raise ValueError("a, b: histograms must not be all zero")
+    return float(np.abs(x / x.sum() - y / y.sum()).sum())
+
+
+# ------------------------------------------------------------------------------------------
+# bending model (§4.2)
+# ------------------------------------------------------------------------------------------
+
+
+@dataclass
+class BendingModel:
+    """The Markov bending model of §4.2 with histogram matching.
+
+    Build it with :meth:`fit`. The candidate tables hold every input sub-sequence
+    ``C_i = (α̂_{i,k+1}, r̂_{i,k+1})`` that is followed by at least ``m`` more elements.
+
+    Attributes
+    ----------
+    h : float
+        Resampling step (edge length) in pixels.
+    k, m, c, bins : int
+        Markov order (history of ``k + 1`` elements), extension length, number of candidates
+        to choose among, histogram bins ``B``.
+    omega_g : float
+        Weight ``ω_G`` of the histogram matching.
+    source : Skeleton
+        The input resampled to ``h``.
+    hist_alpha, hist_r : ndarray, shape (bins,)
+        The input's normalised angle and thickness histograms ``Ĥ_α``, ``Ĥ_r``.
+    range_alpha, range_r : (float, float)
+        Intervals split into the bins (the input's minimum and maximum).
+    lengths : dict of int to list of float
+        Branch lengths of the input per generation (0 = roots), used to pick target lengths.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> b = Branch.from_angles([10, 100], 0.0, rng.normal(0, 0.3, 60), np.full(62, 2.0), 2.0)
+    >>> model = BendingModel.fit(Skeleton([b]), h=2.0)
+    >>> model.k, model.m, model.c, model.bins
+    (3, 4, 2, 16)
+    >>> len(model.cand_hist_alpha) > 0
+    True
+    """
+
+    h: float
+    k: int
+    m: int
+    c: int
+    bins: int
+    omega_g: float
+    source: Skeleton
+    hist_alpha: F64
+    hist_r: F64
+    range_alpha: tuple[float, float]
+    range_r: tuple[float, float]
+    lengths: dict[int, list[float]]
+    # candidate tables, one row per candidate sub-sequence
+    cand_hist_alpha: F64 = field(repr=False)  # (C, k+1) history angles
+    cand_hist_r: F64 = field(repr=False)  # (C, k+1) history thickness / h
+    next_alpha: F64 = field(repr=False)  # (C, m) following angles
+    next_r: F64 = field(repr=False)  # (C, m) following thickness (pixels)
+    inc_alpha: F64 = field(repr=False)  # (C, bins) histogram counts the extension adds
+    inc_r: F64 = field(repr=False)
+    cand_where: I64 = field(repr=False)  # (C, 2) source branch, first history element
+
+    @classmethod
+    def fit(
+        cls,
+        skeleton: Skeleton,
+        *,
+        h: float | None = None,
+        k: int = 3,
+        m: int | None = None,
+        c: int = 2,
+        bins: int = 16,
+        omega_g: float = 50.0,
+        feature_size: float | None = None,
+    ) -> BendingModel:
+        """Learn the bending model from an example skeleton.
+
+        Parameters
+        ----------
+        skeleton : Skeleton
+            The example structure (any sampling; it is resampled to ``h``).
+        h : float, optional
+            Resampling step in pixels; default :func:`default_h` (median thickness).
+        k : int
+            Order of the Markov process: the history is ``k + 1`` elements (paper: 3).
+        m : int, optional
+            Elements added per step. Default ``round(feature_size / h)`` (the paper's
+            ``m = s/h``), or 4 when no ``feature_size`` is given.
+        c : int
+            Number of best candidates to choose among (paper: 2; ``c = 1`` is deterministic).
+        bins : int
+            Histogram bins ``B`` (paper: 16).
+        omega_g : float
+            Histogram-matching weight ``ω_G`` (paper: 50; 0 switches the matching off).
+        feature_size : float, optional
+            Typical bending feature size ``s`` in pixels, sets ``m`` when ``m`` is not given.
+
+        Returns
+        -------
+        BendingModel
+
+        Raises
+        ------
+        ValueError
+            If no branch is long enough for a history of ``k + 1`` plus ``m`` elements.
+
+        Examples
+        --------
+        >>> b = Branch.from_angles([10, 100], 0.0, 0.1 * np.sin(np.arange(50)), np.full(52, 2.0), 2.0)
+        >>> model = BendingModel.fit(Skeleton([b]), h=2.0, k=2, m=3, c=1)
+        >>> model.next_alpha.shape[1]
+        3
+        """
+        _check_skeleton(skeleton)
+        h = default_h(skeleton) if h is None else check_float(h, "h", 0.0, inclusive=False)
+        k = _check_k(k)
+        if m is None:
+            if feature_size is None:
+                m = 4
+            else:
+                m = max(1, round(check_float(feature_size, "feature_size", 0.0, inclusive=False) / h))
+        m = check_int(m, "m", 1)
+        c = check_int(c, "c", 1)
+        bins = check_int(bins, "bins", 1)
+        omega_g = check_float(omega_g, "omega_g", 0.0)
+        src = skeleton.resample(h)
+        elems = [_elements(b) for b in src.branches]
+        all_a = np.concatenate([a for a, _ in elems])
+        all_r = np.concatenate([r for _, r in elems])
+        need = k + 1 + m
+        if max(len(a) for a, _ in elems) < need:
+            longest = max(len(b) for b in src.branches)
+            raise ValueError(
+                f"skeleton: no branch is long enough for k + m = {k} + {m}: after resampling to h = {h:g} the "
+                f"longest branch has {longest} vertices, but k + m + 3 = {need + 2} are needed (lower k, m or h)"
+            )
+        ra, rr = _range(all_a), _range(all_r)
+        hist_a = np.bincount(_bin(all_a, *ra, bins), minlength=bins) / all_a.size
+        hist_r = np.bincount(_bin(all_r, *rr, bins), minlength=bins) / all_r.size
+        ha, hr, na, nr, where = [], [], [], [], []
+        for bi, (a, r) in enumerate(elems):
+            n = len(a) - need + 1
+            if n <= 0:
+                continue
+            idx = np.arange(n)[:, None]
+            ha.append(a[idx + np.arange(k + 1)])
+            hr.append(r[idx + np.arange(k + 1)] / h)
+            na.append(a[idx + k + 1 + np.arange(m)])
+            nr.append(r[idx + k + 1 + np.arange(m)])
+            where.append(np.stack([np.full(n, bi), np.arange(n)], axis=1))
+        next_a, next_r = np.vstack(na), np.vstack(nr)
+        rows = np.arange(len(next_a))[:, None]
+        inc_a = np.zeros((len(next_a), bins))
+        np.add.at(inc_a, (np.broadcast_to(rows, next_a.shape), _bin(next_a, *ra, bins)), 1.0)
+        inc_r = np.zeros((len(next_a), bins))
+        np.add.at(inc_r, (np.broadcast_to(rows, next_r.shape), _bin(next_r, *rr, bins)), 1.0)
+        lengths: dict[int, list[float]] = {}
+        for g, b in zip(_generations(src), src.branches):
+            lengths.setdefault(g, []).append(b.length())
+        return cls(
+            h=h, k=k, m=m, c=c, bins=bins, omega_g=omega_g, source=src,
+            hist_alpha=hist_a.astype(np.float64), hist_r=hist_r.astype(np.float64),
+            range_alpha=ra, range_r=rr, lengths=lengths,
+            cand_hist_alpha=np.vstack(ha), cand_hist_r=np.vstack(hr), next_alpha=next_a, next_r=next_r,
+            inc_alpha=inc_a, inc_r=inc_r, cand_where=np.vstack(where).astype(np.int64),
+        )
+
+    def log_quality(self, alpha: F64, r: F64, counts_alpha: F64, counts_r: F64) -> F64:
+        """``log Q*_i`` of every candidate for a branch history (vectorised over candidates).
+
+        Parameters
+        ----------
+        alpha, r : ndarray, shape (L,)
+            The branch's last ``L <= k + 1`` angles and thicknesses (pixels); shorter
+            histories are matched against the last ``L`` elements of each candidate.
+        counts_alpha, counts_r : ndarray, shape (bins,)
+            Histogram counts of the whole structure synthesised so far (``n_t`` elements).
+
+        Returns
+        -------
+        ndarray of float64, shape (C,)
+            ``log Q_i + ω_G (Δ_α(i) + Δ_r(i)) n_t / m``.
+        """
+        L = len(alpha)
+        if not 1 <= L <= self.k + 1 or len(r) != L:
+            raise ValueError(f"alpha, r: expected 1 .. {self.k + 1} history elements each, got {len(alpha)}, {len(r)}")
+        q = np.log(_dist(self.cand_hist_alpha[:, -L:], alpha[None, :]))
+        q += np.log(_dist(self.cand_hist_r[:, -L:], (r / self.h)[None, :]))
+        n_t = float(counts_alpha.sum())
+        if self.omega_g > 0 and n_t > 0:
+            delta = self._delta(self.hist_alpha, counts_alpha, self.inc_alpha, n_t)
+            delta += self._delta(self.hist_r, counts_r, self.inc_r, n_t)
+            q += self.omega_g * delta * (n_t / self.m)
+        return q
+
+    def _delta(self, target: F64, counts: F64, inc: F64, n_t: float) -> F64:
+        now = float(((target - counts / n_t) ** 2).sum()) / self.bins
+        after = ((target[None, :] - (counts[None, :] + inc) / (n_t + self.m)) ** 2).sum(axis=1) / self.bins
+        return np.asarray(now - after, dtype=np.float64)
+
+    def start_elements(self, branch: int = 0) -> tuple[float, F64, F64, float]:
+        """Heading, first ``k + 1`` elements and first thickness of an input branch (a stem to copy)."""
+        b = self.source.branches[branch]
+        a, r = _elements(b)
+        return b.heading(), a[: self.k + 1], r[: self.k + 1], float(b.thickness[0])
+
+
+# ------------------------------------------------------------------------------------------
+# furcation model (§4.3)
+# ------------------------------------------------------------------------------------------
+
+
+def _noncausal(a_full: F64, r_full: F64, k: int, h: float) -> tuple[F64, F64]:
+    """Non-causal neighbourhoods ``(α_{i-k..i+k}, r_{i-k..i+k} / h)`` of every vertex of a branch.
+
+    ``a_full`` has one angle per vertex (0 at the two end points); outside the branch angles
+    are padded with 0 (straight) and thickness with the end values.
+    """
+    n = len(a_full)
+    a = np.concatenate([np.zeros(k), a_full, np.zeros(k)])
+    r = np.concatenate([np.full(k, r_full[0]), r_full, np.full(k, r_full[-1])]) / h
+    idx = np.arange(n)[:, None] + np.arange(2 * k + 1)[None, :]
+    return a[idx], r[idx]
+
+
+def _per_vertex(branch: Branch) -> tuple[F64, F64]:
+    a = np.zeros(len(branch))
+    if len(branch) >= 3:
+        a[1:-1] = branch.angles()
+    return a, branch.thickness.copy()
+
+
+def _gaps(n: int, furcations: Sequence[int]) -> tuple[F64, F64]:
+    """Index distances ``n⁻, n⁺`` of every vertex to the previous / next furcation (or end point)."""
+    marks = np.array(sorted({0, n - 1, *[int(f) for f in furcations]}), dtype=np.int64)
+    i = np.arange(n)
+    # the mark strictly before / after i (a furcation at i does not count for itself)
+    prev_pos = np.searchsorted(marks, i, side="left") - 1
+    next_pos = np.searchsorted(marks, i, side="right")
+    prev = np.where(prev_pos >= 0, marks[np.clip(prev_pos, 0, len(marks) - 1)], 0)
+    nxt = np.where(next_pos < len(marks), marks[np.clip(next_pos, 0, len(marks) - 1)], n - 1)
+    return (i - prev).astype(np.float64), (nxt - i).astype(np.float64)
+
+
+@dataclass
+class FurcationModel:
+    """The furcation model of §4.3: where to branch (linear SVM) and how (non-causal matching).
+
+    Build it with :meth:`fit`.
+
+    Attributes
+    ----------
+    h : float
+        Resampling step; must equal the bending model's.
+    k, c : int
+        Half-width of the non-causal neighbourhood; candidates to choose among for the child's
+        first segment.
+    weights, bias : ndarray, float
+        The linear classifier ``L(x) = weights · x + bias`` on standardised features
+        ``(α_{i-k..i+k}, r_{i-k..i+k}/h, n⁻, n⁺)`` (``4k + 4`` values).
+    mean, scale : ndarray
+        Feature standardisation.
+    platt : (float, float)
+        Sigmoid ``p = 1 / (1 + exp(A L(x) + B))`` that turns ``L`` into a probability.
+    examples_alpha, examples_r : ndarray, shape (F, 2k + 1)
+        Non-causal neighbourhoods of the input's furcation vertices.
+    offsets : ndarray, shape (F,)
+        Branching angle of each input child: its first heading minus the parent's tangent.
+    child_alpha, child_r : list of ndarray
+        First ``k + 1`` elements of each input child (its initial segment).
+    child_r0 : ndarray, shape (F,)
+        Thickness of each child's first vertex.
+    counts : dict of int to list of int
+        Number of children of each input branch, per generation (the distribution of ``d``).
+    min_spacing : int
+        Default minimum index distance between furcations picked on one branch.
+    train_seconds : float
+        Time spent training the SVM.
+
+    Examples
+    --------
+    >>> sk = synthetic_skeleton(0)
+    >>> fm = FurcationModel.fit(sk, h=2.0)
+    >>> fm.weights.shape
+    (16,)
+    """
+
+    h: float
+    k: int
+    c: int
+    weights: F64
+    bias: float
+    mean: F64
+    scale: F64
+    platt: tuple[float, float]
+    examples_alpha: F64
+    examples_r: F64
+    offsets: F64
+    child_alpha: list[F64]
+    child_r: list[F64]
+    child_r0: F64
+    counts: dict[int, list[int]]
+    min_spacing: int = 0
+    train_seconds: float = 0.0
+
+    @classmethod
+    def fit(
+        cls,
+        skeleton: Skeleton,
+        *,
+        h: float | None = None,
+        k: int = 3,
+        c: int = 2,
+        svm_c: float = 1.0,
+        min_spacing: int | None = None,
+    ) -> FurcationModel:
+        """Learn where and how the example structure branches.
+
+        Parameters
+        ----------
+        skeleton : Skeleton
+            The example; needs at least one child branch.
+        h : float, optional
+            Resampling step; default :func:`default_h` (use the bending model's).
+        k : int
+            Half-width of the non-causal neighbourhood (paper: 3).
+        c : int
+            Candidates for the child's first segment (paper's ``c``).
+        svm_c : float
+            SVM soft-margin constant ``C``; furcations are weighted up by the class ratio.
+        min_spacing : int, optional
+            Default minimum index distance between furcations picked on one branch (0 = none).
+            Default: the smallest distance between two furcations on one input branch, so the
+            output never clusters furcations more tightly than the input does.
+
+        Returns
+        -------
+        FurcationModel
+
+        Examples
+        --------
+        >>> fm = FurcationModel.fit(synthetic_skeleton(1), h=2.0, k=2)
+        >>> p = fm.probabilities(synthetic_skeleton(2).resample(2.0).branches[0])
+        >>> bool(((0 <= p) & (p <= 1)).all())
+        True
+        """
+        import time
+
+        _check_skeleton(skeleton)
+        h = default_h(skeleton) if h is None else check_float(h, "h", 0.0, inclusive=False)
+        k = _check_k(k)
+        c = check_int(c, "c", 1)
+        svm_c = check_float(svm_c, "svm_c", 0.0, inclusive=False)
+        src = skeleton.resample(h)
+        kids = src.children()
+        if min_spacing is None:
+            gaps = [int(g) for v in kids.values() for g in np.diff(sorted({i for i, _ in v}))]
+            min_spacing = min(gaps) if gaps else 0
+        min_spacing = check_int(min_spacing, "min_spacing", 0)
+        gens = _generations(src)
+        if not any(kids.values()):
+            raise ValueError("skeleton: has no child branches, so there are no furcations to learn from")
+        feats, labels = [], []
+        ex_a, ex_r, offsets, ch_a, ch_r, ch_r0 = [], [], [], [], [], []
+        counts: dict[int, list[int]] = {}
+        for bi, b in enumerate(src.branches):
+            a_full, r_full = _per_vertex(b)
+            na, nr = _noncausal(a_full, r_full, k, h)
+            fur = sorted({v for v, _ in kids[bi]})
+            nm, npl = _gaps(len(b), fur)
+            feats.append(np.hstack([na, nr, nm[:, None], npl[:, None]]))
+            lab = -np.ones(len(b), np.int32)
+            lab[fur] = 1
+            labels.append(lab)
+            counts.setdefault(gens[bi], []).append(len(kids[bi]))
+            for v, ci in kids[bi]:
+                child = src.branches[ci]
+                ex_a.append(na[v])
+                ex_r.append(nr[v])
+                offsets.append(_wrap(child.heading() - _tangent(b, v)))
+                ca, cr = _elements(child)
+                ch_a.append(ca[: k + 1])
+                ch_r.append(cr[: k + 1])
+                ch_r0.append(float(child.thickness[0]))
+        X = np.vstack(feats)
+        y = np.concatenate(labels)
+        mean = X.mean(axis=0)
+        scale = X.std(axis=0)
+        scale[scale < 1e-12] = 1.0
+        Z = ((X - mean) / scale).astype(np.float32)
+        t0 = time.perf_counter()
+        w, b0 = _linear_svm(Z, y, svm_c)
+        train = time.perf_counter() - t0
+        f = Z.astype(np.float64) @ w + b0
+        platt = _platt(f, y)
+        return cls(
+            h=h, k=k, c=c, weights=w, bias=b0, mean=mean, scale=scale, platt=platt,
+            examples_alpha=np.vstack(ex_a), examples_r=np.vstack(ex_r), offsets=np.asarray(offsets),
+            child_alpha=ch_a, child_r=ch_r, child_r0=np.asarray(ch_r0), counts=counts,
+            min_spacing=min_spacing, train_seconds=train,
+        )
+
+    def features(self, branch: Branch, furcations: Sequence[int] = ()) -> F64:
+        """The ``4k + 4`` raw features of every vertex of a branch resampled to ``h``."""
+        a_full, r_full = _per_vertex(branch)
+        na, nr = _noncausal(a_full, r_full, self.k, self.h)
+        nm, npl = _gaps(len(branch), furcations)
+        return np.hstack([na, nr, nm[:, None], npl[:, None]])
+
+    def decision(self, branch: Branch, furcations: Sequence[int] = ()) -> F64:
+        """The classifier value ``L(x)`` per vertex (positive: furcation side)."""
+        z = (self.features(branch, furcations) - self.mean) / self.scale
+        return np.asarray(z @ self.weights + self.bias, dtype=np.float64)
+
+    def probabilities(self, branch: Branch, furcations: Sequence[int] = ()) -> F64:
+        """Furcation probability of every vertex of ``branch`` (resampled to ``h``).
+
+        Parameters
+        ----------
+        branch : Branch
+            A branch already resampled to the model's step ``h``.
+        furcations : sequence of int
+            Vertices that already carry a furcation (they set ``n⁻`` and ``n⁺``).
+
+        Returns
+        -------
+        ndarray of float64, shape (len(branch),)
+        """
+        A, B = self.platt
+        return np.asarray(1.0 / (1.0 + np.exp(np.clip(A * self.decision(branch, furcations) + B, -500, 500))))
+
+    def pick(
+        self, branch: Branch, d: int, *, existing: Sequence[int] = (), min_spacing: int | None = None
+    ) -> list[int]:
+        """Pick ``d`` furcation vertices of maximum probability, one after another (§4.3).
+
+        Each pick updates ``n⁻, n⁺`` of the others; with ``min_spacing`` a pick also blocks the
+        vertices closer than that. End points are never picked.
+
+        Examples
+        --------
+        >>> fm = FurcationModel.fit(synthetic_skeleton(0), h=2.0)
+        >>> b = synthetic_skeleton(3).resample(2.0).branches[0]
+        >>> picks = fm.pick(b, 3, min_spacing=5)
+        >>> len(picks), all(abs(p - q) >= 5 for p in picks for q in picks if p != q)
+        (3, True)
+        """
+        d = check_int(d, "d", 0)
+        spacing = self.min_spacing if min_spacing is None else check_int(min_spacing, "min_spacing", 0)
+        chosen = [int(e) for e in existing]
+        out: list[int] = []
+        n = len(branch)
+        for _ in range(d):
+            p = self.probabilities(branch, chosen)
+            p[[0, n - 1]] = -1.0
+            for f in chosen:
+                p[max(0, f - max(spacing - 1, 0)) : f + max(spacing, 1)] = -1.0
+            i = int(np.argmax(p))
+            if p[i] < 0:
+                break
+            chosen.append(i)
+            out.append(i)
+        return out
+
+    def child_start(self, branch: Branch, vertex: int, rng: np.random.Generator) -> list[int]:
+        """Input furcations ordered for copying a child's first segment at ``vertex`` (§4.3).
+
+        The first entry is drawn among the ``c`` best matches of the non-causal neighbourhood
+        with probability proportional to quality; the rest follow by decreasing quality
+        (fallbacks when the first would cross the structure).
+        """
+        a_full, r_full = _per_vertex(branch)
+        na, nr = _noncausal(a_full, r_full, self.k, self.h)
+        q = _dist(self.examples_alpha, na[vertex][None, :]) * _dist(self.examples_r, nr[vertex][None, :])
+        order = np.argsort(-q, kind="stable")
+        top = order[: self.c]
+        first = int(rng.choice(top, p=q[top] / q[top].sum()))
+        return [first] + [int(o) for o in order if o != first]
+
+
+def _tangent(branch: Branch, v: int) -> float:
+    """Heading of the branch at vertex ``v`` (mean of the adjacent edge directions)."""
+    p = branch.points
+    i0, i1 = max(v - 1, 0), min(v + 1, len(p) - 1)
+    d = p[i1] - p[i0]
+    return float(math.atan2(-d[1], d[0]))
+
+
+def _linear_svm(Z: NDArray[np.float32], y: NDArray[np.int32], svm_c: float) -> tuple[F64, float]:
+    """Train a linear C-SVC (OpenCV's libsvm port) and return its hyperplane ``(w, b)``.
+
+    The positive class is weighted by the negative/positive ratio so that the rare furcations
+    are not ignored. ``w, b`` are read back from raw outputs and oriented so that ``w·z + b > 0``
+    means "furcation".
+    """
+    svm = cv2.ml.SVM.create()
+    svm.setType(cv2.ml.SVM_C_SVC)
+    svm.setKernel(cv2.ml.SVM_LINEAR)
+    svm.setC(svm_c)
+    pos = max(int((y > 0).sum()), 1)
+    svm.setClassWeights(np.array([1.0, max(1.0, (len(y) - pos) / pos)]))
+    svm.setTermCriteria((cv2.TERM_CRITERIA_MAX_ITER + cv2.TERM_CRITERIA_EPS, 100000, 1e-6))
+    svm.train(Z, cv2.ml.ROW_SAMPLE, y.reshape(-1, 1))
+    dim = Z.shape[1]
+    probe = np.vstack([np.zeros(dim), np.eye(dim)]).astype(np.float32)
+    raw = svm.predict(probe, flags=cv2.ml.STAT_MODEL_RAW_OUTPUT)[1].ravel().astype(np.float64)
+    b, w = raw[0], raw[1:] - raw[0]
+    # OpenCV's raw output sign is not tied to the label order; orient by the predicted labels.
+    lab = svm.predict(Z)[1].ravel()
+    f = Z.astype(np.float64) @ w + b
+    ref = lab if (lab > 0).any() and (lab < 0).any() else y
+    if f[ref > 0].mean() < f[ref < 0].mean():
+        w, b = -w, -b
+    return w, float(b)
+
+
+def _platt(f: F64, y: NDArray[np.int32]) -> tuple[float, float]:
+    """Platt's sigmoid fit ``p = 1 / (1 + exp(A f + B))`` by Newton's method (Lin et al. 2007)."""
+    n_pos, n_neg = float((y > 0).sum()), float((y <= 0).sum())
+    t = np.where(y > 0, (n_pos + 1) / (n_pos + 2), 1 / (n_neg + 2))
+    A, B = 0.0, math.log((n_neg + 1) / (n_pos + 1))
+    for _ in range(100):
+        z = np.clip(A * f + B, -500, 500)
+        p = 1.0 / (1.0 + np.exp(z))
+        # gradient and Hessian of the cross-entropy with respect to (A, B)
+        g = np.array([((t - p) * f).sum(), (t - p).sum()])
+        wgt = p * (1 - p)
+        H = np.array([[(wgt * f * f).sum(), (wgt * f).sum()], [(wgt * f).sum(), wgt.sum()]]) + 1e-12 * np.eye(2)
+        step = np.linalg.solve(H, g)
+        A, B = A - float(step[0]), B - float(step[1])
+        if np.abs(step).max() < 1e-10:
+            break
+    return A, B
+
+
+# ------------------------------------------------------------------------------------------
+# synthesis: density map, guidance, growth (§4.4, §4.5)
+# ------------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Growing:
+    """A branch while it grows: points, thickness, and its elements (interior-vertex α, r)."""
+
+    points: list[F64]
+    thickness: list[float]
+    alpha: list[float]
+    r: list[float]
+    heading: float
+    parent: tuple[int, int] | None
+    generation: int
+    index: int
+    inserted: int = 0  # segments already written into the density map
+
+    def length(self) -> float:
+        return float(len(self.points) - 1)
+
+
+class _World:
+    """The structure grown so far: segments, density map, histograms, guidance."""
+
+    def __init__(
+        self, model: BendingModel, shape: tuple[int, int], *, colonize: bool, rho: float,
+        guide: F64 | None, rng: np.random.Generator,
+    ) -> None:
+        self.model = model
+        self.shape = shape
+        self.colonize = colonize
+        self.rho = rho
+        self.guide = guide
+        self.rng = rng
+        self.dist = np.full(shape, np.inf, np.float32) if colonize else None
+        # which branch vertex each pixel's distance comes from, to ignore where a child starts
+        self.owner_branch = np.full(shape, -1, np.int32) if colonize else None
+        self.owner_vertex = np.full(shape, -1, np.int32) if colonize else None
+        self.seg_a: list[F64] = []
+        self.seg_b: list[F64] = []
+        self._segs: tuple[F64, F64] | None = None
+        self.counts_alpha = np.zeros(model.bins)
+        self.counts_r = np.zeros(model.bins)
+        self.total_length = 0.0
+
+    # -- bookkeeping ----------------------------------------------------------------------
+    def segments(self) -> tuple[F64, F64]:
+        if self._segs is None:
+            if self.seg_a:
+                self._segs = (np.vstack(self.seg_a), np.vstack(self.seg_b))
+            else:
+                self._segs = (np.zeros((0, 2)), np.zeros((0, 2)))
+        return self._segs
+
+    def add_segments(self, pts: F64) -> None:
+        if len(pts) >= 2:
+            self.seg_a.append(pts[:-1].copy())
+            self.seg_b.append(pts[1:].copy())
+            self._segs = None
+            self.total_length += float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+
+    def add_elements(self, alpha: F64, r: F64) -> None:
+        m = self.model
+        np.add.at(self.counts_alpha, _bin(alpha, *m.range_alpha, m.bins), 1.0)
+        np.add.at(self.counts_r, _bin(r, *m.range_r, m.bins), 1.0)
+
+    def stamp(self, pts: F64, thick: F64, branch: int, first: int) -> None:
+        """Write segments into the distance map, only within ``3ρ`` of them (§4.4 local update).
+
+        ``pts`` are vertices ``first, first + 1, ...`` of branch ``branch``.
+        """
+        if self.dist is None or self.owner_branch is None or self.owner_vertex is None or len(pts) < 2:
+            return
+        H, W = self.shape
+        reach = 3.0 * self.rho + float(thick.max())
+        x0 = max(math.floor(pts[:, 0].min() - reach), 0)
+        x1 = min(math.ceil(pts[:, 0].max() + reach) + 1, W)
+        y0 = max(math.floor(pts[:, 1].min() - reach), 0)
+        y1 = min(math.ceil(pts[:, 1].max() + reach) + 1, H)
+        if x0 >= x1 or y0 >= y1:
+            return
+        yy, xx = np.mgrid[y0:y1, x0:x1]
+        grid = np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float64)
+        best = np.full(len(grid), np.inf)
+        which = np.zeros(len(grid), np.int32)
+        for j in range(len(pts) - 1):
+            a, d = pts[j], pts[j + 1] - pts[j]
+            dd = float(d @ d)
+            t = np.zeros(len(grid)) if dd == 0 else np.clip((grid - a) @ d / dd, 0.0, 1.0)
+            e = np.linalg.norm(grid - (a + t[:, None] * d), axis=1) - (thick[j] + t * (thick[j + 1] - thick[j]))
+            e = np.maximum(e, 0.0)
+            closer = e < best
+            best[closer] = e[closer]
+            which[closer] = j + np.rint(t[closer]).astype(np.int32)
+        view = self.dist[y0:y1, x0:x1]
+        new = best.reshape(view.shape).astype(np.float32)
+        closer2 = new < view
+        view[closer2] = new[closer2]
+        self.owner_branch[y0:y1, x0:x1][closer2] = branch
+        self.owner_vertex[y0:y1, x0:x1][closer2] = first + which.reshape(view.shape)[closer2]
+
+    def density_mean(self) -> float:
+        if self.dist is None:
+            return 0.0
+        return float(np.exp(-(self.dist.astype(np.float64) ** 2) / self.rho**2).mean())
+
+    # -- candidate evaluation --------------------------------------------------------------
+    def _lookup(self, grid: Any, pts: F64) -> F64:
+        H, W = self.shape
+        ix = np.rint(pts[..., 0]).astype(np.int64)
+        iy = np.rint(pts[..., 1]).astype(np.int64)
+        inside = (ix >= 0) & (ix < W) & (iy >= 0) & (iy < H)
+        out = np.zeros(ix.shape)
+        out[inside] = grid[iy[inside], ix[inside]]
+        return out
+
+    def inside(self, pts: F64) -> NDArray[np.bool_]:
+        H, W = self.shape
+        ok = (pts[..., 0] >= 0) & (pts[..., 0] <= W - 1) & (pts[..., 1] >= 0) & (pts[..., 1] <= H - 1)
+        return np.asarray(ok.all(axis=-1))
+
+    def crossings(self, tip: F64, ext: F64) -> NDArray[np.bool_]:
+        """For each candidate extension ``(C, m, 2)`` from ``tip``: does it cross a segment?"""
+        A, B = self.segments()
+        C = len(ext)
+        if len(A) == 0:
+            return np.zeros(C, bool)
+        reach = float(np.linalg.norm(ext - tip, axis=-1).max()) + 2 * self.model.h
+        mid = 0.5 * (A + B)
+        near = np.linalg.norm(mid - tip, axis=1) <= reach
+        if not near.any():
+            return np.zeros(C, bool)
+        A, B = A[near], B[near]
+        path = np.concatenate([np.broadcast_to(tip, (C, 1, 2)), ext], axis=1)
+        P, Q = path[:, :-1].reshape(-1, 2), path[:, 1:].reshape(-1, 2)
+        hit = _cross(P, Q, A, B).any(axis=1)
+        return np.asarray(hit.reshape(C, -1).any(axis=1))
+
+    def ray_max(self, grid: Any, tip: F64, direction: F64, length: float, samples: int) -> F64:
+        s = length * np.arange(1, samples + 1) / samples
+        pts = tip[None, None, :] + direction[:, None, :] * s[None, :, None]
+        return np.asarray(self._lookup(grid, pts).max(axis=1))
+
+
+def _orient(a: F64, b: F64, c: F64) -> F64:
+    return np.asarray((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
+
+
+def _cross(P: F64, Q: F64, A: F64, B: F64) -> NDArray[np.bool_]:
+    """Proper crossings between segments ``P[i]Q[i]`` and ``A[j]B[j]`` as an ``(i, j)`` table.
+
+    Touching at an end point (a child starting on its parent, consecutive edges) is not a
+    crossing; a strict sign change of both orientation pairs is.
+    """
+    p, q = P[:, None, :], Q[:, None, :]
+    a, b = A[None, :, :], B[None, :, :]
+    o1, o2 = _orient(p, q, a), _orient(p, q, b)
+    o3, o4 = _orient(a, b, p), _orient(a, b, q)
+    return np.asarray((o1 * o2 < 0) & (o3 * o4 < 0))
+
+
+def _guide_map(guide: Any, shape: tuple[int, int], width: float) -> tuple[F64, F64 | None]:
+    """The guidance map ``G`` (§4.5) and, for a polyline guide, the polyline.
+
+    A boolean ``(H, W)`` mask marks the path; an ``(n, 2)`` array is an ``(x, y)`` polyline;
+    both become ``G = 1 - exp(-d² / width²)`` with ``d`` the distance to the path. Any other
+    real ``(H, W)`` array is ``G`` itself (integers scaled by their dtype's maximum).
+    """
+    arr = np.asarray(guide)
+    if arr.ndim == 2 and arr.shape == tuple(shape):
+        if arr.dtype == np.bool_:
+            if not arr.any():
+                raise ValueError("guide: the path mask is empty")
+            d = cv2.distanceTransform(np.where(arr, 0, 255).astype(np.uint8), cv2.DIST_L2, 5).astype(np.float64)
+            return 1.0 - np.exp(-(d**2) / width**2), None
+        if not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+            raise TypeError(f"guide: expected a real-valued or boolean map, got dtype {arr.dtype}")
+        g = arr.astype(np.float64)
+        if np.issubdtype(arr.dtype, np.integer):
+            g /= float(np.iinfo(arr.dtype).max)
+        if not np.isfinite(g).all():
+            raise ValueError("guide: the guidance map contains NaN or infinity")
+        return np.clip(g, 0.0, 1.0), None
+    if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < 2:
+        raise ValueError(f"guide: expected an (H, W) = {tuple(shape)} map or mask, or an (n, 2) polyline of (x, y), got shape {arr.shape}")
+    line = arr.astype(np.float64)
+    if not np.isfinite(line).all():
+        raise ValueError("guide: the polyline contains NaN or infinity")
+    mask = np.full(shape, 255, np.uint8)
+    cv2.polylines(mask, [np.round(line * 16).astype(np.int32)], False, 0, thickness=1, lineType=cv2.LINE_8, shift=4)
+    d = cv2.distanceTransform(mask, cv2.DIST_L2, 5).astype(np.float64)
+    return 1.0 - np.exp(-(d**2) / width**2), line
+
+
+def _check_start(start: Any) -> tuple[float, float, float | None] | None:
+    if start is None:
+        return None
+    vals = np.asarray(start, dtype=np.float64).ravel()
+    if vals.size not in (2, 3) or not np.isfinite(vals).all():
+        raise ValueError(f"start: expected (x, y) or (x, y, heading in radians) with finite values, got {start!r}")
+    return float(vals[0]), float(vals[1]), (float(vals[2]) if vals.size == 3 else None)
+
+
+class _Grower:
+    """Runs the Markov growth of single branches inside a :class:`_World`."""
+
+    def __init__(self, world: _World, model: BendingModel) -> None:
+        self.world = world
+        self.model = model
+        self.cum_alpha = np.cumsum(model.next_alpha, axis=1)
+        # vertices around a child's attachment on its parent that its density lookups ignore
+        self.near = math.ceil(3.0 * world.rho / model.h) + 1
+
+    def step(self, br: _Growing) -> bool:
+        """Append one extension of ``m`` elements to ``br``; False when no candidate is valid."""
+        m, w = self.model, self.world
+        L = min(len(br.alpha), m.k + 1)
+        if L == 0:
+            # no history yet (should not happen: branches start with copied elements)
+            return False
+        q = m.log_quality(np.asarray(br.alpha[-L:]), np.asarray(br.r[-L:]), w.counts_alpha, w.counts_r)
+        tip = br.points[-1]
+        heads = br.heading + self.cum_alpha  # (C, m) heading of each new edge
+        steps = m.h * _direction(heads)
+        ext = tip + np.cumsum(steps, axis=1)  # (C, m, 2) new vertices
+        q[~w.inside(ext)] = -np.inf
+        if w.colonize or w.guide is not None:
+            mean_dir = steps.sum(axis=1)
+            norm = np.linalg.norm(mean_dir, axis=1, keepdims=True)
+            direction = np.where(norm > 1e-12, mean_dir / np.maximum(norm, 1e-12), _direction(heads[:, -1]))
+            length = 3.0 * m.m * m.h
+            samples = max(3 * m.m, 4)
+            if w.colonize and w.dist is not None:
+                q -= np.log(w.ray_max(_DensityView(w, br.parent, self.near), tip, direction, length, samples) + _EPS)
+            if w.guide is not None:
+                q -= np.log(w.ray_max(w.guide, tip, direction, length, samples) + _EPS)
+        choice = self._choose(q, tip, ext)
+        if choice is None:
+            return False
+        self._append(br, choice, ext[choice])
+        return True
+
+    def _choose(self, q: F64, tip: F64, ext: F64) -> int | None:
+        """Among valid candidates (finite quality, no crossing), pick one of the ``c`` best ∝ quality."""
+        m = self.model
+        order = np.argsort(-q, kind="stable")
+        order = order[np.isfinite(q[order])]
+        valid: list[int] = []
+        chunk = max(4 * m.c, 16)
+        pos = 0
+        while len(valid) < m.c and pos < len(order):
+            idx = order[pos : pos + chunk]
+            pos += chunk
+            bad = self.world.crossings(tip, ext[idx])
+            valid.extend(int(i) for i in idx[~bad][: m.c - len(valid)])
+        if not valid:
+            return None
+        lq = q[valid]
+        p = np.exp(lq - lq.max())
+        return int(self.world.rng.choice(valid, p=p / p.sum()))
+
+    def _append(self, br: _Growing, i: int, new_pts: F64) -> None:
+        self.append_elements(br, self.model.next_alpha[i], self.model.next_r[i], new_pts)
+
+    def append_elements(self, br: _Growing, alpha: F64, r: F64, new_pts: F64) -> None:
+        """Turn at the tip by each ``alpha`` and give the tip thickness ``r`` (the tip becomes interior)."""
+        w = self.world
+        start = len(br.points) - 1
+        for j in range(len(alpha)):
+            br.thickness[-1] = float(r[j])
+            br.points.append(new_pts[j])
+            br.thickness.append(float(r[j]))
+        br.alpha.extend(float(a) for a in alpha)
+        br.r.extend(float(v) for v in r)
+        br.heading = _wrap(br.heading + float(np.sum(alpha)))
+        w.add_elements(np.asarray(alpha, dtype=np.float64), np.asarray(r, dtype=np.float64))
+        pts = np.asarray(br.points[start:])
+        w.add_segments(pts)
+        self.flush(br, final=False)
+
+    def flush(self, br: _Growing, *, final: bool) -> None:
+        """Write the branch's segments into the density map, holding back the last ``3ρ`` of arc
+        length while it grows so that a tip does not repel itself."""
+        w = self.world
+        if w.dist is None:
+            return
+        hold = 0 if final else math.ceil(3.0 * w.rho / self.model.h) + 1
+        upto = len(br.points) - 1 - hold  # segments [inserted, upto) are final
+        if upto > br.inserted:
+            pts = np.asarray(br.points[br.inserted : upto + 1])
+            th = np.asarray(br.thickness[br.inserted : upto + 1])
+            w.stamp(pts, th, br.index, br.inserted)
+            br.inserted = upto
+
+
+class _DensityView:
+    """``D = exp(-d²/ρ²)`` read lazily from the distance map (indexing only, no full-map copy).
+
+    A child starts on its parent, so every direction would see ``D = 1`` there and the
+    density could not tell directions apart; pixels whose nearest structure is the parent
+    within ``near`` vertices of the attachment read as empty (the child's own last ``3ρ``
+    are held back from the map for the same reason).
+    """
+
+    def __init__(self, world: _World, parent: tuple[int, int] | None = None, near: int = 0) -> None:
+        self.world = world
+        self.parent = parent
+        self.near = near
+
+    def __getitem__(self, key: Any) -> Any:
+        w = self.world
+        assert w.dist is not None and w.owner_branch is not None and w.owner_vertex is not None
+        d = w.dist[key].astype(np.float64)
+        out = np.exp(-(d**2) / w.rho**2)
+        if self.parent is not None:
+            pb, pv = self.parent
+            skip = (w.owner_branch[key] == pb) & (np.abs(w.owner_vertex[key] - pv) <= self.near)
+            out[skip] = 0.0
+        return out
+
+
+def _points_for(br: _Growing, alpha: F64, h: float) -> F64:
+    heads = br.heading + np.cumsum(alpha)
+    return np.asarray(br.points[-1] + np.cumsum(h * _direction(heads), axis=0))
+
+
+def _valid_prefix(world: _World, tip: F64, pts: F64) -> int:
+    """How many of the points ``pts`` (a path from ``tip``) stay inside and cross nothing."""
+    n = 0
+    prev = tip
+    for p in pts:
+        if not world.inside(p[None, :])[()] or world.crossings(prev, p[None, None, :])[0]:
+            break
+        prev = p
+        n += 1
+    return n
+
+
+def _new_branch(
+    world: _World, grower: _Grower, start: F64, heading: float, r0: float, alpha: F64, r: F64,
+    parent: tuple[int, int] | None, generation: int, index: int, *, partial: bool,
+) -> _Growing | None:
+    """Start a branch: first edge along ``heading``, then the copied initial elements.
+
+    Returns None when the first edge is invalid (outside or crossing), or when ``partial`` is
+    False and any copied element is invalid.
+    """
+    h = grower.model.h
+    p1 = start + h * _direction(heading)
+    if not world.inside(np.vstack([start, p1])[None]).all() or world.crossings(start, p1[None, None, :])[0]:
+        return None
+    br = _Growing([start.copy(), p1], [r0, r0], [], [], heading, parent, generation, index)
+    pts = _points_for(br, alpha, h)
+    ok = _valid_prefix(world, p1, pts)
+    if ok < len(alpha) and not partial:
+        return None
+    world.add_segments(np.vstack([start, p1]))
+    if ok:
+        grower.append_elements(br, alpha[:ok], r[:ok], pts[:ok])
+    return br
+
+
+def _finish(grower: _Grower, br: _Growing) -> Branch:
+    grower.flush(br, final=True)
+    return Branch(np.asarray(br.points), np.asarray(br.thickness), br.parent)
+
+
+def _check_models(bending: Any, furcation: Any) -> None:
+    if not isinstance(bending, BendingModel):
+        raise TypeError(f"bending: expected a BendingModel, got {type(bending).__name__}")
+    if furcation is not None:
+        if not isinstance(furcation, FurcationModel):
+            raise TypeError(f"furcation: expected a FurcationModel or None, got {type(furcation).__name__}")
+        if abs(furcation.h - bending.h) > 1e-9 * bending.h:
+            raise ValueError(
+                f"furcation: was fitted with h = {furcation.h:g} but bending with h = {bending.h:g}; fit both with the same h"
+            )
+
+
+def _default_start(bending: BendingModel, shape: tuple[int, int], root: int) -> tuple[float, float]:
+    x, y = bending.source.branches[root].points[0]
+    H, W = shape
+    if bending.source.shape is not None:
+        sh, sw = bending.source.shape
+        return float(x / max(sw - 1, 1) * (W - 1)), float(y / max(sh - 1, 1) * (H - 1))
+    x0, y0, x1, y1 = bending.source.bounds()
+    fx = (x - x0) / (x1 - x0) if x1 > x0 else 0.5
+    fy = (y - y0) / (y1 - y0) if y1 > y0 else 0.5
+    return float((0.05 + 0.9 * fx) * (W - 1)), float((0.05 + 0.9 * fy) * (H - 1))
+
+
+def grow(
+    bending: BendingModel,
+    furcation: FurcationModel | None = None,
+    *,
+    shape: Any,
+    start: Any = None,
+    seed: Any = 0,
+    generations: int = 3,
+    max_length: float | None = None,
+    max_density: float | None = None,
+    branch_length: float | None = None,
+    children: int | None = None,
+    colonize: bool = True,
+    rho: float | None = None,
+    guide: Any = None,
+    guide_width: float | None = None,
+    min_spacing: int | None = None,
+    progress: Progress = None,
+) -> Skeleton:
+    """Synthesise a new branching structure (§4): a main branch, then furcations, recursively.
+
+    The main branch starts with the first ``k + 1`` elements of an input root branch and is
+    extended by the bending model ``m`` elements at a time; each finished branch gets ``d``
+    furcations from the furcation model (``d`` drawn from the input's numbers of children per
+    branch of the same generation), whose children are grown the same way, breadth first.
+
+    Parameters
+    ----------
+    bending : BendingModel
+        The bending model.
+    furcation : FurcationModel, optional
+        The furcation model; without it only the main branch grows.
+    shape : (int, int)
+        ``(H, W)`` of the output image; every vertex stays inside.
+    start : (x, y) or (x, y, heading), optional
+        Start of the main branch (heading in radians, counter-clockwise on screen from ``+x``).
+        Default: the first point of a polyline ``guide``, else the input root's start scaled
+        to ``shape``; the heading defaults to the guide's or the input root's.
+    seed : int or numpy.random.Generator
+        Seed; the same seed gives the same structure.
+    generations : int
+        Stop criterion: maximum branch generations (1 = main branch only).
+    max_length : float, optional
+        Stop criterion: maximum total branch length in pixels.
+    max_density : float, optional
+        Stop criterion: maximum mean of the density map ``D`` over the image (in ``(0, 1]``).
+    branch_length : float, optional
+        Target length of every branch in pixels. Default: drawn from the input's branch
+        lengths of the same generation.
+    children : int, optional
+        Furcations per branch ``d``; default drawn from the input's distribution.
+    colonize : bool
+        Space colonisation (§4.4): density map with ``Q** = Q* / (D + ε)``, ``1/ε = 10³``.
+        Crossing extensions are always rejected, also without colonisation.
+    rho : float, optional
+        Density width ``ρ`` in pixels; default ``m h`` (one bending feature).
+    guide : (H, W) array or (n, 2) array, optional
+        Guidance (§4.5): an ``(x, y)`` polyline or a boolean ``(H, W)`` path mask, turned into
+        ``G = 1 - exp(-d² / w²)`` (a valley of width ``w = guide_width`` along the path), or a
+        real ``(H, W)`` map used as ``G`` directly (values in ``[0, 1]``, low = attractive).
+        Candidate qualities are divided by ``G_i + ε`` with ``G_i`` the maximum of ``G`` along
+        the candidate's direction, as for the density.
+    guide_width : float, optional
+        Valley width; default ``3 m h``.
+    min_spacing : int, optional
+        Minimum index distance between furcations on a branch (default: the model's).
+    progress : callable, optional
+        ``progress(done, total)`` in finished branches.
+
+    Returns
+    -------
+    Skeleton
+        The new structure with ``shape``; branch edges have length ``h``.
+
+    Examples
+    --------
+    >>> src = synthetic_skeleton(0)
+    >>> bend = BendingModel.fit(src, h=2.0)
+    >>> fur = FurcationModel.fit(src, h=2.0)
+    >>> out = grow(bend, fur, shape=(200, 300), seed=1, generations=2)
+    >>> out.shape, len(out.branches) >= 1
+    ((200, 300), True)
+    >>> out == grow(bend, fur, shape=(200, 300), seed=1, generations=2)
+    True
+    """
+    from .._validate import check_size
+
+    _check_models(bending, furcation)
+    shape = check_size(shape, "shape")
+    st = _check_start(start)
+    rng = np.random.default_rng(check_seed(seed))
+    generations = check_int(generations, "generations", 1)
+    limit = math.inf if max_length is None else check_float(max_length, "max_length", 0.0, inclusive=False)
+    dens_limit = None if max_density is None else check_float(max_density, "max_density", 0.0, inclusive=False)
+    if dens_limit is not None and dens_limit > 1:
+        raise ValueError(f"max_density: expected a value in (0, 1], got {max_density}")
+    blen = None if branch_length is None else check_float(branch_length, "branch_length", 0.0, inclusive=False)
+    d_fixed = None if children is None else check_int(children, "children", 0)
+    h, m = bending.h, bending.m
+    rho = m * h if rho is None else check_float(rho, "rho", 0.0, inclusive=False)
+    gw = 3.0 * m * h if guide_width is None else check_float(guide_width, "guide_width", 0.0, inclusive=False)
+    gmap, gline = (None, None) if guide is None else _guide_map(guide, shape, gw)
+    world = _World(bending, shape, colonize=bool(colonize), rho=rho, guide=gmap, rng=rng)
+    grower = _Grower(world, bending)
+
+    roots = [i for i, b in enumerate(bending.source.branches) if b.parent is None and len(b) >= 3]
+    root = int(rng.choice(roots)) if roots else 0
+    heading, a0, r0, t0 = bending.start_elements(root)
+    if st is not None:
+        x, y = st[0], st[1]
+        if st[2] is not None:
+            heading = st[2]
+    elif gline is not None:
+        x, y = float(gline[0, 0]), float(gline[0, 1])
+    else:
+        x, y = _default_start(bending, shape, root)
+    if (st is None or st[2] is None) and gline is not None:
+        d = gline[min(1, len(gline) - 1)] - gline[0]
+        heading = math.atan2(-d[1], d[0])
+    H, W = shape
+    if not (0 <= x <= W - 1 and 0 <= y <= H - 1):
+        raise ValueError(f"start: ({x:g}, {y:g}) is outside the {W}x{H} image")
+    main = _new_branch(world, grower, np.array([x, y]), heading, t0, a0, r0, None, 0, 0, partial=True)
+    if main is None:
+        raise ValueError(f"start: the first edge from ({x:g}, {y:g}) with heading {heading:.2f} leaves the image")
+
+    def target(gen: int) -> float:
+        if blen is not None:
+            return blen
+        g = max(x for x in bending.lengths if x <= gen) if any(x <= gen for x in bending.lengths) else 0
+        return float(rng.choice(bending.lengths[g]))
+
+    out: list[Branch] = []
+    queue: list[tuple[int, int, int]] = []  # (parent branch, vertex, generation) in creation order
+    current: _Growing | None = main
+    qpos = 0
+    stop = False
+    while current is not None:
+        goal = target(current.generation)
+        while not stop and current.length() * h < goal:
+            if world.total_length >= limit or not grower.step(current):
+                break
+            if dens_limit is not None and world.density_mean() >= dens_limit:
+                stop = True
+        branch = _finish(grower, current)
+        out.append(branch)
+        stop = stop or world.total_length >= limit
+        if not stop and furcation is not None and current.generation + 1 < generations and len(branch) >= 3:
+            if d_fixed is not None:
+                d = d_fixed
+            else:
+                pool = furcation.counts.get(current.generation) or [c for v in furcation.counts.values() for c in v]
+                d = int(rng.choice(pool))
+            for v in furcation.pick(branch, d, min_spacing=min_spacing):
+                queue.append((len(out) - 1, v, current.generation + 1))
+        if progress is not None:
+            progress(len(out), len(out) + len(queue) - qpos)
+        current = None
+        while not stop and current is None and qpos < len(queue):
+            pi, v, gen = queue[qpos]
+            qpos += 1
+            assert furcation is not None
+            pb = out[pi]
+            for j in furcation.child_start(pb, v, rng)[: max(furcation.c, 4)]:
+                hd = _tangent(pb, v) + float(furcation.offsets[j])
+                current = _new_branch(
+                    world, grower, pb.points[v], hd, float(furcation.child_r0[j]), furcation.child_alpha[j],
+                    furcation.child_r[j], (pi, v), gen, len(out), partial=False,
+                )
+                if current is not None:
+                    break
+    return Skeleton(out, shape)
+
+
+def extend(
+    skeleton: Skeleton,
+    branch_index: int,
+    bending: BendingModel,
+    *,
+    steps: int = 1,
+    seed: Any = 0,
+    colonize: bool = True,
+    rho: float | None = None,
+    shape: Any = None,
+) -> Skeleton:
+    """Extend one branch's tip by ``steps`` Markov steps of ``m`` elements (§6, interactive use).
+
+    The other branches are obstacles (no crossings) and, with ``colonize``, fill the density
+    map. Existing vertices are kept; new vertices are ``h`` apart.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        The structure to edit; it is not modified.
+    branch_index : int
+        Branch whose last vertex is the tip to extend.
+    bending : BendingModel
+        The bending model.
+    steps : int
+        Number of extensions (each adds up to ``m`` vertices).
+    seed : int or numpy.random.Generator
+        Seed.
+    colonize : bool
+        Use the density map (§4.4).
+    rho : float, optional
+        Density width; default ``m h``.
+    shape : (int, int), optional
+        Image size; default the skeleton's ``shape`` (required when it has none).
+
+    Returns
+    -------
+    Skeleton
+        A copy with the branch extended (fewer vertices if the tip runs out of valid moves).
+
+    Examples
+    --------
+    >>> src = synthetic_skeleton(0)
+    >>> bend = BendingModel.fit(src, h=2.0)
+    >>> grown = grow(bend, shape=(200, 300), seed=0, branch_length=60)
+    >>> longer = extend(grown, 0, bend, steps=3, seed=0)
+    >>> len(longer.branches[0]) > len(grown.branches[0])
+    True
+    """
+    from .._validate import check_size
+
+    _check_models(bending, None)
+    _check_skeleton(skeleton)
+    if isinstance(branch_index, bool) or not isinstance(branch_index, numbers.Integral):
+        raise TypeError(f"branch_index: expected an integer, got {branch_index!r}")
+    if not 0 <= int(branch_index) < len(skeleton.branches):
+        raise ValueError(f"branch_index: expected 0 .. {len(skeleton.branches) - 1}, got {branch_index}")
+    bi = int(branch_index)
+    steps = check_int(steps, "steps", 0)
+    if shape is None:
+        if skeleton.shape is None:
+            raise ValueError("shape: the skeleton has no shape; pass shape=(H, W)")
+        shape = skeleton.shape
+    shape = check_size(shape, "shape")
+    rng = np.random.default_rng(check_seed(seed))
+    h, m = bending.h, bending.m
+    rho = m * h if rho is None else check_float(rho, "rho", 0.0, inclusive=False)
+    world = _World(bending, shape, colonize=bool(colonize), rho=rho, guide=None, rng=rng)
+    grower = _Grower(world, bending)
+    for b in skeleton.branches:
+        world.add_segments(b.points)
+        a, r = _elements(b.resample(h))
+        if len(a):
+            world.add_elements(a, r)
+    target = skeleton.branches[bi]
+    # resample from the tip backwards so that the tip stays exactly where it is
+    tail = Branch(target.points[::-1].copy(), target.thickness[::-1].copy()).resample(h)
+    tail = Branch(tail.points[::-1].copy(), tail.thickness[::-1].copy())
+    a, r = _elements(tail)
+    d = tail.points[-1] - tail.points[-2]
+    br = _Growing(
+        [p for p in target.points], list(target.thickness), list(a[-(bending.k + 1) :]), list(r[-(bending.k + 1) :]),
+        math.atan2(-d[1], d[0]), target.parent, 0, bi,
+    )
+    hold = math.ceil(3.0 * rho / h) + 1
+    for j, b in enumerate(skeleton.branches):
+        if j != bi:
+            world.stamp(b.points, b.thickness, j, 0)
+        elif len(b) - 1 - hold > 0:
+            world.stamp(b.points[: len(b) - hold], b.thickness[: len(b) - hold], j, 0)
+    br.inserted = max(len(target) - 1 - hold, 0)
+    n0 = len(target)
+    keep = float(target.thickness[-1])
+    for _ in range(steps):
+        if not br.alpha or not grower.step(br):
+            break
+    br.thickness[n0 - 1] = keep
+    branches = list(skeleton.branches)
+    branches[bi] = Branch(np.asarray(br.points), np.asarray(br.thickness), target.parent)
+    return Skeleton(branches, skeleton.shape if skeleton.shape is not None else None)
+
+
+def synthetic_skeleton(
+    seed: Any = 0, *, length: float = 240.0, h: float = 2.0, sigma: float = 0.25, furcations: int = 4
+) -> Skeleton:
+    """A random branching structure with known statistics, for tests, benches and examples.
+
+    A main branch is a random walk of ``length`` pixels with step ``h`` whose turning angles
+    follow ``α_i = 0.5 α_{i-1} + N(0, σ²)``; its thickness tapers from 4 px and drops by 30 %
+    at each of the ``furcations`` furcation vertices (the rule a furcation model can learn),
+    where a child (a shorter, thinner walk leaving at 0.4–0.9 rad to a random side) starts.
+    The shape is the bounding box plus a margin.
+
+    Examples
+    --------
+    >>> sk = synthetic_skeleton(0)
+    >>> len(sk.branches), sk.branches[1].parent[0]
+    (5, 0)
+    """
+    rng = np.random.default_rng(check_seed(seed))
+    length = check_float(length, "length", 0.0, inclusive=False)
+    h = check_float(h, "h", 0.0, inclusive=False)
+    sigma = check_float(sigma, "sigma", 0.0)
+    furcations = check_int(furcations, "furcations", 0)
+
+    def walk(n: int) -> F64:
+        a = np.zeros(n)
+        for i in range(n):
+            a[i] = (0.5 * a[i - 1] if i else 0.0) + rng.normal(0.0, sigma)
+        return a
+
+    n = max(int(length / h), 8)
+    a = walk(n - 2)
+    spacing = max(n // (furcations + 1), 1)
+    fur = sorted(int(v) for v in rng.choice(np.arange(spacing // 2 + 2, n - 3), size=min(furcations, n - 6), replace=False))
+    thick = 4.0 * np.linspace(1.0, 0.6, n)
+    for v in fur:
+        thick[v + 1 :] *= 0.7
+    thick = np.maximum(thick * (1.0 + 0.03 * rng.standard_normal(n)), 0.3)
+    main = Branch.from_angles([0.0, 0.0], 0.0, a, thick, h)
+    branches = [main]
+    for v in fur:
+        cn = max(int(rng.uniform(0.25, 0.45) * n), 10)
+        hd = _tangent(main, v) + float(rng.choice([-1.0, 1.0])) * float(rng.uniform(0.4, 0.9))
+        ct = thick[v] * 0.7 * np.linspace(1.0, 0.6, cn) * (1.0 + 0.03 * rng.standard_normal(cn))
+        branches.append(Branch.from_angles(main.points[v], hd, walk(cn - 2), ct, h, parent=(0, v)))
+    pts = np.vstack([b.points for b in branches])
+    lo = pts.min(axis=0) - 10.0
+    for b in branches:
+        b.points = b.points - lo
+    hi = np.vstack([b.points for b in branches]).max(axis=0) + 10.0
+    return Skeleton(branches, (math.ceil(hi[1]), math.ceil(hi[0])))

@@ -1,0 +1,439 @@
+"""Statistical structure synthesis (Sibbing et al. 2010, §4): bending, furcation, colonisation, guidance."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import cv2
+import numpy as np
+import pytest
+from conftest import shared_file
+from phloem.branching import (
+    BendingModel,
+    Branch,
+    FurcationModel,
+    Skeleton,
+    SkeletonError,
+    angle_histogram,
+    extend,
+    grow,
+    histogram_distance,
+    synthetic_skeleton,
+    thickness_histogram,
+)
+
+H = 2.0
+
+
+def walk_branch(rng: np.random.Generator, n: int, sigma: float, start=(20.0, 150.0), heading=0.0) -> Branch:
+    """A random-walk branch with AR(1) turning angles of known spread and a tapering thickness."""
+    a = np.zeros(n - 2)
+    for i in range(n - 2):
+        a[i] = (0.5 * a[i - 1] if i else 0.0) + rng.normal(0.0, sigma)
+    thick = np.linspace(4.0, 1.5, n) * (1 + 0.05 * rng.standard_normal(n))
+    return Branch.from_angles(start, heading, a, thick, H)
+
+
+def forest(seed: int, sigma: float = 0.25, branches: int = 3) -> Skeleton:
+    """Several synthetic structures side by side, one skeleton (more data for the statistics)."""
+    parts = [synthetic_skeleton(seed + i, sigma=sigma, length=260.0) for i in range(branches)]
+    out: list[Branch] = []
+    y0 = 0.0
+    width = 0
+    for p in parts:
+        base = len(out)
+        for b in p.branches:
+            parent = None if b.parent is None else (b.parent[0] + base, b.parent[1])
+            out.append(Branch(b.points + [0.0, y0], b.thickness, parent))
+        assert p.shape is not None
+        y0 += p.shape[0]
+        width = max(width, p.shape[1])
+    return Skeleton(out, (math.ceil(y0), width))
+
+
+def segments(sk: Skeleton) -> tuple[np.ndarray, np.ndarray]:
+    return np.vstack([b.points[:-1] for b in sk.branches]), np.vstack([b.points[1:] for b in sk.branches])
+
+
+def count_crossings(sk: Skeleton) -> int:
+    """Brute force: pairs of segments that properly cross (touching end points does not count)."""
+    P, Q = segments(sk)
+
+    def orient(a, b, c):
+        return (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
+
+    p, q, a, b = P[:, None], Q[:, None], P[None], Q[None]
+    hit = (orient(p, q, a) * orient(p, q, b) < -1e-9) & (orient(a, b, p) * orient(a, b, q) < -1e-9)
+    return int(np.triu(hit, 1).sum())
+
+
+# -- bending model ---------------------------------------------------------------------------
+
+
+def test_c1_large_k_reproduces_the_source_branch():
+    # Fig. 3d: with c = 1 and a large k the model copies the source branch exactly.
+    src = walk_branch(np.random.default_rng(3), 120, 0.12)
+    sk = Skeleton([src], (300, 400))
+    model = BendingModel.fit(sk, h=H, k=20, m=15, c=1, omega_g=0.0)
+    out = grow(model, shape=(300, 400), start=(*src.points[0], src.heading()), branch_length=src.length(), colonize=False)
+    got, want = out.branches[0].angles(), model.source.branches[0].angles()
+    n = len(want) - model.m
+    assert len(got) >= n
+    np.testing.assert_allclose(got[:n], want[:n], atol=1e-9)
+    np.testing.assert_allclose(out.branches[0].points[: n + 2], model.source.branches[0].points[: n + 2], atol=1e-6)
+    # ... while allowing variability (Fig. 3b, c = 2) departs from it.
+    varied = BendingModel.fit(sk, h=H, k=20, m=15, c=2, omega_g=0.0)
+    loose = grow(varied, shape=(300, 400), start=(*src.points[0], src.heading()), branch_length=src.length(), colonize=False, seed=1)
+    la = loose.branches[0].angles()
+    assert not np.allclose(la[: min(n, len(la))], want[: min(n, len(la))], atol=1e-6)
+
+
+def test_quality_is_the_papers_dist_product():
+    src = walk_branch(np.random.default_rng(0), 40, 0.2)
+    model = BendingModel.fit(Skeleton([src]), h=H, k=3, m=2, omega_g=0.0)
+    i = 5
+    alpha, r = model.cand_hist_alpha[i], model.cand_hist_r[i] * H
+    q = np.exp(model.log_quality(alpha, r, np.zeros(16), np.zeros(16)))
+    assert q[i] == pytest.approx(4.0)  # dist = 2 for both at X = Y
+    j = 9
+    want = (1 / (np.linalg.norm(model.cand_hist_alpha[j] - alpha) + 1) + 1) * (
+        1 / (np.linalg.norm(model.cand_hist_r[j] - r / H) + 1) + 1
+    )
+    assert q[j] == pytest.approx(want)
+    assert (q > 1).all()
+
+
+def test_histogram_matching_raises_quality_of_helpful_candidates():
+    src = walk_branch(np.random.default_rng(1), 80, 0.3)
+    model = BendingModel.fit(Skeleton([src]), h=H)
+    alpha, r = model.cand_hist_alpha[0], model.cand_hist_r[0] * H
+    # A structure so far made only of angles from the input's most common bin: candidates that
+    # add to that bin worsen the match, the others improve it (thickness counts match the input).
+    top = int(np.argmax(model.hist_alpha))
+    ca = np.zeros(16)
+    ca[top] = 40.0
+    cr = 40.0 * model.hist_r
+    gain = model.log_quality(alpha, r, ca, cr) - model.log_quality(alpha, r, np.zeros(16), np.zeros(16))
+    in_top = model.inc_alpha[:, top]
+    assert (in_top == 0).any() and (in_top > 0).any()
+    assert gain[in_top == 0].min() > gain[in_top > 0].max() - 1e-9
+    assert gain[in_top == 0].mean() > gain[in_top == in_top.max()].mean()
+    # the n_t / m factor: the same histograms with more nodes weigh more
+    gain2 = model.log_quality(alpha, r, 2 * ca, 2 * cr) - model.log_quality(alpha, r, np.zeros(16), np.zeros(16))
+    assert np.abs(gain2).max() > np.abs(gain).max()
+
+
+@pytest.fixture(scope="module")
+def source() -> Skeleton:
+    return forest(10)
+
+
+@pytest.fixture(scope="module")
+def models(source: Skeleton) -> tuple[BendingModel, FurcationModel]:
+    return BendingModel.fit(source, h=H), FurcationModel.fit(source, h=H)
+
+
+def test_grown_histograms_match_the_input(source: Skeleton, models: tuple[BendingModel, FurcationModel]):
+    bend, fur = models
+    ra, rr = bend.range_alpha, bend.range_r
+    # The bound comes from the input itself: the source holds three independent synthetic trees;
+    # one tree differs from the other two by `spread`. A structure grown from the model should be
+    # no further from the whole input than one sample of the same process is from another.
+    roots = [i for i, b in enumerate(bend.source.branches) if b.parent is None]
+    split = roots[1]
+    first = Skeleton(bend.source.branches[:split])
+    second = Skeleton([Branch(b.points, b.thickness) for b in bend.source.branches[split:]])
+    spread_a = histogram_distance(angle_histogram(first, range=ra)[0], angle_histogram(second, range=ra)[0])
+    spread_r = histogram_distance(thickness_histogram(first, range=rr)[0], thickness_histogram(second, range=rr)[0])
+    out = grow(bend, fur, shape=(400, 400), seed=2, generations=2)
+    n_out = sum(len(b) for b in out.branches)
+    assert n_out > 200
+    da = histogram_distance(angle_histogram(out, range=ra)[0], bend.hist_alpha)
+    dr = histogram_distance(thickness_histogram(out, range=rr)[0], bend.hist_r)
+    bound_a, bound_r = spread_a, spread_r  # about 0.22 and 0.58
+    assert da < bound_a, (da, spread_a)
+    assert dr < bound_r, (dr, spread_r)
+    # The bound has teeth: a structure bending twice as strongly is rejected by it.
+    other = forest(40, sigma=0.6)
+    wild = grow(BendingModel.fit(other, h=H), shape=(400, 400), seed=2, generations=1)
+    assert histogram_distance(angle_histogram(wild, range=ra)[0], bend.hist_alpha) > bound_a
+
+
+def test_histogram_matching_brings_histograms_closer(source: Skeleton, models: tuple[BendingModel, FurcationModel]):
+    bend, fur = models
+    plain = BendingModel.fit(source, h=H, omega_g=0.0)
+
+    def distance(model: BendingModel) -> float:
+        total = 0.0
+        for seed in range(3):
+            out = grow(model, fur, shape=(400, 400), seed=seed, generations=2)
+            total += histogram_distance(angle_histogram(out, range=bend.range_alpha)[0], bend.hist_alpha)
+            total += histogram_distance(thickness_histogram(out, range=bend.range_r)[0], bend.hist_r)
+        return total
+
+    assert distance(bend) < 0.7 * distance(plain)
+
+
+def test_no_crossings_with_colonisation(models: tuple[BendingModel, FurcationModel]):
+    bend, fur = models
+    # a cramped image with many branches: without the crossing test branches would cross
+    out = grow(bend, fur, shape=(160, 160), seed=5, generations=3, children=4, start=(5, 80, 0.0))
+    assert len(out.branches) >= 4
+    assert count_crossings(out) == 0
+    # every vertex inside and every edge of length h
+    for b in out.branches:
+        np.testing.assert_allclose(np.linalg.norm(np.diff(b.points, axis=0), axis=1), H, rtol=1e-9)
+
+
+def test_colonisation_keeps_branches_apart(models: tuple[BendingModel, FurcationModel]):
+    bend, fur = models
+
+    def gap(colonize: bool) -> float:
+        vals = []
+        for seed in range(3):
+            out = grow(bend, fur, shape=(220, 220), seed=seed, generations=2, children=3, colonize=colonize)
+            for i, b in enumerate(out.branches[1:], 1):
+                others = np.vstack([o.points for j, o in enumerate(out.branches) if j not in (i, b.parent[0])] or [[1e9, 1e9]])
+                d = np.linalg.norm(b.points[:, None] - others[None], axis=2).min(axis=1)
+                vals.append(np.mean(d))
+        return float(np.mean(vals))
+
+    assert gap(True) > gap(False)
+
+
+def test_crossing_candidates_get_zero_quality():
+    # A wall across the path: the branch must stop (or turn) rather than cross it.
+    src = walk_branch(np.random.default_rng(4), 100, 0.05)
+    model = BendingModel.fit(Skeleton([src]), h=H, m=4)
+    wall = Branch([[60.0, 0.0], [60.0, 299.0]], 1.0)
+    sk = Skeleton([wall], (300, 300))
+    # a stub heading straight at the wall
+    stub = Branch([[20.0, 150.0], [22.0, 150.0], [24.0, 150.0], [26.0, 150.0], [28.0, 150.0], [30.0, 150.0]], 2.0)
+    sk = Skeleton([wall, stub], (300, 300))
+    out = extend(sk, 1, model, steps=30, seed=0)
+    assert len(out.branches[1]) > len(stub)
+    assert count_crossings(out) == 0
+    assert out.branches[1].points[:, 0].max() < 60.0
+
+
+# -- furcation model -------------------------------------------------------------------------
+
+
+def auc(scores: np.ndarray, labels: np.ndarray) -> float:
+    pos, neg = scores[labels], scores[~labels]
+    return float(((pos[:, None] > neg[None]).sum() + 0.5 * (pos[:, None] == neg[None]).sum()) / (len(pos) * len(neg)))
+
+
+def test_svm_ranks_held_out_furcations_above_chance():
+    # furcations follow a learnable rule: the thickness drops by 30 % right after them
+    fur = FurcationModel.fit(forest(100, branches=4), h=H)
+    scores, labels = [], []
+    for seed in range(200, 204):
+        sk = synthetic_skeleton(seed, length=260.0, furcations=5).resample(H)
+        main = sk.branches[0]
+        lab = np.zeros(len(main), bool)
+        lab[[v for v, _ in sk.children()[0]]] = True
+        scores.append(fur.probabilities(main))
+        labels.append(lab)
+    s, lab = np.concatenate(scores), np.concatenate(labels)
+    assert lab.sum() >= 15
+    assert auc(s, lab) > 0.8
+    assert ((s >= 0) & (s <= 1)).all()
+
+
+def test_svm_training_needs_furcations():
+    sk = Skeleton([walk_branch(np.random.default_rng(0), 50, 0.2)])
+    with pytest.raises(ValueError, match="skeleton"):
+        FurcationModel.fit(sk, h=H)
+
+
+def test_pick_respects_min_spacing(models: tuple[BendingModel, FurcationModel]):
+    _, fur = models
+    main = synthetic_skeleton(7).resample(H).branches[0]
+    picks = fur.pick(main, 6, min_spacing=10)
+    assert len(picks) == len(set(picks)) >= 3
+    assert min(abs(a - b) for a in picks for b in picks if a != b) >= 10
+    assert all(0 < p < len(main) - 1 for p in picks)
+
+
+def test_children_copy_the_input_branching_angles(models: tuple[BendingModel, FurcationModel]):
+    bend, fur = models
+    out = grow(bend, fur, shape=(400, 400), seed=3, generations=2)
+    kids = [b for b in out.branches if b.parent is not None]
+    assert kids
+    for b in kids:
+        pb, v = b.parent
+        parent = out.branches[pb]
+        np.testing.assert_allclose(b.points[0], parent.points[v])
+        d = parent.points[min(v + 1, len(parent) - 1)] - parent.points[max(v - 1, 0)]
+        off = (b.heading() - math.atan2(-d[1], d[0]) + math.pi) % (2 * math.pi) - math.pi
+        assert np.min(np.abs(fur.offsets - off)) < 1e-6
+
+
+# -- synthesis -------------------------------------------------------------------------------
+
+
+def test_grow_is_deterministic_for_a_seed(models: tuple[BendingModel, FurcationModel]):
+    bend, fur = models
+    a = grow(bend, fur, shape=(256, 256), seed=11, generations=2)
+    b = grow(bend, fur, shape=(256, 256), seed=11, generations=2)
+    c = grow(bend, fur, shape=(256, 256), seed=12, generations=2)
+    assert a == b
+    assert a != c
+
+
+def test_stop_criteria(models: tuple[BendingModel, FurcationModel]):
+    bend, fur = models
+    short = grow(bend, fur, shape=(300, 300), seed=0, max_length=80.0)
+    assert short.total_length() <= 80.0 + bend.m * bend.h + 2 * bend.h
+    one = grow(bend, fur, shape=(300, 300), seed=0, generations=1)
+    assert len(one.branches) == 1
+    sparse = grow(bend, fur, shape=(300, 300), seed=0, generations=3, children=4, max_density=0.02)
+    dense = grow(bend, fur, shape=(300, 300), seed=0, generations=3, children=4)
+    assert sparse.total_length() < dense.total_length()
+    calls: list[tuple[int, int]] = []
+    grow(bend, fur, shape=(300, 300), seed=0, generations=2, progress=lambda d, t: calls.append((d, t)))
+    assert calls and calls[-1][0] == calls[-1][1]
+
+
+def test_guided_growth_follows_the_path(models: tuple[BendingModel, FurcationModel]):
+    bend, _ = models
+    line = np.array([[10.0, 150.0], [290.0, 150.0]])
+
+    def spread(guide) -> float:
+        vals = []
+        for seed in range(3):
+            out = grow(bend, shape=(300, 300), seed=seed, start=(10, 150, 0.7), guide=guide, branch_length=250, guide_width=12)
+            vals.append(np.abs(out.branches[0].points[:, 1] - 150.0).mean())
+        return float(np.mean(vals))
+
+    assert spread(line) < 0.5 * spread(None)
+    # a map works like the polyline, and so does a painted path mask
+    g = np.ones((300, 300))
+    g[140:161, :] = 0.0
+    assert spread(g) < 0.5 * spread(None)
+    painted = np.zeros((300, 300), bool)
+    painted[150, 10:290] = True
+    assert spread(painted) < 0.5 * spread(None)
+
+
+def test_extend_appends_to_one_branch(models: tuple[BendingModel, FurcationModel]):
+    bend, fur = models
+    sk = grow(bend, fur, shape=(300, 300), seed=4, generations=2, branch_length=60)
+    out = extend(sk, 0, bend, steps=5, seed=1)
+    old, new = sk.branches[0], out.branches[0]
+    assert len(new) > len(old)
+    np.testing.assert_array_equal(new.points[: len(old)], old.points)
+    np.testing.assert_array_equal(new.thickness[: len(old)], old.thickness)
+    np.testing.assert_allclose(np.linalg.norm(np.diff(new.points[len(old) - 1 :], axis=0), axis=1), H)
+    assert all(a is b for a, b in zip(out.branches[1:], sk.branches[1:]))
+    assert count_crossings(out) == 0
+    assert extend(sk, 0, bend, steps=5, seed=1) == out
+
+
+# -- real data -------------------------------------------------------------------------------
+
+
+def mask_to_skeleton(mask: np.ndarray, min_pixels: int = 10) -> Skeleton:
+    """A tree skeleton of a binary channel mask: a breadth-first spanning tree of its medial axis
+    from the widest point, cut into branches along longest paths; thickness from the distance map."""
+    from skimage.morphology import skeletonize
+
+    skel = skeletonize(mask)
+    dt = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
+    _, lab = cv2.connectedComponents(skel.astype(np.uint8), connectivity=8)
+    on = lab == 1 + int(np.argmax(np.bincount(lab.ravel())[1:]))
+    ys, xs = np.nonzero(on)
+    i = int(np.argmax(dt[ys, xs]))
+    start = (int(ys[i]), int(xs[i]))
+    parent: dict[tuple[int, int], tuple[int, int] | None] = {start: None}
+    order, queue = [start], deque([start])
+    while queue:
+        y, x = queue.popleft()
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                p = (y + dy, x + dx)
+                if (dy or dx) and 0 <= p[0] < on.shape[0] and 0 <= p[1] < on.shape[1] and on[p] and p not in parent:
+                    parent[p] = (y, x)
+                    order.append(p)
+                    queue.append(p)
+    kids: dict[tuple[int, int], list[tuple[int, int]]] = {p: [] for p in order}
+    for p in order[1:]:
+        kids[parent[p]].append(p)  # type: ignore[index]
+    height: dict[tuple[int, int], int] = {}
+    for p in reversed(order):
+        height[p] = 1 + max((height[c] for c in kids[p]), default=0)
+    branches: list[Branch] = []
+    todo: deque[tuple[tuple[int, int], tuple[int, int] | None]] = deque([(start, None)])
+    while todo:
+        p, attach = todo.popleft()
+        if height[p] < min_pixels:
+            continue
+        path = [p]
+        while kids[path[-1]]:
+            nxt = max(kids[path[-1]], key=lambda c: height[c])
+            todo.extend((c, (len(branches), len(path) - 1)) for c in kids[path[-1]] if c != nxt)
+            path.append(nxt)
+        pts = np.array([[x, y] for y, x in path], float)
+        branches.append(Branch(pts, np.array([max(float(dt[y, x]), 0.5) for y, x in path]), attach))
+    return Skeleton(branches, mask.shape)
+
+
+@pytest.mark.shared
+def test_river_delta_statistics_carry_over():
+    img = cv2.imread(str(shared_file("branching", "rivgraph_colville_delta_mask.png")), cv2.IMREAD_GRAYSCALE)
+    mask = cv2.resize(img, (500, 500), interpolation=cv2.INTER_AREA) > 127
+    src = mask_to_skeleton(mask)
+    assert len(src.branches) > 30
+    bend, fur = BendingModel.fit(src), FurcationModel.fit(src)
+    ra, rr = bend.range_alpha, bend.range_r
+    # spread between two halves of the input (alternate branches, about 0.15 for both); the
+    # halves interleave, so they are closer than independent samples: allow 1.5 times that
+    halves = [Skeleton([Branch(b.points, b.thickness) for b in bend.source.branches[j::2] if len(b) >= 3]) for j in (0, 1)]
+    spread_a = histogram_distance(*(angle_histogram(x, range=ra)[0] for x in halves))
+    spread_r = histogram_distance(*(thickness_histogram(x, range=rr)[0] for x in halves))
+    out = grow(bend, fur, shape=(500, 500), seed=0)
+    assert sum(len(b) for b in out.branches) > 300
+    assert count_crossings(out) == 0
+    assert histogram_distance(angle_histogram(out, range=ra)[0], bend.hist_alpha) < 1.5 * spread_a
+    assert histogram_distance(thickness_histogram(out, range=rr)[0], bend.hist_r) < 1.5 * spread_r
+
+
+# -- errors ----------------------------------------------------------------------------------
+
+
+def test_bad_input_errors(models: tuple[BendingModel, FurcationModel]):
+    bend, fur = models
+    with pytest.raises(ValueError, match="skeleton: the skeleton has no branches"):
+        BendingModel.fit(Skeleton([]))
+    tiny = Skeleton([Branch([[0, 0], [2, 0], [4, 0], [6, 0]], 1.0)])
+    with pytest.raises(ValueError, match=r"skeleton: no branch is long enough for k \+ m"):
+        BendingModel.fit(tiny, h=H)
+    with pytest.raises(SkeletonError, match="NaN"):
+        Branch([[0, 0], [np.nan, 1]], 1.0)
+    with pytest.raises(ValueError, match="^h:"):
+        BendingModel.fit(tiny, h=float("nan"))
+    with pytest.raises(ValueError, match="^k:"):
+        BendingModel.fit(tiny, h=H, k=0)
+    with pytest.raises(TypeError, match="^skeleton:"):
+        BendingModel.fit([[0, 0], [1, 1]])  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="^start:"):
+        grow(bend, shape=(100, 100), start=(np.nan, 3))
+    with pytest.raises(ValueError, match="^start:"):
+        grow(bend, shape=(100, 100), start=(500, 3))
+    with pytest.raises(ValueError, match="^guide:"):
+        grow(bend, shape=(100, 100), guide=np.zeros((5, 3)))
+    with pytest.raises(ValueError, match="^max_density:"):
+        grow(bend, shape=(100, 100), max_density=2.0)
+    with pytest.raises(TypeError, match="^bending:"):
+        grow(fur, shape=(100, 100))  # type: ignore[arg-type]
+    other = FurcationModel.fit(synthetic_skeleton(0), h=3.0)
+    with pytest.raises(ValueError, match="^furcation: was fitted with h"):
+        grow(bend, other, shape=(100, 100))
+    with pytest.raises(ValueError, match="^branch_index:"):
+        extend(Skeleton([Branch([[0, 0], [5, 0]], 1.0)], (10, 10)), 3, bend)
+    with pytest.raises(ValueError, match="^shape:"):
+        extend(Skeleton([Branch([[0, 0], [5, 0]], 1.0)]), 0, bend)
+    with pytest.raises(ValueError, match="^a, b:"):
+        histogram_distance([1, 2], [1, 2, 3])

@@ -1,0 +1,340 @@
+"""Tracing source skeletons from images (phloem.branching.trace) and maximum-gradient thickness (000 §3)."""
+
+from __future__ import annotations
+
+import itertools
+import time
+
+import numpy as np
+import phloem
+import pytest
+from phloem.branching import Branch, Skeleton, estimate_thickness, trace
+
+# -- synthetic structures with a known centre line and radius ---------------------------------
+
+
+def _seg_dist(px: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance of points ``px`` (..., 2) to segment ``a``-``b``."""
+    d = b - a
+    t = np.clip(((px - a) @ d) / float(d @ d), 0.0, 1.0)
+    return np.linalg.norm(px - (a + t[..., None] * d), axis=-1)
+
+
+class Tubes:
+    """Straight segments ``(a, b, radius, name)`` rasterised exactly: a pixel is inside when its
+    centre is within ``radius`` of a segment (round caps, round joints)."""
+
+    def __init__(self, shape: tuple[int, int], segs: list[tuple[tuple[float, float], tuple[float, float], float, str]]):
+        self.shape = shape
+        self.segs = [(np.asarray(a, float), np.asarray(b, float), float(r), n) for a, b, r, n in segs]
+        yy, xx = np.mgrid[: shape[0], : shape[1]]
+        px = np.stack([xx, yy], axis=-1).astype(float)
+        self.dist = np.min([_seg_dist(px, a, b) - r for a, b, r, _ in self.segs], axis=0)
+
+    def mask(self) -> np.ndarray:
+        return (self.dist <= 0).astype(np.uint8)
+
+    def nearest(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Distance of each point to the nearest centre-line segment, and that segment's radius."""
+        d = np.stack([_seg_dist(pts, a, b) for a, b, _, _ in self.segs])
+        k = np.argmin(d, axis=0)
+        return d[k, np.arange(len(pts))], np.array([self.segs[i][2] for i in k])
+
+
+def _dist_to(pts: np.ndarray, seg: tuple) -> np.ndarray:
+    return _seg_dist(pts, seg[0], seg[1])
+
+
+def _near(pts: np.ndarray, where: list[tuple[float, float]], radius: float) -> np.ndarray:
+    return np.min([np.linalg.norm(pts - np.asarray(w, float), axis=1) for w in where], axis=0) < radius
+
+
+Y_SHAPE = Tubes(
+    (110, 100),
+    [((50, 100), (50, 60), 5, "stem"), ((50, 60), (20, 15), 3, "left"), ((50, 60), (82, 18), 3, "right")],
+)
+
+# Trunk r=5 splits at (100, 110) into A (straight on, r=4) and B (r=3); A has a short side branch
+# A1 at (100, 70), B one (B1) at (130, 95). Every side branch is shorter than the rest of its
+# parent, so the longest-path decomposition is trunk+A, then B and A1, then B1.
+TREE = Tubes(
+    (200, 200),
+    [
+        ((100, 190), (100, 110), 5, "trunk"),
+        ((100, 110), (100, 30), 4, "A"),
+        ((100, 110), (160, 80), 3, "B"),
+        ((100, 70), (70, 55), 2.5, "A1"),
+        ((130, 95), (135, 120), 2.5, "B1"),
+    ],
+)
+TREE_TIPS = {"A": (100, 30), "B": (160, 80), "A1": (70, 55), "B1": (135, 120)}
+JUNCTIONS = [(100, 110), (100, 70), (130, 95)]
+
+
+def _tip_name(b: Branch) -> str:
+    d = {n: np.linalg.norm(b.points[-1] - np.asarray(p, float)) for n, p in TREE_TIPS.items()}
+    name = min(d, key=lambda n: d[n])
+    assert d[name] < 8, f"branch ends at {b.points[-1]}, far from every tip"
+    return name
+
+
+def _assert_centreline(sk: Skeleton, tubes: Tubes, junctions: list[tuple[float, float]] = ()) -> None:
+    """Every vertex within 1.5 px of the true centre line; 2.5 px within 8 px of a junction, where
+    the medial axis of the union of tubes bends away from the centre lines."""
+    pts = np.vstack([b.points for b in sk.branches])
+    d, _ = tubes.nearest(pts)
+    tol = np.where(_near(pts, list(junctions), 8.0), 2.5, 1.5) if junctions else np.full(len(pts), 1.5)
+    bad = d - tol
+    assert bad.max() <= 0, f"vertex {pts[np.argmax(bad)]} is {d[np.argmax(bad)]:.2f} px off the centre line"
+
+
+def _assert_thickness(sk: Skeleton, tubes: Tubes, away: list[tuple[float, float]], tol: float = 0.8) -> None:
+    """Thickness within ``tol`` of the true radius, away from junctions and tips (10 px)."""
+    pts = np.vstack([b.points for b in sk.branches])
+    thick = np.concatenate([b.thickness for b in sk.branches])
+    keep = ~_near(pts, away, 10.0)
+    assert keep.sum() > 0.5 * len(pts)
+    _, r = tubes.nearest(pts[keep])
+    err = np.abs(thick[keep] - r)
+    assert err.max() <= tol, f"thickness off by {err.max():.2f} px at {pts[keep][np.argmax(err)]}"
+
+
+# -- trace on masks ---------------------------------------------------------------------------
+
+
+def test_y_shape_two_branches_on_the_centre_line_with_the_right_thickness():
+    sk = trace(Y_SHAPE.mask(), kind="mask")
+    assert sk.shape == (110, 100)
+    assert len(sk.branches) == 2
+    main, child = sk.branches
+    # the thick stem is the root: the main branch starts at its bottom
+    assert np.linalg.norm(main.points[0] - (50, 100)) < 3
+    assert main.parent is None and child.parent is not None
+    pb, pv = child.parent
+    assert pb == 0
+    assert np.linalg.norm(main.points[pv] - (50, 60)) < 4
+    assert np.allclose(child.points[0], main.points[pv], atol=1.5)
+    _assert_centreline(sk, Y_SHAPE, [(50, 60)])
+    _assert_thickness(sk, Y_SHAPE, away=[(50, 60), (50, 100), (20, 15), (82, 18)])
+
+
+def test_three_level_tree_parents_point_to_the_right_branch():
+    sk = trace(TREE.mask(), kind="mask")
+    assert len(sk.branches) == 4
+    names = [_tip_name(b) for b in sk.branches]
+    assert names[0] == "A" and np.linalg.norm(sk.branches[0].points[0] - (100, 190)) < 3
+    assert sorted(names) == ["A", "A1", "B", "B1"]
+    by = dict(zip(names, sk.branches))
+    expect = {"B": ("A", (100, 110)), "A1": ("A", (100, 70)), "B1": ("B", (130, 95))}
+    for child, (parent, at) in expect.items():
+        pb, pv = by[child].parent
+        assert names[pb] == parent, f"{child} hangs off {names[pb]}, not {parent}"
+        assert np.linalg.norm(sk.branches[pb].points[pv] - at) < 5
+    depth = []
+    for b in sk.branches:
+        depth.append(0 if b.parent is None else depth[b.parent[0]] + 1)
+    assert sorted(depth) == [0, 1, 1, 2]
+    _assert_centreline(sk, TREE, JUNCTIONS)
+    _assert_thickness(sk, TREE, away=JUNCTIONS + list(TREE_TIPS.values()) + [(100, 190)])
+
+
+def test_ring_and_braid_are_cut_into_trees():
+    ring = Tubes(
+        (100, 100),
+        [
+            ((50 + 30 * np.cos(a), 50 + 30 * np.sin(a)), (50 + 30 * np.cos(b), 50 + 30 * np.sin(b)), 3, "r")
+            for a, b in zip(np.linspace(0, 2 * np.pi, 41)[:-1], np.linspace(0, 2 * np.pi, 41)[1:])
+        ],
+    )
+    sk = trace(ring.mask(), kind="mask")
+    assert len(sk.branches) >= 1 and sk.branches[0].parent is None
+    _assert_centreline(sk, ring)
+    # nearly the whole circumference, cut once
+    assert 0.9 * 2 * np.pi * 30 < sk.total_length() < 2 * np.pi * 30 + 1
+    # a braid: two channels that split and rejoin, with a stem on either side; the upper one is thinner
+    braid = Tubes(
+        (80, 160),
+        [
+            ((5, 40), (40, 40), 4, "in"),
+            ((40, 40), (80, 15), 2, "u1"),
+            ((80, 15), (120, 40), 2, "u2"),
+            ((40, 40), (80, 65), 3, "d1"),
+            ((80, 65), (120, 40), 3, "d2"),
+            ((120, 40), (155, 40), 4, "out"),
+        ],
+    )
+    sk = trace(braid.mask(), kind="mask")
+    _assert_centreline(sk, braid, [(40, 40), (120, 40)])
+    # the cycle is cut in the thin upper channel: the main branch runs along the lower one, and
+    # branch ends lie inside the upper channel (away from its junctions)
+    assert sk.branches[0].points[:, 1].max() > 60
+    ends = np.array([p for b in sk.branches for p in (b.points[0], b.points[-1])])
+    on_upper = np.min([_dist_to(ends, braid.segs[k]) for k in (1, 2)], axis=0) < 2.5
+    assert (on_upper & ~_near(ends, [(40, 40), (120, 40)], 6.0)).any(), "the thick channel was cut"
+    total = sum(np.hypot(*(b - a)) for a, b, _, _ in braid.segs)
+    assert sk.total_length() < total
+
+
+def test_several_components_give_several_roots_largest_first():
+    m = np.zeros((60, 120), np.uint8)
+    m[10:16, 5:40] = 1
+    m[30:38, 50:115] = 1
+    sk = trace(m, kind="mask")
+    assert [b.parent for b in sk.branches] == [None, None]
+    assert sk.branches[0].length() > sk.branches[1].length()
+
+
+def test_options_root_h_and_determinism():
+    mask = TREE.mask()
+    a = trace(mask, kind="mask")
+    assert trace(mask, kind="mask") == a
+    sk = trace(mask, kind="mask", root=(160, 80))
+    assert np.linalg.norm(sk.branches[0].points[0] - (160, 80)) < 6
+    r = trace(mask, kind="mask", h=3.0)
+    for b in r.branches:
+        assert np.allclose(np.linalg.norm(np.diff(b.points, axis=0), axis=1), 3.0)
+    assert len(trace(mask, kind="mask", min_length=60).branches) == 2  # only trunk+A and B are that long
+
+
+# -- trace on photos --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("dark", [True, False])
+def test_photo_of_a_tree_traced_by_ridge_filter(dark):
+    rng = np.random.default_rng(1)
+    soft = np.clip(0.5 - TREE.dist, 0.0, 1.0)  # anti-aliased tubes
+    img = (0.75 - 0.5 * soft if dark else 0.25 + 0.5 * soft) + rng.normal(0, 0.03, TREE.shape)
+    sk = trace(img.astype(np.float32), sigmas=(1.5, 3.0))
+    assert 3 <= len(sk.branches) <= 8
+    pts = np.vstack([b.points for b in sk.branches])
+    d, _ = TREE.nearest(pts)
+    assert np.percentile(d, 95) <= 2.0
+    # most of the structure is found
+    assert sk.total_length() > 0.8 * sum(np.hypot(*(b - a)) for a, b, _, _ in TREE.segs) - 40
+    # thickness by maximum gradient: right within a pixel away from forks and tips
+    thick = np.concatenate([b.thickness for b in sk.branches])
+    keep = ~_near(pts, [*JUNCTIONS, *TREE_TIPS.values(), (100, 190)], 10.0)
+    _, r = TREE.nearest(pts[keep])
+    assert np.median(np.abs(thick[keep] - r)) < 0.5
+    assert np.percentile(np.abs(thick[keep] - r), 90) < 1.0
+
+
+def test_photo_rim_is_not_a_ridge_and_broken_vessels_are_bridged():
+    # A retina-like photo: a lit disk on black with one dark vessel across it that has a 16 px gap.
+    yy, xx = np.mgrid[:240, :240]
+    img = np.where(np.hypot(xx - 120, yy - 120) < 110, 0.6, 0.02)
+    vessel = Tubes((240, 240), [((30, 120), (112, 120), 3, "a"), ((128, 120), (210, 120), 3, "b")])
+    img = (img - 0.3 * np.clip(0.5 - vessel.dist, 0, 1)).astype(np.float32)
+    sk = trace(img, kind="dark", sigmas=(1.5, 3.0), gap=20)
+    pts = np.vstack([b.points for b in sk.branches])
+    rim = np.abs(np.hypot(pts[:, 0] - 120, pts[:, 1] - 120) - 110)
+    assert rim.min() > 8, "the rim of the lit disk was traced"
+    assert len(sk.branches) == 1, "the gap was not bridged"
+    assert sk.branches[0].length() > 160
+    assert len(trace(img, kind="dark", sigmas=(1.5, 3.0), gap=0).branches) == 2
+
+
+# -- thickness by maximum gradient ----------------------------------------------------------
+
+
+@pytest.mark.parametrize("radius", [2.0, 4.0, 7.0])
+def test_estimate_thickness_on_blurred_tubes(radius):
+    import cv2
+
+    t = np.linspace(0.2, 2.6, 40)
+    centre = np.stack([80 + 50 * np.cos(t), 80 + 50 * np.sin(t)], axis=1)
+    tubes = Tubes((160, 160), [(tuple(a), tuple(b), radius, "arc") for a, b in itertools.pairwise(centre)])
+    img = cv2.GaussianBlur(np.clip(0.5 - tubes.dist, 0, 1).astype(np.float32), (0, 0), 1.0)
+    img = 0.8 - 0.5 * img  # dark tube on a bright background
+    sk = Skeleton([Branch(centre, 0.0)], (160, 160))
+    est = estimate_thickness(img, sk).branches[0].thickness
+    assert np.abs(est - radius).max() < 1.0, est
+    # a centre line 1 px off still gives the radius: half the distance between the edges
+    off = Skeleton([Branch(centre * 1.0 + 1.0, 0.0)])
+    est = estimate_thickness(img, off).branches[0].thickness
+    assert np.abs(est - radius).max() < 1.0, est
+
+
+def test_estimate_thickness_keeps_structure():
+    sk = trace(TREE.mask(), kind="mask")
+    est = estimate_thickness(TREE.mask().astype(np.float32), sk)
+    assert [b.parent for b in est.branches] == [b.parent for b in sk.branches] and est.shape == sk.shape
+    assert all(np.array_equal(a.points, b.points) for a, b in zip(est.branches, sk.branches))
+
+
+# -- errors -----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("image", "kwargs", "err", "match"),
+    [
+        (np.zeros((0, 10)), {}, ValueError, "image"),
+        (np.zeros((4, 4, 4, 4)), {}, ValueError, "image"),
+        (np.zeros((10, 10), bool), {}, TypeError, "image"),
+        (np.full((10, 10), np.nan), {}, ValueError, "image"),
+        (np.full((10, 10), 0.3), {}, ValueError, "image: nothing to trace"),
+        (Y_SHAPE.mask(), {"kind": "ridges"}, ValueError, "kind"),
+        (Y_SHAPE.mask(), {"sigmas": -1.0}, ValueError, "sigmas"),
+        (Y_SHAPE.mask(), {"sigmas": ()}, ValueError, "sigmas"),
+        (Y_SHAPE.mask(), {"min_length": -1.0}, ValueError, "min_length"),
+        (Y_SHAPE.mask(), {"min_length": 1000.0}, ValueError, "image: nothing to trace"),
+        (Y_SHAPE.mask(), {"root": (500, 5)}, ValueError, "root"),
+        (Y_SHAPE.mask(), {"channel": 2}, ValueError, "channel"),
+        (Y_SHAPE.mask(), {"h": 0.0}, ValueError, "h"),
+        (Y_SHAPE.mask(), {"thickness": "dt"}, ValueError, "thickness"),
+        (Y_SHAPE.mask(), {"gap": -1.0}, ValueError, "gap"),
+        (Y_SHAPE.mask(), {"kind": "mask", "threshold": 2.0}, ValueError, "image: nothing to trace"),
+    ],
+)
+def test_bad_input_names_the_argument(image, kwargs, err, match):
+    with pytest.raises(err, match=match):
+        trace(image, **kwargs)
+
+
+def test_estimate_thickness_bad_input():
+    sk = Skeleton([Branch([[1, 1], [5, 5]], 1.0)])
+    with pytest.raises(TypeError, match="skeleton"):
+        estimate_thickness(np.zeros((10, 10)), "not a skeleton")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="max_radius"):
+        estimate_thickness(np.zeros((10, 10)), sk, max_radius=0)
+    with pytest.raises(ValueError, match="image"):
+        estimate_thickness(np.full((10, 10), np.nan), sk)
+
+
+# -- real images ------------------------------------------------------------------------------
+
+
+@pytest.mark.shared
+def test_retina_trace_is_plausible():
+    from conftest import shared_file
+
+    img = phloem.io.read_image(shared_file("branching", "skimage_retina.jpg"))
+    t0 = time.perf_counter()
+    sk = trace(img, kind="dark", channel=1, sigmas=(1.5, 3.0))
+    assert time.perf_counter() - t0 < 30  # loose: it takes well under a second
+    assert 50 <= len(sk.branches) <= 800
+    assert 8_000 < sk.total_length() < 60_000
+    # vessels are dark: traced vertices are darker than the image around them
+    import cv2
+
+    g = img[..., 1]
+    local = cv2.blur(g, (31, 31))
+    pts = np.vstack([b.points for b in sk.branches]).round().astype(int)
+    darker = g[pts[:, 1], pts[:, 0]] < local[pts[:, 1], pts[:, 0]]
+    assert darker.mean() > 0.8
+
+
+@pytest.mark.shared
+def test_colville_delta_trace_is_plausible():
+    from conftest import shared_file
+
+    img = phloem.io.read_image(shared_file("branching", "rivgraph_colville_delta_mask.png"))
+    t0 = time.perf_counter()
+    sk = trace(img)
+    assert time.perf_counter() - t0 < 30  # loose: it takes about half a second
+    assert sk.shape == img.shape[:2]
+    assert 30 <= len(sk.branches) <= 1000
+    assert 8_000 < sk.total_length() < 50_000
+    pts = np.vstack([b.points for b in sk.branches]).round().astype(int)
+    assert (img[pts[:, 1], pts[:, 0]] > 0.5).mean() > 0.99
+    assert max(b.thickness.max() for b in sk.branches) > 10  # the main channel is wide
