@@ -7,7 +7,8 @@ target skeleton | structure synthesis (§5.1–5.3, gaps black) | final image wi
 completed (§5.4) | fragment placement map (one colour per target fragment, white = completed).
 Rows: a synthetic river (drawn from a known skeleton) re-rendered along a new skeleton;
 the same with every §5.3 stage switched off (plain rigid copy); a grey vessel picture along a
-rotated, bent skeleton; identity (target = source); when ../shared/data is there, one real
+rotated, bent skeleton; identity (target = source); the river along a target grown by
+phloem.branching.grow from models learnt on its source skeleton (§4 then §5); when ../shared/data is there, one real
 channel of the Colville delta water mask painted along its 180°-turned copy. Last row: 2×
 crops around two furcations of the river: full pipeline (with the target skeleton), full
 pipeline, and without §5.3.
@@ -27,7 +28,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 import phloem
 from branching_scene import picture, tree
-from phloem.branching import Branch, RenderResult, Skeleton, fragments, render
+from phloem.branching import BendingModel, Branch, FurcationModel, RenderResult, Skeleton, fragments, grow, render
 from sheet_texture import ROOT, _fit, _label, write_sheet
 
 
@@ -134,6 +135,9 @@ def main() -> None:
         row("vessels", vimg, vsrc, vtgt),
         row("identity", img, src, src),
     ]
+    # The whole §4 + §5 pipeline: models learnt from the source skeleton grow the target.
+    grown = grow(BendingModel.fit(src), FurcationModel.fit(src), shape=(320, 560), seed=3, generations=2)
+    rows.append(row("river, grown target", img, src, grown))
     real = colville()
     if real is not None:
         rows.append(row("Colville channel", *real))

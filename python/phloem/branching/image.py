@@ -927,12 +927,13 @@ def render(
 
     structure = canvas.copy() if full_output else canvas
     if complete and (~filled).any():
-        zone = np.zeros((H0, W0), np.uint8)
-        for b in src_sk.branches:
-            for (a, bb), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
-                rr = max(rf * 0.5 * (r0 + r1), MIN_RADIUS)
-                cv2.line(zone, _pt(a), _pt(bb), 1, thickness=max(1, round(2 * rr)), lineType=cv2.LINE_8, shift=4)
-        allowed = zone == 0
+        # The source minus its structure widened to the fragment radius; where the structure
+        # is so dense that less than a sixth of the image would be left (a retina), widened
+        # less, down to the structure plus a quarter of its thickness.
+        for factor in (rf, 2.0, 1.25):
+            allowed = _background(src_sk, (H0, W0), factor)
+            if allowed.mean() >= 1 / 6:
+                break
         canvas = _complete_background(
             canvas, ~filled, img, allowed, patch_size=p, iterations=c_iters, seed=s, threads=t
         )
@@ -961,6 +962,16 @@ def _foreign(skeleton: Skeleton, frs: list[Fragment], *, keep: int) -> NDArray[n
     if plain - int(out.sum()) < keep:
         out[:] = False
     return out
+
+
+def _background(skeleton: Skeleton, shape: tuple[int, int], factor: float) -> NDArray[np.bool_]:
+    """Pixels farther from the structure than ``factor ×`` its thickness (at least 2 px)."""
+    zone = np.zeros(shape, np.uint8)
+    for b in skeleton.branches:
+        for (a, bb), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
+            rr = max(factor * 0.5 * (r0 + r1), MIN_RADIUS)
+            cv2.line(zone, _pt(a), _pt(bb), 1, thickness=max(1, round(2 * rr)), lineType=cv2.LINE_8, shift=4)
+    return np.asarray(zone == 0)
 
 
 def _branch_map(skeleton: Skeleton, shape: tuple[int, int]) -> NDArray[np.int32]:
