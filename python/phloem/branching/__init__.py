@@ -13,7 +13,7 @@ References
 from __future__ import annotations
 
 from .figures import histogram_figure
-from .image import Fragment, RenderResult, fragments, render, rigid_align
+from .image import Fragment, RenderResult, fragments, rectify, render, rigid_align, unrectify
 from .skeleton import Branch, Skeleton, SkeletonError
 from .structure import (
     BendingModel,
@@ -30,6 +30,6 @@ from .trace import estimate_thickness, trace
 
 __all__ = [
     "BendingModel", "Branch", "Fragment", "FurcationModel", "RenderResult", "Skeleton", "SkeletonError", "angle_histogram",
-    "default_h", "estimate_thickness", "extend", "fragments", "grow", "histogram_distance", "histogram_figure", "render",
-    "rigid_align", "synthetic_skeleton", "thickness_histogram", "trace",
+    "default_h", "estimate_thickness", "extend", "fragments", "grow", "histogram_distance", "histogram_figure", "rectify",
+    "render", "rigid_align", "synthetic_skeleton", "thickness_histogram", "trace", "unrectify",
 ]
