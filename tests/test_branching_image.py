@@ -229,7 +229,8 @@ def test_perspective_rectify_render_unrectify_round_trip() -> None:
     src_q = np.float32([[0, 0], [w, 0], [w, h], [0, h]])
     dst_q = np.float32([[20, 0], [w - 20, 10], [w, h], [0, h - 5]])
     Hm = cv2.getPerspectiveTransform(src_q, dst_q)
-    rect, rsk, H2 = rectify(img, sk, Hm)
+    rect, rsk, H2, valid = rectify(img, sk, Hm)
+    assert valid.shape == rect.shape[:2] and 0.5 < valid.mean() < 1.0
     # The skeleton follows the homography, and the structure stays under it.
     p = np.c_[sk.branches[0].points, np.ones(len(sk.branches[0]))] @ H2.T
     assert np.allclose(rsk.branches[0].points, p[:, :2] / p[:, 2:], atol=1e-6)

@@ -55,7 +55,7 @@ from numpy.typing import NDArray
 
 from .. import _core
 from .._progress import Progress
-from .._validate import as_image, check_float, check_int, check_patch_size, check_seed, check_threads
+from .._validate import as_image, as_mask, check_float, check_int, check_patch_size, check_seed, check_threads
 from ..blend import seamless
 from ..seams import seam
 from ..texture import WEXLER_GAMMA, WEXLER_SIGMA_PERCENTILE, _downsample, _fill_inward, _patch_masks, _upsample_field
@@ -658,6 +658,7 @@ def render(
     seams: bool = ...,
     mirror: bool = ...,
     complete: bool = ...,
+    valid: Any = ...,
     patch_size: int = ...,
     completion_iterations: int = ...,
     threads: int | None = ...,
@@ -682,6 +683,7 @@ def render(
     seams: bool = ...,
     mirror: bool = ...,
     complete: bool = ...,
+    valid: Any = ...,
     patch_size: int = ...,
     completion_iterations: int = ...,
     threads: int | None = ...,
@@ -707,6 +709,7 @@ def render(
     seams: bool = True,
     mirror: bool = True,
     complete: bool = True,
+    valid: Any = None,
     patch_size: int = 7,
     completion_iterations: int = 4,
     threads: int | None = None,
@@ -756,6 +759,9 @@ def render(
         ``False`` is the paper's behaviour.
     complete : bool, optional
         Fill the gaps between the branches (§5.4, default True); without it they stay 0.
+    valid : (H, W) array_like of bool, optional
+        Where ``image`` shows real content (default everywhere), e.g. the photo inside the
+        frame of :func:`rectify`; the gap completion copies only from there.
     patch_size : int, optional
         Patch side of the gap completion (default 7, odd).
     completion_iterations : int, optional
@@ -933,8 +939,11 @@ def render(
         # The source minus its structure widened to the fragment radius; where the structure
         # is so dense that less than a sixth of the image would be left (a retina), widened
         # less, down to the structure plus a quarter of its thickness.
+        ok = np.ones((H0, W0), bool) if valid is None else as_mask(valid, "valid", (H0, W0))
+        if valid is not None:  # a patch may not straddle the border of the valid region
+            ok = cv2.erode(ok.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
         for factor in (rf, 2.0, 1.25):
-            allowed = _background(src_sk, (H0, W0), factor)
+            allowed = _background(src_sk, (H0, W0), factor) & ok
             if allowed.mean() >= 1 / 6:
                 break
         canvas = _complete_background(
@@ -986,7 +995,7 @@ def _apply(Hm: F64, pts: F64) -> F64:
     return np.asarray(q[:, :2] / q[:, 2:], dtype=np.float64)
 
 
-def rectify(image: Any, skeleton: Skeleton, homography: Any) -> tuple[F32, Skeleton, F64]:
+def rectify(image: Any, skeleton: Skeleton, homography: Any) -> tuple[F32, Skeleton, F64, NDArray[np.bool_]]:
     """Warp an image and its skeleton to a frontal view (Fig. 8 b) for :func:`render`.
 
     The output frame is the bounding box of the warped image. Skeleton points are mapped by
@@ -1011,6 +1020,9 @@ def rectify(image: Any, skeleton: Skeleton, homography: Any) -> tuple[F32, Skele
     homography : (3, 3) ndarray
         The homography actually used (the given one followed by the shift into the frame);
         pass it to :func:`unrectify`.
+    valid : (H', W') ndarray of bool
+        Where the frame shows the photo; pass it as ``valid`` to :func:`render` so that the
+        gap completion does not copy the empty corners.
 
     Examples
     --------
@@ -1019,7 +1031,7 @@ def rectify(image: Any, skeleton: Skeleton, homography: Any) -> tuple[F32, Skele
     >>> yy, xx = np.mgrid[:40, :60]
     >>> img = (0.5 + 0.4 * np.sin(xx / 7.0) * np.cos(yy / 5.0)).astype(np.float32)
     >>> sk = Skeleton([Branch([[5, 20], [55, 20]], 2.0)], (40, 60))
-    >>> rect, rsk, Hm = rectify(img, sk, [[2, 0, 0], [0, 2, 0], [0, 0, 1]])   # a 2x zoom
+    >>> rect, rsk, Hm, valid = rectify(img, sk, [[2, 0, 0], [0, 2, 0], [0, 0, 1]])   # a 2x zoom
     >>> rect.shape, rsk.branches[0].thickness.tolist()
     ((80, 120, 1), [4.0, 4.0])
     >>> back = unrectify(rect, Hm, (40, 60))
@@ -1041,6 +1053,8 @@ def rectify(image: Any, skeleton: Skeleton, homography: Any) -> tuple[F32, Skele
         img, Hs, (int(size[0]), int(size[1])), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT
     )
     rect: F32 = np.ascontiguousarray(out.reshape(int(size[1]), int(size[0]), img.shape[2]), dtype=np.float32)
+    ones = np.ones(img.shape[:2], np.uint8)
+    valid = cv2.warpPerspective(ones, Hs, (int(size[0]), int(size[1])), flags=cv2.INTER_NEAREST) > 0
     branches = []
     for b in sk.branches:
         pts = _apply(Hs, b.points)
@@ -1051,7 +1065,7 @@ def rectify(image: Any, skeleton: Skeleton, homography: Any) -> tuple[F32, Skele
         scale = np.sqrt(np.abs(dx[:, 0] * dy[:, 1] - dx[:, 1] * dy[:, 0]))
         pts = np.clip(pts, -0.5, [size[0] - 0.5, size[1] - 0.5])
         branches.append(Branch(pts, b.thickness * scale, b.parent))
-    return rect, Skeleton(branches, (int(size[1]), int(size[0]))), Hs
+    return rect, Skeleton(branches, (int(size[1]), int(size[0]))), Hs, np.asarray(valid)
 
 
 def unrectify(image: Any, homography: Any, shape: tuple[int, int]) -> F32:
