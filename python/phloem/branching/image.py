@@ -617,9 +617,16 @@ def _complete_background(
                 cur = _fill_inward(cur, rest)
             init = up
         # At full resolution the field found at half resolution, upsampled, already copies
-        # full-resolution pixels; a search there took 40% of the time and looked the same on
-        # our scenes (see the bench notes). It runs only when there is no coarser level.
-        for it in range(iterations if lv > 0 else (0 if fieldv is not None else 1)):
+        # full-resolution pixels: a search there took 40% of the time and looked the same on
+        # our scenes, so it runs only when there is no coarser level. At half resolution, with
+        # coarser levels below, half the iterations (most of the rest of the time; same look).
+        if lv == 0 and len(pyr) > 1:
+            n_it = 0
+        elif lv == 1 and len(pyr) > 2:
+            n_it = max(1, iterations // 2)
+        else:
+            n_it = iterations
+        for it in range(n_it):
             # A warm-started search (from the previous iteration's field) needs one pass.
             fieldv, dist, _ = _core.nnf(
                 cur, cur, patch_size=p, iterations=3 if it == 0 else 1, levels=1, exact=False,
