@@ -147,6 +147,15 @@ def test_render_is_deterministic_for_a_seed() -> None:
     assert any(not np.array_equal(others[0], o) for o in others[1:])
 
 
+def test_progress_reports_every_fragment() -> None:
+    img, sk = _scene()
+    calls: list[tuple[int, int]] = []
+    res = render(img, sk, sk, seed=0, complete=False, full_output=True, progress=lambda d, t: calls.append((d, t)))
+    total = len(res.targets) + 1
+    assert calls[-1] == (total, total) and all(t == total for _, t in calls)
+    assert [d for d, _ in calls] == sorted(d for d, _ in calls) and len(calls) == total
+
+
 def test_stages_can_be_switched_off() -> None:
     img, sk = _scene()
     plain = render(img, sk, sk, seed=0, deform=False, photometric=False, seams=False, complete=False)
