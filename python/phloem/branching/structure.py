@@ -1168,6 +1168,86 @@ def _default_start(bending: BendingModel, shape: tuple[int, int], root: int) -> 
     return float((0.05 + 0.9 * fx) * (W - 1)), float((0.05 + 0.9 * fy) * (H - 1))
 
 
+@dataclass
+class _RootInfo:
+    """The input's root branches that can serve as stems, and how likely each is drawn."""
+
+    roots: list[int]
+    tree_p: F64  # ∝ the total length of the root's tree (for the first, or only, tree)
+
+
+def _roots(bending: BendingModel) -> _RootInfo:
+    src = bending.source
+    tree: list[int] = []
+    for i, b in enumerate(src.branches):
+        tree.append(i if b.parent is None else tree[b.parent[0]])
+    size = np.zeros(len(src.branches))
+    for i, b in enumerate(src.branches):
+        size[tree[i]] += b.length()
+    roots = [i for i, b in enumerate(src.branches) if b.parent is None and len(b) >= 3]
+    p = size[roots] if roots else np.zeros(0)
+    p = p / p.sum() if p.sum() > 0 else np.full(len(roots), 1.0 / max(len(roots), 1))
+    return _RootInfo(roots, np.asarray(p, dtype=np.float64))
+
+
+def _input_length(bending: BendingModel, shape: tuple[int, int]) -> float:
+    """The input's total length scaled by the ratio of the image areas (same structure density)."""
+    src = bending.source
+    if src.shape is not None:
+        area = float(src.shape[0] * src.shape[1])
+    else:
+        x0, y0, x1, y1 = src.bounds()
+        area = max((x1 - x0) * (y1 - y0), 1.0)
+    return float(src.total_length() * shape[0] * shape[1] / area)
+
+
+def _place_root(
+    world: _World, grower: _Grower, bending: BendingModel, info: _RootInfo, shape: tuple[int, int],
+    rng: np.random.Generator, index: int, tries: int = 24,
+) -> tuple[_Growing, int] | None:
+    """Start a further root tree where the structure is sparse.
+
+    Each try copies a uniformly drawn input root (its first elements and heading, so the
+    output's roots follow the input's); the first half of the tries start near that root's
+    own (scaled) position, jittered by ``2ρ`` (roots at the image border stay there), the
+    other half anywhere in the image. The start with the least density along its first
+    ``3 m h`` wins, preferring a start near an input root when one is practically empty.
+    """
+    if not info.roots:
+        return None
+    H, W = shape
+    h, rho = bending.h, world.rho
+    xs = np.zeros(tries)
+    ys = np.zeros(tries)
+    js = np.zeros(tries, np.int64)
+    heads = np.zeros(tries)
+    for t in range(tries):
+        j = info.roots[int(rng.integers(len(info.roots)))]
+        x, y = _default_start(bending, shape, j)
+        if t < tries // 2:
+            x = float(np.clip(x + rng.normal(0.0, 2.0 * rho), 0.0, W - 1))
+            y = float(np.clip(y + rng.normal(0.0, 2.0 * rho), 0.0, H - 1))
+        else:
+            x, y = float(rng.uniform(0.0, W - 1)), float(rng.uniform(0.0, H - 1))
+        xs[t], ys[t], js[t], heads[t] = x, y, j, bending.source.branches[j].heading()
+    score = np.zeros(tries)
+    if world.dist is not None:
+        samples = max(3 * bending.m, 4)
+        s = 3.0 * bending.m * h * np.arange(samples + 1) / samples
+        tip = np.stack([xs, ys], axis=1)
+        pts = tip[:, None, :] + _direction(heads)[:, None, :] * s[None, :, None]
+        score = world._lookup(_DensityView(world), pts).max(axis=1)
+    near = np.arange(tries) < tries // 2
+    order = np.argsort(score + np.where(near & (score < 0.05), -1.0, 0.0), kind="stable")
+    for t in order:
+        j = int(js[t])
+        heading, a0, r0, t0 = bending.start_elements(j)
+        br = _new_branch(world, grower, np.array([xs[t], ys[t]]), heading, t0, a0, r0, None, 0, index, partial=True)
+        if br is not None:
+            return br, j
+    return None
+
+
 def grow(
     bending: BendingModel,
     furcation: FurcationModel | None = None,
@@ -1176,7 +1256,8 @@ def grow(
     start: Any = None,
     seed: Any = 0,
     generations: int = 3,
-    max_length: float | None = None,
+    max_length: float | str | None = None,
+    roots: int | None = None,
     max_density: float | None = None,
     branch_length: float | None = None,
     children: int | None = None,
@@ -1190,9 +1271,19 @@ def grow(
     """Synthesise a new branching structure (§4): a main branch, then furcations, recursively.
 
     The main branch starts with the first ``k + 1`` elements of an input root branch and is
-    extended by the bending model ``m`` elements at a time; each finished branch gets ``d``
-    furcations from the furcation model (``d`` drawn from the input's numbers of children per
-    branch of the same generation), whose children are grown the same way, breadth first.
+    extended by the bending model ``m`` elements at a time up to that root's length; each
+    finished branch gets ``d`` furcations from the furcation model (``d`` drawn from the
+    input's numbers of children per branch of the same generation), whose children are grown
+    the same way, breadth first.
+
+    Traced inputs are often forests of many small trees. With ``roots`` above 1, or with
+    ``max_length="input"`` (about as much structure as the input), further root trees follow
+    once a tree is finished: each copies the stem of a uniformly drawn input root (so the
+    output's roots follow the input's), placed where the density along its first ``3 m h`` is
+    lowest among 24 tries, half near input roots' own (scaled) positions (jittered by ``2ρ``;
+    preferred when practically empty, so border roots stay at the border) and half anywhere
+    in the image, until ``roots`` trees exist, the length or density limit is reached,
+    or eight starts in a row fail.
 
     Parameters
     ----------
@@ -1210,8 +1301,14 @@ def grow(
         Seed; the same seed gives the same structure.
     generations : int
         Stop criterion: maximum branch generations (1 = main branch only).
-    max_length : float, optional
-        Stop criterion: maximum total branch length in pixels.
+    max_length : float or "input", optional
+        Stop criterion: maximum total branch length in pixels. ``"input"``: the input's total
+        length scaled by the ratio of the image areas (the input's ``shape``, else its bounding
+        box), i.e. the input's structure density; then ``roots`` defaults to as many trees as
+        needed.
+    roots : int, optional
+        Maximum number of root trees. Default: 1, or unlimited with ``max_length="input"``.
+        ``start`` and a polyline ``guide`` only place the first tree.
     max_density : float, optional
         Stop criterion: maximum mean of the density map ``D`` over the image (in ``(0, 1]``).
     branch_length : float, optional
@@ -1252,6 +1349,12 @@ def grow(
     ((200, 300), True)
     >>> out == grow(bend, fur, shape=(200, 300), seed=1, generations=2)
     True
+
+    About as much structure as the input, in as many trees as it takes:
+
+    >>> forest = grow(bend, fur, shape=src.shape, seed=1, max_length="input")
+    >>> bool(forest.total_length() > 0.9 * src.total_length()), len(forest.branches) > len(out.branches)
+    (True, True)
     """
     from .._validate import check_size
 
@@ -1260,7 +1363,14 @@ def grow(
     st = _check_start(start)
     rng = np.random.default_rng(check_seed(seed))
     generations = check_int(generations, "generations", 1)
-    limit = math.inf if max_length is None else check_float(max_length, "max_length", 0.0, inclusive=False)
+    input_sized = isinstance(max_length, str)
+    if input_sized and max_length != "input":
+        raise ValueError(f"max_length: expected a length in pixels, 'input' or None, got {max_length!r}")
+    if input_sized:
+        limit = _input_length(bending, shape)
+    else:
+        limit = math.inf if max_length is None else check_float(max_length, "max_length", 0.0, inclusive=False)
+    n_roots = None if roots is None else check_int(roots, "roots", 1)
     dens_limit = None if max_density is None else check_float(max_density, "max_density", 0.0, inclusive=False)
     if dens_limit is not None and dens_limit > 1:
         raise ValueError(f"max_density: expected a value in (0, 1], got {max_density}")
@@ -1273,26 +1383,16 @@ def grow(
     world = _World(bending, shape, colonize=bool(colonize), rho=rho, guide=gmap, rng=rng)
     grower = _Grower(world, bending)
 
-    roots = [i for i, b in enumerate(bending.source.branches) if b.parent is None and len(b) >= 3]
-    root = int(rng.choice(roots)) if roots else 0
-    heading, a0, r0, t0 = bending.start_elements(root)
-    if st is not None:
-        x, y = st[0], st[1]
-        if st[2] is not None:
-            heading = st[2]
-    elif gline is not None:
-        x, y = float(gline[0, 0]), float(gline[0, 1])
-    else:
-        x, y = _default_start(bending, shape, root)
-    if (st is None or st[2] is None) and gline is not None:
-        d = gline[min(1, len(gline) - 1)] - gline[0]
-        heading = math.atan2(-d[1], d[0])
     H, W = shape
-    if not (0 <= x <= W - 1 and 0 <= y <= H - 1):
-        raise ValueError(f"start: ({x:g}, {y:g}) is outside the {W}x{H} image")
-    main = _new_branch(world, grower, np.array([x, y]), heading, t0, a0, r0, None, 0, 0, partial=True)
-    if main is None:
-        raise ValueError(f"start: the first edge from ({x:g}, {y:g}) with heading {heading:.2f} leaves the image")
+    info = _roots(bending)
+    if n_roots is None:
+        n_roots = 1 if not input_sized else 1_000_000
+    out: list[Branch] = []
+    queue: list[tuple[int, int, int]] = []  # (parent branch, vertex, generation) in creation order
+    qpos = 0
+    stop = False
+    trees = 0
+    failures = 0
 
     def target(gen: int) -> float:
         if blen is not None:
@@ -1300,45 +1400,87 @@ def grow(
         g = max(x for x in bending.lengths if x <= gen) if any(x <= gen for x in bending.lengths) else 0
         return float(rng.choice(bending.lengths[g]))
 
-    out: list[Branch] = []
-    queue: list[tuple[int, int, int]] = []  # (parent branch, vertex, generation) in creation order
-    current: _Growing | None = main
-    qpos = 0
-    stop = False
-    while current is not None:
-        goal = target(current.generation)
-        while not stop and current.length() * h < goal:
-            if world.total_length >= limit or not grower.step(current):
-                break
-            if dens_limit is not None and world.density_mean() >= dens_limit:
-                stop = True
-        branch = _finish(grower, current)
-        out.append(branch)
-        stop = stop or world.total_length >= limit
-        if not stop and furcation is not None and current.generation + 1 < generations and len(branch) >= 3:
-            if d_fixed is not None:
-                d = d_fixed
+    while not stop and trees < n_roots and world.total_length < limit:
+        if trees == 0:
+            # the first tree copies the stem of an input root: at a given start any root (uniform
+            # draw); otherwise one drawn by the size of its tree, placed at its own (scaled) start,
+            # so that a short root of a big input does not make a tiny output
+            if not info.roots:
+                root = 0
+            elif st is not None or gline is not None:
+                root = int(rng.choice(info.roots))
             else:
-                pool = furcation.counts.get(current.generation) or [c for v in furcation.counts.values() for c in v]
-                d = int(rng.choice(pool))
-            for v in furcation.pick(branch, d, min_spacing=min_spacing):
-                queue.append((len(out) - 1, v, current.generation + 1))
-        if progress is not None:
-            progress(len(out), len(out) + len(queue) - qpos)
-        current = None
-        while not stop and current is None and qpos < len(queue):
-            pi, v, gen = queue[qpos]
-            qpos += 1
-            assert furcation is not None
-            pb = out[pi]
-            for j in furcation.child_start(pb, v, rng)[: max(furcation.c, 4)]:
-                hd = _tangent(pb, v) + float(furcation.offsets[j])
-                current = _new_branch(
-                    world, grower, pb.points[v], hd, float(furcation.child_r0[j]), furcation.child_alpha[j],
-                    furcation.child_r[j], (pi, v), gen, len(out), partial=False,
-                )
-                if current is not None:
+                root = info.roots[int(rng.choice(len(info.roots), p=info.tree_p))]
+            heading, a0, r0, t0 = bending.start_elements(root)
+            if st is not None:
+                x, y = st[0], st[1]
+                if st[2] is not None:
+                    heading = st[2]
+            elif gline is not None:
+                x, y = float(gline[0, 0]), float(gline[0, 1])
+            else:
+                x, y = _default_start(bending, shape, root)
+            if (st is None or st[2] is None) and gline is not None:
+                d = gline[min(1, len(gline) - 1)] - gline[0]
+                heading = math.atan2(-d[1], d[0])
+            if not (0 <= x <= W - 1 and 0 <= y <= H - 1):
+                raise ValueError(f"start: ({x:g}, {y:g}) is outside the {W}x{H} image")
+            current = _new_branch(world, grower, np.array([x, y]), heading, t0, a0, r0, None, 0, len(out), partial=True)
+            if current is None:
+                raise ValueError(f"start: the first edge from ({x:g}, {y:g}) with heading {heading:.2f} leaves the image")
+            goal = float(bending.source.branches[root].length()) if blen is None else blen
+        else:
+            placed = _place_root(world, grower, bending, info, shape, rng, len(out))
+            if placed is None:
+                failures += 1
+                if failures >= 8:
                     break
+                continue
+            current, root = placed
+            goal = float(bending.source.branches[root].length()) if blen is None else blen
+        trees += 1
+        before = world.total_length
+        while current is not None:
+            while not stop and current.length() * h < goal:
+                if world.total_length >= limit or not grower.step(current):
+                    break
+                if dens_limit is not None and world.density_mean() >= dens_limit:
+                    stop = True
+            branch = _finish(grower, current)
+            out.append(branch)
+            stop = stop or world.total_length >= limit
+            if not stop and furcation is not None and current.generation + 1 < generations and len(branch) >= 3:
+                if d_fixed is not None:
+                    d = d_fixed
+                else:
+                    pool = furcation.counts.get(current.generation) or [c for v in furcation.counts.values() for c in v]
+                    d = int(rng.choice(pool))
+                for v in furcation.pick(branch, d, min_spacing=min_spacing):
+                    queue.append((len(out) - 1, v, current.generation + 1))
+            if progress is not None:
+                progress(len(out), len(out) + len(queue) - qpos)
+            current = None
+            while not stop and current is None and qpos < len(queue):
+                pi, v, gen = queue[qpos]
+                qpos += 1
+                assert furcation is not None
+                pb = out[pi]
+                for j in furcation.child_start(pb, v, rng)[: max(furcation.c, 4)]:
+                    hd = _tangent(pb, v) + float(furcation.offsets[j])
+                    current = _new_branch(
+                        world, grower, pb.points[v], hd, float(furcation.child_r0[j]), furcation.child_alpha[j],
+                        furcation.child_r[j], (pi, v), gen, len(out), partial=False,
+                    )
+                    if current is not None:
+                        break
+            if current is None:
+                goal = 0.0
+            else:
+                goal = target(current.generation)
+        # a tree that could not grow beyond its copied start counts as a failed placement
+        failures = failures + 1 if world.total_length - before < (bending.k + 2) * h + 1e-9 else 0
+        if failures >= 8:
+            break
     return Skeleton(out, shape)
 
 
