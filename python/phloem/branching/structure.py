@@ -811,32 +811,58 @@ class _World:
         self.rho = rho
         self.guide = guide
         self.rng = rng
-        self.dist = np.full(shape, np.inf, np.float32) if colonize else None
+        # the density map D = exp(-d²/ρ²) itself (float32), so that lookups are plain indexing
+        self.dens = np.zeros(shape, np.float32) if colonize else None
+        self._dsum = 0.0  # sum of D over the image, kept up to date by stamp()
         # which branch vertex each pixel's distance comes from, to ignore where a child starts
         self.owner_branch = np.full(shape, -1, np.int32) if colonize else None
         self.owner_vertex = np.full(shape, -1, np.int32) if colonize else None
-        self.seg_a: list[F64] = []
-        self.seg_b: list[F64] = []
-        self._segs: tuple[F64, F64] | None = None
+        # segments in growable arrays plus a bucket grid (cell = one extension plus 2h), so a
+        # crossing test looks at the segments near the candidate paths only
+        self._seg = np.zeros((256, 4))
+        self._nseg = 0
+        self._cell = (model.m + 2) * model.h
+        self._grid: dict[tuple[int, int], list[int]] = {}
         self.counts_alpha = np.zeros(model.bins)
         self.counts_r = np.zeros(model.bins)
         self.total_length = 0.0
 
     # -- bookkeeping ----------------------------------------------------------------------
     def segments(self) -> tuple[F64, F64]:
-        if self._segs is None:
-            if self.seg_a:
-                self._segs = (np.vstack(self.seg_a), np.vstack(self.seg_b))
-            else:
-                self._segs = (np.zeros((0, 2)), np.zeros((0, 2)))
-        return self._segs
+        """All segments so far as ``(A, B)`` end point arrays."""
+        seg = self._seg[: self._nseg]
+        return seg[:, :2], seg[:, 2:]
 
     def add_segments(self, pts: F64) -> None:
-        if len(pts) >= 2:
-            self.seg_a.append(pts[:-1].copy())
-            self.seg_b.append(pts[1:].copy())
-            self._segs = None
-            self.total_length += float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+        n = len(pts) - 1
+        if n < 1:
+            return
+        if self._nseg + n > len(self._seg):
+            grown = np.zeros((max(2 * len(self._seg), self._nseg + n), 4))
+            grown[: self._nseg] = self._seg[: self._nseg]
+            self._seg = grown
+        self._seg[self._nseg : self._nseg + n, :2] = pts[:-1]
+        self._seg[self._nseg : self._nseg + n, 2:] = pts[1:]
+        lo = np.floor(np.minimum(pts[:-1], pts[1:]) / self._cell).astype(np.int64)
+        hi = np.floor(np.maximum(pts[:-1], pts[1:]) / self._cell).astype(np.int64)
+        for j in range(n):
+            for cx in range(int(lo[j, 0]), int(hi[j, 0]) + 1):
+                for cy in range(int(lo[j, 1]), int(hi[j, 1]) + 1):
+                    self._grid.setdefault((cx, cy), []).append(self._nseg + j)
+        self._nseg += n
+        self.total_length += float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+
+    def near_segments(self, lo: F64, hi: F64) -> I64:
+        """Indices of the segments whose bounding box may overlap the box ``lo .. hi``."""
+        c0 = np.floor(lo / self._cell).astype(np.int64)
+        c1 = np.floor(hi / self._cell).astype(np.int64)
+        found: list[int] = []
+        for cx in range(int(c0[0]), int(c1[0]) + 1):
+            for cy in range(int(c0[1]), int(c1[1]) + 1):
+                ids = self._grid.get((cx, cy))
+                if ids:
+                    found.extend(ids)
+        return np.unique(np.asarray(found, dtype=np.int64))
 
     def add_elements(self, alpha: F64, r: F64) -> None:
         m = self.model
@@ -844,11 +870,15 @@ class _World:
         np.add.at(self.counts_r, _bin(r, *m.range_r, m.bins), 1.0)
 
     def stamp(self, pts: F64, thick: F64, branch: int, first: int) -> None:
-        """Write segments into the distance map, only within ``3ρ`` of them (§4.4 local update).
+        """Write segments into the density map, only within ``3ρ`` of them (§4.4 local update).
 
-        ``pts`` are vertices ``first, first + 1, ...`` of branch ``branch``.
+        ``pts`` are vertices ``first, first + 1, ...`` of branch ``branch``. The polyline is
+        drawn (sub-pixel) into a window and OpenCV's distance transform with pixel labels
+        gives every window pixel its distance to the nearest drawn pixel (within about half a
+        pixel of the exact distance to the segments) and which one that is; the thickness of
+        the nearest branch point is subtracted.
         """
-        if self.dist is None or self.owner_branch is None or self.owner_vertex is None or len(pts) < 2:
+        if self.dens is None or self.owner_branch is None or self.owner_vertex is None or len(pts) < 2:
             return
         H, W = self.shape
         reach = 3.0 * self.rho + float(thick.max())
@@ -858,30 +888,37 @@ class _World:
         y1 = min(math.ceil(pts[:, 1].max() + reach) + 1, H)
         if x0 >= x1 or y0 >= y1:
             return
-        yy, xx = np.mgrid[y0:y1, x0:x1]
-        grid = np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float64)
-        best = np.full(len(grid), np.inf)
-        which = np.zeros(len(grid), np.int32)
-        for j in range(len(pts) - 1):
-            a, d = pts[j], pts[j + 1] - pts[j]
-            dd = float(d @ d)
-            t = np.zeros(len(grid)) if dd == 0 else np.clip((grid - a) @ d / dd, 0.0, 1.0)
-            e = np.linalg.norm(grid - (a + t[:, None] * d), axis=1) - (thick[j] + t * (thick[j + 1] - thick[j]))
-            e = np.maximum(e, 0.0)
-            closer = e < best
-            best[closer] = e[closer]
-            which[closer] = j + np.rint(t[closer]).astype(np.int32)
-        view = self.dist[y0:y1, x0:x1]
-        new = best.reshape(view.shape).astype(np.float32)
-        closer2 = new < view
-        view[closer2] = new[closer2]
-        self.owner_branch[y0:y1, x0:x1][closer2] = branch
-        self.owner_vertex[y0:y1, x0:x1][closer2] = first + which.reshape(view.shape)[closer2]
+        win = np.full((y1 - y0, x1 - x0), 255, np.uint8)
+        local = np.round((pts - [x0, y0]) * 16.0).astype(np.int32).reshape(-1, 1, 2)
+        cv2.polylines(win, [local], False, 0, thickness=1, lineType=cv2.LINE_8, shift=4)
+        zy, zx = np.nonzero(win == 0)
+        if len(zy) == 0:
+            return
+        d, lab = cv2.distanceTransformWithLabels(win, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
+        # the nearest point of the polyline to every drawn pixel: its vertex and thickness
+        zp = np.stack([zx + x0, zy + y0], axis=1).astype(np.float64)
+        a, seg = pts[:-1], pts[1:] - pts[:-1]
+        dd = np.maximum((seg**2).sum(axis=1), 1e-12)
+        t = np.clip(((zp[:, None, :] - a[None]) * seg[None]).sum(axis=2) / dd[None], 0.0, 1.0)
+        e = ((zp[:, None, :] - (a[None] + t[..., None] * seg[None])) ** 2).sum(axis=2)
+        j = np.argmin(e, axis=1)
+        tj = t[np.arange(len(j)), j]
+        rz = thick[j] + tj * (thick[j + 1] - thick[j])
+        vz = (first + j + np.rint(tj)).astype(np.int32)
+        li = lab - 1  # labels count the drawn pixels in raster order, as np.nonzero does
+        dist = np.maximum(d - rz[li].astype(np.float32), 0.0)
+        new = np.exp(-(dist**2) / np.float32(self.rho**2)).astype(np.float32)
+        view = self.dens[y0:y1, x0:x1]
+        closer = new > view
+        self._dsum += float((new[closer] - view[closer]).sum(dtype=np.float64))
+        view[closer] = new[closer]
+        self.owner_branch[y0:y1, x0:x1][closer] = branch
+        self.owner_vertex[y0:y1, x0:x1][closer] = vz[li[closer]]
 
     def density_mean(self) -> float:
-        if self.dist is None:
+        if self.dens is None:
             return 0.0
-        return float(np.exp(-(self.dist.astype(np.float64) ** 2) / self.rho**2).mean())
+        return self._dsum / float(self.shape[0] * self.shape[1])
 
     # -- candidate evaluation --------------------------------------------------------------
     def _lookup(self, grid: Any, pts: F64) -> F64:
@@ -900,16 +937,15 @@ class _World:
 
     def crossings(self, tip: F64, ext: F64) -> NDArray[np.bool_]:
         """For each candidate extension ``(C, m, 2)`` from ``tip``: does it cross a segment?"""
-        A, B = self.segments()
         C = len(ext)
-        if len(A) == 0:
+        if self._nseg == 0 or C == 0:
             return np.zeros(C, bool)
-        reach = float(np.linalg.norm(ext - tip, axis=-1).max()) + 2 * self.model.h
-        mid = 0.5 * (A + B)
-        near = np.linalg.norm(mid - tip, axis=1) <= reach
-        if not near.any():
+        flat = ext.reshape(-1, 2)
+        near = self.near_segments(np.minimum(flat.min(axis=0), tip), np.maximum(flat.max(axis=0), tip))
+        if len(near) == 0:
             return np.zeros(C, bool)
-        A, B = A[near], B[near]
+        seg = self._seg[near]
+        A, B = seg[:, :2], seg[:, 2:]
         path = np.concatenate([np.broadcast_to(tip, (C, 1, 2)), ext], axis=1)
         P, Q = path[:, :-1].reshape(-1, 2), path[:, 1:].reshape(-1, 2)
         hit = _cross(P, Q, A, B).any(axis=1)
@@ -989,6 +1025,21 @@ class _Grower:
         self.cum_alpha = np.cumsum(model.next_alpha, axis=1)
         # vertices around a child's attachment on its parent that its density lookups ignore
         self.near = math.ceil(3.0 * world.rho / model.h) + 1
+        # Candidate paths relative to a tip at the origin heading along +x: a step only has to
+        # rotate them (no trigonometry per candidate and step).
+        unit = _direction(self.cum_alpha)  # (C, m, 2)
+        self.rel_ext = model.h * np.cumsum(unit, axis=1)
+        mean_dir = unit.sum(axis=1)
+        norm = np.linalg.norm(mean_dir, axis=1)
+        psi = np.where(norm > 1e-12, np.arctan2(-mean_dir[:, 1], mean_dir[:, 0]), self.cum_alpha[:, -1])
+        # The density (guide) maximum is looked up along each candidate's average direction,
+        # 3 m h long. Candidates whose directions agree to within a quarter pixel at the ray's
+        # end share one ray (a few hundred rays instead of one per candidate).
+        self.ray_length = 3.0 * model.m * model.h
+        self.ray_samples = max(3 * model.m, 4)
+        key = np.rint(psi / (0.25 / self.ray_length)).astype(np.int64)
+        _, first, self.ray_of = np.unique(key, return_index=True, return_inverse=True)
+        self.ray_psi = psi[first]
 
     def step(self, br: _Growing) -> bool:
         """Append one extension of ``m`` elements to ``br``; False when no candidate is valid."""
@@ -999,20 +1050,17 @@ class _Grower:
             return False
         q = m.log_quality(np.asarray(br.alpha[-L:]), np.asarray(br.r[-L:]), w.counts_alpha, w.counts_r)
         tip = br.points[-1]
-        heads = br.heading + self.cum_alpha  # (C, m) heading of each new edge
-        steps = m.h * _direction(heads)
-        ext = tip + np.cumsum(steps, axis=1)  # (C, m, 2) new vertices
+        c, s = math.cos(br.heading), math.sin(br.heading)
+        rx, ry = self.rel_ext[..., 0], self.rel_ext[..., 1]
+        ext = np.stack([tip[0] + c * rx + s * ry, tip[1] - s * rx + c * ry], axis=-1)  # (C, m, 2) new vertices
         q[~w.inside(ext)] = -np.inf
         if w.colonize or w.guide is not None:
-            mean_dir = steps.sum(axis=1)
-            norm = np.linalg.norm(mean_dir, axis=1, keepdims=True)
-            direction = np.where(norm > 1e-12, mean_dir / np.maximum(norm, 1e-12), _direction(heads[:, -1]))
-            length = 3.0 * m.m * m.h
-            samples = max(3 * m.m, 4)
-            if w.colonize and w.dist is not None:
-                q -= np.log(w.ray_max(_DensityView(w, br.parent, self.near), tip, direction, length, samples) + _EPS)
+            direction = _direction(br.heading + self.ray_psi)
+            if w.colonize and w.dens is not None:
+                view = _DensityView(w, br.parent, self.near)
+                q -= np.log(w.ray_max(view, tip, direction, self.ray_length, self.ray_samples) + _EPS)[self.ray_of]
             if w.guide is not None:
-                q -= np.log(w.ray_max(w.guide, tip, direction, length, samples) + _EPS)
+                q -= np.log(w.ray_max(w.guide, tip, direction, self.ray_length, self.ray_samples) + _EPS)[self.ray_of]
         choice = self._choose(q, tip, ext)
         if choice is None:
             return False
@@ -1061,7 +1109,7 @@ class _Grower:
         """Write the branch's segments into the density map, holding back the last ``3ρ`` of arc
         length while it grows so that a tip does not repel itself."""
         w = self.world
-        if w.dist is None:
+        if w.dens is None:
             return
         hold = 0 if final else math.ceil(3.0 * w.rho / self.model.h) + 1
         upto = len(br.points) - 1 - hold  # segments [inserted, upto) are final
@@ -1088,9 +1136,8 @@ class _DensityView:
 
     def __getitem__(self, key: Any) -> Any:
         w = self.world
-        assert w.dist is not None and w.owner_branch is not None and w.owner_vertex is not None
-        d = w.dist[key].astype(np.float64)
-        out = np.exp(-(d**2) / w.rho**2)
+        assert w.dens is not None and w.owner_branch is not None and w.owner_vertex is not None
+        out = w.dens[key].astype(np.float64)
         if self.parent is not None:
             pb, pv = self.parent
             skip = (w.owner_branch[key] == pb) & (np.abs(w.owner_vertex[key] - pv) <= self.near)
@@ -1231,7 +1278,7 @@ def _place_root(
             x, y = float(rng.uniform(0.0, W - 1)), float(rng.uniform(0.0, H - 1))
         xs[t], ys[t], js[t], heads[t] = x, y, j, bending.source.branches[j].heading()
     score = np.zeros(tries)
-    if world.dist is not None:
+    if world.dens is not None:
         samples = max(3 * bending.m, 4)
         s = 3.0 * bending.m * h * np.arange(samples + 1) / samples
         tip = np.stack([xs, ys], axis=1)
