@@ -437,7 +437,16 @@ class BendingModel:
 
     def _delta(self, target: F64, counts: F64, inc: F64, n_t: float) -> F64:
         now = float(((target - counts / n_t) ** 2).sum()) / self.bins
-        after = ((target[None, :] - (counts[None, :] + inc) / (n_t + self.m)) ** 2).sum(axis=1) / self.bins
+        # ||u - v_i||² = ||u||² - 2 u·v_i + ||v_i||² with u = target - counts / (n_t + m) and
+        # v_i = inc_i / (n_t + m): one matrix-vector product instead of a (C, bins) temporary
+        n = n_t + self.m
+        u = target - counts / n
+        sq = self.__dict__.get("_inc_sq")
+        if sq is None or sq[0] is not self.inc_alpha or sq[1] is not self.inc_r:
+            sq = (self.inc_alpha, self.inc_r, (self.inc_alpha**2).sum(axis=1), (self.inc_r**2).sum(axis=1))
+            self.__dict__["_inc_sq"] = sq
+        inc_sq = sq[2] if inc is self.inc_alpha else sq[3] if inc is self.inc_r else (inc**2).sum(axis=1)
+        after = (float(u @ u) - 2.0 * (inc @ u) / n + inc_sq / (n * n)) / self.bins
         return np.asarray(now - after, dtype=np.float64)
 
     def start_elements(self, branch: int = 0) -> tuple[float, F64, F64, float]:
@@ -1070,13 +1079,21 @@ class _Grower:
     def _choose(self, q: F64, tip: F64, ext: F64) -> int | None:
         """Among valid candidates (finite quality, no crossing), pick one of the ``c`` best ∝ quality."""
         m = self.model
-        order = np.argsort(-q, kind="stable")
+        chunk = max(4 * m.c, 16)
+        # the best ``chunk`` candidates first (by quality, then index); the full order only when
+        # they do not hold ``c`` valid ones
+        top = np.argpartition(-q, chunk - 1)[:chunk] if len(q) > chunk else np.arange(len(q))
+        order = top[np.lexsort((top, -q[top]))]
         order = order[np.isfinite(q[order])]
         valid: list[int] = []
-        chunk = max(4 * m.c, 16)
         pos = 0
-        while len(valid) < m.c and pos < len(order):
+        while len(valid) < m.c and pos < len(q):
+            if pos == chunk:
+                order = np.argsort(-q, kind="stable")
+                order = order[np.isfinite(q[order])]
             idx = order[pos : pos + chunk]
+            if len(idx) == 0:
+                break
             pos += chunk
             bad = self.world.crossings(tip, ext[idx])
             valid.extend(int(i) for i in idx[~bad][: m.c - len(valid)])
