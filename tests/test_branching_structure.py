@@ -191,7 +191,8 @@ def test_colonisation_keeps_branches_apart(models: tuple[BendingModel, Furcation
 
     def gap(colonize: bool) -> float:
         vals = []
-        for seed in range(3):
+        # single structures vary a lot (mean gaps from 7 to 55 px per seed): average over 8
+        for seed in range(8):
             out = grow(bend, fur, shape=(220, 220), seed=seed, generations=2, children=3, colonize=colonize)
             for i, b in enumerate(out.branches[1:], 1):
                 others = np.vstack([o.points for j, o in enumerate(out.branches) if j not in (i, b.parent[0])] or [[1e9, 1e9]])
@@ -297,6 +298,48 @@ def test_stop_criteria(models: tuple[BendingModel, FurcationModel]):
     assert calls and calls[-1][0] == calls[-1][1]
 
 
+def test_input_sized_forest(source: Skeleton, models: tuple[BendingModel, FurcationModel]):
+    bend, fur = models
+    assert source.shape is not None
+    L = bend.source.total_length()
+    out = grow(bend, fur, shape=source.shape, seed=0, max_length="input")
+    # about the input's length: it stops within one extension (plus a new branch's first edge)
+    assert 0.9 * L < out.total_length() <= L + (bend.m + 2) * bend.h
+    assert sum(b.parent is None for b in out.branches) >= 2  # the input is a forest of 3 trees
+    assert count_crossings(out) == 0
+    assert out == grow(bend, fur, shape=source.shape, seed=0, max_length="input")
+    # the same structure density in twice the area: twice the length
+    H2, W2 = source.shape
+    big = grow(bend, fur, shape=(2 * H2, W2), seed=0, max_length="input")
+    assert 1.8 * L < big.total_length() <= 2 * L + (bend.m + 2) * bend.h
+    # roots caps the number of trees; a length limit still holds
+    two = grow(bend, fur, shape=source.shape, seed=0, roots=2, max_length=4 * L)
+    assert sum(b.parent is None for b in two.branches) <= 2
+    with pytest.raises(ValueError, match="^max_length:"):
+        grow(bend, shape=(100, 100), max_length="all")
+    with pytest.raises(ValueError, match="^roots:"):
+        grow(bend, shape=(100, 100), roots=0)
+
+
+def test_warm_start_keeps_the_stem_thickness(source: Skeleton, models: tuple[BendingModel, FurcationModel]):
+    bend, fur = models
+    literal = BendingModel.fit(source, h=H, warm_start=0.0)
+
+    def ratio(model: BendingModel) -> float:
+        # thickness right after the first extension over the last copied stem element
+        r = []
+        for seed in range(6):
+            t = grow(model, fur, shape=(400, 400), seed=seed, generations=1).branches[0].thickness
+            s = model.k + 2
+            r.append(t[s + model.m] / t[s - 1])
+        return float(np.median(r))
+
+    # The input's stems taper by under 10 % over this span; with the literal formula the
+    # matching against the histograms of 4 copied elements thins the stem to ~15 % at once.
+    assert ratio(literal) < 0.3
+    assert ratio(bend) > 0.7
+
+
 def test_guided_growth_follows_the_path(models: tuple[BendingModel, FurcationModel]):
     bend, _ = models
     line = np.array([[10.0, 150.0], [290.0, 150.0]])
@@ -321,15 +364,17 @@ def test_guided_growth_follows_the_path(models: tuple[BendingModel, FurcationMod
 def test_extend_appends_to_one_branch(models: tuple[BendingModel, FurcationModel]):
     bend, fur = models
     sk = grow(bend, fur, shape=(300, 300), seed=4, generations=2, branch_length=60)
-    out = extend(sk, 0, bend, steps=5, seed=1)
-    old, new = sk.branches[0], out.branches[0]
+    # a branch whose tip has room to grow (not at the image border)
+    bi = next(i for i, b in enumerate(sk.branches) if (np.abs(b.points[-1] - 150.0) < 110.0).all())
+    out = extend(sk, bi, bend, steps=5, seed=1)
+    old, new = sk.branches[bi], out.branches[bi]
     assert len(new) > len(old)
     np.testing.assert_array_equal(new.points[: len(old)], old.points)
     np.testing.assert_array_equal(new.thickness[: len(old)], old.thickness)
     np.testing.assert_allclose(np.linalg.norm(np.diff(new.points[len(old) - 1 :], axis=0), axis=1), H)
-    assert all(a is b for a, b in zip(out.branches[1:], sk.branches[1:]))
+    assert all(a is b for j, (a, b) in enumerate(zip(out.branches, sk.branches)) if j != bi)
     assert count_crossings(out) == 0
-    assert extend(sk, 0, bend, steps=5, seed=1) == out
+    assert extend(sk, bi, bend, steps=5, seed=1) == out
 
 
 # -- real data -------------------------------------------------------------------------------
