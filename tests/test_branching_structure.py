@@ -63,9 +63,12 @@ def count_crossings(sk: Skeleton) -> int:
     def orient(a, b, c):
         return (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
 
-    p, q, a, b = P[:, None], Q[:, None], P[None], Q[None]
-    hit = (orient(p, q, a) * orient(p, q, b) < -1e-9) & (orient(a, b, p) * orient(a, b, q) < -1e-9)
-    return int(np.triu(hit, 1).sum())
+    total = 0
+    for i0 in range(0, len(P), 256):  # in row blocks: real structures have thousands of segments
+        p, q, a, b = P[i0 : i0 + 256, None], Q[i0 : i0 + 256, None], P[None], Q[None]
+        hit = (orient(p, q, a) * orient(p, q, b) < -1e-9) & (orient(a, b, p) * orient(a, b, q) < -1e-9)
+        total += int(np.triu(hit, 1 + i0).sum())
+    return total
 
 
 # -- bending model ---------------------------------------------------------------------------
@@ -443,6 +446,72 @@ def test_river_delta_statistics_carry_over():
     assert count_crossings(out) == 0
     assert histogram_distance(angle_histogram(out, range=ra)[0], bend.hist_alpha) < 1.5 * spread_a
     assert histogram_distance(thickness_histogram(out, range=rr)[0], bend.hist_r) < 1.5 * spread_r
+
+
+def input_halves(bend: BendingModel) -> list[Skeleton]:
+    """The input (resampled) split in two: alternate trees, or alternate branches for fewer than 4 trees."""
+    sk = bend.source
+    tree: list[int] = []
+    for i, b in enumerate(sk.branches):
+        tree.append(i if b.parent is None else tree[b.parent[0]])
+    rank = {r: j for j, r in enumerate(sorted(set(tree)))}
+    key = [rank[t] for t in tree] if len(rank) >= 4 else list(range(len(tree)))
+    return [
+        Skeleton([Branch(b.points, b.thickness) for i, b in enumerate(sk.branches) if key[i] % 2 == j and len(b) >= 3])
+        for j in (0, 1)
+    ]
+
+
+def check_input_sized(src: Skeleton, shape: tuple[int, int]) -> None:
+    """Grow an input-sized structure from a traced skeleton and compare it with the input.
+
+    Bound: the output may be no further from the input than 1.5 times the distance between
+    the input's two halves (``spread``) for the angles, 1 times for the thickness. The halves
+    hold half the samples each, so sampling noise alone puts an independent sample of the
+    output's size at about 0.7 spread from the whole input; the rest allows for the Markov
+    model's approximation. The angle bound has teeth: the same model without histogram
+    matching (``omega_g=0``) lands at 2-2.4 spread on both inputs; a structure grown from the
+    other input lands at 3.6-7 spread (angles) and 1.5-3.6 spread (thickness).
+    """
+    bend, fur = BendingModel.fit(src), FurcationModel.fit(src)
+    ra, rr = bend.range_alpha, bend.range_r
+    halves = input_halves(bend)
+    spread_a = histogram_distance(*(angle_histogram(x, range=ra)[0] for x in halves))
+    spread_r = histogram_distance(*(thickness_histogram(x, range=rr)[0] for x in halves))
+    out = grow(bend, fur, shape=shape, seed=0, max_length="input")
+    L = bend.source.total_length()
+    assert 0.9 * L < out.total_length() <= L + (bend.m + 2) * bend.h
+    assert count_crossings(out) == 0
+    da = histogram_distance(angle_histogram(out, range=ra)[0], bend.hist_alpha)
+    dr = histogram_distance(thickness_histogram(out, range=rr)[0], bend.hist_r)
+    assert da < 1.5 * spread_a, (da, spread_a)
+    assert dr < spread_r, (dr, spread_r)
+
+
+@pytest.mark.shared
+def test_retina_input_sized_structure_matches_the_input():
+    # 45 traced trees, 110 branches; spread 0.049 (angles) and 0.41 (thickness: the halves
+    # split thick and thin vessel trees); grown: ~4000 nodes, 0.045 and 0.033
+    from phloem import io
+    from phloem.branching import trace
+
+    img = io.read_image(shared_file("branching", "skimage_retina.jpg"))
+    src = trace(img, kind="dark", channel=1, sigmas=(1.5, 3, 5))
+    assert len(src.branches) > 50
+    check_input_sized(src, img.shape[:2])
+
+
+@pytest.mark.shared
+def test_river_mask_input_sized_structure_matches_the_input():
+    # one traced tree of 118 branches (halves: alternate branches); spread 0.13 and 0.45;
+    # grown: ~3000 nodes, 0.070 and 0.146
+    from phloem import io
+    from phloem.branching import trace
+
+    img = io.read_image(shared_file("branching", "rivgraph_colville_delta_mask.png"))
+    src = trace(img, kind="mask")
+    assert len(src.branches) > 50
+    check_input_sized(src, img.shape[:2])
 
 
 # -- errors ----------------------------------------------------------------------------------
