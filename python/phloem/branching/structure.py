@@ -20,6 +20,23 @@ uses them:
 
 All randomness comes from ``numpy.random.default_rng(seed)``, so a seed fixes the output.
 
+Interpretations beyond the paper's text:
+
+* **Warm-started histogram matching.** The synthesised histograms start with
+  :attr:`BendingModel.warm_start` pseudo-elements distributed like the input (default
+  ``bins * m``); otherwise the first extensions are matched against the histograms of the
+  ``k + 1`` copied stem elements and a thick stem thins to the input's commonest thickness
+  at once. The paper's ``n_t / m`` weighting is kept.
+* **Forests.** Traced inputs are forests of many small trees; ``grow(..., roots=N)`` or
+  ``max_length="input"`` start further root trees (copied input stems, placed where the
+  density is lowest) until the input's length, scaled by the image areas, is reached.
+* **Density map.** ``d(p, B)`` is OpenCV's labelled distance transform of the drawn
+  polyline in the ``3ρ`` window of each update (within about half a pixel of the exact
+  segment distance) minus the thickness at the nearest branch point; candidates whose
+  average directions agree to within a quarter pixel at the end of the ``3 m h`` look-up
+  ray share one ray. Crossings are tested exactly, against the segments in the buckets of
+  a grid that the candidate paths touch.
+
 Angles are compared in radians, thicknesses in units of the resampling step ``h`` (so that
 the distance is scale-free, §2 "Contributions").
 
@@ -1110,10 +1127,12 @@ class _Grower:
             if pos == chunk:
                 order = np.argsort(-q, kind="stable")
                 order = order[np.isfinite(q[order])]
-            idx = order[pos : pos + chunk]
+            # chunks double after the first, so a blocked tip costs a few calls, not C / chunk
+            size = chunk if pos == 0 else pos
+            idx = order[pos : pos + size]
             if len(idx) == 0:
                 break
-            pos += chunk
+            pos += size
             bad = self.world.crossings(tip, ext[idx])
             valid.extend(int(i) for i in idx[~bad][: m.c - len(valid)])
         if not valid:
