@@ -5,8 +5,13 @@ random-walk trees side by side, step h = 2 px); fit the bending model and the fu
 model (linear SVM; the paper reports "about one minute" of training), then grow a structure of
 about 500 nodes in a 512x512 image with space colonisation, three generations.
 
+When ``../shared/data/branching`` is present the table also grows input-sized structures
+(``grow(..., max_length="input")``, seed 1) from the traced retina, Colville delta mask and
+Jacksboro DEM, with their nodes, seconds and the L1 distances of the angle and thickness
+histograms to the input's.
+
 Run for figures:   pytest benches/bench_branching_structure.py --benchmark-enable --benchmark-only
-Table:             python benches/bench_branching_structure.py [--runs N] [--trees T] [--nodes N]
+Table:             python benches/bench_branching_structure.py [--runs N] [--trees T] [--nodes N] [--no-real]
 In the default test run the benchmark executes once (``--benchmark-disable``).
 """
 
@@ -14,9 +19,20 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import pytest
-from phloem.branching import BendingModel, Branch, FurcationModel, Skeleton, grow, synthetic_skeleton
+from phloem.branching import (
+    BendingModel,
+    Branch,
+    FurcationModel,
+    Skeleton,
+    angle_histogram,
+    grow,
+    histogram_distance,
+    synthetic_skeleton,
+    thickness_histogram,
+)
 
 pytestmark = pytest.mark.filterwarnings("ignore::pytest_benchmark.logger.PytestBenchmarkWarning")
 
@@ -70,11 +86,50 @@ def times(trees: int, nodes: int) -> dict[str, float]:
     return t
 
 
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "branching"
+#: traced inputs of the issue: file, trace() settings
+REAL = {
+    "retina": ("skimage_retina.jpg", {"kind": "dark", "channel": 1, "sigmas": (1.5, 3, 5)}),
+    "colville": ("rivgraph_colville_delta_mask.png", {"kind": "mask"}),
+    "dem": ("mpl_jacksboro_fault_dem_u16.png", {"kind": "bright", "sigmas": (3, 6)}),
+}
+
+
+def real_rows() -> list[str]:
+    """Input-sized growth from the traced real inputs (empty without ../shared)."""
+    from phloem import io
+    from phloem.branching import trace
+
+    rows = []
+    for name, (file, kw) in REAL.items():
+        path = SHARED / file
+        if not path.exists():
+            continue
+        img = io.read_image(path)
+        src = trace(img, **kw)  # type: ignore[arg-type]
+        bend = BendingModel.fit(src)
+        fur = FurcationModel.fit(src, h=bend.h)
+        t0 = time.perf_counter()
+        out = grow(bend, fur, shape=img.shape[:2], seed=1, max_length="input")
+        dt = time.perf_counter() - t0
+        ha, e = angle_histogram(src, h=bend.h)
+        hb, _ = angle_histogram(out, h=bend.h, range=(e[0], e[-1]))
+        ta, e = thickness_histogram(src, h=bend.h)
+        tb, _ = thickness_histogram(out, h=bend.h, range=(e[0], e[-1]))
+        rows.append(
+            f"{name:>10} {len(src.branches):>8} {sum(b.parent is None for b in out.branches):>6} {len(out.branches):>8} "
+            f"{sum(len(b) for b in out.branches):>6} {out.total_length() / src.total_length():>8.2f} {dt:>8.2f} "
+            f"{histogram_distance(ha, hb):>8.3f} {histogram_distance(ta, tb):>8.3f}"
+        )
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--trees", type=int, default=4, help="synthetic trees in the example (SVM training size)")
     ap.add_argument("--nodes", type=int, default=500)
+    ap.add_argument("--no-real", action="store_true", help="skip the traced inputs of ../shared")
     args = ap.parse_args()
     src = example(args.trees)
     samples = sum(len(b) for b in src.resample(H).branches)
@@ -83,6 +138,12 @@ def main() -> None:
     print(f"example: {args.trees} trees, {len(src.branches)} branches, {samples} SVM samples (h = {H:g} px)")
     print(" ".join(f"{k:>14}" for k in best) + f"   (seconds, best of {args.runs})")
     print(" ".join(f"{v:>14.3f}" if v < 100 else f"{v:>14.0f}" for v in best.values()))
+    rows = [] if args.no_real else real_rows()
+    if rows:
+        print('\ninput-sized structures (max_length="input", seed 1; L1 of normalised histograms vs the input)')
+        head = ("input", "in br", "roots", "branches", "nodes", "length/L", "seconds", "angle L1", "thick L1")
+        print(" ".join(f"{h:>{w}}" for h, w in zip(head, (10, 8, 6, 8, 6, 8, 8, 8, 8))))
+        print("\n".join(rows))
 
 
 if __name__ == "__main__":
