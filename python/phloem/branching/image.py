@@ -234,10 +234,20 @@ def _cum(branch: Branch) -> F64:
     return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(branch.points, axis=0), axis=1))])
 
 
-def _centres(branch: Branch, lam: float, rf: float) -> list[float]:
+def _radius_cap(skeleton: Skeleton, rf: float) -> float:
+    """Largest fragment radius: ``rf`` times twice the 90th percentile of the thickness.
+
+    A traced mask can hold a few blob-like parts (a lake, the sea) whose "thickness" is ten
+    times a channel's; uncapped, their fragments would be disks hundreds of pixels wide.
+    """
+    th = np.concatenate([b.thickness for b in skeleton.branches])
+    return max(rf * 2.0 * float(np.quantile(th, 0.9)), MIN_RADIUS)
+
+
+def _centres(branch: Branch, lam: float, rf: float, rmax: float = np.inf) -> list[float]:
     """Arc lengths of the fragment centres: consecutive Euclidean distance ``λ (s_i + s_(i+1))``."""
     s, pts, th = _dense(branch)
-    rad = np.maximum(rf * th, MIN_RADIUS)
+    rad = np.clip(rf * th, MIN_RADIUS, max(rmax, MIN_RADIUS))
     out = [0]
     i = 0
     n = len(s)
@@ -294,23 +304,24 @@ def _fragments(
     Without ``furcations`` no furcation fragments are made."""
     out: list[Fragment] = []
     cums = [_cum(b) for b in skeleton.branches]
+    rmax = _radius_cap(skeleton, rf)
     for bi, b in enumerate(skeleton.branches):
         cum = cums[bi]
-        arcs = _centres(b, lam, rf)
+        arcs = _centres(b, lam, rf, rmax)
         fur: Fragment | None = None
         if b.parent is not None and furcations:
             pb, pv = b.parent
             parent = skeleton.branches[pb]
             pc = cums[pb]
             centre = parent.points[pv]
-            radius = max(rf * float(parent.thickness[pv]), MIN_RADIUS)
+            radius = min(max(rf * float(parent.thickness[pv]), MIN_RADIUS), rmax)
             pp, pt = _segment(parent, pc, float(pc[pv]), radius, k)
             cp, ct = _segment(b, cum, 0.0, radius, k, child=True)
             fur = Fragment(centre.copy(), radius, np.vstack([pp, cp]) - centre, np.concatenate([pt, ct]), bi, 0.0, True)
         frs = []
         for a in arcs:
             c, t = _at(b, cum, np.array([a]))
-            radius = max(rf * float(t[0]), MIN_RADIUS)
+            radius = min(max(rf * float(t[0]), MIN_RADIUS), rmax)
             pts, th = _segment(b, cum, a, radius, k)
             frs.append(Fragment(c[0], radius, pts - c[0], th, bi, a))
         if fur is not None:
@@ -349,7 +360,9 @@ def fragments(
     lam : float, optional
         Spacing factor λ (default 0.75, the paper's value), in (0, 1].
     radius_factor : float, optional
-        Fragment radius over branch thickness (default 3).
+        Fragment radius over branch thickness (default 3), at most 3 times twice the
+        skeleton's 90th-percentile thickness (so blob-like parts such as a lake do not make
+        giant fragments).
     samples : int, optional
         Samples ``k`` per skeleton segment of the shape vector (default 9).
 
@@ -750,7 +763,7 @@ def render(
     lam : float, optional
         Fragment spacing factor λ (default 0.75).
     radius_factor : float, optional
-        Fragment radius over thickness (default 3).
+        Fragment radius over thickness (default 3; capped as in :func:`fragments`).
     samples : int, optional
         Samples ``k`` per skeleton segment of a fragment's shape (default 9).
     deform : bool, optional
