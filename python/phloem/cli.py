@@ -394,6 +394,38 @@ def _guide(path: str | None, args: argparse.Namespace) -> Any:
     return (g.mean(axis=2) if g.ndim == 3 else g) > 0.5
 
 
+def _length(text: str) -> float | str:
+    if text == "input":
+        return text
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a length in pixels or 'input', got {text!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"expected a positive length, got {text}")
+    return v
+
+
+def _render_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("image synthesis (§5)")
+    g.add_argument("--omega-s", type=float, default=2.0, help="weight of the thickness term of the fragment shape distance (paper: 2)")
+    g.add_argument("--omega-c", type=float, default=1.0, help="weight of colour consistency with the fragments already placed (default 1)")
+    g.add_argument("--no-complete", action="store_true", help="leave the background black instead of completing it from the example (§5.4)")
+    g.add_argument("--fragment-map", metavar="PNG", default=None, help="also write the map of which fragment painted each pixel")
+
+
+def _render_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    return {"omega_s": args.omega_s, "omega_c": args.omega_c, "complete": not args.no_complete}
+
+
+def _fragment_map(labels: np.ndarray) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    colours = rng.uniform(0.25, 1.0, (int(labels.max()) + 2, 3)).astype(np.float32)
+    colours[0] = 0.0
+    out: np.ndarray = colours[labels + 1]
+    return out
+
+
 def _grow_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("structure synthesis (§4)")
     g.add_argument("--h", type=float, default=None, help="resampling step in pixels (default: the input's median thickness)")
@@ -401,7 +433,9 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--m", type=_positive, default=None, help="elements appended per step, the feature size s/h (default 4)")
     g.add_argument("--c", type=_positive, default=2, help="candidates: 1 follows the input exactly, more gives more variety (paper: 2)")
     g.add_argument("--generations", type=_positive, default=3, help="branch generations to grow (default 3)")
-    g.add_argument("--max-length", type=float, default=None, help="stop at this total branch length in pixels")
+    g.add_argument("--max-length", type=_length, default=None, metavar="PX|input",
+                   help="stop at this total branch length in pixels, or 'input' for about as much structure as the example "
+                        "(root trees are added until then; default: one tree for grow, 'input' for run)")  # fmt: skip
     g.add_argument("--no-colonize", action="store_true", help="turn off space colonisation (§4.4; crossings are still refused)")
     g.add_argument("--guide", metavar="PATH", default=None,
                    help="guided synthesis (§4.5): a JSON list of [x, y] points or a mask image the structure should follow")  # fmt: skip
@@ -432,6 +466,59 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     if args.histograms is not None:
         fig = branching.histogram_figure(source, new, h=bend.h)
         io.write_image(args.histograms, fig, overwrite=args.force, bit_depth=args.bit_depth)
+
+
+def _cmd_branching_render(args: argparse.Namespace) -> None:
+    extra = [Path(args.fragment_map)] if args.fragment_map else []
+    _preflight(args, extra)
+    img = io.read_image(args.input, max_pixels=args.max_pixels)
+    source = branching.Skeleton.load(args.skeleton)
+    target = branching.Skeleton.load(args.target)
+    if target.shape is None:
+        raise ValueError(f"target: {args.target} has no shape; the new image's size comes from it")
+    res = _run(
+        "branching render", args,
+        lambda bar: branching.render(img, source, target, seed=args.seed, threads=args.threads, progress=bar,
+                                     full_output=True, **_render_kwargs(args)),
+    )  # fmt: skip
+    _save(args, "branching render", res.image)
+    if args.fragment_map:
+        io.write_image(args.fragment_map, _fragment_map(res.labels), overwrite=args.force, bit_depth=args.bit_depth)
+
+
+def _branching_run_targets(args: argparse.Namespace) -> dict[str, Path]:
+    stem = Path(args.out).with_suffix("")
+    files = {"skeleton": Path(f"{stem}_skeleton.json"), "histograms": Path(f"{stem}_histograms.png")}
+    if args.fragment_map:
+        files["fragments"] = Path(args.fragment_map)
+    return files
+
+
+def _cmd_branching_run(args: argparse.Namespace) -> None:
+    files = _branching_run_targets(args)
+    _preflight(args, [p for r, p in files.items() if r != "skeleton"])
+    _check_json_target(files["skeleton"], args)
+    img = io.read_image(args.input, max_pixels=args.max_pixels)
+    source = None if args.skeleton is None else branching.Skeleton.load(args.skeleton)
+    trace_options = {"kind": args.kind, "sigmas": tuple(args.sigmas), "channel": args.channel, "min_length": args.min_length}
+    res = _run(
+        "branching run", args,
+        lambda bar: branching.synthesize(
+            img, source, size=args.size, seed=args.seed, trace_options=trace_options, h=args.h, k=args.k, m=args.m,
+            c=args.c, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize,
+            guide=_guide(args.guide, args), render_options=_render_kwargs(args), threads=args.threads, progress=bar,
+        ),
+    )  # fmt: skip
+    written = {role: str(p) for role, p in files.items()}
+    _save(args, "branching run", res.image, h=res.bending.h, files=written,
+          source_branches=len(res.source.branches), target_branches=len(res.target.branches))  # fmt: skip
+    _write_skeleton(files["skeleton"], res.target, args, "branching run", h=res.bending.h)
+    fig = branching.histogram_figure(res.source, res.target, h=res.bending.h)
+    io.write_image(files["histograms"], fig, overwrite=args.force, bit_depth=args.bit_depth)
+    if "fragments" in files:
+        io.write_image(files["fragments"], _fragment_map(res.render.labels), overwrite=args.force, bit_depth=args.bit_depth)
+    if not args.quiet:
+        print(f"wrote {files['histograms']}", file=sys.stderr)
 
 
 def _cmd_demo(args: argparse.Namespace) -> None:
@@ -580,6 +667,28 @@ def build_parser() -> argparse.ArgumentParser:
     _grow_options(q)
     _common(q)
     q.set_defaults(func=_cmd_branching_grow)
+    q = bsub.add_parser("render", help="paint a new skeleton with fragments of the example image (§5)",
+                        description="Fragments along both skeletons, shape and colour matching, deformation by a smooth "
+                                    "displacement field, photometric correction, graph-cut seams, gap completion.")  # fmt: skip
+    q.add_argument("input", metavar="IN", help="the example image")
+    q.add_argument("skeleton", metavar="SKEL.json", help="the example's skeleton")
+    q.add_argument("target", metavar="NEW.json", help="the skeleton to paint (its shape sets the output size)")
+    q.add_argument("--out", required=True, metavar="OUT", help="output image (.png, .jpg, .tif)")
+    _render_options(q)
+    _common(q)
+    q.set_defaults(func=_cmd_branching_render)
+    q = bsub.add_parser("run", help="image in, new image out: trace (or load) the skeleton, grow a new one, render it",
+                        description="The whole pipeline. Writes OUT, OUT.json, the new skeleton OUT_skeleton.json and the "
+                                    "input/output angle and thickness histograms OUT_histograms.png (Fig. 7).")  # fmt: skip
+    q.add_argument("input", metavar="IN", help="the example image")
+    q.add_argument("--skeleton", metavar="SKEL.json", default=None, help="the example's skeleton (default: trace it)")
+    q.add_argument("--out", required=True, metavar="OUT", help="output image (.png, .jpg, .tif)")
+    q.add_argument("--size", type=_size, default=None, metavar="WxH", help="size of the new image (default: the example's)")
+    _trace_options(q)
+    _grow_options(q)
+    _render_options(q)
+    _common(q)
+    q.set_defaults(func=_cmd_branching_run, max_length="input")
 
     p = sub.add_parser("demo", help="the main job on embedded data: a bark texture from the built-in Douglas-fir photo",
                        description="Runs the bark pipeline (phloem bark) on phloem's embedded CC0 Douglas-fir bark photo.")  # fmt: skip

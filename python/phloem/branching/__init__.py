@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from .figures import histogram_figure
 from .image import Fragment, RenderResult, fragments, rectify, render, rigid_align, unrectify
+from .pipeline import SynthesisResult, synthesize
 from .skeleton import Branch, Skeleton, SkeletonError
 from .structure import (
     BendingModel,
@@ -29,7 +30,28 @@ from .structure import (
 from .trace import estimate_thickness, trace
 
 __all__ = [
-    "BendingModel", "Branch", "Fragment", "FurcationModel", "RenderResult", "Skeleton", "SkeletonError", "angle_histogram",
-    "default_h", "estimate_thickness", "extend", "fragments", "grow", "histogram_distance", "histogram_figure", "rectify",
-    "render", "rigid_align", "synthetic_skeleton", "thickness_histogram", "trace", "unrectify",
+    "BendingModel",
+    "Branch",
+    "Fragment",
+    "FurcationModel",
+    "RenderResult",
+    "Skeleton",
+    "SkeletonError",
+    "SynthesisResult",
+    "angle_histogram",
+    "default_h",
+    "estimate_thickness",
+    "extend",
+    "fragments",
+    "grow",
+    "histogram_distance",
+    "histogram_figure",
+    "rectify",
+    "render",
+    "rigid_align",
+    "synthesize",
+    "synthetic_skeleton",
+    "thickness_histogram",
+    "trace",
+    "unrectify",
 ]

@@ -1,0 +1,142 @@
+"""The whole branching pipeline in one call: image (and skeleton) in, new image out (§3–§5)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._progress import Progress
+from .._validate import as_image, check_size
+from .image import RenderResult, render
+from .skeleton import Skeleton
+from .structure import BendingModel, FurcationModel, grow
+from .trace import trace
+
+__all__ = ["SynthesisResult", "synthesize"]
+
+
+@dataclass
+class SynthesisResult:
+    """What :func:`synthesize` made, stage by stage.
+
+    Attributes
+    ----------
+    image : (H, W, C) float32 ndarray
+        The new image.
+    source : Skeleton
+        The input's skeleton (given or traced).
+    target : Skeleton
+        The synthesised skeleton the new image shows.
+    bending : BendingModel
+    furcation : FurcationModel or None
+        ``None`` when the input has no furcation to learn from.
+    render : RenderResult
+        Fragments, their placement map and the image before gap completion.
+    """
+
+    image: NDArray[np.float32]
+    source: Skeleton
+    target: Skeleton
+    bending: BendingModel
+    furcation: FurcationModel | None
+    render: RenderResult
+
+
+def synthesize(
+    image: Any,
+    skeleton: Skeleton | None = None,
+    *,
+    size: Any = None,
+    seed: int = 0,
+    trace_options: dict[str, Any] | None = None,
+    h: float | None = None,
+    k: int = 3,
+    m: int | None = None,
+    c: int = 2,
+    generations: int = 3,
+    max_length: float | str | None = "input",
+    colonize: bool = True,
+    guide: Any = None,
+    render_options: dict[str, Any] | None = None,
+    threads: int | None = None,
+    progress: Progress = None,
+) -> SynthesisResult:
+    """A new image of a branching structure like the one in ``image`` (Sibbing et al. 2010).
+
+    1. the source skeleton: ``skeleton``, or :func:`trace` of ``image`` (with
+       ``trace_options``);
+    2. the bending model (§4.2) and, if the source branches, the furcation model (§4.3);
+    3. a new skeleton by :func:`grow` (§4.4–4.5) on a canvas of ``size``, by default about as
+       much structure as the input holds (``max_length="input"``);
+    4. the new image by :func:`render` (§5: fragments, deformation, photometric correction,
+       seams, gap completion), with ``render_options``.
+
+    Parameters
+    ----------
+    image : (H, W[, C]) array_like
+        The example image.
+    skeleton : Skeleton, optional
+        Its skeleton; traced when omitted.
+    size : (int, int), optional
+        ``(H, W)`` of the new image (default: the input's).
+    seed : int, optional
+        Seed of the growth and of the fragment choices.
+    trace_options : dict, optional
+        Keyword arguments for :func:`trace` (e.g. ``{"kind": "dark", "sigmas": (1.5, 3, 5)}``).
+    h, k, m, c : optional
+        Bending model parameters (see :meth:`BendingModel.fit`; paper: ``k = 3``, ``c = 2``).
+    generations, max_length, colonize, guide : optional
+        See :func:`grow`.
+    render_options : dict, optional
+        Keyword arguments for :func:`render`.
+    threads : int, optional
+        Worker threads for the pixel work.
+    progress : callable, optional
+        ``progress(done, total)`` over the four stages' work.
+
+    Returns
+    -------
+    SynthesisResult
+
+    Examples
+    --------
+    >>> import numpy as np, cv2
+    >>> img = np.full((96, 128), 0.8, np.float32)
+    >>> _ = cv2.line(img, (5, 90), (70, 40), 0.1, 5); _ = cv2.line(img, (70, 40), (125, 5), 0.1, 4)
+    >>> _ = cv2.line(img, (70, 40), (90, 92), 0.1, 3)
+    >>> res = synthesize(img, trace_options={"kind": "dark", "sigmas": (1.5, 2.5)}, seed=1)
+    >>> res.image.shape, res.target.shape
+    ((96, 128, 1), (96, 128))
+    """
+    img = as_image(image, "image")
+    shape = img.shape[:2] if size is None else check_size(size, "size")
+    steps = 4
+
+    def tick(i: int) -> None:
+        if progress is not None:
+            progress(i, steps)
+
+    if skeleton is None:
+        source = trace(img, **(trace_options or {}))
+    elif isinstance(skeleton, Skeleton):
+        source = skeleton
+        if source.shape is not None and source.shape != img.shape[:2]:
+            raise ValueError(f"skeleton: made for a {source.shape} image, but image is {img.shape[:2]}")
+    else:
+        raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
+    tick(1)
+    bending = BendingModel.fit(source, h=h, k=k, m=m, c=c)
+    has_children = any(b.parent is not None for b in source.branches)
+    furcation = FurcationModel.fit(source, h=bending.h, k=k, c=c) if has_children else None
+    tick(2)
+    target = grow(
+        bending, furcation, shape=shape, seed=seed, generations=generations, max_length=max_length,
+        colonize=colonize, guide=guide,
+    )  # fmt: skip
+    tick(3)
+    res = render(img, source, target, seed=seed, threads=threads, full_output=True, **(render_options or {}))
+    tick(4)
+    return SynthesisResult(res.image, source, target, bending, furcation, res)
