@@ -21,7 +21,7 @@ bench:  ## Rust criterion benches and Python benchmarks
 	cargo bench -p phloem-core --bench shapes
 	cargo bench -p phloem-core --bench tbn
 	cargo bench -p phloem-core --bench mvc
-	pytest benches/bench_patch.py benches/bench_seams.py benches/bench_blend.py benches/bench_shapes.py benches/bench_tbn.py benches/bench_bark.py benches/bench_trees.py benches/bench_warp.py benches/bench_tree_variations.py benches/bench_branching_structure.py benches/bench_branching_trace.py --benchmark-enable --benchmark-only
+	pytest benches/bench_patch.py benches/bench_seams.py benches/bench_blend.py benches/bench_shapes.py benches/bench_tbn.py benches/bench_bark.py benches/bench_trees.py benches/bench_warp.py benches/bench_tree_variations.py benches/bench_branching_structure.py benches/bench_branching_trace.py benches/bench_branching_image.py --benchmark-enable --benchmark-only
 
 peers:  ## side-by-side runs against PyPatchMatch, resynthesizer, texture-synthesis
 	python benches/peers.py
@@ -35,5 +35,7 @@ sheet:  ## contact sheets of the texture, graph-cut, shape, bark and tree jobs (
 	python benches/sheet_trees.py out/trees_sheet.png
 	python benches/sheet_tree_variations.py out/tree_variations_sheet.png
 	python benches/sheet_branching_trace.py --out out/branching_trace_sheet.png
+	python benches/sheet_branching_image.py --out out/branching_image_sheet.png
+	python benches/sheet_branching.py out/branching_sheet.png
 
 .PHONY: help install test lint bench peers sheet
