@@ -284,15 +284,8 @@ def _check_skeleton(skeleton: Any, name: str, shape: tuple[int, int] | None) -> 
     for i, b in enumerate(skeleton.branches):
         if not (np.isfinite(b.points).all() and np.isfinite(b.thickness).all()):
             raise ValueError(f"{name}: branches[{i}] has NaN or infinite points or thickness")
-        if shape is not None:
-            h, w = shape
-            x, y = b.points[:, 0], b.points[:, 1]
-            bad = (x < -0.5) | (y < -0.5) | (x > w - 0.5) | (y > h - 0.5)
-            if bad.any():
-                j = int(np.argmax(bad))
-                raise ValueError(
-                    f"{name}: branches[{i}].points[{j}] = ({x[j]:.1f}, {y[j]:.1f}) is outside the {w}x{h} image"
-                )
+    if shape is not None:
+        skeleton.check_inside(shape, name)
     return skeleton
 
 

@@ -290,15 +290,22 @@ class Skeleton:
                     raise SkeletonError(
                         f"branches[{i}].parent: vertex {pv} is outside branch {pb} ({len(self.branches[pb])} vertices)"
                     )
-            if self.shape is not None:
-                h, w = self.shape
-                x, y = b.points[:, 0], b.points[:, 1]
-                bad = (x < -0.5) | (y < -0.5) | (x > w - 0.5) | (y > h - 0.5)
-                if bad.any():
-                    j = int(np.argmax(bad))
-                    raise SkeletonError(
-                        f"branches[{i}].points[{j}] = ({x[j]:.1f}, {y[j]:.1f}) is outside the {w}x{h} image"
-                    )
+        if self.shape is not None:
+            self.check_inside(self.shape)
+
+    def check_inside(self, shape: tuple[int, int], name: str = "") -> None:
+        """Raise :class:`SkeletonError` naming the first vertex outside an ``(H, W)`` image.
+
+        ``name`` (e.g. ``"target_skeleton"``) prefixes the message.
+        """
+        h, w = shape
+        for i, b in enumerate(self.branches):
+            x, y = b.points[:, 0], b.points[:, 1]
+            bad = (x < -0.5) | (y < -0.5) | (x > w - 0.5) | (y > h - 0.5)
+            if bad.any():
+                j = int(np.argmax(bad))
+                where = f"{name}: branches[{i}]" if name else f"branches[{i}]"
+                raise SkeletonError(f"{where}.points[{j}] = ({x[j]:.1f}, {y[j]:.1f}) is outside the {w}x{h} image")
 
     # -- geometry ---------------------------------------------------------------------------
 
