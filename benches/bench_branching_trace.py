@@ -13,6 +13,7 @@ In the default test run the benchmark executes once (``--benchmark-disable``).
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -27,14 +28,8 @@ pytestmark = pytest.mark.filterwarnings("ignore::pytest_benchmark.logger.PytestB
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "branching"
 
-CASES: dict[str, dict[str, Any]] = {
-    "skimage_retina.jpg": {"kind": "dark", "channel": 1, "sigmas": (1.5, 3.0, 5.0)},
-    "rivgraph_colville_delta_mask.png": {"kind": "mask"},
-    "rivgraph_brahmaputra_braided_mask.png": {"kind": "mask"},
-    "rivgraph_mouse_brain_vessels.png": {"kind": "dark", "sigmas": (1.5, 3.0, 5.0)},
-    "mpl_jacksboro_fault_dem_u16.png": {"kind": "bright", "sigmas": (3.0, 6.0)},
-    "skimage_microaneurysms.png": {"kind": "dark", "sigmas": (1.5, 3.0)},
-}
+sys.path.insert(0, str(Path(__file__).parent))
+from branching_scene import TRACE_SETTINGS as CASES
 
 
 def synthetic_tree(size: int = 1024, depth: int = 7, seed: int = 0) -> np.ndarray:

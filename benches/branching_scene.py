@@ -8,10 +8,21 @@ drawn from the skeleton, the skeleton is exact, which no hand tracing of a photo
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import cv2
 import numpy as np
 from phloem.branching import Branch, Skeleton
+
+# The real examples of ../shared/data/branching -> the trace() arguments that suit them.
+TRACE_SETTINGS: dict[str, dict[str, Any]] = {
+    "skimage_retina.jpg": {"kind": "dark", "channel": 1, "sigmas": (1.5, 3.0, 5.0)},
+    "rivgraph_colville_delta_mask.png": {"kind": "mask"},
+    "rivgraph_brahmaputra_braided_mask.png": {"kind": "mask"},
+    "rivgraph_mouse_brain_vessels.png": {"kind": "dark", "sigmas": (1.5, 3.0, 5.0)},
+    "mpl_jacksboro_fault_dem_u16.png": {"kind": "bright", "sigmas": (3.0, 6.0)},
+    "skimage_microaneurysms.png": {"kind": "dark", "sigmas": (1.5, 3.0)},
+}
 
 
 def meander(

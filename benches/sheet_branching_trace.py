@@ -14,7 +14,6 @@ import argparse
 import sys
 import time
 from pathlib import Path
-from typing import Any
 
 import cv2
 import numpy as np
@@ -23,15 +22,8 @@ from phloem.branching import Branch, Skeleton, trace
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "branching"
 
-# name -> trace() arguments that suit it
-CASES: dict[str, dict[str, Any]] = {
-    "skimage_retina.jpg": {"kind": "dark", "channel": 1, "sigmas": (1.5, 3.0, 5.0)},
-    "rivgraph_colville_delta_mask.png": {"kind": "mask"},
-    "rivgraph_brahmaputra_braided_mask.png": {"kind": "mask"},
-    "rivgraph_mouse_brain_vessels.png": {"kind": "dark", "sigmas": (1.5, 3.0, 5.0)},
-    "mpl_jacksboro_fault_dem_u16.png": {"kind": "bright", "sigmas": (3.0, 6.0)},
-    "skimage_microaneurysms.png": {"kind": "dark", "sigmas": (1.5, 3.0)},
-}
+sys.path.insert(0, str(Path(__file__).parent))
+from branching_scene import TRACE_SETTINGS as CASES
 
 
 def depth(sk: Skeleton) -> list[int]:
