@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -58,6 +58,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from .._progress import Progress
 from .._validate import check_float, check_int, check_seed
 from .skeleton import Branch, Skeleton
 
@@ -75,7 +76,6 @@ __all__ = [
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
-Progress = Callable[[int, int], None] | None
 
 #: ``1/ε`` of §4.4: the largest factor by which an empty region can raise a candidate's quality.
 INV_EPS = 1e3
