@@ -428,7 +428,9 @@ def _fragment_map(labels: np.ndarray) -> np.ndarray:
 
 def _grow_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("structure synthesis (§4)")
-    g.add_argument("--h", type=float, default=None, help="resampling step in pixels (default: the input's median thickness)")
+    g.add_argument("--h", type=float, default=None,
+                   help="resampling step in pixels (default: the input's median thickness). The model remembers k steps, so "
+                        "a larger h (e.g. 10 on a traced river) keeps long branches on course instead of curling")  # fmt: skip
     g.add_argument("--k", type=_positive, default=3, help="order of the Markov bending model (paper: 3)")
     g.add_argument("--m", type=_positive, default=None, help="elements appended per step, the feature size s/h (default 4)")
     g.add_argument("--c", type=_positive, default=2, help="candidates: 1 follows the input exactly, more gives more variety (paper: 2)")
