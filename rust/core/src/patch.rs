@@ -208,7 +208,40 @@ pub(crate) trait Kernel {
     fn zero() -> Self::Acc;
     fn add_row(acc: &mut Self::Acc, a: &[f32], b: &[f32]);
     fn total(acc: &Self::Acc) -> f32;
+
+    /// `base` plus the distance between the `rows × len` values at `t[t0 + k·ts..]` and
+    /// `s[s0 + k·ss..]` (`k < rows`), abandoned once it reaches `cutoff` (checked every other
+    /// row, as in [`Level::dist_with`]). `NC` is `len.div_ceil(8)`; both slices must hold at
+    /// least [`PAD`] values past the end of their last row, which implementations may read
+    /// (and ignore). Same result, bit for bit, as [`Self::add_row`] row by row.
+    #[inline(always)]
+    fn patch<const NC: usize>(
+        t: &[f32],
+        (t0, ts): (usize, usize),
+        s: &[f32],
+        (s0, ss): (usize, usize),
+        (rows, len): (usize, usize),
+        base: f32,
+        cutoff: f32,
+    ) -> f32 {
+        let mut acc = Self::zero();
+        for k in 0..rows {
+            let (a, b) = (t0 + k * ts, s0 + k * ss);
+            Self::add_row(&mut acc, &t[a..a + len], &s[b..b + len]);
+            if k % 2 == 1 && k + 1 < rows {
+                let partial = base + Self::total(&acc);
+                if partial >= cutoff {
+                    return partial;
+                }
+            }
+        }
+        base + Self::total(&acc)
+    }
 }
+
+/// Zero floats appended to a level's source and target buffers, so that a fixed-width kernel
+/// ([`Kernel::patch`]) may load whole 8-lane chunks past the end of a patch row.
+const PAD: usize = 8;
 
 /// The portable kernel.
 pub(crate) struct Portable;
@@ -326,6 +359,62 @@ impl Kernel for Avx2 {
     }
 
     #[inline(always)]
+    fn patch<const NC: usize>(
+        t: &[f32],
+        (t0, ts): (usize, usize),
+        s: &[f32],
+        (s0, ss): (usize, usize),
+        (rows, len): (usize, usize),
+        base: f32,
+        cutoff: f32,
+    ) -> f32 {
+        use std::arch::x86_64::{
+            _mm256_add_ps, _mm256_and_ps, _mm256_castsi256_ps, _mm256_cmpgt_epi32, _mm256_loadu_ps,
+            _mm256_mul_ps, _mm256_set1_epi32, _mm256_setr_epi32, _mm256_setzero_ps, _mm256_sub_ps,
+        };
+        assert!(NC >= 1 && len.div_ceil(8) == NC && rows >= 1);
+        assert!(t0 + (rows - 1) * ts + 8 * NC <= t.len());
+        assert!(s0 + (rows - 1) * ss + 8 * NC <= s.len());
+        // SAFETY: AVX2 is enabled (see `zero`); the asserts above keep every load of `8 * NC`
+        // values per row inside the slices.
+        unsafe {
+            // The last chunk's lanes past `len` hold the next pixels' values: zeroing their
+            // differences adds +0.0, as the masked loads of `add_row` do.
+            let mask = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
+                _mm256_set1_epi32((len - 8 * (NC - 1)) as i32),
+                _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+            ));
+            let (tp, sp) = (t.as_ptr().add(t0), s.as_ptr().add(s0));
+            let [mut a0, mut a1, mut a2] = [_mm256_setzero_ps(); 3];
+            for k in 0..rows {
+                let (tr, sr) = (tp.add(k * ts), sp.add(k * ss));
+                for j in 0..NC {
+                    let mut d = _mm256_sub_ps(
+                        _mm256_loadu_ps(tr.add(8 * j)),
+                        _mm256_loadu_ps(sr.add(8 * j)),
+                    );
+                    if j + 1 == NC {
+                        d = _mm256_and_ps(d, mask);
+                    }
+                    let sq = _mm256_mul_ps(d, d);
+                    match j % 3 {
+                        0 => a0 = _mm256_add_ps(a0, sq),
+                        1 => a1 = _mm256_add_ps(a1, sq),
+                        _ => a2 = _mm256_add_ps(a2, sq),
+                    }
+                }
+                if k % 2 == 1 && k + 1 < rows {
+                    let partial = base + Self::total(&[a0, a1, a2]);
+                    if partial >= cutoff {
+                        return partial;
+                    }
+                }
+            }
+            base + Self::total(&[a0, a1, a2])
+        }
+    }
+
+    #[inline(always)]
     fn total(acc: &Self::Acc) -> f32 {
         use std::arch::x86_64::{
             _mm256_add_ps, _mm256_castps256_ps128, _mm256_extractf128_ps, _mm_add_ps,
@@ -357,10 +446,12 @@ struct Pass<'p> {
 }
 
 struct Level<'a> {
-    src: Cow<'a, [f32]>,
+    /// Source values, followed by [`PAD`] zeros.
+    src: Vec<f32>,
     sh: usize,
     sw: usize,
-    tgt: Cow<'a, [f32]>,
+    /// Target values, followed by [`PAD`] zeros.
+    tgt: Vec<f32>,
     th: usize,
     tw: usize,
     c: usize,
@@ -403,11 +494,16 @@ impl Level<'_> {
                 }
             }
         }
+        let pad = |buf: Cow<'b, [f32]>| {
+            let mut v = buf.into_owned();
+            v.extend_from_slice(&[0.0; PAD]);
+            v
+        };
         Level {
-            src,
+            src: pad(src),
             sh,
             sw,
-            tgt,
+            tgt: pad(tgt),
             th,
             tw,
             c,
@@ -462,6 +558,33 @@ impl Level<'_> {
             }
         }
         base + K::total(&acc)
+    }
+
+    /// [`Self::dist_with`] for a target patch wholly inside the target, by the fixed-width
+    /// kernel [`Kernel::patch`] (`NC` chunks of eight values per patch row).
+    #[inline(always)]
+    fn dist_interior<K: Kernel, const NC: usize>(
+        &self,
+        ty: usize,
+        tx: usize,
+        s: u32,
+        cutoff: f32,
+    ) -> f32 {
+        let (sy, sx) = unpack(s);
+        let (r, c) = (self.r, self.c);
+        let base = self.cost.map_or(0.0, |c| c[sy * self.sw + sx]);
+        if base >= cutoff {
+            return base;
+        }
+        K::patch::<NC>(
+            &self.tgt,
+            (((ty - r) * self.tw + tx - r) * c, self.tw * c),
+            &self.src,
+            (((sy - r) * self.sw + sx - r) * c, self.sw * c),
+            (2 * r + 1, (2 * r + 1) * c),
+            base,
+            cutoff,
+        )
     }
 
     /// Hints the cache to load the source rows a distance evaluation of centre `s` against
@@ -549,15 +672,28 @@ impl Level<'_> {
                     level,
                     it,
                 };
-                #[cfg(target_arch = "x86_64")]
-                let count = if fast {
-                    // SAFETY: the CPU supports AVX2 (checked just above).
-                    unsafe { self.stripe_avx2(chunk, stripe, &pass) }
-                } else {
-                    self.stripe::<Portable>(chunk, stripe, &pass)
+                // The fixed-width kernel takes rows of up to four 8-lane chunks.
+                macro_rules! run {
+                    ($nc:literal) => {{
+                        #[cfg(target_arch = "x86_64")]
+                        let count = if fast {
+                            // SAFETY: the CPU supports AVX2 (checked just above).
+                            unsafe { self.stripe_avx2::<$nc>(chunk, stripe, &pass) }
+                        } else {
+                            self.stripe::<Portable, $nc>(chunk, stripe, &pass)
+                        };
+                        #[cfg(not(target_arch = "x86_64"))]
+                        let count = self.stripe::<Portable, $nc>(chunk, stripe, &pass);
+                        count
+                    }};
+                }
+                let count = match (2 * self.r + 1) * self.c {
+                    1..=8 => run!(1),
+                    9..=16 => run!(2),
+                    17..=24 => run!(3),
+                    25..=32 => run!(4),
+                    _ => run!(0),
                 };
-                #[cfg(not(target_arch = "x86_64"))]
-                let count = self.stripe::<Portable>(chunk, stripe, &pass);
                 evals.fetch_add(count, Ordering::Relaxed);
             });
         evals.into_inner()
@@ -566,18 +702,22 @@ impl Level<'_> {
     /// [`Self::stripe`] with the AVX2 kernel, compiled for AVX2; bit-identical results.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn stripe_avx2(&self, chunk: &mut [Cell], stripe: usize, pass: &Pass<'_>) -> u64 {
-        self.stripe::<Avx2>(chunk, stripe, pass)
+    unsafe fn stripe_avx2<const NC: usize>(
+        &self,
+        chunk: &mut [Cell],
+        stripe: usize,
+        pass: &Pass<'_>,
+    ) -> u64 {
+        self.stripe::<Avx2, NC>(chunk, stripe, pass)
     }
 
     /// Evaluates candidate `cand` for target pixel `(y, x)`, keeping it if it beats `best`.
     /// A method, not a closure: a closure the compiler does not inline is compiled without
     /// AVX2, and every intrinsic in it becomes a call.
     #[inline(always)]
-    fn try_candidate<K: Kernel>(
+    fn try_candidate<K: Kernel, const NC: usize>(
         &self,
-        y: usize,
-        x: usize,
+        (y, x, interior): (usize, usize, bool),
         count: &mut u64,
         cand: Option<u32>,
         best: &mut Cell,
@@ -585,7 +725,11 @@ impl Level<'_> {
         if let Some(s) = cand {
             if s != best.idx {
                 *count += 1;
-                let d = self.dist_with::<K>(y, x, s, best.d);
+                let d = if NC > 0 && interior {
+                    self.dist_interior::<K, NC>(y, x, s, best.d)
+                } else {
+                    self.dist_with::<K>(y, x, s, best.d)
+                };
                 if d < best.d {
                     *best = Cell { idx: s, d };
                 }
@@ -595,7 +739,12 @@ impl Level<'_> {
 
     /// Propagation and random search over one stripe; returns the candidates evaluated.
     #[inline(always)]
-    fn stripe<K: Kernel>(&self, chunk: &mut [Cell], stripe: usize, pass: &Pass<'_>) -> u64 {
+    fn stripe<K: Kernel, const NC: usize>(
+        &self,
+        chunk: &mut [Cell],
+        stripe: usize,
+        pass: &Pass<'_>,
+    ) -> u64 {
         let tw = self.tw;
         let reverse = pass.it % 2 == 1;
         let step: i64 = if reverse { 1 } else { -1 };
@@ -613,15 +762,16 @@ impl Level<'_> {
                 if best.idx == NONE {
                     continue;
                 }
+                let r = self.r;
+                let at = (y, x, y >= r && x >= r && y + r < self.th && x + r < tw);
                 // Propagation: the neighbour one step back along the scan, shifted.
                 let nx = x as i64 + step;
                 if nx >= 0 && nx < tw as i64 {
                     let n = chunk[ly * tw + nx as usize].idx;
                     if n != NONE {
                         let (sy, sx) = unpack(n);
-                        self.try_candidate::<K>(
-                            y,
-                            x,
+                        self.try_candidate::<K, NC>(
+                            at,
                             &mut count,
                             self.valid(sy as i64, sx as i64 - step),
                             &mut best,
@@ -639,9 +789,8 @@ impl Level<'_> {
                 };
                 if n != NONE {
                     let (sy, sx) = unpack(n);
-                    self.try_candidate::<K>(
-                        y,
-                        x,
+                    self.try_candidate::<K, NC>(
+                        at,
                         &mut count,
                         self.valid(sy as i64 - step, sx as i64),
                         &mut best,
@@ -653,9 +802,8 @@ impl Level<'_> {
                     let b = by * self.sw + bx;
                     for &j in &table[b * k..(b + 1) * k] {
                         let (jy, jx) = unpack(j);
-                        self.try_candidate::<K>(
-                            y,
-                            x,
+                        self.try_candidate::<K, NC>(
+                            at,
                             &mut count,
                             self.valid(jy as i64, jx as i64),
                             &mut best,
@@ -692,7 +840,7 @@ impl Level<'_> {
                     rad /= 2;
                 }
                 for &s in &samples[..ns] {
-                    self.try_candidate::<K>(y, x, &mut count, Some(s), &mut best);
+                    self.try_candidate::<K, NC>(at, &mut count, Some(s), &mut best);
                 }
                 chunk[li] = best;
             }
@@ -1374,6 +1522,76 @@ mod tests {
         negative[0] = -1.0;
         input.source_cost = Some(&negative);
         assert!(nnf(&input, &params).is_err());
+    }
+
+    /// `Kernel::patch` with `NC` fixed, for every kernel, on the same data.
+    fn patch_all<const NC: usize>(
+        t: &[f32],
+        s: &[f32],
+        (rows, len): (usize, usize),
+        (ts, ss): (usize, usize),
+        (base, cutoff): (f32, f32),
+    ) -> Vec<f32> {
+        let args = ((1, ts), (2, ss), (rows, len));
+        let mut out = vec![Portable::patch::<NC>(
+            t, args.0, s, args.1, args.2, base, cutoff,
+        )];
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            #[target_feature(enable = "avx2")]
+            unsafe fn avx2<const NC: usize>(
+                t: &[f32],
+                s: &[f32],
+                args: ((usize, usize), (usize, usize), (usize, usize)),
+                base: f32,
+                cutoff: f32,
+            ) -> f32 {
+                Avx2::patch::<NC>(t, args.0, s, args.1, args.2, base, cutoff)
+            }
+            // SAFETY: the CPU has AVX2 (checked above).
+            out.push(unsafe { avx2::<NC>(t, s, args, base, cutoff) });
+        }
+        out
+    }
+
+    #[test]
+    fn fixed_width_kernel_matches_row_by_row_sums() {
+        // Rows of every length a fixed-width kernel takes, rows packed tightly (so the lanes
+        // past a row's end hold the next row's values) and with slack, every cutoff regime.
+        let mut rng = Rng::keyed(77, 0, 0);
+        let mut val = || rng.below(1 << 20) as f32 / (1 << 16) as f32 - 8.0;
+        for len in 1..=32 {
+            for rows in [1, 2, 3, 7, 9] {
+                for slack in [0, 5] {
+                    let (ts, ss) = (len + slack, len + 2 * slack);
+                    let t: Vec<f32> = (0..1 + rows * ts + PAD).map(|_| val()).collect();
+                    let s: Vec<f32> = (0..2 + rows * ss + PAD).map(|_| val()).collect();
+                    let mut acc = Portable::zero();
+                    for k in 0..rows {
+                        let (a, b) = (1 + k * ts, 2 + k * ss);
+                        Portable::add_row(&mut acc, &t[a..a + len], &s[b..b + len]);
+                    }
+                    let full = 0.5 + Portable::total(&acc);
+                    for cutoff in [f32::INFINITY, full, full * 0.5, 0.25] {
+                        let ctx = (rows, len);
+                        let got = match len.div_ceil(8) {
+                            1 => patch_all::<1>(&t, &s, ctx, (ts, ss), (0.5, cutoff)),
+                            2 => patch_all::<2>(&t, &s, ctx, (ts, ss), (0.5, cutoff)),
+                            3 => patch_all::<3>(&t, &s, ctx, (ts, ss), (0.5, cutoff)),
+                            _ => patch_all::<4>(&t, &s, ctx, (ts, ss), (0.5, cutoff)),
+                        };
+                        for d in &got {
+                            if cutoff > full {
+                                assert_eq!(d.to_bits(), full.to_bits(), "len {len} rows {rows}");
+                            } else {
+                                assert!(*d >= cutoff && *d <= full, "len {len} rows {rows}");
+                            }
+                        }
+                        assert!(got.windows(2).all(|w| w[0].to_bits() == w[1].to_bits()));
+                    }
+                }
+            }
+        }
     }
 
     #[test]
