@@ -27,7 +27,19 @@ fn main() {
     // PM_SRC=128 shrinks the source (cache-resident) to separate memory from compute.
     let sn: usize = std::env::var("PM_SRC").map_or(n, |s| s.parse().expect("PM_SRC"));
     let src = load("python/phloem/data/bark_douglas_fir.png", sn as u32);
-    let tgt = load("tests/data/water.jpg", n as u32);
+    // PM_TGT=bark matches the source against a shifted copy of itself (coherent case).
+    let tgt = if std::env::var("PM_TGT").is_ok_and(|v| v == "bark") {
+        let mut t = load("python/phloem/data/bark_douglas_fir.png", n as u32 + 8);
+        let w = n + 8;
+        let mut out = Vec::with_capacity(n * n * 3);
+        for y in 0..n {
+            out.extend_from_slice(&t[((y + 5) * w + 3) * 3..((y + 5) * w + 3 + n) * 3]);
+        }
+        t.clear();
+        out
+    } else {
+        load("tests/data/water.jpg", n as u32)
+    };
     let input = NnfInput::new(
         Image::new("source", &src, sn, sn, 3).unwrap(),
         Image::new("target", &tgt, n, n, 3).unwrap(),
