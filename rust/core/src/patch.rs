@@ -636,11 +636,76 @@ impl Level<'_> {
                     });
                     *cell = Cell {
                         idx,
-                        d: self.dist(y, x, idx, f32::INFINITY),
+                        d: f32::INFINITY,
                     };
                 }
             });
+        self.fill_distances(&mut cells);
         cells
+    }
+
+    /// Chunks of eight values per patch row for the fixed-width kernel, or 0 for rows too
+    /// long for it (more than 32 values), which take the general one.
+    fn chunks(&self) -> usize {
+        match (2 * self.r + 1) * self.c {
+            n @ 1..=32 => n.div_ceil(8),
+            _ => 0,
+        }
+    }
+
+    /// Sets the distance of every cell with a match, on the fastest kernel.
+    fn fill_distances(&self, cells: &mut [Cell]) {
+        #[cfg(target_arch = "x86_64")]
+        let fast = avx2_enabled();
+        cells
+            .par_chunks_mut(self.tw)
+            .enumerate()
+            .for_each(|(y, row)| {
+                macro_rules! run {
+                    ($nc:literal) => {{
+                        #[cfg(target_arch = "x86_64")]
+                        if fast {
+                            // SAFETY: the CPU supports AVX2 (checked just above).
+                            unsafe { self.distances_avx2::<$nc>(y, row) }
+                        } else {
+                            self.distances::<Portable, $nc>(y, row);
+                        }
+                        #[cfg(not(target_arch = "x86_64"))]
+                        self.distances::<Portable, $nc>(y, row);
+                    }};
+                }
+                match self.chunks() {
+                    1 => run!(1),
+                    2 => run!(2),
+                    3 => run!(3),
+                    4 => run!(4),
+                    _ => run!(0),
+                }
+            });
+    }
+
+    /// [`Self::distances`] with the AVX2 kernel, compiled for AVX2; bit-identical results.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn distances_avx2<const NC: usize>(&self, y: usize, row: &mut [Cell]) {
+        self.distances::<Avx2, NC>(y, row);
+    }
+
+    /// The distances of target row `y`'s matches.
+    #[inline(always)]
+    fn distances<K: Kernel, const NC: usize>(&self, y: usize, row: &mut [Cell]) {
+        let r = self.r;
+        for (x, cell) in row.iter_mut().enumerate() {
+            if cell.idx == NONE {
+                continue;
+            }
+            let interior = y >= r && x >= r && y + r < self.th && x + r < self.tw;
+            cell.d = if NC > 0 && interior {
+                self.dist_interior::<K, NC>(y, x, cell.idx, f32::INFINITY)
+            } else {
+                self.dist_with::<K>(y, x, cell.idx, f32::INFINITY)
+            };
+        }
     }
 
     /// One PatchMatch iteration (propagation + random search) over the whole target.
@@ -649,8 +714,7 @@ impl Level<'_> {
         let evals = AtomicU64::new(0);
         let tw = self.tw;
         #[cfg(target_arch = "x86_64")]
-        let fast =
-            !FORCE_PORTABLE.load(Ordering::Relaxed) && std::arch::is_x86_feature_detected!("avx2");
+        let fast = avx2_enabled();
         cells
             .par_chunks_mut(STRIPE_ROWS * tw)
             .enumerate()
@@ -676,11 +740,11 @@ impl Level<'_> {
                         count
                     }};
                 }
-                let count = match (2 * self.r + 1) * self.c {
-                    1..=8 => run!(1),
-                    9..=16 => run!(2),
-                    17..=24 => run!(3),
-                    25..=32 => run!(4),
+                let count = match self.chunks() {
+                    1 => run!(1),
+                    2 => run!(2),
+                    3 => run!(3),
+                    4 => run!(4),
                     _ => run!(0),
                 };
                 evals.fetch_add(count, Ordering::Relaxed);
