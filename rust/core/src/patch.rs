@@ -802,6 +802,7 @@ impl Level<'_> {
         let reverse = pass.it % 2 == 1;
         let step: i64 = if reverse { 1 } else { -1 };
         let search_radius = self.sh.max(self.sw) as i64;
+        let (ymax, xmax) = ((self.sh - 1 - self.r) as i64, (self.sw - 1 - self.r) as i64);
         let y0 = stripe * STRIPE_ROWS;
         let rows = chunk.len() / tw;
         let mut count = 0u64;
@@ -880,12 +881,20 @@ impl Level<'_> {
                 let mut rad = search_radius;
                 while rad >= 1 && ns < samples.len() {
                     let ylo = (by - rad).max(r);
-                    let yhi = (by + rad).min(self.sh as i64 - 1 - r);
+                    let yhi = (by + rad).min(ymax);
                     let xlo = (bx - rad).max(r);
-                    let xhi = (bx + rad).min(self.sw as i64 - 1 - r);
-                    let cy = rng.range_inclusive(ylo, yhi);
-                    let cx = rng.range_inclusive(xlo, xhi);
-                    if let Some(s) = self.valid(cy, cx) {
+                    let xhi = (bx + rad).min(xmax);
+                    // Window sides are at most MAX_SOURCE_SIDE, so the 32-bit draw is exact.
+                    let cy = ylo + rng.below_u32((yhi - ylo + 1) as u32) as i64;
+                    let cx = xlo + rng.below_u32((xhi - xlo + 1) as u32) as i64;
+                    // Without a source mask every point of the window is an allowed centre:
+                    // the window lies inside the border and contains the current best.
+                    let cand = if self.masked {
+                        self.valid(cy, cx)
+                    } else {
+                        Some(pack(cy as usize, cx as usize))
+                    };
+                    if let Some(s) = cand {
                         samples[ns] = s;
                         ns += 1;
                     }
