@@ -44,7 +44,11 @@ fn main() {
         Image::new("source", &src, sn, sn, 3).unwrap(),
         Image::new("target", &tgt, n, n, 3).unwrap(),
     );
-    let params = NnfParams::default();
+    // PM_IT=0 times the set-up alone (validation, level, initial field).
+    let params = NnfParams {
+        iterations: std::env::var("PM_IT").map_or(5, |s| s.parse().expect("PM_IT")),
+        ..NnfParams::default()
+    };
 
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
