@@ -208,7 +208,42 @@ pub(crate) trait Kernel {
     fn zero() -> Self::Acc;
     fn add_row(acc: &mut Self::Acc, a: &[f32], b: &[f32]);
     fn total(acc: &Self::Acc) -> f32;
+
+    /// `base` plus the distance between the `rows × len` values at `t[t0 + k·ts..]` and
+    /// `s[s0 + k·ss..]` (`k < rows`), abandoned if it has reached `cutoff` after two rows.
+    /// (One check only: on unrelated images most candidates survive the first rows, and each
+    /// check is a horizontal sum and a badly predicted branch. Abandoning never changes a
+    /// result, only the time: partial sums of squares never exceed the full one.) `NC` is `len.div_ceil(8)`; both slices must hold at
+    /// least [`PAD`] values past the end of their last row, which implementations may read
+    /// (and ignore). Same result, bit for bit, as [`Self::add_row`] row by row.
+    #[inline(always)]
+    fn patch<const NC: usize>(
+        t: &[f32],
+        (t0, ts): (usize, usize),
+        s: &[f32],
+        (s0, ss): (usize, usize),
+        (rows, len): (usize, usize),
+        base: f32,
+        cutoff: f32,
+    ) -> f32 {
+        let mut acc = Self::zero();
+        for k in 0..rows {
+            let (a, b) = (t0 + k * ts, s0 + k * ss);
+            Self::add_row(&mut acc, &t[a..a + len], &s[b..b + len]);
+            if k == 1 && rows > 2 {
+                let partial = base + Self::total(&acc);
+                if partial >= cutoff {
+                    return partial;
+                }
+            }
+        }
+        base + Self::total(&acc)
+    }
 }
+
+/// Zero floats appended to a level's source and target buffers, so that a fixed-width kernel
+/// ([`Kernel::patch`]) may load whole 8-lane chunks past the end of a patch row.
+const PAD: usize = 8;
 
 /// The portable kernel.
 pub(crate) struct Portable;
@@ -326,6 +361,71 @@ impl Kernel for Avx2 {
     }
 
     #[inline(always)]
+    fn patch<const NC: usize>(
+        t: &[f32],
+        (t0, ts): (usize, usize),
+        s: &[f32],
+        (s0, ss): (usize, usize),
+        (rows, len): (usize, usize),
+        base: f32,
+        cutoff: f32,
+    ) -> f32 {
+        use std::arch::x86_64::{
+            _mm256_add_ps, _mm256_and_ps, _mm256_castsi256_ps, _mm256_cmpgt_epi32, _mm256_loadu_ps,
+            _mm256_mul_ps, _mm256_set1_epi32, _mm256_setr_epi32, _mm256_setzero_ps, _mm256_sub_ps,
+        };
+        assert!(NC >= 1 && len.div_ceil(8) == NC && rows >= 1);
+        assert!(t0 + (rows - 1) * ts + 8 * NC <= t.len());
+        assert!(s0 + (rows - 1) * ss + 8 * NC <= s.len());
+        // SAFETY: AVX2 is enabled (see `zero`); the asserts above keep every load of `8 * NC`
+        // values per row inside the slices.
+        unsafe {
+            // The last chunk's lanes past `len` hold the next pixels' values: zeroing their
+            // differences adds +0.0, as the masked loads of `add_row` do.
+            let mask = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
+                _mm256_set1_epi32((len - 8 * (NC - 1)) as i32),
+                _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+            ));
+            let (tr, sr) = (t.as_ptr().add(t0), s.as_ptr().add(s0));
+            let [mut a0, mut a1, mut a2] = [_mm256_setzero_ps(); 3];
+            // Patch row k: chunk j into accumulator j mod 3.
+            macro_rules! row {
+                ($k:expr) => {
+                    for j in 0..NC {
+                        let mut d = _mm256_sub_ps(
+                            _mm256_loadu_ps(tr.add($k * ts + 8 * j)),
+                            _mm256_loadu_ps(sr.add($k * ss + 8 * j)),
+                        );
+                        if j + 1 == NC {
+                            d = _mm256_and_ps(d, mask);
+                        }
+                        let sq = _mm256_mul_ps(d, d);
+                        match j % 3 {
+                            0 => a0 = _mm256_add_ps(a0, sq),
+                            1 => a1 = _mm256_add_ps(a1, sq),
+                            _ => a2 = _mm256_add_ps(a2, sq),
+                        }
+                    }
+                };
+            }
+            row!(0);
+            if rows > 1 {
+                row!(1);
+                if rows > 2 {
+                    let partial = base + Self::total(&[a0, a1, a2]);
+                    if partial >= cutoff {
+                        return partial;
+                    }
+                    for k in 2..rows {
+                        row!(k);
+                    }
+                }
+            }
+            base + Self::total(&[a0, a1, a2])
+        }
+    }
+
+    #[inline(always)]
     fn total(acc: &Self::Acc) -> f32 {
         use std::arch::x86_64::{
             _mm256_add_ps, _mm256_castps256_ps128, _mm256_extractf128_ps, _mm_add_ps,
@@ -357,10 +457,12 @@ struct Pass<'p> {
 }
 
 struct Level<'a> {
-    src: Cow<'a, [f32]>,
+    /// Source values, followed by [`PAD`] zeros.
+    src: Vec<f32>,
     sh: usize,
     sw: usize,
-    tgt: Cow<'a, [f32]>,
+    /// Target values, followed by [`PAD`] zeros.
+    tgt: Vec<f32>,
     th: usize,
     tw: usize,
     c: usize,
@@ -403,11 +505,16 @@ impl Level<'_> {
                 }
             }
         }
+        let pad = |buf: Cow<'b, [f32]>| {
+            let mut v = buf.into_owned();
+            v.extend_from_slice(&[0.0; PAD]);
+            v
+        };
         Level {
-            src,
+            src: pad(src),
             sh,
             sw,
-            tgt,
+            tgt: pad(tgt),
             th,
             tw,
             c,
@@ -464,26 +571,31 @@ impl Level<'_> {
         base + K::total(&acc)
     }
 
-    /// Hints the cache to load the source rows a distance evaluation of centre `s` against
-    /// target row `ty` will read. A no-op off x86-64.
+    /// [`Self::dist_with`] for a target patch wholly inside the target, by the fixed-width
+    /// kernel [`Kernel::patch`] (`NC` chunks of eight values per patch row).
     #[inline(always)]
-    fn prefetch(&self, s: u32, ty: usize) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-            let (sy, sx) = unpack(s);
-            let (dy0, dy1) = (ty.min(self.r), (self.th - 1 - ty).min(self.r));
-            let row0 = (sy - dy0) * self.sw + sx - self.r.min(sx);
-            for k in 0..=dy0 + dy1 {
-                let at = (row0 + k * self.sw) * self.c;
-                if at < self.src.len() {
-                    // SAFETY: prefetching is a hint and cannot fault; the address is in bounds.
-                    unsafe { _mm_prefetch::<_MM_HINT_T0>(self.src.as_ptr().add(at).cast::<i8>()) };
-                }
-            }
+    fn dist_interior<K: Kernel, const NC: usize>(
+        &self,
+        ty: usize,
+        tx: usize,
+        s: u32,
+        cutoff: f32,
+    ) -> f32 {
+        let (sy, sx) = unpack(s);
+        let (r, c) = (self.r, self.c);
+        let base = self.cost.map_or(0.0, |c| c[sy * self.sw + sx]);
+        if base >= cutoff {
+            return base;
         }
-        #[cfg(not(target_arch = "x86_64"))]
-        let _ = (s, ty);
+        K::patch::<NC>(
+            &self.tgt,
+            (((ty - r) * self.tw + tx - r) * c, self.tw * c),
+            &self.src,
+            (((sy - r) * self.sw + sx - r) * c, self.sw * c),
+            (2 * r + 1, (2 * r + 1) * c),
+            base,
+            cutoff,
+        )
     }
 
     #[inline(always)]
@@ -524,11 +636,76 @@ impl Level<'_> {
                     });
                     *cell = Cell {
                         idx,
-                        d: self.dist(y, x, idx, f32::INFINITY),
+                        d: f32::INFINITY,
                     };
                 }
             });
+        self.fill_distances(&mut cells);
         cells
+    }
+
+    /// Chunks of eight values per patch row for the fixed-width kernel, or 0 for rows too
+    /// long for it (more than 32 values), which take the general one.
+    fn chunks(&self) -> usize {
+        match (2 * self.r + 1) * self.c {
+            n @ 1..=32 => n.div_ceil(8),
+            _ => 0,
+        }
+    }
+
+    /// Sets the distance of every cell with a match, on the fastest kernel.
+    fn fill_distances(&self, cells: &mut [Cell]) {
+        #[cfg(target_arch = "x86_64")]
+        let fast = avx2_enabled();
+        cells
+            .par_chunks_mut(self.tw)
+            .enumerate()
+            .for_each(|(y, row)| {
+                macro_rules! run {
+                    ($nc:literal) => {{
+                        #[cfg(target_arch = "x86_64")]
+                        if fast {
+                            // SAFETY: the CPU supports AVX2 (checked just above).
+                            unsafe { self.distances_avx2::<$nc>(y, row) }
+                        } else {
+                            self.distances::<Portable, $nc>(y, row);
+                        }
+                        #[cfg(not(target_arch = "x86_64"))]
+                        self.distances::<Portable, $nc>(y, row);
+                    }};
+                }
+                match self.chunks() {
+                    1 => run!(1),
+                    2 => run!(2),
+                    3 => run!(3),
+                    4 => run!(4),
+                    _ => run!(0),
+                }
+            });
+    }
+
+    /// [`Self::distances`] with the AVX2 kernel, compiled for AVX2; bit-identical results.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn distances_avx2<const NC: usize>(&self, y: usize, row: &mut [Cell]) {
+        self.distances::<Avx2, NC>(y, row);
+    }
+
+    /// The distances of target row `y`'s matches.
+    #[inline(always)]
+    fn distances<K: Kernel, const NC: usize>(&self, y: usize, row: &mut [Cell]) {
+        let r = self.r;
+        for (x, cell) in row.iter_mut().enumerate() {
+            if cell.idx == NONE {
+                continue;
+            }
+            let interior = y >= r && x >= r && y + r < self.th && x + r < self.tw;
+            cell.d = if NC > 0 && interior {
+                self.dist_interior::<K, NC>(y, x, cell.idx, f32::INFINITY)
+            } else {
+                self.dist_with::<K>(y, x, cell.idx, f32::INFINITY)
+            };
+        }
     }
 
     /// One PatchMatch iteration (propagation + random search) over the whole target.
@@ -537,8 +714,7 @@ impl Level<'_> {
         let evals = AtomicU64::new(0);
         let tw = self.tw;
         #[cfg(target_arch = "x86_64")]
-        let fast =
-            !FORCE_PORTABLE.load(Ordering::Relaxed) && std::arch::is_x86_feature_detected!("avx2");
+        let fast = avx2_enabled();
         cells
             .par_chunks_mut(STRIPE_ROWS * tw)
             .enumerate()
@@ -549,15 +725,28 @@ impl Level<'_> {
                     level,
                     it,
                 };
-                #[cfg(target_arch = "x86_64")]
-                let count = if fast {
-                    // SAFETY: the CPU supports AVX2 (checked just above).
-                    unsafe { self.stripe_avx2(chunk, stripe, &pass) }
-                } else {
-                    self.stripe::<Portable>(chunk, stripe, &pass)
+                // The fixed-width kernel takes rows of up to four 8-lane chunks.
+                macro_rules! run {
+                    ($nc:literal) => {{
+                        #[cfg(target_arch = "x86_64")]
+                        let count = if fast {
+                            // SAFETY: the CPU supports AVX2 (checked just above).
+                            unsafe { self.stripe_avx2::<$nc>(chunk, stripe, &pass) }
+                        } else {
+                            self.stripe::<Portable, $nc>(chunk, stripe, &pass)
+                        };
+                        #[cfg(not(target_arch = "x86_64"))]
+                        let count = self.stripe::<Portable, $nc>(chunk, stripe, &pass);
+                        count
+                    }};
+                }
+                let count = match self.chunks() {
+                    1 => run!(1),
+                    2 => run!(2),
+                    3 => run!(3),
+                    4 => run!(4),
+                    _ => run!(0),
                 };
-                #[cfg(not(target_arch = "x86_64"))]
-                let count = self.stripe::<Portable>(chunk, stripe, &pass);
                 evals.fetch_add(count, Ordering::Relaxed);
             });
         evals.into_inner()
@@ -566,18 +755,22 @@ impl Level<'_> {
     /// [`Self::stripe`] with the AVX2 kernel, compiled for AVX2; bit-identical results.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn stripe_avx2(&self, chunk: &mut [Cell], stripe: usize, pass: &Pass<'_>) -> u64 {
-        self.stripe::<Avx2>(chunk, stripe, pass)
+    unsafe fn stripe_avx2<const NC: usize>(
+        &self,
+        chunk: &mut [Cell],
+        stripe: usize,
+        pass: &Pass<'_>,
+    ) -> u64 {
+        self.stripe::<Avx2, NC>(chunk, stripe, pass)
     }
 
     /// Evaluates candidate `cand` for target pixel `(y, x)`, keeping it if it beats `best`.
     /// A method, not a closure: a closure the compiler does not inline is compiled without
     /// AVX2, and every intrinsic in it becomes a call.
     #[inline(always)]
-    fn try_candidate<K: Kernel>(
+    fn try_candidate<K: Kernel, const NC: usize>(
         &self,
-        y: usize,
-        x: usize,
+        (y, x, interior): (usize, usize, bool),
         count: &mut u64,
         cand: Option<u32>,
         best: &mut Cell,
@@ -585,7 +778,11 @@ impl Level<'_> {
         if let Some(s) = cand {
             if s != best.idx {
                 *count += 1;
-                let d = self.dist_with::<K>(y, x, s, best.d);
+                let d = if NC > 0 && interior {
+                    self.dist_interior::<K, NC>(y, x, s, best.d)
+                } else {
+                    self.dist_with::<K>(y, x, s, best.d)
+                };
                 if d < best.d {
                     *best = Cell { idx: s, d };
                 }
@@ -595,11 +792,17 @@ impl Level<'_> {
 
     /// Propagation and random search over one stripe; returns the candidates evaluated.
     #[inline(always)]
-    fn stripe<K: Kernel>(&self, chunk: &mut [Cell], stripe: usize, pass: &Pass<'_>) -> u64 {
+    fn stripe<K: Kernel, const NC: usize>(
+        &self,
+        chunk: &mut [Cell],
+        stripe: usize,
+        pass: &Pass<'_>,
+    ) -> u64 {
         let tw = self.tw;
         let reverse = pass.it % 2 == 1;
         let step: i64 = if reverse { 1 } else { -1 };
         let search_radius = self.sh.max(self.sw) as i64;
+        let (ymax, xmax) = ((self.sh - 1 - self.r) as i64, (self.sw - 1 - self.r) as i64);
         let y0 = stripe * STRIPE_ROWS;
         let rows = chunk.len() / tw;
         let mut count = 0u64;
@@ -613,15 +816,16 @@ impl Level<'_> {
                 if best.idx == NONE {
                     continue;
                 }
+                let r = self.r;
+                let at = (y, x, y >= r && x >= r && y + r < self.th && x + r < tw);
                 // Propagation: the neighbour one step back along the scan, shifted.
                 let nx = x as i64 + step;
                 if nx >= 0 && nx < tw as i64 {
                     let n = chunk[ly * tw + nx as usize].idx;
                     if n != NONE {
                         let (sy, sx) = unpack(n);
-                        self.try_candidate::<K>(
-                            y,
-                            x,
+                        self.try_candidate::<K, NC>(
+                            at,
                             &mut count,
                             self.valid(sy as i64, sx as i64 - step),
                             &mut best,
@@ -639,9 +843,8 @@ impl Level<'_> {
                 };
                 if n != NONE {
                     let (sy, sx) = unpack(n);
-                    self.try_candidate::<K>(
-                        y,
-                        x,
+                    self.try_candidate::<K, NC>(
+                        at,
                         &mut count,
                         self.valid(sy as i64 - step, sx as i64),
                         &mut best,
@@ -653,9 +856,8 @@ impl Level<'_> {
                     let b = by * self.sw + bx;
                     for &j in &table[b * k..(b + 1) * k] {
                         let (jy, jx) = unpack(j);
-                        self.try_candidate::<K>(
-                            y,
-                            x,
+                        self.try_candidate::<K, NC>(
+                            at,
                             &mut count,
                             self.valid(jy as i64, jx as i64),
                             &mut best,
@@ -664,8 +866,8 @@ impl Level<'_> {
                 }
                 // Random search around the current best, radius halving (alpha = 1/2). The
                 // centre is fixed for the whole sequence (Barnes et al. 2009, Eq. 1), so all
-                // samples are drawn first and their rows prefetched: the evaluations below
-                // then find the source in cache instead of waiting on memory one by one.
+                // samples are drawn first. (Prefetching their rows here measured no faster
+                // once the kernel got cheaper: the 3 MB source of the benchmark sits in L2/L3.)
                 let mut rng = Rng::keyed(
                     pass.seed,
                     (pass.level as u64) << 32 | pass.it as u64,
@@ -679,20 +881,27 @@ impl Level<'_> {
                 let mut rad = search_radius;
                 while rad >= 1 && ns < samples.len() {
                     let ylo = (by - rad).max(r);
-                    let yhi = (by + rad).min(self.sh as i64 - 1 - r);
+                    let yhi = (by + rad).min(ymax);
                     let xlo = (bx - rad).max(r);
-                    let xhi = (bx + rad).min(self.sw as i64 - 1 - r);
-                    let cy = rng.range_inclusive(ylo, yhi);
-                    let cx = rng.range_inclusive(xlo, xhi);
-                    if let Some(s) = self.valid(cy, cx) {
-                        self.prefetch(s, y);
+                    let xhi = (bx + rad).min(xmax);
+                    // Window sides are at most MAX_SOURCE_SIDE, so the 32-bit draw is exact.
+                    let cy = ylo + rng.below_u32((yhi - ylo + 1) as u32) as i64;
+                    let cx = xlo + rng.below_u32((xhi - xlo + 1) as u32) as i64;
+                    // Without a source mask every point of the window is an allowed centre:
+                    // the window lies inside the border and contains the current best.
+                    let cand = if self.masked {
+                        self.valid(cy, cx)
+                    } else {
+                        Some(pack(cy as usize, cx as usize))
+                    };
+                    if let Some(s) = cand {
                         samples[ns] = s;
                         ns += 1;
                     }
                     rad /= 2;
                 }
                 for &s in &samples[..ns] {
-                    self.try_candidate::<K>(y, x, &mut count, Some(s), &mut best);
+                    self.try_candidate::<K, NC>(at, &mut count, Some(s), &mut best);
                 }
                 chunk[li] = best;
             }
@@ -1374,6 +1583,76 @@ mod tests {
         negative[0] = -1.0;
         input.source_cost = Some(&negative);
         assert!(nnf(&input, &params).is_err());
+    }
+
+    /// `Kernel::patch` with `NC` fixed, for every kernel, on the same data.
+    fn patch_all<const NC: usize>(
+        t: &[f32],
+        s: &[f32],
+        (rows, len): (usize, usize),
+        (ts, ss): (usize, usize),
+        (base, cutoff): (f32, f32),
+    ) -> Vec<f32> {
+        let args = ((1, ts), (2, ss), (rows, len));
+        let mut out = vec![Portable::patch::<NC>(
+            t, args.0, s, args.1, args.2, base, cutoff,
+        )];
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            #[target_feature(enable = "avx2")]
+            unsafe fn avx2<const NC: usize>(
+                t: &[f32],
+                s: &[f32],
+                args: ((usize, usize), (usize, usize), (usize, usize)),
+                base: f32,
+                cutoff: f32,
+            ) -> f32 {
+                Avx2::patch::<NC>(t, args.0, s, args.1, args.2, base, cutoff)
+            }
+            // SAFETY: the CPU has AVX2 (checked above).
+            out.push(unsafe { avx2::<NC>(t, s, args, base, cutoff) });
+        }
+        out
+    }
+
+    #[test]
+    fn fixed_width_kernel_matches_row_by_row_sums() {
+        // Rows of every length a fixed-width kernel takes, rows packed tightly (so the lanes
+        // past a row's end hold the next row's values) and with slack, every cutoff regime.
+        let mut rng = Rng::keyed(77, 0, 0);
+        let mut val = || rng.below(1 << 20) as f32 / (1 << 16) as f32 - 8.0;
+        for len in 1..=32 {
+            for rows in [1, 2, 3, 7, 9] {
+                for slack in [0, 5] {
+                    let (ts, ss) = (len + slack, len + 2 * slack);
+                    let t: Vec<f32> = (0..1 + rows * ts + PAD).map(|_| val()).collect();
+                    let s: Vec<f32> = (0..2 + rows * ss + PAD).map(|_| val()).collect();
+                    let mut acc = Portable::zero();
+                    for k in 0..rows {
+                        let (a, b) = (1 + k * ts, 2 + k * ss);
+                        Portable::add_row(&mut acc, &t[a..a + len], &s[b..b + len]);
+                    }
+                    let full = 0.5 + Portable::total(&acc);
+                    for cutoff in [f32::INFINITY, full, full * 0.5, 0.25] {
+                        let ctx = (rows, len);
+                        let got = match len.div_ceil(8) {
+                            1 => patch_all::<1>(&t, &s, ctx, (ts, ss), (0.5, cutoff)),
+                            2 => patch_all::<2>(&t, &s, ctx, (ts, ss), (0.5, cutoff)),
+                            3 => patch_all::<3>(&t, &s, ctx, (ts, ss), (0.5, cutoff)),
+                            _ => patch_all::<4>(&t, &s, ctx, (ts, ss), (0.5, cutoff)),
+                        };
+                        for d in &got {
+                            if cutoff > full {
+                                assert_eq!(d.to_bits(), full.to_bits(), "len {len} rows {rows}");
+                            } else {
+                                assert!(*d >= cutoff && *d <= full, "len {len} rows {rows}");
+                            }
+                        }
+                        assert!(got.windows(2).all(|w| w[0].to_bits() == w[1].to_bits()));
+                    }
+                }
+            }
+        }
     }
 
     #[test]

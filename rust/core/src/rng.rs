@@ -42,6 +42,14 @@ impl Rng {
         ((u128::from(self.next_u64() >> 32) * u128::from(n)) >> 32) as u64
     }
 
+    /// [`Self::below`] for `n` that fits in 32 bits: the same value, without the 128-bit
+    /// product.
+    #[inline]
+    pub fn below_u32(&mut self, n: u32) -> u64 {
+        debug_assert!(n > 0);
+        ((self.next_u64() >> 32) * u64::from(n)) >> 32
+    }
+
     /// A uniform integer in `lo..=hi`.
     #[inline]
     pub fn range_inclusive(&mut self, lo: i64, hi: i64) -> i64 {
@@ -66,6 +74,19 @@ mod tests {
             Rng::keyed(1, 2, 3).next_u64(),
             Rng::keyed(2, 2, 3).next_u64()
         );
+    }
+
+    #[test]
+    fn below_u32_is_below() {
+        for n in [1u32, 2, 3, 7, 512, 65_535, 65_536, u32::MAX] {
+            let (mut a, mut b) = (
+                Rng::keyed(5, 6, u64::from(n)),
+                Rng::keyed(5, 6, u64::from(n)),
+            );
+            for _ in 0..1000 {
+                assert_eq!(a.below(u64::from(n)), b.below_u32(n));
+            }
+        }
     }
 
     #[test]
