@@ -24,7 +24,6 @@ from pathlib import Path
 import pytest
 from phloem.branching import (
     BendingModel,
-    Branch,
     FurcationModel,
     Skeleton,
     angle_histogram,
@@ -41,19 +40,7 @@ H = 2.0
 
 def example(trees: int = 4, seed: int = 0) -> Skeleton:
     """``trees`` synthetic structures stacked vertically in one skeleton."""
-    out: list[Branch] = []
-    y0 = 0.0
-    width = 0
-    for i in range(trees):
-        part = synthetic_skeleton(seed + i, length=260.0, h=H)
-        base = len(out)
-        for b in part.branches:
-            parent = None if b.parent is None else (b.parent[0] + base, b.parent[1])
-            out.append(Branch(b.points + [0.0, y0], b.thickness, parent))
-        assert part.shape is not None
-        y0 += part.shape[0]
-        width = max(width, part.shape[1])
-    return Skeleton(out, (int(y0) + 1, width))
+    return Skeleton.stack([synthetic_skeleton(seed + i, length=260.0, h=H) for i in range(trees)])
 
 
 def grow_nodes(bending: BendingModel, furcation: FurcationModel, nodes: int, seed: int = 0) -> Skeleton:

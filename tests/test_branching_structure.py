@@ -37,19 +37,7 @@ def walk_branch(rng: np.random.Generator, n: int, sigma: float, start=(20.0, 150
 
 def forest(seed: int, sigma: float = 0.25, branches: int = 3) -> Skeleton:
     """Several synthetic structures side by side, one skeleton (more data for the statistics)."""
-    parts = [synthetic_skeleton(seed + i, sigma=sigma, length=260.0) for i in range(branches)]
-    out: list[Branch] = []
-    y0 = 0.0
-    width = 0
-    for p in parts:
-        base = len(out)
-        for b in p.branches:
-            parent = None if b.parent is None else (b.parent[0] + base, b.parent[1])
-            out.append(Branch(b.points + [0.0, y0], b.thickness, parent))
-        assert p.shape is not None
-        y0 += p.shape[0]
-        width = max(width, p.shape[1])
-    return Skeleton(out, (math.ceil(y0), width))
+    return Skeleton.stack([synthetic_skeleton(seed + i, sigma=sigma, length=260.0) for i in range(branches)])
 
 
 def segments(sk: Skeleton) -> tuple[np.ndarray, np.ndarray]:

@@ -307,6 +307,36 @@ class Skeleton:
                 where = f"{name}: branches[{i}]" if name else f"branches[{i}]"
                 raise SkeletonError(f"{where}.points[{j}] = ({x[j]:.1f}, {y[j]:.1f}) is outside the {w}x{h} image")
 
+    @classmethod
+    def stack(cls, parts: Sequence[Skeleton]) -> Skeleton:
+        """The skeletons one below the other in one image: a forest with their branches.
+
+        Each part is moved down by the heights of the parts above it; parent indices are
+        renumbered. Every part needs a ``shape``.
+
+        Examples
+        --------
+        >>> a = Skeleton([Branch([[0, 1], [4, 1]], 1.0)], (3, 5))
+        >>> b = Skeleton([Branch([[1, 0], [1, 2]], 1.0), Branch([[1, 1], [3, 1]], 1.0, parent=(0, 1))], (4, 6))
+        >>> s = Skeleton.stack([a, b])
+        >>> s.shape, s.branches[2].parent, s.branches[1].points[0].tolist()
+        ((7, 6), (1, 1), [1.0, 3.0])
+        """
+        out: list[Branch] = []
+        y0, width = 0, 0
+        for i, part in enumerate(parts):
+            if part.shape is None:
+                raise SkeletonError(f"parts[{i}]: a skeleton without a shape cannot be stacked")
+            base = len(out)
+            for b in part.branches:
+                parent = None if b.parent is None else (b.parent[0] + base, b.parent[1])
+                out.append(Branch(b.points + [0.0, float(y0)], b.thickness.copy(), parent))
+            y0 += part.shape[0]
+            width = max(width, part.shape[1])
+        if not out:
+            raise SkeletonError("parts: expected at least one skeleton with branches")
+        return cls(out, (y0, width))
+
     # -- geometry ---------------------------------------------------------------------------
 
     def children(self) -> dict[int, list[tuple[int, int]]]:
