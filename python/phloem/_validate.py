@@ -143,3 +143,18 @@ def check_size(size: Any, name: str = "size") -> tuple[int, int]:
     except (TypeError, ValueError):
         raise TypeError(f"{name}: expected (height, width) or an int, got {size!r}") from None
     return check_int(h, f"{name}[0] (height)", 1), check_int(w, f"{name}[1] (width)", 1)
+
+
+def check_convex_weights(weights: Any, count: int, name: str = "weights") -> NDArray[np.float64]:
+    """``count`` real, finite, non-negative weights summing to 1 (within 1e-6), as float64."""
+    arr = np.asarray(weights)
+    if arr.dtype == np.bool_ or not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+        raise TypeError(f"{name}: expected real numbers, got dtype {arr.dtype}")
+    if arr.shape != (count,):
+        raise ValueError(f"{name}: expected {count} weights, one per source, got shape {arr.shape}")
+    out = np.ascontiguousarray(arr, dtype=np.float64)
+    if not (np.isfinite(out).all() and (out >= 0).all()):
+        raise ValueError(f"{name}: expected finite non-negative weights, got {out.tolist()}")
+    if abs(float(out.sum()) - 1.0) > 1e-6:
+        raise ValueError(f"{name}: expected weights summing to 1, got sum {float(out.sum()):.6g}")
+    return out

@@ -40,7 +40,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from ._validate import as_image, as_mask, check_float, check_int
+from . import io, warp
+from ._validate import as_image, as_mask, check_convex_weights, check_float, check_int
 
 __all__ = [
     "Library",
@@ -1132,19 +1133,8 @@ def combine_contours(contours: Sequence[Any], weights: Any) -> F64:
     cs = [_points(c, f"contours[{i}]") for i, c in enumerate(contours)]
     if len({c.shape for c in cs}) != 1:
         raise ValueError(f"contours: expected the same number of points in each, got {[len(c) for c in cs]}")
-    w = _convex_weights(weights, len(cs), "weights")
+    w = check_convex_weights(weights, len(cs), "weights")
     return np.asarray(np.tensordot(w, np.stack(cs), axes=1), dtype=np.float64)
-
-
-def _convex_weights(weights: Any, count: int, name: str) -> F64:
-    w = np.asarray(weights, dtype=np.float64).reshape(-1)
-    if w.shape != (count,):
-        raise ValueError(f"{name}: expected {count} weights, got shape {np.shape(weights)}")
-    if not np.isfinite(w).all() or (w < 0).any():
-        raise ValueError(f"{name}: expected finite non-negative weights, got {w.tolist()}")
-    if abs(float(w.sum()) - 1.0) > 1e-6:
-        raise ValueError(f"{name}: expected weights summing to 1, got sum {float(w.sum()):.6g}")
-    return w
 
 
 def _dilated_contour(mask: Mask, dilation: int) -> F64:
@@ -1372,14 +1362,12 @@ def morph(
     shape = ts[0].image.shape[:2]
     if any(t.image.shape != ts[0].image.shape for t in ts):
         raise ValueError(f"trees: expected exemplars of one size, got {sorted({t.image.shape[:2] for t in ts})}")
-    w = _convex_weights(weights, len(ts), "weights")
-    cw = w if color_weights is None else _convex_weights(color_weights, len(ts), "color_weights")
+    w = check_convex_weights(weights, len(ts), "weights")
+    cw = w if color_weights is None else check_convex_weights(color_weights, len(ts), "color_weights")
     target = combine_contours([t.resampled for t in ts], w)
     mask = fill_contour(target, shape)
     keep = [i for i in range(len(ts)) if cw[i] > 0]
     tc, scs = cages(target, [ts[i] for i in keep], shape, m=m, dilation=dilation, mask=mask)
-    from . import warp
-
     # `dilation` 3 x 3 dilations are one square dilation of side 2 * dilation + 1.
     side = 2 * dilation + 1
     region = cv2.dilate(mask.astype(np.uint8), np.ones((side, side), np.uint8)) > 0
@@ -1515,8 +1503,6 @@ class Library:
         ValueError
             If an image cannot be used (unless ``skip_bad``) or no tree is found.
         """
-        from . import io
-
         folder = Path(path)
         if not folder.is_dir():
             raise ValueError(f"path: {folder} is not a folder")

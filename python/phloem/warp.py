@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import _core
-from ._validate import as_image, as_mask, check_size, check_threads, restore_ndim
+from ._validate import as_image, as_mask, check_convex_weights, check_size, check_threads, restore_ndim
 
 __all__ = ["mvc", "mvc_combine", "mvc_weights"]
 
@@ -53,20 +53,6 @@ def _points(points: Any, name: str, *, polygon: bool) -> NDArray[np.float64]:
             raise ValueError(
                 f"{name}: expected a polygon with non-zero area, got a degenerate one (all points on a line)"
             )
-    return out
-
-
-def _weights(weights: Any, count: int) -> NDArray[np.float64]:
-    arr = np.asarray(weights)
-    if arr.dtype == np.bool_ or not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
-        raise TypeError(f"weights: expected real numbers, got dtype {arr.dtype}")
-    if arr.shape != (count,):
-        raise ValueError(f"weights: expected {count} weights, one per image, got shape {arr.shape}")
-    out = np.ascontiguousarray(arr, dtype=np.float64)
-    if not (np.isfinite(out).all() and (out >= 0).all()):
-        raise ValueError(f"weights: expected finite non-negative weights, got {out.tolist()}")
-    if abs(out.sum() - 1.0) > 1e-6:
-        raise ValueError(f"weights: expected weights summing to 1, got {out.sum()}")
     return out
 
 
@@ -272,6 +258,6 @@ def mvc_combine(
         raise ValueError(
             f"images: expected colour channels and a last alpha channel (C >= 2), got C = {imgs[0].shape[2]}"
         )
-    w = _weights(weights, len(imgs))
+    w = check_convex_weights(weights, len(imgs))
     reg = None if region is None else as_mask(region, "region", hw)
     return _core.mvc_combine(imgs, conts, target, w, hw, region=reg, threads=check_threads(threads))
