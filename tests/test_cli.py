@@ -239,7 +239,7 @@ def test_trees_writes_variations_sidecars_and_sheet(tmp_path, capsys):
     # The sidecar's variation seed reproduces the file through the Python API.
     from phloem import trees
 
-    library = trees.Library.from_folder(lib, size=128)
+    library = trees.Library.load(lib, size=128)
     v = trees.variation(library, seed=meta["parameters"]["variation_seed"])
     assert np.abs(v.image - img).max() <= 1 / 255 + 1e-6
     assert io.read_image(sheet).shape[2] == 3
@@ -278,7 +278,7 @@ def test_trees_bad_library_is_a_clean_error(tmp_path, capsys):
     rgb = tmp_path / "rgb.png"
     io.write_image(rgb, np.ones((40, 40, 3), np.float32))
     assert main(["trees", str(rgb), "--count", "1", "--out-dir", str(tmp_path / "o"), "-q"]) == 2
-    assert "no alpha channel" in capsys.readouterr().err
+    assert "rgb.png: expected an RGBA image (trees need an alpha channel)" in capsys.readouterr().err
     one = tmp_path / "one"
     one.mkdir()
     _tree_png(one / "t.png", 30, 4)

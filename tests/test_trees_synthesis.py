@@ -250,21 +250,22 @@ def test_variation_and_library_errors(library, tmp_path: Path):
     phloem.io.write_image(tmp_path / "empty.png", np.zeros((50, 40, 4), np.float32))
     phloem.io.write_image(tmp_path / "tree.png", _tree(0))
     with pytest.raises(ValueError, match=r"empty.png: "):
-        trees.Library.from_folder(tmp_path, size=128)
-    lib = trees.Library.from_folder(tmp_path, size=128, skip_bad=True)
+        trees.Library.load(tmp_path, size=128)
+    lib = trees.Library.load(tmp_path, size=128, skip_bad=True)
     assert lib.names == ["tree.png"]
-    with pytest.raises(ValueError, match=r"^path: .* is not a folder"):
-        trees.Library.from_folder(tmp_path / "tree.png")
+    with pytest.raises(ValueError, match=r"^path: .* does not exist"):
+        trees.Library.load(tmp_path / "none")
+    assert trees.Library.load(tmp_path / "tree.png", size=128).names == ["tree.png"]  # one image
 
 
-def test_library_from_folder_splits_atlases(tmp_path: Path):
+def test_library_load_splits_atlases(tmp_path: Path):
     atlas = np.zeros((300, 460, 4), np.float32)
     atlas[:, :220] = _tree(0)
     atlas[:, 240:] = _tree(1)
     phloem.io.write_image(tmp_path / "atlas.png", atlas)
-    lib = trees.Library.from_folder(tmp_path, size=128)
+    lib = trees.Library.load(tmp_path, size=128)
     assert lib.names == ["atlas.png[0]", "atlas.png[1]"]
-    whole = trees.Library.from_folder(tmp_path, size=128, atlas=False)
+    whole = trees.Library.load(tmp_path, size=128, atlas=False)
     assert whole.names == ["atlas.png"]
 
 

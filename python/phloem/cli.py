@@ -227,14 +227,10 @@ def _tree_library(args: argparse.Namespace, bar: Any) -> trees.Library:
     clf = None
     if args.trunk_model is not None:
         clf = trees.TrunkClassifier.from_dict(json.loads(Path(args.trunk_model).read_text(encoding="utf-8")))
-    if src.is_dir():
-        return trees.Library.from_folder(src, atlas=atlas, size=args.size, skip_bad=args.skip_bad, classifier=clf, progress=bar)
-    img = io.read_image(src, max_pixels=args.max_pixels)
-    if img.ndim != 3 or img.shape[2] != 4:
-        raise ValueError(f"library: {src} has no alpha channel; tree billboards must be RGBA")
-    pieces = [img] if atlas is False else trees.split_atlas(img)
-    names = [src.name] if len(pieces) == 1 else [f"{src.name}[{i}]" for i in range(len(pieces))]
-    return trees.Library.from_images(pieces, names=names, size=args.size, classifier=clf, progress=bar)
+    return trees.Library.load(
+        src, atlas=atlas, size=args.size, skip_bad=args.skip_bad, classifier=clf, max_pixels=args.max_pixels,
+        progress=bar,
+    )  # fmt: skip
 
 
 def _cmd_trees(args: argparse.Namespace) -> None:

@@ -1379,7 +1379,7 @@ def morph(
 class Library:
     """A library of preprocessed tree exemplars (paper §3: the library ``L``).
 
-    Build one with :meth:`from_images` or :meth:`from_folder`; all trees share one size and
+    Build one with :meth:`from_images` or :meth:`load`; all trees share one size and
     one contour split, so their contours can be combined.
 
     Attributes
@@ -1467,7 +1467,7 @@ class Library:
         return cls(out, list(names) if names is not None else [])
 
     @classmethod
-    def from_folder(
+    def load(
         cls,
         path: str | os.PathLike[str],
         *,
@@ -1476,14 +1476,15 @@ class Library:
         alpha_threshold: float = 0.5,
         skip_bad: bool = False,
         classifier: TrunkClassifier | None = None,
+        max_pixels: int = io.DEFAULT_MAX_PIXELS,
         progress: Any = None,
     ) -> Library:
-        """Read every PNG/TIFF/WebP image of a folder (sorted by name) into a library.
+        """Read a folder of PNG/TIFF/WebP images (sorted by name), or one image, into a library.
 
         Parameters
         ----------
         path : path-like
-            The folder.
+            A folder, or one image (typically an atlas of several trees).
         atlas : bool, optional
             ``True``: every image is an atlas of several trees (:func:`split_atlas`);
             ``False``: one tree per image; ``None`` (default): split every image and keep
@@ -1495,6 +1496,8 @@ class Library:
             instead of raising.
         classifier : TrunkClassifier, optional
             Crown/trunk segmentation by this classifier instead of :func:`segment`.
+        max_pixels : int, optional
+            Refuse images with more pixels (see :func:`phloem.io.read_image`).
         progress : callable, optional
             ``progress(done, total)`` after each image.
 
@@ -1504,16 +1507,19 @@ class Library:
             If an image cannot be used (unless ``skip_bad``) or no tree is found.
         """
         folder = Path(path)
-        if not folder.is_dir():
-            raise ValueError(f"path: {folder} is not a folder")
-        files = sorted(p for p in folder.iterdir() if p.suffix.lower() in {".png", ".tif", ".tiff", ".webp"})
-        if not files:
-            raise ValueError(f"path: {folder} has no PNG, TIFF or WebP images")
+        if folder.is_dir():
+            files = sorted(p for p in folder.iterdir() if p.suffix.lower() in {".png", ".tif", ".tiff", ".webp"})
+            if not files:
+                raise ValueError(f"path: {folder} has no PNG, TIFF or WebP images")
+        elif folder.is_file():
+            files = [folder]
+        else:
+            raise ValueError(f"path: {folder} does not exist")
         trees_: list[Tree] = []
         names: list[str] = []
         for k, f in enumerate(files):
             try:
-                img = io.read_image(f)
+                img = io.read_image(f, max_pixels=max_pixels)
                 if img.ndim != 3 or img.shape[2] != 4:
                     raise ValueError("expected an RGBA image (trees need an alpha channel)")
                 pieces = [img] if atlas is False else split_atlas(img, alpha_threshold=alpha_threshold)
