@@ -332,8 +332,8 @@ def _trace_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--min-length", type=float, default=8.0, help="drop traced branches shorter than this many pixels (default 8)")
 
 
-def _trace(args: argparse.Namespace, image: np.ndarray) -> branching.Skeleton:
-    return branching.trace(image, kind=args.kind, sigmas=tuple(args.sigmas), channel=args.channel, min_length=args.min_length)
+def _trace_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    return {"kind": args.kind, "sigmas": tuple(args.sigmas), "channel": args.channel, "min_length": args.min_length}
 
 
 def _write_skeleton(path: Path, sk: branching.Skeleton, args: argparse.Namespace, command: str, **extra: Any) -> None:
@@ -362,19 +362,12 @@ def _cmd_branching_trace(args: argparse.Namespace) -> None:
     if args.overlay is not None:
         _check_writable(Path(args.overlay), args)
     img = io.read_image(args.input, max_pixels=args.max_pixels)
-    sk = _run("branching trace", args, lambda bar: _trace(args, img))
+    sk = _run("branching trace", args, lambda bar: branching.trace(img, **_trace_kwargs(args)))
     _write_skeleton(out, sk, args, "branching trace", branches=len(sk.branches), total_length=round(sk.total_length(), 1))
     if args.overlay is not None:
         io.write_image(args.overlay, sk.draw(img, width=2), overwrite=args.force, bit_depth=args.bit_depth)
         if not args.quiet:
             print(f"wrote {args.overlay}", file=sys.stderr)
-
-
-def _models(args: argparse.Namespace, source: branching.Skeleton) -> tuple[Any, Any]:
-    bend = branching.BendingModel.fit(source, h=args.h, k=args.k, m=args.m, c=args.c)
-    has_children = any(b.parent is not None for b in source.branches)
-    fur = branching.FurcationModel.fit(source, h=bend.h, k=args.k, c=args.c) if has_children else None
-    return bend, fur
 
 
 def _guide(path: str | None, args: argparse.Namespace) -> Any:
@@ -456,7 +449,7 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     shape = args.size or source.shape
     if shape is None:
         raise ValueError("size: the skeleton file has no shape; pass --size WxH")
-    bend, fur = _models(args, source)
+    bend, fur = branching.fit_models(source, h=args.h, k=args.k, m=args.m, c=args.c)
     new = _run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
     _write_skeleton(out, new, args, "branching grow", h=bend.h, branches=len(new.branches))
     if args.preview is not None:
@@ -498,11 +491,10 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
     _check_json_target(files["skeleton"], args)
     img = io.read_image(args.input, max_pixels=args.max_pixels)
     source = None if args.skeleton is None else branching.Skeleton.load(args.skeleton)
-    trace_options = {"kind": args.kind, "sigmas": tuple(args.sigmas), "channel": args.channel, "min_length": args.min_length}
     res = _run(
         "branching run", args,
         lambda bar: branching.synthesize(
-            img, source, size=args.size, seed=args.seed, trace_options=trace_options, h=args.h, k=args.k, m=args.m,
+            img, source, size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, k=args.k, m=args.m,
             c=args.c, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize,
             guide=_guide(args.guide, args), render_options=_render_kwargs(args), threads=args.threads, progress=bar,
         ),

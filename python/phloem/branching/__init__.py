@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from .figures import histogram_figure
 from .image import Fragment, RenderResult, fragments, rectify, render, rigid_align, unrectify
-from .pipeline import SynthesisResult, synthesize
+from .pipeline import SynthesisResult, fit_models, synthesize
 from .skeleton import Branch, Skeleton, SkeletonError
 from .structure import (
     BendingModel,
@@ -42,6 +42,7 @@ __all__ = [
     "default_h",
     "estimate_thickness",
     "extend",
+    "fit_models",
     "fragments",
     "grow",
     "histogram_distance",

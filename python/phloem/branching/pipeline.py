@@ -15,7 +15,7 @@ from .skeleton import Skeleton
 from .structure import BendingModel, FurcationModel, grow
 from .trace import trace
 
-__all__ = ["SynthesisResult", "synthesize"]
+__all__ = ["SynthesisResult", "fit_models", "synthesize"]
 
 
 @dataclass
@@ -43,6 +43,26 @@ class SynthesisResult:
     bending: BendingModel
     furcation: FurcationModel | None
     render: RenderResult
+
+
+def fit_models(
+    skeleton: Skeleton, *, h: float | None = None, k: int = 3, m: int | None = None, c: int = 2
+) -> tuple[BendingModel, FurcationModel | None]:
+    """The bending model (§4.2) and, if the skeleton branches at all, the furcation model (§4.3).
+
+    Both use the bending model's resampling step ``h``.
+
+    Examples
+    --------
+    >>> from phloem.branching import synthetic_skeleton
+    >>> bend, fur = fit_models(synthetic_skeleton(0), h=2.0)
+    >>> bend.h, fur is not None
+    (2.0, True)
+    """
+    bending = BendingModel.fit(skeleton, h=h, k=k, m=m, c=c)
+    has_children = any(b.parent is not None for b in skeleton.branches)
+    furcation = FurcationModel.fit(skeleton, h=bending.h, k=k, c=c) if has_children else None
+    return bending, furcation
 
 
 def synthesize(
@@ -128,9 +148,7 @@ def synthesize(
     else:
         raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
     tick(1)
-    bending = BendingModel.fit(source, h=h, k=k, m=m, c=c)
-    has_children = any(b.parent is not None for b in source.branches)
-    furcation = FurcationModel.fit(source, h=bending.h, k=k, c=c) if has_children else None
+    bending, furcation = fit_models(source, h=h, k=k, m=m, c=c)
     tick(2)
     target = grow(
         bending, furcation, shape=shape, seed=seed, generations=generations, max_length=max_length,
