@@ -925,11 +925,11 @@ def simplify(mask: Any, *, m: int = 100, dilation: int = 8) -> F64:
     dilation = check_int(dilation, "dilation", 0)
     if not mk.any():
         raise ValueError("mask: expected some set pixels, the mask is empty")
-    u8: NDArray[Any] = mk.astype(np.uint8)
-    if dilation:
-        u8 = cv2.copyMakeBorder(u8, dilation, dilation, dilation, dilation, cv2.BORDER_CONSTANT, value=0)
-        u8 = cv2.dilate(u8, np.ones((3, 3), np.uint8), iterations=dilation)
-    c = contour(np.asarray(u8) > 0) - dilation
+    return _simplify_outline(_dilated_contour(mk, dilation), m)
+
+
+def _simplify_outline(c: F64, m: int) -> F64:
+    """``m`` points of equal chord along a closed outline, from its lowest point."""
     start = int(np.argmax(c[:, 1] + 1e-6 * np.abs(c[:, 0] - c[:, 0].mean()) * -1))
     loop = np.concatenate([c[start:], c[:start], c[start : start + 1]])
     return _segment_resample(loop, m)
@@ -1033,10 +1033,11 @@ def prepare(
     c = contour(img[..., 3], alpha_threshold=alpha_threshold)
     pins = pin_points(c, tm)
     cr = resample(c, pins, split=split)
-    interior = fill_contour(cr, img.shape[:2])
-    cs = simplify(interior, m=m, dilation=dilation)
+    # The dilated outline once: C_s samples it here, and cages() matches against it later.
+    dilation = check_int(dilation, "dilation", 0)
+    outline = _dilated_contour(fill_contour(cr, img.shape[:2]), dilation)
+    cs = _simplify_outline(outline, check_int(m, "m", 3))
     counts = (int(split[0]), int(split[1]), int(split[2]))
-    outline = _dilated_contour(interior, dilation)
     return Tree(
         image=img,
         trunk=tm,
@@ -1138,7 +1139,8 @@ def combine_contours(contours: Sequence[Any], weights: Any) -> F64:
 
 
 def _dilated_contour(mask: Mask, dilation: int) -> F64:
-    """The longest exterior contour of ``mask`` dilated ``dilation`` times (3 x 3 square)."""
+    """The longest exterior contour of ``mask`` dilated ``dilation`` times by a 3 x 3 square
+    (one dilation by a square of side ``2 dilation + 1``)."""
     u8: NDArray[Any] = mask.astype(np.uint8)
     if dilation:
         u8 = cv2.copyMakeBorder(u8, dilation, dilation, dilation, dilation, cv2.BORDER_CONSTANT, value=0)
