@@ -313,6 +313,14 @@ impl Best<'_> {
     }
 }
 
+/// Whether an `h × w` exemplar holds `k` neighbours for every pixel outside the window of
+/// `exclude` pixels around it (what [`knn`] needs).
+#[must_use]
+pub fn fits(h: usize, w: usize, exclude: usize, k: usize) -> bool {
+    let excluded_max = (2 * exclude + 1).min(h) * (2 * exclude + 1).min(w);
+    h * w > excluded_max && h * w - excluded_max >= k
+}
+
 /// Computes the `k` nearest patches of every exemplar pixel (see the module docs).
 pub fn knn(exemplar: &Image<'_>, weights: Option<&[f32]>, params: &KnnParams) -> Result<Knn> {
     let p = params.patch_size;
@@ -327,8 +335,7 @@ pub fn knn(exemplar: &Image<'_>, weights: Option<&[f32]>, params: &KnnParams) ->
         return Err(invalid("k", "expected at least 1 neighbour, got 0"));
     }
     let ex = params.exclude;
-    let excluded_max = (2 * ex + 1).min(h) * (2 * ex + 1).min(w);
-    if h * w <= excluded_max || h * w - excluded_max < params.k {
+    if !fits(h, w, ex, params.k) {
         return Err(invalid(
             "k",
             format!("{} neighbours cannot be found in a {h}×{w} exemplar when {ex} pixels around each are excluded", params.k),

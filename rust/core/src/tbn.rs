@@ -35,7 +35,7 @@ use rayon::prelude::*;
 
 use crate::error::{invalid, Result};
 use crate::image::{prescale, Image};
-use crate::knn::{coherence_candidates, knn, mirror_pad, pad_with, shift, Knn, KnnParams};
+use crate::knn::{self, coherence_candidates, knn, mirror_pad, pad_with, shift, Knn, KnnParams};
 #[cfg(target_arch = "x86_64")]
 use crate::patch::Avx2;
 use crate::patch::{avx2_enabled, Kernel, Portable, NONE};
@@ -576,9 +576,7 @@ impl<'a> Level<'a> {
         // A coarse level can be too small to hold k - 1 neighbours outside each patch's
         // excluded window; it then searches coherence candidates only (k = 1). Every other
         // k-NN failure is an error, not a silent fallback.
-        let excluded = (2 * r + 1).min(el.h) * (2 * r + 1).min(el.w);
-        let fits = el.h * el.w > excluded && el.h * el.w - excluded >= params.k.saturating_sub(1);
-        let table = if params.k > 1 && fits {
+        let table = if params.k > 1 && knn::fits(el.h, el.w, r, params.k - 1) {
             let img = Image::new("exemplar", &el.aug, el.h, el.w, ca)?;
             knn(
                 &img,
