@@ -25,8 +25,6 @@ from typing import Any, Literal
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage, sparse  # type: ignore[import-untyped]  # (scipy comes with scikit-image)
-from scipy.sparse import csgraph  # type: ignore[import-untyped]
 
 from .._validate import as_image, check_float, check_int
 from .skeleton import Branch, Skeleton
@@ -327,6 +325,9 @@ def _pixel_forest(skel: NDArray[np.bool_], radius: F32) -> tuple[NDArray[np.intp
     for edge weights ``length / (r_a + r_b)``, so every cycle loses its edge of smallest radius
     (and the redundant diagonals of the pixel graph go first).
     """
+    from scipy import sparse  # type: ignore[import-untyped]  # (scipy comes with scikit-image; imported
+    from scipy.sparse import csgraph  # type: ignore[import-untyped]  # here, not at phloem import time)
+
     ys, xs = np.nonzero(skel)
     n = len(ys)
     index = np.full(skel.shape, -1, np.int64)
@@ -358,6 +359,8 @@ def _pixel_forest(skel: NDArray[np.bool_], radius: F32) -> tuple[NDArray[np.intp
 
 def _reach(tree: Any, start: int) -> tuple[NDArray[np.intp], NDArray[np.int32], F64]:
     """Nodes of ``start``'s tree by increasing path length, predecessors and path lengths."""
+    from scipy.sparse import csgraph
+
     dist, pred = csgraph.dijkstra(tree, directed=False, indices=start, return_predecessors=True)
     nodes = np.nonzero(np.isfinite(dist))[0]
     order = nodes[np.argsort(dist[nodes], kind="stable")]
@@ -408,6 +411,8 @@ def _decompose(tree: Any, root: int) -> list[tuple[list[int], int | None, int]]:
 
 def _smooth_path(pts: F64, sigma: float) -> F64:
     """Gaussian smoothing along a polyline, point-reflected at the ends so the ends stay put."""
+    from scipy import ndimage
+
     if sigma <= 0 or len(pts) < 3:
         return pts
     pad = min(len(pts) - 1, math.ceil(3 * sigma))
@@ -527,6 +532,8 @@ def trace(
     >>> bool(abs(np.median(sk.branches[0].thickness) - 4.5) < 0.5)
     True
     """
+    from scipy import ndimage
+    from scipy.sparse import csgraph
     from skimage.morphology import skeletonize
 
     if kind not in _KINDS:
