@@ -316,3 +316,41 @@ def test_forked_child_can_use_the_thread_pools(bark):
 
 def _nnf_in_child(src):
     return nnf(src, src[8:40, 8:40], threads=2, seed=3)[0]
+
+
+def test_concurrent_calls_get_workers_of_their_own(bark):
+    # A call checks a pool out for its duration. Here a one-thread shape synthesis waits,
+    # inside its progress callback (so while holding its pool), for a one-thread nnf call made
+    # from another Python thread. Had the two calls shared one cached one-thread pool, nnf
+    # would queue behind the synthesis and the wait would time out.
+    import threading
+
+    from phloem import shapes
+
+    src = np.ascontiguousarray(bark[:64, :64])
+    expected, _ = nnf(src, src[8:40, 8:40], threads=1, seed=3)
+    got: list[np.ndarray] = []
+    done = threading.Event()
+
+    def other() -> None:
+        got.append(nnf(src, src[8:40, 8:40], threads=1, seed=3)[0])
+        done.set()
+
+    waited: list[bool] = []
+    worker = threading.Thread(target=other)
+
+    def progress(i: int, n: int) -> None:
+        if not waited:
+            worker.start()
+            waited.append(done.wait(timeout=20))
+            if not waited[0]:  # cancel the synthesis, freeing its pool for nnf
+                raise TimeoutError("nnf queued behind the running call")
+
+    ex = np.zeros((48, 48), bool)
+    ex[10:30, 12:20] = True
+    try:
+        shapes.synthesize(ex, (48, 48), patch_size=7, seed=0, threads=1, progress=progress)
+    finally:
+        worker.join()
+    assert waited == [True]
+    assert np.array_equal(got[0], expected)
