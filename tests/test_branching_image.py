@@ -11,7 +11,7 @@ import phloem
 import pytest
 from conftest import shared_file
 from phloem.branching import Branch, Skeleton, fragments, rectify, render, rigid_align, unrectify
-from phloem.branching.image import _dense, _smooth_field
+from phloem.branching.image import _dense, _in_order, _smooth_field
 
 
 def _rot(a: float) -> np.ndarray:
@@ -145,6 +145,59 @@ def test_render_is_deterministic_for_a_seed() -> None:
     assert np.array_equal(one, a.image)  # whatever the number of threads
     others = [render(img, sk, tgt, seed=s, c=4, complete=False, full_output=True).choice for s in range(4)]
     assert any(not np.array_equal(others[0], o) for o in others[1:])
+
+
+def test_concurrent_painting_equals_painting_in_order() -> None:
+    """Fragments that do not overlap are painted at the same time; the image, the choices and
+    the fragment map must still be those of painting them one by one. Three separate trees
+    and two sub-branches give the scheduler real concurrency, and c = 4 makes every pick a
+    random draw."""
+    img, sk = _scene()
+    branches = []
+    for k, (y, ang) in enumerate(((30.0, 0.1), (110.0, -0.1), (190.0, 0.05))):
+        main = _wavy((10, y), ang, 230, (4.0, 3.0), phase=k)
+        branches.append(main)
+        if k != 1:
+            kid = _wavy(tuple(main.points[35]), 0.9 - 1.8 * (k == 2), 40, (3.0, 2.0), amp=0.1, parent=(len(branches) - 1, 35))
+            branches.append(kid)
+    tgt = Skeleton(branches, (220, 260))
+    runs = [render(img, sk, tgt, seed=3, c=4, complete=False, full_output=True, threads=t) for t in (1, 2, 3)]
+    for r in runs[1:]:
+        assert np.array_equal(r.image, runs[0].image)
+        assert np.array_equal(r.choice, runs[0].choice) and np.array_equal(r.labels, runs[0].labels)
+
+
+def test_in_order_waits_only_for_overlapping_fragments() -> None:
+    import threading
+
+    # 0 and 1 overlap; 2 overlaps neither and must run while 1 waits for 0 (a barrier of two
+    # that 0 and 2 must reach together, or it times out); 3 overlaps 1 and 2.
+    boxes = np.array([[0, 10, 0, 10], [5, 15, 5, 15], [20, 30, 20, 30], [12, 25, 12, 25]])
+    barrier = threading.Barrier(2, timeout=10)
+    events: list[tuple[str, int]] = []
+    lock = threading.Lock()
+
+    def work(j: int) -> None:
+        with lock:
+            events.append(("start", j))
+        if j in (0, 2):
+            barrier.wait()
+        with lock:
+            events.append(("end", j))
+
+    calls: list[tuple[int, int]] = []
+    _in_order(boxes, work, workers=2, progress=lambda d, t: calls.append((d, t)))
+    pos = {e: i for i, e in enumerate(events)}
+    for i, j in ((0, 1), (1, 3), (2, 3)):
+        assert pos[("end", i)] < pos[("start", j)], events
+    assert calls == [(1, 5), (2, 5), (3, 5), (4, 5)]
+
+    def fail(j: int) -> None:
+        if j == 2:
+            raise ValueError("fragment 2")
+
+    with pytest.raises(ValueError, match="fragment 2"):
+        _in_order(boxes, fail, workers=2, progress=None)
 
 
 def test_progress_reports_every_fragment() -> None:
