@@ -11,7 +11,7 @@ import phloem
 import pytest
 from conftest import shared_file
 from phloem.branching import Branch, Skeleton, fragments, rectify, render, rigid_align, unrectify
-from phloem.branching.image import _dense, _in_order, _smooth_field
+from phloem.branching.image import _dense, _in_order, _match_borders, _smooth_field
 
 
 def _rot(a: float) -> np.ndarray:
@@ -165,6 +165,52 @@ def test_concurrent_painting_equals_painting_in_order() -> None:
     for r in runs[1:]:
         assert np.array_equal(r.image, runs[0].image)
         assert np.array_equal(r.choice, runs[0].choice) and np.array_equal(r.labels, runs[0].labels)
+
+
+def _texture(shape: tuple[int, int], seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return (0.5 + 0.1 * cv2.GaussianBlur(rng.normal(size=shape).astype(np.float32), (0, 0), 2.0) / 0.15)[..., None]
+
+
+def test_match_borders_removes_a_lighting_step_and_keeps_the_gaps_gradients() -> None:
+    # Structure on the left, 0.1 brighter than the completion that continues its texture on
+    # the right: the Poisson solution with the step as Dirichlet data on one side and free
+    # borders elsewhere is the texture plus the constant 0.1.
+    tex = _texture((80, 90), 0)
+    hole = np.zeros((80, 90), bool)
+    hole[:, 20:] = True
+    canvas = np.where(hole[..., None], tex, tex + 0.1).astype(np.float32)
+    out = _match_borders(canvas, hole, np.float32([-1.0]), np.float32([2.0]), radius=10.0, threads=1)
+    assert np.array_equal(out[~hole], canvas[~hole])
+    corr = (out - canvas)[..., 0][hole]
+    assert abs(float(corr.mean()) - 0.1) < 0.005 and float(np.abs(corr - 0.1).max()) < 0.01
+
+
+def test_match_borders_leaves_content_steps_alone() -> None:
+    # A white branch cut off at the structure's edge (rows 35-44) is content, not lighting:
+    # away from it the dark completion must not be brightened. A border that is all large
+    # steps (a white structure) gets no correction at all.
+    hole = np.zeros((80, 90), bool)
+    hole[:, 20:] = True
+    canvas = np.zeros((80, 90, 1), np.float32)
+    canvas[35:45, :20] = 1.0
+    lo, hi = np.float32([0.0]), np.float32([1.0])
+    out = _match_borders(canvas, hole, lo, hi, radius=10.0, threads=1)
+    far = hole.copy()
+    far[25:55, :40] = False
+    assert float(np.abs(out[far]).max()) < 0.02
+    white = np.where(hole[..., None], 0.0, 1.0).astype(np.float32)
+    assert np.array_equal(_match_borders(white, hole, lo, hi, radius=10.0, threads=1), white)
+
+
+def test_match_borders_default_is_off_for_masks_only() -> None:
+    img, sk = _scene()
+    tgt = Skeleton([_wavy((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
+    grey = [render(img, sk, tgt, seed=2, match_borders=m) for m in (None, True, False)]
+    assert np.array_equal(grey[0], grey[1]) and not np.array_equal(grey[0], grey[2])
+    mask = np.where(sk.mask(), 1.0, 0.0).astype(np.float32)
+    masks = [render(mask, sk, tgt, seed=2, match_borders=m) for m in (None, False)]
+    assert np.array_equal(masks[0], masks[1])
 
 
 def test_in_order_waits_only_for_overlapping_fragments() -> None:

@@ -34,7 +34,10 @@ Beyond the paper (each needed for clean junctions, see the tests):
 - source branch fragments that hold part of another branch (a sub-branch's start) are left
   to the furcation fragments: pasted along a plain target branch they left stubs;
 - furcation fragments are also offered mirrored (``mirror=True``), since with rotations only
-  a target sub-branch on the other side of its parent may have no match.
+  a target sub-branch on the other side of its parent may have no match;
+- the completed gaps are pasted in the gradient domain against the structure
+  (``match_borders``), as §5.3 does for the fragments: the background patches the completion
+  copies need not match the brightness the fragments bring along, and each disk showed.
 
 Perspective (Fig. 8): :func:`rectify` warps a photo taken at an angle, with its skeleton, by
 a user-given homography to a frontal view; synthesise there, then :func:`unrectify` distorts
@@ -674,6 +677,7 @@ def render(
     seams: bool = ...,
     mirror: bool = ...,
     complete: bool = ...,
+    match_borders: bool | None = ...,
     valid: Any = ...,
     patch_size: int = ...,
     completion_iterations: int = ...,
@@ -699,6 +703,7 @@ def render(
     seams: bool = ...,
     mirror: bool = ...,
     complete: bool = ...,
+    match_borders: bool | None = ...,
     valid: Any = ...,
     patch_size: int = ...,
     completion_iterations: int = ...,
@@ -725,6 +730,7 @@ def render(
     seams: bool = True,
     mirror: bool = True,
     complete: bool = True,
+    match_borders: bool | None = None,
     valid: Any = None,
     patch_size: int = 7,
     completion_iterations: int = 4,
@@ -775,6 +781,12 @@ def render(
         ``False`` is the paper's behaviour.
     complete : bool, optional
         Fill the gaps between the branches (§5.4, default True); without it they stay 0.
+    match_borders : bool, optional
+        Shift the completed gaps in the gradient domain so that they meet the painted
+        structure without a colour step (only the smooth part of the step, made of small
+        steps: a branch cut off at a disk's edge is left alone). Without it every fragment
+        disk of an unevenly lit photo or a terrain shows as a lighter or darker circle. Default (None): on, except for two-level
+        images such as masks, which have no lighting to match. Needs ``photometric``.
     valid : (H, W) array_like of bool, optional
         Where ``image`` shows real content (default everywhere), e.g. the photo inside the
         frame of :func:`rectify`; the gap completion copies only from there.
@@ -980,11 +992,83 @@ def render(
         canvas = _complete_background(
             canvas, ~filled, img, allowed, patch_size=p, iterations=c_iters, seed=s, threads=t
         )
+        if match_borders is None:  # a mask: (nearly) every pixel at its minimum or maximum
+            match_borders = float(((img == lo) | (img == hi)).all(axis=2).mean()) < 0.95
+        if photometric and match_borders:
+            canvas = _match_borders(canvas, ~filled, lo, hi, radius=float(np.median([g.radius for g in targets])), threads=t)
     if progress is not None:
         progress(len(targets) + 1, len(targets) + 1)
     if full_output:
         return RenderResult(canvas, labels, sources, targets, choice, mirrored, structure)
     return canvas
+
+
+def _smooth_masked(vals: F32, w: F32, sigma: float) -> tuple[F32, F32]:
+    """Normalised Gaussian convolution ``G * (w v) / G * w`` (0 where no weight is near) and
+    ``G * w``, computed at a resolution of about 4 pixels per ``sigma``."""
+    h, wd = w.shape
+    f = max(1, int(sigma / 4))
+    small = (max(1, -(-wd // f)), max(1, -(-h // f)))
+    num = cv2.resize(vals * w[..., None], small, interpolation=cv2.INTER_AREA).reshape(small[1], small[0], -1)
+    den = cv2.resize(w, small, interpolation=cv2.INTER_AREA)
+    num = cv2.GaussianBlur(num, (0, 0), sigma / f).reshape(small[1], small[0], -1)
+    den = cv2.GaussianBlur(den, (0, 0), sigma / f)
+    m = num / np.maximum(den, 1e-12)[..., None] * (den > 1e-6)[..., None]
+    out = cv2.resize(m, (wd, h), interpolation=cv2.INTER_LINEAR).reshape(h, wd, -1)
+    dens = cv2.resize(den, (wd, h), interpolation=cv2.INTER_LINEAR)
+    return out.astype(np.float32), dens.astype(np.float32)
+
+
+def _match_borders(
+    canvas: F32, hole: NDArray[np.bool_], lo: F32, hi: F32, *, radius: float, threads: int | None
+) -> F32:
+    """Gradient-domain paste of the completed gaps against the painted structure.
+
+    The completion copies background patches whose brightness need not match the fragments'
+    own background where the two meet (an unevenly lit photo, a terrain's large-scale slope),
+    and every fragment disk then shows as a lighter or darker circle. As for the fragments
+    themselves (§5.3), the gaps keep their gradients and are shifted to meet the structure
+    at their border: a Poisson solve over the gaps whose border values are the completion's
+    own (carried one pixel into the structure) plus the *smooth* part of the colour step
+    there. The step is smoothed over about a fragment radius (a local median), counting small steps only
+    (weight ``1 / (1 + (|step| / τ)²)`` with τ a tenth of the image's range): a lighting
+    difference is small and smooth, while a large step is content (a branch cut off at a
+    disk's edge, a river against dry land in a mask) and must not be smeared across the gap.
+    Where large steps make up most of the nearby border (a share of small ones below ¾),
+    the correction fades out, to nothing below a quarter.
+    """
+    known = (~hole).astype(np.float32)
+    k4 = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], np.float32)
+    cnt = cv2.filter2D(1.0 - known, -1, k4, borderType=cv2.BORDER_CONSTANT)
+    ring = ~hole & (cnt > 0)
+    if not ring.any():
+        return canvas
+    src = canvas.copy()
+    inner = np.where(hole[..., None], canvas, 0.0).astype(np.float32)
+    acc = cv2.filter2D(inner, -1, k4, borderType=cv2.BORDER_CONSTANT).reshape(canvas.shape)
+    src[ring] = acc[ring] / cnt[ring][:, None]
+    step = np.zeros_like(canvas)
+    step[ring] = canvas[ring] - src[ring]
+    tau = 0.25 * max(float(np.linalg.norm(hi - lo)), 1e-6)
+    w = np.zeros(hole.shape, np.float32)
+    w[ring] = 1.0 / (1.0 + (np.linalg.norm(step[ring], axis=1) / tau) ** 2)
+    smooth, den = _smooth_masked(step, w, radius)
+    _, den_all = _smooth_masked(step, ring.astype(np.float32), radius)
+    # A local median rather than a mean (iteratively reweighted, Weiszfeld): a border that is
+    # mostly matched with a few small steps (a mask's anti-aliased edges) gets no correction.
+    for _ in range(4):
+        dev = np.linalg.norm((step - smooth)[ring], axis=1)
+        wm = np.zeros_like(w)
+        wm[ring] = w[ring] / np.maximum(dev, 0.01 * tau)
+        smooth, _ = _smooth_masked(step, wm, radius)
+    # Share of small steps along the nearby border: none below a quarter, full above three.
+    share = den / np.maximum(den_all, 1e-12)
+    smooth *= np.clip((share - 0.25) * 2.0, 0.0, 1.0)[..., None]
+    dst = canvas.copy()
+    dst[ring] = src[ring] + smooth[ring]
+    out = seamless(src, dst, hole, (0, 0), tol=1e-4, threads=threads)
+    res: F32 = np.where(hole[..., None], np.clip(out, lo, hi), canvas).astype(np.float32)
+    return res
 
 
 def _in_order(boxes: NDArray[np.int64], work: Callable[[int], None], *, workers: int, progress: Progress) -> None:
