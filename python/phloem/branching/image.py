@@ -900,7 +900,7 @@ def render(
             ents = idx[order]
             maps = np.stack([lib.to_source(int(e), float(a)) for e, a in zip(ents, theta[order], strict=True)])
             centres = np.stack([lib.frs[int(lib.frag[e])].center for e in ents])
-            sp = np.einsum("pk,nlk->npl", rel, maps) + centres[:, None, :]
+            sp = rel[None] @ maps.transpose(0, 2, 1) + centres[:, None, :]  # (an einsum: 8× slower)
             vals = _sample(img, sp[..., 0].astype(np.float32), sp[..., 1].astype(np.float32))
             obj += w_c * k * g.radius**2 * ((vals - painted[None]) ** 2).sum(axis=2).mean(axis=1)
         best = np.argsort(obj, kind="stable")[:c_n]
@@ -963,11 +963,15 @@ def render(
             ny, nx = np.nonzero(new)
             bx = (slice(max(0, ny.min() - 1), ny.max() + 2), slice(max(0, nx.min() - 1), nx.max() + 2))
             dst = canvas[ys, xs][bx].copy()
-            dst[~fill_c[bx]] = warped[bx][~fill_c[bx]]
-            res = seamless(warped[bx], dst, new[bx], (0, 0), fixed=fixed[bx], tol=1e-4, max_iterations=100, threads=1)
+            np.copyto(dst, warped[bx], where=~fill_c[bx][..., None])
+            # tol 1e-3: within 0.0013 of the exact solve (a third of an 8-bit level) on the
+            # river bench's fragments, and a quarter faster than 1e-4.
+            res = seamless(warped[bx], dst, new[bx], (0, 0), fixed=fixed[bx], tol=1e-3, max_iterations=100, threads=1)
             # The gradient-domain paste can overshoot where a border mismatches strongly; keep
             # the output within the input's range. (Basic slices: views of canvas.)
-            canvas[ys, xs][bx][new[bx]] = np.clip(res.reshape(*dst.shape)[new[bx]], lo, hi)
+            res = res.reshape(*dst.shape)
+            np.clip(res, lo, hi, out=res)
+            np.copyto(canvas[ys, xs][bx], res, where=new[bx][..., None])
         else:
             canvas[ys, xs][new] = warped[new]
         filled[ys, xs] |= new
