@@ -203,6 +203,23 @@ def test_match_borders_leaves_content_steps_alone() -> None:
     assert np.array_equal(_match_borders(white, hole, lo, hi, radius=10.0, threads=1), white)
 
 
+def test_fragments_reaching_outside_valid_are_not_used() -> None:
+    # The right third of the input is "frame" (value 5, outside `valid`); the source branch
+    # runs through it. No pixel of it may reach the output, and a `valid` that leaves no
+    # fragment whole is an error naming it.
+    img, sk = _scene()
+    img = img.copy()
+    img[:, 150:] = 5.0
+    valid = np.zeros(img.shape[:2], bool)
+    valid[:, :150] = True
+    tgt = Skeleton([_wavy((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
+    assert float(render(img, sk, tgt, seed=1, complete=False).max()) > 4.0  # without `valid` it does
+    out = render(img, sk, tgt, seed=1, valid=valid)
+    assert float(out.max()) < 1.5
+    with pytest.raises(ValueError, match="valid"):
+        render(img, sk, tgt, valid=np.zeros(img.shape[:2], bool))
+
+
 def test_match_borders_default_is_off_for_masks_only() -> None:
     img, sk = _scene()
     tgt = Skeleton([_wavy((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))

@@ -400,6 +400,12 @@ def _disk(shape: tuple[int, int], c: F64, r: float) -> tuple[slice, slice, NDArr
     return slice(y0, y1), slice(x0, x1), disk, y0, x0
 
 
+def _reaches_out(f: Fragment, ok: NDArray[np.bool_]) -> bool:
+    """Whether the disk of source fragment ``f`` holds a pixel outside ``ok``."""
+    ys, xs, disk, _, _ = _disk(ok.shape, f.center, f.radius)
+    return bool((disk & ~ok[ys, xs]).any())
+
+
 def _rot(theta: float) -> F64:
     c, s = math.cos(theta), math.sin(theta)
     return np.array([[c, -s], [s, c]])
@@ -417,7 +423,7 @@ class _Library:
         frag = [i for i in range(len(frs)) if exclude is None or not exclude[i]]
         flip = [False] * len(frag)
         if mirror:
-            extra = [i for i, f in enumerate(frs) if f.furcation]
+            extra = [i for i, f in enumerate(frs) if f.furcation and (exclude is None or not exclude[i])]
             frag += extra
             flip += [True] * len(extra)
         self.frag = np.array(frag, dtype=np.int64)
@@ -789,7 +795,8 @@ def render(
         images such as masks, which have no lighting to match. Needs ``photometric``.
     valid : (H, W) array_like of bool, optional
         Where ``image`` shows real content (default everywhere), e.g. the photo inside the
-        frame of :func:`rectify`; the gap completion copies only from there.
+        frame of :func:`rectify` or a fundus photo's disc: only fragments that lie wholly
+        inside it are pasted, and the gap completion copies only from there.
     patch_size : int, optional
         Patch side of the gap completion (default 7, odd).
     completion_iterations : int, optional
@@ -847,10 +854,17 @@ def render(
     t = check_threads(threads)
     rng = np.random.default_rng(s)
 
+    ok = np.ones((H0, W0), bool) if valid is None else as_mask(valid, "valid", (H0, W0))
     sources = _fragments(src_sk, lam_f, rf, k, order=False)
+    # Fragments that reach outside the valid region would paste its outside (a fundus
+    # photo's black frame) into the output.
+    outside = np.array([valid is not None and _reaches_out(f, ok) for f in sources], bool)
+    if all(outside[i] for i, f in enumerate(sources) if not f.furcation):
+        raise ValueError("valid: every source branch fragment reaches outside it; nothing is left to paint with")
     # Without furcation fragments in the source a target furcation is painted by branch fragments.
-    targets = _fragments(tgt_sk, lam_f, rf, k, order=True, furcations=any(f.furcation for f in sources))
-    lib = _Library(sources, mirror=mirror, exclude=_foreign(src_sk, sources, keep=max(3, c_n)))
+    furcations = any(f.furcation and not out for f, out in zip(sources, outside, strict=True))
+    targets = _fragments(tgt_sk, lam_f, rf, k, order=True, furcations=furcations)
+    lib = _Library(sources, mirror=mirror, exclude=_foreign(src_sk, sources, keep=max(3, c_n)) | outside)
     H, W = out_shape
     C = img.shape[2]
     canvas = np.zeros((H, W, C), np.float32)
@@ -986,7 +1000,6 @@ def render(
         # The source minus its structure widened to the fragment radius; where the structure
         # is so dense that less than a sixth of the image would be left (a retina), widened
         # less, down to the structure plus a quarter of its thickness.
-        ok = np.ones((H0, W0), bool) if valid is None else as_mask(valid, "valid", (H0, W0))
         if valid is not None:  # a patch may not straddle the border of the valid region
             ok = cv2.erode(ok.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
         for factor in (rf, 2.0, 1.25):
