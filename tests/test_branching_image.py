@@ -158,8 +158,9 @@ def test_concurrent_painting_equals_painting_in_order() -> None:
         main = _wavy((10, y), ang, 230, (4.0, 3.0), phase=k)
         branches.append(main)
         if k != 1:
-            kid = _wavy(tuple(main.points[35]), 0.9 - 1.8 * (k == 2), 40, (3.0, 2.0), amp=0.1, parent=(len(branches) - 1, 35))
-            branches.append(kid)
+            turn = 0.9 - 1.8 * (k == 2)
+            parent = (len(branches) - 1, 35)
+            branches.append(_wavy(tuple(main.points[35]), turn, 40, (3.0, 2.0), amp=0.1, parent=parent))
     tgt = Skeleton(branches, (220, 260))
     runs = [render(img, sk, tgt, seed=3, c=4, complete=False, full_output=True, threads=t) for t in (1, 2, 3)]
     for r in runs[1:]:

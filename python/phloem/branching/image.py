@@ -791,8 +791,9 @@ def render(
         Shift the completed gaps in the gradient domain so that they meet the painted
         structure without a colour step (only the smooth part of the step, made of small
         steps: a branch cut off at a disk's edge is left alone). Without it every fragment
-        disk of an unevenly lit photo or a terrain shows as a lighter or darker circle. Default (None): on, except for two-level
-        images such as masks, which have no lighting to match. Needs ``photometric``.
+        disk of an unevenly lit photo or a terrain shows as a lighter or darker circle.
+        Default (None): on, except for two-level images such as masks, which have no
+        lighting to match. Needs ``photometric``.
     valid : (H, W) array_like of bool, optional
         Where ``image`` shows real content (default everywhere), e.g. the photo inside the
         frame of :func:`rectify` or a fundus photo's disc: only fragments that lie wholly
@@ -1012,7 +1013,8 @@ def render(
         if match_borders is None:  # a mask: (nearly) every pixel at its minimum or maximum
             match_borders = float(((img == lo) | (img == hi)).all(axis=2).mean()) < 0.95
         if photometric and match_borders:
-            canvas = _match_borders(canvas, ~filled, lo, hi, radius=float(np.median([g.radius for g in targets])), threads=t)
+            radius = float(np.median([g.radius for g in targets]))
+            canvas = _match_borders(canvas, ~filled, lo, hi, radius=radius, threads=t)
     if progress is not None:
         progress(len(targets) + 1, len(targets) + 1)
     if full_output:
@@ -1047,8 +1049,8 @@ def _match_borders(
     themselves (§5.3), the gaps keep their gradients and are shifted to meet the structure
     at their border: a Poisson solve over the gaps whose border values are the completion's
     own (carried one pixel into the structure) plus the *smooth* part of the colour step
-    there. The step is smoothed over about a fragment radius (a local median), counting small steps only
-    (weight ``1 / (1 + (|step| / τ)²)`` with τ a tenth of the image's range): a lighting
+    there. The step is smoothed over about a fragment radius (a local median), counting
+    small steps only (weight ``1 / (1 + (|step| / τ)²)`` with τ a quarter of the image's range): a lighting
     difference is small and smooth, while a large step is content (a branch cut off at a
     disk's edge, a river against dry land in a mask) and must not be smeared across the gap.
     Where large steps make up most of the nearby border (a share of small ones below ¾),
