@@ -406,6 +406,21 @@ def _reaches_out(f: Fragment, ok: NDArray[np.bool_]) -> bool:
     return bool((disk & ~ok[ys, xs]).any())
 
 
+def _clip_channels(x: F32, lo: F32, hi: F32) -> F32:
+    """Clip each channel of ``x`` (H, W, C) to ``[lo[c], hi[c]]`` in place. (One ``np.clip``
+    with ``(C,)`` bounds runs its inner loop over the 3 channels: 9× slower.)"""
+    for c in range(x.shape[2]):
+        np.clip(x[..., c], lo[c], hi[c], out=x[..., c])
+    return x
+
+
+def _paste(dst: F32, src: F32, mask: NDArray[np.bool_]) -> None:
+    """``dst[mask] = src[mask]`` for (H, W, C) images, through a mask repeated over the
+    channels so the copy runs along whole rows (3-7× faster than either masked indexing or a
+    broadcast ``where``)."""
+    np.copyto(dst, src, where=np.repeat(mask[..., None], dst.shape[2], axis=2))
+
+
 def _rot(theta: float) -> F64:
     c, s = math.cos(theta), math.sin(theta)
     return np.array([[c, -s], [s, c]])
@@ -917,7 +932,8 @@ def render(
             centres = np.stack([lib.frs[int(lib.frag[e])].center for e in ents])
             sp = rel[None] @ maps.transpose(0, 2, 1) + centres[:, None, :]  # (an einsum: 8× slower)
             vals = _sample(img, sp[..., 0].astype(np.float32), sp[..., 1].astype(np.float32))
-            obj += w_c * k * g.radius**2 * ((vals - painted[None]) ** 2).sum(axis=2).mean(axis=1)
+            diff = (vals - painted[None]).reshape(len(order), -1)  # (channel sums over a trailing
+            obj += w_c * k * g.radius**2 * np.einsum("ij,ij->i", diff, diff) / len(oy)  # axis of 3: slow)
         best = np.argsort(obj, kind="stable")[:c_n]
         wts = 1.0 / np.maximum(obj[best], 1e-9)
         # Inverse-CDF draw from this fragment's own uniform: the same pick whatever order the
@@ -978,20 +994,19 @@ def render(
             ny, nx = np.nonzero(new)
             bx = (slice(max(0, ny.min() - 1), ny.max() + 2), slice(max(0, nx.min() - 1), nx.max() + 2))
             dst = canvas[ys, xs][bx].copy()
-            np.copyto(dst, warped[bx], where=~fill_c[bx][..., None])
+            _paste(dst, warped[bx], ~fill_c[bx])
             # tol 1e-3: within 0.0013 of the exact solve (a third of an 8-bit level) on the
             # river bench's fragments, and a quarter faster than 1e-4.
             res = seamless(warped[bx], dst, new[bx], (0, 0), fixed=fixed[bx], tol=1e-3, max_iterations=100, threads=1)
             # The gradient-domain paste can overshoot where a border mismatches strongly; keep
             # the output within the input's range. (Basic slices: views of canvas.)
-            res = res.reshape(*dst.shape)
-            np.clip(res, lo, hi, out=res)
-            np.copyto(canvas[ys, xs][bx], res, where=new[bx][..., None])
+            res = _clip_channels(res.reshape(*dst.shape), lo, hi)
+            _paste(canvas[ys, xs][bx], res, new[bx])
         else:
-            canvas[ys, xs][new] = warped[new]
+            _paste(canvas[ys, xs], warped, new)
         filled[ys, xs] |= new
-        labels[ys, xs][new] = j
-        owner[ys, xs][new] = g.branch
+        np.copyto(labels[ys, xs], j, where=new)
+        np.copyto(owner[ys, xs], g.branch, where=new)
 
     _in_order(boxes, paint, workers=t if t is not None else _core.default_threads(), progress=progress)
 
@@ -1086,7 +1101,8 @@ def _match_borders(
     dst = canvas.copy()
     dst[ring] = src[ring] + smooth[ring]
     out = seamless(src, dst, hole, (0, 0), tol=1e-4, threads=threads)
-    res: F32 = np.where(hole[..., None], np.clip(out, lo, hi), canvas).astype(np.float32)
+    res: F32 = canvas.copy()
+    _paste(res, _clip_channels(out, lo, hi), hole)
     return res
 
 
