@@ -240,6 +240,8 @@ fn coarsen(f: &mut FLevel) -> Option<FLevel> {
 struct Dense {
     n: usize,
     l: Vec<f64>,
+    /// First column of each row of `l` that is not zero.
+    first: Vec<usize>,
 }
 
 impl Dense {
@@ -253,15 +255,15 @@ impl Dense {
             }
             dmax = dmax.max(m[i * n + i]);
         }
-        crate::multigrid::cholesky_in_place(&mut m, n, 1e-13 * dmax, 1e-14 * dmax);
-        Self { n, l: m }
+        let first = crate::multigrid::cholesky_in_place(&mut m, n, 1e-13 * dmax, 1e-14 * dmax);
+        Self { n, l: m, first }
     }
 
     fn solve(&self, b: &[f64], x: &mut [f64]) {
         let n = self.n;
         for i in 0..n {
             let mut s = b[i];
-            for k in 0..i {
+            for k in self.first[i]..i {
                 s -= self.l[i * n + k] * x[k];
             }
             x[i] = s / self.l[i * n + i];
@@ -269,7 +271,9 @@ impl Dense {
         for i in (0..n).rev() {
             let mut s = x[i];
             for k in i + 1..n {
-                s -= self.l[k * n + i] * x[k];
+                if self.first[k] <= i {
+                    s -= self.l[k * n + i] * x[k];
+                }
             }
             x[i] = s / self.l[i * n + i];
         }
