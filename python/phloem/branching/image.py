@@ -47,7 +47,6 @@ the result back. Finding the homography is left to the user (four point pairs an
 
 from __future__ import annotations
 
-import functools
 import heapq
 import math
 from collections.abc import Callable
@@ -62,7 +61,7 @@ from numpy.typing import NDArray
 from .. import _core
 from .._progress import Progress
 from .._validate import as_image, as_mask, check_float, check_int, check_patch_size, check_seed, check_threads
-from ..blend import seamless
+from ..blend import interpolate_field, seamless
 from ..seams import seam
 from ..texture import WEXLER_GAMMA, WEXLER_SIGMA_PERCENTILE, _downsample, _fill_inward, _patch_masks, _upsample_field
 from .skeleton import Branch, Skeleton
@@ -478,54 +477,11 @@ def _sample(img: F32, mapx: F32, mapy: F32) -> F32:
     return np.ascontiguousarray(out.reshape(*mapx.shape, img.shape[2]), dtype=np.float32)
 
 
-@functools.lru_cache(maxsize=64)
-def _grid_normal(h: int, w: int) -> F64:
-    """``LᵀL`` of the 4-neighbour graph Laplacian of an ``h × w`` grid (cached per size): the
-    energy ``E = ‖L d‖²`` of §5.3, with only in-grid neighbours at the border, as in
-    :func:`phloem.blend.interpolate_field`."""
-    n = h * w
-    idx = np.arange(n).reshape(h, w)
-    a = np.concatenate([idx[:, :-1].ravel(), idx[:-1, :].ravel()])
-    b = np.concatenate([idx[:, 1:].ravel(), idx[1:, :].ravel()])
-    L = np.zeros((n, n))
-    L[a, b] = L[b, a] = -1.0
-    L[np.arange(n), np.arange(n)] = -L.sum(axis=1)
-    out: F64 = L.T @ L
-    out.flags.writeable = False
-    return out
-
-
-def _smooth_field(h: int, w: int, pts: NDArray[np.int64], vals: F64) -> F64:
-    """Minimiser of ``‖L d‖²`` over an ``h × w`` grid with ``d[pts] = vals``, by a direct solve.
-
-    The same system as :func:`phloem.blend.interpolate_field` (the tests compare them); on the
-    few hundred cells of a coarsened fragment a dense Cholesky solve takes under a millisecond,
-    where the engine's iterative solver spends ~5 ms in set-up. (``cv2.solve``: LAPACK's
-    threads fight the engines' for 2 cores and were 30× slower under load.)
-    """
-    A = _grid_normal(h, w)
-    n = h * w
-    fixed = pts[:, 0] * w + pts[:, 1]
-    free = np.ones(n, bool)
-    free[fixed] = False
-    out = np.empty((n, vals.shape[1]))
-    out[fixed] = vals
-    if free.any():
-        fi = np.nonzero(free)[0]
-        rhs = -(A[np.ix_(fi, fixed)] @ vals)
-        ok, sol = cv2.solve(
-            np.ascontiguousarray(A[np.ix_(fi, fi)]), np.ascontiguousarray(rhs), flags=cv2.DECOMP_CHOLESKY
-        )
-        if not ok:  # pragma: no cover - A_ff is positive definite once one cell is fixed
-            raise RuntimeError("displacement field: the constrained system is singular")
-        out[fi] = sol
-    return out.reshape(h, w, vals.shape[1])
-
-
 def _displacement(disk_shape: tuple[int, int], y0: int, x0: int, q_abs: F64, d: F64, r: float) -> F32:
     """The smooth displacement field over a crop that takes the values ``d`` at ``q_abs``
-    (§5.3), solved on a grid coarsened to at most ~8 cells per radius and upsampled bilinearly:
-    the field is smooth by construction, and the full-resolution solve costs ~100× more."""
+    (§5.3, :func:`phloem.blend.interpolate_field`), solved on a grid coarsened to at most ~8
+    cells per radius and upsampled bilinearly: the field is smooth by construction, and the
+    full-resolution solve costs ~100× more."""
     h, w = disk_shape
     f = max(1, math.ceil(r / 8))
     ch, cw = max(2, -(-h // f)), max(2, -(-w // f))
@@ -537,7 +493,8 @@ def _displacement(disk_shape: tuple[int, int], y0: int, x0: int, q_abs: F64, d: 
     np.add.at(vals, inv, d)
     vals /= np.bincount(inv, minlength=len(uniq))[:, None]
     pts = np.stack([uniq // cw, uniq % cw], axis=1)
-    coarse = _smooth_field(ch, cw, pts, vals).astype(np.float32)
+    # The field engine factors grids this small directly (a banded Cholesky, one CG step).
+    coarse = interpolate_field(np.ones((ch, cw), bool), pts, vals, threads=1)
     if f == 1:
         return np.ascontiguousarray(coarse[:h, :w])
     # Coarse cell (i, j) sits at fine pixel (i f, j f): map fine pixels back to coarse coordinates.
@@ -930,8 +887,11 @@ def render(
             ents = idx[order]
             maps = np.stack([lib.to_source(int(e), float(a)) for e, a in zip(ents, theta[order], strict=True)])
             centres = np.stack([lib.frs[int(lib.frag[e])].center for e in ents])
-            sp = rel[None] @ maps.transpose(0, 2, 1) + centres[:, None, :]  # (an einsum: 8× slower)
-            vals = _sample(img, sp[..., 0].astype(np.float32), sp[..., 1].astype(np.float32))
+            # Written out: a stacked matmul calls BLAS (see render's threads), an einsum is 8× slower.
+            rx, ry = rel[:, 0], rel[:, 1]
+            mx = maps[:, 0, 0, None] * rx + maps[:, 0, 1, None] * ry + centres[:, 0, None]
+            my = maps[:, 1, 0, None] * rx + maps[:, 1, 1, None] * ry + centres[:, 1, None]
+            vals = _sample(img, mx.astype(np.float32), my.astype(np.float32))
             diff = (vals - painted[None]).reshape(len(order), -1)  # (channel sums over a trailing
             obj += w_c * k * g.radius**2 * np.einsum("ij,ij->i", diff, diff) / len(oy)  # axis of 3: slow)
         best = np.argsort(obj, kind="stable")[:c_n]
