@@ -44,6 +44,11 @@ WEXLER_GAMMA = 1.3
 #: makes the weights nearly uniform and the fill soft. The 25th keeps edges (local contrast
 #: in a 96² hole: coffee 0.64 → 0.67, bark 0.78 → 0.84); lower starts to break structures.
 WEXLER_SIGMA_PERCENTILE = 25.0
+#: Floor of the natural log of a completion vote weight. Deep in a large hole γ^−d times a poor
+#: match's similarity underflows float32 (a 60×120 hole in a birch photo: 1753 of its 7200
+#: pixels got no vote at all and kept their upsampled value); e^−80 ≈ 2e−35 stays a normal float32, so floored votes
+#: still average exactly, and only ties among hopeless patches.
+_LOG_WEIGHT_FLOOR = -80.0
 
 
 def _downsample(img: NDArray[np.float32], shape: tuple[int, int]) -> NDArray[np.float32]:
@@ -418,9 +423,10 @@ def complete(
     cur: NDArray[np.float32] | None = None
     for lv in range(len(pyramid) - 1, -1, -1):
         orig, hole_l, need, smask = pyramid[lv]
-        # Distance of hole pixels to the known region, for Wexler's confidence γ^−d.
+        # Distance of hole pixels to the known region, for Wexler's confidence γ^−d (as a log:
+        # the vote weights are formed in the log domain and floored).
         depth = cv2.distanceTransform(hole_l.astype(np.uint8), cv2.DIST_L2, 3)
-        conf = np.power(WEXLER_GAMMA, -depth).astype(np.float32)
+        log_conf = -math.log(WEXLER_GAMMA) * depth[need]
         if cur is None:
             cur = _fill_inward(orig, hole_l)
             init = None
@@ -448,7 +454,7 @@ def complete(
             d = dist[need]
             sigma2 = max(float(np.percentile(d, WEXLER_SIGMA_PERCENTILE)), 1e-8)
             wvote = np.zeros(dist.shape, np.float32)
-            wvote[need] = np.exp(-d / (2.0 * sigma2)) * conf[need]
+            wvote[need] = np.exp(np.maximum(log_conf - d / (2.0 * sigma2), _LOG_WEIGHT_FLOOR))
             voted, wsum = _core.vote(cur, field, patch_size=p, weights=wvote, threads=t)
             fill = hole_l & (wsum > 0)
             cur[fill] = voted[fill]  # cur is this level's own copy, never the pyramid's image
