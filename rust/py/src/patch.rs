@@ -55,7 +55,7 @@ fn flat_indices(name: &'static str, rc: &[i32], h: usize, w: usize) -> PyResult<
 type NnfOut<'py> = (Bound<'py, PyArray3<i32>>, Bound<'py, PyArray2<f32>>, u64);
 
 #[pyfunction]
-#[pyo3(name = "nnf", signature = (source, target, *, patch_size, iterations, levels, exact, seed, weights=None, source_mask=None, target_mask=None, init=None, source_knn=None, source_cost=None, threads=None))]
+#[pyo3(name = "nnf", signature = (source, target, *, patch_size, iterations, levels, exact, seed, weights=None, source_mask=None, target_mask=None, init=None, source_knn=None, source_cost=None, threads=None, kdtree=false))]
 pub fn nnf_py<'py>(
     py: Python<'py>,
     source: PyReadonlyArray3<'py, f32>,
@@ -72,6 +72,7 @@ pub fn nnf_py<'py>(
     source_knn: Option<numpy::PyReadonlyArray4<'py, i32>>,
     source_cost: Option<PyReadonlyArray2<'py, f32>>,
     threads: Option<usize>,
+    kdtree: bool,
 ) -> PyResult<NnfOut<'py>> {
     let (sh, sw) = (source.as_array().dim().0, source.as_array().dim().1);
     let table = match &source_knn {
@@ -99,6 +100,8 @@ pub fn nnf_py<'py>(
     };
     let method = if exact {
         Method::Exact
+    } else if kdtree {
+        Method::KdTree
     } else {
         Method::PatchMatch
     };
