@@ -219,6 +219,22 @@ def test_vote_identity_reproduces_source(bark):
     out, w = vote(src, field, patch_size=7)
     np.testing.assert_allclose(out, src, atol=1e-6)
     assert (w > 0).all()
+    # Votes that agree stay put under mean-shift.
+    np.testing.assert_allclose(vote(src, field, patch_size=7, mean_shift=3)[0], src, atol=1e-6)
+
+
+def test_vote_mean_shift_takes_the_majority_side():
+    src = np.zeros((3, 9, 1), np.float32)
+    src[:, 5:] = 1.0  # columns 0..4 hold 0, columns 5..8 hold 1
+    field = np.array([[[1, 1], [1, 7]]], np.int32)  # pixel 0 matched to zeros, pixel 1 to ones
+    weights = np.array([[3.0, 1.0]], np.float32)
+    mean, _ = vote(src, field, patch_size=3, weights=weights)
+    assert mean[0, 0, 0] == pytest.approx(0.25)
+    shifted, _ = vote(src, field, patch_size=3, weights=weights, mean_shift=3)
+    assert shifted[0, 0, 0] < 0.05
+    assert np.array_equal(vote(src, field, patch_size=3, weights=weights, mean_shift=0)[0], mean)
+    with pytest.raises(ValueError, match="mean_shift"):
+        vote(src, field, patch_size=3, mean_shift=-1)
 
 
 @pytest.mark.parametrize(

@@ -98,6 +98,7 @@ def vote(
     patch_size: int,
     weights: NDArray[np.float32] | None = None,
     threads: int | None = None,
+    mean_shift: int = 0,
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]: ...
 def seamless(
     src: NDArray[np.float32],

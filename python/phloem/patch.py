@@ -283,7 +283,13 @@ def candidates(
 
 
 def vote(
-    source: Any, field: Any, *, patch_size: int = 7, weights: Any = None, threads: int | None = None
+    source: Any,
+    field: Any,
+    *,
+    patch_size: int = 7,
+    weights: Any = None,
+    mean_shift: int = 0,
+    threads: int | None = None,
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """Weighted average of the source patches a field places over each target pixel.
 
@@ -300,6 +306,11 @@ def vote(
         Patch side used to build the field (default 7).
     weights : (M, N) array_like, optional
         Non-negative weight of the patch centred at each target pixel (default 1).
+    mean_shift : int, optional
+        Steps of weighted mean-shift from the mean towards the dominant mode of each pixel's
+        votes (Wexler et al. 2007, §3.2), so that disagreeing votes pick a side instead of
+        blurring; the Gaussian kernel's bandwidth is the votes' own spread around the
+        current estimate. 0 (default): the weighted mean.
 
     Returns
     -------
@@ -318,5 +329,6 @@ def vote(
         if w.shape != f.shape[:2]:
             raise ValueError(f"weights: expected shape {f.shape[:2]} like the field, got {w.shape}")
     return _core.vote(
-        src, f, patch_size=check_patch_size(patch_size), weights=w, threads=check_threads(threads)
-    )
+        src, f, patch_size=check_patch_size(patch_size), weights=w, threads=check_threads(threads),
+        mean_shift=check_int(mean_shift, "mean_shift", 0),
+    )  # fmt: skip

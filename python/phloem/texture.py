@@ -56,6 +56,10 @@ _LOG_WEIGHT_FLOOR = -80.0
 #: error still 3 % below PyPatchMatch's; weights 0.5 and 1.5 gave 0.917 and 0.962 at errors
 #: 5 % and 0.5 % below).
 COMPLETION_GRADIENT_WEIGHT = 1.0
+#: Mean-shift steps of the very last vote of completion (Wexler et al. 2007, §3.2; see
+#: :func:`phloem.patch.vote`): the final colours move from the mean of the overlapping
+#: patches' votes to their dominant mode, so that disagreeing votes do not blur the fill.
+COMPLETION_MEAN_SHIFT = 3
 
 
 def _downsample(img: NDArray[np.float32], shape: tuple[int, int]) -> NDArray[np.float32]:
@@ -366,7 +370,9 @@ def complete(
     the pixels the overlapping matches put there, weighted by Wexler's similarity
     ``exp(−d / 2σ²)`` (σ² at the 25th percentile of the distances) times the confidence
     ``1.3^−depth``. The next level starts from the field upsampled and voted with the finer
-    level's own pixels, so no blurred upsampled image is ever carried down.
+    level's own pixels, so no blurred upsampled image is ever carried down. The very last
+    vote moves each pixel from the mean of its votes to their dominant mode by mean-shift,
+    as Wexler et al. propose (:data:`COMPLETION_MEAN_SHIFT`).
 
     Three choices follow Philippeau's completion as implemented in PyPatchMatch; the first
     two are what makes fills of structured photos accurate, the third keeps them sharp: the pyramid is mask-aware and the hole
@@ -474,7 +480,8 @@ def complete(
             sigma2 = max(float(np.percentile(d, WEXLER_SIGMA_PERCENTILE)), 1e-8)
             wvote = np.zeros(dist.shape, np.float32)
             wvote[need] = np.exp(np.maximum(log_conf - d / (2.0 * sigma2), _LOG_WEIGHT_FLOOR))
-            voted, wsum = _core.vote(cur, field, patch_size=p, weights=wvote, threads=t)
+            shift = COMPLETION_MEAN_SHIFT if lv == 0 and it == n_iters - 1 else 0
+            voted, wsum = _core.vote(cur, field, patch_size=p, weights=wvote, threads=t, mean_shift=shift)
             fill = hole_l & (wsum > 0)
             cur[fill] = voted[fill]  # cur is this level's own copy, never the pyramid's image
             init = field

@@ -218,7 +218,7 @@ pub fn coherence_candidates_py<'py>(
 type VoteOut<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray2<f32>>);
 
 #[pyfunction]
-#[pyo3(name = "vote", signature = (source, field, *, patch_size, weights=None, threads=None))]
+#[pyo3(name = "vote", signature = (source, field, *, patch_size, weights=None, threads=None, mean_shift=0))]
 pub fn vote_py<'py>(
     py: Python<'py>,
     source: PyReadonlyArray3<'py, f32>,
@@ -226,6 +226,7 @@ pub fn vote_py<'py>(
     patch_size: usize,
     weights: Option<PyReadonlyArray2<'py, f32>>,
     threads: Option<usize>,
+    mean_shift: usize,
 ) -> PyResult<VoteOut<'py>> {
     let src = image("source", &source)?;
     let (h, w, two) = field.as_array().dim();
@@ -244,7 +245,13 @@ pub fn vote_py<'py>(
     .map_err(to_py)?;
     let wts = opt_slice("weights", weights.as_ref())?;
     let v = py
-        .detach(|| guarded(|| install(threads, || vote::vote(&src, &idx, h, w, wts, patch_size))))
+        .detach(|| {
+            guarded(|| {
+                install(threads, || {
+                    vote::vote_mode(&src, &idx, h, w, wts, patch_size, mean_shift)
+                })
+            })
+        })
         .map_err(to_py)?;
     let img = Array3::from_shape_vec((h, w, src.c), v.image).expect("vote shape");
     let wt = Array2::from_shape_vec((h, w), v.weight).expect("weight shape");
