@@ -66,8 +66,9 @@ def nnf(
         propagation-assisted kd-tree search (He & Sun 2012: every target patch first tries
         the few source patches nearest to it in a 16-dimensional PCA space of the source
         patches, then ``iterations`` PatchMatch passes propagate them; full resolution
-        only), which gets within about 1 % of exact between unrelated images where plain
-        PatchMatch stays 15–30 % above, at several times the cost; or brute-force exact
+        only), which gets within 1–3 % of exact after 5 iterations between unrelated
+        texture crops where plain PatchMatch stays 15–31 % above, at 3–4 times its cost
+        (0.9 s against 0.23 s for 512² against 512² on 2 threads); or brute-force exact
         search, ``O(Ms·Ns·Mt·Nt)``, refused above :data:`EXACT_LIMIT` pixel pairs.
     weights : (C,) array_like, optional
         Non-negative per-channel weights of the squared differences (default all 1).
