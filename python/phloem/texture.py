@@ -366,21 +366,23 @@ def complete(
 
     The image is completed coarse to fine (Wexler, Shechtman, Irani 2007): at every pyramid
     level, each patch touching the hole finds its nearest wholly known patch by PatchMatch
-    (warm-started from the coarser level's field; compared on values and gradients), and each hole pixel becomes the mean of
-    the pixels the overlapping matches put there, weighted by Wexler's similarity
+    (warm-started from the coarser level's field; compared on values and gradients), and
+    each hole pixel becomes the mean of the pixels the overlapping matches put there,
+    weighted by Wexler's similarity
     ``exp(−d / 2σ²)`` (σ² at the 25th percentile of the distances) times the confidence
     ``1.3^−depth``. The next level starts from the field upsampled and voted with the finer
     level's own pixels, so no blurred upsampled image is ever carried down. The very last
     vote moves each pixel from the mean of its votes to their dominant mode by mean-shift,
     as Wexler et al. propose (:data:`COMPLETION_MEAN_SHIFT`).
 
-    Three choices follow Philippeau's completion as implemented in PyPatchMatch; the first
-    two are what makes fills of structured photos accurate, the third keeps them sharp: the pyramid is mask-aware and the hole
+    Three choices follow Philippeau's completion as implemented in PyPatchMatch. The first
+    two make fills of structured photos accurate: the pyramid is mask-aware and the hole
     *shrinks* on the way up (a coarse pixel is known if any fine pixel under its 6-tap
     binomial kernel is), down to the level where the hole disappears, so large structures
     are settled by interpolation across a sliver of hole and only refined below; and the
-    iteration schedule spends many cheap iterations on coarse levels and one at the finest;
-    and patch distances include the gradients (:data:`COMPLETION_GRADIENT_WEIGHT`).
+    iteration schedule spends many cheap iterations on coarse levels and one at the finest.
+    The third keeps fills sharp: patch distances include the gradients
+    (:data:`COMPLETION_GRADIENT_WEIGHT`).
 
     Parameters
     ----------
