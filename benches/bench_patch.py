@@ -36,6 +36,13 @@ def test_patchmatch_512(benchmark, pair, threads):
     assert field.shape == (512, 512, 2)
 
 
+def test_kdtree_512(benchmark, pair):
+    # The near-exact option (method="kdtree": PCA kd-tree seeding, then 5 PatchMatch passes).
+    src, tgt = pair
+    field, _ = benchmark(phloem.patch.nnf, src, tgt, patch_size=7, iterations=5, method="kdtree", threads=2)
+    assert field.shape == (512, 512, 2)
+
+
 def test_synthesize_512_from_256(benchmark):
     ex = np.ascontiguousarray(phloem.data.bark()[..., :3])
     out = benchmark.pedantic(phloem.texture.synthesize, args=(ex, (512, 512)), kwargs={"threads": 2}, rounds=3)

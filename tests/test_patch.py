@@ -22,16 +22,18 @@ def _crops(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(src), np.ascontiguousarray(tgt)
 
 
-# Mean distance of a 5-iteration field over the exact one, measured (seed 1) and given ~3 %
+# Mean distance of a 5-iteration field over the exact one, measured (seed 1) and given ~2-3 %
 # headroom. Plain PatchMatch shines where target and source share coherent structure (see
-# test_crop_is_found_exactly); between two unrelated crops it relies on random search, and
-# enrichment (Generalized PatchMatch) closes most of the gap. The issue's goal of 1.05 is met
-# by enrich=8 on water only; see the note on issue 2.
-RATIO = {  # texture: (plain, enrich=8)
-    "bark": (1.34, 1.11),
-    "water": (1.18, 1.07),
-    "gravel": (1.28, 1.09),
+# test_crop_is_found_exactly); between two unrelated crops it relies on random search, which
+# even 100 iterations leave 3-9 % above exact, and coarse-to-fine levels do not help.
+# Enrichment (Generalized PatchMatch) closes most of the gap; kd-tree seeding (He & Sun
+# 2012) closes it: the issue's goal of 1.05 is met by method="kdtree" on every texture.
+RATIO = {  # texture: (plain, enrich=8, kdtree); measured 1.310/1.085/1.027, 1.152/1.045/1.007, 1.248/1.062/1.013
+    "bark": (1.34, 1.11, 1.04),
+    "water": (1.18, 1.07, 1.02),
+    "gravel": (1.28, 1.09, 1.03),
 }
+VARIANTS = {"plain": {}, "enrich8": {"enrich": 8}, "kdtree": {"method": "kdtree"}}
 
 
 @pytest.fixture(scope="module")
@@ -48,13 +50,13 @@ def exact_fields(request):
 
 
 @pytest.mark.parametrize("name", sorted(RATIO))
-@pytest.mark.parametrize("enrich", [0, 8])
-def test_patchmatch_close_to_exact_on_real_textures(name, enrich, exact_fields):
+@pytest.mark.parametrize("variant", list(VARIANTS))
+def test_patchmatch_close_to_exact_on_real_textures(name, variant, exact_fields):
     src, tgt, d_ex = exact_fields(name)
-    _, d_pm = nnf(src, tgt, patch_size=7, iterations=5, enrich=enrich, seed=1)
+    _, d_pm = nnf(src, tgt, patch_size=7, iterations=5, seed=1, **VARIANTS[variant])
     assert (d_pm >= d_ex - 1e-4 * np.maximum(d_ex, 1)).all(), "PatchMatch beat exact search: exact is wrong"
     ratio = float(d_pm.mean() / d_ex.mean())
-    assert ratio <= RATIO[name][enrich > 0], ratio
+    assert ratio <= RATIO[name][list(VARIANTS).index(variant)], ratio
 
 
 def test_more_iterations_get_closer_to_exact(exact_fields):
@@ -91,8 +93,9 @@ def test_crop_is_found_exactly(bark):
 @given(
     sh=st.integers(7, 30), sw=st.integers(7, 30), th=st.integers(1, 25), tw=st.integers(1, 25),
     p=st.sampled_from([1, 3, 5, 7]), seed=st.integers(0, 2**32), levels=st.integers(1, 3),
+    method=st.sampled_from(["patchmatch", "kdtree"]),
 )  # fmt: skip
-def test_offsets_in_bounds_and_inside_source_mask(sh, sw, th, tw, p, seed, levels):
+def test_offsets_in_bounds_and_inside_source_mask(sh, sw, th, tw, p, seed, levels, method):
     rng = np.random.default_rng(seed)
     src = rng.random((sh, sw, 2), dtype=np.float32)
     tgt = rng.random((th, tw, 2), dtype=np.float32)
@@ -103,7 +106,7 @@ def test_offsets_in_bounds_and_inside_source_mask(sh, sw, th, tw, p, seed, level
         with pytest.raises(ValueError, match="source_mask"):
             nnf(src, tgt, patch_size=p, source_mask=smask)
         return
-    field, dist = nnf(src, tgt, patch_size=p, source_mask=smask, seed=seed, levels=levels)
+    field, dist = nnf(src, tgt, patch_size=p, source_mask=smask, seed=seed, levels=levels, method=method)
     assert field.shape == (th, tw, 2) and field.dtype == np.int32
     ys, xs = field[..., 0], field[..., 1]
     assert ((ys >= r) & (ys < sh - r) & (xs >= r) & (xs < sw - r)).all()
@@ -119,7 +122,7 @@ def test_target_mask_leaves_other_pixels_unmatched(bark):
     assert (field[tmask] >= 3).all() and np.isfinite(dist[tmask]).all()
 
 
-@pytest.mark.parametrize("method", ["patchmatch", "exact"])
+@pytest.mark.parametrize("method", ["patchmatch", "kdtree", "exact"])
 def test_same_seed_bit_identical_with_1_and_2_threads(water, method):
     src, tgt = water[:96, :96], water[150:250, 120:230]
     kw = dict(patch_size=7, seed=11, levels=2, method=method)
@@ -216,6 +219,22 @@ def test_vote_identity_reproduces_source(bark):
     out, w = vote(src, field, patch_size=7)
     np.testing.assert_allclose(out, src, atol=1e-6)
     assert (w > 0).all()
+    # Votes that agree stay put under mean-shift.
+    np.testing.assert_allclose(vote(src, field, patch_size=7, mean_shift=3)[0], src, atol=1e-6)
+
+
+def test_vote_mean_shift_takes_the_majority_side():
+    src = np.zeros((3, 9, 1), np.float32)
+    src[:, 5:] = 1.0  # columns 0..4 hold 0, columns 5..8 hold 1
+    field = np.array([[[1, 1], [1, 7]]], np.int32)  # pixel 0 matched to zeros, pixel 1 to ones
+    weights = np.array([[3.0, 1.0]], np.float32)
+    mean, _ = vote(src, field, patch_size=3, weights=weights)
+    assert mean[0, 0, 0] == pytest.approx(0.25)
+    shifted, _ = vote(src, field, patch_size=3, weights=weights, mean_shift=3)
+    assert shifted[0, 0, 0] < 0.05
+    assert np.array_equal(vote(src, field, patch_size=3, weights=weights, mean_shift=0)[0], mean)
+    with pytest.raises(ValueError, match="mean_shift"):
+        vote(src, field, patch_size=3, mean_shift=-1)
 
 
 @pytest.mark.parametrize(
@@ -293,10 +312,10 @@ def test_patchmatch_close_to_exact_on_shared_grass():
     grass = phloem.io.read_image(shared_file("textures", "skimage_grass.png"))[..., None]
     src, tgt = np.ascontiguousarray(grass[:128, :128]), np.ascontiguousarray(grass[200:328, 300:428])
     _, d_ex = nnf(src, tgt, method="exact")
-    # Measured 1.254 (plain) and 1.140 (enrich=8); see RATIO above.
-    for enrich, limit in ((0, 1.28), (8, 1.17)):
-        ratio = nnf(src, tgt, iterations=5, enrich=enrich, seed=1)[1].mean() / d_ex.mean()
-        assert ratio <= limit, (enrich, ratio)
+    # Measured 1.254 (plain), 1.140 (enrich=8) and 1.029 (kdtree); see RATIO above.
+    for kw, limit in (({}, 1.28), ({"enrich": 8}, 1.17), ({"method": "kdtree"}, 1.05)):
+        ratio = nnf(src, tgt, iterations=5, seed=1, **kw)[1].mean() / d_ex.mean()
+        assert ratio <= limit, (kw, ratio)
 
 
 @pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="needs os.fork")

@@ -45,6 +45,7 @@ def nnf(
     source_knn: NDArray[np.int32] | None = None,
     source_cost: NDArray[np.float32] | None = None,
     threads: int | None = None,
+    kdtree: bool = False,
 ) -> tuple[NDArray[np.int32], NDArray[np.float32], int]: ...
 def knn(
     exemplar: NDArray[np.float32],
@@ -97,6 +98,7 @@ def vote(
     patch_size: int,
     weights: NDArray[np.float32] | None = None,
     threads: int | None = None,
+    mean_shift: int = 0,
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]: ...
 def seamless(
     src: NDArray[np.float32],

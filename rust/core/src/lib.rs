@@ -5,7 +5,8 @@
 //! `seed` and returns the same result whatever the number of rayon threads.
 //!
 //! Engines so far:
-//! - [`patch`]: nearest-neighbour fields by PatchMatch (Barnes et al. 2009) and exact search;
+//! - [`patch`]: nearest-neighbour fields by PatchMatch (Barnes et al. 2009), PatchMatch seeded
+//!   by PCA kd-tree search (He & Sun 2012), and exact search;
 //! - [`knn`]: k nearest patches inside one exemplar and the k-coherence candidate sets of
 //!   Tong et al. 2002;
 //! - [`vote`]: weighted patch voting, the M-step of texture optimisation (Kwatra et al. 2005)
@@ -27,6 +28,7 @@
 pub mod error;
 pub mod field;
 pub mod image;
+pub(crate) mod kdtree;
 pub mod knn;
 pub mod maxflow;
 pub(crate) mod multigrid;

@@ -55,7 +55,7 @@ fn flat_indices(name: &'static str, rc: &[i32], h: usize, w: usize) -> PyResult<
 type NnfOut<'py> = (Bound<'py, PyArray3<i32>>, Bound<'py, PyArray2<f32>>, u64);
 
 #[pyfunction]
-#[pyo3(name = "nnf", signature = (source, target, *, patch_size, iterations, levels, exact, seed, weights=None, source_mask=None, target_mask=None, init=None, source_knn=None, source_cost=None, threads=None))]
+#[pyo3(name = "nnf", signature = (source, target, *, patch_size, iterations, levels, exact, seed, weights=None, source_mask=None, target_mask=None, init=None, source_knn=None, source_cost=None, threads=None, kdtree=false))]
 pub fn nnf_py<'py>(
     py: Python<'py>,
     source: PyReadonlyArray3<'py, f32>,
@@ -72,6 +72,7 @@ pub fn nnf_py<'py>(
     source_knn: Option<numpy::PyReadonlyArray4<'py, i32>>,
     source_cost: Option<PyReadonlyArray2<'py, f32>>,
     threads: Option<usize>,
+    kdtree: bool,
 ) -> PyResult<NnfOut<'py>> {
     let (sh, sw) = (source.as_array().dim().0, source.as_array().dim().1);
     let table = match &source_knn {
@@ -99,6 +100,8 @@ pub fn nnf_py<'py>(
     };
     let method = if exact {
         Method::Exact
+    } else if kdtree {
+        Method::KdTree
     } else {
         Method::PatchMatch
     };
@@ -215,7 +218,7 @@ pub fn coherence_candidates_py<'py>(
 type VoteOut<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray2<f32>>);
 
 #[pyfunction]
-#[pyo3(name = "vote", signature = (source, field, *, patch_size, weights=None, threads=None))]
+#[pyo3(name = "vote", signature = (source, field, *, patch_size, weights=None, threads=None, mean_shift=0))]
 pub fn vote_py<'py>(
     py: Python<'py>,
     source: PyReadonlyArray3<'py, f32>,
@@ -223,6 +226,7 @@ pub fn vote_py<'py>(
     patch_size: usize,
     weights: Option<PyReadonlyArray2<'py, f32>>,
     threads: Option<usize>,
+    mean_shift: usize,
 ) -> PyResult<VoteOut<'py>> {
     let src = image("source", &source)?;
     let (h, w, two) = field.as_array().dim();
@@ -241,7 +245,13 @@ pub fn vote_py<'py>(
     .map_err(to_py)?;
     let wts = opt_slice("weights", weights.as_ref())?;
     let v = py
-        .detach(|| guarded(|| install(threads, || vote::vote(&src, &idx, h, w, wts, patch_size))))
+        .detach(|| {
+            guarded(|| {
+                install(threads, || {
+                    vote::vote_mode(&src, &idx, h, w, wts, patch_size, mean_shift)
+                })
+            })
+        })
         .map_err(to_py)?;
     let img = Array3::from_shape_vec((h, w, src.c), v.image).expect("vote shape");
     let wt = Array2::from_shape_vec((h, w), v.weight).expect("weight shape");
