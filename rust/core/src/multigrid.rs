@@ -436,6 +436,52 @@ impl Hierarchy {
         s
     }
 
+    /// A first guess for `A x = b` on the fine level by nested iteration (full multigrid):
+    /// `b` restricted to every level, the coarsest solved exactly, and going up, each level
+    /// starts from the prolonged solution of the one below and takes one V-cycle on its
+    /// residual; the fine level gets the prolonged solution of level 1 (the caller's first
+    /// preconditioned step smooths it). `b` is 0 off the unknowns; so is the result.
+    pub fn full_multigrid<const L: usize>(
+        &self,
+        ws: &mut Work<L>,
+        b: &[[f32; L]],
+        x: &mut [[f32; L]],
+    ) {
+        let nl = self.levels.len();
+        if nl == 1 {
+            self.coarsest.solve(b, x);
+            return;
+        }
+        // Right-hand sides of levels 1.. (index l − 1).
+        let mut bs: Vec<Vec<[f32; L]>> = Vec::with_capacity(nl - 1);
+        for l in 1..nl {
+            let (fine, coarse) = (&self.levels[l - 1], &self.levels[l]);
+            let mut bc = vec![[0f32; L]; coarse.h * coarse.w];
+            restrict(fine, coarse, if l == 1 { b } else { &bs[l - 2] }, &mut bc);
+            bs.push(bc);
+        }
+        let last = &self.levels[nl - 1];
+        let mut xl = vec![[0f32; L]; last.h * last.w];
+        self.coarsest.solve(&bs[nl - 2], &mut xl);
+        for l in (1..nl - 1).rev() {
+            let (lev, coarse) = (&self.levels[l], &self.levels[l + 1]);
+            let mut xf = vec![[0f32; L]; lev.h * lev.w];
+            prolong_add(lev, coarse, &xl, &mut xf);
+            let mut r = vec![[0f32; L]; lev.h * lev.w];
+            full_residual(lev, &xf, &bs[l - 1], &mut r);
+            let mut e = vec![[0f32; L]; lev.h * lev.w];
+            self.cycle(ws, l, &r, &mut e);
+            for (xv, ev) in xf.iter_mut().zip(&e) {
+                for c in 0..L {
+                    xv[c] += ev[c];
+                }
+            }
+            xl = xf;
+        }
+        x.fill([0.0; L]);
+        prolong_add(&self.levels[0], &self.levels[1], &xl, x);
+    }
+
     fn cycle<const L: usize>(
         &self,
         ws: &mut Work<L>,
@@ -881,6 +927,43 @@ fn res_at<const L: usize>(
 }
 
 /// `bc = Pᵀ rf`.
+/// `r = b − A x` at every unknown (0 elsewhere), for any `x` that is 0 off the unknowns.
+fn full_residual<const L: usize>(lev: &Level, x: &[[f32; L]], b: &[[f32; L]], r: &mut [[f32; L]]) {
+    let (h, w) = (lev.h, lev.w);
+    rows_mut(r, w, |y, out| {
+        out.fill([0.0; L]);
+        if y == 0 || y == h - 1 {
+            return;
+        }
+        let o = y * w;
+        for xi in 1..w - 1 {
+            let p = o + xi;
+            if lev.inv[p] == 0.0 {
+                continue;
+            }
+            let mut v = b[p];
+            match &lev.stencil {
+                Stencil::Five(d) => {
+                    let (c0, l, rr, u, dn) = (x[p], x[p - 1], x[p + 1], x[p - w], x[p + w]);
+                    for c in 0..L {
+                        v[c] -= d[p] * c0[c] - (l[c] + rr[c] + u[c] + dn[c]);
+                    }
+                }
+                Stencil::Nine(a) => {
+                    let s = &a[p];
+                    for k in 0..9 {
+                        let q = x[p + k / 3 * w + k % 3 - w - 1];
+                        for c in 0..L {
+                            v[c] -= s[k] * q[c];
+                        }
+                    }
+                }
+            }
+            out[xi] = v;
+        }
+    });
+}
+
 fn restrict<const L: usize>(fine: &Level, coarse: &Level, rf: &[[f32; L]], bc: &mut [[f32; L]]) {
     let (hc, wc, wf) = (coarse.h, coarse.w, fine.w);
     rows_mut(bc, wc, |i, out| {
