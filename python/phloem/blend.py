@@ -159,7 +159,7 @@ def seamless(
     >>> bool(np.all(out[0] == 0.5))   # outside the region dst is unchanged
     True
     """
-    s = as_image(src, "src")
+    s = as_image(src, "src", finite=False)  # the core checks src before it solves
     d = as_image(dst, "dst", finite=False)  # the core checks while it copies dst into the output
     if s.shape[2] != d.shape[2]:
         raise ValueError(f"dst: expected {s.shape[2]} channels like src, got {d.shape[2]}")
