@@ -1023,19 +1023,31 @@ fn prolong_add<const L: usize>(fine: &Level, coarse: &Level, xc: &[[f32; L]], xf
             }
         };
         let inv = &fine.inv[y * wf..(y + 1) * wf];
-        for xi in 1..wf - 1 {
-            if inv[xi] == 0.0 {
-                continue;
+        // Fine column 2k − 1 takes coarse column k, fine column 2k the mean of k and k + 1.
+        let mut tk = t(1);
+        let mut k = 1;
+        loop {
+            let xi = 2 * k - 1;
+            if xi >= wf - 1 {
+                break;
             }
-            let v = if xi % 2 == 1 {
-                t(xi.div_ceil(2))
-            } else {
-                let (a, b) = (t(xi / 2), t(xi / 2 + 1));
-                std::array::from_fn(|c| 0.5 * (a[c] + b[c]))
-            };
-            for c in 0..L {
-                out[xi][c] += v[c];
+            if inv[xi] != 0.0 {
+                for c in 0..L {
+                    out[xi][c] += tk[c];
+                }
             }
+            if xi + 1 >= wf - 1 {
+                break;
+            }
+            let tn = t(k + 1);
+            if inv[xi + 1] != 0.0 {
+                let v: [f32; L] = std::array::from_fn(|c| 0.5 * (tk[c] + tn[c]));
+                for c in 0..L {
+                    out[xi + 1][c] += v[c];
+                }
+            }
+            tk = tn;
+            k += 1;
         }
     });
 }

@@ -329,7 +329,13 @@ impl<const L: usize> Values<L> {
             let sy = (gy as i64 + grid.y0 - oy).clamp(0, s.h as i64 - 1) as usize;
             for (gx, v) in row.iter_mut().enumerate() {
                 let sx = (gx as i64 + grid.x0 - ox).clamp(0, s.w as i64 - 1) as usize;
-                v[..nc].copy_from_slice(&s.pixel(sy, sx)[c0..c0 + nc]);
+                let px = &s.pixel(sy, sx)[c0..];
+                // A lane loop, not a slice copy: a copy of runtime length is a memmove call.
+                for c in 0..L {
+                    if c < nc {
+                        v[c] = px[c];
+                    }
+                }
             }
         });
         rows_mut(&mut d, w, |gy, row| {
