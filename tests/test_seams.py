@@ -146,7 +146,9 @@ def core_maxflow(source, sink, edges, *, directed=False, k=4, method="auto"):
     """phloem's engine with the method exposed: (flow, sink side, method used)."""
     from phloem import _core
 
-    f32 = lambda a: np.ascontiguousarray(a, np.float32)  # noqa: E731
+    def f32(a):
+        return np.ascontiguousarray(a, np.float32)
+
     return _core.grid_maxflow(f32(source), f32(sink), f32(edges), connectivity=k, directed=directed, method=method)
 
 
@@ -164,7 +166,7 @@ def test_planar_cut_matches_pymaxflow_and_boykov_kolmogorov(seed, directed):
     assert flow == pytest.approx(ref, rel=1e-6, abs=1e-6)
     assert cut_value(source, sink, edges, side, directed=directed) == pytest.approx(ref, rel=1e-6, abs=1e-6)
     assert not side[np.isinf(source)].any() and side[np.isinf(sink)].all()
-    flow_bk, side_bk, used_bk = core_maxflow(source, sink, edges, directed=directed, method="bk")
+    flow_bk, _, used_bk = core_maxflow(source, sink, edges, directed=directed, method="bk")
     assert used_bk == "bk" and flow_bk == pytest.approx(flow, rel=1e-6, abs=1e-6)
     # The public function gives the same cut.
     f2, s2 = grid_maxflow(source, sink, edges, directed=directed)
