@@ -208,9 +208,11 @@ impl GridGraph {
             .flat_map(|y| (0..w).map(move |x| (y, x)))
             .map(|(y, x)| !seen[self.node(y, x)])
             .collect();
-        self.base_flow += length;
+        // No flow is pushed, so the capacities stay the original (or residual) ones and
+        // `base_flow` keeps meaning the flow already in them: solving again, or after more
+        // terminal capacity is added, stays exact.
         self.solved = true;
-        Some(self.base_flow)
+        Some(self.base_flow + length)
     }
 
     /// Dijkstra from the outer piece after the source arc to the one after the sink arc.
@@ -478,6 +480,37 @@ mod tests {
             let side = g.sink_side().unwrap();
             let cut = cut_value(h, w, 4, &c.edges, &fin(&c.source), &fin(&c.sink), side);
             assert!((cut - want).abs() <= 1e-6 * want, "cut {cut} vs {want}");
+        }
+    }
+
+    #[test]
+    fn solving_again_or_after_adding_terminal_capacity_stays_exact() {
+        let mut rng = Rng::keyed(77, 1, 1);
+        for case in 0..30 {
+            let (h, w) = (3 + rng.below(8) as usize, 3 + rng.below(8) as usize);
+            let mut c = planar_case(&mut rng, h, w);
+            let mut g = graph(&c, 4);
+            let first = g.maxflow();
+            assert_eq!(g.method(), Some(Method::Planar));
+            let again = g.maxflow();
+            assert!(
+                again.to_bits() == first.to_bits(),
+                "case {case}: a second solve changed the flow ({first} -> {again})"
+            );
+            // More capacity on a border pixel (planar again) or an interior one (BK now).
+            for (y, x) in [(0, w / 2), (h / 2, w / 2)] {
+                let (s, t) = (rng.below(9) as f32, rng.below(9) as f32);
+                g.set_terminal(y, x, s, t);
+                c.source[y * w + x] += s;
+                c.sink[y * w + x] += t;
+                let flow = g.maxflow();
+                let want = graph(&c, 4).maxflow_with(Method::BoykovKolmogorov).unwrap();
+                assert!(
+                    (flow - want).abs() <= 1e-6 * want.max(1.0),
+                    "case {case} after ({y}, {x}): {flow} vs {want} ({:?})",
+                    g.method()
+                );
+            }
         }
     }
 
