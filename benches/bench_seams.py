@@ -9,7 +9,9 @@ of the embedded bark, mirror-tiled to reach 1024 px), Kwatra colour-difference c
 4-connected edges, infinite terminal edges on the first (source) and last (sink) column.
 "Build plus solve" starts from the capacity arrays: PyMaxflow's ``add_grid_nodes``,
 ``add_grid_edges(..., symmetric=True)`` (east, south), ``add_grid_tedges`` and ``maxflow``
-against :func:`phloem.seams.grid_maxflow`. The end-to-end :func:`phloem.seams.seam` (costs
+against :func:`phloem.seams.grid_maxflow`. With terminals only on two opposite columns this
+4-connected problem is planar, so phloem solves it as a shortest path in the dual graph
+(Schmidt, Töppe & Cremers 2009) rather than by Boykov–Kolmogorov. The end-to-end :func:`phloem.seams.seam` (costs
 computed in Rust from the two images) is timed as well.
 """
 

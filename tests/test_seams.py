@@ -102,6 +102,115 @@ def test_large_grid_split_in_halves_matches_pymaxflow(threads):
     assert cut_value(source, sink, edges, side) == pytest.approx(ref, rel=1e-5)
 
 
+def border_cycle(h: int, w: int) -> list[tuple[int, int]]:
+    """The border pixels clockwise from the top-left one."""
+    return (
+        [(0, x) for x in range(w)]
+        + [(y, w - 1) for y in range(1, h)]
+        + [(h - 1, x) for x in range(w - 2, -1, -1)]
+        + [(y, 0) for y in range(h - 2, 0, -1)]
+    )
+
+
+def planar_graph(rng, h, w, directed):
+    """Terminals only on the border: a source arc and a sink arc of random lengths and
+    positions (finite, zero and infinite capacities, some pixels tied to both terminals),
+    the other border pixels tied equally to both or to none; edges with many zeros."""
+    d = 4 if directed else 2
+    edges = (rng.integers(0, 12, (h, w, d)) * (rng.random((h, w, d)) < 0.7)).astype(np.float32) / 4
+    source = np.zeros((h, w), np.float32)
+    sink = np.zeros((h, w), np.float32)
+    cyc = border_cycle(h, w)
+    n = len(cyc)
+    n_src = int(rng.integers(1, n))
+    n_snk = int(rng.integers(1, n - n_src + 1))
+    gap = int(rng.integers(0, n - n_src - n_snk + 1))
+    start = int(rng.integers(0, n))
+    for i in range(n):
+        p = cyc[(start + i) % n]
+        v = rng.choice([np.inf, 0.0, *rng.integers(1, 40, 4) / 4])
+        if i < n_src:
+            source[p] = v if i else 1 + rng.integers(0, 40) / 4
+            if np.isfinite(source[p]) and rng.random() < 0.25:
+                sink[p] = source[p] / 2
+        elif n_src + gap <= i < n_src + gap + n_snk:
+            sink[p] = v if i > n_src + gap else 1 + rng.integers(0, 40) / 4
+            if np.isfinite(sink[p]) and rng.random() < 0.25:
+                source[p] = sink[p] / 4
+        elif rng.random() < 0.5:
+            source[p] = sink[p] = rng.integers(0, 10)
+    return source, sink, edges
+
+
+def core_maxflow(source, sink, edges, *, directed=False, k=4, method="auto"):
+    """phloem's engine with the method exposed: (flow, sink side, method used)."""
+    from phloem import _core
+
+    def f32(a):
+        return np.ascontiguousarray(a, np.float32)
+
+    return _core.grid_maxflow(f32(source), f32(sink), f32(edges), connectivity=k, directed=directed, method=method)
+
+
+@pytest.mark.parametrize("directed", [False, True])
+@pytest.mark.parametrize("seed", range(40))
+def test_planar_cut_matches_pymaxflow_and_boykov_kolmogorov(seed, directed):
+    """Terminals on two border arcs: the dual shortest path runs, and its flow and labels are
+    those of an exact min cut (PyMaxflow's value, the labels' own cut value)."""
+    rng = np.random.default_rng(1000 + seed)
+    h, w = (int(v) for v in rng.integers(2, 30, 2))
+    source, sink, edges = planar_graph(rng, h, w, directed)
+    flow, side, used = core_maxflow(source, sink, edges, directed=directed)
+    assert used == "planar"
+    ref, _ = pymaxflow(source, sink, edges, directed=directed)
+    assert flow == pytest.approx(ref, rel=1e-6, abs=1e-6)
+    assert cut_value(source, sink, edges, side, directed=directed) == pytest.approx(ref, rel=1e-6, abs=1e-6)
+    assert not side[np.isinf(source)].any() and side[np.isinf(sink)].all()
+    flow_bk, _, used_bk = core_maxflow(source, sink, edges, directed=directed, method="bk")
+    assert used_bk == "bk" and flow_bk == pytest.approx(flow, rel=1e-6, abs=1e-6)
+    # The public function gives the same cut.
+    f2, s2 = grid_maxflow(source, sink, edges, directed=directed)
+    assert f2 == flow and np.array_equal(s2, side)
+
+
+def test_planar_method_falls_back_where_the_graph_is_not_planar():
+    rng = np.random.default_rng(5)
+    h, w = 9, 11
+    source, sink, edges = planar_graph(rng, h, w, False)
+    cases = {}
+    interior = source.copy()
+    interior[4, 5] = 3.0
+    cases["interior terminal"] = (interior, sink, edges, 4)
+    inter_s, inter_t = np.zeros((h, w)), np.zeros((h, w))
+    inter_s[0, 0], inter_t[0, -1], inter_s[-1, -1], inter_t[-1, 0] = 2.0, 3.0, np.inf, 1.5
+    cases["interleaved arcs"] = (inter_s, inter_t, edges, 4)
+    cases["8-connected"] = (source, sink, rng.integers(0, 9, (h, w, 4)).astype(np.float32), 8)
+    cases["one row"] = (source[:1], sink[:1], edges[:1], 4)
+    for what, (s, t, e, k) in cases.items():
+        flow, side, used = core_maxflow(s, t, e, k=k)
+        assert used == "bk", what
+        ref, _ = pymaxflow(s, t, e, k=k)
+        assert flow == pytest.approx(ref, rel=1e-6, abs=1e-6), what
+        assert cut_value(s, t, e, side, k=k) == pytest.approx(ref, rel=1e-6, abs=1e-6), what
+        with pytest.raises(ValueError, match="^method:"):
+            core_maxflow(s, t, e, k=k, method="planar")
+
+
+def test_seam_strip_takes_the_planar_method(bark):
+    """The benchmark's problem (infinite terminal edges on the first and last column)."""
+    h, w = 96, 24
+    a, b = bark[:h, :w], bark[100 : 100 + h, 37 : 37 + w]
+    edges = kwatra_edges(a, b).astype(np.float32)
+    source, sink = np.zeros((h, w)), np.zeros((h, w))
+    source[:, 0] = np.inf
+    sink[:, -1] = np.inf
+    flow, side, used = core_maxflow(source, sink, edges)
+    assert used == "planar"
+    flow_bk, _, _ = core_maxflow(source, sink, edges, method="bk")
+    assert flow == pytest.approx(flow_bk, rel=1e-6)
+    assert cut_value(source, sink, edges, side) == pytest.approx(flow_bk, rel=1e-6)
+
+
 def kwatra_edges(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Kwatra et al. 2003 Eq. 1 for east and south edges, written independently in numpy."""
     d = np.sqrt(((a.astype(np.float64) - b) ** 2).sum(-1))

@@ -153,7 +153,8 @@ def grid_maxflow(
     connectivity: int,
     directed: bool,
     threads: int | None = None,
-) -> tuple[float, NDArray[np.bool_]]: ...
+    method: str = "auto",
+) -> tuple[float, NDArray[np.bool_], str]: ...
 def seam(
     a: NDArray[np.float32],
     b: NDArray[np.float32],

@@ -2,7 +2,7 @@
 
 Both solve sparse symmetric systems on pixel grids in phloem's Rust core by conjugate
 gradients preconditioned with a Galerkin multigrid V-cycle (parallel, GIL released, the same
-result for any number of threads).
+result for any number of threads); :func:`seamless` starts from a full-multigrid first guess.
 """
 
 from __future__ import annotations
@@ -126,7 +126,7 @@ def seamless(
     tol : float, optional
         Stop when ``‖b − A f‖ / ‖b‖ ≤ tol`` in every channel (default 1e-6).
     max_iterations : int, optional
-        Most conjugate-gradient iterations (default 200; 5–10 are typical). A
+        Most conjugate-gradient iterations (default 200; 2–6 are typical). A
         ``RuntimeWarning`` says if ``tol`` was not reached.
     threads : int, optional
         Worker threads (default: ``PHLOEM_NUM_THREADS`` or all cores).
@@ -159,7 +159,7 @@ def seamless(
     >>> bool(np.all(out[0] == 0.5))   # outside the region dst is unchanged
     True
     """
-    s = as_image(src, "src")
+    s = as_image(src, "src", finite=False)  # the core checks src before it solves
     d = as_image(dst, "dst", finite=False)  # the core checks while it copies dst into the output
     if s.shape[2] != d.shape[2]:
         raise ValueError(f"dst: expected {s.shape[2]} channels like src, got {d.shape[2]}")

@@ -1,7 +1,11 @@
 """Graph cuts: exact minimum cuts on grid graphs, and seams between overlapping images.
 
-Both run in phloem's Rust core: the Boykov–Kolmogorov max-flow algorithm (PAMI 2004)
-specialised to 4- and 8-connected grids, with the GIL released. :func:`seam` is the
+Both run in phloem's Rust core, with the GIL released. When a 4-connected grid has all its
+terminal edges on the border, the source-tied pixels forming one arc of the border and the
+sink-tied pixels another (a seam across a strip, as in quilting), the graph is planar and the
+minimum cut is a shortest path in its dual graph (Schmidt, Töppe & Cremers, CVPR 2009),
+found by Dijkstra's algorithm; otherwise the Boykov–Kolmogorov max-flow algorithm (PAMI 2004)
+specialised to 4- and 8-connected grids runs. Both are exact. :func:`seam` is the
 compositing step of graph-cut textures (Kwatra et al. 2003), of the fragment composition of
 branching structures (Sibbing et al. 2010 §5.3) and of stroke-based editing (Luo et al.).
 """
@@ -73,10 +77,12 @@ def grid_maxflow(
     directed : bool, optional
         Layout of ``edges`` (default symmetric).
     threads : int, optional
-        Worker threads. Grids of 2^13 pixels or more are cut in two (twice over for big ones), the halves solved in
-        parallel and the search finished on the whole (the result is exact, and the same for
-        any number of threads).
-
+        Worker threads. The planar case (4-connectivity, terminal edges only on the border in
+        two non-interleaving arcs, e.g. the first column tied to the source and the last to
+        the sink) is solved as a shortest path in the dual graph, on one thread. Otherwise
+        grids of 2^13 pixels or more are cut in two (twice over for big ones), the halves
+        solved in parallel and the Boykov–Kolmogorov search finished on the whole. Either way
+        the result is exact and the same for any number of threads.
 
     Returns
     -------
@@ -108,7 +114,8 @@ def grid_maxflow(
     if both.any():
         y, x = np.argwhere(both)[0]
         raise ValueError(f"sink: pixel ({y}, {x}) has infinite capacity to both terminals")
-    return _core.grid_maxflow(s, t, e, connectivity=conn, directed=bool(directed), threads=check_threads(threads))
+    flow, side, _ = _core.grid_maxflow(s, t, e, connectivity=conn, directed=bool(directed), threads=check_threads(threads))
+    return flow, side
 
 
 @overload

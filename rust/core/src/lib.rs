@@ -11,7 +11,8 @@
 //!   Tong et al. 2002;
 //! - [`vote`]: weighted patch voting, the M-step of texture optimisation (Kwatra et al. 2005)
 //!   and of image completion (Wexler et al. 2007);
-//! - [`maxflow`]: exact s-t max-flow / min-cut on grid graphs (Boykov & Kolmogorov 2004);
+//! - [`maxflow`]: exact s-t max-flow / min-cut on grid graphs (a dual shortest path for planar
+//!   problems, Schmidt, Töppe & Cremers 2009; otherwise Boykov & Kolmogorov 2004);
 //! - [`seams`]: graph-cut seams between overlapping images (Kwatra et al. 2003; Luo et al.);
 //! - [`poisson`]: Poisson image editing (Pérez et al. 2003) with normal or mixed gradients and
 //!   fixed pixels, solved by multigrid-preconditioned conjugate gradients;

@@ -1,5 +1,10 @@
 //! Exact s-t max-flow / min-cut on 4- and 8-connected grid graphs.
 //!
+//! Planar problems (4-connectivity, terminal edges only on the border, in a source arc and a
+//! sink arc) are solved as a shortest path in the dual graph ([`Method::Planar`], in the
+//! private `planar` module). Every other problem goes to Boykov–Kolmogorov
+//! ([`Method::BoykovKolmogorov`]):
+//!
 //! The algorithm is Boykov & Kolmogorov's (*An experimental comparison of min-cut/max-flow
 //! algorithms for energy minimization in vision*, PAMI 2004), as in their `maxflow` v3
 //! library: two search trees grown from the terminals, augmentation along the paths where
@@ -9,12 +14,15 @@
 //! tests.
 //!
 //! Capacities are `f32`, as in the `GraphFloat` variant of the C++ library; the flow value is
-//! accumulated in `f64`. A terminal capacity of `+∞` is a hard constraint. The algorithm is
-//! sequential and deterministic; the seam code builds its capacities in parallel.
+//! accumulated in `f64`. A terminal capacity of `+∞` is a hard constraint. Both methods are
+//! deterministic (Boykov–Kolmogorov's split start depends only on the grid's shape); the seam
+//! code builds its capacities in parallel.
 
 use std::collections::VecDeque;
 
 use crate::error::{invalid, Result};
+
+mod planar;
 
 /// Row and column steps of the directions, in the order E, S, W, N, SE, SW, NW, NE; the
 /// opposite of direction `d` is `d ^ 2`.
@@ -61,6 +69,17 @@ pub enum EdgeLayout {
     Directed,
 }
 
+/// The algorithm behind a [`GridGraph`]'s minimum cut.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// A shortest path in the planar dual graph (Schmidt, Töppe & Cremers 2009). Applies to
+    /// 4-connected grids whose terminal edges all attach to border pixels, the source-tied
+    /// ones in one arc of the border and the sink-tied ones in another.
+    Planar,
+    /// Boykov–Kolmogorov augmenting paths: any grid.
+    BoykovKolmogorov,
+}
+
 /// A grid graph with residual capacities, ready for [`GridGraph::maxflow`].
 #[derive(Clone, Debug)]
 pub struct GridGraph {
@@ -76,6 +95,7 @@ pub struct GridGraph {
     base_flow: f64,
     sink_side: Vec<bool>,
     solved: bool,
+    method: Option<Method>,
 }
 
 impl GridGraph {
@@ -113,6 +133,7 @@ impl GridGraph {
             base_flow: 0.0,
             sink_side: Vec::new(),
             solved: false,
+            method: None,
         })
     }
 
@@ -258,16 +279,58 @@ impl GridGraph {
 
     /// Computes the maximum flow, leaving the minimum cut for [`GridGraph::sink_side`].
     ///
-    /// Large grids are cut in two along their longer side, the halves solved independently
-    /// (in parallel) without the edges between them, their flows kept, and the search run
+    /// When the graph is planar with its terminals on the border (see [`Method::Planar`]:
+    /// the case of a seam across a strip tied to one image on one side and to the other on
+    /// the opposite side), the cut is a shortest path in the dual graph; otherwise it is
+    /// [`Method::BoykovKolmogorov`]'s. Both are exact; [`GridGraph::method`] tells which ran.
+    pub fn maxflow(&mut self) -> f64 {
+        if let Some(arcs) = self.planar_arcs() {
+            if let Some(flow) = self.planar_solve(&arcs) {
+                self.method = Some(Method::Planar);
+                return flow;
+            }
+        }
+        self.method = Some(Method::BoykovKolmogorov);
+        self.maxflow_split(SPLIT_DEPTH)
+    }
+
+    /// [`GridGraph::maxflow`] with a chosen method; [`Method::Planar`] is an error (naming
+    /// `method`) where it does not apply.
+    pub fn maxflow_with(&mut self, method: Method) -> Result<f64> {
+        match method {
+            Method::Planar => {
+                let arcs = self.planar_arcs().ok_or_else(|| {
+                    invalid(
+                        "method",
+                        "the planar method needs 4-connectivity and terminal edges only on the \
+                         border, the source-tied pixels in one arc and the sink-tied ones in another",
+                    )
+                })?;
+                let flow = self
+                    .planar_solve(&arcs)
+                    .ok_or_else(|| crate::Error::Internal("planar cut check failed".into()))?;
+                self.method = Some(Method::Planar);
+                Ok(flow)
+            }
+            Method::BoykovKolmogorov => {
+                self.method = Some(Method::BoykovKolmogorov);
+                Ok(self.maxflow_split(SPLIT_DEPTH))
+            }
+        }
+    }
+
+    /// After [`GridGraph::maxflow`]: the method that found the cut.
+    #[must_use]
+    pub fn method(&self) -> Option<Method> {
+        self.method.filter(|_| self.solved)
+    }
+
+    /// Boykov–Kolmogorov. Large grids are cut in two along their longer side, the halves
+    /// solved independently (in parallel) without the edges between them, their flows kept, and the search run
     /// once more on the whole residual graph (Liu & Sun 2010, *Parallel graph-cuts by
     /// adaptive bottom-up merging*). A flow of the halves is a flow of the whole, so the
     /// result is the exact maximum flow; the split depends only on the grid's shape, so the
     /// result does not depend on the number of threads.
-    pub fn maxflow(&mut self) -> f64 {
-        self.maxflow_split(SPLIT_DEPTH)
-    }
-
     fn maxflow_split(&mut self, depth: usize) -> f64 {
         let long = self.h.max(self.w);
         if depth > 0 && self.h * self.w >= SPLIT_MIN_PIXELS && long >= 2 * SPLIT_MIN_SIDE {
@@ -301,6 +364,7 @@ impl GridGraph {
             base_flow: 0.0,
             sink_side: Vec::new(),
             solved: false,
+            method: None,
         };
         for y in 0..h {
             for x in 0..w {
@@ -645,7 +709,14 @@ mod tests {
     use crate::rng::Rng;
 
     /// Dinic-free reference: Edmonds–Karp on a dense residual matrix (tiny graphs only).
-    fn reference(h: usize, w: usize, k: usize, edges: &[f32], source: &[f32], sink: &[f32]) -> f64 {
+    pub(super) fn reference(
+        h: usize,
+        w: usize,
+        k: usize,
+        edges: &[f32],
+        source: &[f32],
+        sink: &[f32],
+    ) -> f64 {
         let n = h * w + 2;
         let (s, t) = (h * w, h * w + 1);
         let mut c = vec![vec![0f64; n]; n];
@@ -695,7 +766,7 @@ mod tests {
         }
     }
 
-    fn cut_value(
+    pub(super) fn cut_value(
         h: usize,
         w: usize,
         k: usize,

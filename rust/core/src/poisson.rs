@@ -22,10 +22,13 @@
 //! over it. Solving with one pixel pinned gives an exact solution of the singular system
 //! (its right-hand side sums to zero), which is then shifted to that mean.
 //!
-//! The unknown is the correction `h = f − g`, which is smooth (harmonic in normal mode), so
-//! zero is a good first guess. It is found by conjugate gradients in `f64`, preconditioned by
-//! one V-cycle of the Galerkin multigrid in [`crate::multigrid`] (in `f32`), for up to four
-//! channels at once; the stopping test is the relative residual `‖b − A f‖ / ‖b‖` of the
+//! The unknown is the correction `h = f − g`, which is smooth (harmonic in normal mode). Its
+//! first guess comes from full multigrid (nested iteration over the same hierarchy: coarsest
+//! solved exactly, one V-cycle per level going up, prolonged to the fine level), which
+//! leaves a thirtieth to a fiftieth of the residual that a zero guess and one preconditioned step
+//! does, and so saves about two iterations at `tol = 1e-4`. It is then refined by conjugate
+//! gradients in `f64`, preconditioned by one V-cycle of the Galerkin multigrid in
+//! [`crate::multigrid`] (in `f32`), for up to four channels at once; the stopping test is the relative residual `‖b − A f‖ / ‖b‖` of the
 //! system above in every channel. Reductions sum fixed bands of rows in a fixed order, so
 //! the result is bit-identical for any number of threads.
 
@@ -309,12 +312,13 @@ fn find(parent: &mut [usize], mut i: usize) -> usize {
 struct Values<const L: usize> {
     /// Source, its edge replicated beyond its border.
     g: Vec<[f32; L]>,
-    /// Destination (0 outside it).
+    /// Destination (0 outside it). Normal cloning reads it only at Dirichlet destination
+    /// cells, so only those are filled then.
     d: Vec<[f32; L]>,
 }
 
 impl<const L: usize> Values<L> {
-    fn new(input: &BlendInput<'_>, grid: &Grid, c0: usize) -> Self {
+    fn new(input: &BlendInput<'_>, grid: &Grid, c0: usize, mode: Mode) -> Self {
         let (h, w) = (grid.h, grid.w);
         let (s, dst) = (&input.src, &input.dst);
         let (oy, ox) = input.offset;
@@ -325,7 +329,13 @@ impl<const L: usize> Values<L> {
             let sy = (gy as i64 + grid.y0 - oy).clamp(0, s.h as i64 - 1) as usize;
             for (gx, v) in row.iter_mut().enumerate() {
                 let sx = (gx as i64 + grid.x0 - ox).clamp(0, s.w as i64 - 1) as usize;
-                v[..nc].copy_from_slice(&s.pixel(sy, sx)[c0..c0 + nc]);
+                let px = &s.pixel(sy, sx)[c0..];
+                // A lane loop, not a slice copy: a copy of runtime length is a memmove call.
+                for c in 0..L {
+                    if c < nc {
+                        v[c] = px[c];
+                    }
+                }
             }
         });
         rows_mut(&mut d, w, |gy, row| {
@@ -333,7 +343,11 @@ impl<const L: usize> Values<L> {
             if !(0..dst.h as i64).contains(&y) {
                 return;
             }
+            let kind = &grid.kind[gy * w..(gy + 1) * w];
             for (gx, v) in row.iter_mut().enumerate() {
+                if mode == Mode::Normal && kind[gx] != DST {
+                    continue;
+                }
                 let x = gx as i64 + grid.x0;
                 if (0..dst.w as i64).contains(&x) {
                     v[..nc].copy_from_slice(&dst.pixel(y as usize, x as usize)[c0..c0 + nc]);
@@ -556,25 +570,27 @@ fn pcg<const L: usize>(
     let w = mg.levels[0].w;
     let n = b.len();
     let mut ws = mg.work::<L>();
-    let mut x = vec![[0f64; L]; n];
     let mut r: Vec<[f32; L]> = b.iter().map(|v| v.map(|t| t as f32)).collect();
     let mut z = vec![[0f32; L]; n];
-    let mut p = vec![[0f32; L]; n];
+    let mut p: Vec<[f32; L]> = Vec::new();
     let mut q = vec![[0f32; L]; n];
     let done = |rr: [f64; L]| (0..L).all(|c| rr[c].sqrt() <= tol * scale[c]);
-    let mut rr = sum_lanes(&[b.iter().fold([0f64; L], |mut s, v| {
-        for c in 0..L {
-            s[c] += v[c] * v[c];
-        }
-        s
-    })]);
+    // First guess by full multigrid (z as scratch); its residual in f32 like the recurrence
+    // (the f64 check at the end decides convergence).
+    mg.full_multigrid(&mut ws, &r, &mut z);
+    let mut x: Vec<[f64; L]> = z.iter().map(|v| v.map(f64::from)).collect();
+    apply(diag, w, &z, &mut q);
+    let mut rr = update_residual(&mut r, &q, w, [1.0; L]);
+    if done(rr) {
+        rr = true_residual(diag, w, b, &x, &mut r);
+    }
     let mut it = 0;
     loop {
         if done(rr) || it >= max_iterations {
             break;
         }
         let mut rz = mg.vcycle(&mut ws, &r, &mut z);
-        p.copy_from_slice(&z);
+        p.clone_from(&z);
         loop {
             let pq = apply(diag, w, &p, &mut q);
             let alpha: [f64; L] = std::array::from_fn(|c| {
@@ -660,10 +676,18 @@ pub fn seamless(input: &BlendInput<'_>, params: &BlendParams) -> Result<Blended>
         ));
     }
     src.check_finite("src")?;
-    let grid = Grid::new(input)?;
-    let diag = grid.diag();
-    let mg = Hierarchy::new(Level::five(grid.h, grid.w, diag.clone()));
-    let mut out = copy_finite(dst, "dst")?;
+    let setup = || -> Result<_> {
+        let grid = Grid::new(input)?;
+        let diag = grid.diag();
+        let mg = Hierarchy::new(Level::five(grid.h, grid.w, diag.clone()));
+        Ok((grid, diag, mg))
+    };
+    // The copy of the destination into the output is memory-bound and the setup mostly
+    // sequential: run them side by side (measured, same process alternating, best of 40 under
+    // load: 4% faster on a 256² blend, up to 15% on 511²). Errors keep their order.
+    let (setup, out) = rayon::join(setup, || copy_finite(dst, "dst"));
+    let (grid, diag, mg) = setup?;
+    let mut out = out?;
     let (mut iterations, mut residual) = (0, 0.0f64);
     let c = src.c;
     match c {
@@ -693,20 +717,27 @@ pub fn seamless(input: &BlendInput<'_>, params: &BlendParams) -> Result<Blended>
 
 /// A copy of `img`'s values, failing (naming `name`) at the first non-finite one.
 ///
-/// Both passes run in parallel chunks: the check (read-only, branch-free so it vectorises)
-/// and the copy, which rayon writes straight into the new vector's uninitialised capacity
-/// (no zeroing pass first).
+/// One pass in parallel chunks: each chunk is copied straight into the new vector's
+/// uninitialised capacity (no zeroing pass first) and checked while it is in cache.
 fn copy_finite(img: &Image<'_>, name: &'static str) -> Result<Vec<f32>> {
     const CHUNK: usize = 1 << 15;
-    let bad: Option<usize> = img
-        .data
-        .par_chunks(CHUNK)
+    let n = img.data.len();
+    let mut out: Vec<f32> = Vec::with_capacity(n);
+    let bad: Option<usize> = out.spare_capacity_mut()[..n]
+        .par_chunks_mut(CHUNK)
+        .zip(img.data.par_chunks(CHUNK))
         .enumerate()
-        .filter_map(|(i, d)| {
-            let any = d.iter().fold(false, |a, v| a | !v.is_finite());
+        .filter_map(|(i, (o, d))| {
+            let mut any = false;
+            for (o, &v) in o.iter_mut().zip(d) {
+                o.write(v);
+                any |= !v.is_finite();
+            }
             any.then(|| i * CHUNK + d.iter().position(|v| !v.is_finite()).unwrap_or(0))
         })
         .min();
+    // SAFETY: the chunks above cover 0..n and every element was written.
+    unsafe { out.set_len(n) };
     if let Some(i) = bad {
         let p = i / img.c;
         return Err(invalid(
@@ -719,12 +750,6 @@ fn copy_finite(img: &Image<'_>, name: &'static str) -> Result<Vec<f32>> {
             ),
         ));
     }
-    let mut out = Vec::new();
-    img.data
-        .par_iter()
-        .with_min_len(CHUNK)
-        .copied()
-        .collect_into_vec(&mut out);
     Ok(out)
 }
 
@@ -738,7 +763,7 @@ fn solve_group<const L: usize>(
     c0: usize,
     out: &mut [f32],
 ) -> (usize, f64) {
-    let vals = Values::<L>::new(input, grid, c0);
+    let vals = Values::<L>::new(input, grid, c0, params.mode);
     let (h, w) = (grid.h, grid.w);
     let mut b = vec![[0f64; L]; h * w];
     let parts = bands(&mut b, w, |bi, band| {

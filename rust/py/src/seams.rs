@@ -3,7 +3,7 @@
 use ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2, PyReadonlyArray3};
 use phloem_core::error::invalid;
-use phloem_core::maxflow::{EdgeLayout, GridGraph};
+use phloem_core::maxflow::{EdgeLayout, GridGraph, Method};
 use phloem_core::seams::{self, SeamCost, SeamInput};
 use pyo3::prelude::*;
 
@@ -11,10 +11,14 @@ use crate::errors::{guarded, not_contiguous, opt_slice, to_py};
 use crate::patch::image;
 use crate::threads::install;
 
-type FlowOut<'py> = (f64, Bound<'py, PyArray2<bool>>);
+type FlowOut<'py> = (f64, Bound<'py, PyArray2<bool>>, &'static str);
 
+/// Returns the flow, the sink side and the method that ran (`"planar"` or `"bk"`); `method`
+/// `"auto"` picks the planar dual shortest path where it applies, `"planar"` and `"bk"`
+/// force one (tests compare them).
 #[pyfunction]
-#[pyo3(name = "grid_maxflow", signature = (source, sink, edges, *, connectivity, directed, threads=None))]
+#[pyo3(name = "grid_maxflow", signature = (source, sink, edges, *, connectivity, directed, threads=None, method="auto"))]
+#[allow(clippy::too_many_arguments)]
 pub fn grid_maxflow_py<'py>(
     py: Python<'py>,
     source: PyReadonlyArray2<'py, f32>,
@@ -23,7 +27,19 @@ pub fn grid_maxflow_py<'py>(
     connectivity: usize,
     directed: bool,
     threads: Option<usize>,
+    method: &str,
 ) -> PyResult<FlowOut<'py>> {
+    let method = match method {
+        "auto" => None,
+        "planar" => Some(Method::Planar),
+        "bk" => Some(Method::BoykovKolmogorov),
+        other => {
+            return Err(to_py(invalid(
+                "method",
+                format!("expected 'auto', 'planar' or 'bk', got {other:?}"),
+            )))
+        }
+    };
     let (h, w) = source.as_array().dim();
     let (eh, ew, _) = edges.as_array().dim();
     if sink.as_array().dim() != (h, w) || (eh, ew) != (h, w) {
@@ -40,21 +56,28 @@ pub fn grid_maxflow_py<'py>(
     } else {
         EdgeLayout::Symmetric
     };
-    let (flow, side) = py
+    let (flow, side, used) = py
         .detach(|| {
             guarded(|| {
                 install(threads, || {
                     let mut g = GridGraph::new(h, w, connectivity)?;
                     g.set_edges("edges", e, layout)?;
                     g.set_terminals(s, t)?;
-                    let flow = g.maxflow();
-                    Ok((flow, g.sink_side().unwrap_or_default().to_vec()))
+                    let flow = match method {
+                        None => g.maxflow(),
+                        Some(m) => g.maxflow_with(m)?,
+                    };
+                    let used = match g.method() {
+                        Some(Method::Planar) => "planar",
+                        _ => "bk",
+                    };
+                    Ok((flow, g.sink_side().unwrap_or_default().to_vec(), used))
                 })
             })
         })
         .map_err(to_py)?;
     let side = Array2::from_shape_vec((h, w), side).expect("label shape");
-    Ok((flow, side.into_pyarray(py)))
+    Ok((flow, side.into_pyarray(py), used))
 }
 
 type SeamOut<'py> = (Bound<'py, PyArray2<bool>>, f64, (usize, usize));
