@@ -8,12 +8,14 @@ paper's IS column) and the automatic gap completion (§5.4) separately.
 
     python benches/bench_branching_image.py [--threads N] [--profile] [--repeat R] [--complete]
 
-Measured on the shared 2-core box while other jobs kept its load average at 3-4: 152 target
-fragments (mean radius 66.5 px) on a 4200x2400 canvas, structure synthesis 1.06-1.35 s
-(110-144 fragments/s; the goal of under 1 s is missed by a little), gap completion ~20 s.
-Where the structure time goes (--profile): the Poisson pastes ~0.3 s, Python bookkeeping in
-render ~0.25 s, graph-cut seams ~0.2 s, displacement-field solves ~0.1 s, remaps ~0.08 s. The
-completion is PatchMatch search and voting over ~8 Mpx of gaps.
+Measured on the 2-core box with other jobs paused: 152 target fragments (mean radius 66.5 px)
+on a 4200x2400 canvas, structure synthesis 0.71-0.76 s on 2 threads (about 200 fragments/s;
+goal: under 1 s) and 0.92 s on one, gap completion ~17 s. Fragments that do not overlap are
+painted concurrently (render's `threads`), 1.6-1.7 at a time on average; the rest is the
+chain of overlapping fragments along each branch and the Python bookkeeping, which holds the
+GIL. Single-threaded (--profile --threads 1) the time goes to the Poisson pastes, the
+graph-cut seams, the numpy bookkeeping in render, remaps and the displacement-field solves.
+The completion is PatchMatch search and voting over ~8 Mpx of gaps.
 """
 
 from __future__ import annotations
