@@ -937,7 +937,6 @@ fn res_at<const L: usize>(
     v
 }
 
-/// `bc = Pᵀ rf`.
 /// `r = b − A x` at every unknown (0 elsewhere), for any `x` that is 0 off the unknowns.
 fn full_residual<const L: usize>(lev: &Level, x: &[[f32; L]], b: &[[f32; L]], r: &mut [[f32; L]]) {
     let (h, w) = (lev.h, lev.w);
@@ -975,6 +974,7 @@ fn full_residual<const L: usize>(lev: &Level, x: &[[f32; L]], b: &[[f32; L]], r:
     });
 }
 
+/// `bc = Pᵀ rf`.
 fn restrict<const L: usize>(fine: &Level, coarse: &Level, rf: &[[f32; L]], bc: &mut [[f32; L]]) {
     let (hc, wc, wf) = (coarse.h, coarse.w, fine.w);
     rows_mut(bc, wc, |i, out| {
