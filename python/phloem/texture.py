@@ -769,6 +769,7 @@ def by_numbers(
     iterations: int = ...,
     init: Literal["smart", "random"] = ...,
     selection: Literal["medoid", "hybrid", "average"] = ...,
+    composite: int = ...,
     wrap: bool = ...,
     tileable: bool = ...,
     seed: int | np.random.Generator = ...,
@@ -791,6 +792,7 @@ def by_numbers(
     iterations: int = ...,
     init: Literal["smart", "random"] = ...,
     selection: Literal["medoid", "hybrid", "average"] = ...,
+    composite: int = ...,
     wrap: bool = ...,
     tileable: bool = ...,
     seed: int | np.random.Generator = ...,
@@ -812,6 +814,7 @@ def by_numbers(
     iterations: int = 3,
     init: Literal["smart", "random"] = "smart",
     selection: Literal["medoid", "hybrid", "average"] = "medoid",
+    composite: int = 0,
     wrap: bool = True,
     tileable: bool = False,
     seed: int | np.random.Generator = 0,
@@ -928,6 +931,7 @@ def by_numbers(
     z = check_float(feature_weight, "feature_weight", 0.0)
     n_levels = None if levels is None else check_int(levels, "levels", 1)
     iters = check_int(iterations, "iterations", 1)
+    rounds = check_int(composite, "composite", 0)
     if init not in ("smart", "random"):
         raise ValueError(f"init: expected 'smart' or 'random', got {init!r}")
     if selection not in ("medoid", "hybrid", "average"):
@@ -961,7 +965,8 @@ def by_numbers(
         weights = np.concatenate([weights, np.full(f3.shape[2], z, np.float32)])
     src = _core.by_numbers(
         channels, la, lb, patch_size=p, k=kk, label_weight=w, levels=n_levels, iterations=iters, init=init,
-        wrap=bool(wrap), tileable=bool(tileable), seed=s, selection=selection, weights=weights, threads=t,
+        wrap=bool(wrap), tileable=bool(tileable), seed=s, selection=selection, composite=rounds, seam_channels=nc,
+        weights=weights, threads=t,
         progress=progress,
     )  # fmt: skip
     out = restore_ndim(np.ascontiguousarray(ex[src[..., 0], src[..., 1]]), exemplar)

@@ -28,6 +28,7 @@
 // `m_pixel_avx2` is compiled with AVX2 enabled (see `knn`).
 #![allow(clippy::inline_always)]
 
+pub mod composite;
 pub mod init;
 pub mod pyramid;
 
@@ -91,6 +92,13 @@ pub struct TbnParams {
     /// E-step selection. Default [`Selection::Medoid`] (the only one that keeps the exemplar's
     /// sharpness; see [`Selection`]).
     pub selection: Selection,
+    /// Rounds of graph-cut compositing ([`composite`]) after the finest level: coherent
+    /// pieces of the exemplar grow, with seams where their copies agree. 0 (the default)
+    /// leaves the solver's result as it is.
+    pub composite: usize,
+    /// Exemplar channels the compositing seams compare (the first `seam_channels`; 0 = all).
+    /// The Python wrapper passes the colour channels, leaving out the feature distance map.
+    pub seam_channels: usize,
     /// Forward shifts that leave the exemplar wrap around (true) or are dropped. Default true.
     pub wrap: bool,
     /// Output neighbourhoods wrap around the output's borders, so it tiles. Default false.
@@ -112,6 +120,8 @@ impl Default for TbnParams {
             iterations: 3,
             init: Init::Smart,
             selection: Selection::Medoid,
+            composite: 0,
+            seam_channels: 0,
             wrap: true,
             tileable: false,
             random_search: true,
@@ -538,6 +548,24 @@ pub fn by_numbers(
             if let Some(f) = progress {
                 f(done, total);
             }
+        }
+        if l == 0 && params.composite > 0 {
+            let scene = composite::Scene {
+                ex: &el.aug,
+                stride: ca,
+                c: if params.seam_channels == 0 {
+                    c0
+                } else {
+                    params.seam_channels.min(c0)
+                },
+                eh: el.h,
+                ew: el.w,
+                labels_in: &el.labels,
+                labels_out: lo,
+                h,
+                w,
+            };
+            composite::composite(&scene, &mut refs, params.composite, params.seed)?;
         }
     }
     Ok(Tbn { h: oh, w: ow, refs })
