@@ -885,6 +885,16 @@ def by_numbers(
         - ``"hybrid"``: medoid at every iteration except the finest level's last, which
           averages: in between (coherence 1.00–1.35 × the thesis', Laplacian variance 0.66×
           the photo's).
+    composite : int, optional
+        Rounds of graph-cut compositing after the finest level (default 0: none). Each round
+        walks 32×32 windows (stride 16) and lets each window's 4 most frequent source offsets
+        take over pixels by α-expansion under Kwatra et al.'s (2003) seam cost on the colour
+        channels, so whole exemplar pieces grow and meet where their copies agree; pixels only
+        take copies of their own label. With ``selection="average"`` one round brings back
+        the photo's sharpness (Laplacian variance 0.52× → 1.00× the photo's on the embedded
+        bark) and closer per-label histograms (0.31–0.42 × the thesis' results) at the
+        average's coherence (0.97–1.24 × the thesis'); with the medoid it cuts incoherence
+        (1.00–1.41 × the thesis', from 1.15–1.67). About 0.1–0.2 s per round on bark1.
     wrap : bool, optional
         Forward shifts that leave the exemplar wrap around (default True) instead of being
         dropped.

@@ -184,6 +184,7 @@ fn window(
     let mut changed = false;
     let mut src = vec![0f32; wh * ww];
     let mut snk = vec![0f32; wh * ww];
+    let mut da: Vec<f32> = Vec::with_capacity(loc.len());
     for &(_, alpha) in &runs {
         // Nothing to gain unless α may take a pixel it does not hold yet.
         let gain =
@@ -202,6 +203,13 @@ fn window(
                 snk[k] -= c;
             }
         };
+        // ‖I(p + current) − I(p + α)‖ per pixel of the window and its ring.
+        da.clear();
+        for y in ey1..ey2 {
+            for x in ex1..ex2 {
+                da.push(scene.diff(y, x, loc[at(y, x)], alpha));
+            }
+        }
         for y in ey1..ey2 {
             for x in ex1..ex2 {
                 let cp = loc[at(y, x)];
@@ -217,9 +225,16 @@ fn window(
                     }
                     let cq = loc[at(qy, qx)];
                     // E(x_p, x_q) for keep (0) / take α (1).
-                    let e00 = scene.diff(y, x, cp, cq) + scene.diff(qy, qx, cp, cq);
-                    let e01 = scene.diff(y, x, cp, alpha) + scene.diff(qy, qx, cp, alpha);
-                    let e10 = scene.diff(y, x, alpha, cq) + scene.diff(qy, qx, alpha, cq);
+                    let (dp, dq) = (da[at(y, x)], da[at(qy, qx)]);
+                    let (e00, e01, e10) = if cp == cq {
+                        (0.0, dp + dq, dp + dq)
+                    } else {
+                        (
+                            scene.diff(y, x, cp, cq) + scene.diff(qy, qx, cp, cq),
+                            dp + scene.diff(qy, qx, cp, alpha),
+                            scene.diff(y, x, alpha, cq) + dq,
+                        )
+                    };
                     if pin && qin {
                         unary(y, x, e10 - e00, &mut src, &mut snk);
                         unary(qy, qx, -e10, &mut src, &mut snk);
