@@ -29,8 +29,9 @@
 //! an output label boundary (35% of them) hold 84% of the incoherence. Half of those 7×7
 //! label patches occur nowhere in the exemplar's label map, so a copy that keeps every
 //! pixel's label must put a seam inside them; the thesis' result blurs across them instead.
-//! More rounds, 48² windows, a squared seam cost, candidate offsets from a label-shape
-//! nearest-neighbour field, or a label-mismatch data term did not help (±0.03 or worse).
+//! Three rounds with 6 candidates gain at most 0.04 over one round with 4; 48² windows, a
+//! squared seam cost, candidate offsets from a label-shape nearest-neighbour field or a
+//! label-mismatch data term did not help (within ±0.03, or worse).
 
 use rayon::prelude::*;
 
