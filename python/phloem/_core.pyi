@@ -83,6 +83,8 @@ def by_numbers(
     tileable: bool,
     seed: int,
     selection: str = "medoid",
+    composite: int = 0,
+    seam_channels: int = 0,
     weights: NDArray[np.float32] | None = None,
     threads: int | None = None,
     progress: Callable[[int, int], object] | None = None,

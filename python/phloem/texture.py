@@ -769,6 +769,7 @@ def by_numbers(
     iterations: int = ...,
     init: Literal["smart", "random"] = ...,
     selection: Literal["medoid", "hybrid", "average"] = ...,
+    composite: int = ...,
     wrap: bool = ...,
     tileable: bool = ...,
     seed: int | np.random.Generator = ...,
@@ -791,6 +792,7 @@ def by_numbers(
     iterations: int = ...,
     init: Literal["smart", "random"] = ...,
     selection: Literal["medoid", "hybrid", "average"] = ...,
+    composite: int = ...,
     wrap: bool = ...,
     tileable: bool = ...,
     seed: int | np.random.Generator = ...,
@@ -812,6 +814,7 @@ def by_numbers(
     iterations: int = 3,
     init: Literal["smart", "random"] = "smart",
     selection: Literal["medoid", "hybrid", "average"] = "medoid",
+    composite: int = 0,
     wrap: bool = True,
     tileable: bool = False,
     seed: int | np.random.Generator = 0,
@@ -882,6 +885,16 @@ def by_numbers(
         - ``"hybrid"``: medoid at every iteration except the finest level's last, which
           averages: in between (coherence 1.00–1.35 × the thesis', Laplacian variance 0.66×
           the photo's).
+    composite : int, optional
+        Rounds of graph-cut compositing after the finest level (default 0: none). Each round
+        walks 32×32 windows (stride 16) and lets each window's 4 most frequent source offsets
+        take over pixels by α-expansion under Kwatra et al.'s (2003) seam cost on the colour
+        channels, so whole exemplar pieces grow and meet where their copies agree; pixels only
+        take copies of their own label. With ``selection="average"`` one round brings back
+        the photo's sharpness (Laplacian variance 0.52× → 1.00× the photo's on the embedded
+        bark) and closer per-label histograms (0.31–0.42 × the thesis' results) at the
+        average's coherence (0.97–1.24 × the thesis'); with the medoid it cuts incoherence
+        (1.00–1.41 × the thesis', from 1.15–1.67). About 0.1–0.2 s per round on bark1.
     wrap : bool, optional
         Forward shifts that leave the exemplar wrap around (default True) instead of being
         dropped.
@@ -928,6 +941,7 @@ def by_numbers(
     z = check_float(feature_weight, "feature_weight", 0.0)
     n_levels = None if levels is None else check_int(levels, "levels", 1)
     iters = check_int(iterations, "iterations", 1)
+    rounds = check_int(composite, "composite", 0)
     if init not in ("smart", "random"):
         raise ValueError(f"init: expected 'smart' or 'random', got {init!r}")
     if selection not in ("medoid", "hybrid", "average"):
@@ -961,7 +975,8 @@ def by_numbers(
         weights = np.concatenate([weights, np.full(f3.shape[2], z, np.float32)])
     src = _core.by_numbers(
         channels, la, lb, patch_size=p, k=kk, label_weight=w, levels=n_levels, iterations=iters, init=init,
-        wrap=bool(wrap), tileable=bool(tileable), seed=s, selection=selection, weights=weights, threads=t,
+        wrap=bool(wrap), tileable=bool(tileable), seed=s, selection=selection, composite=rounds, seam_channels=nc,
+        weights=weights, threads=t,
         progress=progress,
     )  # fmt: skip
     out = restore_ndim(np.ascontiguousarray(ex[src[..., 0], src[..., 1]]), exemplar)

@@ -56,7 +56,7 @@ fn flat(
 }
 
 #[pyfunction]
-#[pyo3(name = "by_numbers", signature = (exemplar, labels_in, labels_out, *, patch_size, k, label_weight, levels, iterations, init, wrap, tileable, seed, selection="medoid", weights=None, threads=None, progress=None))]
+#[pyo3(name = "by_numbers", signature = (exemplar, labels_in, labels_out, *, patch_size, k, label_weight, levels, iterations, init, wrap, tileable, seed, selection="medoid", composite=0, seam_channels=0, weights=None, threads=None, progress=None))]
 pub fn by_numbers_py<'py>(
     py: Python<'py>,
     exemplar: PyReadonlyArray3<'py, f32>,
@@ -72,6 +72,8 @@ pub fn by_numbers_py<'py>(
     tileable: bool,
     seed: u64,
     selection: &str,
+    composite: usize,
+    seam_channels: usize,
     weights: Option<PyReadonlyArray1<'py, f32>>,
     threads: Option<usize>,
     progress: Option<Py<PyAny>>,
@@ -127,6 +129,8 @@ pub fn by_numbers_py<'py>(
         iterations,
         init,
         selection,
+        composite,
+        seam_channels,
         wrap,
         tileable,
         random_search: true,
