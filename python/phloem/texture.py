@@ -813,8 +813,8 @@ def by_numbers(
     levels: int | None = None,
     iterations: int = 3,
     init: Literal["smart", "random"] = "smart",
-    selection: Literal["medoid", "hybrid", "average"] = "medoid",
-    composite: int = 0,
+    selection: Literal["medoid", "hybrid", "average"] = "average",
+    composite: int = 1,
     wrap: bool = True,
     tileable: bool = False,
     seed: int | np.random.Generator = 0,
@@ -871,7 +871,8 @@ def by_numbers(
     init : {"smart", "random"}, optional
         Initialisation of the coarsest level (default "smart").
     selection : {"medoid", "hybrid", "average"}, optional
-        How the E-step chooses among a pixel's votes (default "medoid").
+        How the E-step chooses among a pixel's votes (default "average", followed by one
+        round of compositing: see ``composite``).
 
         - ``"medoid"``: the weighted medoid of the same-label votes (the vote with the least
           weighted sum of distances to the others). Keeps the exemplar's contrast and fine
@@ -886,7 +887,7 @@ def by_numbers(
           averages: in between (coherence 1.00–1.35 × the thesis', Laplacian variance 0.66×
           the photo's).
     composite : int, optional
-        Rounds of graph-cut compositing after the finest level (default 0: none). Each round
+        Rounds of graph-cut compositing after the finest level (default 1; 0: none). Each round
         walks 32×32 windows (stride 16) and lets each window's 4 most frequent source offsets
         take over pixels by α-expansion under Kwatra et al.'s (2003) seam cost on the colour
         channels, so whole exemplar pieces grow and meet where their copies agree; pixels only
