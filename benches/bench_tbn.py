@@ -156,7 +156,8 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--pipeline", action="store_true", help="the bark pipeline's 512² scale (phloem only)")
-    ap.add_argument("--selection", nargs="+", default=["medoid"], help="E-step selections to time (phloem)")
+    ap.add_argument("--selection", nargs="+", default=["average"], help="E-step selections (default: the library's)")
+    ap.add_argument("--composite", type=int, default=1, help="graph-cut compositing rounds (default: the library's, 1)")
     args = ap.parse_args()
     name, ex, a, b = pipeline_workload() if args.pipeline else workload()
     print(
@@ -164,7 +165,9 @@ def main() -> None:
     )
     print(f"{'method':<32} {'best':>7} {'median':>7} {'px/s':>9} {'coherence':>10} {'hist':>6}")
     rows: dict = {
-        f"phloem.by_numbers {sel}": lambda sel=sel: phloem.texture.by_numbers(ex, a, b, threads=args.threads, selection=sel)
+        f"phloem.by_numbers {sel}+c{args.composite}": lambda sel=sel: phloem.texture.by_numbers(
+            ex, a, b, threads=args.threads, selection=sel, composite=args.composite
+        )
         for sel in args.selection
     }
     rows |= {
