@@ -9,7 +9,7 @@ paper's IS column) and the automatic gap completion (§5.4) separately.
     python benches/bench_branching_image.py [--threads N] [--profile] [--repeat R] [--complete]
 
 Measured on the 2-core box with other jobs paused: 152 target fragments (mean radius 66.5 px)
-on a 4200x2400 canvas, structure synthesis 0.71-0.76 s on 2 threads (about 200 fragments/s;
+on a 4200x2400 canvas, structure synthesis 0.71-0.85 s on 2 threads (about 200 fragments/s;
 goal: under 1 s) and 0.92 s on one, gap completion ~17 s. Fragments that do not overlap are
 painted concurrently (render's `threads`), 1.6-1.7 at a time on average; the rest is the
 chain of overlapping fragments along each branch and the Python bookkeeping, which holds the
