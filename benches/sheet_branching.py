@@ -28,6 +28,9 @@ import numpy as np
 import phloem
 from phloem import branching as br
 
+sys.path.insert(0, str(Path(__file__).parent))
+from sheet_texture import _fit, _label, _rgb, write_sheet  # noqa: E402
+
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "branching"
 
 
@@ -48,28 +51,6 @@ def examples() -> list[tuple[str, np.ndarray, dict[str, Any], dict[str, Any]]]:
     return out
 
 
-def rgb(img: np.ndarray) -> np.ndarray:
-    x = img if img.ndim == 3 else img[..., None]
-    return np.repeat(x, 3, axis=2) if x.shape[2] == 1 else np.ascontiguousarray(x[..., :3])
-
-
-def fit(img: np.ndarray, tile: int) -> np.ndarray:
-    s = tile / max(img.shape[:2])
-    small = cv2.resize(
-        img, (max(1, round(img.shape[1] * s)), max(1, round(img.shape[0] * s))), interpolation=cv2.INTER_AREA
-    )
-    out = np.full((tile, tile, 3), 1.0, np.float32)
-    out[: small.shape[0], : small.shape[1]] = small
-    return out
-
-
-def label(img: np.ndarray, text: str) -> np.ndarray:
-    u8 = (np.clip(img, 0, 1) * 255).astype(np.uint8)
-    cv2.rectangle(u8, (0, 0), (u8.shape[1], 18), (255, 255, 255), -1)
-    cv2.putText(u8, text, (4, 13), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (0, 0, 0), 1, cv2.LINE_AA)
-    return u8.astype(np.float32) / 255
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out")
@@ -85,9 +66,9 @@ def main() -> int:
         t0 = time.perf_counter()
         res = br.synthesize(img, trace_options=topts, seed=args.seed, **extra)
         dt = time.perf_counter() - t0
-        out = rgb(res.image)
+        out = _rgb(res.image)
         if mask is not None:  # keep the photo's black surround
-            out = np.where(mask[..., None], out, rgb(img))
+            out = np.where(mask[..., None], out, _rgb(img))
         hfig = br.histogram_figure(res.source, res.target, h=res.bending.h, width=2 * args.tile, height=args.tile // 2)
         hist = np.full((args.tile, 2 * args.tile, 3), 1.0, np.float32)
         hist[args.tile // 4 : args.tile // 4 + hfig.shape[0]] = hfig
@@ -95,15 +76,17 @@ def main() -> int:
         n_new = sum(len(b) for b in res.target.branches)
         print(f"{name}: {img.shape[1]}x{img.shape[0]}, source {len(res.source.branches)} branches, new {len(res.target.branches)} "
               f"branches ({n_new} vertices at h={res.bending.h:.2f}; source {n_src}), {len(res.render.targets)} fragments, {dt:.1f} s")  # fmt: skip
+        traced = res.source.draw(_rgb(img), color=(1, 0.1, 0.1), width=2)
+        grown = res.target.draw(shape=res.target.shape, color=(1, 1, 1), width=2)
         tiles = [
-            label(fit(rgb(img), args.tile), name),
-            label(fit(res.source.draw(rgb(img), color=(1, 0.1, 0.1), width=2), args.tile), "traced skeleton"),
-            label(fit(res.target.draw(shape=res.target.shape, color=(1, 1, 1), width=2), args.tile), "grown skeleton"),
-            label(fit(out, args.tile), f"new image, {dt:.1f} s"),
-            label(hist, "angle / thickness histograms: input grey, output orange"),
+            _label(_fit(img, args.tile, cv2.INTER_AREA), name),
+            _label(_fit(traced, args.tile, cv2.INTER_AREA), "traced skeleton"),
+            _label(_fit(grown, args.tile, cv2.INTER_AREA), "grown skeleton"),
+            _label(_fit(out, args.tile, cv2.INTER_AREA), f"new image, {dt:.1f} s"),
+            _label(hist, "angle / thickness histograms: input grey, output orange"),
         ]
         rows.append(np.concatenate(tiles, axis=1))
-    phloem.io.write_image(args.out, np.concatenate(rows, axis=0), overwrite=True)
+    write_sheet(rows, args.out)
     print(f"wrote {args.out}")
     return 0
 

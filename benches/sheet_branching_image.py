@@ -42,12 +42,7 @@ from phloem.branching import (
     render,
     unrectify,
 )
-from sheet_texture import ROOT, _fit, _label, write_sheet
-
-
-def _rgb(img: np.ndarray) -> np.ndarray:
-    img = img[..., :3] if img.ndim == 3 else img[..., None]
-    return np.repeat(img, 3, axis=2) if img.shape[2] == 1 else img
+from sheet_texture import ROOT, _fit, _label, _rgb, write_sheet
 
 
 def _disks(img: np.ndarray, sk: Skeleton) -> np.ndarray:

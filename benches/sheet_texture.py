@@ -27,22 +27,26 @@ TILE = 256
 
 
 def _rgb(img: np.ndarray) -> np.ndarray:
-    img = img[..., :3] if img.ndim == 3 else img
-    return np.repeat(img[..., None], 3, axis=2) if img.ndim == 2 else img
+    """Gray (2-D or one channel), RGB or RGBA as RGB."""
+    img = img[..., :3] if img.ndim == 3 else img[..., None]
+    return np.repeat(img, 3, axis=2) if img.shape[2] == 1 else img
 
 
-def _fit(img: np.ndarray) -> np.ndarray:
+def _fit(img: np.ndarray, tile: int = TILE, interpolation: int = cv2.INTER_NEAREST) -> np.ndarray:
+    """``img`` scaled into a white ``tile × tile`` square (nearest neighbour shows pixels;
+    pass ``cv2.INTER_AREA`` for photos shrunk a lot)."""
     img = _rgb(img).astype(np.float32)
-    s = TILE / max(img.shape[:2])
-    out = cv2.resize(img, (round(img.shape[1] * s), round(img.shape[0] * s)), interpolation=cv2.INTER_NEAREST)
-    tile = np.ones((TILE, TILE, 3), np.float32)
-    tile[: out.shape[0], : out.shape[1]] = out
-    return tile
+    s = tile / max(img.shape[:2])
+    size = (max(1, round(img.shape[1] * s)), max(1, round(img.shape[0] * s)))
+    out = cv2.resize(img, size, interpolation=interpolation).reshape(size[1], size[0], 3)
+    square = np.ones((tile, tile, 3), np.float32)
+    square[: out.shape[0], : out.shape[1]] = out
+    return square
 
 
 def _label(tile: np.ndarray, text: str) -> np.ndarray:
     t8 = (np.clip(tile, 0, 1) * 255).astype(np.uint8)  # OpenCV 5 draws text on 8-bit only
-    cv2.rectangle(t8, (0, 0), (TILE, 16), (255, 255, 255), -1)
+    cv2.rectangle(t8, (0, 0), (t8.shape[1], 16), (255, 255, 255), -1)
     cv2.putText(t8, text, (3, 12), cv2.FONT_HERSHEY_SIMPLEX, 0.38, (0, 0, 0), 1, cv2.LINE_AA)
     return t8.astype(np.float32) / 255
 
