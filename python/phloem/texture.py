@@ -433,8 +433,6 @@ def complete(
     r = p // 2
     if not hole.any():
         raise ValueError("mask: no pixel is selected for filling (the mask is empty)")
-    if not _patch_masks(hole, p)[1].any():
-        raise ValueError(f"mask: the known region holds no complete {p}×{p} patch to copy from")
     iters = None if iterations is None else check_int(iterations, "iterations", 1)
     s_iters = None if search_iterations is None else check_int(search_iterations, "search_iterations", 1)
     s = check_seed(seed)
@@ -442,6 +440,8 @@ def complete(
     max_levels = None if levels is None else check_int(levels, "levels", 1)
 
     pyramid = _hole_pyramid(img, hole, p, max_levels)
+    if not pyramid[0][3].any():  # the full-resolution level's usable source centres
+        raise ValueError(f"mask: the known region holds no complete {p}×{p} patch to copy from")
     schedule = [(iters or 1 + 2 * lv, s_iters or min(7, 1 + lv)) for lv in range(len(pyramid))]
     total = sum(n for n, _ in schedule)
     done = 0
