@@ -8,7 +8,7 @@ import phloem
 import pytest
 from conftest import shared_file
 from phloem import _core
-from phloem.metrics import label_histogram_distance, patch_coherence
+from phloem.metrics import label_agreement, label_histogram_distance, patch_coherence
 from phloem.texture import by_numbers, feature_distance_map
 
 
@@ -276,6 +276,28 @@ def test_label_histogram_distance():
 
 
 # --- errors ------------------------------------------------------------------------------
+
+
+def test_label_agreement():
+    # Two flat colours with a little noise: the exemplar agrees with its own map, an output
+    # painted by the map agrees, and swapped or half-wrong paintings score 0 and 0.5.
+    rng = np.random.default_rng(0)
+    lab = (np.arange(60)[:, None] < 30).repeat(40, axis=1).astype(int)
+    colours = np.array([[0.2, 0.3, 0.1], [0.8, 0.7, 0.6]], np.float32)
+    ex = (colours[lab] + rng.normal(0, 0.03, (60, 40, 3))).astype(np.float32)
+    assert label_agreement(ex, lab, ex, lab) == 1.0
+    out_lab = np.zeros((50, 50), int)
+    out_lab[:, 20:] = 1
+    painted = colours[out_lab]
+    assert label_agreement(painted, out_lab, ex, lab) == 1.0
+    assert label_agreement(painted, 1 - out_lab, ex, lab) == 0.0
+    half = painted.copy()
+    half[:25] = colours[1 - out_lab[:25]]
+    assert label_agreement(half, out_lab, ex, lab, denoise=0) == 0.5
+    with pytest.raises(ValueError, match="^labels"):
+        label_agreement(painted, np.full((50, 50), 7), ex, lab)
+    with pytest.raises(ValueError, match="^denoise"):
+        label_agreement(painted, out_lab, ex, lab, denoise=-1)
 
 
 def test_errors_name_the_argument(scene):
