@@ -158,6 +158,9 @@ def main() -> None:
     ap.add_argument("--pipeline", action="store_true", help="the bark pipeline's 512² scale (phloem only)")
     ap.add_argument("--selection", nargs="+", default=["average"], help="E-step selections (default: the library's)")
     ap.add_argument("--composite", type=int, default=1, help="graph-cut compositing rounds (default: the library's, 1)")
+    ap.add_argument(
+        "--stand-in-weight", type=float, nargs="+", default=[5.0], help="stand-in weights, 0 for none (default: 5)"
+    )
     args = ap.parse_args()
     name, ex, a, b = pipeline_workload() if args.pipeline else workload()
     print(
@@ -165,10 +168,11 @@ def main() -> None:
     )
     print(f"{'method':<32} {'best':>7} {'median':>7} {'px/s':>9} {'coherence':>10} {'hist':>6}")
     rows: dict = {
-        f"phloem.by_numbers {sel}+c{args.composite}": lambda sel=sel: phloem.texture.by_numbers(
-            ex, a, b, threads=args.threads, selection=sel, composite=args.composite
+        f"phloem.by_numbers {sel}+c{args.composite}+s{siw:g}": lambda sel=sel, siw=siw: phloem.texture.by_numbers(
+            ex, a, b, threads=args.threads, selection=sel, composite=args.composite, stand_in_weight=siw or None
         )
         for sel in args.selection
+        for siw in args.stand_in_weight
     }
     rows |= {
         "patchmatch_by_numbers": lambda: patchmatch_by_numbers(ex, a, b, threads=args.threads),

@@ -4,10 +4,12 @@
 
 One row per thesis run in ``../shared/data/bark/thesis_runs`` (Laitoch 2018; skipped when the
 folder is absent): the photo ``ai``, its label map ``a``, the output label map ``b``, the
-thesis' result ``bi`` and phloem's, with patch coherence to ``ai`` (lower is better) and the
-per-label histogram distance (lower is better) of both; then a row on the embedded bark with
-a two-label map. The last panel of every row shows phloem's sources (red = exemplar row,
-green = column): smooth patches are coherent copies, speckle is pixel-wise mixing.
+thesis' result ``bi``, phloem's with every piece's labels enforced (``stand_in_weight=None``)
+and phloem's default (pieces run across label boundaries on stand-ins), with patch coherence
+to ``ai`` (lower is better), the per-label histogram distance (lower is better) and the label
+agreement (higher is better) of each; then a row on the embedded bark with a two-label map.
+The last panel of every row shows phloem's sources (red = exemplar row, green = column):
+smooth patches are coherent copies, speckle is pixel-wise mixing.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import phloem
-from phloem.metrics import label_histogram_distance, patch_coherence
+from phloem.metrics import label_agreement, label_histogram_distance, patch_coherence
 
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_tbn import _labels as _gray_labels
@@ -33,20 +35,27 @@ def row(name: str, ai: np.ndarray, a: np.ndarray, b: np.ndarray, bi: np.ndarray 
     t0 = time.perf_counter()
     out, src = phloem.texture.by_numbers(ai, a, b, seed=0, return_sources=True)
     dt = time.perf_counter() - t0
-    coh, hist = patch_coherence(out, ai), label_histogram_distance(out, b, ai, a)
+    strict = phloem.texture.by_numbers(ai, a, b, seed=0, stand_in_weight=None)
+    coh, hist, agree = patch_coherence(out, ai), label_histogram_distance(out, b, ai, a), label_agreement(out, b, ai, a)
     tiles = [
         _label(_fit(ai), f"{name} ai {ai.shape[1]}x{ai.shape[0]}"),
         _label(_fit(phloem.bark.encode_labels(a)), f"a: {np.unique(a).size} labels"),
         _label(_fit(phloem.bark.encode_labels(b)), f"b {b.shape[1]}x{b.shape[0]}"),
     ]
-    line = f"{name}: phloem {dt:.2f} s, coherence {coh:.5f}, hist {hist:.3f}"
+    line = f"{name}: phloem {dt:.2f} s, coherence {coh:.5f}, hist {hist:.3f}, agreement {agree:.3f}"
     if bi is not None:
+        bi = bi[: b.shape[0], : b.shape[1]]
         cb, hb = patch_coherence(bi, ai), label_histogram_distance(bi, b, ai, a)
-        tiles.append(_label(_fit(bi), f"thesis bi: coh {cb * 1e3:.3f}e-3 hist {hb:.3f}"))
-        line += f"; thesis bi coherence {cb:.5f}, hist {hb:.3f}; ratios {coh / cb:.2f}, {hist / hb:.2f}"
+        ab = label_agreement(bi, b, ai, a)
+        tiles.append(_label(_fit(bi), f"thesis bi: coh {cb * 1e3:.3f}e-3 hist {hb:.3f} agr {ab:.3f}"))
+        line += f"; thesis bi coherence {cb:.5f}, hist {hb:.3f}, agreement {ab:.3f}"
+        line += f"; ratios {coh / cb:.2f}, {hist / hb:.2f}"
     else:
         tiles.append(_label(np.ones((TILE, TILE, 3), np.float32), "(no thesis result)"))
-    tiles.append(_label(_fit(out), f"phloem {dt:.2f}s: coh {coh * 1e3:.3f}e-3 hist {hist:.3f}"))
+    cs, hs = patch_coherence(strict, ai), label_histogram_distance(strict, b, ai, a)
+    as_ = label_agreement(strict, b, ai, a)
+    tiles.append(_label(_fit(strict), f"no stand-ins: coh {cs * 1e3:.3f}e-3 hist {hs:.3f} agr {as_:.3f}"))
+    tiles.append(_label(_fit(out), f"phloem {dt:.2f}s: coh {coh * 1e3:.3f}e-3 hist {hist:.3f} agr {agree:.3f}"))
     tiles.append(_label(_fit(_sources(src, ai.shape)), "phloem sources (R row, G col)"))
     return np.concatenate(tiles, axis=1), line
 

@@ -94,9 +94,10 @@ def test_deterministic_across_threads_and_seeds(scene, selection, composite):
 
 
 def test_medoid_selection_keeps_the_exemplars_contrast(bark):
-    # Synthesising the embedded bark's own (flipped) label map: the Laplacian variance of the
-    # gray output (fine detail) measured 0.118 with the medoid, 0.087 hybrid, 0.063 average,
-    # against the photo's 0.119 — the averaging E-step blurs, as Laitoch 2018 reports.
+    # Synthesising the embedded bark's own (flipped) label map without compositing: the
+    # Laplacian variance of the gray output (fine detail) measured 1.00x the photo's with the
+    # medoid, 0.73x hybrid, 0.52x average — the averaging E-step blurs, as Laitoch 2018
+    # reports.
     import cv2
 
     ex = np.ascontiguousarray(bark[:, :, :3])
@@ -105,7 +106,7 @@ def test_medoid_selection_keeps_the_exemplars_contrast(bark):
     photo = cv2.Laplacian(ex.mean(axis=2), cv2.CV_32F).var()
     lap = {}
     for sel in ("medoid", "hybrid", "average"):
-        g = by_numbers(ex, a, b, seed=0, selection=sel).mean(axis=2)
+        g = by_numbers(ex, a, b, seed=0, selection=sel, composite=0).mean(axis=2)
         lap[sel] = cv2.Laplacian(g, cv2.CV_32F).var()
     assert lap["medoid"] > 0.9 * photo, (lap, photo)
     assert lap["average"] < lap["hybrid"] < lap["medoid"], lap
@@ -132,6 +133,47 @@ def test_compositing_makes_the_averaging_estep_sharp_and_coherent(bark):
     assert breaks(runs[1][1]) < 0.6 * breaks(runs[0][1]), (breaks(runs[0][1]), breaks(runs[1][1]))
     with pytest.raises(ValueError, match="composite"):
         by_numbers(ex, a, b, composite=-1)
+
+
+def test_stand_ins_carry_pieces_across_boundaries_the_exemplar_lacks(scene):
+    # The scene's output labels are rectangles: straight edges and corners the bark's blobby
+    # label map never has, so a copy that keeps every pixel's label must cut a seam along
+    # each edge. Stand-ins let the pieces run across (patch incoherence measured 0.0049
+    # against 0.0061 without), and every pixel still comes from its own label.
+    ex, a, b = scene
+    plain = by_numbers(ex, a, b, seed=0, stand_in_weight=None)
+    out, src = by_numbers(ex, a, b, seed=0, return_sources=True)
+    np.testing.assert_array_equal(a[src[..., 0], src[..., 1]], b)
+    assert patch_coherence(out, ex) < 0.88 * patch_coherence(plain, ex)
+    # Without compositing there is nothing to stand in for.
+    np.testing.assert_array_equal(
+        by_numbers(ex, a, b, seed=0, composite=0), by_numbers(ex, a, b, seed=0, composite=0, stand_in_weight=None)
+    )
+    for bad in (-1.0, float("nan")):
+        with pytest.raises(ValueError, match="^stand_in_weight"):
+            by_numbers(ex, a, b, stand_in_weight=bad)
+
+
+def test_stand_ins_keep_labels_that_colour_alone_does_not_decide(bark):
+    # Labels from a threshold of the *blurred* bark: light pixels inside dark regions and dark
+    # ones inside light regions abound, so a stand-in chosen by a pixel's own colour is free
+    # almost everywhere and the output stops following the label map (label agreement 0.847
+    # without stand-ins fell to 0.645 with such stand-ins). Stand-ins matched on the
+    # surroundings as well keep it at 0.80.
+    import cv2
+
+    bark = np.ascontiguousarray(bark[:, :, :3])
+
+    def two(img):
+        g = cv2.GaussianBlur(img.mean(axis=2), (0, 0), 2.0)
+        return (g > np.median(g)).astype(np.int32)
+
+    ex = np.ascontiguousarray(bark[:, :128])
+    a, b = two(ex), two(bark[:, 128:])
+    plain = by_numbers(ex, a, b, seed=0, stand_in_weight=None)
+    out = by_numbers(ex, a, b, seed=0)
+    assert label_agreement(out, b, ex, a) > label_agreement(plain, b, ex, a) - 0.08
+    assert patch_coherence(out, ex) < 0.9 * patch_coherence(plain, ex)
 
 
 def test_extra_channels_follow_the_same_sources(scene):
@@ -211,40 +253,56 @@ def _thesis_run(name):
     return ai, labels(d / "a.png"), labels(d / "b.png"), phloem.io.read_image(d / "bi.png")[..., :3]
 
 
-# Ratios phloem / thesis result (bi) measured with seed 0; the limits leave a little room for
-# the approximate coherence search. Do not loosen them to make a change pass.
+# Ratios phloem / thesis result (bi) measured with seed 0 and the default (kd-tree) coherence
+# search; the limits leave a little room. Do not loosen them to make a change pass.
+THESIS_CONFIGS = {
+    "medoid": {"selection": "medoid", "composite": 0},
+    "average": {"selection": "average", "composite": 0},
+    "average+composite": {"selection": "average", "composite": 1, "stand_in_weight": None},
+    "default": {},  # average, one round of compositing, label stand-ins (weight 5)
+}
 THESIS_LIMITS = {
-    # (name, selection): (coherence ratio, histogram ratio); measured with patch_size=7, k=1
-    # and two extra coarse iterations.
-    # medoid (the default): 1.67/0.43, 1.55/0.36, 1.15/0.28, 1.19/0.33
+    # (name, config): (coherence ratio, histogram ratio)
+    # medoid (sharpest, least coherent): 1.67/0.43, 1.53/0.37, 1.14/0.28, 1.22/0.34
     ("bark1", "medoid"): (1.71, 0.48),
-    ("bark2", "medoid"): (1.59, 0.41),
-    ("eucalyptus", "medoid"): (1.19, 0.33),
-    ("eucap5", "medoid"): (1.23, 0.38),
-    # average (more coherent, softer): 1.18/0.53, 1.18/0.35, 0.94/0.49, 0.99/0.55
-    ("bark1", "average"): (1.22, 0.58),
+    ("bark2", "medoid"): (1.57, 0.41),
+    ("eucalyptus", "medoid"): (1.18, 0.32),
+    ("eucap5", "medoid"): (1.26, 0.38),
+    # average (Eq. 3.5; more coherent, softer): 1.17/0.52, 1.18/0.36, 0.95/0.49, 1.01/0.54
+    ("bark1", "average"): (1.21, 0.57),
     ("bark2", "average"): (1.22, 0.40),
-    ("eucalyptus", "average"): (0.98, 0.54),
-    ("eucap5", "average"): (1.03, 0.60),
-    # average with one round of graph-cut compositing (composite=1: sharp again, histograms
-    # closer): 1.24/0.42, 1.17/0.31, 0.97/0.38, 0.99/0.40
-    ("bark1", "average+composite"): (1.28, 0.47),
-    ("bark2", "average+composite"): (1.21, 0.36),
-    ("eucalyptus", "average+composite"): (1.01, 0.43),
-    ("eucap5", "average+composite"): (1.03, 0.45),
+    ("eucalyptus", "average"): (0.99, 0.54),
+    ("eucap5", "average"): (1.05, 0.59),
+    # average + one round of compositing, labels enforced on every piece (sharp again,
+    # closer histograms): 1.23/0.42, 1.18/0.31, 0.95/0.38, 1.00/0.40
+    ("bark1", "average+composite"): (1.27, 0.47),
+    ("bark2", "average+composite"): (1.22, 0.35),
+    ("eucalyptus", "average+composite"): (0.99, 0.42),
+    ("eucap5", "average+composite"): (1.04, 0.45),
+    # the default: pieces run across label boundaries on stand-ins: 0.92/0.47, 0.92/0.31,
+    # 0.67/0.34, 0.75/0.48 -- more coherent than the thesis' results on all four
+    ("bark1", "default"): (0.96, 0.52),
+    ("bark2", "default"): (0.96, 0.35),
+    ("eucalyptus", "default"): (0.71, 0.38),
+    ("eucap5", "default"): (0.79, 0.52),
 }
 
 
 @pytest.mark.shared
-@pytest.mark.parametrize(("name", "selection"), sorted(THESIS_LIMITS))
-def test_thesis_runs(name, selection):
+@pytest.mark.parametrize(("name", "config"), sorted(THESIS_LIMITS))
+def test_thesis_runs(name, config):
     ai, a, b, bi = _thesis_run(name)
-    sel, _, comp = selection.partition("+")
-    out = by_numbers(ai, a, b, seed=0, selection=sel, composite=1 if comp else 0)
+    out, src = by_numbers(ai, a, b, seed=0, return_sources=True, **THESIS_CONFIGS[config])
+    assert (a[src[..., 0], src[..., 1]] == b).all()
     coh = patch_coherence(out, ai) / patch_coherence(bi, ai)
     hist = label_histogram_distance(out, b, ai, a) / label_histogram_distance(bi, b, ai, a)
-    max_coh, max_hist = THESIS_LIMITS[name, selection]
-    assert coh < max_coh and hist < max_hist, (name, selection, coh, hist)
+    max_coh, max_hist = THESIS_LIMITS[name, config]
+    assert coh < max_coh and hist < max_hist, (name, config, coh, hist)
+    # Stand-ins trade a little label agreement for coherence: measured 0.920 / 0.906 / 0.964 /
+    # 0.926 against the thesis' 0.916 / 0.826 / 0.969 / 0.927 (0.937 / 0.928 / 0.978 / 0.939
+    # with every piece's labels enforced).
+    agree, agree_bi = label_agreement(out, b, ai, a), label_agreement(bi[: b.shape[0], : b.shape[1]], b, ai, a)
+    assert agree > agree_bi - 0.01, (name, config, agree, agree_bi)
 
 
 # --- feature distance map and the histogram metric ------------------------------------------

@@ -84,6 +84,7 @@ def by_numbers(
     seed: int,
     selection: str = "medoid",
     composite: int = 0,
+    stand_in_weight: float = ...,
     seam_channels: int = 0,
     weights: NDArray[np.float32] | None = None,
     threads: int | None = None,

@@ -22,7 +22,9 @@
 //! The distance is the squared L2 of Eq. 3.3: the exemplar's channels (features such as a
 //! feature distance map ride along as weighted channels) plus `w` per label mismatch (labels
 //! are one-hot channels scaled by `sqrt(w / 2)`). phloem adds a hard label constraint: every
-//! output pixel references an exemplar pixel of its own label.
+//! output pixel references an exemplar pixel of its own label. An optional round of graph-cut
+//! compositing ([`composite`]) after the finest level grows whole exemplar pieces, and with
+//! stand-ins lets them run across output label boundaries the exemplar lacks.
 
 // `#[inline(always)]` on the distance helpers is deliberate: only code inlined into
 // `m_pixel_avx2` is compiled with AVX2 enabled (see `knn`).
@@ -96,6 +98,11 @@ pub struct TbnParams {
     /// pieces of the exemplar grow, with seams where their copies agree. 0 (the default)
     /// leaves the solver's result as it is.
     pub composite: usize,
+    /// Weight `W` of label stand-ins in the compositing: a pixel may take an offset whose
+    /// copy has another label if it shows that copy's stand-in (the exemplar pixel of its own
+    /// label nearest in colour and in mean colour over a patch), at a data cost of `W` times
+    /// that distance (see [`composite`]). Infinite (the default) forbids such offsets.
+    pub stand_in_weight: f32,
     /// Exemplar channels the compositing seams compare (the first `seam_channels`; 0 = all).
     /// The Python wrapper passes the colour channels, leaving out the feature distance map.
     pub seam_channels: usize,
@@ -121,6 +128,7 @@ impl Default for TbnParams {
             init: Init::Smart,
             selection: Selection::Medoid,
             composite: 0,
+            stand_in_weight: f32::INFINITY,
             seam_channels: 0,
             wrap: true,
             tileable: false,
@@ -360,6 +368,15 @@ fn check(input: &TbnInput<'_>, params: &TbnParams) -> Result<usize> {
     if params.levels == Some(0) {
         return Err(invalid("levels", "expected at least 1 level, got 0"));
     }
+    if params.stand_in_weight.is_nan() || params.stand_in_weight < 0.0 {
+        return Err(invalid(
+            "stand_in_weight",
+            format!(
+                "expected a value >= 0 (inf: none), got {}",
+                params.stand_in_weight
+            ),
+        ));
+    }
     let ex = &input.exemplar;
     if ex.h.min(ex.w) < p {
         return Err(invalid(
@@ -550,14 +567,28 @@ pub fn by_numbers(
             }
         }
         if l == 0 && params.composite > 0 {
+            let c = if params.seam_channels == 0 {
+                c0
+            } else {
+                params.seam_channels.min(c0)
+            };
+            let table = params.stand_in_weight.is_finite().then(|| {
+                // Stand-ins match a pixel and its surroundings at the patch's scale.
+                let desc = composite::descriptors(&el.aug, ca, c, el.h, el.w, p / 2);
+                composite::StandIns::new(
+                    &desc,
+                    2 * c,
+                    &el.labels,
+                    n_labels,
+                    composite::STAND_IN_BUDGET,
+                )
+            });
             let scene = composite::Scene {
+                stand_ins: table.as_ref(),
+                stand_in_weight: params.stand_in_weight,
                 ex: &el.aug,
                 stride: ca,
-                c: if params.seam_channels == 0 {
-                    c0
-                } else {
-                    params.seam_channels.min(c0)
-                },
+                c,
                 eh: el.h,
                 ew: el.w,
                 labels_in: &el.labels,

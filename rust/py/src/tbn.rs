@@ -56,7 +56,7 @@ fn flat(
 }
 
 #[pyfunction]
-#[pyo3(name = "by_numbers", signature = (exemplar, labels_in, labels_out, *, patch_size, k, label_weight, levels, iterations, init, wrap, tileable, seed, selection="medoid", composite=0, seam_channels=0, weights=None, threads=None, progress=None))]
+#[pyo3(name = "by_numbers", signature = (exemplar, labels_in, labels_out, *, patch_size, k, label_weight, levels, iterations, init, wrap, tileable, seed, selection="medoid", composite=0, stand_in_weight=f32::INFINITY, seam_channels=0, weights=None, threads=None, progress=None))]
 pub fn by_numbers_py<'py>(
     py: Python<'py>,
     exemplar: PyReadonlyArray3<'py, f32>,
@@ -73,6 +73,7 @@ pub fn by_numbers_py<'py>(
     seed: u64,
     selection: &str,
     composite: usize,
+    stand_in_weight: f32,
     seam_channels: usize,
     weights: Option<PyReadonlyArray1<'py, f32>>,
     threads: Option<usize>,
@@ -130,6 +131,7 @@ pub fn by_numbers_py<'py>(
         init,
         selection,
         composite,
+        stand_in_weight,
         seam_channels,
         wrap,
         tileable,
