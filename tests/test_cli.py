@@ -179,6 +179,25 @@ def test_bark_resumes_from_an_edited_label_map(tmp_path, exemplar_png):
     assert io.read_image(out).shape == (32, 48, 3)
 
 
+def test_bark_stand_in_options_reach_the_library(tmp_path, exemplar_png):
+    from phloem import bark
+
+    photo = io.read_image(exemplar_png)
+    outs = {}
+    for name, extra in (("strict", ["--strict-labels"]), ("weight", ["--stand-in-weight", "2"])):
+        outs[name] = tmp_path / f"{name}.png"
+        argv = ["bark", str(exemplar_png), "--size", "48x32", "--out", str(outs[name]), "--seed", "1", "-q", *extra]
+        assert main(argv) == 0
+    for name, weight in (("strict", None), ("weight", 2.0)):
+        expected = bark.generate(photo, (32, 48), seed=1, stand_in_weight=weight)
+        np.testing.assert_allclose(io.read_image(outs[name]), expected, atol=0.5 / 255 + 1e-6)
+    meta = json.loads(io.sidecar_path(outs["strict"]).read_text())
+    assert meta["parameters"]["strict_labels"] is True
+    with pytest.raises(SystemExit) as exc:
+        main(["bark", str(exemplar_png), "--size", "32x32", "--stand-in-weight", "-1", "--out", str(tmp_path / "o.png")])
+    assert exc.value.code == 2
+
+
 def test_bark_errors_name_the_problem(tmp_path, exemplar_png, capsys):
     io.write_image(tmp_path / "noisy.png", np.random.default_rng(0).random((20, 20)).astype(np.float32))
     cases = [
@@ -200,7 +219,7 @@ def test_bark_errors_name_the_problem(tmp_path, exemplar_png, capsys):
             ],
             "different files",
         ),
-    ]
+        ]
     for argv, message in cases:
         assert main(argv) == 2
         err = capsys.readouterr().err

@@ -324,7 +324,7 @@ def generate(
     labels_in: Any = ..., labels_out: Any = ..., method: Literal["layered", "joint"] = ..., rotations: Rotations = ...,
     edge_label: bool = ...,
     tileable: bool = ..., denoise: float = ..., label_weight: float = ..., feature_weight: float = ...,
-    init: Literal["smart", "random"] = ..., seed: int | np.random.Generator = ..., threads: int | None = ...,
+    stand_in_weight: float | None = ..., init: Literal["smart", "random"] = ..., seed: int | np.random.Generator = ..., threads: int | None = ...,
     progress: Progress = ..., return_intermediates: Literal[False] = ...,
 ) -> NDArray[np.float32]: ...
 @overload
@@ -333,7 +333,7 @@ def generate(
     labels_in: Any = ..., labels_out: Any = ..., method: Literal["layered", "joint"] = ..., rotations: Rotations = ...,
     edge_label: bool = ...,
     tileable: bool = ..., denoise: float = ..., label_weight: float = ..., feature_weight: float = ...,
-    init: Literal["smart", "random"] = ..., seed: int | np.random.Generator = ..., threads: int | None = ...,
+    stand_in_weight: float | None = ..., init: Literal["smart", "random"] = ..., seed: int | np.random.Generator = ..., threads: int | None = ...,
     progress: Progress = ..., return_intermediates: Literal[True],
 ) -> BarkResult: ...
 def generate(
@@ -351,6 +351,7 @@ def generate(
     denoise: float = 10.0,
     label_weight: float = 3.0,
     feature_weight: float = 8.0,
+    stand_in_weight: float | None = 5.0,
     init: Literal["smart", "random"] = "smart",
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
@@ -399,6 +400,11 @@ def generate(
         Non-local-means strength of :func:`input_labels` (default 10).
     label_weight, feature_weight : float, optional
         The thesis' ``w`` (default 3) and ``z`` (default 8) of texture-by-numbers (§3.3.4).
+    stand_in_weight : float or None, optional
+        Cost of label stand-ins in texture-by-numbers (default 5; None: the texture follows
+        the label map's every boundary, seams and all): see
+        :func:`phloem.texture.by_numbers`. Pass None when painting a hand-edited map whose
+        exact shapes matter more than seamless pieces.
     init : {"smart", "random"}, optional
         Texture-by-numbers initialisation (§3.4; default "smart").
     seed : int or numpy.random.Generator, optional
@@ -462,6 +468,7 @@ def generate(
         ex = np.ascontiguousarray(np.concatenate([img, hm], axis=2))
     out, sources = texture.by_numbers(
         ex, lab_in, lab_out, label_weight=label_weight, feature_weight=feature_weight, init=init,
+        stand_in_weight=stand_in_weight,
         tileable=tileable, seed=int(seeds[2]), threads=threads, return_sources=True,
         progress=_stage(progress, 40, 100),
     )  # fmt: skip

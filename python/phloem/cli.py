@@ -41,6 +41,13 @@ def _positive(text: str) -> int:
     return v
 
 
+def _non_negative(text: str) -> float:
+    v = float(text)
+    if not (v >= 0 and v != float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text}")
+    return v
+
+
 def _common(p: argparse.ArgumentParser, *, writes: bool = True) -> None:
     g = p.add_argument_group("common options")
     g.add_argument("--seed", type=int, default=0, help="seed of every random choice; same seed, same output (default 0)")
@@ -202,6 +209,7 @@ def _cmd_bark(args: argparse.Namespace) -> None:
         lambda bar: bark.generate(
             photo, args.size, labels=args.labels, height_map=hm, labels_in=lab_in, labels_out=lab_out,
             method=args.method, rotations=_ROTATIONS[args.rotations], edge_label=args.edge_label, tileable=args.tileable, seed=args.seed,
+            stand_in_weight=None if args.strict_labels else args.stand_in_weight,
             threads=args.threads, progress=bar, return_intermediates=True,
         ),  # fmt: skip
     )
@@ -601,6 +609,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--edge-label", action="store_true", help="add a region for the borders between regions to both label maps (§3.5.5)")
     p.add_argument("--height-map", metavar="HM", default=None, help="height map of IN, synthesised along; written as OUT_height.png (16-bit)")
     p.add_argument("--tileable", action="store_true", help="make the label map and the texture wrap around so OUT tiles")
+    p.add_argument("--stand-in-weight", type=_non_negative, default=5.0, metavar="W",
+                   help="cost of letting a coherent piece of the photo run across a label boundary on nearest-coloured pixels "
+                        "of the right label (default 5; lower: more seamless, looser boundaries)")  # fmt: skip
+    p.add_argument("--strict-labels", action="store_true",
+                   help="no stand-ins: the texture follows every boundary of the label map exactly, with seams along them")  # fmt: skip
     p.add_argument("--cylinder-preview", metavar="PNG", default=None, help="also write the texture wrapped around a trunk to PNG")
     p.add_argument("--keep-intermediates", action="store_true", help="also write the label maps as OUT_labels_in.png and OUT_labels_out.png")
     p.add_argument("--labels-in", metavar="PNG", default=None, help="use this input label map (flat colours, same size as IN) instead of computing it")
