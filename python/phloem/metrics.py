@@ -13,16 +13,14 @@ branching structures with their L1 distance (Sibbing et al. 2010, Fig. 7; define
 
 from __future__ import annotations
 
-import math
-import numbers
 from typing import Any, Literal
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from . import patch as _patch
 from . import shapes as _shapes
+from .bark import _check_denoise, _denoised_lab, _rgb8
 from ._validate import as_image, as_mask, check_patch_size
 from .branching.structure import angle_histogram, histogram_distance, thickness_histogram
 
@@ -272,20 +270,11 @@ def label_agreement(
     img = as_image(image, "image")
     ex = as_image(exemplar, "exemplar")
     lab, elab = _label_maps(labels, img.shape[:2], exemplar_labels, ex.shape[:2])
-    if isinstance(denoise, bool) or not isinstance(denoise, numbers.Real) or not math.isfinite(denoise) or denoise < 0:
-        raise ValueError(f"denoise: expected a finite strength >= 0, got {denoise!r}")
+    _check_denoise(denoise)
     values = np.unique(elab)
-
-    def lab_colours(x: NDArray[np.float32]) -> NDArray[np.float32]:
-        rgb = x[..., :3] if x.shape[2] >= 3 else np.repeat(x[..., :1], 3, axis=2)
-        bgr = np.ascontiguousarray(np.clip(np.rint(rgb * 255), 0, 255).astype(np.uint8)[..., ::-1])
-        if denoise > 0:
-            bgr = cv2.fastNlMeansDenoisingColored(bgr, None, float(denoise), float(denoise), 7, 21)
-        return np.asarray(cv2.cvtColor(bgr.astype(np.float32) / 255.0, cv2.COLOR_BGR2Lab), dtype=np.float32)
-
-    ex_lab = lab_colours(ex)
+    ex_lab = _denoised_lab(_rgb8(ex), denoise)
     centres = np.stack([ex_lab[elab == v].mean(axis=0) for v in values])
-    img_lab = lab_colours(img)
+    img_lab = _denoised_lab(_rgb8(img), denoise)
     d = ((img_lab[:, :, None, :] - centres[None, None]) ** 2).sum(axis=-1)
     return float(np.mean(values[d.argmin(axis=-1)] == lab))
 

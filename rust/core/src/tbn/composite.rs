@@ -115,13 +115,19 @@ pub struct Scene<'a> {
 }
 
 impl Scene<'_> {
-    /// The exemplar pixel output pixel `(y, x)` copies under offset `o`, clamped to the
-    /// exemplar.
+    /// The exemplar pixel (flat index) offset `o` copies to output pixel `(y, x)`, clamped to
+    /// the exemplar.
     #[inline]
-    fn px(&self, y: usize, x: usize, o: (i32, i32)) -> &[f32] {
+    fn source(&self, y: usize, x: usize, o: (i32, i32)) -> usize {
         let sy = (y as i64 + i64::from(o.0)).clamp(0, self.eh as i64 - 1) as usize;
         let sx = (x as i64 + i64::from(o.1)).clamp(0, self.ew as i64 - 1) as usize;
-        let i = self.copy(y, x, sy * self.ew + sx) * self.stride;
+        sy * self.ew + sx
+    }
+
+    /// The values output pixel `(y, x)` shows under offset `o`.
+    #[inline]
+    fn px(&self, y: usize, x: usize, o: (i32, i32)) -> &[f32] {
+        let i = self.copy(y, x, self.source(y, x, o)) * self.stride;
         &self.ex[i..i + self.c]
     }
 
@@ -155,10 +161,8 @@ impl Scene<'_> {
     #[inline]
     fn stand_in_cost(&self, y: usize, x: usize, o: (i32, i32)) -> f32 {
         let Some(s) = self.stand_ins else { return 0.0 };
-        let sy = (y as i64 + i64::from(o.0)).clamp(0, self.eh as i64 - 1) as usize;
-        let sx = (x as i64 + i64::from(o.1)).clamp(0, self.ew as i64 - 1) as usize;
         let l = self.labels_out[y * self.w + x] as usize;
-        self.stand_in_weight * s.cost[l * self.eh * self.ew + sy * self.ew + sx]
+        self.stand_in_weight * s.cost[l * self.eh * self.ew + self.source(y, x, o)]
     }
 
     /// `‖I(y, x, a) − I(y, x, b)‖`.
