@@ -6,13 +6,19 @@ help:  ## list the targets
 install:  ## build and install phloem with the test extras
 	pip install ".[test]"
 
+dev:  ## build the extension in release mode into the current environment (maturin develop)
+	maturin develop --release
+
 test: install  ## every test: Rust unit tests and pytest (what CI runs)
 	cargo test --release -p phloem-core && pytest
 
-lint:  ## rustfmt, clippy and the stub check
+lint:  ## ruff, ruff format, mypy --strict, stubtest, rustfmt and clippy (what CI runs after the tests)
+	ruff check .
+	ruff format --check .
+	mypy --strict python/phloem
+	python -m mypy.stubtest phloem._core
 	cargo fmt --all -- --check
 	cargo clippy --workspace --all-targets -- -D warnings
-	python -m mypy.stubtest phloem._core
 
 bench:  ## Rust criterion benches and Python benchmarks
 	cargo bench -p phloem-core --bench patch
@@ -38,4 +44,4 @@ sheet:  ## contact sheets of the texture, graph-cut, shape, bark and tree jobs (
 	python benches/sheet_branching_image.py --out out/branching_image_sheet.png
 	python benches/sheet_branching.py out/branching_sheet.png
 
-.PHONY: help install test lint bench peers sheet
+.PHONY: help install dev test lint bench peers sheet

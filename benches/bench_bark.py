@@ -16,8 +16,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-import phloem
 import pytest
+
+import phloem
 from phloem import bark
 
 pytestmark = pytest.mark.filterwarnings("ignore::pytest_benchmark.logger.PytestBenchmarkWarning")

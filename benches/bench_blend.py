@@ -148,7 +148,9 @@ def table(rounds: int = 15) -> None:
             ts = np.array(times[name]) * 1e3
             print(f"{n:>6}² {name:>28} {ts.min():8.1f} {np.median(ts):9.1f} {iters:>5} {res:9.2e}")
         ours8 = (results["phloem tol=1e-6 threads=1"][0].clip(0, 1) * 255 + 0.5).astype(np.uint8)
-        print(f"{n:>6}² {'phloem rounded to 8 bits':>28} {'':>8} {'':>9} {'':>5} {relative_residual(ours8 / 255, job):9.2e}")
+        print(
+            f"{n:>6}² {'phloem rounded to 8 bits':>28} {'':>8} {'':>9} {'':>5} {relative_residual(ours8 / 255, job):9.2e}"
+        )
 
 
 if __name__ == "__main__":

@@ -29,6 +29,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 from branching_scene import picture, tree
+
 from phloem.branching import fragments, render
 
 

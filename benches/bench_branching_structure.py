@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 import pytest
+
 from phloem.branching import (
     BendingModel,
     FurcationModel,
@@ -45,7 +46,16 @@ def example(trees: int = 4, seed: int = 0) -> Skeleton:
 
 def grow_nodes(bending: BendingModel, furcation: FurcationModel, nodes: int, seed: int = 0) -> Skeleton:
     # total length (nodes - 1) h gives about ``nodes`` vertices in all branches
-    return grow(bending, furcation, shape=(512, 512), seed=seed, generations=3, children=4, max_length=nodes * H, start=(10, 256, 0.0))
+    return grow(
+        bending,
+        furcation,
+        shape=(512, 512),
+        seed=seed,
+        generations=3,
+        children=4,
+        max_length=nodes * H,
+        start=(10, 256, 0.0),
+    )
 
 
 def test_bench_grow_500(benchmark):

@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import argparse
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import pytest
@@ -109,10 +110,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=7)
     args = ap.parse_args()
-    print(f"{'overlap':>10} {'PyMaxflow':>10} {'phloem':>10} {'ratio':>6} {'seam()':>10} {'Mpx/s':>6}  flow (phloem / PyMaxflow)")
+    print(
+        f"{'overlap':>10} {'PyMaxflow':>10} {'phloem':>10} {'ratio':>6} {'seam()':>10} {'Mpx/s':>6}  flow (phloem / PyMaxflow)"
+    )
     for h, w in SIZES:
         p = problem(h, w)
-        r = best_of({"pym": lambda: run_pymaxflow(p), "ph": lambda: run_phloem(p), "seam": lambda: run_seam(p)}, args.runs)
+        r = best_of(
+            {"pym": lambda: run_pymaxflow(p), "ph": lambda: run_phloem(p), "seam": lambda: run_seam(p)}, args.runs
+        )
         (tp, fp), (tq, fq), (ts, _) = r["pym"], r["ph"], r["seam"]
         print(
             f"{h:>5}×{w:<4} {tp * 1e3:>8.1f}ms {tq * 1e3:>8.1f}ms {tp / tq:>5.1f}× {ts * 1e3:>8.1f}ms"

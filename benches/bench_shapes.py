@@ -15,8 +15,9 @@ import time
 
 import cv2
 import numpy as np
-import phloem
 import pytest
+
+import phloem
 from phloem import shapes
 
 pytestmark = pytest.mark.filterwarnings("ignore::pytest_benchmark.logger.PytestBenchmarkWarning")

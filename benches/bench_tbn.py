@@ -20,8 +20,9 @@ from typing import Any
 
 import cv2
 import numpy as np
-import phloem
 import pytest
+
+import phloem
 from phloem.metrics import label_histogram_distance, patch_coherence
 
 pytestmark = pytest.mark.filterwarnings("ignore::pytest_benchmark.logger.PytestBenchmarkWarning")

@@ -23,8 +23,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import phloem
 import pytest
+
+import phloem
 from phloem import trees
 
 pytestmark = pytest.mark.filterwarnings("ignore::pytest_benchmark.logger.PytestBenchmarkWarning")
@@ -40,7 +41,9 @@ def synthetic_tree(seed: int) -> np.ndarray:
     rng = np.random.default_rng(seed)
     img = np.zeros((400, 300, 4), np.float32)
     cx = 150 + int(rng.integers(-20, 20))
-    cv2.fillPoly(img, [np.array([[cx - 10, 395], [cx + 10, 395], [cx + 6, 180], [cx - 6, 180]], np.int32)], (0.4, 0.3, 0.2, 1.0))
+    cv2.fillPoly(
+        img, [np.array([[cx - 10, 395], [cx + 10, 395], [cx + 6, 180], [cx - 6, 180]], np.int32)], (0.4, 0.3, 0.2, 1.0)
+    )
     centre = rng.normal((cx, 130), (5, 10))
     spread = rng.uniform((30, 30), (60, 50))
     for _ in range(300):
@@ -82,7 +85,9 @@ def main() -> None:
     t0 = time.perf_counter()
     lib = trees.Library.from_images(imgs, names=names, size=args.size)
     t_lib = time.perf_counter() - t0
-    print(f"library: {len(lib)} exemplars prepared at {args.size}² in {t_lib:.2f} s ({t_lib / len(lib) * 1e3:.0f} ms each)")
+    print(
+        f"library: {len(lib)} exemplars prepared at {args.size}² in {t_lib:.2f} s ({t_lib / len(lib) * 1e3:.0f} ms each)"
+    )
     singles = []
     for s in range(args.runs):
         t0 = time.perf_counter()

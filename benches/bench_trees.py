@@ -17,8 +17,9 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import phloem
 import pytest
+
+import phloem
 from phloem import trees
 
 pytestmark = pytest.mark.filterwarnings("ignore::pytest_benchmark.logger.PytestBenchmarkWarning")

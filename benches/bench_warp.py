@@ -18,8 +18,9 @@ from typing import Any
 
 import cv2
 import numpy as np
-import phloem
 import pytest
+
+import phloem
 
 pytestmark = pytest.mark.filterwarnings("ignore::pytest_benchmark.logger.PytestBenchmarkWarning")
 

@@ -12,6 +12,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+
 from phloem.branching import Branch, Skeleton
 
 # The real examples of ../shared/data/branching -> the trace() arguments that suit them.

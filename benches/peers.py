@@ -326,8 +326,9 @@ def make_texture_synthesis(binary: str, workdir: Path) -> SynthesisTool:
     """A synthesis tool running the CLI; the exemplar PNG is written before timing starts."""
 
     def tool(exemplar: np.ndarray, size: int) -> Callable[[], np.ndarray]:
-        import phloem
         from PIL import Image
+
+        import phloem
 
         src, out = workdir / "exemplar.png", workdir / "out.png"
         Image.fromarray(exemplar).save(src)

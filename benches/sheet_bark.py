@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+
 import phloem
 from phloem import bark
 
@@ -27,7 +28,9 @@ SHARED = ROOT.parent / "shared" / "data" / "bark"
 RUNS = ("bark1", "bark2", "eucalyptus", "eucap5")
 
 
-def pipeline_row(name: str, photo: np.ndarray, k: int, size: tuple[int, int], rotations: bool | str = "half") -> list[np.ndarray]:
+def pipeline_row(
+    name: str, photo: np.ndarray, k: int, size: tuple[int, int], rotations: bool | str = "half"
+) -> list[np.ndarray]:
     opts = {"labels": k, "rotations": rotations}
     t0 = time.perf_counter()
     joint = bark.generate(photo, size, seed=1, return_intermediates=True, **opts)

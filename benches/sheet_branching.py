@@ -25,11 +25,12 @@ from typing import Any
 
 import cv2
 import numpy as np
+
 import phloem
 from phloem import branching as br
 
 sys.path.insert(0, str(Path(__file__).parent))
-from sheet_texture import _fit, _label, _rgb, write_sheet  # noqa: E402
+from sheet_texture import _fit, _label, _rgb, write_sheet
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "branching"
 

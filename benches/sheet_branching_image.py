@@ -28,8 +28,10 @@ import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-import phloem
 from branching_scene import picture, tree
+from sheet_texture import ROOT, _fit, _label, _rgb, write_sheet
+
+import phloem
 from phloem.branching import (
     BendingModel,
     Branch,
@@ -42,7 +44,6 @@ from phloem.branching import (
     render,
     unrectify,
 )
-from sheet_texture import ROOT, _fit, _label, _rgb, write_sheet
 
 
 def _disks(img: np.ndarray, sk: Skeleton) -> np.ndarray:

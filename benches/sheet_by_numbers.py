@@ -20,6 +20,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
 import phloem
 from phloem.metrics import label_agreement, label_histogram_distance, patch_coherence
 

@@ -24,7 +24,7 @@ import phloem
 from phloem.seams import seam
 
 sys.path.insert(0, str(Path(__file__).parent))
-from sheet_texture import ROOT, TILE, _fit, _label, write_sheet  # noqa: E402
+from sheet_texture import ROOT, TILE, _fit, _label, write_sheet
 
 
 def _edges(labels: np.ndarray, valid: np.ndarray | None = None) -> np.ndarray:

@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+
 import phloem
 from phloem import shapes
 
@@ -70,7 +71,9 @@ def bark_row() -> list[np.ndarray]:
 def thesis_row(run: str) -> list[np.ndarray]:
     a, b = thesis_map(run, "a"), thesis_map(run, "b")
     tiles = [_label(_fit(_gray(a)), f"{run} a ({a.max() + 1} labels) c={shapes.chord_length(a):.0f}")]
-    tiles.append(_label(_fit(_gray(b)), f"thesis b: D={shapes.shape_similarity(a, b):.2f} c={shapes.chord_length(b):.0f}"))
+    tiles.append(
+        _label(_fit(_gray(b)), f"thesis b: D={shapes.shape_similarity(a, b):.2f} c={shapes.chord_length(b):.0f}")
+    )
     for method in shapes.METHODS:
         out, dt = _timed(shapes.synthesize_labels, a, b.shape, method=method, seed=0)
         d, c = shapes.shape_similarity(a, out), shapes.chord_length(out)

@@ -121,7 +121,11 @@ def main(out_path: str) -> None:
     water = phloem.io.read_image(ROOT / "tests" / "data" / "water.jpg")
     bark = phloem.data.bark()[..., :3]
     rows, lines = [], []
-    for name, ex in [("bark", bark[:128, :128]), ("brick", phloem.data.brick()[:160, :160]), ("water", water[:150, :150])]:
+    for name, ex in [
+        ("bark", bark[:128, :128]),
+        ("brick", phloem.data.brick()[:160, :160]),
+        ("water", water[:150, :150]),
+    ]:
         r, line = synthesis_row(name, np.ascontiguousarray(ex))
         rows.append(r)
         lines.append(line)

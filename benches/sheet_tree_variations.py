@@ -18,11 +18,19 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
 import phloem
 from phloem import trees
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "trees"
-PICKS = [("deciduous-alt", 2), ("coniferous", 0), ("cerrado-trees", 0), ("tropical", 1), ("evergreen-mediterranean", 2), ("savanna-trees", 1)]
+PICKS = [
+    ("deciduous-alt", 2),
+    ("coniferous", 0),
+    ("cerrado-trees", 0),
+    ("tropical", 1),
+    ("evergreen-mediterranean", 2),
+    ("savanna-trees", 1),
+]
 MORE = ["mixed", "deciduous", "caatinga-trees"]
 
 
@@ -60,7 +68,11 @@ def main() -> int:
             names.append(f"{a}[{i}]")
     lib = trees.Library.from_images(imgs, names=names, size=args.size)
     tables = np.concatenate(
-        [trees.morph_table(lib.trees[:6], tile=args.tile, colors=False), trees.morph_table(lib.trees[:6], tile=args.tile)], axis=1
+        [
+            trees.morph_table(lib.trees[:6], tile=args.tile, colors=False),
+            trees.morph_table(lib.trees[:6], tile=args.tile),
+        ],
+        axis=1,
     )
     width = tables.shape[1]
     per = width // args.tile

@@ -7,8 +7,9 @@ import itertools
 
 import cv2
 import numpy as np
-import phloem
 import pytest
+
+import phloem
 from phloem import bark
 
 THESIS_RUNS = ("bark1", "bark2", "eucalyptus", "eucap5")
@@ -102,7 +103,9 @@ def test_erosion_removes_isolated_pixels():
     speck = img.copy()
     speck[20, 20] = 1.0 - speck[20, 20]  # one pixel of the other colour
     speck[40, 41] = 1.0 - speck[40, 41]
-    np.testing.assert_array_equal(bark.input_labels(speck, 2, denoise=0, erosion=1)[[20, 40], [20, 41]], truth[[20, 40], [20, 41]])
+    np.testing.assert_array_equal(
+        bark.input_labels(speck, 2, denoise=0, erosion=1)[[20, 40], [20, 41]], truth[[20, 40], [20, 41]]
+    )
     kept = bark.input_labels(speck, 2, denoise=0, erosion=0)
     assert (kept[[20, 40], [20, 41]] != truth[[20, 40], [20, 41]]).all()
 

@@ -110,7 +110,7 @@ def test_residual_of_the_returned_image_is_small(scene, mode, shape, offset):
     assert info["residual"] < 1e-6 and 1 <= info["iterations"] <= 20, info
     assert relative_residual(out, src, dst, mask, offset, mode=mode) < 1e-4
     # Outside the region dst is untouched.
-    A, b, (uy, ux) = poisson_system(src, dst, mask, offset)
+    _A, _b, (uy, ux) = poisson_system(src, dst, mask, offset)
     outside = np.ones(dst.shape[:2], bool)
     outside[uy, ux] = False
     assert np.array_equal(out[outside], dst[outside])
@@ -139,7 +139,7 @@ def _quadratic_scene(n=64, dn=100, off=(18, 20)):
 def test_analytic_solution_dirichlet():
     """src quadratic, dst = src + H on the boundary with H discrete-harmonic: f = src + H."""
     n, off = 64, (18, 20)
-    src, dst, harmonic = _quadratic_scene(n, 100, off)
+    src, dst, _harmonic = _quadratic_scene(n, 100, off)
     mask = _ring(n)  # a hole: dst values inside it are Dirichlet too
     inner = np.zeros(dst.shape, bool)
     inner[off[0] : off[0] + n, off[1] : off[1] + n] = mask
@@ -324,7 +324,7 @@ def test_field_matches_a_sparse_direct_solve(seed):
     points = np.array(points)
     values = rng.normal(size=(len(points), 2))
     ours, info = interpolate_field(region, points, values, return_info=True)
-    ref, L = field_reference(region, points, values)
+    ref, _L = field_reference(region, points, values)
     assert np.array_equal(np.isnan(ours), np.isnan(ref))
     assert np.array_equal(ours[points[:, 0], points[:, 1]], values.astype(np.float32))
     np.testing.assert_allclose(ours[region], ref[region], atol=1e-4 * (1 + np.abs(values).max()))

@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 from conftest import shared_file
+
 from phloem.branching import (
     BendingModel,
     Branch,
@@ -67,7 +68,9 @@ def test_c1_large_k_reproduces_the_source_branch():
     src = walk_branch(np.random.default_rng(3), 120, 0.12)
     sk = Skeleton([src], (300, 400))
     model = BendingModel.fit(sk, h=H, k=20, m=15, c=1, omega_g=0.0)
-    out = grow(model, shape=(300, 400), start=(*src.points[0], src.heading()), branch_length=src.length(), colonize=False)
+    out = grow(
+        model, shape=(300, 400), start=(*src.points[0], src.heading()), branch_length=src.length(), colonize=False
+    )
     got, want = out.branches[0].angles(), model.source.branches[0].angles()
     n = len(want) - model.m
     assert len(got) >= n
@@ -75,7 +78,14 @@ def test_c1_large_k_reproduces_the_source_branch():
     np.testing.assert_allclose(out.branches[0].points[: n + 2], model.source.branches[0].points[: n + 2], atol=1e-6)
     # ... while allowing variability (Fig. 3b, c = 2) departs from it.
     varied = BendingModel.fit(sk, h=H, k=20, m=15, c=2, omega_g=0.0)
-    loose = grow(varied, shape=(300, 400), start=(*src.points[0], src.heading()), branch_length=src.length(), colonize=False, seed=1)
+    loose = grow(
+        varied,
+        shape=(300, 400),
+        start=(*src.points[0], src.heading()),
+        branch_length=src.length(),
+        colonize=False,
+        seed=1,
+    )
     la = loose.branches[0].angles()
     assert not np.allclose(la[: min(n, len(la))], want[: min(n, len(la))], atol=1e-6)
 
@@ -186,7 +196,9 @@ def test_colonisation_keeps_branches_apart(models: tuple[BendingModel, Furcation
         for seed in range(8):
             out = grow(bend, fur, shape=(220, 220), seed=seed, generations=2, children=3, colonize=colonize)
             for i, b in enumerate(out.branches[1:], 1):
-                others = np.vstack([o.points for j, o in enumerate(out.branches) if j not in (i, b.parent[0])] or [[1e9, 1e9]])
+                others = np.vstack(
+                    [o.points for j, o in enumerate(out.branches) if j not in (i, b.parent[0])] or [[1e9, 1e9]]
+                )
                 d = np.linalg.norm(b.points[:, None] - others[None], axis=2).min(axis=1)
                 vals.append(np.mean(d))
         return float(np.mean(vals))
@@ -342,7 +354,9 @@ def test_guided_growth_follows_the_path(models: tuple[BendingModel, FurcationMod
     def spread(guide) -> float:
         vals = []
         for seed in range(3):
-            out = grow(bend, shape=(300, 300), seed=seed, start=(10, 150, 0.7), guide=guide, branch_length=250, guide_width=12)
+            out = grow(
+                bend, shape=(300, 300), seed=seed, start=(10, 150, 0.7), guide=guide, branch_length=250, guide_width=12
+            )
             vals.append(np.abs(out.branches[0].points[:, 1] - 150.0).mean())
         return float(np.mean(vals))
 
@@ -430,7 +444,9 @@ def test_river_delta_statistics_carry_over():
     ra, rr = bend.range_alpha, bend.range_r
     # spread between two halves of the input (alternate branches, about 0.15 for both); the
     # halves interleave, so they are closer than independent samples: allow 1.5 times that
-    halves = [Skeleton([Branch(b.points, b.thickness) for b in bend.source.branches[j::2] if len(b) >= 3]) for j in (0, 1)]
+    halves = [
+        Skeleton([Branch(b.points, b.thickness) for b in bend.source.branches[j::2] if len(b) >= 3]) for j in (0, 1)
+    ]
     spread_a = histogram_distance(*(angle_histogram(x, range=ra)[0] for x in halves))
     spread_r = histogram_distance(*(thickness_histogram(x, range=rr)[0] for x in halves))
     out = grow(bend, fur, shape=(500, 500), seed=0)

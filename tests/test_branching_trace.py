@@ -6,8 +6,9 @@ import itertools
 import time
 
 import numpy as np
-import phloem
 import pytest
+
+import phloem
 from phloem.branching import Branch, Skeleton, estimate_thickness, trace
 
 # -- synthetic structures with a known centre line and radius ---------------------------------

@@ -4,9 +4,10 @@ pixel from an exemplar pixel of its own label, deterministically, and coherently
 from __future__ import annotations
 
 import numpy as np
-import phloem
 import pytest
 from conftest import shared_file
+
+import phloem
 from phloem import _core
 from phloem.metrics import label_agreement, label_histogram_distance, patch_coherence
 from phloem.texture import by_numbers, feature_distance_map
@@ -313,7 +314,7 @@ def test_feature_distance_map_is_signed_distance_to_dark_features():
     img[:, 28:34] = 0.0
     fdm = feature_distance_map(img, sigma=1.0, radius=10.0)
     assert fdm.shape == (40, 60) and fdm.dtype == np.float32
-    assert 0.0 <= fdm.min() and fdm.max() <= 1.0
+    assert fdm.min() >= 0.0 and fdm.max() <= 1.0
     row = fdm[20]
     assert row[31] > 0.5 > row[20]  # inside vs outside the furrow
     # Outside, it falls linearly with distance until clamped at radius.

@@ -194,7 +194,9 @@ def test_bark_stand_in_options_reach_the_library(tmp_path, exemplar_png):
     meta = json.loads(io.sidecar_path(outs["strict"]).read_text())
     assert meta["parameters"]["strict_labels"] is True
     with pytest.raises(SystemExit) as exc:
-        main(["bark", str(exemplar_png), "--size", "32x32", "--stand-in-weight", "-1", "--out", str(tmp_path / "o.png")])
+        main(
+            ["bark", str(exemplar_png), "--size", "32x32", "--stand-in-weight", "-1", "--out", str(tmp_path / "o.png")]
+        )
     assert exc.value.code == 2
 
 
@@ -219,7 +221,7 @@ def test_bark_errors_name_the_problem(tmp_path, exemplar_png, capsys):
             ],
             "different files",
         ),
-        ]
+    ]
     for argv, message in cases:
         assert main(argv) == 2
         err = capsys.readouterr().err
@@ -329,7 +331,18 @@ def test_branching_trace_and_grow_write_skeletons_with_sidecars(tmp_path, capsys
     assert json.loads((tmp_path / "river.json.json").read_text())["command"] == "branching trace"
     assert io.read_image(tmp_path / "overlay.png").shape == (160, 200, 3)
     new = tmp_path / "new.json"
-    args = ["branching", "grow", str(skel), "--out", str(new), "--seed", "5", "--histograms", str(tmp_path / "h.png"), "-q"]
+    args = [
+        "branching",
+        "grow",
+        str(skel),
+        "--out",
+        str(new),
+        "--seed",
+        "5",
+        "--histograms",
+        str(tmp_path / "h.png"),
+        "-q",
+    ]
     assert main(args) == 0
     grown = Skeleton.load(new)
     assert grown.shape == (160, 200) and len(grown.branches) >= 1
@@ -388,7 +401,24 @@ def test_branching_run_writes_image_skeleton_histograms_and_sidecar(tmp_path):
     assert img[river].mean() < img[~river].mean() - 0.1
     # render from the written skeletons reproduces the run's image (same seed).
     sk = tmp_path / "src.json"
-    assert main(["branching", "trace", str(tmp_path / "river.png"), "--kind", "dark", "--sigmas", "2", "3", "--out", str(sk), "-q"]) == 0
+    assert (
+        main(
+            [
+                "branching",
+                "trace",
+                str(tmp_path / "river.png"),
+                "--kind",
+                "dark",
+                "--sigmas",
+                "2",
+                "3",
+                "--out",
+                str(sk),
+                "-q",
+            ]
+        )
+        == 0
+    )
     again = tmp_path / "again.png"
     assert main(["branching", "render", str(tmp_path / "river.png"), str(sk), str(tmp_path / "new_skeleton.json"),
                  "--out", str(again), "--seed", "2", "-q"]) == 0  # fmt: skip

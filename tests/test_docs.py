@@ -9,7 +9,25 @@ import pytest
 
 
 @pytest.mark.parametrize(
-    "module", ["phloem.io", "phloem.data", "phloem.patch", "phloem.seams", "phloem.texture", "phloem.metrics", "phloem.blend", "phloem.bark", "phloem.shapes", "phloem.trees", "phloem.warp", "phloem.branching.skeleton", "phloem.branching.structure", "phloem.branching.trace", "phloem.branching.figures", "phloem.branching.pipeline"]
+    "module",
+    [
+        "phloem.io",
+        "phloem.data",
+        "phloem.patch",
+        "phloem.seams",
+        "phloem.texture",
+        "phloem.metrics",
+        "phloem.blend",
+        "phloem.bark",
+        "phloem.shapes",
+        "phloem.trees",
+        "phloem.warp",
+        "phloem.branching.skeleton",
+        "phloem.branching.structure",
+        "phloem.branching.trace",
+        "phloem.branching.figures",
+        "phloem.branching.pipeline",
+    ],
 )
 def test_docstring_examples(module):
     mod = importlib.import_module(module)

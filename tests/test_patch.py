@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import given
@@ -62,12 +64,12 @@ def test_patchmatch_close_to_exact_on_real_textures(name, variant, exact_fields)
 def test_more_iterations_get_closer_to_exact(exact_fields):
     src, tgt, d_ex = exact_fields("water")
     ratios = [nnf(src, tgt, iterations=it, seed=1)[1].mean() / d_ex.mean() for it in (1, 3, 10, 30)]
-    assert all(a > b for a, b in zip(ratios, ratios[1:])), ratios
+    assert all(a > b for a, b in itertools.pairwise(ratios)), ratios
 
 
 def test_exact_matches_numpy_brute_force(bark):
     src, tgt, p = bark[:20, :24], bark[100:112, 50:61], 5
-    field, dist = nnf(src, tgt, patch_size=p, method="exact")
+    _field, dist = nnf(src, tgt, patch_size=p, method="exact")
     r = p // 2
     tpad = np.pad(tgt, ((r, r), (r, r), (0, 0)), constant_values=np.nan)
     for ty in range(tgt.shape[0]):
@@ -84,7 +86,7 @@ def test_exact_matches_numpy_brute_force(bark):
 
 def test_crop_is_found_exactly(bark):
     tgt = bark[40:100, 30:110]
-    field, dist = nnf(bark, tgt, seed=3)
+    field, _dist = nnf(bark, tgt, seed=3)
     ys, xs = np.mgrid[40:100, 30:110]
     hits = (field[..., 0] == ys) & (field[..., 1] == xs)
     assert hits[3:-3, 3:-3].mean() > 0.99
@@ -145,7 +147,7 @@ def test_different_seeds_differ_but_both_converge(water):
 def test_given_init_is_kept_when_optimal(bark):
     src, tgt = bark[:40, :40], bark[60:80, 60:90]
     exact, d_ex = nnf(src, tgt, patch_size=5, method="exact")
-    field, dist = nnf(src, tgt, patch_size=5, init=exact, iterations=3, seed=9)
+    _field, dist = nnf(src, tgt, patch_size=5, init=exact, iterations=3, seed=9)
     np.testing.assert_allclose(dist, d_ex, rtol=1e-5)
 
 
@@ -170,7 +172,12 @@ def test_knn_exact_agrees_with_numpy(gravel):
     d_all[near] = np.inf
     ref = np.sort(d_all, axis=1)[:, :k].reshape(*ex.shape, k)
     np.testing.assert_allclose(dist, ref, rtol=1e-4, atol=1e-6)
-    assert (np.maximum(np.abs(idx[..., 0] - ys.reshape(ex.shape)[..., None]), np.abs(idx[..., 1] - xs.reshape(ex.shape)[..., None])) > 1).all()
+    assert (
+        np.maximum(
+            np.abs(idx[..., 0] - ys.reshape(ex.shape)[..., None]), np.abs(idx[..., 1] - xs.reshape(ex.shape)[..., None])
+        )
+        > 1
+    ).all()
 
 
 def test_knn_approximate_close_to_exact(water):

@@ -60,7 +60,7 @@ def test_quilting_beats_random_placement_at_the_seams(bark):
     off = (src[..., 0] - yy) * 10000 + (src[..., 1] - xx)
 
     def seam_jump(img, labels):
-        dx = (labels[:, 1:] != labels[:, :-1])
+        dx = labels[:, 1:] != labels[:, :-1]
         jump = np.abs(img[:, 1:] - img[:, :-1]).sum(-1)
         return float(jump[dx].mean())
 

@@ -244,7 +244,7 @@ def test_real_image_seam_flow_matches_pymaxflow(bark, shape):
     inner = edges.copy()
     inner[:, 0, 0] = 0
     inner[:, -2, 0] = 0
-    
+
     src_t = np.zeros((h, w))
     src_t[:, 1] = BIG
     snk_t = np.zeros((h, w))
@@ -259,8 +259,8 @@ def test_seam_costs_match_independent_numpy_costs(bark):
     region = np.ones((40, 50), bool)
     seeds = np.zeros((40, 50), np.int8)
     seeds[:, 0], seeds[:, -1] = 1, 2
-    mask, e_builtin = seam(a, b, region, seeds=seeds, return_energy=True)
-    mask2, e_numpy = seam(a, b, region, seeds=seeds, cost=kwatra_edges(a, b), return_energy=True)
+    _mask, e_builtin = seam(a, b, region, seeds=seeds, return_energy=True)
+    _mask2, e_numpy = seam(a, b, region, seeds=seeds, cost=kwatra_edges(a, b), return_energy=True)
     assert e_builtin == pytest.approx(e_numpy, rel=1e-5)
     # Luo's cost from its definition: min(d(s), d(t)) / G(s, t) on 0-255 colours.
     a8, b8 = 255.0 * a.astype(np.float64), 255.0 * b.astype(np.float64)
@@ -298,7 +298,7 @@ def test_seam_on_a_disk_respects_the_border_rule(bark):
     a, b = bark[:h, :w], bark[120 : 120 + h, 60 : 60 + w]
     for cost in ("kwatra", "gradient", "luo"):
         take_b = seam(a, b, region, a_mask=old, b_mask=new, cost=cost, border_weight=np.inf)
-        
+
         for y, x in zip(*np.nonzero(region)):
             nb = [(y + dy, x + dx) for dy, dx in DIRS[:4] if 0 <= y + dy < h and 0 <= x + dx < w]
             by_a = any(old[p] and not new[p] for p in nb)
@@ -309,7 +309,6 @@ def test_seam_on_a_disk_respects_the_border_rule(bark):
                 assert take_b[y, x], (cost, y, x)
         assert (take_b[new & ~old]).all() and not take_b[old & ~new].any()
         assert not take_b[~old & ~new].any()
-        
 
 
 def test_seeds_are_hard_and_identical_images_cost_nothing(bark):

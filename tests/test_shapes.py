@@ -5,10 +5,11 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
-import phloem
 import pytest
-from phloem import shapes
 from scipy import ndimage
+
+import phloem
+from phloem import shapes
 
 
 def blobs(h: int, w: int, seed: int, k: int = 2, sigma: float = 3.0) -> np.ndarray:
@@ -270,8 +271,9 @@ def test_rotations_keep_a_vertical_input_vertical():
     for rot in (False, "half"):
         out = shapes.synthesize(ex, 128, patch_size=9, rotations=rot, seed=0)
         assert _vertical_share(out) > 0.7, rot
-        lab = shapes.synthesize_labels(ex.astype(int) + (yy > 64) * (xx > 100), 128, method="joint",
-                                       patch_size=9, rotations=rot, seed=0)
+        lab = shapes.synthesize_labels(
+            ex.astype(int) + (yy > 64) * (xx > 100), 128, method="joint", patch_size=9, rotations=rot, seed=0
+        )
         assert _vertical_share(lab) > 0.6, rot
     # With all four turns a furrow's patch also matches its quarter turn; only print it.
     out = shapes.synthesize(ex, 128, patch_size=9, rotations=True, seed=0)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -35,7 +37,15 @@ def test_synthesis_keeps_the_exemplar_contrast(synthesized, exemplar):
     # output's local contrast and colour spread must stay near the exemplar's.
     def local_std(img):
         g = img.mean(axis=2)
-        return float(np.mean([g[y : y + 8, x : x + 8].std() for y in range(0, g.shape[0] - 8, 8) for x in range(0, g.shape[1] - 8, 8)]))
+        return float(
+            np.mean(
+                [
+                    g[y : y + 8, x : x + 8].std()
+                    for y in range(0, g.shape[0] - 8, 8)
+                    for x in range(0, g.shape[1] - 8, 8)
+                ]
+            )
+        )
 
     assert local_std(synthesized) > 0.8 * local_std(exemplar)
     np.testing.assert_allclose(synthesized.reshape(-1, 3).std(0), exemplar.reshape(-1, 3).std(0), rtol=0.2)
@@ -192,7 +202,7 @@ def test_completion_pyramid_shrinks_the_hole(bark):
     levels = _hole_pyramid(img, hole, 7, None)
     areas = [int(h.sum()) for _, h, _, _ in levels]
     assert len(levels) >= 3
-    assert all(b < a / 4 for a, b in zip(areas, areas[1:])), areas  # measured 9216, 2116, 400, 64, 4
+    assert all(b < a / 4 for a, b in itertools.pairwise(areas)), areas  # measured 9216, 2116, 400, 64, 4
     assert areas[-1] <= 64, areas
 
 

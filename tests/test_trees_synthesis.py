@@ -7,8 +7,9 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import phloem
 import pytest
+
+import phloem
 from phloem import trees
 
 SIZE = 256

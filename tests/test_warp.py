@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from phloem.warp import mvc, mvc_combine, mvc_weights
 
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import os
 
-from . import _core, bark, branching, blend, data, io, metrics, patch, seams, shapes, texture, trees, warp
+from . import _core, bark, blend, branching, data, io, metrics, patch, seams, shapes, texture, trees, warp
 
 __version__: str = _core.__version__
 
@@ -30,4 +30,18 @@ __version__: str = _core.__version__
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_core._after_fork_in_child)
 
-__all__ = ["__version__", "bark", "branching", "blend", "data", "io", "metrics", "patch", "seams", "shapes", "texture", "trees", "warp"]
+__all__ = [
+    "__version__",
+    "bark",
+    "blend",
+    "branching",
+    "data",
+    "io",
+    "metrics",
+    "patch",
+    "seams",
+    "shapes",
+    "texture",
+    "trees",
+    "warp",
+]

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Optional, TextIO
 from collections.abc import Callable
+from typing import TextIO
 
-Progress = Optional[Callable[[int, int], None]]
+Progress = Callable[[int, int], None] | None
 
 
 class Bar:

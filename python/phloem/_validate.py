@@ -12,7 +12,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["as_image", "as_labels", "as_mask", "check_float", "check_patch_size", "check_seed", "check_size", "check_threads", "restore_ndim"]
+__all__ = [
+    "as_image",
+    "as_labels",
+    "as_mask",
+    "check_float",
+    "check_patch_size",
+    "check_seed",
+    "check_size",
+    "check_threads",
+    "restore_ndim",
+]
 
 
 def as_image(image: Any, name: str, *, finite: bool = True) -> NDArray[np.float32]:

@@ -45,7 +45,9 @@ __all__ = [
 Rotations = bool | Literal["half"]
 
 
-def _kmeans(x: NDArray[np.float32], k: int, rng: np.random.Generator, restarts: int = 3, max_iter: int = 100) -> tuple[NDArray[np.int32], NDArray[np.float32]]:
+def _kmeans(
+    x: NDArray[np.float32], k: int, rng: np.random.Generator, restarts: int = 3, max_iter: int = 100
+) -> tuple[NDArray[np.int32], NDArray[np.float32]]:
     """Lloyd's k-means with k-means++ seeding; the best of ``restarts`` runs by inertia.
 
     Works on the distinct rows of ``x`` weighted by their counts, which gives the same
@@ -335,21 +337,49 @@ def _stage(progress: Progress, lo: int, hi: int) -> Progress:
 
 @overload
 def generate(
-    image: Any, size: int | tuple[int, int] | None = ..., *, labels: int = ..., height_map: Any = ...,
-    labels_in: Any = ..., labels_out: Any = ..., method: Literal["layered", "joint"] = ..., rotations: Rotations = ...,
+    image: Any,
+    size: int | tuple[int, int] | None = ...,
+    *,
+    labels: int = ...,
+    height_map: Any = ...,
+    labels_in: Any = ...,
+    labels_out: Any = ...,
+    method: Literal["layered", "joint"] = ...,
+    rotations: Rotations = ...,
     edge_label: bool = ...,
-    tileable: bool = ..., denoise: float = ..., label_weight: float = ..., feature_weight: float = ...,
-    stand_in_weight: float | None = ..., init: Literal["smart", "random"] = ..., seed: int | np.random.Generator = ..., threads: int | None = ...,
-    progress: Progress = ..., return_intermediates: Literal[False] = ...,
+    tileable: bool = ...,
+    denoise: float = ...,
+    label_weight: float = ...,
+    feature_weight: float = ...,
+    stand_in_weight: float | None = ...,
+    init: Literal["smart", "random"] = ...,
+    seed: int | np.random.Generator = ...,
+    threads: int | None = ...,
+    progress: Progress = ...,
+    return_intermediates: Literal[False] = ...,
 ) -> NDArray[np.float32]: ...
 @overload
 def generate(
-    image: Any, size: int | tuple[int, int] | None = ..., *, labels: int = ..., height_map: Any = ...,
-    labels_in: Any = ..., labels_out: Any = ..., method: Literal["layered", "joint"] = ..., rotations: Rotations = ...,
+    image: Any,
+    size: int | tuple[int, int] | None = ...,
+    *,
+    labels: int = ...,
+    height_map: Any = ...,
+    labels_in: Any = ...,
+    labels_out: Any = ...,
+    method: Literal["layered", "joint"] = ...,
+    rotations: Rotations = ...,
     edge_label: bool = ...,
-    tileable: bool = ..., denoise: float = ..., label_weight: float = ..., feature_weight: float = ...,
-    stand_in_weight: float | None = ..., init: Literal["smart", "random"] = ..., seed: int | np.random.Generator = ..., threads: int | None = ...,
-    progress: Progress = ..., return_intermediates: Literal[True],
+    tileable: bool = ...,
+    denoise: float = ...,
+    label_weight: float = ...,
+    feature_weight: float = ...,
+    stand_in_weight: float | None = ...,
+    init: Literal["smart", "random"] = ...,
+    seed: int | np.random.Generator = ...,
+    threads: int | None = ...,
+    progress: Progress = ...,
+    return_intermediates: Literal[True],
 ) -> BarkResult: ...
 def generate(
     image: Any,

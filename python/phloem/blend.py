@@ -292,7 +292,9 @@ def interpolate_field(
     if flat:
         vals = vals[:, None]
     if vals.ndim != 2 or vals.shape[0] != pts.shape[0] or vals.shape[1] == 0:
-        raise ValueError(f"values: expected shape ({pts.shape[0]}, D) or ({pts.shape[0]},) like points, got {vals.shape}")
+        raise ValueError(
+            f"values: expected shape ({pts.shape[0]}, D) or ({pts.shape[0]},) like points, got {vals.shape}"
+        )
     t = _tol(tol)
     out, iterations, residual = _core.interpolate_field(
         reg,

@@ -11,9 +11,9 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
-from collections.abc import Callable, Sequence
 
 import cv2
 import numpy as np
@@ -50,13 +50,28 @@ def _non_negative(text: str) -> float:
 
 def _common(p: argparse.ArgumentParser, *, writes: bool = True) -> None:
     g = p.add_argument_group("common options")
-    g.add_argument("--seed", type=int, default=0, help="seed of every random choice; same seed, same output (default 0)")
-    g.add_argument("--threads", type=_positive, default=None, help="worker threads (default: PHLOEM_NUM_THREADS or all cores)")
-    g.add_argument("--max-pixels", type=_positive, default=io.DEFAULT_MAX_PIXELS, help="refuse input images larger than this many pixels (default %(default)s)")
+    g.add_argument(
+        "--seed", type=int, default=0, help="seed of every random choice; same seed, same output (default 0)"
+    )
+    g.add_argument(
+        "--threads", type=_positive, default=None, help="worker threads (default: PHLOEM_NUM_THREADS or all cores)"
+    )
+    g.add_argument(
+        "--max-pixels",
+        type=_positive,
+        default=io.DEFAULT_MAX_PIXELS,
+        help="refuse input images larger than this many pixels (default %(default)s)",
+    )
     g.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     if writes:
         g.add_argument("--force", action="store_true", help="replace OUT and OUT.json if they exist")
-        g.add_argument("--bit-depth", type=int, choices=(8, 16), default=8, help="bits per channel of OUT (16 for PNG/TIFF only; default 8)")
+        g.add_argument(
+            "--bit-depth",
+            type=int,
+            choices=(8, 16),
+            default=8,
+            help="bits per channel of OUT (16 for PNG/TIFF only; default 8)",
+        )
 
 
 def _check_writable(path: Path, args: argparse.Namespace) -> None:
@@ -109,9 +124,15 @@ def _cmd_synthesize(args: argparse.Namespace) -> None:
         "synthesize",
         args,
         lambda bar: texture.synthesize(
-            ex, args.size, patch_size=args.patch_size, levels=args.levels, iterations=args.iterations,
-            seed=args.seed, threads=args.threads, progress=bar,
-        ),  # fmt: skip
+            ex,
+            args.size,
+            patch_size=args.patch_size,
+            levels=args.levels,
+            iterations=args.iterations,
+            seed=args.seed,
+            threads=args.threads,
+            progress=bar,
+        ),
     )
     _save(args, "synthesize", out)
 
@@ -123,9 +144,16 @@ def _cmd_quilt(args: argparse.Namespace) -> None:
         "quilt",
         args,
         lambda bar: texture.quilt(
-            ex, args.size, block=args.block, overlap=args.overlap, randomness=args.randomness, cost=args.cost,
-            seed=args.seed, threads=args.threads, progress=bar,
-        ),  # fmt: skip
+            ex,
+            args.size,
+            block=args.block,
+            overlap=args.overlap,
+            randomness=args.randomness,
+            cost=args.cost,
+            seed=args.seed,
+            threads=args.threads,
+            progress=bar,
+        ),
     )
     _save(args, "quilt", out)
 
@@ -137,15 +165,23 @@ def _cmd_complete(args: argparse.Namespace) -> None:
     if m.ndim == 3:
         m = m[..., 3] if m.shape[2] == 4 and args.mask_alpha else m[..., :3].max(axis=2)
     if m.shape != img.shape[:2]:
-        raise ValueError(f"mask: {args.mask} is {m.shape[1]}×{m.shape[0]}, but the image is {img.shape[1]}×{img.shape[0]}")
+        raise ValueError(
+            f"mask: {args.mask} is {m.shape[1]}×{m.shape[0]}, but the image is {img.shape[1]}×{img.shape[0]}"
+        )
     hole = (m < 0.5) if args.mask_alpha else (m >= 0.5)
     out = _run(
         "complete",
         args,
         lambda bar: texture.complete(
-            img, hole, patch_size=args.patch_size, levels=args.levels, iterations=args.iterations,
-            seed=args.seed, threads=args.threads, progress=bar,
-        ),  # fmt: skip
+            img,
+            hole,
+            patch_size=args.patch_size,
+            levels=args.levels,
+            iterations=args.iterations,
+            seed=args.seed,
+            threads=args.threads,
+            progress=bar,
+        ),
     )
     _save(args, "complete", out)
 
@@ -168,7 +204,10 @@ def _cmd_nnf(args: argparse.Namespace) -> None:
     np.savez_compressed(buf, field=field, distance=dist)
     io._atomic_write(out, buf.getvalue(), args.force)
     if not args.quiet:
-        print(f"nnf: {time.perf_counter() - t0:.2f} s, mean distance {float(dist.mean()):.4g}; wrote {out}", file=sys.stderr)
+        print(
+            f"nnf: {time.perf_counter() - t0:.2f} s, mean distance {float(dist.mean()):.4g}; wrote {out}",
+            file=sys.stderr,
+        )
 
 
 def _bark_targets(args: argparse.Namespace) -> dict[str, Path]:
@@ -194,24 +233,40 @@ def _cmd_bark(args: argparse.Namespace) -> None:
     _preflight(args, list(extra.values()))
     if len({Path(args.out).resolve(), *(p.resolve() for p in extra.values())}) != len(extra) + 1:
         raise ValueError("out: OUT, the intermediate maps and the preview must be different files")
-    if args.input is None:
-        photo = data.bark()
-    else:
-        photo = io.read_image(args.input, max_pixels=args.max_pixels)
+    photo = data.bark() if args.input is None else io.read_image(args.input, max_pixels=args.max_pixels)
     hm = None if args.height_map is None else io.read_image(args.height_map, max_pixels=args.max_pixels)
     if hm is not None and hm.ndim == 3:
         hm = hm[..., :3].mean(axis=2)
-    lab_in = None if args.labels_in is None else bark.decode_labels(io.read_image(args.labels_in, max_pixels=args.max_pixels))
-    lab_out = None if args.labels_out is None else bark.decode_labels(io.read_image(args.labels_out, max_pixels=args.max_pixels))
+    lab_in = (
+        None
+        if args.labels_in is None
+        else bark.decode_labels(io.read_image(args.labels_in, max_pixels=args.max_pixels))
+    )
+    lab_out = (
+        None
+        if args.labels_out is None
+        else bark.decode_labels(io.read_image(args.labels_out, max_pixels=args.max_pixels))
+    )
     res = _run(
         "bark",
         args,
         lambda bar: bark.generate(
-            photo, args.size, labels=args.labels, height_map=hm, labels_in=lab_in, labels_out=lab_out,
-            method=args.method, rotations=_ROTATIONS[args.rotations], edge_label=args.edge_label, tileable=args.tileable, seed=args.seed,
+            photo,
+            args.size,
+            labels=args.labels,
+            height_map=hm,
+            labels_in=lab_in,
+            labels_out=lab_out,
+            method=args.method,
+            rotations=_ROTATIONS[args.rotations],
+            edge_label=args.edge_label,
+            tileable=args.tileable,
+            seed=args.seed,
             stand_in_weight=None if args.strict_labels else args.stand_in_weight,
-            threads=args.threads, progress=bar, return_intermediates=True,
-        ),  # fmt: skip
+            threads=args.threads,
+            progress=bar,
+            return_intermediates=True,
+        ),
     )
     written = {role: str(p) for role, p in extra.items()}
     _save(args, "bark", res.texture, input=args.input or "phloem.data.bark()", files=written)
@@ -336,8 +391,15 @@ def _trace_options(p: argparse.ArgumentParser) -> None:
                         "or dark ones (vessels, cracks, rivers on land); auto decides (default)")  # fmt: skip
     g.add_argument("--sigmas", type=float, nargs="+", default=[1.0, 2.0, 3.0], metavar="S",
                    help="ridge-filter scales in pixels, about the radii of the structures to find (default 1 2 3)")  # fmt: skip
-    g.add_argument("--channel", type=int, default=None, help="trace this channel of a colour image (e.g. 1 = green for retinas; default: luminance)")
-    g.add_argument("--min-length", type=float, default=8.0, help="drop traced branches shorter than this many pixels (default 8)")
+    g.add_argument(
+        "--channel",
+        type=int,
+        default=None,
+        help="trace this channel of a colour image (e.g. 1 = green for retinas; default: luminance)",
+    )
+    g.add_argument(
+        "--min-length", type=float, default=8.0, help="drop traced branches shorter than this many pixels (default 8)"
+    )
 
 
 def _trace_kwargs(args: argparse.Namespace) -> dict[str, Any]:
@@ -371,7 +433,9 @@ def _cmd_branching_trace(args: argparse.Namespace) -> None:
         _check_writable(Path(args.overlay), args)
     img = io.read_image(args.input, max_pixels=args.max_pixels)
     sk = _run("branching trace", args, lambda bar: branching.trace(img, **_trace_kwargs(args)))
-    _write_skeleton(out, sk, args, "branching trace", branches=len(sk.branches), total_length=round(sk.total_length(), 1))
+    _write_skeleton(
+        out, sk, args, "branching trace", branches=len(sk.branches), total_length=round(sk.total_length(), 1)
+    )
     if args.overlay is not None:
         io.write_image(args.overlay, sk.draw(img, width=2), overwrite=args.force, bit_depth=args.bit_depth)
         if not args.quiet:
@@ -405,10 +469,26 @@ def _length(text: str) -> float | str:
 
 def _render_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("image synthesis (§5)")
-    g.add_argument("--omega-s", type=float, default=2.0, help="weight of the thickness term of the fragment shape distance (paper: 2)")
-    g.add_argument("--omega-c", type=float, default=1.0, help="weight of colour consistency with the fragments already placed (default 1)")
-    g.add_argument("--no-complete", action="store_true", help="leave the background black instead of completing it from the example (§5.4)")
-    g.add_argument("--fragment-map", metavar="PNG", default=None, help="also write the map of which fragment painted each pixel")
+    g.add_argument(
+        "--omega-s",
+        type=float,
+        default=2.0,
+        help="weight of the thickness term of the fragment shape distance (paper: 2)",
+    )
+    g.add_argument(
+        "--omega-c",
+        type=float,
+        default=1.0,
+        help="weight of colour consistency with the fragments already placed (default 1)",
+    )
+    g.add_argument(
+        "--no-complete",
+        action="store_true",
+        help="leave the background black instead of completing it from the example (§5.4)",
+    )
+    g.add_argument(
+        "--fragment-map", metavar="PNG", default=None, help="also write the map of which fragment painted each pixel"
+    )
 
 
 def _render_kwargs(args: argparse.Namespace) -> dict[str, Any]:
@@ -429,13 +509,22 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
                    help="resampling step in pixels (default: the input's median thickness). The model remembers k steps, so "
                         "a larger h (e.g. 10 on a traced river) keeps long branches on course instead of curling")  # fmt: skip
     g.add_argument("--k", type=_positive, default=3, help="order of the Markov bending model (paper: 3)")
-    g.add_argument("--m", type=_positive, default=None, help="elements appended per step, the feature size s/h (default 4)")
-    g.add_argument("--c", type=_positive, default=2, help="candidates: 1 follows the input exactly, more gives more variety (paper: 2)")
+    g.add_argument(
+        "--m", type=_positive, default=None, help="elements appended per step, the feature size s/h (default 4)"
+    )
+    g.add_argument(
+        "--c",
+        type=_positive,
+        default=2,
+        help="candidates: 1 follows the input exactly, more gives more variety (paper: 2)",
+    )
     g.add_argument("--generations", type=_positive, default=3, help="branch generations to grow (default 3)")
     g.add_argument("--max-length", type=_length, default=None, metavar="PX|input",
                    help="stop at this total branch length in pixels, or 'input' for about as much structure as the example "
                         "(root trees are added until then; default: one tree for grow, 'input' for run)")  # fmt: skip
-    g.add_argument("--no-colonize", action="store_true", help="turn off space colonisation (§4.4; crossings are still refused)")
+    g.add_argument(
+        "--no-colonize", action="store_true", help="turn off space colonisation (§4.4; crossings are still refused)"
+    )
     g.add_argument("--guide", metavar="PATH", default=None,
                    help="guided synthesis (§4.5): a JSON list of [x, y] points or a mask image the structure should follow")  # fmt: skip
 
@@ -461,7 +550,12 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     new = _run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
     _write_skeleton(out, new, args, "branching grow", h=bend.h, branches=len(new.branches))
     if args.preview is not None:
-        io.write_image(args.preview, new.draw(shape=shape, color=(1.0, 1.0, 1.0), width=2), overwrite=args.force, bit_depth=args.bit_depth)
+        io.write_image(
+            args.preview,
+            new.draw(shape=shape, color=(1.0, 1.0, 1.0), width=2),
+            overwrite=args.force,
+            bit_depth=args.bit_depth,
+        )
     if args.histograms is not None:
         fig = branching.histogram_figure(source, new, h=bend.h)
         io.write_image(args.histograms, fig, overwrite=args.force, bit_depth=args.bit_depth)
@@ -514,7 +608,9 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
     fig = branching.histogram_figure(res.source, res.target, h=res.bending.h)
     io.write_image(files["histograms"], fig, overwrite=args.force, bit_depth=args.bit_depth)
     if "fragments" in files:
-        io.write_image(files["fragments"], _fragment_map(res.render.labels), overwrite=args.force, bit_depth=args.bit_depth)
+        io.write_image(
+            files["fragments"], _fragment_map(res.render.labels), overwrite=args.force, bit_depth=args.bit_depth
+        )
     if not args.quiet:
         print(f"wrote {files['histograms']}", file=sys.stderr)
 
@@ -537,12 +633,16 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Run 'phloem COMMAND --help' for the options of a command.",
     )
     ap.add_argument("--version", action="version", version=f"phloem {__version__}")
-    sub = ap.add_subparsers(dest="command", metavar="COMMAND", required=True, help="what to make; each has its own --help")
+    sub = ap.add_subparsers(
+        dest="command", metavar="COMMAND", required=True, help="what to make; each has its own --help"
+    )
 
     p = sub.add_parser("synthesize", help="synthesise a texture of any size from an exemplar image",
                        description="Texture optimisation (Kwatra et al. 2005) over an image pyramid, with PatchMatch search and robust patch voting.")  # fmt: skip
     p.add_argument("input", metavar="IN", help="exemplar image (PNG, JPEG or TIFF)")
-    p.add_argument("--size", type=_size, required=True, metavar="WxH", help="output width x height in pixels, e.g. 512x512")
+    p.add_argument(
+        "--size", type=_size, required=True, metavar="WxH", help="output width x height in pixels, e.g. 512x512"
+    )
     p.add_argument("--out", required=True, metavar="OUT", help="output image (.png, .jpg, .tif)")
     p.add_argument("--patch-size", type=int, default=7, help="patch side, odd (default 7)")
     p.add_argument("--levels", type=_positive, default=None, help="pyramid levels (default: from the exemplar size)")
@@ -554,10 +654,19 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Graph-cut quilting (Kwatra et al. 2003): exemplar blocks placed by entire-patch matching, "
                                    "cut into the output along minimum-cost seams. Every output pixel is an exemplar pixel.")  # fmt: skip
     p.add_argument("input", metavar="IN", help="exemplar image (PNG, JPEG or TIFF)")
-    p.add_argument("--size", type=_size, required=True, metavar="WxH", help="output width x height in pixels, e.g. 512x512")
+    p.add_argument(
+        "--size", type=_size, required=True, metavar="WxH", help="output width x height in pixels, e.g. 512x512"
+    )
     p.add_argument("--out", required=True, metavar="OUT", help="output image (.png, .jpg, .tif)")
-    p.add_argument("--block", type=_positive, default=None, help="side of the exemplar blocks (default: 64, or half the exemplar's shorter side)")
-    p.add_argument("--overlap", type=_positive, default=None, help="overlap of neighbouring blocks in pixels (default: block/4)")
+    p.add_argument(
+        "--block",
+        type=_positive,
+        default=None,
+        help="side of the exemplar blocks (default: 64, or half the exemplar's shorter side)",
+    )
+    p.add_argument(
+        "--overlap", type=_positive, default=None, help="overlap of neighbouring blocks in pixels (default: block/4)"
+    )
     p.add_argument("--randomness", type=float, default=0.01,
                    help="Kwatra's k: 0 always takes the best-matching block, larger values pick worse matches more often (default 0.01)")  # fmt: skip
     p.add_argument("--cost", choices=("kwatra", "gradient", "luo"), default="kwatra",
@@ -570,7 +679,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("input", metavar="IN", help="image with a region to fill")
     p.add_argument("mask", metavar="MASK", help="image of the same size, white where pixels are to be filled")
     p.add_argument("--out", required=True, metavar="OUT", help="output image (.png, .jpg, .tif)")
-    p.add_argument("--mask-alpha", action="store_true", help="take the hole from MASK's alpha channel: transparent pixels are filled")
+    p.add_argument(
+        "--mask-alpha",
+        action="store_true",
+        help="take the hole from MASK's alpha channel: transparent pixels are filled",
+    )
     p.add_argument("--patch-size", type=int, default=7, help="patch side, odd (default 7)")
     p.add_argument("--levels", type=_positive, default=None, help="pyramid levels (default: from the hole size)")
     p.add_argument("--iterations", type=_positive, default=None,
@@ -597,27 +710,72 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Input label map (non-local means, CIELAB, k-means, §3.5), a new label map of the output size "
                                    "(Rosenberger et al. shape synthesis, §3.6), then texture-by-numbers (Fan et al. 2012, §3.3-3.4). "
                                    "Write the label maps with --keep-intermediates, edit them, and resume with --labels-in/--labels-out.")  # fmt: skip
-    p.add_argument("input", metavar="IN", nargs="?", default=None, help="bark photo (PNG, JPEG or TIFF; default: phloem's embedded Douglas-fir bark)")
-    p.add_argument("--size", type=_size, default=None, metavar="WxH", help="output width x height, e.g. 512x512 (required unless --labels-out is given)")
+    p.add_argument(
+        "input",
+        metavar="IN",
+        nargs="?",
+        default=None,
+        help="bark photo (PNG, JPEG or TIFF; default: phloem's embedded Douglas-fir bark)",
+    )
+    p.add_argument(
+        "--size",
+        type=_size,
+        default=None,
+        metavar="WxH",
+        help="output width x height, e.g. 512x512 (required unless --labels-out is given)",
+    )
     p.add_argument("--out", required=True, metavar="OUT", help="output texture (.png, .jpg, .tif)")
-    p.add_argument("--labels", type=_positive, default=2, metavar="K", help="regions of the input label map (default 2; 2-3 work best)")
+    p.add_argument(
+        "--labels",
+        type=_positive,
+        default=2,
+        metavar="K",
+        help="regions of the input label map (default 2; 2-3 work best)",
+    )
     p.add_argument("--method", choices=("layered", "joint"), default="joint",
                    help="label-map synthesis: phloem's joint multi-label variant (default) or the thesis' nested layers")  # fmt: skip
     p.add_argument("--rotations", choices=("half", "all", "none"), default="half",
                    help="turns of the photo's shapes the new label map may use: half (0 and 180 degrees, default: bark grows "
                         "along the trunk), all (also 90 degrees, for bark without a grain such as plane trees) or none")  # fmt: skip
-    p.add_argument("--edge-label", action="store_true", help="add a region for the borders between regions to both label maps (§3.5.5)")
-    p.add_argument("--height-map", metavar="HM", default=None, help="height map of IN, synthesised along; written as OUT_height.png (16-bit)")
-    p.add_argument("--tileable", action="store_true", help="make the label map and the texture wrap around so OUT tiles")
+    p.add_argument(
+        "--edge-label",
+        action="store_true",
+        help="add a region for the borders between regions to both label maps (§3.5.5)",
+    )
+    p.add_argument(
+        "--height-map",
+        metavar="HM",
+        default=None,
+        help="height map of IN, synthesised along; written as OUT_height.png (16-bit)",
+    )
+    p.add_argument(
+        "--tileable", action="store_true", help="make the label map and the texture wrap around so OUT tiles"
+    )
     p.add_argument("--stand-in-weight", type=_non_negative, default=5.0, metavar="W",
                    help="cost of letting a coherent piece of the photo run across a label boundary on nearest-coloured pixels "
                         "of the right label (default 5; lower: more seamless, looser boundaries)")  # fmt: skip
     p.add_argument("--strict-labels", action="store_true",
                    help="no stand-ins: the texture follows every boundary of the label map exactly, with seams along them")  # fmt: skip
-    p.add_argument("--cylinder-preview", metavar="PNG", default=None, help="also write the texture wrapped around a trunk to PNG")
-    p.add_argument("--keep-intermediates", action="store_true", help="also write the label maps as OUT_labels_in.png and OUT_labels_out.png")
-    p.add_argument("--labels-in", metavar="PNG", default=None, help="use this input label map (flat colours, same size as IN) instead of computing it")
-    p.add_argument("--labels-out", metavar="PNG", default=None, help="use this output label map instead of synthesising one (sets the size)")
+    p.add_argument(
+        "--cylinder-preview", metavar="PNG", default=None, help="also write the texture wrapped around a trunk to PNG"
+    )
+    p.add_argument(
+        "--keep-intermediates",
+        action="store_true",
+        help="also write the label maps as OUT_labels_in.png and OUT_labels_out.png",
+    )
+    p.add_argument(
+        "--labels-in",
+        metavar="PNG",
+        default=None,
+        help="use this input label map (flat colours, same size as IN) instead of computing it",
+    )
+    p.add_argument(
+        "--labels-out",
+        metavar="PNG",
+        default=None,
+        help="use this output label map instead of synthesising one (sets the size)",
+    )
     _common(p)
     p.set_defaults(func=_cmd_bark)
 
@@ -626,23 +784,45 @@ def build_parser() -> argparse.ArgumentParser:
                                    "2000-point contour (§4). Each new tree's contour is a random convex combination of the "
                                    "contours of --sources trees, filled by mean value coordinate colour transfer from them (§5). "
                                    "Writes DIR/PREFIX0000.png ... with a .json sidecar naming the sources and weights.")  # fmt: skip
-    p.add_argument("library", metavar="LIBRARY", help="folder of RGBA tree images (atlases of several trees are split), or one atlas image")
+    p.add_argument(
+        "library",
+        metavar="LIBRARY",
+        help="folder of RGBA tree images (atlases of several trees are split), or one atlas image",
+    )
     p.add_argument("--count", type=_positive, required=True, metavar="N", help="number of new trees")
     p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for the new trees (created if missing)")
     p.add_argument("--prefix", default="tree_", help="file name prefix of the new trees (default tree_)")
     p.add_argument("--like", metavar="TREE", default=None,
                    help="make variations of this RGBA tree: it gets weight 0.6-0.9 and the library trees the rest (§3)")  # fmt: skip
-    p.add_argument("--size", type=_positive, default=1024, help="side of the square output images; the library is normalised to it (default 1024)")
-    p.add_argument("--sources", type=_positive, default=2, help="trees combined in each new tree, --like included (default 2)")
+    p.add_argument(
+        "--size",
+        type=_positive,
+        default=1024,
+        help="side of the square output images; the library is normalised to it (default 1024)",
+    )
+    p.add_argument(
+        "--sources", type=_positive, default=2, help="trees combined in each new tree, --like included (default 2)"
+    )
     p.add_argument("--colors", choices=("random", "contour", "single"), default=None,
                    help="colour weights: an independent random convex combination (§5.2), the contour's weights, or one source "
                         "(default: random; contour with --like)")  # fmt: skip
-    p.add_argument("--histogram", action="store_true", help="match each tree's colour histogram to another library tree (§5.3)")
-    p.add_argument("--atlas", choices=("auto", "yes", "no"), default="auto", help="split library images into single trees: auto (default), yes, no")
+    p.add_argument(
+        "--histogram", action="store_true", help="match each tree's colour histogram to another library tree (§5.3)"
+    )
+    p.add_argument(
+        "--atlas",
+        choices=("auto", "yes", "no"),
+        default="auto",
+        help="split library images into single trees: auto (default), yes, no",
+    )
     p.add_argument("--trunk-model", metavar="JSON", default=None,
                    help="crown/trunk segmentation by a classifier trained with phloem.trees.TrunkClassifier.fit and saved with "
                         "to_dict (default: the training-free width-profile segmenter)")  # fmt: skip
-    p.add_argument("--skip-bad", action="store_true", help="skip library images that cannot be used (no alpha, empty) instead of stopping")
+    p.add_argument(
+        "--skip-bad",
+        action="store_true",
+        help="skip library images that cannot be used (no alpha, empty) instead of stopping",
+    )
     p.add_argument("--sheet", metavar="PNG", default=None,
                    help="also write a contact sheet: the combination tables of the paper's Fig. 13-14 for six library trees, then the new trees")  # fmt: skip
     _common(p)
@@ -667,9 +847,20 @@ def build_parser() -> argparse.ArgumentParser:
                                     "space colonisation (§4.4) and optional guidance (§4.5).")  # fmt: skip
     q.add_argument("skeleton", metavar="SKEL.json", help="the example skeleton (phloem.skeleton JSON)")
     q.add_argument("--out", required=True, metavar="NEW.json", help="new skeleton file to write")
-    q.add_argument("--size", type=_size, default=None, metavar="WxH", help="size of the new structure's image (default: the example's)")
+    q.add_argument(
+        "--size",
+        type=_size,
+        default=None,
+        metavar="WxH",
+        help="size of the new structure's image (default: the example's)",
+    )
     q.add_argument("--preview", metavar="PNG", default=None, help="also draw the new skeleton into PNG")
-    q.add_argument("--histograms", metavar="PNG", default=None, help="also write the input and output angle and thickness histograms (Fig. 7)")
+    q.add_argument(
+        "--histograms",
+        metavar="PNG",
+        default=None,
+        help="also write the input and output angle and thickness histograms (Fig. 7)",
+    )
     _grow_options(q)
     _common(q)
     q.set_defaults(func=_cmd_branching_grow)
@@ -689,7 +880,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("input", metavar="IN", help="the example image")
     q.add_argument("--skeleton", metavar="SKEL.json", default=None, help="the example's skeleton (default: trace it)")
     q.add_argument("--out", required=True, metavar="OUT", help="output image (.png, .jpg, .tif)")
-    q.add_argument("--size", type=_size, default=None, metavar="WxH", help="size of the new image (default: the example's)")
+    q.add_argument(
+        "--size", type=_size, default=None, metavar="WxH", help="size of the new image (default: the example's)"
+    )
     _trace_options(q)
     _grow_options(q)
     _render_options(q)

@@ -12,9 +12,9 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
-from collections.abc import Mapping
 
 import cv2
 import numpy as np
@@ -157,7 +157,9 @@ def _atomic_write(path: Path, data: bytes, overwrite: bool) -> None:
             try:
                 os.link(tmp, path)  # fails atomically if path exists
             except FileExistsError:
-                raise FileExistsError(f"out: {path} already exists (pass overwrite=True / --force to replace it)") from None
+                raise FileExistsError(
+                    f"out: {path} already exists (pass overwrite=True / --force to replace it)"
+                ) from None
             except OSError:
                 if path.exists():
                     raise FileExistsError(f"out: {path} already exists (pass overwrite=True / --force)") from None

@@ -20,8 +20,8 @@ from numpy.typing import NDArray
 
 from . import patch as _patch
 from . import shapes as _shapes
-from .bark import _check_denoise, _denoised_lab, _rgb8
 from ._validate import as_image, as_mask, check_patch_size
+from .bark import _check_denoise, _denoised_lab, _rgb8
 from .branching.structure import angle_histogram, histogram_distance, thickness_histogram
 
 __all__ = [
@@ -227,9 +227,7 @@ def label_histogram_distance(image: Any, labels: Any, exemplar: Any, exemplar_la
     return float(np.mean(dists))
 
 
-def label_agreement(
-    image: Any, labels: Any, exemplar: Any, exemplar_labels: Any, *, denoise: float = 10.0
-) -> float:
+def label_agreement(image: Any, labels: Any, exemplar: Any, exemplar_labels: Any, *, denoise: float = 10.0) -> float:
     """Fraction of ``image`` pixels whose look matches the label ``labels`` asks for.
 
     The exemplar's labels define a colour model as the bark thesis builds its label maps

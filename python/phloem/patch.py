@@ -279,7 +279,12 @@ def candidates(
         if nb.ndim != 4 or nb.shape[:2] != (eh, ew) or nb.shape[3] != 2:
             raise ValueError(f"neighbours: expected shape ({eh}, {ew}, k, 2), got {nb.shape}")
     return _core.coherence_candidates(
-        r, (eh, ew), patch_size=check_patch_size(patch_size), wrap=bool(wrap), knn_idx=nb, threads=check_threads(threads)
+        r,
+        (eh, ew),
+        patch_size=check_patch_size(patch_size),
+        wrap=bool(wrap),
+        knn_idx=nb,
+        threads=check_threads(threads),
     )
 
 

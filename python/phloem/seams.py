@@ -32,7 +32,9 @@ def _connectivity(connectivity: Any) -> int:
     return int(connectivity)
 
 
-def _capacities(values: Any, name: str, shape: tuple[int, ...] | None = None, *, allow_inf: bool = False) -> NDArray[np.float32]:
+def _capacities(
+    values: Any, name: str, shape: tuple[int, ...] | None = None, *, allow_inf: bool = False
+) -> NDArray[np.float32]:
     arr = np.asarray(values)
     if arr.dtype == np.bool_ or not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
         raise TypeError(f"{name}: expected real-valued capacities, got dtype {arr.dtype}")
@@ -114,7 +116,9 @@ def grid_maxflow(
     if both.any():
         y, x = np.argwhere(both)[0]
         raise ValueError(f"sink: pixel ({y}, {x}) has infinite capacity to both terminals")
-    flow, side, _ = _core.grid_maxflow(s, t, e, connectivity=conn, directed=bool(directed), threads=check_threads(threads))
+    flow, side, _ = _core.grid_maxflow(
+        s, t, e, connectivity=conn, directed=bool(directed), threads=check_threads(threads)
+    )
     return flow, side
 
 
@@ -261,7 +265,16 @@ def seam(
         if not bw >= 0:
             raise ValueError(f"border_weight: expected a non-negative number or inf, got {border_weight!r}")
     take_b, energy, _ = _core.seam(
-        ia, ib, reg, cost=name, connectivity=conn, border_weight=bw, a_mask=am, b_mask=bm, seeds=sd, edges=edges,
+        ia,
+        ib,
+        reg,
+        cost=name,
+        connectivity=conn,
+        border_weight=bw,
+        a_mask=am,
+        b_mask=bm,
+        seeds=sd,
+        edges=edges,
         threads=check_threads(threads),
     )
     return (take_b, energy) if return_energy else take_b

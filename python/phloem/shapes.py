@@ -22,7 +22,16 @@ from . import _core
 from ._progress import Progress
 from ._validate import as_mask, check_int, check_patch_size, check_seed, check_size, check_threads
 
-__all__ = ["MAX_LABELS", "MAX_PATCH", "METHODS", "chord_length", "layer_order", "shape_similarity", "synthesize", "synthesize_labels"]
+__all__ = [
+    "MAX_LABELS",
+    "MAX_PATCH",
+    "METHODS",
+    "chord_length",
+    "layer_order",
+    "shape_similarity",
+    "synthesize",
+    "synthesize_labels",
+]
 
 #: The largest patch side (121 pixels fit in one 128-bit word).
 MAX_PATCH = 11
@@ -339,9 +348,7 @@ def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool | L
     ua = np.searchsorted(union, va).astype(np.uint8)[la]
     ub = np.searchsorted(union, vb).astype(np.uint8)[lb]
     return float(
-        _core.shape_similarity(
-            np.ascontiguousarray(ua), np.ascontiguousarray(ub), patch_size=p, rotations=turns
-        )
+        _core.shape_similarity(np.ascontiguousarray(ua), np.ascontiguousarray(ub), patch_size=p, rotations=turns)
     )
 
 

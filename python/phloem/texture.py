@@ -68,7 +68,9 @@ def _downsample(img: NDArray[np.float32], shape: tuple[int, int]) -> NDArray[np.
     return np.ascontiguousarray(out.reshape(h, w, img.shape[2]), dtype=np.float32)
 
 
-def _upsample_field(field: NDArray[np.int32], shape: tuple[int, int], src_shape: tuple[int, int], r: int) -> NDArray[np.int32]:
+def _upsample_field(
+    field: NDArray[np.int32], shape: tuple[int, int], src_shape: tuple[int, int], r: int
+) -> NDArray[np.int32]:
     """Coherent upsampling of a field: pixel (y, x) inherits its parent's match, shifted by
     its position inside the parent, clamped to valid centres; ``-1`` stays ``-1``."""
     h, w = shape
@@ -83,7 +85,9 @@ def _upsample_field(field: NDArray[np.int32], shape: tuple[int, int], src_shape:
     return up
 
 
-def _block_field(shape: tuple[int, int], src_shape: tuple[int, int], p: int, rng: np.random.Generator) -> NDArray[np.int32]:
+def _block_field(
+    shape: tuple[int, int], src_shape: tuple[int, int], p: int, rng: np.random.Generator
+) -> NDArray[np.int32]:
     """Starting field of random coherent blocks: voting it gives a patchwork of exemplar
     pieces, not the grey average a per-pixel random field gives."""
     r = p // 2
@@ -129,7 +133,7 @@ def _auto_levels(min_side: int, patch_size: int) -> int:
     # The coarsest exemplar keeps at least ~4 patches across. Going coarser (2.5 patches)
     # gets brick courses right but leaves so little exemplar that the output tiles it
     # periodically, which is worse (see metrics.repetition and the note on issue 2).
-    return max(1, min(6, int(math.floor(math.log2(max(min_side / (4 * patch_size), 1.0)))) + 1))
+    return max(1, min(6, math.floor(math.log2(max(min_side / (4 * patch_size), 1.0))) + 1))
 
 
 def synthesize(
@@ -141,7 +145,7 @@ def synthesize(
     iterations: int = 4,
     search_iterations: int = 2,
     diversity: float = 1.0,
-        weights: Any = None,
+    weights: Any = None,
     max_pixels: int = 2**28,
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
@@ -296,7 +300,10 @@ def _fill_inward(img: NDArray[np.float32], hole: NDArray[np.bool_]) -> NDArray[n
         if not ring.any():
             break
         acc = np.stack(
-            [cv2.filter2D(img[..., c] * known, -1, kernel, borderType=cv2.BORDER_CONSTANT) for c in range(img.shape[2])],
+            [
+                cv2.filter2D(img[..., c] * known, -1, kernel, borderType=cv2.BORDER_CONSTANT)
+                for c in range(img.shape[2])
+            ],
             axis=-1,
         )
         img[ring] = acc[ring] / cnt[ring][:, None]
@@ -730,7 +737,9 @@ def feature_distance_map(image: Any, *, sigma: float = 3.0, radius: float = 12.0
     return np.ascontiguousarray((np.clip(signed / rad, -1.0, 1.0) + 1.0) / 2.0, dtype=np.float32)
 
 
-def _compact_labels(labels_in: Any, labels_out: Any, shape_in: tuple[int, int]) -> tuple[NDArray[np.int32], NDArray[np.int32]]:
+def _compact_labels(
+    labels_in: Any, labels_out: Any, shape_in: tuple[int, int]
+) -> tuple[NDArray[np.int32], NDArray[np.int32]]:
     """Label maps as int32 ``0..n-1`` (``np.unique`` order of ``labels_in``), with checks."""
     li, lo = np.asarray(labels_in), np.asarray(labels_out)
     for name, a in (("labels_in", li), ("labels_out", lo)):

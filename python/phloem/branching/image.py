@@ -862,7 +862,6 @@ def render(
         disks.append((disk, y0, x0))
         boxes[j] = ys.start, ys.stop, xs.start, xs.stop
 
-
     def paint(j: int) -> None:
         g = targets[j]
         ys, xs = crops[j]
@@ -969,7 +968,6 @@ def render(
         np.copyto(owner[ys, xs], g.branch, where=new)
 
     _in_order(boxes, paint, workers=t if t is not None else _core.default_threads(), progress=progress)
-
 
     structure = canvas.copy() if full_output else canvas
     if complete and (~filled).any():

@@ -434,11 +434,26 @@ class BendingModel:
         for g, b in zip(_generations(src), src.branches):
             lengths.setdefault(g, []).append(b.length())
         return cls(
-            h=h, k=k, m=m, c=c, bins=bins, omega_g=omega_g, source=src,
-            hist_alpha=hist_a.astype(np.float64), hist_r=hist_r.astype(np.float64),
-            range_alpha=ra, range_r=rr, lengths=lengths,
-            cand_hist_alpha=np.vstack(ha), cand_hist_r=np.vstack(hr), next_alpha=next_a, next_r=next_r,
-            inc_alpha=inc_a, inc_r=inc_r, cand_where=np.vstack(where).astype(np.int64), warm_start=warm,
+            h=h,
+            k=k,
+            m=m,
+            c=c,
+            bins=bins,
+            omega_g=omega_g,
+            source=src,
+            hist_alpha=hist_a.astype(np.float64),
+            hist_r=hist_r.astype(np.float64),
+            range_alpha=ra,
+            range_r=rr,
+            lengths=lengths,
+            cand_hist_alpha=np.vstack(ha),
+            cand_hist_r=np.vstack(hr),
+            next_alpha=next_a,
+            next_r=next_r,
+            inc_alpha=inc_a,
+            inc_r=inc_r,
+            cand_where=np.vstack(where).astype(np.int64),
+            warm_start=warm,
         )
 
     def log_quality(self, alpha: F64, r: F64, counts_alpha: F64, counts_r: F64) -> F64:
@@ -679,10 +694,23 @@ class FurcationModel:
         f = Z.astype(np.float64) @ w + b0
         platt = _platt(f, y)
         return cls(
-            h=h, k=k, c=c, weights=w, bias=b0, mean=mean, scale=scale, platt=platt,
-            examples_alpha=np.vstack(ex_a), examples_r=np.vstack(ex_r), offsets=np.asarray(offsets),
-            child_alpha=ch_a, child_r=ch_r, child_r0=np.asarray(ch_r0), counts=counts,
-            min_spacing=min_spacing, train_seconds=train,
+            h=h,
+            k=k,
+            c=c,
+            weights=w,
+            bias=b0,
+            mean=mean,
+            scale=scale,
+            platt=platt,
+            examples_alpha=np.vstack(ex_a),
+            examples_r=np.vstack(ex_r),
+            offsets=np.asarray(offsets),
+            child_alpha=ch_a,
+            child_r=ch_r,
+            child_r0=np.asarray(ch_r0),
+            counts=counts,
+            min_spacing=min_spacing,
+            train_seconds=train,
         )
 
     def features(self, branch: Branch, furcations: Sequence[int] = ()) -> F64:
@@ -845,8 +873,14 @@ class _World:
     """The structure grown so far: segments, density map, histograms, guidance."""
 
     def __init__(
-        self, model: BendingModel, shape: tuple[int, int], *, colonize: bool, rho: float,
-        guide: F64 | None, rng: np.random.Generator,
+        self,
+        model: BendingModel,
+        shape: tuple[int, int],
+        *,
+        colonize: bool,
+        rho: float,
+        guide: F64 | None,
+        rng: np.random.Generator,
     ) -> None:
         self.model = model
         self.shape = shape
@@ -1003,7 +1037,9 @@ class _World:
 
 
 def _orient(a: F64, b: F64, c: F64) -> F64:
-    return np.asarray((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
+    return np.asarray(
+        (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
+    )
 
 
 def _cross(P: F64, Q: F64, A: F64, B: F64) -> NDArray[np.bool_]:
@@ -1042,7 +1078,9 @@ def _guide_map(guide: Any, shape: tuple[int, int], width: float) -> tuple[F64, F
             raise ValueError("guide: the guidance map contains NaN or infinity")
         return np.clip(g, 0.0, 1.0), None
     if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < 2:
-        raise ValueError(f"guide: expected an (H, W) = {tuple(shape)} map or mask, or an (n, 2) polyline of (x, y), got shape {arr.shape}")
+        raise ValueError(
+            f"guide: expected an (H, W) = {tuple(shape)} map or mask, or an (n, 2) polyline of (x, y), got shape {arr.shape}"
+        )
     line = arr.astype(np.float64)
     if not np.isfinite(line).all():
         raise ValueError("guide: the polyline contains NaN or infinity")
@@ -1218,8 +1256,18 @@ def _valid_prefix(world: _World, tip: F64, pts: F64) -> int:
 
 
 def _new_branch(
-    world: _World, grower: _Grower, start: F64, heading: float, r0: float, alpha: F64, r: F64,
-    parent: tuple[int, int] | None, generation: int, index: int, *, partial: bool,
+    world: _World,
+    grower: _Grower,
+    start: F64,
+    heading: float,
+    r0: float,
+    alpha: F64,
+    r: F64,
+    parent: tuple[int, int] | None,
+    generation: int,
+    index: int,
+    *,
+    partial: bool,
 ) -> _Growing | None:
     """Start a branch: first edge along ``heading``, then the copied initial elements.
 
@@ -1304,8 +1352,14 @@ def _input_length(bending: BendingModel, shape: tuple[int, int]) -> float:
 
 
 def _place_root(
-    world: _World, grower: _Grower, bending: BendingModel, info: _RootInfo, shape: tuple[int, int],
-    rng: np.random.Generator, index: int, tries: int = 24,
+    world: _World,
+    grower: _Grower,
+    bending: BendingModel,
+    info: _RootInfo,
+    shape: tuple[int, int],
+    rng: np.random.Generator,
+    index: int,
+    tries: int = 24,
 ) -> tuple[_Growing, int] | None:
     """Start a further root tree where the structure is sparse.
 
@@ -1529,7 +1583,9 @@ def grow(
                 raise ValueError(f"start: ({x:g}, {y:g}) is outside the {W}x{H} image")
             current = _new_branch(world, grower, np.array([x, y]), heading, t0, a0, r0, None, 0, len(out), partial=True)
             if current is None:
-                raise ValueError(f"start: the first edge from ({x:g}, {y:g}) with heading {heading:.2f} leaves the image")
+                raise ValueError(
+                    f"start: the first edge from ({x:g}, {y:g}) with heading {heading:.2f} leaves the image"
+                )
             goal = float(bending.source.branches[root].length()) if blen is None else blen
         else:
             placed = _place_root(world, grower, bending, info, shape, rng, len(out))
@@ -1549,7 +1605,9 @@ def grow(
                 if dens_limit is not None and world.density_mean() >= dens_limit:
                     stop = True
             if stalled is None:
-                stalled = current.length() * h < goal - 1e-9 and len(current.alpha) <= len(bending.start_elements(root)[1])
+                stalled = current.length() * h < goal - 1e-9 and len(current.alpha) <= len(
+                    bending.start_elements(root)[1]
+                )
             branch = _finish(grower, current)
             out.append(branch)
             stop = stop or world.total_length >= limit
@@ -1572,15 +1630,21 @@ def grow(
                 for j in furcation.child_start(pb, v, rng)[: max(furcation.c, 4)]:
                     hd = _tangent(pb, v) + float(furcation.offsets[j])
                     current = _new_branch(
-                        world, grower, pb.points[v], hd, float(furcation.child_r0[j]), furcation.child_alpha[j],
-                        furcation.child_r[j], (pi, v), gen, len(out), partial=False,
+                        world,
+                        grower,
+                        pb.points[v],
+                        hd,
+                        float(furcation.child_r0[j]),
+                        furcation.child_alpha[j],
+                        furcation.child_r[j],
+                        (pi, v),
+                        gen,
+                        len(out),
+                        partial=False,
                     )
                     if current is not None:
                         break
-            if current is None:
-                goal = 0.0
-            else:
-                goal = target(current.generation)
+            goal = 0.0 if current is None else target(current.generation)
         # a tree whose stem could not grow beyond its copied start counts as a failed placement
         failures = failures + 1 if stalled else 0
         if failures >= 8:
@@ -1669,8 +1733,14 @@ def extend(
     a, r = _elements(tail)
     d = tail.points[-1] - tail.points[-2]
     br = _Growing(
-        [p for p in target.points], list(target.thickness), list(a[-(bending.k + 1) :]), list(r[-(bending.k + 1) :]),
-        math.atan2(-d[1], d[0]), target.parent, 0, bi,
+        [p for p in target.points],
+        list(target.thickness),
+        list(a[-(bending.k + 1) :]),
+        list(r[-(bending.k + 1) :]),
+        math.atan2(-d[1], d[0]),
+        target.parent,
+        0,
+        bi,
     )
     hold = math.ceil(3.0 * rho / h) + 1
     for j, b in enumerate(skeleton.branches):
@@ -1722,7 +1792,9 @@ def synthetic_skeleton(
     n = max(int(length / h), 8)
     a = walk(n - 2)
     spacing = max(n // (furcations + 1), 1)
-    fur = sorted(int(v) for v in rng.choice(np.arange(spacing // 2 + 2, n - 3), size=min(furcations, n - 6), replace=False))
+    fur = sorted(
+        int(v) for v in rng.choice(np.arange(spacing // 2 + 2, n - 3), size=min(furcations, n - 6), replace=False)
+    )
     thick = 4.0 * np.linspace(1.0, 0.6, n)
     for v in fur:
         thick[v + 1 :] *= 0.7

@@ -601,10 +601,7 @@ def trace(
 
     branches: list[Branch] = []
     for c in comp_order:
-        if start is not None and labels[start] == c:
-            croot = start
-        else:
-            croot = _pick_root(tree, int(first[c]), r)
+        croot = start if start is not None and labels[start] == c else _pick_root(tree, int(first[c]), r)
         new_index: dict[int, int] = {}
         for i, (path, parent, at) in enumerate(_decompose(tree, croot)):
             if parent is not None and parent not in new_index:
