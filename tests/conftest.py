@@ -12,6 +12,7 @@ import phloem
 
 DATA = Path(__file__).parent / "data"
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+os.environ.setdefault("PHLOEM_SHARED_DATA", str(SHARED))
 
 
 @pytest.fixture(scope="session")
@@ -30,14 +31,6 @@ def water() -> np.ndarray:
 def gravel() -> np.ndarray:
     """Gravel, gray float32 (128, 128)."""
     return phloem.io.read_image(DATA / "gravel_128.png")
-
-
-def shared_file(*parts: str) -> Path:
-    """A file of ../shared/data, or skip the test when the folder is absent (e.g. in CI)."""
-    p = SHARED.joinpath(*parts)
-    if not p.exists():
-        pytest.skip(f"{p} is not available")
-    return p
 
 
 def pytest_configure(config: pytest.Config) -> None:

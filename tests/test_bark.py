@@ -34,7 +34,7 @@ def _colour(labels: np.ndarray, seed: int, noise: float = 0.04) -> np.ndarray:
 
 def _thesis(run: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(ai RGB, a labels, b labels, bi RGB) of a thesis run, labels numbered by sorted colour."""
-    from conftest import shared_file
+    from phloem.testing import shared_file
 
     folder = shared_file("bark", "thesis_runs", run)
     ai = next(folder.glob("ai.*"))

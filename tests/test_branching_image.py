@@ -8,11 +8,11 @@ import math
 import cv2
 import numpy as np
 import pytest
-from conftest import shared_file
 
 import phloem
 from phloem.branching import Branch, Skeleton, fragments, rectify, render, rigid_align, unrectify
 from phloem.branching.image import _dense, _displacement, _in_order, _match_borders
+from phloem.testing import shared_file
 
 
 def _rot(a: float) -> np.ndarray:

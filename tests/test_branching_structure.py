@@ -8,7 +8,6 @@ from collections import deque
 import cv2
 import numpy as np
 import pytest
-from conftest import shared_file
 
 from phloem.branching import (
     BendingModel,
@@ -23,6 +22,7 @@ from phloem.branching import (
     synthetic_skeleton,
     thickness_histogram,
 )
+from phloem.testing import shared_file
 
 H = 2.0
 

@@ -307,7 +307,7 @@ def test_estimate_thickness_bad_input():
 
 @pytest.mark.shared
 def test_retina_trace_is_plausible():
-    from conftest import shared_file
+    from phloem.testing import shared_file
 
     img = phloem.io.read_image(shared_file("branching", "skimage_retina.jpg"))
     t0 = time.perf_counter()
@@ -327,7 +327,7 @@ def test_retina_trace_is_plausible():
 
 @pytest.mark.shared
 def test_colville_delta_trace_is_plausible():
-    from conftest import shared_file
+    from phloem.testing import shared_file
 
     img = phloem.io.read_image(shared_file("branching", "rivgraph_colville_delta_mask.png"))
     t0 = time.perf_counter()

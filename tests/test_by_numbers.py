@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import shared_file
 
 import phloem
 from phloem import _core
 from phloem.metrics import label_agreement, label_histogram_distance, patch_coherence
+from phloem.testing import shared_file
 from phloem.texture import by_numbers, feature_distance_map
 
 

@@ -314,7 +314,7 @@ def test_version_matches_the_package_metadata():
 
 @pytest.mark.shared
 def test_patchmatch_close_to_exact_on_shared_grass():
-    from conftest import shared_file
+    from phloem.testing import shared_file
 
     grass = phloem.io.read_image(shared_file("textures", "skimage_grass.png"))[..., None]
     src, tgt = np.ascontiguousarray(grass[:128, :128]), np.ascontiguousarray(grass[200:328, 300:428])

@@ -210,7 +210,7 @@ THESIS_RUNS = ["bark1", "bark2", "eucalyptus", "eucap5"]
 
 
 def thesis_map(run: str, name: str) -> np.ndarray:
-    from conftest import shared_file
+    from phloem.testing import shared_file
 
     img = phloem.io.read_image(shared_file("bark", "thesis_runs", run, f"{name}.png"))
     flat = np.round(img.reshape(img.shape[0], img.shape[1], -1) * 255).astype(np.int32)

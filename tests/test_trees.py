@@ -149,7 +149,7 @@ ATLAS_COUNTS = {
 @pytest.mark.shared
 @pytest.mark.parametrize("name", sorted(ATLAS_COUNTS))
 def test_split_flightgear_atlas_counts(name):
-    from conftest import shared_file
+    from phloem.testing import shared_file
 
     atlas = phloem.io.read_image(shared_file("trees", f"flightgear_atlas_{name}.png"))
     lo, hi = ATLAS_COUNTS[name]
@@ -270,7 +270,7 @@ def _labelled_trunk(img: np.ndarray, baseline: int) -> np.ndarray:
 
 @pytest.mark.shared
 def test_segment_against_hand_labels():
-    from conftest import shared_file
+    from phloem.testing import shared_file
 
     ious = []
     for name, i, baseline in LABELS:
@@ -476,7 +476,7 @@ def test_trunk_classifier_errors():
 
 @pytest.mark.shared
 def test_trunk_classifier_leave_one_out_on_hand_labels():
-    from conftest import shared_file
+    from phloem.testing import shared_file
 
     data = []
     for name, i, baseline in LABELS:

@@ -272,7 +272,7 @@ def test_library_load_splits_atlases(tmp_path: Path):
 
 @pytest.mark.shared
 def test_flightgear_variations_are_tree_like():
-    from conftest import shared_file
+    from phloem.testing import shared_file
 
     atlas = phloem.io.read_image(shared_file("trees", "flightgear_atlas_coniferous.png"))
     lib = trees.Library.from_images(trees.split_atlas(atlas)[:4], size=512)
