@@ -8,7 +8,8 @@ coarse to fine over a mask-aware pyramid.
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import Any, Literal
 
 import cv2
 import numpy as np
@@ -16,7 +17,16 @@ from numpy.typing import NDArray
 
 from .. import _core
 from .._progress import Progress
-from .._validate import as_image, as_mask, check_int, check_patch_size, check_seed, check_threads, restore_ndim
+from .._validate import (
+    as_image,
+    as_mask,
+    check_float,
+    check_int,
+    check_patch_size,
+    check_seed,
+    check_threads,
+    restore_ndim,
+)
 from ._pyramid import upsample_field
 
 __all__ = ["complete"]
@@ -95,11 +105,31 @@ _HOLE_KERNEL = np.array([1, 5, 10, 10, 5, 1], np.float32) / 32.0
 #: A coarse pixel counts as known when this much of its kernel weight falls on known pixels
 #: (below the smallest single-pixel weight 1/1024, so one known fine pixel is enough).
 _KNOWN_WEIGHT = 1e-4
+#: The strict pyramid's threshold: a coarse pixel whose kernel sees less known weight than this
+#: is synthesised instead of interpolated from the few rim pixels it sees, which are biased
+#: towards the rim (aliased stripes, a white bank's halo).
+_STRICT_KNOWN_WEIGHT = 0.3
+#: The strict pyramid differs from the interpolating one from this level on (0: the finest),
+#: so the two share the finer levels and ``pyramid="auto"`` compares them one level below.
+_STRICT_FROM = 2
+#: ``pyramid="auto"`` keeps the interpolating pyramid's fill unless the strict one's patch
+#: energy is below this fraction of it: a structure broken at the coarse levels (stripes out of
+#: phase) raises it several-fold, while on natural photos the two stay within about 20 %.
+_AUTO_ENERGY_RATIO = 0.5
+
+Pyramid = Literal["auto", "interpolate", "strict"]
+_Level = tuple[NDArray[np.float32], NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]
 
 
 def _hole_pyramid(
-    img: NDArray[np.float32], hole: NDArray[np.bool_], p: int, max_levels: int | None
-) -> list[tuple[NDArray[np.float32], NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]]:
+    img: NDArray[np.float32],
+    hole: NDArray[np.bool_],
+    p: int,
+    max_levels: int | None,
+    *,
+    allowed: NDArray[np.bool_] | None = None,
+    strict_from: int | None = None,
+) -> list[_Level]:
     """Coarse-to-fine levels for :func:`complete`, finest first: (image, hole, pixels needing a
     match, usable source centres).
 
@@ -107,13 +137,20 @@ def _hole_pyramid(
     :data:`_HOLE_KERNEL`, then every second pixel), so a coarse pixel is known as soon as any
     fine pixel under its kernel is: the hole *shrinks* by about two pixels per side at every
     level instead of growing, and the coarsest levels see only a sliver of it, filled by
-    interpolation from its rim. Levels are added until the hole vanishes, the image gets
-    narrower than a patch, or no whole known patch is left (or ``max_levels`` is reached).
+    interpolation from its rim. From level ``strict_from`` on, a coarse pixel is known only when
+    :data:`_STRICT_KNOWN_WEIGHT` of its kernel weight is. Source centres need a wholly known
+    patch of ``allowed`` pixels (a coarse pixel is allowed when every fine pixel under its
+    kernel is). Levels are added until the hole vanishes, the image gets narrower than a patch,
+    or no usable source patch is left (or ``max_levels`` is reached).
     """
-    need, source = _patch_masks(hole, p)
+    forbid = None if allowed is None else ~allowed
+    need, source = _patch_masks(hole if forbid is None else hole | forbid, p)
+    if forbid is not None:
+        need = _patch_masks(hole, p)[0]
     levels = [(img, hole, need, source)]
     k = (~hole).astype(np.float32)
     v = img * k[..., None]
+    f = None if forbid is None else forbid.astype(np.float32)
     a = (2, 2)  # the anchor: output x sums input x − 2 … x + 3
 
     def down(x: NDArray[np.float32]) -> NDArray[np.float32]:
@@ -122,10 +159,14 @@ def _hole_pyramid(
 
     while max_levels is None or len(levels) < max_levels:
         k, v = down(k)[..., 0], down(v)
-        hole_l = k < _KNOWN_WEIGHT
+        strict = strict_from is not None and len(levels) >= strict_from
+        hole_l = k < (_STRICT_KNOWN_WEIGHT if strict else _KNOWN_WEIGHT)
         if not hole_l.any() or min(k.shape) < p:
             break
         need_l, source_l = _patch_masks(hole_l, p)
+        if f is not None:
+            f = (down(f)[..., 0] >= _KNOWN_WEIGHT).astype(np.float32)
+            source_l = _patch_masks(hole_l | (f > 0), p)[1]
         if not source_l.any():
             break
         values = np.ascontiguousarray(v / np.maximum(k, _KNOWN_WEIGHT)[..., None], dtype=np.float32)
@@ -134,14 +175,126 @@ def _hole_pyramid(
     return levels
 
 
+def _schedule(value: Any, name: str, n_levels: int, default: Callable[[int], int], minimum: int) -> list[int]:
+    """Per-level counts, finest first, from None (``default(level)``), an int (every level) or a
+    sequence (the finest levels, each at least ``minimum``; the coarser ones repeat its last)."""
+    if value is None:
+        return [default(lv) for lv in range(n_levels)]
+    if isinstance(value, Sequence) and not isinstance(value, str):
+        counts = [check_int(c, name, minimum) for c in value]
+        if not counts:
+            raise ValueError(f"{name}: expected at least one count, got an empty sequence")
+        return [counts[min(lv, len(counts) - 1)] for lv in range(n_levels)]
+    return [check_int(value, name, 1)] * n_levels
+
+
+class _Filler:
+    """The search-and-vote loop of :func:`complete` over one pyramid's levels."""
+
+    def __init__(self, p: int, seed: int, threads: int | None, gradient_weight: float, progress: Progress) -> None:
+        self.p, self.seed, self.threads, self.gw = p, seed, threads, gradient_weight
+        self.progress, self.done, self.total = progress, 0, 0
+
+    def features(self, img: NDArray[np.float32]) -> NDArray[np.float32]:
+        return _with_gradients(img, self.gw) if self.gw > 0 else img
+
+    def start(
+        self, level: _Level, field: NDArray[np.int32] | None
+    ) -> tuple[NDArray[np.float32], NDArray[np.int32] | None]:
+        """A level's first image: the coarser field upsampled and voted with this level's own
+        pixels (no blurred upsampled image is carried down), or the onion peel at the coarsest."""
+        orig, hole_l, need, smask = level
+        if field is None:
+            return _fill_inward(orig, hole_l), None
+        cur = orig.copy()
+        up = upsample_field(field, hole_l.shape, orig.shape[:2], self.p // 2)
+        up[~need] = -1
+        bad = ~smask[np.maximum(up[..., 0], 0), np.maximum(up[..., 1], 0)] & need
+        up[bad] = -1
+        voted, wsum = _core.vote(orig, up, patch_size=self.p, threads=self.threads)
+        fill = hole_l & (wsum > 0)
+        cur[fill] = voted[fill]
+        rest = hole_l & ~fill
+        if rest.any():
+            cur = _fill_inward(cur, rest)
+        return cur, up
+
+    def iterate(
+        self,
+        level: _Level,
+        lv: int,
+        cur: NDArray[np.float32],
+        init: NDArray[np.int32] | None,
+        n_iters: int,
+        n_search: int,
+        mean_shift: int,
+    ) -> tuple[NDArray[np.float32], NDArray[np.int32] | None]:
+        """Search-and-vote iterations at one level; ``cur`` is this level's own copy."""
+        _, hole_l, need, smask = level
+        # Wexler's confidence γ^−d as a log: the vote weights are formed in the log domain and
+        # floored, so deep inside a large hole they cannot underflow float32.
+        depth = cv2.distanceTransform(hole_l.astype(np.uint8), cv2.DIST_L2, 3)
+        log_conf = -math.log(WEXLER_GAMMA) * depth[need]
+        field = init
+        for it in range(n_iters):
+            feat = self.features(cur)
+            field, dist, _ = _core.nnf(
+                feat, feat, patch_size=self.p, iterations=n_search, levels=1, exact=False,
+                seed=self.seed + 7919 * (lv * 64 + it + 1), source_mask=smask, target_mask=need,
+                init=field, threads=self.threads,
+            )  # fmt: skip
+            d = dist[need]
+            sigma2 = max(float(np.percentile(d, WEXLER_SIGMA_PERCENTILE)), 1e-8)
+            wvote = np.zeros(dist.shape, np.float32)
+            wvote[need] = np.exp(np.maximum(log_conf - d / (2.0 * sigma2), _LOG_WEIGHT_FLOOR))
+            shift = mean_shift if it == n_iters - 1 else 0
+            voted, wsum = _core.vote(
+                cur, field, patch_size=self.p, weights=wvote, threads=self.threads, mean_shift=shift
+            )
+            fill = hole_l & (wsum > 0)
+            cur[fill] = voted[fill]
+            self.done += 1
+            if self.progress is not None:
+                self.progress(self.done, self.total)
+        return cur, field
+
+    def run(
+        self, pyramid: list[_Level], stop: int, iters: list[int], search: list[int]
+    ) -> tuple[NDArray[np.float32], NDArray[np.int32] | None]:
+        """Levels from the coarsest down to ``stop``; returns the image and field there."""
+        field: NDArray[np.int32] | None = None
+        cur = pyramid[-1][0]
+        for lv in range(len(pyramid) - 1, stop - 1, -1):
+            cur, init = self.start(pyramid[lv], field)
+            shift = COMPLETION_MEAN_SHIFT if lv == 0 else 0
+            cur, new = self.iterate(pyramid[lv], lv, cur, init, iters[lv], search[lv], shift)
+            field = new if new is not None else init
+        return cur, field
+
+    def energy(self, level: _Level, cur: NDArray[np.float32], init: NDArray[np.int32] | None, lv: int) -> float:
+        """Mean patch distance of the hole's patches to their nearest sources (Wexler's
+        objective), searched from ``init``."""
+        _, _, need, smask = level
+        feat = self.features(cur)
+        _, dist, _ = _core.nnf(
+            feat, feat, patch_size=self.p, iterations=3, levels=1, exact=False,
+            seed=self.seed + 7919 * (lv * 64 + 63), source_mask=smask, target_mask=need, init=init,
+            threads=self.threads,
+        )  # fmt: skip
+        return float(dist[need].mean())
+
+
 def complete(
     image: Any,
     mask: Any,
     *,
+    sources: Any = None,
     patch_size: int = 7,
     levels: int | None = None,
-    iterations: int | None = None,
-    search_iterations: int | None = None,
+    iterations: int | Sequence[int] | None = None,
+    search_iterations: int | Sequence[int] | None = None,
+    pyramid: Pyramid = "auto",
+    gradient_weight: float = COMPLETION_GRADIENT_WEIGHT,
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
     progress: Progress = None,
@@ -174,15 +327,34 @@ def complete(
         The image; values under the mask are ignored.
     mask : (M, N) array_like of bool
         True where pixels are to be filled.
+    sources : (M, N) array_like of bool, optional
+        Pixels patches may be copied from (default: every known pixel). A patch is a source
+        only if all its pixels are known and in ``sources``; known pixels outside it still
+        guide the matching as the hole's surroundings. To fill a hole from another image,
+        place both in one frame and pass the other image's region.
     patch_size : int, optional
         Patch side, odd (default 7).
     levels : int, optional
         Most pyramid levels (default: until the hole vanishes at the coarsest level).
-    iterations : int, optional
+    iterations : int or sequence of int, optional
         Search-and-vote iterations per level (default ``1 + 2·level``, level 0 the finest:
-        one at full resolution, more on the cheap coarse levels).
-    search_iterations : int, optional
-        PatchMatch iterations per search step (default ``min(7, 1 + level)``).
+        one at full resolution, more on the cheap coarse levels). A sequence gives them per
+        level, finest first, the coarser levels repeating its last entry; 0 at a level only
+        votes the coarser level's field upsampled (a cheap schedule for large fills).
+    search_iterations : int or sequence of int, optional
+        PatchMatch iterations per search step (default ``min(7, 1 + level)``), per level like
+        ``iterations``.
+    pyramid : {"auto", "interpolate", "strict"}, optional
+        How coarse levels treat pixels on the hole's rim. ``"interpolate"``: a coarse pixel is
+        known as soon as one fine pixel under its kernel is (the shrinking hole above).
+        ``"strict"``: from the third level on, only when 30 % of its kernel weight is known;
+        rim pixels are synthesised instead of interpolated from the few fine pixels they see,
+        which keeps fine periodic structure in phase and a bright rim from bleeding into the
+        fill. ``"auto"`` (default) runs both on the coarse levels and keeps the interpolating
+        fill unless the strict one is far more coherent.
+    gradient_weight : float, optional
+        Weight of the gradients in the patch distance (default
+        :data:`COMPLETION_GRADIENT_WEIGHT`; 0: values only, faster).
     seed : int or numpy.random.Generator, optional
         Seed (default 0); identical output for any thread count.
     threads : int, optional
@@ -213,68 +385,55 @@ def complete(
     """
     img = as_image(image, "image")
     hole = as_mask(mask, "mask", img.shape[:2])
+    allowed = None if sources is None else as_mask(sources, "sources", img.shape[:2])
     p = check_patch_size(patch_size)
-    r = p // 2
     if not hole.any():
         raise ValueError("mask: no pixel is selected for filling (the mask is empty)")
-    iters = None if iterations is None else check_int(iterations, "iterations", 1)
-    s_iters = None if search_iterations is None else check_int(search_iterations, "search_iterations", 1)
+    if pyramid not in ("auto", "interpolate", "strict"):
+        raise ValueError(f"pyramid: expected 'auto', 'interpolate' or 'strict', got {pyramid!r}")
+    gw = check_float(gradient_weight, "gradient_weight", 0.0)
     s = check_seed(seed)
     t = check_threads(threads)
     max_levels = None if levels is None else check_int(levels, "levels", 1)
 
-    pyramid = _hole_pyramid(img, hole, p, max_levels)
-    if not pyramid[0][3].any():  # the full-resolution level's usable source centres
-        raise ValueError(f"mask: the known region holds no complete {p}×{p} patch to copy from")
-    schedule = [(iters or 1 + 2 * lv, s_iters or min(7, 1 + lv)) for lv in range(len(pyramid))]
-    total = sum(n for n, _ in schedule)
-    done = 0
-    field: NDArray[np.int32] | None = None
-    cur: NDArray[np.float32] | None = None
-    for lv in range(len(pyramid) - 1, -1, -1):
-        orig, hole_l, need, smask = pyramid[lv]
-        # Distance of hole pixels to the known region, for Wexler's confidence γ^−d (as a log:
-        # the vote weights are formed in the log domain and floored).
-        depth = cv2.distanceTransform(hole_l.astype(np.uint8), cv2.DIST_L2, 3)
-        log_conf = -math.log(WEXLER_GAMMA) * depth[need]
-        if cur is None:
-            cur = _fill_inward(orig, hole_l)
-            init = None
-        else:
-            cur = orig.copy()
-            up = upsample_field(field, hole_l.shape, orig.shape[:2], r) if field is not None else None
-            if up is not None:
-                up[~need] = -1
-                bad = ~smask[np.maximum(up[..., 0], 0), np.maximum(up[..., 1], 0)] & need
-                up[bad] = -1
-                voted, wsum = _core.vote(orig, up, patch_size=p, threads=t)
-                fill = hole_l & (wsum > 0)
-                cur[fill] = voted[fill]
-                rest = hole_l & ~fill
-                if rest.any():
-                    cur = _fill_inward(cur, rest)
-            init = up
-        n_iters, n_search = schedule[lv]
-        for it in range(n_iters):
-            feat = _with_gradients(cur, COMPLETION_GRADIENT_WEIGHT)
-            field, dist, _ = _core.nnf(
-                feat, feat, patch_size=p, iterations=n_search, levels=1, exact=False,
-                seed=s + 7919 * (lv * 64 + it + 1), source_mask=smask, target_mask=need,
-                init=init, threads=t,
-            )  # fmt: skip
-            d = dist[need]
-            sigma2 = max(float(np.percentile(d, WEXLER_SIGMA_PERCENTILE)), 1e-8)
-            wvote = np.zeros(dist.shape, np.float32)
-            wvote[need] = np.exp(np.maximum(log_conf - d / (2.0 * sigma2), _LOG_WEIGHT_FLOOR))
-            shift = COMPLETION_MEAN_SHIFT if lv == 0 and it == n_iters - 1 else 0
-            voted, wsum = _core.vote(cur, field, patch_size=p, weights=wvote, threads=t, mean_shift=shift)
-            fill = hole_l & (wsum > 0)
-            cur[fill] = voted[fill]  # cur is this level's own copy, never the pyramid's image
-            init = field
-            done += 1
-            if progress is not None:
-                progress(done, total)
-    assert cur is not None
+    main = _hole_pyramid(
+        img, hole, p, max_levels, allowed=allowed, strict_from=_STRICT_FROM if pyramid == "strict" else None
+    )
+    if not main[0][3].any():  # the full-resolution level's usable source centres
+        where = "the known region" if allowed is None else "the known pixels in sources"
+        raise ValueError(f"mask: {where} holds no complete {p}×{p} patch to copy from")
+    alt = None
+    if pyramid == "auto" and len(main) > _STRICT_FROM:
+        alt = _hole_pyramid(img, hole, p, max_levels, allowed=allowed, strict_from=_STRICT_FROM)
+        if len(alt) <= _STRICT_FROM:
+            alt = None
+    n = max(len(main), len(alt) if alt is not None else 0)
+    iters = _schedule(iterations, "iterations", n, lambda lv: 1 + 2 * lv, 0)
+    search = _schedule(search_iterations, "search_iterations", n, lambda lv: min(7, 1 + lv), 1)
+    filler = _Filler(p, s, t, gw, progress)
+    filler.total = sum(iters[: len(main)]) + (sum(iters[_STRICT_FROM : len(alt)]) if alt is not None else 0)
+    if alt is None:
+        cur, _ = filler.run(main, 0, iters, search)
+    else:
+        # Both pyramids down to the first level they share; there, the fill whose patches are
+        # better explained by known ones continues.
+        starts = []
+        for pyr in (main, alt):
+            _, field = filler.run(pyr, _STRICT_FROM, iters, search)
+            cur1, up = filler.start(pyr[_STRICT_FROM - 1], field)
+            starts.append((filler.energy(pyr[_STRICT_FROM - 1], cur1, up, _STRICT_FROM - 1), cur1, up))
+        pick = 1 if starts[1][0] < _AUTO_ENERGY_RATIO * starts[0][0] else 0
+        _, cur, field = starts[pick]
+        lv = _STRICT_FROM - 1
+        cur, new = filler.iterate(
+            main[lv], lv, cur, field, iters[lv], search[lv], COMPLETION_MEAN_SHIFT if lv == 0 else 0
+        )
+        field = new if new is not None else field
+        for lv in range(_STRICT_FROM - 2, -1, -1):
+            cur, init = filler.start(main[lv], field)
+            shift = COMPLETION_MEAN_SHIFT if lv == 0 else 0
+            cur, new = filler.iterate(main[lv], lv, cur, init, iters[lv], search[lv], shift)
+            field = new if new is not None else init
     out = img.copy()
     out[hole] = cur[hole]
     return restore_ndim(out, image)
