@@ -105,12 +105,13 @@ _HOLE_KERNEL = np.array([1, 5, 10, 10, 5, 1], np.float32) / 32.0
 #: A coarse pixel counts as known when this much of its kernel weight falls on known pixels
 #: (below the smallest single-pixel weight 1/1024, so one known fine pixel is enough).
 _KNOWN_WEIGHT = 1e-4
-#: The strict pyramid's threshold: a coarse pixel whose kernel sees less known weight than this
-#: is synthesised instead of interpolated from the few rim pixels it sees, which are biased
-#: towards the rim (aliased stripes, a white bank's halo).
-_STRICT_KNOWN_WEIGHT = 0.3
-#: The strict pyramid differs from the interpolating one from this level on (0: the finest),
-#: so the two share the finer levels and ``pyramid="auto"`` compares them one level below.
+#: The strict pyramid's threshold: a coarse pixel is known only when its whole kernel is (the
+#: classic pyramid, whose hole grows). Rim pixels are then synthesised, not interpolated from the
+#: few known pixels they see, which are biased towards the rim (aliased stripes, a bright bank's
+#: halo).
+_STRICT_KNOWN_WEIGHT = 0.999
+#: ``pyramid="auto"``'s strict alternative differs from the interpolating pyramid from this level
+#: on (0: the finest), so the two share the finer levels and are compared one level below.
 _STRICT_FROM = 2
 #: ``pyramid="auto"`` keeps the interpolating pyramid's fill unless the strict one's patch
 #: energy is below this fraction of it: a structure broken at the coarse levels (stripes out of
@@ -138,7 +139,7 @@ def _hole_pyramid(
     fine pixel under its kernel is: the hole *shrinks* by about two pixels per side at every
     level instead of growing, and the coarsest levels see only a sliver of it, filled by
     interpolation from its rim. From level ``strict_from`` on, a coarse pixel is known only when
-    :data:`_STRICT_KNOWN_WEIGHT` of its kernel weight is. Source centres need a wholly known
+    its whole kernel is (:data:`_STRICT_KNOWN_WEIGHT`). Source centres need a wholly known
     patch of ``allowed`` pixels (a coarse pixel is allowed when every fine pixel under its
     kernel is). Levels are added until the hole vanishes, the image gets narrower than a patch,
     or no usable source patch is left (or ``max_levels`` is reached).
@@ -191,9 +192,18 @@ def _schedule(value: Any, name: str, n_levels: int, default: Callable[[int], int
 class _Filler:
     """The search-and-vote loop of :func:`complete` over one pyramid's levels."""
 
-    def __init__(self, p: int, seed: int, threads: int | None, gradient_weight: float, progress: Progress) -> None:
+    def __init__(
+        self,
+        p: int,
+        seed: int,
+        threads: int | None,
+        gradient_weight: float,
+        progress: Progress,
+        base: NDArray[np.float32] | None,
+    ) -> None:
         self.p, self.seed, self.threads, self.gw = p, seed, threads, gradient_weight
         self.progress, self.done, self.total = progress, 0, 0
+        self.base = base
 
     def features(self, img: NDArray[np.float32]) -> NDArray[np.float32]:
         return _with_gradients(img, self.gw) if self.gw > 0 else img
@@ -202,10 +212,15 @@ class _Filler:
         self, level: _Level, field: NDArray[np.int32] | None
     ) -> tuple[NDArray[np.float32], NDArray[np.int32] | None]:
         """A level's first image: the coarser field upsampled and voted with this level's own
-        pixels (no blurred upsampled image is carried down), or the onion peel at the coarsest."""
+        pixels (no blurred upsampled image is carried down); at the coarsest, the onion peel or
+        the ``base`` colour."""
         orig, hole_l, need, smask = level
         if field is None:
-            return _fill_inward(orig, hole_l), None
+            if self.base is None:
+                return _fill_inward(orig, hole_l), None
+            cur = orig.copy()
+            cur[hole_l] = self.base
+            return cur, None
         cur = orig.copy()
         up = upsample_field(field, hole_l.shape, orig.shape[:2], self.p // 2)
         up[~need] = -1
@@ -330,8 +345,9 @@ def complete(
     sources : (M, N) array_like of bool, optional
         Pixels patches may be copied from (default: every known pixel). A patch is a source
         only if all its pixels are known and in ``sources``; known pixels outside it still
-        guide the matching as the hole's surroundings. To fill a hole from another image,
-        place both in one frame and pass the other image's region.
+        guide the matching as the hole's surroundings, but the coarsest level starts from the
+        sources' median colour rather than from the rim. To fill a hole from another image, place
+        both in one frame and pass the other image's region.
     patch_size : int, optional
         Patch side, odd (default 7).
     levels : int, optional
@@ -347,11 +363,11 @@ def complete(
     pyramid : {"auto", "interpolate", "strict"}, optional
         How coarse levels treat pixels on the hole's rim. ``"interpolate"``: a coarse pixel is
         known as soon as one fine pixel under its kernel is (the shrinking hole above).
-        ``"strict"``: from the third level on, only when 30 % of its kernel weight is known;
-        rim pixels are synthesised instead of interpolated from the few fine pixels they see,
-        which keeps fine periodic structure in phase and a bright rim from bleeding into the
-        fill. ``"auto"`` (default) runs both on the coarse levels and keeps the interpolating
-        fill unless the strict one is far more coherent.
+        ``"strict"``: only when all of them are (the hole grows); rim pixels are synthesised
+        instead of interpolated from the few fine pixels they see, which keeps fine periodic
+        structure in phase and a bright rim from bleeding into the fill. ``"auto"`` (default)
+        runs both (strict from the third level on) and keeps the interpolating fill unless the
+        strict one is far more coherent.
     gradient_weight : float, optional
         Weight of the gradients in the patch distance (default
         :data:`COMPLETION_GRADIENT_WEIGHT`; 0: values only, faster).
@@ -396,9 +412,7 @@ def complete(
     t = check_threads(threads)
     max_levels = None if levels is None else check_int(levels, "levels", 1)
 
-    main = _hole_pyramid(
-        img, hole, p, max_levels, allowed=allowed, strict_from=_STRICT_FROM if pyramid == "strict" else None
-    )
+    main = _hole_pyramid(img, hole, p, max_levels, allowed=allowed, strict_from=1 if pyramid == "strict" else None)
     if not main[0][3].any():  # the full-resolution level's usable source centres
         where = "the known region" if allowed is None else "the known pixels in sources"
         raise ValueError(f"mask: {where} holds no complete {p}×{p} patch to copy from")
@@ -410,7 +424,10 @@ def complete(
     n = max(len(main), len(alt) if alt is not None else 0)
     iters = _schedule(iterations, "iterations", n, lambda lv: 1 + 2 * lv, 0)
     search = _schedule(search_iterations, "search_iterations", n, lambda lv: min(7, 1 + lv), 1)
-    filler = _Filler(p, s, t, gw, progress)
+    # With restricted sources the hole's rim need not look like what fills it (a branch beside a
+    # gap), so the coarsest level starts from the sources' median colour instead of the rim's.
+    base = None if allowed is None else np.median(img[allowed & ~hole], axis=0).astype(np.float32)
+    filler = _Filler(p, s, t, gw, progress, base)
     filler.total = sum(iters[: len(main)]) + (sum(iters[_STRICT_FROM : len(alt)]) if alt is not None else 0)
     if alt is None:
         cur, _ = filler.run(main, 0, iters, search)
