@@ -151,3 +151,30 @@ def test_completion_schedules(hole_case):
     ]:
         with pytest.raises(ValueError, match=match):
             complete(img, hole, **kwargs)
+
+
+def test_strict_pyramid_does_not_grow_spurs_off_a_bright_rim():
+    # Branching's gap filling: a painted white channel (known, not a source) in a black gap, the
+    # background sources holding thin untraced tributaries. The interpolating pyramid's coarse
+    # levels take the channel's white into rim pixels and the fill matches them with tributary
+    # pieces (18 white pixels here); the strict pyramid synthesises the rim and adds none.
+    rng = np.random.default_rng(0)
+    canvas = np.zeros((160, 160, 1), np.float32)
+    canvas[20:140, 74:86] = 1.0
+    hole = np.ones((160, 160), bool)
+    hole[19:141, 73:87] = False
+    src = np.zeros((200, 160, 1), np.float32)
+    for _ in range(8):
+        y, x = rng.integers(10, 190), rng.integers(10, 130)
+        src[y : y + 2, x : x + 25] = 1.0
+    frame = np.concatenate([canvas, np.zeros((56, 160, 1), np.float32), src])
+    fill = np.zeros(frame.shape[:2], bool)
+    fill[:160] = hole
+    sources = np.zeros_like(fill)
+    sources[216:] = True
+    kw = dict(sources=sources, levels=4, iterations=[0, 2, 4], search_iterations=[1, 1, 3], gradient_weight=0.0)
+    white = {
+        pyr: int((complete(frame, fill, pyramid=pyr, **kw)[:160][hole] > 0.5).sum())
+        for pyr in ("strict", "interpolate")
+    }
+    assert white["strict"] == 0 and white["interpolate"] > 0, white
