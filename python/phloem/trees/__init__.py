@@ -40,8 +40,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from . import io, warp
-from ._validate import as_image, as_mask, check_convex_weights, check_float, check_int
+from .. import io, warp
+from .._validate import as_image, as_mask, check_convex_weights, check_float, check_int
 
 __all__ = [
     "Library",
