@@ -46,11 +46,8 @@ def fill_contour(points: Any, shape: tuple[int, int]) -> Mask:
     h, w = (int(s) for s in shape)
     if h < 1 or w < 1:
         raise ValueError(f"shape: expected a positive (H, W), got {shape!r}")
-    # The curve on an empty canvas with a one-pixel margin: the margin connects every outside
-    # region to the seed, so whatever the fill reaches is outside; the rest (the curve and all
-    # it encloses) is inside.
-    # The canvas also covers the parts of the curve outside the image (up to one image size
-    # beyond each edge; farther points are clamped there), so that no gap lets the fill in.
+    # A one-pixel margin joins every outside region to the seed; the canvas also holds the curve's
+    # parts outside the image (clamped at one image size beyond), so no gap lets the fill in.
     lim = np.array([w, h], np.float64)
     p = np.clip(p, -lim, 2 * lim - 1)
     x0, y0 = (min(0, int(np.floor(v))) - 1 for v in p.min(axis=0))
