@@ -22,7 +22,7 @@ from . import patch as _patch
 from . import shapes as _shapes
 from ._validate import as_image, as_mask, check_patch_size
 from .bark import _check_denoise, _denoised_lab, _rgb8
-from .branching.structure import angle_histogram, histogram_distance, thickness_histogram
+from .branching.histograms import angle_histogram, histogram_distance, thickness_histogram
 
 __all__ = [
     "angle_histogram",

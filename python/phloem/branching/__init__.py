@@ -12,21 +12,15 @@ References
 
 from __future__ import annotations
 
+from .bending import BendingModel, default_h
 from .figures import histogram_figure
+from .furcation import FurcationModel
+from .growth import extend, grow
+from .histograms import angle_histogram, histogram_distance, thickness_histogram
 from .image import Fragment, RenderResult, fragments, rectify, render, rigid_align, unrectify
 from .pipeline import SynthesisResult, fit_models, synthesize
 from .skeleton import Branch, Skeleton, SkeletonError
-from .structure import (
-    BendingModel,
-    FurcationModel,
-    angle_histogram,
-    default_h,
-    extend,
-    grow,
-    histogram_distance,
-    synthetic_skeleton,
-    thickness_histogram,
-)
+from .synthetic import synthetic_skeleton
 from .trace import estimate_thickness, trace
 
 __all__ = [
