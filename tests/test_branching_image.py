@@ -11,7 +11,9 @@ import pytest
 
 import phloem
 from phloem.branching import Branch, Skeleton, fragments, rectify, render, rigid_align, unrectify
-from phloem.branching.image import _dense, _displacement, _in_order, _match_borders
+from phloem.branching.fragments import _dense
+from phloem.branching.gaps import _match_borders
+from phloem.branching.render import _displacement, _in_order
 from phloem.testing import channel_scene as _scene
 from phloem.testing import longest_path as _longest_path
 from phloem.testing import shared_file
@@ -271,11 +273,12 @@ def test_displacement_field_hits_its_constraints() -> None:
     assert np.allclose(const, [3.0, -1.5], atol=1e-5)
 
 
-def test_docstring_examples() -> None:
+@pytest.mark.parametrize("module", ["fragments", "render", "rectify"])
+def test_docstring_examples(module: str) -> None:
     import doctest
+    import importlib
 
-    import phloem.branching.image as mod
-
+    mod = importlib.import_module(f"phloem.branching.{module}")
     res = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
     assert res.attempted > 0 and res.failed == 0
 

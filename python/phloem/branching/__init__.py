@@ -14,11 +14,13 @@ from __future__ import annotations
 
 from .bending import BendingModel, default_h
 from .figures import histogram_figure
+from .fragments import Fragment, fragments, rigid_align
 from .furcation import FurcationModel
 from .growth import extend, grow
 from .histograms import angle_histogram, histogram_distance, thickness_histogram
-from .image import Fragment, RenderResult, fragments, rectify, render, rigid_align, unrectify
 from .pipeline import SynthesisResult, fit_models, synthesize
+from .rectify import rectify, unrectify
+from .render import RenderResult, render
 from .skeleton import Branch, Skeleton, SkeletonError
 from .synthetic import synthetic_skeleton
 from .trace import estimate_thickness, trace

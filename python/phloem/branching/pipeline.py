@@ -13,7 +13,7 @@ from .._validate import as_image, check_size
 from .bending import BendingModel
 from .furcation import FurcationModel
 from .growth import grow
-from .image import RenderResult, render
+from .render import RenderResult, render
 from .skeleton import Skeleton
 from .trace import trace
 
