@@ -30,8 +30,8 @@ def _check_skeleton(skeleton: Any, name: str, shape: tuple[int, int] | None) -> 
 
 
 def _clip_channels(x: F32, lo: F32, hi: F32) -> F32:
-    """Clip each channel of ``x`` (H, W, C) to ``[lo[c], hi[c]]`` in place. (One ``np.clip``
-    with ``(C,)`` bounds runs its inner loop over the 3 channels: 9× slower.)"""
+    """Clip each channel of ``x`` (H, W, C) to ``[lo[c], hi[c]]`` in place, one channel at a time
+    (one ``np.clip`` with ``(C,)`` bounds runs its inner loop over the channels: much slower)."""
     for c in range(x.shape[2]):
         np.clip(x[..., c], lo[c], hi[c], out=x[..., c])
     return x
@@ -39,7 +39,7 @@ def _clip_channels(x: F32, lo: F32, hi: F32) -> F32:
 
 def _paste(dst: F32, src: F32, mask: NDArray[np.bool_]) -> None:
     """``dst[mask] = src[mask]`` for (H, W, C) images, through a mask repeated over the
-    channels so the copy runs along whole rows (3-7× faster than either masked indexing or a
+    channels so the copy runs along whole rows (faster than either masked indexing or a
     broadcast ``where``)."""
     np.copyto(dst, src, where=np.repeat(mask[..., None], dst.shape[2], axis=2))
 

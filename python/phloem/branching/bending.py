@@ -151,14 +151,11 @@ class BendingModel:
         warm_start : float, optional
             Pseudo-elements distributed like the input that the synthesised histograms start
             with; default ``bins * m`` (one extension's worth per bin). With 0, as in the
-            paper's formula taken literally, the first extensions are matched against
-            histograms of the ``k + 1`` copied stem elements: all in one or two bins, so the
-            matching term (up to ``e^2.5`` for ``ω_G = 50``) outweighs the Markov quality (at
-            most a factor 4) and a thick stem drops to the input's most common thickness at
-            once (4.0 to 0.8 px on :func:`synthetic_skeleton` forests). The pseudo-elements
-            keep the histograms near the input's until the structure has grown enough to
-            have a distribution of its own; from then on the paper's ``n_t / m`` weighting
-            applies unchanged.
+            paper's formula taken literally, the first extensions are matched against the
+            histograms of the ``k + 1`` copied stem elements alone, and a thick stem drops to
+            the input's most common thickness at once. The pseudo-elements keep the histograms
+            near the input's until the structure has a distribution of its own; from then on
+            the paper's ``n_t / m`` weighting applies unchanged.
 
         Returns
         -------

@@ -109,10 +109,8 @@ def _complete_background(
             if rest.any():
                 cur = _fill_inward(cur, rest)
             init = up
-        # At full resolution the field found at half resolution, upsampled, already copies
-        # full-resolution pixels: a search there took 40% of the time and looked the same on
-        # our scenes, so it runs only when there is no coarser level. At half resolution, with
-        # coarser levels below, half the iterations (most of the rest of the time; same look).
+        # The upsampled half-resolution field already copies full-resolution pixels: no search
+        # at full resolution, half the iterations at half resolution (docs/pipelines/branching.md).
         if lv == 0 and len(pyr) > 1:
             n_it = 0
         elif lv == 1 and len(pyr) > 2:

@@ -245,7 +245,7 @@ def render(
 
     References
     ----------
-    .. [1] D. Sibbing, D. Pick, L. Kobbelt, "Image Synthesis for Branching Structures",
+    .. [1] D. Sibbing, D. Pavić, L. Kobbelt, "Image Synthesis for Branching Structures",
        Computer Graphics Forum 29(7), 2010, §5.
 
     Examples
@@ -545,7 +545,7 @@ def _displacement(disk_shape: tuple[int, int], y0: int, x0: int, q_abs: F64, d: 
     """The smooth displacement field over a crop that takes the values ``d`` at ``q_abs``
     (§5.3, :func:`phloem.blend.interpolate_field`), solved on a grid coarsened to at most ~8
     cells per radius and upsampled bilinearly: the field is smooth by construction, and the
-    full-resolution solve costs ~100× more."""
+    full-resolution solve costs far more."""
     h, w = disk_shape
     f = max(1, math.ceil(r / 8))
     ch, cw = max(2, -(-h // f)), max(2, -(-w // f))
