@@ -15,13 +15,3 @@ from .quilt import quilt
 from .synthesis import synthesize
 
 __all__ = ["by_numbers", "complete", "feature_distance_map", "quilt", "synthesize"]
-
-# Branching's own gap-filling loop still uses these internals; they go when it calls complete().
-from . import _pyramid
-from .complete import WEXLER_GAMMA as WEXLER_GAMMA
-from .complete import WEXLER_SIGMA_PERCENTILE as WEXLER_SIGMA_PERCENTILE
-from .complete import _fill_inward as _fill_inward
-from .complete import _patch_masks as _patch_masks
-
-_downsample = _pyramid.downsample
-_upsample_field = _pyramid.upsample_field
