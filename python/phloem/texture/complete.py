@@ -77,10 +77,15 @@ def _fill_inward(img: NDArray[np.float32], hole: NDArray[np.bool_]) -> NDArray[n
     """Onion-peel start for the coarsest level: each ring of the hole takes the mean of its
     already known 8-neighbours."""
     img = img.copy()
-    known = (~hole).astype(np.float32)
-    img[hole] = 0.0
+    ys, xs = np.nonzero(hole)
+    if ys.size == 0:
+        return img
+    # Only the hole's box and a one-pixel ring take part, so rings cost their box, not the image.
+    box = (slice(max(0, ys.min() - 1), ys.max() + 2), slice(max(0, xs.min() - 1), xs.max() + 2))
+    sub, remaining = img[box], hole[box].copy()
+    known = (~remaining).astype(np.float32)
+    sub[remaining] = 0.0
     kernel = np.ones((3, 3), np.float32)
-    remaining = hole.copy()
     while remaining.any():
         cnt = cv2.filter2D(known, -1, kernel, borderType=cv2.BORDER_CONSTANT)
         ring = remaining & (cnt > 0)
@@ -88,12 +93,12 @@ def _fill_inward(img: NDArray[np.float32], hole: NDArray[np.bool_]) -> NDArray[n
             break
         acc = np.stack(
             [
-                cv2.filter2D(img[..., c] * known, -1, kernel, borderType=cv2.BORDER_CONSTANT)
-                for c in range(img.shape[2])
+                cv2.filter2D(np.ascontiguousarray(sub[..., c]) * known, -1, kernel, borderType=cv2.BORDER_CONSTANT)
+                for c in range(sub.shape[2])
             ],
             axis=-1,
         )
-        img[ring] = acc[ring] / cnt[ring][:, None]
+        sub[ring] = acc[ring] / cnt[ring][:, None]
         known[ring] = 1.0
         remaining &= ~ring
     return img
@@ -418,7 +423,9 @@ def complete(
         raise ValueError(f"mask: {where} holds no complete {p}×{p} patch to copy from")
     alt = None
     if pyramid == "auto" and len(main) > _STRICT_FROM:
-        alt = _hole_pyramid(img, hole, p, max_levels, allowed=allowed, strict_from=_STRICT_FROM)
+        # No deeper than the interpolating pyramid: the strict hole never vanishes, and its
+        # extra levels would cost most of the time.
+        alt = _hole_pyramid(img, hole, p, len(main), allowed=allowed, strict_from=_STRICT_FROM)
         if len(alt) <= _STRICT_FROM:
             alt = None
     n = max(len(main), len(alt) if alt is not None else 0)
@@ -428,7 +435,9 @@ def complete(
     # gap), so the coarsest level starts from the sources' median colour instead of the rim's.
     base = None if allowed is None else np.median(img[allowed & ~hole], axis=0).astype(np.float32)
     filler = _Filler(p, s, t, gw, progress, base)
-    filler.total = sum(iters[: len(main)]) + (sum(iters[_STRICT_FROM : len(alt)]) if alt is not None else 0)
+    # The alternative only has to show whether its fill is far better: half the iterations.
+    alt_iters = [max(1, n // 2) for n in iters]
+    filler.total = sum(iters[: len(main)]) + (sum(alt_iters[_STRICT_FROM : len(alt)]) if alt is not None else 0)
     if alt is None:
         cur, _ = filler.run(main, 0, iters, search)
     else:
@@ -436,7 +445,7 @@ def complete(
         # better explained by known ones continues.
         starts = []
         for pyr in (main, alt):
-            _, field = filler.run(pyr, _STRICT_FROM, iters, search)
+            _, field = filler.run(pyr, _STRICT_FROM, iters if pyr is main else alt_iters, search)
             cur1, up = filler.start(pyr[_STRICT_FROM - 1], field)
             starts.append((filler.energy(pyr[_STRICT_FROM - 1], cur1, up, _STRICT_FROM - 1), cur1, up))
         pick = 1 if starts[1][0] < _AUTO_ENERGY_RATIO * starts[0][0] else 0
