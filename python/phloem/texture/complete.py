@@ -435,8 +435,8 @@ def complete(
     # gap), so the coarsest level starts from the sources' median colour instead of the rim's.
     base = None if allowed is None else np.median(img[allowed & ~hole], axis=0).astype(np.float32)
     filler = _Filler(p, s, t, gw, progress, base)
-    # The alternative only has to show whether its fill is far better: half the iterations.
-    alt_iters = [max(1, n // 2) for n in iters]
+    # The alternative only has to show whether its fill is far better: one iteration less a level.
+    alt_iters = [max(1, n - 1) for n in iters]
     filler.total = sum(iters[: len(main)]) + (sum(alt_iters[_STRICT_FROM : len(alt)]) if alt is not None else 0)
     if alt is None:
         cur, _ = filler.run(main, 0, iters, search)
