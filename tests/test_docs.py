@@ -35,3 +35,27 @@ def test_public_modules_show_examples(module: str) -> None:
         mods += [importlib.import_module(m.name) for m in pkgutil.walk_packages(mod.__path__, module + ".")]
     finder = doctest.DocTestFinder()
     assert any(t.examples for m in mods for t in finder.find(m)), f"{module} has no examples"
+
+
+def test_every_docs_page_is_in_the_mkdocs_nav() -> None:
+    """mkdocs.yml parses, and no page under docs/ is left out of its nav."""
+    from pathlib import Path
+
+    import yaml
+
+    root = Path(__file__).resolve().parents[1]
+    config = yaml.safe_load((root / "mkdocs.yml").read_text(encoding="utf-8"))
+
+    def pages(nav: object) -> list[str]:
+        if isinstance(nav, str):
+            return [nav]
+        if isinstance(nav, list):
+            return [p for item in nav for p in pages(item)]
+        if isinstance(nav, dict):
+            return [p for value in nav.values() for p in pages(value)]
+        return []
+
+    listed = set(pages(config["nav"]))
+    docs = root / config.get("docs_dir", "docs")
+    on_disk = {p.relative_to(docs).as_posix() for p in docs.rglob("*.md")}
+    assert on_disk <= listed, f"pages missing from the mkdocs nav: {sorted(on_disk - listed)}"
