@@ -36,12 +36,13 @@ pub mod pyramid;
 
 use rayon::prelude::*;
 
-use crate::error::{invalid, Result};
-use crate::image::{prescale, Image};
-use crate::knn::{self, coherence_candidates, knn, mirror_pad, pad_with, shift, Knn, KnnParams};
 #[cfg(target_arch = "x86_64")]
-use crate::patch::Avx2;
-use crate::patch::{avx2_enabled, Kernel, Portable, NONE};
+use crate::distance::Avx2;
+use crate::distance::{avx2_enabled, Kernel, Portable};
+use crate::error::{invalid, Result};
+use crate::image::{mirror_pad, prescale, wrap_pad, Image};
+use crate::knn::{self, coherence_candidates, knn, shift, Knn, KnnParams};
+use crate::patch::NONE;
 use crate::rng::Rng;
 use pyramid::{level_sizes, upsample_refs, Step};
 
@@ -220,11 +221,6 @@ fn out_index(y: i64, x: i64, h: usize, w: usize, tileable: bool) -> Option<usize
     } else {
         Some(y as usize * w + x as usize)
     }
-}
-
-/// The `r`-pixel border of a `h × w × c` buffer made by wrapping around.
-fn wrap_pad(data: &[f32], h: usize, w: usize, c: usize, r: usize) -> Vec<f32> {
-    pad_with(data, h, w, c, r, |i, n| i.rem_euclid(n as i64) as usize)
 }
 
 /// A padded image whose `p × p` patches are contiguous rows of `p · c` values.
@@ -1207,7 +1203,7 @@ mod tests {
 
     #[test]
     fn simd_and_portable_paths_agree() {
-        use crate::patch::FORCE_PORTABLE;
+        use crate::distance::FORCE_PORTABLE;
         use std::sync::atomic::Ordering;
         let params = TbnParams {
             levels: Some(2),
