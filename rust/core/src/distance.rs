@@ -2,8 +2,8 @@
 //! search ([`crate::knn`]) and texture-by-numbers ([`crate::tbn`]): sums of squared
 //! differences over rows of `f32` values, portable or with AVX2, bit-identical either way.
 //!
-//! Callers pick the kernel once per work unit ([`avx2_enabled`]) and monomorphise their hot
-//! loop over [`Kernel`]; only code inlined into a `#[target_feature(enable = "avx2")]`
+//! Callers pick the kernel once per work unit (`avx2_enabled`) and monomorphise their hot
+//! loop over `Kernel`; only code inlined into a `#[target_feature(enable = "avx2")]`
 //! function is compiled with AVX2, hence the `#[inline(always)]` throughout.
 
 #![allow(clippy::inline_always)]

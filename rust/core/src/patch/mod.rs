@@ -18,10 +18,10 @@
 //! stream keyed by `(seed, level, iteration, pixel)`. Together these make the result
 //! bit-identical for any number of threads.
 //!
-//! Layout: this file holds the API, its parameters and their validation; [`level`] one
-//! resolution of the problem and the distances every method shares, [`patchmatch`] the
-//! propagation and random search, [`kd_seed`] the kd-tree start, [`exact`] brute force. The
-//! SIMD kernels live in [`crate::distance`].
+//! Layout: this file holds the API, its parameters and their validation; `level` one
+//! resolution of the problem and the distances every method shares, `patchmatch` the
+//! propagation and random search, `kd_seed` the kd-tree start, `exact` brute force. The SIMD
+//! kernels live in [`crate::distance`].
 
 mod exact;
 mod kd_seed;
