@@ -162,8 +162,7 @@ impl Pass<'_> {
     }
 
     /// Offers `b` as a neighbour of `a`. A method, not a closure: a closure that the compiler
-    /// does not inline is compiled without AVX2, and every intrinsic in it becomes a call (it
-    /// made the AVX2 path four times slower than the portable one).
+    /// does not inline is compiled without AVX2, and every intrinsic in it becomes a call.
     #[inline(always)]
     fn consider<K: Kernel>(&self, a: usize, b: u32, best: &mut Best<'_>) {
         if b != NONE && self.far(a, b as usize) {

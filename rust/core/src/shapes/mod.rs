@@ -46,8 +46,8 @@ pub const MAX_ORDER_SEARCH: usize = 7;
 const MAX_AUTO_LEVELS: usize = 6;
 
 /// Automatic pyramids stop at the level where the exemplar and output are this many patches
-/// wide: with one, a patch covers a whole blob of the exemplar at the coarsest level (with
-/// three, outputs' blobs came out about half the exemplar's chord length).
+/// wide: with one, a patch covers a whole blob of the exemplar at the coarsest level, so the
+/// random start grows blobs of the exemplar's scale.
 const AUTO_MIN_PATCHES: usize = 1;
 
 /// Which 90° turns of the exemplar's boundary patches may match (Eq. 3.7).
@@ -347,8 +347,8 @@ pub fn synthesize_labels(
     params: &ShapeParams,
     progress: Progress<'_>,
 ) -> Result<LabelMap> {
-    // Deeper pyramids make the layered method's nested masks coarse and cost it Eq. 3.9
-    // (eucalyptus: 3.29 at 5 levels against 2.10 at 3), so it keeps three patches.
+    // Deeper pyramids make the layered method's nested masks coarse, so it keeps three
+    // patches at the coarsest level.
     let min_patches = if method == Method::Layered {
         3
     } else {

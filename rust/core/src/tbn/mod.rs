@@ -67,11 +67,13 @@ pub enum Selection {
 }
 
 /// Parameters of [`by_numbers`].
+///
+/// [`TbnParams::default`] is what a Rust caller gets, and each field's doc names its Rust
+/// default: medoid selection, no compositing, no stand-ins. phloem's Python wrapper
+/// (`phloem.texture.by_numbers`) passes every field explicitly with defaults of its own.
 #[derive(Clone, Debug)]
 pub struct TbnParams {
-    /// Neighbourhood side, odd. Default 7 (with `k = 1`: on the thesis' four bark runs, more
-    /// coherent than 5 with `k = 2` and about as close in per-label histograms, at the same
-    /// time).
+    /// Neighbourhood side, odd. Default 7 (with `k = 1`; see `docs/engines/tbn.md`).
     pub patch_size: usize,
     /// k of k-coherence: each coherence candidate brings its `k − 1` nearest exemplar patches.
     /// Default 1 (coherence candidates only, no k-NN table).
@@ -99,8 +101,8 @@ pub struct TbnParams {
     /// label nearest in colour and in mean colour over a patch), at a data cost of `W` times
     /// that distance (see [`composite`]). Infinite (the default) forbids such offsets.
     pub stand_in_weight: f32,
-    /// Exemplar channels the compositing seams compare (the first `seam_channels`; 0 = all).
-    /// The Python wrapper passes the colour channels, leaving out the feature distance map.
+    /// Exemplar channels the compositing seams compare (the first `seam_channels`; 0, the
+    /// default, = all), e.g. the colour channels without a feature distance map.
     pub seam_channels: usize,
     /// Forward shifts that leave the exemplar wrap around (true) or are dropped. Default true.
     pub wrap: bool,
@@ -138,10 +140,8 @@ impl Default for TbnParams {
 pub const MIN_COARSE_SIDE: usize = 40;
 /// Most pyramid levels chosen automatically.
 pub const MAX_AUTO_LEVELS: usize = 5;
-/// Extra solver iterations at every level but the finest. They are cheap (a quarter of the
-/// pixels or fewer, M-step on a quarter of those) and the coarse layout decides the fine
-/// coherence: 3 → 5 coarse iterations measured patch coherence 3–6% lower on the thesis' four
-/// bark runs (mean of seeds 0–2), for 7% more time on bark1.
+/// Extra solver iterations at every level but the finest: they are cheap (a quarter of the
+/// pixels or fewer) and the coarse layout decides the fine coherence.
 pub const COARSE_EXTRA_ITERATIONS: usize = 2;
 /// Inputs of [`by_numbers`].
 #[derive(Clone, Copy, Debug)]

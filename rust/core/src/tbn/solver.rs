@@ -21,8 +21,7 @@ use super::{init, level_iterations, Selection, TbnParams};
 
 /// E-step vote weights are `max(d, floor)^−ROBUST_POWER` for a match at distance `d`.
 const ROBUST_POWER: f32 = 0.6;
-/// Passes of the approximate k-NN search per level (2 measured as good as 4 on the thesis'
-/// bark runs, for 0.2 s less on bark1).
+/// Passes of the approximate k-NN search per level (more gain nothing measurable).
 const KNN_ITERATIONS: usize = 2;
 
 #[inline]
@@ -344,8 +343,7 @@ impl<'a> Level<'a> {
         )?;
         let s = self.output_image(refs);
         // X†: every other row and column, at an offset drawn per iteration, at the coarse
-        // levels; every pixel at the finest, which decides the output's fine coherence
-        // (measured on the thesis' bark runs: patch coherence 1.4 → 1.2 × the thesis' result).
+        // levels; every pixel at the finest, which decides the output's fine coherence.
         let st = if self.depth == 0 { 1 } else { 2 };
         let mut grid_rng = Rng::keyed(seed, key, u64::MAX);
         let (gy, gx) = (
@@ -383,41 +381,10 @@ impl<'a> Level<'a> {
                 }
             });
 
-        // E-step (Eq. 3.5).
-        // Each vote weighs its match's N_lr distance to the power −0.6 (Kwatra et al. 2005's
-        // robust weights, exponent r = 0.8, as in texture::synthesize), floored at a tenth of
-        // the median. A plain mean pulls every pixel towards mid-tones where votes disagree;
-        // on the thesis' bark runs the weights cut the per-label histogram distance by a
-        // quarter to a third for about 5% more patch incoherence.
-        //
-        // Measured (coherence / histogram ratios to the thesis' results on bark1, bark2,
-        // eucalyptus, eucap5, seed 0, with 3 coarse iterations unless noted, against 1.26/0.57,
-        // 1.23/0.35, 0.98/0.52, 1.03/0.53 for the averaging E-step below):
-        // - the best-weighted vote instead of the one nearest the mean: 1.92/0.35, 1.90/0.31,
-        //   1.34/0.26, 1.32/0.35, crisp but pixel-wise mixed;
-        // - (now `Selection`, measured with 5 coarse iterations: average 1.18/0.53, 1.18/0.35,
-        //   0.94/0.49, 0.99/0.55; medoid 1.67/0.43, 1.55/0.36, 1.15/0.28, 1.19/0.33; hybrid
-        //   1.35/0.45, 1.33/0.36, 1.02/0.30, 1.00/0.36; two or three averaging iterations at
-        //   the end, 1.28/0.47, 1.26/0.37, 0.98/0.31, 0.96/0.39 and 1.23/0.48, 1.22/0.37,
-        //   0.95/0.35, 0.93/0.41, softer still.) Also tried: medoid at the finest level
-        //   only, 1.62/0.44, 1.50/0.30, 1.17/0.36, 1.24/0.38; medoid only at the last finest
-        //   iteration, 1.53/0.46, 1.43/0.31; medoid among the 9 (4) heaviest votes,
-        //   1.70/0.42, 1.54/0.36 (1.79/0.43, 1.66/0.36); Σ w·ssd^0.75 or Σ w·ssd instead of
-        //   Σ w·ssd^0.5, 1.56/0.47 and 1.54/0.51 on bark1, softer; a Gaussian-kernel mode,
-        //   1.68/0.43, oversharp (Laplacian variance 1.2× the photo's); the coherence
-        //   candidates as medoid candidates too: within noise; medoid vote-weight exponents 0,
-        //   0.3, 1: 1.70/0.47, 1.63/0.45, 1.76/0.44 on bark1, no clear gain;
-        // - a bonus for votes many neighbours agree on (Han et al. 2006), d·(1 − ½·share):
-        //   within the seed-to-seed noise (±0.03);
-        // - a final pass taking every pixel's M-step match directly: 2.03/0.43, 2.01/0.27;
-        // - weight exponents 0, 0.3, 1 and a dense M-step at all levels: no better;
-        // - the mode of the votes (the exemplar pixel with the largest summed weight, i.e.
-        //   the most-voted offset): 1.89/0.35, 1.77/0.31, 1.18/0.25, 1.30/0.34, oversharp
-        //   (Laplacian variance 1.58x the photo's on bark1);
-        // - ICM smoothing of the offsets (candidates: the neighbours' offsets; Potts or
-        //   Kwatra seam cost): coherence within ±0.02 (eucap5 1.19 -> 1.21-1.25 with Potts);
-        // - graph-cut compositing after the finest level (`composite`, [`composite`]): see
-        //   there; compositing at the end of every level as well: mixed (±0.1), not kept.
+        // E-step (Eq. 3.5). Each vote weighs its match's N_lr distance to the power −0.6
+        // (Kwatra et al. 2005's robust weights), floored at a tenth of the median: a plain
+        // mean pulls every pixel towards mid-tones where votes disagree. The variants tried
+        // instead are in docs/engines/tbn.md.
         let pw = ROBUST_POWER;
         let floor = {
             let mut d: Vec<f32> = mdist.iter().copied().filter(|v| v.is_finite()).collect();
