@@ -16,7 +16,8 @@ use crate::rng::Rng;
 use super::NONE;
 
 /// Source positions inside a level are packed as `row << 16 | col`: decoding is two shifts
-/// instead of two divisions by the width, which the hot loop does for every candidate.
+/// instead of two divisions by the width, which the hot loop does for every candidate. Sides
+/// are at most [`super::MAX_SOURCE_SIDE`].
 #[inline(always)]
 pub(super) fn pack(y: usize, x: usize) -> u32 {
     ((y as u32) << 16) | x as u32
@@ -27,6 +28,7 @@ pub(super) fn unpack(p: u32) -> (usize, usize) {
     ((p >> 16) as usize, (p & 0xFFFF) as usize)
 }
 
+/// One target pixel's match: the packed source centre (or [`NONE`]) and its distance.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Cell {
     pub(super) idx: u32,
