@@ -24,8 +24,8 @@
 //!
 //! The unknown is the correction `h = f − g`, which is smooth (harmonic in normal mode). Its
 //! first guess comes from full multigrid; it is then refined by conjugate gradients
-//! ([`crate::solver::pcg`]) in `f64`, preconditioned by one V-cycle of the Galerkin multigrid
-//! ([`crate::solver::multigrid`], `f32`), for up to four channels at once. The stopping test is
+//! (`solver::pcg`) in `f64`, preconditioned by one V-cycle of the Galerkin multigrid
+//! (`solver::multigrid`, `f32`), for up to four channels at once. The stopping test is
 //! the relative residual `‖b − A f‖ / ‖b‖` of the system above in every channel. The result is
 //! bit-identical for any number of threads.
 
