@@ -467,6 +467,11 @@ pub fn seamless(input: &BlendInput<'_>, params: &BlendParams) -> Result<Blended>
             let (i, r) = solve_group::<2>(input, params, &grid, &diag, &mg, 0, &mut out);
             (iterations, residual) = (i, r);
         }
+        // RGB as three lanes, not four with one idle: a quarter less memory traffic.
+        3 => {
+            let (i, r) = solve_group::<3>(input, params, &grid, &diag, &mg, 0, &mut out);
+            (iterations, residual) = (i, r);
+        }
         _ => {
             for c0 in (0..c).step_by(4) {
                 let (i, r) = solve_group::<4>(input, params, &grid, &diag, &mg, c0, &mut out);

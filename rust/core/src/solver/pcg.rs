@@ -110,7 +110,7 @@ pub(crate) fn pcg<T: Real, const L: usize>(
     let n = b.len();
     let mut r: Vec<[T; L]> = b.iter().map(|v| v.map(T::of_f64)).collect();
     let mut z = vec![[T::ZERO; L]; n];
-    let mut p: Vec<[T; L]> = Vec::new();
+    let mut p = vec![[T::ZERO; L]; n];
     let mut q = vec![[T::ZERO; L]; n];
     let done = |rr: [f64; L]| (0..L).all(|c| rr[c].sqrt() <= tol * scale[c]);
     let (mut x, mut rr);
@@ -135,7 +135,8 @@ pub(crate) fn pcg<T: Real, const L: usize>(
             break;
         }
         let mut rz = m.apply(&r, &mut z);
-        p.clone_from(&z);
+        // p = z; z's buffer is overwritten by the next preconditioner step before it is read.
+        std::mem::swap(&mut p, &mut z);
         loop {
             let pq = a.apply(&p, &mut q);
             let alpha: [f64; L] = std::array::from_fn(|c| {
