@@ -1,8 +1,9 @@
 """Gradient-domain solvers: seamless (Poisson) blending and smooth field interpolation.
 
 Both solve sparse symmetric systems on pixel grids in phloem's Rust core by conjugate
-gradients preconditioned with a Galerkin multigrid V-cycle (parallel, GIL released, the same
-result for any number of threads); :func:`seamless` starts from a full-multigrid first guess.
+gradients preconditioned with the core's one Galerkin multigrid (parallel, GIL released, the
+same result for any number of threads); :func:`seamless` starts from a full-multigrid first
+guess, and small fields are factored directly. ``docs/engines/solvers.md`` describes the solvers.
 """
 
 from __future__ import annotations

@@ -11,11 +11,14 @@
 //! affine fields are not (border rows of `L` do not vanish on them), which is the price of a
 //! well-posed energy without values outside the region.
 //!
-//! The constrained pixels are eliminated, so they are hit exactly. The normal equations
-//! `(LᵀL)_FF d_F = −(LᵀL)_FC d_C` (13-point, symmetric positive definite) are solved per
-//! component of `d` by conjugate gradients preconditioned with a Galerkin multigrid V-cycle
-//! (bilinear interpolation between grids of halved resolution, symmetric Gauss–Seidel
-//! smoothing, a dense Cholesky factor on the coarsest grid), all in `f64`.
+//! The constrained pixels `C` are eliminated, so they are hit exactly. The normal equations
+//! `(LᵀL)_FF d_F = −(LᵀL)_FC d_C` over the free pixels `F` (13-point, symmetric positive
+//! definite) are solved per component of `d`: small systems by a direct Cholesky factor, larger
+//! ones by conjugate gradients in `f64` preconditioned with `B²`, `B` one V-cycle of the
+//! multigrid of `L_FF` (the Laplacian with the constrained pixels as Dirichlet values, which is
+//! positive definite because every part holds a constraint). `(LᵀL)_FF = L_FF² + L_CFᵀ L_CF`
+//! differs from `L_FF²` by a matrix of rank at most `|C|`, so the iteration count grows with
+//! the number of constraints, not with the size of the region.
 
 // Lane loops index several arrays in lockstep; the index form is what vectorises.
 #![allow(clippy::needless_range_loop)]
@@ -23,6 +26,11 @@
 use rayon::prelude::*;
 
 use crate::error::{invalid, Result};
+use crate::solver::bands;
+use crate::solver::cholesky::Cholesky;
+use crate::solver::laplacian;
+use crate::solver::multigrid::{Hierarchy, Level, VCycle};
+use crate::solver::pcg::{pcg, Operator, Preconditioner, Solution};
 
 /// Solver parameters of [`interpolate_field`].
 #[derive(Clone, Copy, Debug)]
@@ -52,335 +60,6 @@ pub struct Field {
     pub iterations: usize,
     /// Largest relative residual of the normal equations over components.
     pub residual: f64,
-}
-
-/// A sparse row: (column, value) pairs, columns increasing.
-type Row = Vec<(u32, f64)>;
-
-/// A square sparse matrix in compressed rows, columns sorted.
-#[derive(Clone, Debug, Default)]
-struct Csr {
-    ptr: Vec<usize>,
-    col: Vec<u32>,
-    val: Vec<f64>,
-    /// Position of each row's diagonal entry in `col`/`val`.
-    diag: Vec<usize>,
-}
-
-impl Csr {
-    fn n(&self) -> usize {
-        self.ptr.len() - 1
-    }
-
-    fn from_rows(rows: Vec<Vec<(u32, f64)>>) -> Self {
-        let mut m = Self {
-            ptr: vec![0],
-            ..Self::default()
-        };
-        for (i, row) in rows.into_iter().enumerate() {
-            let mut d = usize::MAX;
-            for (j, v) in row {
-                if j as usize == i {
-                    d = m.col.len();
-                }
-                m.col.push(j);
-                m.val.push(v);
-            }
-            m.diag.push(d);
-            m.ptr.push(m.col.len());
-        }
-        m
-    }
-
-    fn row(&self, i: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
-        (self.ptr[i]..self.ptr[i + 1]).map(|k| (self.col[k] as usize, self.val[k]))
-    }
-
-    fn mul(&self, x: &[f64], y: &mut [f64]) {
-        for (i, yi) in y.iter_mut().enumerate() {
-            *yi = self.row(i).map(|(j, v)| v * x[j]).sum();
-        }
-    }
-
-    /// One Gauss–Seidel sweep for `A x = b`, forward or backward.
-    fn gauss_seidel(&self, x: &mut [f64], b: &[f64], forward: bool) {
-        let n = self.n();
-        for k in 0..n {
-            let i = if forward { k } else { n - 1 - k };
-            let d = self.val[self.diag[i]];
-            if d <= 0.0 {
-                continue;
-            }
-            let mut s = b[i];
-            for (j, v) in self.row(i) {
-                if j != i {
-                    s -= v * x[j];
-                }
-            }
-            x[i] = s / d;
-        }
-    }
-}
-
-/// One level: its operator, the grid position of each unknown, and (except on the coarsest)
-/// the interpolation from the next level as rows of (coarse unknown, weight).
-struct FLevel {
-    a: Csr,
-    h: usize,
-    w: usize,
-    pos: Vec<(usize, usize)>,
-    p: Vec<Vec<(u32, f64)>>,
-}
-
-/// Coarse rows (or columns) a fine one interpolates from: coarse `i` sits on fine `2i`.
-fn parents(t: usize) -> impl Iterator<Item = (usize, f64)> {
-    let (a, b, w) = if t % 2 == 0 {
-        (t / 2, usize::MAX, 1.0)
-    } else {
-        (t / 2, t / 2 + 1, 0.5)
-    };
-    [(a, w), (b, w)]
-        .into_iter()
-        .filter(|&(i, _)| i != usize::MAX)
-}
-
-/// Builds the coarse level of `f` (setting `f.p`), or `None` when it would not shrink.
-fn coarsen(f: &mut FLevel) -> Option<FLevel> {
-    // Accumulator window radius: coarse stencils of LᵀL reach 2 points; one to spare.
-    const R: usize = 3;
-    const S: usize = 2 * R + 1;
-    let (hc, wc) = (f.h / 2 + 1, f.w / 2 + 1);
-    let mut index = vec![u32::MAX; hc * wc];
-    for &(y, x) in &f.pos {
-        for (i, _) in parents(y) {
-            for (j, _) in parents(x) {
-                index[i * wc + j] = 0;
-            }
-        }
-    }
-    let mut pos = Vec::new();
-    for (k, slot) in index.iter_mut().enumerate() {
-        if *slot == 0 {
-            *slot = pos.len() as u32;
-            pos.push((k / wc, k % wc));
-        }
-    }
-    if pos.len() >= f.pos.len() {
-        return None;
-    }
-    f.p = f
-        .pos
-        .iter()
-        .map(|&(y, x)| {
-            let mut row = Vec::with_capacity(4);
-            for (i, wy) in parents(y) {
-                for (j, wx) in parents(x) {
-                    row.push((index[i * wc + j], wy * wx));
-                }
-            }
-            row
-        })
-        .collect();
-    // Children of each coarse unknown, with weights.
-    let mut children: Vec<Vec<(usize, f64)>> = vec![Vec::new(); pos.len()];
-    for (fi, row) in f.p.iter().enumerate() {
-        for &(c, wt) in row {
-            children[c as usize].push((fi, wt));
-        }
-    }
-    let fa = &f.a;
-    let fp = &f.p;
-    let rows: Vec<Vec<(u32, f64)>> = (0..pos.len())
-        .into_par_iter()
-        .map(|ci| {
-            let (iy, ix) = pos[ci];
-            let mut acc = [0f64; S * S];
-            for &(fi, wfi) in &children[ci] {
-                for (g, a) in fa.row(fi) {
-                    for &(cj, wgj) in &fp[g] {
-                        let (jy, jx) = pos[cj as usize];
-                        let k = (jy + R - iy) * S + (jx + R - ix);
-                        acc[k] += wfi * a * wgj;
-                    }
-                }
-            }
-            let mut row = Vec::new();
-            for (k, &v) in acc.iter().enumerate() {
-                if v != 0.0 {
-                    let (jy, jx) = (iy + k / S - R, ix + k % S - R);
-                    row.push((index[jy * wc + jx], v));
-                }
-            }
-            row
-        })
-        .collect();
-    let mut a = Csr::from_rows(rows);
-    // Exact symmetry: copy each upper entry onto its mirror.
-    for i in 0..a.n() {
-        for k in a.ptr[i]..a.ptr[i + 1] {
-            let j = a.col[k] as usize;
-            if j > i {
-                let v = a.val[k];
-                if let Ok(m) = a.col[a.ptr[j]..a.ptr[j + 1]].binary_search(&(i as u32)) {
-                    a.val[a.ptr[j] + m] = v;
-                }
-            }
-        }
-    }
-    Some(FLevel {
-        a,
-        h: hc,
-        w: wc,
-        pos,
-        p: Vec::new(),
-    })
-}
-
-/// Dense regularised Cholesky factor of the coarsest operator.
-struct Dense {
-    n: usize,
-    l: Vec<f64>,
-    /// First column of each row of `l` that is not zero.
-    first: Vec<usize>,
-}
-
-impl Dense {
-    fn new(a: &Csr) -> Self {
-        let n = a.n();
-        let mut m = vec![0f64; n * n];
-        let mut dmax = 0f64;
-        for i in 0..n {
-            for (j, v) in a.row(i) {
-                m[i * n + j] = v;
-            }
-            dmax = dmax.max(m[i * n + i]);
-        }
-        let first = crate::multigrid::cholesky_in_place(&mut m, n, 1e-13 * dmax, 1e-14 * dmax);
-        Self { n, l: m, first }
-    }
-
-    fn solve(&self, b: &[f64], x: &mut [f64]) {
-        let n = self.n;
-        for i in 0..n {
-            let mut s = b[i];
-            for k in self.first[i]..i {
-                s -= self.l[i * n + k] * x[k];
-            }
-            x[i] = s / self.l[i * n + i];
-        }
-        for i in (0..n).rev() {
-            let mut s = x[i];
-            for k in i + 1..n {
-                if self.first[k] <= i {
-                    s -= self.l[k * n + i] * x[k];
-                }
-            }
-            x[i] = s / self.l[i * n + i];
-        }
-    }
-}
-
-const COARSEST: usize = 400;
-
-struct Multigrid {
-    levels: Vec<FLevel>,
-    dense: Dense,
-}
-
-impl Multigrid {
-    fn new(fine: FLevel) -> Self {
-        let mut levels = vec![fine];
-        while levels.last().expect("fine level").a.n() > COARSEST {
-            let last = levels.last_mut().expect("fine level");
-            match coarsen(last) {
-                Some(c) => levels.push(c),
-                None => break,
-            }
-        }
-        let dense = Dense::new(&levels.last().expect("fine level").a);
-        Self { levels, dense }
-    }
-
-    /// `x = M⁻¹ b` by one symmetric V(1,1)-cycle from zero.
-    fn cycle(&self, l: usize, b: &[f64], x: &mut [f64]) {
-        let lev = &self.levels[l];
-        if l + 1 == self.levels.len() {
-            self.dense.solve(b, x);
-            return;
-        }
-        x.fill(0.0);
-        lev.a.gauss_seidel(x, b, true);
-        let n = lev.a.n();
-        let mut r = vec![0f64; n];
-        lev.a.mul(x, &mut r);
-        for (ri, bi) in r.iter_mut().zip(b) {
-            *ri = bi - *ri;
-        }
-        let nc = self.levels[l + 1].a.n();
-        let mut bc = vec![0f64; nc];
-        for (fi, row) in lev.p.iter().enumerate() {
-            for &(c, wt) in row {
-                bc[c as usize] += wt * r[fi];
-            }
-        }
-        let mut xc = vec![0f64; nc];
-        self.cycle(l + 1, &bc, &mut xc);
-        for (fi, row) in lev.p.iter().enumerate() {
-            x[fi] += row.iter().map(|&(c, wt)| wt * xc[c as usize]).sum::<f64>();
-        }
-        lev.a.gauss_seidel(x, b, false);
-    }
-}
-
-/// PCG for `A x = b`; returns (x, iterations, relative residual). When the recurrence has
-/// drifted from the true residual it restarts from the true one.
-fn pcg(mg: &Multigrid, b: &[f64], tol: f64, max_iterations: usize) -> (Vec<f64>, usize, f64) {
-    let a = &mg.levels[0].a;
-    let n = b.len();
-    let dot = |u: &[f64], v: &[f64]| u.iter().zip(v).map(|(x, y)| x * y).sum::<f64>();
-    let bn = dot(b, b).sqrt();
-    let mut x = vec![0f64; n];
-    if bn == 0.0 {
-        return (x, 0, 0.0);
-    }
-    let mut r = b.to_vec();
-    let mut z = vec![0f64; n];
-    let mut q = vec![0f64; n];
-    let mut it = 0;
-    loop {
-        let start = it;
-        mg.cycle(0, &r, &mut z);
-        let mut p = z.clone();
-        let mut rz = dot(&r, &z);
-        while it < max_iterations && dot(&r, &r).sqrt() > tol * bn {
-            a.mul(&p, &mut q);
-            let pq = dot(&p, &q);
-            if pq <= 0.0 || rz <= 0.0 {
-                break;
-            }
-            let alpha = rz / pq;
-            for i in 0..n {
-                x[i] += alpha * p[i];
-                r[i] -= alpha * q[i];
-            }
-            it += 1;
-            mg.cycle(0, &r, &mut z);
-            let rz_new = dot(&r, &z);
-            let beta = rz_new / rz;
-            rz = rz_new;
-            for i in 0..n {
-                p[i] = z[i] + beta * p[i];
-            }
-        }
-        a.mul(&x, &mut q);
-        for i in 0..n {
-            r[i] = b[i] - q[i];
-        }
-        let res = dot(&r, &r).sqrt() / bn;
-        if res <= tol || it >= max_iterations || it == start {
-            return (x, it, res);
-        }
-    }
 }
 
 /// The smooth field over `region` (`h × w`) that takes `values[k]` (`d` numbers each) at
@@ -521,60 +200,6 @@ pub fn interpolate_field(
     let deg: Vec<f64> = (0..n)
         .map(|i| nbrs(i).iter().filter(|&&j| j != u32::MAX).count() as f64)
         .collect();
-    let mut free_index = vec![u32::MAX; n];
-    let mut free = Vec::new();
-    for i in 0..n {
-        if fixed[i].is_none() {
-            free_index[i] = free.len() as u32;
-            free.push(i);
-        }
-    }
-    // Rows of LᵀL over the free pixels; columns of constrained pixels go to the right side.
-    let rows: Vec<(Row, Vec<f64>)> = free
-        .par_iter()
-        .map(|&i| {
-            // (LᵀL)_iq = Σ_k L_ki L_kq over k ∈ {i} ∪ N(i).
-            let mut entries: Vec<(usize, f64)> = Vec::with_capacity(16);
-            let mut add = |q: usize, v: f64| {
-                if let Some(e) = entries.iter_mut().find(|e| e.0 == q) {
-                    e.1 += v;
-                } else {
-                    entries.push((q, v));
-                }
-            };
-            let ni = nbrs(i);
-            for k in std::iter::once(i as u32).chain(ni.iter().copied()) {
-                if k == u32::MAX {
-                    continue;
-                }
-                let k = k as usize;
-                let lki = if k == i { deg[i] } else { -1.0 };
-                add(k, lki * deg[k]);
-                for q in nbrs(k) {
-                    if q != u32::MAX {
-                        add(q as usize, -lki);
-                    }
-                }
-            }
-            entries.sort_by_key(|e| e.0);
-            let mut row = Vec::with_capacity(entries.len());
-            let mut rhs = vec![0f64; d];
-            for (q, v) in entries {
-                if v == 0.0 {
-                    continue;
-                }
-                match fixed[q] {
-                    None => row.push((free_index[q], v)),
-                    Some(k) => {
-                        for c in 0..d {
-                            rhs[c] -= v * values[k * d + c];
-                        }
-                    }
-                }
-            }
-            (row, rhs)
-        })
-        .collect();
     let mut out = vec![f32::NAN; h * w * d];
     for (i, &p) in pos.iter().enumerate() {
         if let Some(k) = fixed[i] {
@@ -583,6 +208,7 @@ pub fn interpolate_field(
             }
         }
     }
+    let free: Vec<usize> = (0..n).filter(|&i| fixed[i].is_none()).collect();
     if free.is_empty() {
         return Ok(Field {
             values: out,
@@ -590,36 +216,68 @@ pub fn interpolate_field(
             residual: 0.0,
         });
     }
-    let (arows, rhs): (Vec<_>, Vec<_>) = rows.into_iter().unzip();
-    let a = Csr::from_rows(arows);
-    let (y0, x0) = (
-        free.iter().map(|&i| pos[i] / w).min().unwrap_or(0),
-        free.iter().map(|&i| pos[i] % w).min().unwrap_or(0),
-    );
-    let fpos: Vec<(usize, usize)> = free
-        .iter()
-        .map(|&i| (pos[i] / w - y0, pos[i] % w - x0))
-        .collect();
-    let mg = Multigrid::new(FLevel {
-        a,
-        h: fpos.iter().map(|p| p.0).max().unwrap_or(0) + 1,
-        w: fpos.iter().map(|p| p.1).max().unwrap_or(0) + 1,
-        pos: fpos,
-        p: Vec::new(),
-    });
-    let solved: Vec<(Vec<f64>, usize, f64)> = (0..d)
-        .into_par_iter()
-        .map(|c| {
-            let b: Vec<f64> = rhs.iter().map(|r| r[c]).collect();
-            pcg(&mg, &b, params.tol, params.max_iterations)
-        })
-        .collect();
+    let grid = Grid::new(&pos, w, &deg, &fixed);
+    let (gn, gw) = (grid.h * grid.w, grid.w);
+    let scale = |b: &[[f64; 1]]| {
+        let bb = bands::dot(b, b, gw)[0];
+        if bb > 0.0 {
+            bb.sqrt()
+        } else {
+            1.0
+        }
+    };
+    let solved: Vec<Solution<1>> = if free.len() <= DIRECT {
+        // Small systems: the exact factor as the preconditioner, so CG takes one step.
+        let (factor, rhs) = normal_equations(&free, &deg, &fixed, nbrs, values, d);
+        let cells: Vec<usize> = free.iter().map(|&i| grid.cell[i]).collect();
+        (0..d)
+            .into_par_iter()
+            .map(|c| {
+                let mut b = vec![[0f64; 1]; gn];
+                for (j, &g) in cells.iter().enumerate() {
+                    b[g] = [rhs[j * d + c]];
+                }
+                let mut direct = Direct {
+                    factor: &factor,
+                    cells: &cells,
+                    w: gw,
+                    y: vec![[0.0; 1]; cells.len()],
+                };
+                let s = scale(&b);
+                let (tol, max) = (params.tol, params.max_iterations);
+                pcg(&mut Normal::new(&grid), &mut direct, &b, gw, [s], tol, max)
+            })
+            .collect()
+    } else {
+        let mg = Hierarchy::new(Level::five(grid.h, grid.w, grid.deg_free.clone()));
+        (0..d)
+            .into_par_iter()
+            .map(|c| {
+                // The right-hand side −(LᵀL)_FC d_C = −(L_F· L d̃_C), d̃_C = d on C, 0 elsewhere.
+                let mut v = vec![[0f64; 1]; gn];
+                for (i, f) in fixed.iter().enumerate() {
+                    if let Some(k) = f {
+                        v[grid.cell[i]] = [values[k * d + c]];
+                    }
+                }
+                let mut op = Normal::new(&grid);
+                let mut b = vec![[0f64; 1]; gn];
+                op.apply(&v, &mut b);
+                for t in &mut b {
+                    t[0] = -t[0];
+                }
+                let s = scale(&b);
+                let (tol, max) = (params.tol, params.max_iterations);
+                pcg(&mut op, &mut SquaredVCycle::new(&mg), &b, gw, [s], tol, max)
+            })
+            .collect()
+    };
     let (mut iterations, mut residual) = (0, 0f64);
-    for (c, (x, it, res)) in solved.iter().enumerate() {
-        iterations = iterations.max(*it);
-        residual = residual.max(*res);
-        for (fi, &i) in free.iter().enumerate() {
-            out[pos[i] * d + c] = x[fi] as f32;
+    for (c, s) in solved.iter().enumerate() {
+        iterations = iterations.max(s.iterations);
+        residual = residual.max(s.residual);
+        for &i in &free {
+            out[pos[i] * d + c] = s.x[grid.cell[i]][0] as f32;
         }
     }
     Ok(Field {
@@ -627,6 +285,216 @@ pub fn interpolate_field(
         iterations,
         residual,
     })
+}
+
+/// Systems with at most this many free pixels are factored directly.
+const DIRECT: usize = 400;
+
+/// The region on a framed, odd-sized grid over its bounding box (the layout of the solvers).
+struct Grid {
+    h: usize,
+    w: usize,
+    /// Grid cell of each region pixel.
+    cell: Vec<usize>,
+    /// `deg` at the region's pixels, 0 elsewhere: the diagonal of `L`.
+    deg_region: Vec<f32>,
+    /// `deg` at the free pixels, 0 elsewhere: the diagonal of `L_FF`.
+    deg_free: Vec<f32>,
+}
+
+impl Grid {
+    fn new(pos: &[usize], w: usize, deg: &[f64], fixed: &[Option<usize>]) -> Self {
+        let (mut y0, mut y1, mut x0, mut x1) = (usize::MAX, 0, usize::MAX, 0);
+        for &p in pos {
+            let (y, x) = (p / w, p % w);
+            y0 = y0.min(y);
+            y1 = y1.max(y);
+            x0 = x0.min(x);
+            x1 = x1.max(x);
+        }
+        let (gh, gw) = ((y1 - y0 + 3) | 1, (x1 - x0 + 3) | 1);
+        let cell: Vec<usize> = pos
+            .iter()
+            .map(|&p| (p / w - y0 + 1) * gw + p % w - x0 + 1)
+            .collect();
+        let mut deg_region = vec![0f32; gh * gw];
+        let mut deg_free = vec![0f32; gh * gw];
+        for (i, &g) in cell.iter().enumerate() {
+            deg_region[g] = deg[i] as f32;
+            if fixed[i].is_none() {
+                deg_free[g] = deg[i] as f32;
+            }
+        }
+        Self {
+            h: gh,
+            w: gw,
+            cell,
+            deg_region,
+            deg_free,
+        }
+    }
+}
+
+/// The normal operator `(LᵀL)_FF = L_F· L_·F` on grid vectors that are 0 off the free pixels,
+/// applied as two Laplacian passes.
+struct Normal<'a> {
+    grid: &'a Grid,
+    /// `L p` over the whole region.
+    t: Vec<[f64; 1]>,
+    /// `A x` of [`Operator::residual`].
+    ax: Vec<[f64; 1]>,
+}
+
+impl<'a> Normal<'a> {
+    fn new(grid: &'a Grid) -> Self {
+        let n = grid.h * grid.w;
+        Self {
+            grid,
+            t: vec![[0.0; 1]; n],
+            ax: vec![[0.0; 1]; n],
+        }
+    }
+}
+
+impl Operator<f64, 1> for Normal<'_> {
+    fn apply(&mut self, p: &[[f64; 1]], q: &mut [[f64; 1]]) -> [f64; 1] {
+        let g = self.grid;
+        laplacian::apply(&g.deg_region, g.w, p, &mut self.t);
+        laplacian::apply(&g.deg_free, g.w, &self.t, q);
+        bands::dot(p, q, g.w)
+    }
+
+    fn residual(&mut self, b: &[[f64; 1]], x: &[[f64; 1]], r: &mut [[f64; 1]]) -> [f64; 1] {
+        let g = self.grid;
+        let mut ax = std::mem::take(&mut self.ax);
+        laplacian::apply(&g.deg_region, g.w, x, &mut self.t);
+        laplacian::apply(&g.deg_free, g.w, &self.t, &mut ax);
+        for ((ri, bi), ai) in r.iter_mut().zip(b).zip(&ax) {
+            ri[0] = bi[0] - ai[0];
+        }
+        self.ax = ax;
+        bands::dot(r, r, g.w)
+    }
+}
+
+/// `B²` for `B` one V-cycle of the multigrid of `L_FF` (in `f32`): symmetric positive definite,
+/// and close to `(LᵀL)_FF⁻¹` up to a perturbation of rank at most `|C|`.
+struct SquaredVCycle<'a> {
+    vcycle: VCycle<'a, 1>,
+    w: usize,
+    r: Vec<[f32; 1]>,
+    t: Vec<[f32; 1]>,
+    z: Vec<[f32; 1]>,
+}
+
+impl<'a> SquaredVCycle<'a> {
+    fn new(mg: &'a Hierarchy) -> Self {
+        let lev = &mg.levels[0];
+        let n = lev.h * lev.w;
+        Self {
+            vcycle: VCycle::new(mg),
+            w: lev.w,
+            r: vec![[0.0; 1]; n],
+            t: vec![[0.0; 1]; n],
+            z: vec![[0.0; 1]; n],
+        }
+    }
+}
+
+impl Preconditioner<f64, 1> for SquaredVCycle<'_> {
+    fn apply(&mut self, r: &[[f64; 1]], z: &mut [[f64; 1]]) -> [f64; 1] {
+        for (a, b) in self.r.iter_mut().zip(r) {
+            a[0] = b[0] as f32;
+        }
+        self.vcycle.apply(&self.r, &mut self.t);
+        self.vcycle.apply(&self.t, &mut self.z);
+        for (a, b) in z.iter_mut().zip(&self.z) {
+            a[0] = f64::from(b[0]);
+        }
+        bands::dot(r, z, self.w)
+    }
+}
+
+/// The exact solve of small systems: the Cholesky factor of `(LᵀL)_FF` on the free cells.
+struct Direct<'a> {
+    factor: &'a Cholesky,
+    /// Grid cell of each free pixel, in the factor's order.
+    cells: &'a [usize],
+    w: usize,
+    y: Vec<[f64; 1]>,
+}
+
+impl Preconditioner<f64, 1> for Direct<'_> {
+    fn apply(&mut self, r: &[[f64; 1]], z: &mut [[f64; 1]]) -> [f64; 1] {
+        for (y, &g) in self.y.iter_mut().zip(self.cells) {
+            *y = r[g];
+        }
+        self.factor.solve(&mut self.y);
+        z.fill([0.0]);
+        for (y, &g) in self.y.iter().zip(self.cells) {
+            z[g] = *y;
+        }
+        bands::dot(r, z, self.w)
+    }
+}
+
+/// The Cholesky factor of `(LᵀL)_FF` over the free pixels `free` (raster order, so the profile
+/// is a band a few grid rows wide), and the right-hand sides `−(LᵀL)_FC d_C` (`d` per row).
+fn normal_equations(
+    free: &[usize],
+    deg: &[f64],
+    fixed: &[Option<usize>],
+    nbrs: impl Fn(usize) -> [u32; 4],
+    values: &[f64],
+    d: usize,
+) -> (Cholesky, Vec<f64>) {
+    let nf = free.len();
+    let mut fidx = vec![usize::MAX; deg.len()];
+    for (j, &i) in free.iter().enumerate() {
+        fidx[i] = j;
+    }
+    let mut m = vec![0f64; nf * nf];
+    let mut rhs = vec![0f64; nf * d];
+    let mut dmax = 0f64;
+    let with = |k: usize| {
+        std::iter::once(k as u32)
+            .chain(nbrs(k))
+            .filter(|&j| j != u32::MAX)
+    };
+    let mut entries: Vec<(usize, f64)> = Vec::with_capacity(16);
+    for (a, &i) in free.iter().enumerate() {
+        // (LᵀL)_iq = Σ_k L_ki L_kq over k ∈ {i} ∪ N(i) (small integers: exact in any order).
+        entries.clear();
+        for k in with(i) {
+            let k = k as usize;
+            let lki = if k == i { deg[i] } else { -1.0 };
+            for q in with(k) {
+                let q = q as usize;
+                let v = lki * if q == k { deg[k] } else { -1.0 };
+                match entries.iter_mut().find(|e| e.0 == q) {
+                    Some(e) => e.1 += v,
+                    None => entries.push((q, v)),
+                }
+            }
+        }
+        entries.sort_by_key(|e| e.0);
+        for &(q, v) in &entries {
+            if v == 0.0 {
+                continue;
+            }
+            match fixed[q] {
+                None => m[a * nf + fidx[q]] = v,
+                Some(k) => {
+                    for c in 0..d {
+                        rhs[a * d + c] -= v * values[k * d + c];
+                    }
+                }
+            }
+        }
+        dmax = dmax.max(m[a * nf + a]);
+    }
+    // The system is positive definite; the tiny shift keeps the factor of earlier versions.
+    (Cholesky::new(m, nf, 1e-13 * dmax, 1e-14 * dmax), rhs)
 }
 
 #[cfg(test)]
@@ -681,53 +549,98 @@ mod tests {
         }
     }
 
-    #[test]
-    fn galerkin_operators_are_symmetric_and_shrink() {
-        // The Dirichlet pixel Laplacian of a disk as the fine operator.
-        let n = 64;
-        let region = disk(n);
-        let mut index = vec![u32::MAX; n * n];
-        let pos: Vec<(usize, usize)> = (0..n * n)
-            .filter(|&p| region[p])
-            .map(|p| (p / n, p % n))
-            .collect();
-        for (i, &(y, x)) in pos.iter().enumerate() {
-            index[y * n + x] = i as u32;
-        }
-        let rows = pos
-            .iter()
-            .map(|&(y, x)| {
-                let mut row = Vec::new();
-                for (yy, xx) in [(y - 1, x), (y, x - 1), (y, x), (y, x + 1), (y + 1, x)] {
-                    let j = index[yy * n + xx];
-                    if yy == y && xx == x {
-                        row.push((j, 4.0));
-                    } else if j != u32::MAX {
-                        row.push((j, -1.0));
-                    }
-                }
-                row
-            })
-            .collect();
-        let mg = Multigrid::new(FLevel {
-            a: Csr::from_rows(rows),
-            h: n,
-            w: n,
-            pos,
-            p: Vec::new(),
-        });
-        assert!(mg.levels.len() >= 3);
-        for pair in mg.levels.windows(2) {
-            assert!(pair[1].a.n() * 3 < pair[0].a.n());
-        }
-        for lev in &mg.levels {
-            for i in 0..lev.a.n() {
-                assert!(lev.a.val[lev.a.diag[i]] > 0.0);
-                for (j, v) in lev.a.row(i) {
-                    let back = lev.a.row(j).find(|e| e.0 == i).map(|e| e.1);
-                    assert_eq!(back, Some(v));
+    /// The energy's minimiser by dense Gaussian elimination on `LᵀL` with the constraints as
+    /// equations, from the definition (no code shared with the solver).
+    fn reference(region: &[bool], n: usize, pts: &[[i64; 2]], vals: &[f64]) -> Vec<f64> {
+        let cells: Vec<usize> = (0..n * n).filter(|&p| region[p]).collect();
+        let m = cells.len();
+        let idx = |p: usize| cells.iter().position(|&q| q == p);
+        let mut l = vec![vec![0f64; m]; m];
+        for (i, &p) in cells.iter().enumerate() {
+            let (y, x) = (p / n, p % n);
+            let mut nb = Vec::new();
+            if y > 0 {
+                nb.push(p - n);
+            }
+            if x > 0 {
+                nb.push(p - 1);
+            }
+            if x + 1 < n {
+                nb.push(p + 1);
+            }
+            if y + 1 < n {
+                nb.push(p + n);
+            }
+            for q in nb {
+                if let Some(j) = idx(q) {
+                    l[i][j] = -1.0;
+                    l[i][i] += 1.0;
                 }
             }
+        }
+        let mut a = vec![vec![0f64; m + 1]; m];
+        for i in 0..m {
+            for j in 0..m {
+                a[i][j] = (0..m).map(|k| l[k][i] * l[k][j]).sum();
+            }
+        }
+        for (k, &[r, c]) in pts.iter().enumerate() {
+            let i = idx(r as usize * n + c as usize).unwrap();
+            a[i].iter_mut().for_each(|v| *v = 0.0);
+            a[i][i] = 1.0;
+            a[i][m] = vals[k];
+        }
+        for col in 0..m {
+            let piv = (col..m)
+                .max_by(|&x, &y| a[x][col].abs().total_cmp(&a[y][col].abs()))
+                .unwrap();
+            a.swap(col, piv);
+            for row in 0..m {
+                if row != col && a[row][col] != 0.0 {
+                    let f = a[row][col] / a[col][col];
+                    for k in col..=m {
+                        a[row][k] -= f * a[col][k];
+                    }
+                }
+            }
+        }
+        let mut out = vec![f64::NAN; n * n];
+        for (i, &p) in cells.iter().enumerate() {
+            out[p] = a[i][m] / a[i][i];
+        }
+        out
+    }
+
+    #[test]
+    fn direct_and_iterative_paths_match_a_dense_solve() {
+        // 16² disk: the exact factor (one CG step); 26² disk: the multigrid PCG path.
+        for n in [16usize, 26] {
+            let region = disk(n);
+            let free = region.iter().filter(|&&r| r).count() - 3;
+            assert_eq!(free <= DIRECT, n == 16);
+            let c = n as i64 / 2;
+            let pts = [[c, 2], [c, n as i64 - 3], [2, c]];
+            let vals = [1.0, -0.5, 2.0];
+            let f =
+                interpolate_field(&region, n, n, &pts, &vals, 1, &FieldParams::default()).unwrap();
+            let r = reference(&region, n, &pts, &vals);
+            for p in 0..n * n {
+                if region[p] {
+                    assert!(
+                        (f64::from(f.values[p]) - r[p]).abs() < 1e-5,
+                        "{n}: {} vs {}",
+                        f.values[p],
+                        r[p]
+                    );
+                }
+            }
+            assert!(f.residual <= 1e-10, "{n}: {}", f.residual);
+            assert_eq!(
+                f.iterations <= 1,
+                n == 16,
+                "{n}: {} iterations",
+                f.iterations
+            );
         }
     }
 

@@ -34,13 +34,13 @@ pub mod image;
 pub(crate) mod kdtree;
 pub mod knn;
 pub mod maxflow;
-pub(crate) mod multigrid;
 pub mod mvc;
 pub mod patch;
 pub mod poisson;
 pub mod rng;
 pub mod seams;
 pub mod shapes;
+pub(crate) mod solver;
 pub mod tbn;
 pub mod vote;
 

@@ -1,5 +1,6 @@
-//! Geometric multigrid on masked pixel grids: the preconditioner of the Poisson solves in
-//! [`crate::poisson`].
+//! Geometric multigrid on masked pixel grids: the preconditioner (and first guess) of the
+//! Poisson solves in [`crate::poisson`] and the preconditioner of the smooth fields in
+//! [`crate::field`].
 //!
 //! Every level is an odd-sized `h × w` grid whose border (a frame one cell wide) holds no
 //! unknowns, so stencils never leave the grid. The finest level is the 5-point pixel
@@ -28,15 +29,9 @@
 
 use rayon::prelude::*;
 
-/// Rows per parallel work item. Fixed (not derived from the thread count) so that every
-/// reduction sums the same partial sums in the same order for any number of threads.
-pub(crate) const BAND: usize = 8;
-
-/// Grids with fewer cells than this are processed on the calling thread (same result).
-/// Low enough that level 1 of a 256² region (131² cells) runs in parallel: measured A/B
-/// (same process, alternating, best of 40, 2 cores under load) 48k → 12k cells made the
-/// 256² and 511² blends 3–4% faster; 4k was no better.
-const PARALLEL_CELLS: usize = 12 * 1024;
+use super::bands::{rows_mut, BAND, PARALLEL_CELLS};
+use super::cholesky::Cholesky;
+use super::pcg::Preconditioner;
 
 /// Coarsening stops once a level has at most this many unknowns; it is solved densely.
 const COARSEST: usize = 64;
@@ -288,8 +283,7 @@ fn galerkin_row(i: usize, j: usize, row_at: impl Fn(usize, usize) -> Option<[f32
 struct Coarsest {
     /// Grid index of each unknown.
     cells: Vec<usize>,
-    /// Lower-triangular factor, row-major `n × n`.
-    l: Vec<f64>,
+    factor: Cholesky,
 }
 
 impl Coarsest {
@@ -314,33 +308,15 @@ impl Coarsest {
         }
         // A singular coarse operator comes with consistent right-hand sides, and any solution
         // gives the same prolonged correction; the shift only makes the factor exist.
-        cholesky_in_place(&mut m, n, 1e-9 * dmax, 1e-12 * dmax);
-        Self { cells, l: m }
+        let factor = Cholesky::new(m, n, 1e-9 * dmax, 1e-12 * dmax);
+        Self { cells, factor }
     }
 
     fn solve<const L: usize>(&self, b: &[[f32; L]], x: &mut [[f32; L]]) {
-        let n = self.cells.len();
-        let mut y = vec![[0f64; L]; n];
-        for i in 0..n {
-            let mut s = b[self.cells[i]].map(f64::from);
-            for k in 0..i {
-                for c in 0..L {
-                    s[c] -= self.l[i * n + k] * y[k][c];
-                }
-            }
-            y[i] = s.map(|v| v / self.l[i * n + i]);
-        }
-        for i in (0..n).rev() {
-            let mut s = y[i];
-            for k in i + 1..n {
-                for c in 0..L {
-                    s[c] -= self.l[k * n + i] * y[k][c];
-                }
-            }
-            y[i] = s.map(|v| v / self.l[i * n + i]);
-        }
-        for (i, &p) in self.cells.iter().enumerate() {
-            x[p] = y[i].map(|v| v as f32);
+        let mut y: Vec<[f64; L]> = self.cells.iter().map(|&p| b[p].map(f64::from)).collect();
+        self.factor.solve(&mut y);
+        for (v, &p) in y.iter().zip(&self.cells) {
+            x[p] = v.map(|t| t as f32);
         }
     }
 }
@@ -475,8 +451,7 @@ impl Hierarchy {
             full_residual(lev, &xf, &bs[l - 1], &mut r);
             let mut e = vec![[0f32; L]; lev.h * lev.w];
             if l == 1 {
-                // Level 1 only smooths: measured, a V-cycle there bought no accuracy
-                // (2-iteration residuals 6.18e-5 vs 6.24e-5 on a 256² blend) and cost 8%.
+                // Level 1 only smooths: a V-cycle there buys no accuracy for its cost.
                 smooth(lev, &mut e, &r, true);
                 postsmooth(lev, &mut e, &r, false);
             } else {
@@ -516,6 +491,30 @@ impl Hierarchy {
         ws.b[l + 1] = bc;
         ws.x[l + 1] = xc;
         postsmooth(lev, x, b, false);
+    }
+}
+
+/// One V-cycle of a hierarchy as the preconditioner of [`super::pcg::pcg`], and full
+/// multigrid as its first guess.
+pub(crate) struct VCycle<'a, const L: usize> {
+    mg: &'a Hierarchy,
+    ws: Work<L>,
+}
+
+impl<'a, const L: usize> VCycle<'a, L> {
+    pub fn new(mg: &'a Hierarchy) -> Self {
+        Self { mg, ws: mg.work() }
+    }
+}
+
+impl<const L: usize> Preconditioner<f32, L> for VCycle<'_, L> {
+    fn apply(&mut self, r: &[[f32; L]], z: &mut [[f32; L]]) -> [f64; L] {
+        self.mg.vcycle(&mut self.ws, r, z)
+    }
+
+    fn first_guess(&mut self, b: &[[f32; L]], x: &mut [[f32; L]]) -> bool {
+        self.mg.full_multigrid(&mut self.ws, b, x);
+        true
     }
 }
 
@@ -738,19 +737,6 @@ fn bands_mut<T: Copy + Send + Sync, R: Send>(
         x.par_chunks_mut(BAND * w).enumerate().map(run).collect()
     } else {
         x.chunks_mut(BAND * w).enumerate().map(run).collect()
-    }
-}
-
-/// Calls `f(row, out_row)` for every row of `out`, in parallel on large grids.
-pub(crate) fn rows_mut<T: Send>(
-    out: &mut [T],
-    w: usize,
-    f: impl Fn(usize, &mut [T]) + Sync + Send,
-) {
-    if out.len() >= PARALLEL_CELLS {
-        out.par_chunks_mut(w).enumerate().for_each(|(y, r)| f(y, r));
-    } else {
-        out.chunks_mut(w).enumerate().for_each(|(y, r)| f(y, r));
     }
 }
 
@@ -1055,44 +1041,6 @@ fn prolong_add<const L: usize>(fine: &Level, coarse: &Level, xc: &[[f32; L]], xf
     });
 }
 
-/// Dense Cholesky factorisation of the row-major `n × n` matrix `m`, in place (the lower
-/// triangle becomes `L`). `shift` is added to the diagonal first and pivots are floored at
-/// `floor`, so singular but consistent coarse systems still factor.
-///
-/// Returns the profile: `first[i]`, the first column of row `i` that is not zero. `L` has
-/// the profile of the matrix (fill-in stays inside it), so only entries inside it are
-/// computed and read: for a grid operator in row-major order, whose band is a few grid rows
-/// wide, that is `O(n b²)` instead of `O(n³)`. The terms skipped are exact zeros, so the
-/// factor is the same as the full loop's.
-pub(crate) fn cholesky_in_place(m: &mut [f64], n: usize, shift: f64, floor: f64) -> Vec<usize> {
-    let first: Vec<usize> = (0..n)
-        .map(|i| (0..i).find(|&j| m[i * n + j] != 0.0).unwrap_or(i))
-        .collect();
-    for i in 0..n {
-        m[i * n + i] += shift;
-    }
-    for j in 0..n {
-        let fj = first[j];
-        let mut d = m[j * n + j];
-        for k in fj..j {
-            d -= m[j * n + k] * m[j * n + k];
-        }
-        let d = d.max(floor).sqrt();
-        m[j * n + j] = d;
-        for i in j + 1..n {
-            if first[i] > j {
-                continue; // outside the profile: stays 0
-            }
-            let mut s = m[i * n + j];
-            for k in first[i].max(fj)..j {
-                s -= m[i * n + k] * m[j * n + k];
-            }
-            m[i * n + j] = s / d;
-        }
-    }
-    first
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1214,64 +1162,5 @@ mod tests {
         let (a, b) = (dot(&v, &mu), dot(&u, &mv));
         assert!((a - b).abs() < 1e-4 * a.abs().max(b.abs()), "{a} vs {b}");
         assert!(dot(&u, &mu) > 0.0);
-    }
-
-    /// The profile-aware factor equals the textbook full-loop factor, bit for bit, on banded
-    /// matrices with ragged profiles (a grid operator with some unknowns removed).
-    #[test]
-    fn profile_cholesky_equals_the_full_loop() {
-        fn full(m: &mut [f64], n: usize, shift: f64, floor: f64) {
-            for i in 0..n {
-                m[i * n + i] += shift;
-            }
-            for j in 0..n {
-                let mut d = m[j * n + j];
-                for k in 0..j {
-                    d -= m[j * n + k] * m[j * n + k];
-                }
-                let d = d.max(floor).sqrt();
-                m[j * n + j] = d;
-                for i in j + 1..n {
-                    let mut s = m[i * n + j];
-                    for k in 0..j {
-                        s -= m[i * n + k] * m[j * n + k];
-                    }
-                    m[i * n + j] = s / d;
-                }
-            }
-        }
-        let mut rng = crate::rng::Rng::keyed(5, 0, 0);
-        for &(h, w) in &[(6usize, 7usize), (9, 4), (12, 12)] {
-            // A 5-point Laplacian plus a diagonal, with random cells dropped.
-            let keep: Vec<usize> = (0..h * w).filter(|_| rng.below(5) != 0).collect();
-            let n = keep.len();
-            let mut m = vec![0f64; n * n];
-            for (i, &p) in keep.iter().enumerate() {
-                m[i * n + i] = 4.5 + rng.below(100) as f64 / 100.0;
-                for (j, &q) in keep.iter().enumerate() {
-                    let (dy, dx) = ((p / w).abs_diff(q / w), (p % w).abs_diff(q % w));
-                    if dy + dx == 1 {
-                        m[i * n + j] = -1.0;
-                    }
-                }
-            }
-            let mut a = m.clone();
-            let first = cholesky_in_place(&mut a, n, 1e-9, 1e-12);
-            full(&mut m, n, 1e-9, 1e-12);
-            for i in 0..n {
-                assert!(first[i] <= i);
-                for j in 0..=i {
-                    assert_eq!(
-                        a[i * n + j].to_bits(),
-                        m[i * n + j].to_bits(),
-                        "L[{i}][{j}]"
-                    );
-                }
-            }
-            assert!(
-                first.iter().enumerate().any(|(i, &f)| f > 0 && f < i),
-                "a ragged profile"
-            );
-        }
     }
 }
