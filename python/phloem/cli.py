@@ -225,9 +225,6 @@ def _bark_targets(args: argparse.Namespace) -> dict[str, Path]:
     return files
 
 
-_ROTATIONS: dict[str, bark.Rotations] = {"half": "half", "all": True, "none": False}
-
-
 def _cmd_bark(args: argparse.Namespace) -> None:
     extra = _bark_targets(args)
     _preflight(args, list(extra.values()))
@@ -253,19 +250,19 @@ def _cmd_bark(args: argparse.Namespace) -> None:
         lambda bar: bark.generate(
             photo,
             args.size,
-            labels=args.labels,
+            n_labels=args.labels,
             height_map=hm,
             labels_in=lab_in,
             labels_out=lab_out,
             method=args.method,
-            rotations=_ROTATIONS[args.rotations],
+            rotations=args.rotations,
             edge_label=args.edge_label,
             tileable=args.tileable,
             seed=args.seed,
             stand_in_weight=None if args.strict_labels else args.stand_in_weight,
             threads=args.threads,
             progress=bar,
-            return_intermediates=True,
+            full_output=True,
         ),
     )
     written = {role: str(p) for role, p in extra.items()}
