@@ -27,21 +27,21 @@ bench:  ## Rust criterion benches and Python benchmarks
 	cargo bench -p phloem-core --bench shapes
 	cargo bench -p phloem-core --bench tbn
 	cargo bench -p phloem-core --bench mvc
-	pytest benches/bench_patch.py benches/bench_seams.py benches/bench_blend.py benches/bench_shapes.py benches/bench_tbn.py benches/bench_bark.py benches/bench_trees.py benches/bench_warp.py benches/bench_tree_variations.py benches/bench_branching_structure.py benches/bench_branching_trace.py benches/bench_branching_image.py --benchmark-enable --benchmark-only
+	pytest benches/python --benchmark-enable --benchmark-only
 
 peers:  ## side-by-side runs against PyPatchMatch, resynthesizer, texture-synthesis
-	python benches/peers.py
+	python benches/peers/peers.py
 
 sheet:  ## contact sheets of the texture, graph-cut, shape, bark and tree jobs (out/*_sheet.png)
-	python benches/sheet_texture.py out/texture_sheet.png
-	python benches/sheet_seams.py out/seams_sheet.png
-	python benches/sheet_bark.py out/bark_sheet.png
-	python benches/sheet_shapes.py out/shapes_sheet.png
-	python benches/sheet_by_numbers.py out/by_numbers_sheet.png
-	python benches/sheet_trees.py out/trees_sheet.png
-	python benches/sheet_tree_variations.py out/tree_variations_sheet.png
-	python benches/sheet_branching_trace.py --out out/branching_trace_sheet.png
-	python benches/sheet_branching_image.py --out out/branching_image_sheet.png
-	python benches/sheet_branching.py out/branching_sheet.png
+	python -m benches.sheets.sheet_texture out/texture_sheet.png
+	python -m benches.sheets.sheet_seams out/seams_sheet.png
+	python -m benches.sheets.sheet_bark out/bark_sheet.png
+	python -m benches.sheets.sheet_shapes out/shapes_sheet.png
+	python -m benches.sheets.sheet_by_numbers out/by_numbers_sheet.png
+	python -m benches.sheets.sheet_trees out/trees_sheet.png
+	python -m benches.sheets.sheet_tree_variations out/tree_variations_sheet.png
+	python -m benches.sheets.sheet_branching_trace --out out/branching_trace_sheet.png
+	python -m benches.sheets.sheet_branching_image --out out/branching_image_sheet.png
+	python -m benches.sheets.sheet_branching out/branching_sheet.png
 
 .PHONY: help install dev test lint bench peers sheet

@@ -12,39 +12,14 @@ import pytest
 import phloem
 from phloem.branching import Branch, Skeleton, fragments, rectify, render, rigid_align, unrectify
 from phloem.branching.image import _dense, _displacement, _in_order, _match_borders
+from phloem.testing import channel_scene as _scene
+from phloem.testing import longest_path as _longest_path
 from phloem.testing import shared_file
+from phloem.testing import wavy_branch as _wavy
 
 
 def _rot(a: float) -> np.ndarray:
     return np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
-
-
-def _wavy(
-    start: tuple[float, float],
-    heading: float,
-    length: float,
-    r: tuple[float, float],
-    *,
-    phase: float = 0.0,
-    amp: float = 0.3,
-    parent: tuple[int, int] | None = None,
-) -> Branch:
-    n = int(length / 3) + 1
-    s = np.arange(n) * 3.0
-    head = heading + amp * np.sin(2 * math.pi * s / 90 + phase)
-    d = np.stack([np.cos(head), np.sin(head)], 1) * 3.0
-    pts = np.vstack([[start], start + np.cumsum(d[:-1], 0)])
-    return Branch(pts, np.linspace(r[0], r[1], n), parent)
-
-
-def _scene(seed: int = 0) -> tuple[np.ndarray, Skeleton]:
-    """A grey textured picture with a dark branching channel drawn along a known skeleton."""
-    rng = np.random.default_rng(seed)
-    main = _wavy((8, 60), 0.05, 210, (4.0, 3.0), phase=1.0)
-    child = _wavy(tuple(main.points[30]), 0.9, 60, (3.0, 2.0), phase=0.0, amp=0.2, parent=(0, 30))
-    sk = Skeleton([main, child], (128, 224))
-    img = 0.7 + 0.05 * cv2.GaussianBlur(rng.normal(size=sk.shape).astype(np.float32), (0, 0), 1.0) / 0.2
-    return np.clip(np.where(sk.mask(), 0.15 + 0.03 * img, img), 0, 1).astype(np.float32), sk
 
 
 def test_rigid_align_is_exact_on_rotated_copies() -> None:
@@ -372,35 +347,6 @@ def test_perspective_rectify_render_unrectify_round_trip() -> None:
     assert float(np.abs(back[..., 0] - img)[m].mean()) < 0.05
     with pytest.raises(ValueError, match="homography"):
         rectify(img, sk, np.zeros((3, 3)))
-
-
-def _longest_path(mask: np.ndarray) -> np.ndarray:
-    """(row, col) pixels of the longest path of the skeleton of a mask (two breadth-first sweeps)."""
-    from collections import deque
-
-    from skimage.morphology import skeletonize
-
-    pts = {(int(y), int(x)) for y, x in np.argwhere(skeletonize(mask))}
-
-    def sweep(start: tuple[int, int]) -> tuple[tuple[int, int], dict[tuple[int, int], tuple[int, int] | None]]:
-        prev: dict[tuple[int, int], tuple[int, int] | None] = {start: None}
-        q, last = deque([start]), start
-        while q:
-            last = u = q.popleft()
-            for dy in (-1, 0, 1):
-                for dx in (-1, 0, 1):
-                    v = (u[0] + dy, u[1] + dx)
-                    if v in pts and v not in prev:
-                        prev[v] = u
-                        q.append(v)
-        return last, prev
-
-    a, _ = sweep(min(pts))
-    b, prev = sweep(a)
-    path = [b]
-    while (p := prev[path[-1]]) is not None:
-        path.append(p)
-    return np.array(path[::-1], float)
 
 
 @pytest.mark.shared

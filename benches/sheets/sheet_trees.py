@@ -1,6 +1,6 @@
 """Contact sheet of the tree preprocessing: atlas -> split trees -> normalised trees with overlays.
 
-    python benches/sheet_trees.py OUT.png [--per-atlas 5] [--tile 256]
+    python -m benches.sheets.sheet_trees OUT.png [--per-atlas 5] [--tile 256]
 
 Each row is one FlightGear atlas of ../shared/data/trees (skipped when absent; the CC0 VisiTrees
 fir is used then): first the atlas over magenta with the boxes of the split trees, then a few of
@@ -20,8 +20,9 @@ import numpy as np
 
 import phloem
 from phloem import trees
+from phloem.testing import shared_path
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "trees"
+SHARED = shared_path("trees")
 ATLASES = (
     "cerrado-trees",
     "coniferous",

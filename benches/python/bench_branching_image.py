@@ -6,7 +6,7 @@ issue's goal: under 1 s on 2 cores. This runs a synthetic river scene of that si
 drawn from a known skeleton, see branching_scene.py) and reports the structure synthesis (the
 paper's IS column) and the automatic gap completion (§5.4) separately.
 
-    python benches/bench_branching_image.py [--threads N] [--profile] [--repeat R] [--complete]
+    python benches/python/bench_branching_image.py [--threads N] [--profile] [--repeat R] [--complete]
 
 Measured on the 2-core box with other jobs paused: 152 target fragments (mean radius 66.5 px)
 on a 4200x2400 canvas, structure synthesis 0.71-0.85 s on 2 threads (about 200 fragments/s;
@@ -23,14 +23,11 @@ from __future__ import annotations
 import argparse
 import cProfile
 import pstats
-import sys
 import time
-from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).parent))
-from branching_scene import picture, tree
 
 from phloem.branching import fragments, render
+from phloem.testing import river_picture as picture
+from phloem.testing import river_skeleton as tree
 
 
 def workload() -> tuple:

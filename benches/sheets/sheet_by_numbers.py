@@ -1,6 +1,6 @@
 """Contact sheet of texture-by-numbers: look at it before trusting any number.
 
-    python benches/sheet_by_numbers.py out/by_numbers_sheet.png
+    python -m benches.sheets.sheet_by_numbers out/by_numbers_sheet.png
 
 One row per thesis run in ``../shared/data/bark/thesis_runs`` (Laitoch 2018; skipped when the
 folder is absent): the photo ``ai``, its label map ``a``, the output label map ``b``, the
@@ -16,20 +16,19 @@ from __future__ import annotations
 
 import sys
 import time
-from pathlib import Path
 
 import cv2
 import numpy as np
 
 import phloem
 from phloem.metrics import label_agreement, label_histogram_distance, patch_coherence
+from phloem.testing import shared_path
 
-sys.path.insert(0, str(Path(__file__).parent))
-from bench_tbn import _labels as _gray_labels
-from sheet_texture import TILE, _fit, _label, write_sheet
-from sheet_texture import _field_colour as _sources
+from ..python.bench_tbn import _labels as _gray_labels
+from ._sheet import TILE, _fit, _label, write_sheet
+from ._sheet import _field_colour as _sources
 
-RUNS = Path(__file__).resolve().parents[2] / "shared" / "data" / "bark" / "thesis_runs"
+RUNS = shared_path("bark", "thesis_runs")
 
 
 def row(name: str, ai: np.ndarray, a: np.ndarray, b: np.ndarray, bi: np.ndarray | None) -> tuple[np.ndarray, str]:

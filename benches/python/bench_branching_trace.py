@@ -3,19 +3,17 @@
 The workload: :func:`phloem.branching.trace` from image to skeleton (ridge filter or mask,
 skeletonisation, spanning forest, longest-path decomposition). A synthetic 1024² binary tree
 always runs; with ``../shared/data/branching`` the table adds the real images with the arguments
-the contact sheet (``benches/sheet_branching_trace.py``) uses.
+the contact sheet (``benches/sheets/sheet_branching_trace.py``) uses.
 
-Run for figures:   pytest benches/bench_branching_trace.py --benchmark-enable --benchmark-only
-Table:             python benches/bench_branching_trace.py [--runs N]
+Run for figures:   pytest benches/python/bench_branching_trace.py --benchmark-enable --benchmark-only
+Table:             python benches/python/bench_branching_trace.py [--runs N]
 In the default test run the benchmark executes once (``--benchmark-disable``).
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import cv2
@@ -24,13 +22,12 @@ import pytest
 
 import phloem
 from phloem.branching import trace
+from phloem.testing import TRACE_SETTINGS as CASES
+from phloem.testing import shared_path
 
 pytestmark = pytest.mark.filterwarnings("ignore::pytest_benchmark.logger.PytestBenchmarkWarning")
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "branching"
-
-sys.path.insert(0, str(Path(__file__).parent))
-from branching_scene import TRACE_SETTINGS as CASES
+SHARED = shared_path("branching")
 
 
 def synthetic_tree(size: int = 1024, depth: int = 7, seed: int = 0) -> np.ndarray:

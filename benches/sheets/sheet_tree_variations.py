@@ -1,6 +1,6 @@
 """Contact sheet of tree variations (Argudo et al. 2017 §5) from the FlightGear library.
 
-    python benches/sheet_tree_variations.py OUT.png [--size 512] [--tile 160] [--count 16]
+    python -m benches.sheets.sheet_tree_variations OUT.png [--size 512] [--tile 160] [--count 16]
 
 Top: the paper's combination tables for six exemplars from different atlases: Fig. 13 (the
 combined contours as silhouettes, weights 2/3 row + 1/3 column below the diagonal and 1/3 + 2/3
@@ -14,15 +14,15 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 import cv2
 import numpy as np
 
 import phloem
 from phloem import trees
+from phloem.testing import shared_path
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "trees"
+SHARED = shared_path("trees")
 PICKS = [
     ("deciduous-alt", 2),
     ("coniferous", 0),

@@ -4,8 +4,8 @@ The issue's workload: from a bark photo to a 512×512 bark texture (goal: under 
 with the embedded Douglas-fir photo (256²) and, when ``../shared/data`` exists, the thesis'
 ``bark1`` photo (263×324).
 
-Run for figures:   pytest benches/bench_bark.py --benchmark-enable --benchmark-only
-Stage table:       python benches/bench_bark.py [--runs N] [--size 512]
+Run for figures:   pytest benches/python/bench_bark.py --benchmark-enable --benchmark-only
+Stage table:       python benches/python/bench_bark.py [--runs N] [--size 512]
 In the default test run the benchmarks execute once each (``--benchmark-disable``).
 """
 
@@ -13,17 +13,17 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import phloem
 from phloem import bark
+from phloem.testing import shared_path
 
 pytestmark = pytest.mark.filterwarnings("ignore::pytest_benchmark.logger.PytestBenchmarkWarning")
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "bark"
+SHARED = shared_path("bark")
 
 
 def photos() -> dict[str, np.ndarray]:

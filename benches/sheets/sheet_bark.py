@@ -7,7 +7,7 @@ own runs from the *same* inputs (photo ``ai``, labels ``a`` and ``b``): the thes
 ``bi`` next to phloem's texture-by-numbers, with patch coherence to the photo (lower is better)
 and the per-label colour histogram distance (lower is better) under each.
 
-    python benches/sheet_bark.py out/bark_sheet.png
+    python -m benches.sheets.sheet_bark out/bark_sheet.png
 """
 
 from __future__ import annotations
@@ -20,11 +20,11 @@ import numpy as np
 
 import phloem
 from phloem import bark
+from phloem.testing import shared_path
 
-sys.path.insert(0, str(Path(__file__).parent))
-from sheet_texture import ROOT, TILE, _fit, _label, write_sheet
+from ._sheet import TILE, _fit, _label, write_sheet
 
-SHARED = ROOT.parent / "shared" / "data" / "bark"
+SHARED = shared_path("bark")
 RUNS = ("bark1", "bark2", "eucalyptus", "eucap5")
 
 

@@ -1,6 +1,6 @@
 """Contact sheet of label-map synthesis: look at it before trusting any number.
 
-    python benches/sheet_shapes.py out/shapes_sheet.png
+    python -m benches.sheets.sheet_shapes out/shapes_sheet.png
 
 Bark row: the embedded bark | its 3-label map (k-means, as in bench_shapes.py) | phloem layered
 and joint outputs at 256² | joint at 512² (shown reduced) | joint at 256² without rotations
@@ -21,13 +21,13 @@ import numpy as np
 
 import phloem
 from phloem import shapes
+from phloem.testing import shared_path
 
-sys.path.insert(0, str(Path(__file__).parent))
-from bench_shapes import bark_labels
-from sheet_texture import ROOT, _fit, _label, write_sheet
+from ..python.bench_shapes import bark_labels
+from ._sheet import _fit, _label, write_sheet
 
 RUNS = ["bark1", "bark2", "eucalyptus", "eucap5"]
-SHARED = ROOT.parent / "shared" / "data" / "bark" / "thesis_runs"
+SHARED = shared_path("bark", "thesis_runs")
 
 
 def _gray(labels: np.ndarray) -> np.ndarray:

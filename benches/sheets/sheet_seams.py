@@ -1,6 +1,6 @@
 """Contact sheet of the graph-cut jobs: look at it before trusting any number.
 
-    python benches/sheet_seams.py out/seams_sheet.png
+    python -m benches.sheets.sheet_seams out/seams_sheet.png
 
 Quilting rows (bark, water, brick): exemplar | quilt with the Kwatra cost | its pieces
 (each exemplar offset one colour, seams in red) | quilt with the gradient cost | randomly
@@ -23,8 +23,7 @@ import numpy as np
 import phloem
 from phloem.seams import seam
 
-sys.path.insert(0, str(Path(__file__).parent))
-from sheet_texture import ROOT, TILE, _fit, _label, write_sheet
+from ._sheet import ROOT, TILE, _fit, _label, write_sheet
 
 
 def _edges(labels: np.ndarray, valid: np.ndarray | None = None) -> np.ndarray:

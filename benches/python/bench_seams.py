@@ -1,7 +1,7 @@
 """Graph-cut seams against PyMaxflow, side by side in one run.
 
-Figures (best of N, the two tools interleaved):  python benches/bench_seams.py [--runs 7]
-pytest-benchmark figures:  pytest benches/bench_seams.py --benchmark-enable --benchmark-only
+Figures (best of N, the two tools interleaved):  python benches/python/bench_seams.py [--runs 7]
+pytest-benchmark figures:  pytest benches/python/bench_seams.py --benchmark-enable --benchmark-only
 In the default test run every case executes once and checks that both tools agree.
 
 The workload is the issue's: a seam through a real overlap of H×W pixels (two different crops

@@ -1,7 +1,7 @@
 """Label-map synthesis (boundary-patch shape optimiser) on the embedded bark's label map.
 
-Figures (best of N):  python benches/bench_shapes.py [--runs 3]
-pytest-benchmark figures:  pytest benches/bench_shapes.py --benchmark-enable --benchmark-only
+Figures (best of N):  python benches/python/bench_shapes.py [--runs 3]
+pytest-benchmark figures:  pytest benches/python/bench_shapes.py --benchmark-enable --benchmark-only
 In the default test run every case executes once and checks each label keeps its area.
 
 The exemplar is the embedded Douglas-fir bark (256²), blurred and clustered by k-means into

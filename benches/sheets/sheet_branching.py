@@ -1,6 +1,6 @@
 """Contact sheet of the whole branching pipeline (Sibbing et al. 2010) on real examples.
 
-    python benches/sheet_branching.py OUT.png [--seed 1] [--tile 360]
+    python -m benches.sheets.sheet_branching OUT.png [--seed 1] [--tile 360]
 
 One row per example, each: the input, its traced skeleton (red), the grown skeleton (white),
 the new image, and the input (grey) / output (orange) angle and thickness histograms of Fig. 7.
@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import cv2
@@ -28,11 +27,11 @@ import numpy as np
 
 import phloem
 from phloem import branching as br
+from phloem.testing import shared_path
 
-sys.path.insert(0, str(Path(__file__).parent))
-from sheet_texture import _fit, _label, _rgb, write_sheet
+from ._sheet import _fit, _label, _rgb, write_sheet
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "branching"
+SHARED = shared_path("branching")
 
 
 def examples() -> list[tuple[str, np.ndarray, dict[str, Any], dict[str, Any]]]:

@@ -1,6 +1,6 @@
 """Python-side benchmarks of the issue's workloads (pytest-benchmark).
 
-Run for figures:   pytest benches/bench_patch.py --benchmark-enable --benchmark-only
+Run for figures:   pytest benches/python/bench_patch.py --benchmark-enable --benchmark-only
 In the default test run they execute once each (``--benchmark-disable``) as smoke tests.
 Peer comparisons (PyPatchMatch, resynthesizer, texture-synthesis) live in ``peers.py``.
 """
@@ -24,7 +24,7 @@ def _rgb512(img: np.ndarray) -> np.ndarray:
 def pair() -> tuple[np.ndarray, np.ndarray]:
     from pathlib import Path
 
-    water = phloem.io.read_image(Path(__file__).parents[1] / "tests" / "data" / "water.jpg")
+    water = phloem.io.read_image(Path(__file__).parents[2] / "tests" / "data" / "water.jpg")
     return _rgb512(phloem.data.bark()), _rgb512(water)
 
 

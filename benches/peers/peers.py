@@ -48,9 +48,9 @@ Usage
 -----
 ::
 
-    python3 benches/peers.py                 # full sizes (a few minutes on 2 cores)
-    python3 benches/peers.py --quick         # 256 images, 48 hole, fewer runs: a smoke test
-    python3 benches/peers.py --json out.json # also write every figure as JSON
+    python3 benches/peers/peers.py                 # full sizes (a few minutes on 2 cores)
+    python3 benches/peers/peers.py --quick         # 256 images, 48 hole, fewer runs: a smoke test
+    python3 benches/peers/peers.py --json out.json # also write every figure as JSON
 
 Timings are only comparable within one run on an otherwise idle machine.
 """
@@ -75,8 +75,9 @@ from typing import Any
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parent.parent
-SHARED = Path("/work/shared/data")
+REPO = Path(__file__).resolve().parents[2]
+# The optional real-image collection, found as phloem.testing.shared_data() finds it.
+SHARED = Path(os.environ.get("PHLOEM_SHARED_DATA") or REPO.parent / "shared" / "data")
 COFFEE = SHARED / "strokes" / "skimage_coffee.png"
 WATER = REPO / "tests" / "data" / "water.jpg"
 GRAVEL = SHARED / "textures" / "skimage_gravel.png"

@@ -10,8 +10,8 @@ When ``../shared/data/branching`` is present the table also grows input-sized st
 Jacksboro DEM, with their nodes, seconds and the L1 distances of the angle and thickness
 histograms to the input's.
 
-Run for figures:   pytest benches/bench_branching_structure.py --benchmark-enable --benchmark-only
-Table:             python benches/bench_branching_structure.py [--runs N] [--trees T] [--nodes N] [--no-real]
+Run for figures:   pytest benches/python/bench_branching_structure.py --benchmark-enable --benchmark-only
+Table:             python benches/python/bench_branching_structure.py [--runs N] [--trees T] [--nodes N] [--no-real]
 In the default test run the benchmark executes once (``--benchmark-disable``).
 """
 
@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 import pytest
 
@@ -33,6 +32,7 @@ from phloem.branching import (
     synthetic_skeleton,
     thickness_histogram,
 )
+from phloem.testing import shared_path
 
 pytestmark = pytest.mark.filterwarnings("ignore::pytest_benchmark.logger.PytestBenchmarkWarning")
 
@@ -83,7 +83,7 @@ def times(trees: int, nodes: int) -> dict[str, float]:
     return t
 
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "branching"
+SHARED = shared_path("branching")
 #: traced inputs of the issue: file, trace() settings
 REAL = {
     "retina": ("skimage_retina.jpg", {"kind": "dark", "channel": 1, "sigmas": (1.5, 3, 5)}),

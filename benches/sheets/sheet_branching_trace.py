@@ -1,6 +1,6 @@
 """Contact sheet of automatic skeleton tracing on the real branching images.
 
-    python benches/sheet_branching_trace.py --out OUT.png [--tile 640]
+    python -m benches.sheets.sheet_branching_trace --out OUT.png [--tile 640]
 
 Each tile is one image of ../shared/data/branching (skipped when absent) with the traced skeleton
 drawn over it: root branches in red, children in yellow, grandchildren and deeper in cyan, and
@@ -13,18 +13,16 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from pathlib import Path
 
 import cv2
 import numpy as np
 
 import phloem
 from phloem.branching import Branch, Skeleton, trace
+from phloem.testing import TRACE_SETTINGS as CASES
+from phloem.testing import shared_path
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "branching"
-
-sys.path.insert(0, str(Path(__file__).parent))
-from branching_scene import TRACE_SETTINGS as CASES
+SHARED = shared_path("branching")
 
 
 def depth(sk: Skeleton) -> list[int]:

@@ -1,6 +1,6 @@
 """Contact sheet of fragment-based image synthesis (Sibbing et al. 2010 §5): look before trusting numbers.
 
-    python benches/sheet_branching_image.py --out out/branching_image_sheet.png
+    python -m benches.sheets.sheet_branching_image --out out/branching_image_sheet.png
 
 Each row: input | input with the source skeleton (red) and its fragment disks (yellow) |
 target skeleton | structure synthesis (§5.1–5.3, gaps black) | final image with the gaps
@@ -19,17 +19,11 @@ pipeline, and without §5.3.
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).parent))
-from branching_scene import picture, tree
-from sheet_texture import ROOT, _fit, _label, _rgb, write_sheet
 
 import phloem
 from phloem.branching import (
@@ -44,6 +38,14 @@ from phloem.branching import (
     render,
     unrectify,
 )
+from phloem.testing import channel_scene as _scene
+from phloem.testing import longest_path as _longest_path
+from phloem.testing import river_picture as picture
+from phloem.testing import river_skeleton as tree
+from phloem.testing import shared_path
+from phloem.testing import wavy_branch as _wavy
+
+from ._sheet import _fit, _label, _rgb, write_sheet
 
 
 def _disks(img: np.ndarray, sk: Skeleton) -> np.ndarray:
@@ -92,9 +94,6 @@ def row(
 
 
 def vessels() -> tuple[np.ndarray, Skeleton, Skeleton]:
-    sys.path.insert(0, str(Path(__file__).parents[1] / "tests"))
-    from test_branching_image import _scene, _wavy
-
     img, sk = _scene()
     main = _wavy((20, 20), 0.5, 200, (4.0, 3.0), phase=3.0, amp=0.4)
     child = _wavy(tuple(main.points[40]), -0.6, 50, (3.0, 2.0), parent=(0, 40))
@@ -104,12 +103,9 @@ def vessels() -> tuple[np.ndarray, Skeleton, Skeleton]:
 def colville() -> tuple[np.ndarray, Skeleton, Skeleton] | None:
     """The Colville delta water mask (RivGraph, ../shared/data; never committed): one channel
     traced automatically (as in the shared test), painted along its 180°-turned copy."""
-    path = ROOT.parent / "shared" / "data" / "branching" / "rivgraph_colville_delta_mask.png"
+    path = shared_path("branching", "rivgraph_colville_delta_mask.png")
     if not path.exists():
         return None
-    sys.path.insert(0, str(ROOT / "tests"))
-    from test_branching_image import _longest_path
-
     m = phloem.io.read_image(path)
     water = (m[..., 0] if m.ndim == 3 else m) > 0.5
     y0, y1, x0, x1 = 540, 1000, 280, 420

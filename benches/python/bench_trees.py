@@ -4,8 +4,8 @@ The workload: one exemplar from RGBA cut-out to a :class:`phloem.trees.Tree` (no
 1024², segment, contour, pins, 2000-point resampling, 100-point simplified contour). A synthetic
 tree with a ragged crown always runs; with ``../shared/data`` the table adds FlightGear trees.
 
-Run for figures:   pytest benches/bench_trees.py --benchmark-enable --benchmark-only
-Stage table:       python benches/bench_trees.py [--runs N] [--size 1024]
+Run for figures:   pytest benches/python/bench_trees.py --benchmark-enable --benchmark-only
+Stage table:       python benches/python/bench_trees.py [--runs N] [--size 1024]
 In the default test run the benchmark executes once (``--benchmark-disable``).
 """
 
@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -21,10 +20,11 @@ import pytest
 
 import phloem
 from phloem import trees
+from phloem.testing import shared_path
 
 pytestmark = pytest.mark.filterwarnings("ignore::pytest_benchmark.logger.PytestBenchmarkWarning")
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "trees"
+SHARED = shared_path("trees")
 
 
 def synthetic_tree(seed: int = 0) -> np.ndarray:

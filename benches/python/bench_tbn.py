@@ -5,9 +5,9 @@ Workload: the thesis' bark1 run (263×324 exemplar ``ai.png``, 256×320 output f
 Laitoch 2018); the embedded bark with a threshold label map stands in when ``../shared`` is
 absent.
 
-Run for figures:   pytest benches/bench_tbn.py --benchmark-enable --benchmark-only
-Same-run table:    python benches/bench_tbn.py [--runs 5] [--threads 2]
-Pipeline scale:    python benches/bench_tbn.py --pipeline   (embedded bark, 2 labels, 512×512)
+Run for figures:   pytest benches/python/bench_tbn.py --benchmark-enable --benchmark-only
+Same-run table:    python benches/python/bench_tbn.py [--runs 5] [--threads 2]
+Pipeline scale:    python benches/python/bench_tbn.py --pipeline   (embedded bark, 2 labels, 512×512)
 In the default test run the benchmarks execute once each (``--benchmark-disable``).
 """
 
@@ -24,10 +24,11 @@ import pytest
 
 import phloem
 from phloem.metrics import label_histogram_distance, patch_coherence
+from phloem.testing import shared_path
 
 pytestmark = pytest.mark.filterwarnings("ignore::pytest_benchmark.logger.PytestBenchmarkWarning")
 
-RUN = Path(__file__).resolve().parents[2] / "shared" / "data" / "bark" / "thesis_runs" / "bark1"
+RUN = shared_path("bark", "thesis_runs", "bark1")
 
 
 def _labels(path: Path) -> np.ndarray:

@@ -3,8 +3,8 @@
 The issue's workload: a 256² or 511² region of the embedded bark photo (resized) blended into a
 1024² water photo (tests/data/water.jpg, resized), RGB, normal cloning.
 
-Run for figures:   pytest benches/bench_blend.py --benchmark-enable --benchmark-only
-Side-by-side:      python benches/bench_blend.py   (interleaved best-of-N, residuals, iterations)
+Run for figures:   pytest benches/python/bench_blend.py --benchmark-enable --benchmark-only
+Side-by-side:      python benches/python/bench_blend.py   (interleaved best-of-N, residuals, iterations)
 In the default test run the benchmarks execute once each (``--benchmark-disable``).
 
 ``cv2.seamlessClone`` takes 8-bit images and a ``center``: it zeroes the mask's one-pixel rim and
@@ -35,7 +35,7 @@ CENTER = (512, 512)  # (x, y) for cv2, the same as (row, col) here
 
 
 def workload(n: int) -> dict[str, Any]:
-    water = phloem.io.read_image(Path(__file__).parents[1] / "tests" / "data" / "water.jpg")[..., :3]
+    water = phloem.io.read_image(Path(__file__).parents[2] / "tests" / "data" / "water.jpg")[..., :3]
     dst = np.ascontiguousarray(cv2.resize(water, (1024, 1024), interpolation=cv2.INTER_CUBIC).clip(0, 1))
     bark = phloem.data.bark()[..., :3]
     src = np.ascontiguousarray(cv2.resize(bark, (n, n), interpolation=cv2.INTER_CUBIC).clip(0, 1))

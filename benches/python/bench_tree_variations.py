@@ -10,8 +10,8 @@ Workloads:
 The library: four synthetic ragged trees always; with ``../shared/data`` the FlightGear
 deciduous, coniferous and cerrado atlases (GPL, read from ../shared only).
 
-Run for figures:   pytest benches/bench_tree_variations.py --benchmark-enable --benchmark-only
-Table:             python benches/bench_tree_variations.py [--runs 7] [--count 100] [--threads 2]
+Run for figures:   pytest benches/python/bench_tree_variations.py --benchmark-enable --benchmark-only
+Table:             python benches/python/bench_tree_variations.py [--runs 7] [--count 100] [--threads 2]
 In the default test run the benchmark executes once (``--benchmark-disable``).
 """
 
@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -27,10 +26,11 @@ import pytest
 
 import phloem
 from phloem import trees
+from phloem.testing import shared_path
 
 pytestmark = pytest.mark.filterwarnings("ignore::pytest_benchmark.logger.PytestBenchmarkWarning")
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "trees"
+SHARED = shared_path("trees")
 PAPER_SECONDS = (8.0, 12.0)
 
 

@@ -5,8 +5,8 @@ bark photo and tests/data/water.jpg, resized, opaque), contours of M = 100 point
 simplified contour; concave, tree-crown-like), 2 threads. The paper reports 8–12 s per variation;
 the goal is under 0.1 s for two sources.
 
-Run for figures:   pytest benches/bench_warp.py --benchmark-enable --benchmark-only
-Quick timing:      python benches/bench_warp.py   (best of 7, 2 threads)
+Run for figures:   pytest benches/python/bench_warp.py --benchmark-enable --benchmark-only
+Quick timing:      python benches/python/bench_warp.py   (best of 7, 2 threads)
 In the default test run the benchmarks execute once each (``--benchmark-disable``).
 """
 
@@ -34,7 +34,7 @@ def crown(phase: float) -> np.ndarray:
 
 
 def workload() -> dict[str, Any]:
-    water = phloem.io.read_image(Path(__file__).parents[1] / "tests" / "data" / "water.jpg")[..., :3]
+    water = phloem.io.read_image(Path(__file__).parents[2] / "tests" / "data" / "water.jpg")[..., :3]
     bark = phloem.data.bark()[..., :3]
     srcs = []
     for img in (bark, water):
