@@ -95,7 +95,6 @@ def renamed(**old: str | OldFlag) -> Callable[[F], F]:
             result = func(*args, **kwargs)
             return result if legacy is None else legacy(result)
 
-        wrapper.__deprecated_spellings__ = dict(old)  # type: ignore[attr-defined]
         return cast(F, wrapper)
 
     return decorate
