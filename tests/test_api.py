@@ -148,3 +148,10 @@ def test_coherence_map_takes_a_generator(photo):
     a = metrics.coherence_map(photo[:24, :24], photo, seed=np.random.default_rng(5))
     b = metrics.coherence_map(photo[:24, :24], photo, seed=np.random.default_rng(5))
     np.testing.assert_array_equal(a, b)
+
+
+def test_shape_similarity_takes_threads():
+    yy, xx = np.mgrid[:40, :40]
+    a, b = yy > 2 * xx, (yy - 20) ** 2 + (xx - 18) ** 2 < 120
+    one = shapes.shape_similarity(a, b, threads=1)
+    assert shapes.shape_similarity(a, b, threads=2) == one == metrics.shape_similarity(a, b, threads=2)

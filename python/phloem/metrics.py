@@ -282,7 +282,9 @@ def label_agreement(image: Any, labels: Any, exemplar: Any, exemplar_labels: Any
     return float(np.mean(values[d.argmin(axis=-1)] == lab))
 
 
-def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: _shapes.Rotations = "all") -> float:
+def shape_similarity(
+    a: Any, b: Any, *, patch_size: int = 7, rotations: _shapes.Rotations = "all", threads: int | None = None
+) -> float:
     """Boundary-patch distance of two shapes or label maps (thesis Eq. 3.9); lower is better.
 
     The same function as :func:`phloem.shapes.shape_similarity`, listed here with the other
@@ -295,7 +297,7 @@ def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: _shapes.
     >>> phloem.metrics.shape_similarity(a, np.rot90(a))
     0.0
     """
-    return _shapes.shape_similarity(a, b, patch_size=patch_size, rotations=rotations)
+    return _shapes.shape_similarity(a, b, patch_size=patch_size, rotations=rotations, threads=threads)
 
 
 def chord_length(labels: Any) -> float:

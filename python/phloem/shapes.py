@@ -314,7 +314,9 @@ def synthesize_labels(
     return np.asarray(values.astype(np.int32)[out], dtype=np.int32)
 
 
-def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: Rotations = "all") -> float:
+def shape_similarity(
+    a: Any, b: Any, *, patch_size: int = 7, rotations: Rotations = "all", threads: int | None = None
+) -> float:
     """The shape distance of Rosenberger et al. (thesis Eq. 3.7–3.9); lower is more alike.
 
     For every boundary pixel of either map (a pixel with a 4-neighbour of another label), the
@@ -333,6 +335,8 @@ def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: Rotation
     rotations : {"all", "half", "none"}, optional
         Minimise over the four 90° rotations of the other map's patch (Eq. 3.7; ``"all"``,
         the default), none (``"none"``) or the half-turn only (``"half"``).
+    threads : int, optional
+        Worker threads (default: ``PHLOEM_NUM_THREADS`` or all cores); the same value for any.
 
     Returns
     -------
@@ -359,9 +363,14 @@ def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: Rotation
         raise ValueError(f"b: expected at most {MAX_LABELS} labels in a and b together, got {len(union)}")
     ua = np.searchsorted(union, va).astype(np.uint8)[la]
     ub = np.searchsorted(union, vb).astype(np.uint8)[lb]
-    return float(
-        _core.shape_similarity(np.ascontiguousarray(ua), np.ascontiguousarray(ub), patch_size=p, rotations=turns)
+    sim = _core.shape_similarity(
+        np.ascontiguousarray(ua),
+        np.ascontiguousarray(ub),
+        patch_size=p,
+        rotations=turns,
+        threads=check_threads(threads),
     )
+    return float(sim)
 
 
 def chord_length(labels: Any) -> float:
