@@ -69,7 +69,7 @@ def renamed(**old: str | OldFlag) -> Callable[[F], F]:
     """
 
     def decorate(func: F) -> F:
-        name = f"{func.__module__.removeprefix('phloem.')}.{func.__qualname__}"
+        name = f"{func.__module__.split('.')[1]}.{func.__qualname__}"  # the public path: trees.vary
 
         @functools.wraps(func)
         def wrapper(*args: Any, **kwargs: Any) -> Any:
