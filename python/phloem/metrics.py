@@ -8,7 +8,7 @@ repetition (how strongly an output repeats itself at a distance, which coherence
 a tiled copy of the exemplar is perfectly coherent), and the shape similarity of binary shapes and
 label maps (Rosenberger et al. 2009, thesis Eq. 3.9), and the angle and thickness histograms of
 branching structures with their L1 distance (Sibbing et al. 2010, Fig. 7; defined in
-:mod:`phloem.branching.structure` and re-exported here).
+:mod:`phloem.branching.histograms` and re-exported here).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from . import shapes as _shapes
 from ._api import Seed
 from ._validate import as_image, as_mask, check_patch_size
 from .bark import _check_denoise, _denoised_lab, _rgb8
-from .branching.structure import angle_histogram, histogram_distance, thickness_histogram
+from .branching.histograms import angle_histogram, histogram_distance, thickness_histogram
 
 __all__ = [
     "angle_histogram",

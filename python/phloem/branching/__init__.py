@@ -1,32 +1,31 @@
-"""Branching structures: Sibbing, Pick, Kobbelt 2010, *Image Synthesis for Branching Structures*.
+"""Branching structures: Sibbing, Pavić, Kobbelt 2010, *Image Synthesis for Branching Structures*.
 
 Learn the bending and branching of rivers, cracks, lightning, ridges or vessels from one
 example image with its skeleton, grow new skeletons with the same character, and compose a new
-image from fragments of the input.
+image from fragments of the input. One module per stage, named after what it holds:
+``skeleton`` and ``trace`` (§3, §4.1), ``histograms``, ``bending`` (§4.2), ``furcation`` (§4.3),
+``growth`` (§4.4, §4.5), ``fragments`` (§5.1), ``render`` (§5.2, §5.3), ``gaps`` (§5.4),
+``rectify`` (Fig. 8), ``pipeline`` (all of it); see ``docs/pipelines/branching.md``.
 
 References
 ----------
-.. [1] D. Sibbing, D. Pick, L. Kobbelt, "Image Synthesis for Branching Structures",
+.. [1] D. Sibbing, D. Pavić, L. Kobbelt, "Image Synthesis for Branching Structures",
    Computer Graphics Forum 29(7), 2010 (Pacific Graphics).
 """
 
 from __future__ import annotations
 
+from .bending import BendingModel, default_h
 from .figures import histogram_figure
-from .image import Fragment, RenderResult, fragments, rectify, render, rigid_align, unrectify
+from .fragments import Fragment, fragments, rigid_align
+from .furcation import FurcationModel
+from .growth import extend, grow
+from .histograms import angle_histogram, histogram_distance, thickness_histogram
 from .pipeline import SynthesisResult, fit_models, synthesize
+from .rectify import rectify, unrectify
+from .render import RenderResult, render
 from .skeleton import Branch, Skeleton, SkeletonError
-from .structure import (
-    BendingModel,
-    FurcationModel,
-    angle_histogram,
-    default_h,
-    extend,
-    grow,
-    histogram_distance,
-    synthetic_skeleton,
-    thickness_histogram,
-)
+from .synthetic import synthetic_skeleton
 from .trace import estimate_thickness, trace
 
 __all__ = [

@@ -6,8 +6,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from .histograms import angle_histogram, histogram_distance, thickness_histogram
 from .skeleton import Skeleton
-from .structure import angle_histogram, histogram_distance, thickness_histogram
 
 __all__ = ["histogram_figure"]
 

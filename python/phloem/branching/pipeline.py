@@ -10,9 +10,11 @@ from numpy.typing import NDArray
 
 from .._progress import Progress
 from .._validate import as_image, check_size
-from .image import RenderResult, render
+from .bending import BendingModel
+from .furcation import FurcationModel
+from .growth import grow
+from .render import RenderResult, render
 from .skeleton import Skeleton
-from .structure import BendingModel, FurcationModel, grow
 from .trace import trace
 
 __all__ = ["SynthesisResult", "fit_models", "synthesize"]

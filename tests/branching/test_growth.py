@@ -1,9 +1,10 @@
-"""Statistical structure synthesis (Sibbing et al. 2010, §4): bending, furcation, colonisation, guidance."""
+"""Growing structures (Sibbing et al. 2010, §4, §4.4, §4.5): histograms, colonisation, guidance, stop criteria, forests."""
 
 from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 
 import cv2
 import numpy as np
@@ -14,7 +15,6 @@ from phloem.branching import (
     Branch,
     FurcationModel,
     Skeleton,
-    SkeletonError,
     angle_histogram,
     extend,
     grow,
@@ -25,24 +25,6 @@ from phloem.branching import (
 from phloem.testing import shared_file
 
 H = 2.0
-
-
-def walk_branch(rng: np.random.Generator, n: int, sigma: float, start=(20.0, 150.0), heading=0.0) -> Branch:
-    """A random-walk branch with AR(1) turning angles of known spread and a tapering thickness."""
-    a = np.zeros(n - 2)
-    for i in range(n - 2):
-        a[i] = (0.5 * a[i - 1] if i else 0.0) + rng.normal(0.0, sigma)
-    thick = np.linspace(4.0, 1.5, n) * (1 + 0.05 * rng.standard_normal(n))
-    return Branch.from_angles(start, heading, a, thick, H)
-
-
-def forest(seed: int, sigma: float = 0.25, branches: int = 3) -> Skeleton:
-    """Several synthetic structures side by side, one skeleton (more data for the statistics)."""
-    return Skeleton.stack([synthetic_skeleton(seed + i, sigma=sigma, length=260.0) for i in range(branches)])
-
-
-def segments(sk: Skeleton) -> tuple[np.ndarray, np.ndarray]:
-    return np.vstack([b.points[:-1] for b in sk.branches]), np.vstack([b.points[1:] for b in sk.branches])
 
 
 def count_crossings(sk: Skeleton) -> int:
@@ -60,82 +42,13 @@ def count_crossings(sk: Skeleton) -> int:
     return total
 
 
-# -- bending model ---------------------------------------------------------------------------
+def segments(sk: Skeleton) -> tuple[np.ndarray, np.ndarray]:
+    return np.vstack([b.points[:-1] for b in sk.branches]), np.vstack([b.points[1:] for b in sk.branches])
 
 
-def test_c1_large_k_reproduces_the_source_branch():
-    # Fig. 3d: with c = 1 and a large k the model copies the source branch exactly.
-    src = walk_branch(np.random.default_rng(3), 120, 0.12)
-    sk = Skeleton([src], (300, 400))
-    model = BendingModel.fit(sk, h=H, k=20, m=15, c=1, omega_g=0.0)
-    out = grow(
-        model, shape=(300, 400), start=(*src.points[0], src.heading()), branch_length=src.length(), colonize=False
-    )
-    got, want = out.branches[0].angles(), model.source.branches[0].angles()
-    n = len(want) - model.m
-    assert len(got) >= n
-    np.testing.assert_allclose(got[:n], want[:n], atol=1e-9)
-    np.testing.assert_allclose(out.branches[0].points[: n + 2], model.source.branches[0].points[: n + 2], atol=1e-6)
-    # ... while allowing variability (Fig. 3b, c = 2) departs from it.
-    varied = BendingModel.fit(sk, h=H, k=20, m=15, c=2, omega_g=0.0)
-    loose = grow(
-        varied,
-        shape=(300, 400),
-        start=(*src.points[0], src.heading()),
-        branch_length=src.length(),
-        colonize=False,
-        seed=1,
-    )
-    la = loose.branches[0].angles()
-    assert not np.allclose(la[: min(n, len(la))], want[: min(n, len(la))], atol=1e-6)
-
-
-def test_quality_is_the_papers_dist_product():
-    src = walk_branch(np.random.default_rng(0), 40, 0.2)
-    model = BendingModel.fit(Skeleton([src]), h=H, k=3, m=2, omega_g=0.0)
-    i = 5
-    alpha, r = model.cand_hist_alpha[i], model.cand_hist_r[i] * H
-    q = np.exp(model.log_quality(alpha, r, np.zeros(16), np.zeros(16)))
-    assert q[i] == pytest.approx(4.0)  # dist = 2 for both at X = Y
-    j = 9
-    want = (1 / (np.linalg.norm(model.cand_hist_alpha[j] - alpha) + 1) + 1) * (
-        1 / (np.linalg.norm(model.cand_hist_r[j] - r / H) + 1) + 1
-    )
-    assert q[j] == pytest.approx(want)
-    assert (q > 1).all()
-
-
-def test_histogram_matching_raises_quality_of_helpful_candidates():
-    src = walk_branch(np.random.default_rng(1), 80, 0.3)
-    model = BendingModel.fit(Skeleton([src]), h=H)
-    alpha, r = model.cand_hist_alpha[0], model.cand_hist_r[0] * H
-    # A structure so far made only of angles from the input's most common bin: candidates that
-    # add to that bin worsen the match, the others improve it (thickness counts match the input).
-    top = int(np.argmax(model.hist_alpha))
-    ca = np.zeros(16)
-    ca[top] = 40.0
-    cr = 40.0 * model.hist_r
-    gain = model.log_quality(alpha, r, ca, cr) - model.log_quality(alpha, r, np.zeros(16), np.zeros(16))
-    in_top = model.inc_alpha[:, top]
-    assert (in_top == 0).any() and (in_top > 0).any()
-    assert gain[in_top == 0].min() > gain[in_top > 0].max() - 1e-9
-    assert gain[in_top == 0].mean() > gain[in_top == in_top.max()].mean()
-    # the n_t / m factor: the same histograms with more nodes weigh more
-    gain2 = model.log_quality(alpha, r, 2 * ca, 2 * cr) - model.log_quality(alpha, r, np.zeros(16), np.zeros(16))
-    assert np.abs(gain2).max() > np.abs(gain).max()
-
-
-@pytest.fixture(scope="module")
-def source() -> Skeleton:
-    return forest(10)
-
-
-@pytest.fixture(scope="module")
-def models(source: Skeleton) -> tuple[BendingModel, FurcationModel]:
-    return BendingModel.fit(source, h=H), FurcationModel.fit(source, h=H)
-
-
-def test_grown_histograms_match_the_input(source: Skeleton, models: tuple[BendingModel, FurcationModel]):
+def test_grown_histograms_match_the_input(
+    source: Skeleton, models: tuple[BendingModel, FurcationModel], forest: Callable[..., Skeleton]
+):
     bend, fur = models
     ra, rr = bend.range_alpha, bend.range_r
     # The bound comes from the input itself: the source holds three independent synthetic trees;
@@ -206,7 +119,7 @@ def test_colonisation_keeps_branches_apart(models: tuple[BendingModel, Furcation
     assert gap(True) > gap(False)
 
 
-def test_crossing_candidates_get_zero_quality():
+def test_crossing_candidates_get_zero_quality(walk_branch: Callable[..., Branch]):
     # A wall across the path: the branch must stop (or turn) rather than cross it.
     src = walk_branch(np.random.default_rng(4), 100, 0.05)
     model = BendingModel.fit(Skeleton([src]), h=H, m=4)
@@ -221,46 +134,6 @@ def test_crossing_candidates_get_zero_quality():
     assert out.branches[1].points[:, 0].max() < 60.0
 
 
-# -- furcation model -------------------------------------------------------------------------
-
-
-def auc(scores: np.ndarray, labels: np.ndarray) -> float:
-    pos, neg = scores[labels], scores[~labels]
-    return float(((pos[:, None] > neg[None]).sum() + 0.5 * (pos[:, None] == neg[None]).sum()) / (len(pos) * len(neg)))
-
-
-def test_svm_ranks_held_out_furcations_above_chance():
-    # furcations follow a learnable rule: the thickness drops by 30 % right after them
-    fur = FurcationModel.fit(forest(100, branches=4), h=H)
-    scores, labels = [], []
-    for seed in range(200, 204):
-        sk = synthetic_skeleton(seed, length=260.0, furcations=5).resample(H)
-        main = sk.branches[0]
-        lab = np.zeros(len(main), bool)
-        lab[[v for v, _ in sk.children()[0]]] = True
-        scores.append(fur.probabilities(main))
-        labels.append(lab)
-    s, lab = np.concatenate(scores), np.concatenate(labels)
-    assert lab.sum() >= 15
-    assert auc(s, lab) > 0.8
-    assert ((s >= 0) & (s <= 1)).all()
-
-
-def test_svm_training_needs_furcations():
-    sk = Skeleton([walk_branch(np.random.default_rng(0), 50, 0.2)])
-    with pytest.raises(ValueError, match="skeleton"):
-        FurcationModel.fit(sk, h=H)
-
-
-def test_pick_respects_min_spacing(models: tuple[BendingModel, FurcationModel]):
-    _, fur = models
-    main = synthetic_skeleton(7).resample(H).branches[0]
-    picks = fur.pick(main, 6, min_spacing=10)
-    assert len(picks) == len(set(picks)) >= 3
-    assert min(abs(a - b) for a in picks for b in picks if a != b) >= 10
-    assert all(0 < p < len(main) - 1 for p in picks)
-
-
 def test_children_copy_the_input_branching_angles(models: tuple[BendingModel, FurcationModel]):
     bend, fur = models
     out = grow(bend, fur, shape=(400, 400), seed=3, generations=2)
@@ -273,9 +146,6 @@ def test_children_copy_the_input_branching_angles(models: tuple[BendingModel, Fu
         d = parent.points[min(v + 1, len(parent) - 1)] - parent.points[max(v - 1, 0)]
         off = (b.heading() - math.atan2(-d[1], d[0]) + math.pi) % (2 * math.pi) - math.pi
         assert np.min(np.abs(fur.offsets - off)) < 1e-6
-
-
-# -- synthesis -------------------------------------------------------------------------------
 
 
 def test_grow_is_deterministic_for_a_seed(models: tuple[BendingModel, FurcationModel]):
@@ -301,7 +171,9 @@ def test_stop_criteria(models: tuple[BendingModel, FurcationModel]):
     assert calls and calls[-1][0] == calls[-1][1]
 
 
-def test_input_sized_forest(source: Skeleton, models: tuple[BendingModel, FurcationModel]):
+def test_input_sized_forest(
+    source: Skeleton, models: tuple[BendingModel, FurcationModel], forest: Callable[..., Skeleton]
+):
     bend, fur = models
     assert source.shape is not None
     L = bend.source.total_length()
@@ -384,9 +256,6 @@ def test_extend_appends_to_one_branch(models: tuple[BendingModel, FurcationModel
     assert all(a is b for j, (a, b) in enumerate(zip(out.branches, sk.branches)) if j != bi)
     assert count_crossings(out) == 0
     assert extend(sk, bi, bend, steps=5, seed=1) == out
-
-
-# -- real data -------------------------------------------------------------------------------
 
 
 def mask_to_skeleton(mask: np.ndarray, min_pixels: int = 10) -> Skeleton:
@@ -522,24 +391,8 @@ def test_river_mask_input_sized_structure_matches_the_input():
     check_input_sized(src, img.shape[:2])
 
 
-# -- errors ----------------------------------------------------------------------------------
-
-
-def test_bad_input_errors(models: tuple[BendingModel, FurcationModel]):
+def test_bad_input_errors(models: tuple[BendingModel, FurcationModel]) -> None:
     bend, fur = models
-    with pytest.raises(ValueError, match="skeleton: the skeleton has no branches"):
-        BendingModel.fit(Skeleton([]))
-    tiny = Skeleton([Branch([[0, 0], [2, 0], [4, 0], [6, 0]], 1.0)])
-    with pytest.raises(ValueError, match=r"skeleton: no branch is long enough for k \+ m"):
-        BendingModel.fit(tiny, h=H)
-    with pytest.raises(SkeletonError, match="NaN"):
-        Branch([[0, 0], [np.nan, 1]], 1.0)
-    with pytest.raises(ValueError, match="^h:"):
-        BendingModel.fit(tiny, h=float("nan"))
-    with pytest.raises(ValueError, match="^k:"):
-        BendingModel.fit(tiny, h=H, k=0)
-    with pytest.raises(TypeError, match="^skeleton:"):
-        BendingModel.fit([[0, 0], [1, 1]])  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="^start:"):
         grow(bend, shape=(100, 100), start=(np.nan, 3))
     with pytest.raises(ValueError, match="^start:"):
@@ -557,5 +410,3 @@ def test_bad_input_errors(models: tuple[BendingModel, FurcationModel]):
         extend(Skeleton([Branch([[0, 0], [5, 0]], 1.0)], (10, 10)), 3, bend)
     with pytest.raises(ValueError, match="^shape:"):
         extend(Skeleton([Branch([[0, 0], [5, 0]], 1.0)]), 0, bend)
-    with pytest.raises(ValueError, match="^a, b:"):
-        histogram_distance([1, 2], [1, 2, 3])

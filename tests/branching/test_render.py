@@ -1,84 +1,19 @@
-"""Fragment-based image synthesis of branching structures (Sibbing et al. 2010, §5)."""
+"""Fragment-based image synthesis (Sibbing et al. 2010, §5.2-§5.3): choice, deformation, seams, pastes, scheduling."""
 
 from __future__ import annotations
-
-import itertools
-import math
 
 import cv2
 import numpy as np
 import pytest
 
 import phloem
-from phloem.branching import Branch, Skeleton, fragments, rectify, render, rigid_align, unrectify
-from phloem.branching.image import _dense, _displacement, _in_order, _match_borders
-from phloem.testing import channel_scene as _scene
-from phloem.testing import longest_path as _longest_path
-from phloem.testing import shared_file
-from phloem.testing import wavy_branch as _wavy
-
-
-def _rot(a: float) -> np.ndarray:
-    return np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
-
-
-def test_rigid_align_is_exact_on_rotated_copies() -> None:
-    rng = np.random.default_rng(0)
-    for _ in range(20):
-        p = rng.normal(size=(9, 2)) * 20
-        a = float(rng.uniform(-math.pi, math.pi))
-        t0 = rng.normal(size=2) * 50
-        R, t = rigid_align(p, p @ _rot(a).T + t0)
-        assert np.allclose(R, _rot(a), atol=1e-12)
-        assert np.allclose(t, t0, atol=1e-9)
-        # With centres (the §5.2 form: centres coincide, only the rotation is fitted).
-        c = p[4]
-        R2, t2 = rigid_align(p, p @ _rot(a).T + t0, source_center=c, target_center=_rot(a) @ c + t0)
-        assert np.allclose(R2, _rot(a), atol=1e-12) and np.allclose(t2, t0, atol=1e-9)
-        assert abs(np.linalg.det(R)) == pytest.approx(1.0)
-
-
-def test_rigid_align_never_reflects() -> None:
-    p = np.array([[0.0, 0], [3, 0], [0, 1]])
-    R, _ = rigid_align(p, p * [1, -1])  # a mirror image: the best rotation, not the reflection
-    assert np.linalg.det(R) == pytest.approx(1.0)
-
-
-def test_fragments_cover_the_skeleton_with_lambda_spacing() -> None:
-    _, sk = _scene()
-    frs = fragments(None, sk, lam=0.75, radius_factor=3)
-    for bi, b in enumerate(sk.branches):
-        own = [f for f in frs if f.branch == bi and not f.furcation]
-        # Radius three times the interpolated thickness.
-        for f in own:
-            th = np.interp(
-                f.arc, np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(b.points, axis=0), axis=1))]), b.thickness
-            )
-            assert f.radius == pytest.approx(3 * th, rel=1e-9)
-        # Spacing λ (s_i + s_(i+1)) between consecutive centres (the last one may close the end early).
-        for f0, f1 in itertools.pairwise(own[:-1]):
-            d = float(np.linalg.norm(f1.center - f0.center))
-            assert d == pytest.approx(0.75 * (f0.radius + f1.radius), abs=0.6)
-        # Every point of the skeleton lies in some disk.
-        _, pts, _ = _dense(b)
-        cen = np.stack([f.center for f in own])
-        rad = np.array([f.radius for f in own])
-        assert (np.linalg.norm(pts[:, None] - cen[None], axis=2) <= rad[None]).any(axis=1).all()
-    fur = [f for f in frs if f.furcation]
-    assert len(fur) == 1 and np.allclose(fur[0].center, sk.branches[0].points[30])
-    assert fur[0].points.shape == (18, 2) and fur[0].thickness.shape == (18,)
-
-
-def test_fragments_spacing_follows_lambda() -> None:
-    sk = Skeleton([Branch([[0, 10], [400, 10]], 5.0)], (20, 401))
-    a = fragments(None, sk, lam=0.75)
-    b = fragments(None, sk, lam=0.5)
-    assert np.linalg.norm(a[1].center - a[0].center) == pytest.approx(22.5, abs=0.5)
-    assert np.linalg.norm(b[1].center - b[0].center) == pytest.approx(15.0, abs=0.5)
+from phloem.branching import Branch, Skeleton, render
+from phloem.branching.render import _displacement, _in_order
+from phloem.testing import channel_scene, longest_path, shared_file, wavy_branch
 
 
 def test_identity_target_reproduces_the_source_along_the_structure() -> None:
-    img, sk = _scene()
+    img, sk = channel_scene()
     out = render(img, sk, sk, seed=0, complete=False, full_output=True)
     near = cv2.dilate(sk.mask().astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool) & (out.labels >= 0)
     err = np.abs(out.image[..., 0] - img)[near]
@@ -94,10 +29,10 @@ def test_identity_target_reproduces_the_source_along_the_structure() -> None:
 
 
 def test_structure_pixels_come_from_the_source_structure() -> None:
-    img, sk = _scene()
+    img, sk = channel_scene()
     # A different target: rotated, bent main branch with one sub-branch elsewhere.
-    main = _wavy((20, 20), 0.5, 200, (4.0, 3.0), phase=3.0, amp=0.4)
-    child = _wavy(tuple(main.points[40]), -0.6, 50, (3.0, 2.0), parent=(0, 40))
+    main = wavy_branch((20, 20), 0.5, 200, (4.0, 3.0), phase=3.0, amp=0.4)
+    child = wavy_branch(tuple(main.points[40]), -0.6, 50, (3.0, 2.0), parent=(0, 40))
     tgt = Skeleton([main, child], (160, 200))
     out = render(img, sk, tgt, seed=3)
     m = tgt.mask()
@@ -111,8 +46,8 @@ def test_structure_pixels_come_from_the_source_structure() -> None:
 
 
 def test_render_is_deterministic_for_a_seed() -> None:
-    img, sk = _scene()
-    main = _wavy((20, 30), 0.2, 170, (4.0, 3.0), phase=2.0)
+    img, sk = channel_scene()
+    main = wavy_branch((20, 30), 0.2, 170, (4.0, 3.0), phase=2.0)
     tgt = Skeleton([main], (96, 200))
     a = render(img, sk, tgt, seed=7, full_output=True)
     b = render(img, sk, tgt, seed=7, full_output=True)
@@ -128,15 +63,15 @@ def test_concurrent_painting_equals_painting_in_order() -> None:
     the fragment map must still be those of painting them one by one. Three separate trees
     and two sub-branches give the scheduler real concurrency, and c = 4 makes every pick a
     random draw."""
-    img, sk = _scene()
+    img, sk = channel_scene()
     branches = []
     for k, (y, ang) in enumerate(((30.0, 0.1), (110.0, -0.1), (190.0, 0.05))):
-        main = _wavy((10, y), ang, 230, (4.0, 3.0), phase=k)
+        main = wavy_branch((10, y), ang, 230, (4.0, 3.0), phase=k)
         branches.append(main)
         if k != 1:
             turn = 0.9 - 1.8 * (k == 2)
             parent = (len(branches) - 1, 35)
-            branches.append(_wavy(tuple(main.points[35]), turn, 40, (3.0, 2.0), amp=0.1, parent=parent))
+            branches.append(wavy_branch(tuple(main.points[35]), turn, 40, (3.0, 2.0), amp=0.1, parent=parent))
     tgt = Skeleton(branches, (220, 260))
     runs = [render(img, sk, tgt, seed=3, c=4, complete=False, full_output=True, threads=t) for t in (1, 2, 3)]
     for r in runs[1:]:
@@ -144,52 +79,16 @@ def test_concurrent_painting_equals_painting_in_order() -> None:
         assert np.array_equal(r.choice, runs[0].choice) and np.array_equal(r.labels, runs[0].labels)
 
 
-def _texture(shape: tuple[int, int], seed: int) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    return (0.5 + 0.1 * cv2.GaussianBlur(rng.normal(size=shape).astype(np.float32), (0, 0), 2.0) / 0.15)[..., None]
-
-
-def test_match_borders_removes_a_lighting_step_and_keeps_the_gaps_gradients() -> None:
-    # Structure on the left, 0.1 brighter than the completion that continues its texture on
-    # the right: the Poisson solution with the step as Dirichlet data on one side and free
-    # borders elsewhere is the texture plus the constant 0.1.
-    tex = _texture((80, 90), 0)
-    hole = np.zeros((80, 90), bool)
-    hole[:, 20:] = True
-    canvas = np.where(hole[..., None], tex, tex + 0.1).astype(np.float32)
-    out = _match_borders(canvas, hole, np.float32([-1.0]), np.float32([2.0]), radius=10.0, threads=1)
-    assert np.array_equal(out[~hole], canvas[~hole])
-    corr = (out - canvas)[..., 0][hole]
-    assert abs(float(corr.mean()) - 0.1) < 0.005 and float(np.abs(corr - 0.1).max()) < 0.01
-
-
-def test_match_borders_leaves_content_steps_alone() -> None:
-    # A white branch cut off at the structure's edge (rows 35-44) is content, not lighting:
-    # away from it the dark completion must not be brightened. A border that is all large
-    # steps (a white structure) gets no correction at all.
-    hole = np.zeros((80, 90), bool)
-    hole[:, 20:] = True
-    canvas = np.zeros((80, 90, 1), np.float32)
-    canvas[35:45, :20] = 1.0
-    lo, hi = np.float32([0.0]), np.float32([1.0])
-    out = _match_borders(canvas, hole, lo, hi, radius=10.0, threads=1)
-    far = hole.copy()
-    far[25:55, :40] = False
-    assert float(np.abs(out[far]).max()) < 0.02
-    white = np.where(hole[..., None], 0.0, 1.0).astype(np.float32)
-    assert np.array_equal(_match_borders(white, hole, lo, hi, radius=10.0, threads=1), white)
-
-
 def test_fragments_reaching_outside_valid_are_not_used() -> None:
     # The right third of the input is "frame" (value 5, outside `valid`); the source branch
     # runs through it. No pixel of it may reach the output, and a `valid` that leaves no
     # fragment whole is an error naming it.
-    img, sk = _scene()
+    img, sk = channel_scene()
     img = img.copy()
     img[:, 150:] = 5.0
     valid = np.zeros(img.shape[:2], bool)
     valid[:, :150] = True
-    tgt = Skeleton([_wavy((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
+    tgt = Skeleton([wavy_branch((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
     assert float(render(img, sk, tgt, seed=1, complete=False).max()) > 4.0  # without `valid` it does
     out = render(img, sk, tgt, seed=1, valid=valid)
     assert float(out.max()) < 1.5
@@ -198,8 +97,8 @@ def test_fragments_reaching_outside_valid_are_not_used() -> None:
 
 
 def test_match_borders_default_is_off_for_masks_only() -> None:
-    img, sk = _scene()
-    tgt = Skeleton([_wavy((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
+    img, sk = channel_scene()
+    tgt = Skeleton([wavy_branch((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
     grey = [render(img, sk, tgt, seed=2, match_borders=m) for m in (None, True, False)]
     assert np.array_equal(grey[0], grey[1]) and not np.array_equal(grey[0], grey[2])
     mask = np.where(sk.mask(), 1.0, 0.0).astype(np.float32)
@@ -241,7 +140,7 @@ def test_in_order_waits_only_for_overlapping_fragments() -> None:
 
 
 def test_progress_reports_every_fragment() -> None:
-    img, sk = _scene()
+    img, sk = channel_scene()
     calls: list[tuple[int, int]] = []
     res = render(img, sk, sk, seed=0, complete=False, full_output=True, progress=lambda d, t: calls.append((d, t)))
     total = len(res.targets) + 1
@@ -250,7 +149,7 @@ def test_progress_reports_every_fragment() -> None:
 
 
 def test_stages_can_be_switched_off() -> None:
-    img, sk = _scene()
+    img, sk = channel_scene()
     plain = render(img, sk, sk, seed=0, deform=False, photometric=False, seams=False, complete=False)
     assert plain.shape == (128, 224, 1)
     assert np.isfinite(plain).all()
@@ -271,17 +170,8 @@ def test_displacement_field_hits_its_constraints() -> None:
     assert np.allclose(const, [3.0, -1.5], atol=1e-5)
 
 
-def test_docstring_examples() -> None:
-    import doctest
-
-    import phloem.branching.image as mod
-
-    res = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
-    assert res.attempted > 0 and res.failed == 0
-
-
 def test_bad_inputs_name_the_argument() -> None:
-    img, sk = _scene()
+    img, sk = channel_scene()
     with pytest.raises(ValueError, match="source_skeleton.*outside"):
         render(img[:50], sk, sk)
     with pytest.raises(ValueError, match="source_skeleton: the skeleton has no branches"):
@@ -298,55 +188,29 @@ def test_bad_inputs_name_the_argument() -> None:
         render(np.full((128, 224), np.nan), sk, sk)
     with pytest.raises(TypeError, match="target_skeleton"):
         render(img, sk, [[0, 0], [1, 1]])  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match="lam"):
-        fragments(img, sk, lam=1.5)
     with pytest.raises(ValueError, match="c:"):
         render(img, sk, sk, c=0)
-    with pytest.raises(ValueError, match="source_points: expected shape"):
-        rigid_align(np.zeros((3, 3)), np.zeros((3, 3)))
 
 
 def test_sub_branches_connect_to_their_parent() -> None:
     """Fig. 6: a sub-branch must run into its parent, not stop short at the banks the parent's
     fragments painted (before the fix, two of these four stopped short: 0.72 and 0.68)."""
     rng = np.random.default_rng(0)
-    main = _wavy((8, 90), 0.05, 300, (7.0, 5.0), phase=1.0)
-    kids = [_wavy(tuple(main.points[50]), 0.8, 90, (4.0, 3.0), amp=0.2, parent=(0, 50))]
-    kids.append(_wavy(tuple(main.points[75]), -0.9, 70, (4.0, 3.0), amp=0.2, parent=(0, 75)))
+    main = wavy_branch((8, 90), 0.05, 300, (7.0, 5.0), phase=1.0)
+    kids = [wavy_branch(tuple(main.points[50]), 0.8, 90, (4.0, 3.0), amp=0.2, parent=(0, 50))]
+    kids.append(wavy_branch(tuple(main.points[75]), -0.9, 70, (4.0, 3.0), amp=0.2, parent=(0, 75)))
     sk = Skeleton([main, *kids], (180, 320))
     tex = cv2.GaussianBlur(rng.normal(size=sk.shape).astype(np.float32), (0, 0), 1.0)
     img = np.clip(np.where(sk.mask(), 0.15 + 0.05 * tex, 0.7 + 0.1 * tex), 0, 1).astype(np.float32)
-    main2 = _wavy((10, 90), -0.05, 280, (7.0, 5.0), phase=2.0, amp=0.2)
+    main2 = wavy_branch((10, 90), -0.05, 280, (7.0, 5.0), phase=2.0, amp=0.2)
     for v, ang in ((25, -1.0), (40, 1.2), (30, -0.5), (50, 0.6)):
-        child = _wavy(tuple(main2.points[v]), ang, 70, (4.0, 3.0), amp=0.1, parent=(0, v))
+        child = wavy_branch(tuple(main2.points[v]), ang, 70, (4.0, 3.0), amp=0.1, parent=(0, v))
         out = render(img, sk, Skeleton([main2, child], (180, 320)), seed=1, complete=False)[..., 0]
         # The child's first three fragment radii, from the furcation outwards, must be dark.
         s = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(child.points, axis=0), axis=1))])
         pts = child.points[s < 3 * 3 * child.thickness[0]]
         vals = out[np.round(pts[:, 1]).astype(int), np.round(pts[:, 0]).astype(int)]
         assert float(vals.max()) < 0.35, (v, ang, vals.round(2))
-
-
-def test_perspective_rectify_render_unrectify_round_trip() -> None:
-    """Fig. 8: rectify a slanted view, synthesise in the frontal frame, distort back."""
-    img, sk = _scene()
-    h, w = sk.shape
-    src_q = np.float32([[0, 0], [w, 0], [w, h], [0, h]])
-    dst_q = np.float32([[20, 0], [w - 20, 10], [w, h], [0, h - 5]])
-    Hm = cv2.getPerspectiveTransform(src_q, dst_q)
-    rect, rsk, H2, valid = rectify(img, sk, Hm)
-    assert valid.shape == rect.shape[:2] and 0.5 < valid.mean() < 1.0
-    # The skeleton follows the homography, and the structure stays under it.
-    p = np.c_[sk.branches[0].points, np.ones(len(sk.branches[0]))] @ H2.T
-    assert np.allclose(rsk.branches[0].points, p[:, :2] / p[:, 2:], atol=1e-6)
-    core = rsk.mask() & (cv2.distanceTransform(rsk.mask().astype(np.uint8), cv2.DIST_L2, 3) > 1.5)
-    assert float(np.median(rect[..., 0][core])) < 0.3
-    out = render(rect, rsk, rsk, seed=0, complete=False)
-    back = unrectify(out, H2, sk.shape)
-    m = cv2.erode(sk.mask().astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-    assert float(np.abs(back[..., 0] - img)[m].mean()) < 0.05
-    with pytest.raises(ValueError, match="homography"):
-        rectify(img, sk, np.zeros((3, 3)))
 
 
 @pytest.mark.shared
@@ -358,7 +222,7 @@ def test_real_river_channel_along_a_rotated_skeleton() -> None:
     y0, y1, x0, x1 = 540, 1000, 280, 420
     _, lab, stats, _ = cv2.connectedComponentsWithStats(water[y0:y1, x0:x1].astype(np.uint8), connectivity=8)
     big = lab == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-    path = _longest_path(big)[::6]
+    path = longest_path(big)[::6]
     thick = cv2.distanceTransform(big.astype(np.uint8), cv2.DIST_L2, 5)[path[:, 0].astype(int), path[:, 1].astype(int)]
     xy = path[:, ::-1] + [x0, y0]
     assert len(xy) > 50

@@ -1,0 +1,79 @@
+"""Per-vertex elements of uniformly resampled branches (Sibbing et al. 2010, §4.1), shared by the
+statistical models: the turning angles ``α_i`` and thicknesses ``r_i``, the paper's ``dist``,
+histogram binning, headings, and the argument check of the model-fitting functions.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._validate import check_int
+from .skeleton import Branch, Skeleton
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+
+
+def _check_skeleton(skeleton: Any, name: str = "skeleton") -> Skeleton:
+    if not isinstance(skeleton, Skeleton):
+        raise TypeError(f"{name}: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
+    if not skeleton.branches:
+        raise ValueError(f"{name}: the skeleton has no branches")
+    return skeleton
+
+
+def _dist(x: F64, y: F64) -> F64:
+    """The paper's ``dist(X, Y) = 1 / (||X - Y|| + 1) + 1`` along the last axis (> 1, no singularity)."""
+    return np.asarray(1.0 / (np.linalg.norm(x - y, axis=-1) + 1.0) + 1.0, dtype=np.float64)
+
+
+def _elements(branch: Branch) -> tuple[F64, F64]:
+    """The per-vertex elements ``(α_i, r_i)`` at the interior vertices of a resampled branch."""
+    if len(branch) < 3:
+        return np.zeros(0), np.zeros(0)
+    return branch.angles(), branch.thickness[1:-1].copy()
+
+
+def _generations(skeleton: Skeleton) -> list[int]:
+    gen: list[int] = []
+    for b in skeleton.branches:
+        gen.append(0 if b.parent is None else gen[b.parent[0]] + 1)
+    return gen
+
+
+def _bin(values: F64, lo: float, hi: float, bins: int) -> I64:
+    t = (values - lo) / (hi - lo) * bins
+    return np.clip(np.floor(np.nan_to_num(t)), 0, bins - 1).astype(np.int64)
+
+
+def _range(values: F64) -> tuple[float, float]:
+    lo, hi = float(values.min()), float(values.max())
+    if hi - lo < 1e-12:
+        lo, hi = lo - 0.5, hi + 0.5
+    return lo, hi
+
+
+def _direction(theta: float | F64) -> F64:
+    """Unit step for a heading counter-clockwise on screen (``y`` grows downwards)."""
+    t = np.asarray(theta, dtype=np.float64)
+    return np.stack([np.cos(t), -np.sin(t)], axis=-1)
+
+
+def _wrap(a: float) -> float:
+    return float(math.pi - (math.pi - a) % (2 * math.pi))
+
+
+def _check_k(k: Any) -> int:
+    return check_int(k, "k", 1)
+
+
+def _tangent(branch: Branch, v: int) -> float:
+    """Heading of the branch at vertex ``v`` (mean of the adjacent edge directions)."""
+    p = branch.points
+    i0, i1 = max(v - 1, 0), min(v + 1, len(p) - 1)
+    d = p[i1] - p[i0]
+    return float(math.atan2(-d[1], d[0]))

@@ -1,0 +1,53 @@
+"""Small helpers the image-side modules (fragments, render, gaps, rectify) share: the skeleton
+check, row-wise masked copies, per-channel clipping, rotations and sub-pixel line coordinates.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .skeleton import Skeleton
+
+F64 = NDArray[np.float64]
+F32 = NDArray[np.float32]
+
+
+def _check_skeleton(skeleton: Any, name: str, shape: tuple[int, int] | None) -> Skeleton:
+    if not isinstance(skeleton, Skeleton):
+        raise TypeError(f"{name}: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
+    if not skeleton.branches:
+        raise ValueError(f"{name}: the skeleton has no branches")
+    for i, b in enumerate(skeleton.branches):
+        if not (np.isfinite(b.points).all() and np.isfinite(b.thickness).all()):
+            raise ValueError(f"{name}: branches[{i}] has NaN or infinite points or thickness")
+    if shape is not None:
+        skeleton.check_inside(shape, name)
+    return skeleton
+
+
+def _clip_channels(x: F32, lo: F32, hi: F32) -> F32:
+    """Clip each channel of ``x`` (H, W, C) to ``[lo[c], hi[c]]`` in place, one channel at a time
+    (one ``np.clip`` with ``(C,)`` bounds runs its inner loop over the channels: much slower)."""
+    for c in range(x.shape[2]):
+        np.clip(x[..., c], lo[c], hi[c], out=x[..., c])
+    return x
+
+
+def _paste(dst: F32, src: F32, mask: NDArray[np.bool_]) -> None:
+    """``dst[mask] = src[mask]`` for (H, W, C) images, through a mask repeated over the
+    channels so the copy runs along whole rows (faster than either masked indexing or a
+    broadcast ``where``)."""
+    np.copyto(dst, src, where=np.repeat(mask[..., None], dst.shape[2], axis=2))
+
+
+def _rot(theta: float) -> F64:
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+def _pt(p: F64) -> tuple[int, int]:
+    return round(p[0] * 16), round(p[1] * 16)

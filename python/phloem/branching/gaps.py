@@ -1,0 +1,262 @@
+"""The gaps between the painted branches (Sibbing, Pavić, Kobbelt 2010, §5.4): patch-based
+completion from the input's background only, then a gradient-domain paste of the completed gaps
+against the painted structure.
+
+:func:`fill_gaps` is the step :func:`~phloem.branching.render` runs after the fragments.
+:func:`_complete_background` is Wexler-style completion whose patches may come only from the
+``allowed`` pixels of the input (the source structure, dilated to the fragment radius, is
+excluded, so no pseudo-branches appear); :func:`_match_borders` shifts the completed gaps in the
+gradient domain so that they meet the structure without a colour step, as §5.3 does for the
+fragments.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import patch
+from ..blend import seamless
+from ..texture import WEXLER_GAMMA, WEXLER_SIGMA_PERCENTILE, _downsample, _fill_inward, _patch_masks, _upsample_field
+from ._pixels import F32, _clip_channels, _paste, _pt
+from .fragments import MIN_RADIUS
+from .skeleton import Skeleton
+
+__all__ = ["fill_gaps"]
+
+
+def _complete_background(
+    canvas: F32,
+    hole: NDArray[np.bool_],
+    source: F32,
+    allowed: NDArray[np.bool_],
+    *,
+    patch_size: int,
+    iterations: int,
+    seed: int,
+    threads: int | None,
+) -> F32:
+    """Wexler-style completion of ``hole`` in ``canvas`` whose patches come only from the
+    ``allowed`` pixels of ``source`` (the input's background), coarse to fine."""
+    p = patch_size
+    r = p // 2
+    H, W = canvas.shape[:2]
+    hs, ws = source.shape[:2]
+    gap = p
+    # One frame: the canvas above, the source below, a separator between them.
+    ww = max(W, ws)
+    frame = np.zeros((H + gap + hs, ww, canvas.shape[2]), np.float32)
+    frame[:H, :W] = canvas
+    frame[H + gap :, :ws] = source
+    fhole = np.zeros(frame.shape[:2], bool)
+    fhole[:H, :W] = hole
+    forbid = np.ones(frame.shape[:2], bool)  # pixels a source patch may not touch
+    forbid[H + gap :, :ws] = ~allowed
+    bg = source[allowed].mean(axis=0) if allowed.any() else source.reshape(-1, source.shape[2]).mean(axis=0)
+    frame[:H, :W][hole] = bg
+    outside = np.ones(frame.shape[:2], bool)
+    outside[:H, :W] = False
+    outside[H + gap :, :ws] = False
+    frame[outside] = bg
+
+    levels = 1
+    ys, xs = np.nonzero(hole)
+    extent = max(int(np.ptp(ys)) + 1, int(np.ptp(xs)) + 1)
+    # Gaps are a few fragment radii wide: enough levels that they are a few patches wide.
+    levels = max(1, min(5, int(math.log2(max(extent / (4 * p), 1.0))) + 1))
+    pyr: list[tuple[F32, NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]] = []
+    for lv in range(levels):
+        h, w = max(1, round(frame.shape[0] / 2**lv)), max(1, round(frame.shape[1] / 2**lv))
+        if lv == 0:
+            img_l, hole_l, forbid_l = frame, fhole, forbid
+        else:
+            img_l = _downsample(frame, (h, w))
+            hole_l = cv2.resize(fhole.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) > 0.001
+            forbid_l = cv2.resize(forbid.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) > 0.001
+        need, _ = _patch_masks(hole_l, p)
+        _, smask = _patch_masks(hole_l | forbid_l, p)
+        if min(h, w) < p or not smask.any():
+            break
+        pyr.append((img_l, hole_l, need, smask))
+    if not pyr:
+        raise ValueError(
+            "source_skeleton: the input image has no background region free of branches to complete the gaps from"
+        )
+    fieldv: NDArray[np.int32] | None = None
+    cur: F32 | None = None
+    for lv in range(len(pyr) - 1, -1, -1):
+        orig, hole_l, need, smask = pyr[lv]
+        depth = cv2.distanceTransform(hole_l.astype(np.uint8), cv2.DIST_L2, 3)
+        # Wexler's confidence γ^−d, with d capped: gaps between branches are hundreds of pixels
+        # wide and the weights deep inside underflowed float32 (pixels voted 0, black specks).
+        # Patches voting on one pixel have depths within a patch width, so the cap only
+        # flattens their relative weights where all are deep.
+        conf = np.power(WEXLER_GAMMA, -np.minimum(depth, 40.0)).astype(np.float32)
+        cur = orig.copy()
+        init = None
+        if fieldv is not None:
+            up = _upsample_field(fieldv, hole_l.shape, orig.shape[:2], r)
+            up[~need] = -1
+            bad = ~smask[np.maximum(up[..., 0], 0), np.maximum(up[..., 1], 0)] & need
+            up[bad] = -1
+            voted, wsum = patch.vote(orig, up, patch_size=p, threads=threads)
+            fill = hole_l & (wsum > 1e-30)
+            cur[fill] = voted[fill]
+            rest = hole_l & ~fill
+            if rest.any():
+                cur = _fill_inward(cur, rest)
+            init = up
+        # The upsampled half-resolution field already copies full-resolution pixels: no search
+        # at full resolution, half the iterations at half resolution (docs/pipelines/branching.md).
+        if lv == 0 and len(pyr) > 1:
+            n_it = 0
+        elif lv == 1 and len(pyr) > 2:
+            n_it = max(1, iterations // 2)
+        else:
+            n_it = iterations
+        for it in range(n_it):
+            # A warm-started search (from the previous iteration's field) needs one pass.
+            fieldv, dist = patch.nnf(
+                cur, cur, patch_size=p, iterations=3 if it == 0 else 1, levels=1,
+                seed=seed + 7919 * (lv * 64 + it + 1), source_mask=smask, target_mask=need,
+                init=init, threads=threads,
+            )  # fmt: skip
+            dd = dist[need]
+            sigma2 = max(float(np.percentile(dd, WEXLER_SIGMA_PERCENTILE)), 1e-8)
+            wvote = np.zeros(dist.shape, np.float32)
+            wvote[need] = np.exp(-dd / (2.0 * sigma2)) * conf[need]
+            voted, wsum = patch.vote(cur, fieldv, patch_size=p, weights=wvote, threads=threads)
+            fill = hole_l & (wsum > 1e-30)
+            cur[fill] = voted[fill]
+            init = fieldv
+    assert cur is not None
+    out: F32 = canvas.copy()
+    out[hole] = cur[:H, :W][hole]
+    return out
+
+
+def _smooth_masked(vals: F32, w: F32, sigma: float) -> tuple[F32, F32]:
+    """Normalised Gaussian convolution ``G * (w v) / G * w`` (0 where no weight is near) and
+    ``G * w``, computed at a resolution of about 4 pixels per ``sigma``."""
+    h, wd = w.shape
+    f = max(1, int(sigma / 4))
+    small = (max(1, -(-wd // f)), max(1, -(-h // f)))
+    num = cv2.resize(vals * w[..., None], small, interpolation=cv2.INTER_AREA).reshape(small[1], small[0], -1)
+    den = cv2.resize(w, small, interpolation=cv2.INTER_AREA)
+    num = cv2.GaussianBlur(num, (0, 0), sigma / f).reshape(small[1], small[0], -1)
+    den = cv2.GaussianBlur(den, (0, 0), sigma / f)
+    m = num / np.maximum(den, 1e-12)[..., None] * (den > 1e-6)[..., None]
+    out = cv2.resize(m, (wd, h), interpolation=cv2.INTER_LINEAR).reshape(h, wd, -1)
+    dens = cv2.resize(den, (wd, h), interpolation=cv2.INTER_LINEAR)
+    return out.astype(np.float32), dens.astype(np.float32)
+
+
+def _match_borders(
+    canvas: F32, hole: NDArray[np.bool_], lo: F32, hi: F32, *, radius: float, threads: int | None
+) -> F32:
+    """Gradient-domain paste of the completed gaps against the painted structure.
+
+    The completion copies background patches whose brightness need not match the fragments'
+    own background where the two meet (an unevenly lit photo, a terrain's large-scale slope),
+    and every fragment disk then shows as a lighter or darker circle. As for the fragments
+    themselves (§5.3), the gaps keep their gradients and are shifted to meet the structure
+    at their border: a Poisson solve over the gaps whose border values are the completion's
+    own (carried one pixel into the structure) plus the *smooth* part of the colour step
+    there. The step is smoothed over about a fragment radius (a local median), counting
+    small steps only (weight ``1 / (1 + (|step| / τ)²)`` with τ a quarter of the image's range): a lighting
+    difference is small and smooth, while a large step is content (a branch cut off at a
+    disk's edge, a river against dry land in a mask) and must not be smeared across the gap.
+    Where large steps make up most of the nearby border (a share of small ones below ¾),
+    the correction fades out, to nothing below a quarter.
+    """
+    known = (~hole).astype(np.float32)
+    k4 = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], np.float32)
+    cnt = cv2.filter2D(1.0 - known, -1, k4, borderType=cv2.BORDER_CONSTANT)
+    ring = ~hole & (cnt > 0)
+    if not ring.any():
+        return canvas
+    src = canvas.copy()
+    inner = np.where(hole[..., None], canvas, 0.0).astype(np.float32)
+    acc = cv2.filter2D(inner, -1, k4, borderType=cv2.BORDER_CONSTANT).reshape(canvas.shape)
+    src[ring] = acc[ring] / cnt[ring][:, None]
+    step = np.zeros_like(canvas)
+    step[ring] = canvas[ring] - src[ring]
+    tau = 0.25 * max(float(np.linalg.norm(hi - lo)), 1e-6)
+    w = np.zeros(hole.shape, np.float32)
+    w[ring] = 1.0 / (1.0 + (np.linalg.norm(step[ring], axis=1) / tau) ** 2)
+    smooth, den = _smooth_masked(step, w, radius)
+    _, den_all = _smooth_masked(step, ring.astype(np.float32), radius)
+    # A local median rather than a mean (iteratively reweighted, Weiszfeld): a border that is
+    # mostly matched with a few small steps (a mask's anti-aliased edges) gets no correction.
+    for _ in range(4):
+        dev = np.linalg.norm((step - smooth)[ring], axis=1)
+        wm = np.zeros_like(w)
+        wm[ring] = w[ring] / np.maximum(dev, 0.01 * tau)
+        smooth, _ = _smooth_masked(step, wm, radius)
+    # Share of small steps along the nearby border: none below a quarter, full above three.
+    share = den / np.maximum(den_all, 1e-12)
+    smooth *= np.clip((share - 0.25) * 2.0, 0.0, 1.0)[..., None]
+    dst = canvas.copy()
+    dst[ring] = src[ring] + smooth[ring]
+    out = seamless(src, dst, hole, (0, 0), tol=1e-4, threads=threads)
+    res: F32 = canvas.copy()
+    _paste(res, _clip_channels(out, lo, hi), hole)
+    return res
+
+
+def _background(skeleton: Skeleton, shape: tuple[int, int], factor: float) -> NDArray[np.bool_]:
+    """Pixels farther from the structure than ``factor ×`` its thickness (at least 2 px)."""
+    zone = np.zeros(shape, np.uint8)
+    for b in skeleton.branches:
+        for (a, bb), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
+            rr = max(factor * 0.5 * (r0 + r1), MIN_RADIUS)
+            cv2.line(zone, _pt(a), _pt(bb), 1, thickness=max(1, round(2 * rr)), lineType=cv2.LINE_8, shift=4)
+    return np.asarray(zone == 0)
+
+
+def fill_gaps(
+    canvas: F32,
+    filled: NDArray[np.bool_],
+    image: F32,
+    source_skeleton: Skeleton,
+    *,
+    valid: NDArray[np.bool_] | None,
+    radius_factor: float,
+    radius: float,
+    lo: F32,
+    hi: F32,
+    match_borders: bool | None,
+    photometric: bool,
+    patch_size: int,
+    iterations: int,
+    seed: int,
+    threads: int | None,
+) -> F32:
+    """Complete the pixels of ``canvas`` outside ``filled`` from the background of ``image`` (§5.4).
+
+    Patches come from ``image`` minus its structure widened to ``radius_factor`` times its
+    thickness, and only from inside ``valid``; with ``match_borders`` (None: on unless ``image``
+    is a two-level mask) and ``photometric`` the completed gaps are then pasted in the gradient
+    domain against the structure, the step smoothed over about ``radius``.
+    """
+    H0, W0 = image.shape[:2]
+    ok = np.ones((H0, W0), bool) if valid is None else valid
+    # Where the structure is so dense that less than a sixth of the image would be left (a
+    # retina), the structure is widened less, down to a quarter of its thickness.
+    if valid is not None:  # a patch may not straddle the border of the valid region
+        ok = cv2.erode(ok.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    for factor in (radius_factor, 2.0, 1.25):
+        allowed = _background(source_skeleton, (H0, W0), factor) & ok
+        if allowed.mean() >= 1 / 6:
+            break
+    canvas = _complete_background(
+        canvas, ~filled, image, allowed, patch_size=patch_size, iterations=iterations, seed=seed, threads=threads
+    )
+    if match_borders is None:  # a mask: (nearly) every pixel at its minimum or maximum
+        match_borders = float(((image == lo) | (image == hi)).all(axis=2).mean()) < 0.95
+    if photometric and match_borders:
+        canvas = _match_borders(canvas, ~filled, lo, hi, radius=radius, threads=threads)
+    return canvas

@@ -1,0 +1,648 @@
+"""Fragment-based image synthesis along a branching structure (Sibbing, Pavić, Kobbelt 2010, §5).
+
+Given an input image with its (source) skeleton and a new (target) skeleton, :func:`render`
+paints the target structure with disk-shaped fragments of the input:
+
+1. The source and the target skeleton are covered with fragments (:mod:`.fragments`, §5.1).
+2. Branch by branch (parents first) each target fragment takes the source fragment minimising
+   ``S + ω_C C`` (§5.2): ``S`` is the shape distance after the closed-form rigid alignment
+   (:func:`~phloem.branching.rigid_align`), ``C`` the colour difference with what is already
+   painted in the overlap; one of the ``c`` best is drawn with probability inversely
+   proportional to its objective.
+3. The chosen fragment is deformed by the smooth displacement field that carries its skeleton
+   samples onto the target's (the energy of :func:`phloem.blend.interpolate_field`, solved
+   directly on a grid of ~8 cells per radius and upsampled; scaled down where it would fold
+   the fragment), cut against the painted pixels along a minimum-cost seam
+   (:func:`phloem.seams.seam`) and pasted in the gradient domain with its colours held fixed
+   where it borders unpainted pixels (:func:`phloem.blend.seamless` with ``fixed``, §5.3).
+   Before a sub-branch starts, the disk of its furcation fragment is deleted from the output
+   and repainted by a furcation fragment (Fig. 6).
+4. The gaps between the branches are completed (§5.4, :mod:`.gaps`).
+
+Beyond the paper (each needed for clean junctions, see the tests):
+
+- a sub-branch crosses the banks its parent's fragments painted; there the seam must give
+  the sub-branch's own structure pixels to the new fragment, and the Poisson paste keeps
+  their colours (a colour seam cut the sub-branch off, the Poisson boundary faded it out);
+- source branch fragments that hold part of another branch (a sub-branch's start) are left
+  to the furcation fragments: pasted along a plain target branch they left stubs;
+- furcation fragments are also offered mirrored (``mirror=True``), since with rotations only
+  a target sub-branch on the other side of its parent may have no match;
+- the completed gaps are pasted in the gradient domain against the structure
+  (``match_borders``), as §5.3 does for the fragments.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
+from dataclasses import dataclass, field
+from typing import Any, Literal, overload
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import _core
+from .._progress import Progress
+from .._validate import as_image, as_mask, check_float, check_int, check_patch_size, check_seed, check_threads
+from ..blend import interpolate_field, seamless
+from ..seams import seam
+from ._pixels import F32, F64, _check_skeleton, _clip_channels, _paste, _pt, _rot
+from .fragments import DEFAULT_SAMPLES, Fragment, FragmentLibrary, check_params, cover, foreign_fragments
+from .gaps import fill_gaps
+from .skeleton import Skeleton
+
+__all__ = ["RenderResult", "render"]
+
+
+@dataclass
+class RenderResult:
+    """Everything :func:`render` computed.
+
+    Attributes
+    ----------
+    image : ndarray of float32, shape (H, W, C)
+        The synthesised image.
+    labels : ndarray of int32, shape (H, W)
+        Index into ``targets`` of the fragment each pixel came from; ``-1`` for pixels filled
+        by the gap completion.
+    sources, targets : list of Fragment
+        The source fragments and the target fragments, in synthesis order.
+    choice : ndarray of int64
+        ``sources`` index chosen for each target fragment.
+    mirrored : ndarray of bool
+        Whether that source fragment was used mirrored (furcations only, see ``mirror``).
+    structure : ndarray of float32, shape (H, W, C)
+        The image before gap completion (unpainted pixels are 0).
+    """
+
+    image: F32
+    labels: NDArray[np.int32]
+    sources: list[Fragment]
+    targets: list[Fragment]
+    choice: NDArray[np.int64]
+    mirrored: NDArray[np.bool_]
+    structure: F32 = field(repr=False)
+
+
+@overload
+def render(
+    image: Any,
+    source_skeleton: Skeleton,
+    target_skeleton: Skeleton,
+    *,
+    seed: int | np.random.Generator = ...,
+    c: int = ...,
+    omega_s: float = ...,
+    omega_c: float = ...,
+    lam: float = ...,
+    radius_factor: float = ...,
+    samples: int = ...,
+    deform: bool = ...,
+    photometric: bool = ...,
+    seams: bool = ...,
+    mirror: bool = ...,
+    complete: bool = ...,
+    match_borders: bool | None = ...,
+    valid: Any = ...,
+    patch_size: int = ...,
+    completion_iterations: int = ...,
+    threads: int | None = ...,
+    progress: Progress = ...,
+    full_output: Literal[False] = ...,
+) -> F32: ...
+@overload
+def render(
+    image: Any,
+    source_skeleton: Skeleton,
+    target_skeleton: Skeleton,
+    *,
+    seed: int | np.random.Generator = ...,
+    c: int = ...,
+    omega_s: float = ...,
+    omega_c: float = ...,
+    lam: float = ...,
+    radius_factor: float = ...,
+    samples: int = ...,
+    deform: bool = ...,
+    photometric: bool = ...,
+    seams: bool = ...,
+    mirror: bool = ...,
+    complete: bool = ...,
+    match_borders: bool | None = ...,
+    valid: Any = ...,
+    patch_size: int = ...,
+    completion_iterations: int = ...,
+    threads: int | None = ...,
+    progress: Progress = ...,
+    full_output: Literal[True],
+) -> RenderResult: ...
+
+
+def render(
+    image: Any,
+    source_skeleton: Skeleton,
+    target_skeleton: Skeleton,
+    *,
+    seed: int | np.random.Generator = 0,
+    c: int = 2,
+    omega_s: float = 2.0,
+    omega_c: float = 1.0,
+    lam: float = 0.75,
+    radius_factor: float = 3.0,
+    samples: int = DEFAULT_SAMPLES,
+    deform: bool = True,
+    photometric: bool = True,
+    seams: bool = True,
+    mirror: bool = True,
+    complete: bool = True,
+    match_borders: bool | None = None,
+    valid: Any = None,
+    patch_size: int = 7,
+    completion_iterations: int = 4,
+    threads: int | None = None,
+    progress: Progress = None,
+    full_output: bool = False,
+) -> F32 | RenderResult:
+    """Synthesise an image of ``target_skeleton`` from fragments of ``image`` (§5).
+
+    See the module docstring for the steps. The colour term is
+    ``C = k r² · mean_overlap ‖colour difference‖²`` (colours in [0, 1]): the paper's sum over
+    the overlap, rescaled so that it grows with the fragment like ``S`` does and a default
+    ``ω_C = 1`` balances the two on images of ordinary contrast. ``C`` is evaluated for the
+    ``max(4c, 8)`` fragments of smallest ``S`` only.
+
+    Parameters
+    ----------
+    image : (H, W[, C]) array_like
+        The input image; integer images are scaled to [0, 1].
+    source_skeleton : Skeleton
+        The structure in ``image`` (every vertex inside it).
+    target_skeleton : Skeleton
+        The structure to paint; its ``shape`` gives the output size.
+    seed : int or numpy.random.Generator, optional
+        Seed of the random choice among the ``c`` best and of the completion (default 0).
+    c : int, optional
+        Number of best candidates to choose from (default 2, as in §4.2; 1 is deterministic).
+    omega_s : float, optional
+        Weight ω_S of the thickness term of the shape distance (default 2).
+    omega_c : float, optional
+        Weight ω_C of colour consistency against shape (default 1).
+    lam : float, optional
+        Fragment spacing factor λ (default 0.75).
+    radius_factor : float, optional
+        Fragment radius over thickness (default 3; capped as in :func:`fragments`).
+    samples : int, optional
+        Samples ``k`` per skeleton segment of a fragment's shape (default 9).
+    deform : bool, optional
+        Deform fragments by the interpolated displacement field (default True).
+    photometric : bool, optional
+        Gradient-domain pasting with boundary constraints (default True).
+    seams : bool, optional
+        Graph-cut seams between overlapping fragments (default True).
+    mirror : bool, optional
+        Also offer every source furcation fragment mirrored (default True). An extension: the
+        paper aligns by rotation only, so with few source furcations a target sub-branch on the
+        other side of its parent finds no match and is painted with a stub on the wrong side.
+        ``False`` is the paper's behaviour.
+    complete : bool, optional
+        Fill the gaps between the branches (§5.4, default True); without it they stay 0.
+    match_borders : bool, optional
+        Shift the completed gaps in the gradient domain so that they meet the painted
+        structure without a colour step (only the smooth part of the step, made of small
+        steps: a branch cut off at a disk's edge is left alone). Without it every fragment
+        disk of an unevenly lit photo or a terrain shows as a lighter or darker circle.
+        Default (None): on, except for two-level images such as masks, which have no
+        lighting to match. Needs ``photometric``.
+    valid : (H, W) array_like of bool, optional
+        Where ``image`` shows real content (default everywhere), e.g. the photo inside the
+        frame of :func:`rectify` or a fundus photo's disc: only fragments that lie wholly
+        inside it are pasted, and the gap completion copies only from there.
+    patch_size : int, optional
+        Patch side of the gap completion (default 7, odd).
+    completion_iterations : int, optional
+        Search-and-vote iterations per pyramid level of the completion (default 4); the
+        full-resolution level copies pixels through the upsampled half-resolution field
+        without a search of its own.
+    threads : int, optional
+        Worker threads (default: all cores). Fragments that do not overlap are painted at
+        the same time, one per thread, each waiting only for the earlier fragments whose
+        crops meet its own, so the image is the same for any count. (Each fragment's seam and
+        Poisson solve runs on one thread: on crops of a few 10⁴ pixels more threads per
+        solve only add overhead.) The gap completion uses all of them.
+    progress : callable, optional
+        Called as ``progress(done, total)`` after each target fragment (and once at the end).
+    full_output : bool, optional
+        Return a :class:`RenderResult` (with the fragment map) instead of the image.
+
+    Returns
+    -------
+    image : (H, W, C) ndarray of float32, or RenderResult
+        ``H, W`` from ``target_skeleton.shape``; ``C`` as in ``image``.
+
+    References
+    ----------
+    .. [1] D. Sibbing, D. Pavić, L. Kobbelt, "Image Synthesis for Branching Structures",
+       Computer Graphics Forum 29(7), 2010, §5.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phloem.branching import Branch, Skeleton, render
+    >>> img = np.full((64, 96), 0.8, np.float32); img[29:35, :] = 0.1     # a dark horizontal river
+    >>> src = Skeleton([Branch([[2, 31.5], [93, 31.5]], 3.0)], (64, 96))
+    >>> tgt = Skeleton([Branch([[31.5, 2], [31.5, 61]], 3.0)], (64, 64))  # the same, vertical
+    >>> out = render(img, src, tgt, seed=0)
+    >>> out.shape, bool(out[30, 29:35].mean() < 0.3), bool(out[30, 5].mean() > 0.6)
+    ((64, 64, 1), True, True)
+    """
+    img = as_image(image, "image")
+    H0, W0 = img.shape[:2]
+    src_sk = _check_skeleton(source_skeleton, "source_skeleton", (H0, W0))
+    if not isinstance(target_skeleton, Skeleton):
+        raise TypeError(f"target_skeleton: expected a phloem.branching.Skeleton, got {type(target_skeleton).__name__}")
+    if target_skeleton.shape is None:
+        raise ValueError("target_skeleton: its shape (the output size) must be set")
+    tgt_sk = _check_skeleton(target_skeleton, "target_skeleton", target_skeleton.shape)
+    lam_f, rf, k = check_params(lam, radius_factor, samples)
+    c_n = check_int(c, "c", 1)
+    w_s = check_float(omega_s, "omega_s", 0.0)
+    w_c = check_float(omega_c, "omega_c", 0.0)
+    p = check_patch_size(patch_size)
+    c_iters = check_int(completion_iterations, "completion_iterations", 1)
+    s = check_seed(seed)
+    t = check_threads(threads)
+    rng = np.random.default_rng(s)
+    opts = _Options(c_n, w_s, w_c, k, deform, photometric, seams, n_eval=max(4 * c_n, 8))
+
+    ok = None if valid is None else as_mask(valid, "valid", (H0, W0))
+    sources, targets, lib = _cover_both(src_sk, tgt_sk, ok, lam_f, rf, k, mirror=mirror, keep=max(3, c_n))
+    painter = _Painter(img, tgt_sk, targets, lib, opts, draws=rng.random(len(targets)))
+    _in_order(painter.boxes, painter.paint, workers=t if t is not None else _core.default_threads(), progress=progress)
+
+    canvas = painter.canvas
+    structure = canvas.copy() if full_output else canvas
+    if complete and (~painter.filled).any():
+        canvas = fill_gaps(
+            canvas, painter.filled, img, src_sk, valid=ok, radius_factor=rf,
+            radius=float(np.median([g.radius for g in targets])), lo=painter.lo, hi=painter.hi,
+            match_borders=match_borders, photometric=photometric, patch_size=p, iterations=c_iters, seed=s, threads=t,
+        )  # fmt: skip
+    if progress is not None:
+        progress(len(targets) + 1, len(targets) + 1)
+    if full_output:
+        return RenderResult(canvas, painter.labels, sources, targets, painter.choice, painter.mirrored, structure)
+    return canvas
+
+
+@dataclass(frozen=True)
+class _Options:
+    """The checked options of the fragment stage."""
+
+    c: int  # candidates to draw from
+    omega_s: float
+    omega_c: float
+    k: int  # samples per skeleton segment of a shape
+    deform: bool
+    photometric: bool
+    seams: bool
+    n_eval: int  # candidates of smallest S whose colour term is evaluated
+
+
+def _cover_both(
+    source: Skeleton,
+    target: Skeleton,
+    valid: NDArray[np.bool_] | None,
+    lam: float,
+    rf: float,
+    k: int,
+    *,
+    mirror: bool,
+    keep: int,
+) -> tuple[list[Fragment], list[Fragment], FragmentLibrary]:
+    """Source fragments, target fragments in synthesis order, and the library of usable sources."""
+    sources = cover(source, lam, rf, k, order=False)
+    # Fragments that reach outside the valid region would paste its outside (a fundus
+    # photo's black frame) into the output.
+    outside = np.array([valid is not None and _reaches_out(f, valid) for f in sources], bool)
+    if all(outside[i] for i, f in enumerate(sources) if not f.furcation):
+        raise ValueError("valid: every source branch fragment reaches outside it; nothing is left to paint with")
+    # Without furcation fragments in the source a target furcation is painted by branch fragments.
+    furcations = any(f.furcation and not out for f, out in zip(sources, outside, strict=True))
+    targets = cover(target, lam, rf, k, order=True, furcations=furcations)
+    lib = FragmentLibrary(sources, mirror=mirror, exclude=foreign_fragments(source, sources, keep=keep) | outside)
+    return sources, targets, lib
+
+
+def _channel_range(img: F32) -> tuple[F32, F32]:
+    """Per-channel minimum and maximum (reducing over rows first, which is much faster)."""
+    H0, C = img.shape[0], img.shape[2]
+    lo = img.reshape(H0, -1).min(axis=0).reshape(-1, C).min(axis=0)
+    hi = img.reshape(H0, -1).max(axis=0).reshape(-1, C).max(axis=0)
+    return lo, hi
+
+
+class _Painter:
+    """The output while the target fragments are painted into it (§5.2-§5.3).
+
+    :meth:`paint` handles one fragment: choose its source (:meth:`_choose`), warp it onto the
+    target (:meth:`_warp`), cut it against the painted pixels (:meth:`_cut`) and paste it
+    (:meth:`_blend`). Fragment ``j`` reads and writes only inside ``boxes[j]``, so fragments
+    whose boxes do not meet can be painted at the same time (:func:`_in_order`).
+    """
+
+    def __init__(
+        self, image: F32, target: Skeleton, targets: list[Fragment], lib: FragmentLibrary, opts: _Options, draws: F64
+    ) -> None:
+        assert target.shape is not None
+        H, W = target.shape
+        self.image = image
+        self.targets = targets
+        self.lib = lib
+        self.opts = opts
+        # One uniform per fragment, drawn up front: the same pick whatever order they are painted in.
+        self.draws = draws
+        self.canvas = np.zeros((H, W, image.shape[2]), np.float32)
+        self.filled = np.zeros((H, W), bool)
+        self.labels = np.full((H, W), -1, np.int32)
+        # Which target branch's structure each pixel lies on, and which branch painted it: a
+        # sub-branch must cross its parent's already painted banks (Fig. 6), where a colour seam
+        # would cut it off and the Poisson boundary would fade it into the bank.
+        self.struct = _branch_map(target, (H, W))
+        self.owner = np.full((H, W), -1, np.int32)
+        self.choice = np.zeros(len(targets), np.int64)
+        self.mirrored = np.zeros(len(targets), bool)
+        self.lo, self.hi = _channel_range(image)
+        self.crops: list[tuple[slice, slice, NDArray[np.bool_], int, int]] = []
+        self.boxes = np.zeros((len(targets), 4), np.int64)
+        for j, g in enumerate(targets):
+            crop = _disk((H, W), g.center, g.radius)
+            self.crops.append(crop)
+            self.boxes[j] = crop[0].start, crop[0].stop, crop[1].start, crop[1].stop
+
+    def paint(self, j: int) -> None:
+        """Paint target fragment ``j``."""
+        g = self.targets[j]
+        ys, xs, disk, _, _ = self.crops[j]
+        # Colour consistency is measured against what is painted, including the parent's
+        # pixels a furcation fragment is about to replace: they are the best colour reference.
+        over = disk & self.filled[ys, xs]
+        if g.furcation:
+            # Fig. 6: the parent's fragments are deleted where the furcation fragment goes.
+            self.filled[ys, xs] &= ~disk
+        fill_c = self.filled[ys, xs]
+        e, theta = self._choose(j, over)
+        warped = self._warp(j, e, theta)
+        new = self._cut(j, warped, fill_c)
+        if not new.any():
+            return
+        self._blend(j, warped, new, fill_c)
+        self.filled[ys, xs] |= new
+        np.copyto(self.labels[ys, xs], j, where=new)
+        np.copyto(self.owner[ys, xs], g.branch, where=new)
+
+    def _choose(self, j: int, over: NDArray[np.bool_]) -> tuple[int, float]:
+        """The library entry and rotation for fragment ``j``: one of the ``c`` best by ``S + ω_C C``."""
+        g, lib, o = self.targets[j], self.lib, self.opts
+        idx, S, theta = lib.shape_distance(g, o.omega_s)
+        order = np.argsort(S, kind="stable")[: o.n_eval]
+        obj = S[order].copy()
+        if o.omega_c > 0 and over.any():
+            obj += self._colour_term(j, over, idx[order], theta[order])
+        best = np.argsort(obj, kind="stable")[: o.c]
+        wts = 1.0 / np.maximum(obj[best], 1e-9)
+        # Inverse-CDF draw from this fragment's own uniform.
+        cdf = np.cumsum(wts)
+        pick = int(best[min(int(np.searchsorted(cdf, self.draws[j] * cdf[-1], side="right")), len(best) - 1)])
+        cand = int(order[pick])
+        e = int(idx[cand])
+        self.choice[j] = int(lib.frag[e])
+        self.mirrored[j] = bool(lib.flip[e])
+        return e, float(theta[cand])
+
+    def _colour_term(self, j: int, over: NDArray[np.bool_], ents: NDArray[np.int64], thetas: F64) -> F64:
+        """``ω_C C`` of each candidate entry: the colour difference with the painted overlap."""
+        g, lib, o = self.targets[j], self.lib, self.opts
+        ys, xs, _, y0, x0 = self.crops[j]
+        oy, ox = np.nonzero(over)
+        step = max(1, int(math.sqrt(len(oy) / 400)))
+        oy, ox = oy[::step], ox[::step]
+        rel = np.stack([ox + x0 - g.center[0], oy + y0 - g.center[1]], axis=1)
+        painted = self.canvas[ys, xs][oy, ox]
+        # The overlap as seen through every candidate, sampled in one remap.
+        maps = np.stack([lib.to_source(int(e), float(a)) for e, a in zip(ents, thetas, strict=True)])
+        centres = np.stack([lib.frs[int(lib.frag[e])].center for e in ents])
+        # Written out: a stacked matmul calls BLAS (see render's threads), an einsum is slower.
+        rx, ry = rel[:, 0], rel[:, 1]
+        mx = maps[:, 0, 0, None] * rx + maps[:, 0, 1, None] * ry + centres[:, 0, None]
+        my = maps[:, 1, 0, None] * rx + maps[:, 1, 1, None] * ry + centres[:, 1, None]
+        vals = _sample(self.image, mx.astype(np.float32), my.astype(np.float32))
+        diff = (vals - painted[None]).reshape(len(ents), -1)  # (channel sums over a trailing
+        return np.asarray(o.omega_c * o.k * g.radius**2 * np.einsum("ij,ij->i", diff, diff) / len(oy))  # axis: slow)
+
+    def _warp(self, j: int, e: int, theta: float) -> F32:
+        """Library entry ``e`` rotated by ``theta`` and deformed onto fragment ``j``'s crop (§5.3)."""
+        g, lib = self.targets[j], self.lib
+        _, _, disk, y0, x0 = self.crops[j]
+        f = lib.frs[int(lib.frag[e])]
+        R = _rot(theta)
+        M = lib.to_source(e, theta)  # target offsets → source offsets
+        # Target pixel → source position: rigid inverse of (p + d(p)), d the displacement field.
+        hh, ww = disk.shape
+        gy, gx = np.mgrid[y0 : y0 + hh, x0 : x0 + ww].astype(np.float64)
+        px, py = gx - g.center[0], gy - g.center[1]
+        if self.opts.deform:
+            d = lib.points[e] @ R.T - g.points
+            dfield = _displacement((hh, ww), y0, x0, g.points + g.center, d, g.radius)
+            alpha = _fold_free(dfield, disk)
+            px = px + alpha * dfield[..., 0]
+            py = py + alpha * dfield[..., 1]
+        mapx = (M[0, 0] * px + M[0, 1] * py + f.center[0]).astype(np.float32)
+        mapy = (M[1, 0] * px + M[1, 1] * py + f.center[1]).astype(np.float32)
+        return _sample(self.image, mapx, mapy)
+
+    def _cut(self, j: int, warped: F32, fill_c: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        """The crop pixels fragment ``j`` takes: its disk, cut against the painted overlap by a seam."""
+        g = self.targets[j]
+        ys, xs, disk, _, _ = self.crops[j]
+        region = disk & fill_c
+        if not (self.opts.seams and region.any() and (disk & ~fill_c).any()):
+            whole: NDArray[np.bool_] = disk.copy()
+            return whole
+        # The cut only needs the overlap and its 1-pixel ring (where the border ties live).
+        ry, rx = np.nonzero(region)
+        sub = (slice(max(0, ry.min() - 1), ry.max() + 2), slice(max(0, rx.min() - 1), rx.max() + 2))
+        cross = region & (self.struct[ys, xs] == g.branch) & (self.owner[ys, xs] != g.branch)
+        seeds = np.where(cross, 2, 0).astype(np.uint8)[sub] if cross.any() else None
+        take = seam(
+            self.canvas[ys, xs][sub], warped[sub], region[sub], a_mask=fill_c[sub], b_mask=disk[sub], seeds=seeds,
+            border_weight=None if seeds is None else 1e4, threads=1,
+        )  # fmt: skip
+        new = disk & ~fill_c
+        new[sub] |= region[sub] & take
+        return new
+
+    def _fixed(self, j: int, new: NDArray[np.bool_], fill_c: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        """The new pixels whose colours the gradient-domain paste keeps (§5.3's added constraints)."""
+        g = self.targets[j]
+        ys, xs, _, _, _ = self.crops[j]
+        known = new | (fill_c & ~new)
+        pad = np.pad(known, 1, constant_values=True)
+        nb_ok = pad[:-2, 1:-1] & pad[2:, 1:-1] & pad[1:-1, :-2] & pad[1:-1, 2:]
+        fixed = new & ~nb_ok
+        # Where this branch's own structure meets what another branch painted, keep its
+        # colours too: that border is structure against bank, not a colour mismatch.
+        foreign = np.pad(fill_c & ~new & (self.owner[ys, xs] != g.branch), 1, constant_values=False)
+        touch = foreign[:-2, 1:-1] | foreign[2:, 1:-1] | foreign[1:-1, :-2] | foreign[1:-1, 2:]
+        fixed |= new & touch & (self.struct[ys, xs] == g.branch)
+        return fixed
+
+    def _blend(self, j: int, warped: F32, new: NDArray[np.bool_], fill_c: NDArray[np.bool_]) -> None:
+        """Paste the ``new`` pixels of ``warped``, in the gradient domain where they meet painted ones."""
+        ys, xs, _, _, _ = self.crops[j]
+        if not (self.opts.photometric and (fill_c & ~new).any()):
+            _paste(self.canvas[ys, xs], warped, new)
+            return
+        fixed = self._fixed(j, new, fill_c)
+        # Solve on the box of the new pixels and their 1-pixel ring only (the same system).
+        ny, nx = np.nonzero(new)
+        bx = (slice(max(0, ny.min() - 1), ny.max() + 2), slice(max(0, nx.min() - 1), nx.max() + 2))
+        dst = self.canvas[ys, xs][bx].copy()
+        _paste(dst, warped[bx], ~fill_c[bx])
+        # tol 1e-3: within a third of an 8-bit level of the exact solve, and faster.
+        res = seamless(warped[bx], dst, new[bx], (0, 0), fixed=fixed[bx], tol=1e-3, max_iterations=100, threads=1)
+        # The gradient-domain paste can overshoot where a border mismatches strongly; keep
+        # the output within the input's range. (Basic slices: views of canvas.)
+        res = _clip_channels(res.reshape(*dst.shape), self.lo, self.hi)
+        _paste(self.canvas[ys, xs][bx], res, new[bx])
+
+
+def _disk(shape: tuple[int, int], c: F64, r: float) -> tuple[slice, slice, NDArray[np.bool_], int, int]:
+    """Crop around a disk (clipped to ``shape``) and the disk mask inside it."""
+    h, w = shape
+    x0, x1 = max(0, math.floor(c[0] - r)), min(w, math.ceil(c[0] + r) + 1)
+    y0, y1 = max(0, math.floor(c[1] - r)), min(h, math.ceil(c[1] + r) + 1)
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    disk = (xx - c[0]) ** 2 + (yy - c[1]) ** 2 <= r * r
+    return slice(y0, y1), slice(x0, x1), disk, y0, x0
+
+
+def _reaches_out(f: Fragment, ok: NDArray[np.bool_]) -> bool:
+    """Whether the disk of source fragment ``f`` holds a pixel outside ``ok``."""
+    ys, xs, disk, _, _ = _disk(ok.shape, f.center, f.radius)
+    return bool((disk & ~ok[ys, xs]).any())
+
+
+def _sample(img: F32, mapx: F32, mapy: F32) -> F32:
+    out = cv2.remap(img, mapx, mapy, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
+    return np.ascontiguousarray(out.reshape(*mapx.shape, img.shape[2]), dtype=np.float32)
+
+
+def _displacement(disk_shape: tuple[int, int], y0: int, x0: int, q_abs: F64, d: F64, r: float) -> F32:
+    """The smooth displacement field over a crop that takes the values ``d`` at ``q_abs``
+    (§5.3, :func:`phloem.blend.interpolate_field`), solved on a grid coarsened to at most ~8
+    cells per radius and upsampled bilinearly: the field is smooth by construction, and the
+    full-resolution solve costs far more."""
+    h, w = disk_shape
+    f = max(1, math.ceil(r / 8))
+    ch, cw = max(2, -(-h // f)), max(2, -(-w // f))
+    rows = np.clip(np.round((q_abs[:, 1] - y0) / f).astype(np.int64), 0, ch - 1)
+    cols = np.clip(np.round((q_abs[:, 0] - x0) / f).astype(np.int64), 0, cw - 1)
+    key = rows * cw + cols
+    uniq, inv = np.unique(key, return_inverse=True)
+    vals = np.zeros((len(uniq), 2))
+    np.add.at(vals, inv, d)
+    vals /= np.bincount(inv, minlength=len(uniq))[:, None]
+    pts = np.stack([uniq // cw, uniq % cw], axis=1)
+    # The field engine factors grids this small directly (a banded Cholesky, one CG step).
+    coarse = interpolate_field(np.ones((ch, cw), bool), pts, vals, threads=1)
+    if f == 1:
+        return np.ascontiguousarray(coarse[:h, :w])
+    # Coarse cell (i, j) sits at fine pixel (i f, j f): map fine pixels back to coarse coordinates.
+    ys = (np.arange(h, dtype=np.float32) / f)[:, None] * np.ones((1, w), np.float32)
+    xs = np.ones((h, 1), np.float32) * (np.arange(w, dtype=np.float32) / f)[None, :]
+    out = cv2.remap(coarse, xs, ys, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return np.ascontiguousarray(out, dtype=np.float32)
+
+
+def _fold_free(dfield: F32, disk: NDArray[np.bool_], *, min_det: float = 0.5) -> float:
+    """Largest of 1, ¾, ½, ¼, 0 by which the field can be scaled so that ``p ↦ p + α d(p)``
+    stays injective over the disk (Jacobian determinant at least ``min_det``).
+
+    §5.3 assumes the deviation left after the rigid alignment is small; it is not at a target
+    furcation whose angle no source furcation has, and there the full field folds the fragment
+    onto its skeleton. The field is linear in the constraints, so scaling it is the field of
+    the scaled constraints: the skeleton is then only partly straightened, without folding.
+    """
+    dux = np.gradient(dfield[..., 0], axis=1)
+    duy = np.gradient(dfield[..., 0], axis=0)
+    dvx = np.gradient(dfield[..., 1], axis=1)
+    dvy = np.gradient(dfield[..., 1], axis=0)
+    a1 = (dux + dvy)[disk]
+    a2 = (dux * dvy - duy * dvx)[disk]
+    for alpha in (1.0, 0.75, 0.5, 0.25):
+        if a1.size == 0 or float((1.0 + alpha * a1 + alpha * alpha * a2).min()) >= min_det:
+            return alpha
+    return 0.0
+
+
+def _in_order(boxes: NDArray[np.int64], work: Callable[[int], None], *, workers: int, progress: Progress) -> None:
+    """Run ``work(j)`` for every fragment ``j`` with the result of running them in order.
+
+    ``work(j)`` reads and writes only inside ``boxes[j]`` (``y0, y1, x0, x1``, half-open), so
+    it need only wait for the earlier fragments whose boxes meet its own; fragments that do not
+    overlap (far apart on one branch, or on different branches) are painted at the same time
+    on ``workers`` threads. The seam, Poisson and remap calls release the GIL.
+    ``progress(done, n + 1)`` is called after each fragment, from the calling thread.
+    """
+    n = len(boxes)
+    if workers <= 1 or n < 2:
+        for j in range(n):
+            work(j)
+            if progress is not None:
+                progress(j + 1, n + 1)
+        return
+    y0, y1, x0, x1 = boxes.T
+    waiting = np.zeros(n, np.int64)
+    after: list[list[int]] = [[] for _ in range(n)]
+    for j in range(1, n):
+        (before,) = np.nonzero((y0[:j] < y1[j]) & (y0[j] < y1[:j]) & (x0[:j] < x1[j]) & (x0[j] < x1[:j]))
+        waiting[j] = len(before)
+        for i in before.tolist():
+            after[i].append(j)
+    ready = [j for j in range(n) if waiting[j] == 0]  # ascending: already a heap
+    running: dict[Future[None], int] = {}
+    done = 0
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="phloem-render") as pool:
+        while ready or running:
+            # Lowest index first: the chain along a branch is the critical path.
+            while ready and len(running) < workers:
+                j = heapq.heappop(ready)
+                running[pool.submit(work, j)] = j
+            finished, _ = wait(running, return_when=FIRST_COMPLETED)
+            for fut in sorted(finished, key=running.__getitem__):
+                j = running.pop(fut)
+                fut.result()  # re-raises; the executor waits for the other running fragment
+                done += 1
+                if progress is not None:
+                    progress(done, n + 1)
+                for k in after[j]:
+                    waiting[k] -= 1
+                    if waiting[k] == 0:
+                        heapq.heappush(ready, k)
+
+
+def _branch_map(skeleton: Skeleton, shape: tuple[int, int]) -> NDArray[np.int32]:
+    """Index of the branch whose structure (thickness plus 2 px) covers each pixel, else -1;
+    children are drawn over their parents."""
+    out = np.full(shape, -1, np.int32)
+    for i, b in enumerate(skeleton.branches):
+        m = np.zeros(shape, np.uint8)
+        for (a, bb), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
+            r = max(0.5 * (r0 + r1), 0.5) + 2.0
+            cv2.line(m, _pt(a), _pt(bb), 1, thickness=max(1, round(2 * r)), lineType=cv2.LINE_8, shift=4)
+        out[m > 0] = i
+    return out

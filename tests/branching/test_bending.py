@@ -1,0 +1,90 @@
+"""The bending model (Sibbing et al. 2010, §4.2): Markov quality, histogram matching, copying the source."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from phloem.branching import BendingModel, Branch, Skeleton, SkeletonError, grow
+
+H = 2.0
+
+
+def test_c1_large_k_reproduces_the_source_branch(walk_branch: Callable[..., Branch]):
+    # Fig. 3d: with c = 1 and a large k the model copies the source branch exactly.
+    src = walk_branch(np.random.default_rng(3), 120, 0.12)
+    sk = Skeleton([src], (300, 400))
+    model = BendingModel.fit(sk, h=H, k=20, m=15, c=1, omega_g=0.0)
+    out = grow(
+        model, shape=(300, 400), start=(*src.points[0], src.heading()), branch_length=src.length(), colonize=False
+    )
+    got, want = out.branches[0].angles(), model.source.branches[0].angles()
+    n = len(want) - model.m
+    assert len(got) >= n
+    np.testing.assert_allclose(got[:n], want[:n], atol=1e-9)
+    np.testing.assert_allclose(out.branches[0].points[: n + 2], model.source.branches[0].points[: n + 2], atol=1e-6)
+    # ... while allowing variability (Fig. 3b, c = 2) departs from it.
+    varied = BendingModel.fit(sk, h=H, k=20, m=15, c=2, omega_g=0.0)
+    loose = grow(
+        varied,
+        shape=(300, 400),
+        start=(*src.points[0], src.heading()),
+        branch_length=src.length(),
+        colonize=False,
+        seed=1,
+    )
+    la = loose.branches[0].angles()
+    assert not np.allclose(la[: min(n, len(la))], want[: min(n, len(la))], atol=1e-6)
+
+
+def test_quality_is_the_papers_dist_product(walk_branch: Callable[..., Branch]):
+    src = walk_branch(np.random.default_rng(0), 40, 0.2)
+    model = BendingModel.fit(Skeleton([src]), h=H, k=3, m=2, omega_g=0.0)
+    i = 5
+    alpha, r = model.cand_hist_alpha[i], model.cand_hist_r[i] * H
+    q = np.exp(model.log_quality(alpha, r, np.zeros(16), np.zeros(16)))
+    assert q[i] == pytest.approx(4.0)  # dist = 2 for both at X = Y
+    j = 9
+    want = (1 / (np.linalg.norm(model.cand_hist_alpha[j] - alpha) + 1) + 1) * (
+        1 / (np.linalg.norm(model.cand_hist_r[j] - r / H) + 1) + 1
+    )
+    assert q[j] == pytest.approx(want)
+    assert (q > 1).all()
+
+
+def test_histogram_matching_raises_quality_of_helpful_candidates(walk_branch: Callable[..., Branch]):
+    src = walk_branch(np.random.default_rng(1), 80, 0.3)
+    model = BendingModel.fit(Skeleton([src]), h=H)
+    alpha, r = model.cand_hist_alpha[0], model.cand_hist_r[0] * H
+    # A structure so far made only of angles from the input's most common bin: candidates that
+    # add to that bin worsen the match, the others improve it (thickness counts match the input).
+    top = int(np.argmax(model.hist_alpha))
+    ca = np.zeros(16)
+    ca[top] = 40.0
+    cr = 40.0 * model.hist_r
+    gain = model.log_quality(alpha, r, ca, cr) - model.log_quality(alpha, r, np.zeros(16), np.zeros(16))
+    in_top = model.inc_alpha[:, top]
+    assert (in_top == 0).any() and (in_top > 0).any()
+    assert gain[in_top == 0].min() > gain[in_top > 0].max() - 1e-9
+    assert gain[in_top == 0].mean() > gain[in_top == in_top.max()].mean()
+    # the n_t / m factor: the same histograms with more nodes weigh more
+    gain2 = model.log_quality(alpha, r, 2 * ca, 2 * cr) - model.log_quality(alpha, r, np.zeros(16), np.zeros(16))
+    assert np.abs(gain2).max() > np.abs(gain).max()
+
+
+def test_bad_input_errors() -> None:
+    tiny = Skeleton([Branch([[0, 0], [2, 0], [4, 0], [6, 0]], 1.0)])
+    with pytest.raises(ValueError, match="skeleton: the skeleton has no branches"):
+        BendingModel.fit(Skeleton([]))
+    with pytest.raises(ValueError, match=r"skeleton: no branch is long enough for k \+ m"):
+        BendingModel.fit(tiny, h=H)
+    with pytest.raises(SkeletonError, match="NaN"):
+        Branch([[0, 0], [np.nan, 1]], 1.0)
+    with pytest.raises(ValueError, match="^h:"):
+        BendingModel.fit(tiny, h=float("nan"))
+    with pytest.raises(ValueError, match="^k:"):
+        BendingModel.fit(tiny, h=H, k=0)
+    with pytest.raises(TypeError, match="^skeleton:"):
+        BendingModel.fit([[0, 0], [1, 1]])  # type: ignore[arg-type]
