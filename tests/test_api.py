@@ -155,3 +155,115 @@ def test_shape_similarity_takes_threads():
     a, b = yy > 2 * xx, (yy - 20) ** 2 + (xx - 18) ** 2 < 120
     one = shapes.shape_similarity(a, b, threads=1)
     assert shapes.shape_similarity(a, b, threads=2) == one == metrics.shape_similarity(a, b, threads=2)
+
+
+# -- texture, branching, trees ------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def models():
+    from phloem import branching
+
+    sk = branching.synthetic_skeleton(0, length=120.0)
+    return sk, branching.fit_models(sk)
+
+
+def test_fit_models_k_and_c(models):
+    from phloem import branching
+
+    sk, _ = models
+    new_bend, _ = branching.fit_models(sk, order=2, n_best=1)
+    old_bend, _ = _old(lambda: branching.fit_models(sk, order=2, c=1), "use n_best=")
+    assert (old_bend.k, old_bend.c) == (new_bend.k, new_bend.c) == (2, 1)
+    old_bend, _ = _old(lambda: branching.fit_models(sk, k=2, n_best=1), "use order=")
+    assert (old_bend.k, old_bend.c) == (2, 1)
+
+
+def test_grow_and_extend_shape(models):
+    from phloem import branching
+
+    _, (bend, fur) = models
+    new = branching.grow(bend, fur, size=(96, 96), seed=0)
+    assert _old(lambda: branching.grow(bend, fur, shape=(96, 96), seed=0), "use size=") == new
+    assert branching.grow(bend, fur, size=96, seed=0) == new  # an int is a square
+    longer = branching.extend(new, 0, bend, steps=1, seed=0, size=(96, 96))
+    assert _old(lambda: branching.extend(new, 0, bend, steps=1, seed=0, shape=(96, 96)), "use size=") == longer
+
+
+def test_render_c(models):
+    from phloem import branching
+
+    sk, _ = models
+    img = np.where(sk.mask(), 0.2, 0.8).astype(np.float32)
+    new = branching.render(img, sk, sk, n_best=1, seed=0, complete=False)
+    np.testing.assert_array_equal(
+        _old(lambda: branching.render(img, sk, sk, c=1, seed=0, complete=False), "n_best="), new
+    )
+
+
+def test_unrectify_shape():
+    from phloem import branching
+
+    img = np.random.default_rng(0).random((20, 30)).astype(np.float32)
+    hm = np.eye(3)
+    new = branching.unrectify(img, hm, size=(20, 30))
+    np.testing.assert_array_equal(_old(lambda: branching.unrectify(img, hm, shape=(20, 30)), "use size="), new)
+
+
+def _tree_rgba(seed):
+    img = np.zeros((120, 80, 4), np.float32)
+    img[..., 1] = 0.5
+    img[10 + seed : 70, 10 : 70 - seed, 3] = 1.0
+    img[70:110, 35:45, 3] = 1.0
+    return img
+
+
+@pytest.fixture(scope="module")
+def library():
+    from phloem import trees
+
+    return trees.Library.from_images([_tree_rgba(s) for s in range(3)], size=128)
+
+
+def test_variation_sources_and_generator_seed(library):
+    from phloem import trees
+
+    new = trees.variation(library, n_sources=3, seed=2)
+    old = _old(lambda: trees.variation(library, sources=3, seed=2), "use n_sources=")
+    np.testing.assert_array_equal(old.image, new.image)
+    a = trees.variation(library, seed=np.random.default_rng(7))
+    b = trees.variation(library, seed=np.random.default_rng(7))
+    np.testing.assert_array_equal(a.image, b.image)
+
+
+def test_vary_n_and_sources(library):
+    from phloem import trees
+
+    new = trees.vary(_tree_rgba(4), library, n_variations=2, n_sources=2, seed=1)
+    old = _old(lambda: trees.vary(_tree_rgba(4), library, n=2, n_sources=2, seed=1), "use n_variations=")
+    assert [v.sources for v in old] == [v.sources for v in new]
+    old = _old(lambda: trees.vary(_tree_rgba(4), library, n_variations=2, sources=2, seed=1), "use n_sources=")
+    assert [v.sources for v in old] == [v.sources for v in new]
+
+
+@pytest.mark.parametrize(("old", "new"), [(None, "auto"), (True, "yes"), (False, "no")])
+def test_library_atlas_words(tmp_path, old, new):
+    from phloem import io, trees
+
+    io.write_image(tmp_path / "t.png", _tree_rgba(0))
+    want = trees.Library.load(tmp_path, size=96, atlas=new)
+    got = _old(lambda: trees.Library.load(tmp_path, size=96, atlas=old), repr(new))
+    assert got.names == want.names and len(got) == len(want)
+
+
+def test_fill_contour_and_cages_shape(library):
+    from phloem import trees
+
+    poly = [(10, 10), (60, 12), (50, 70), (12, 60)]
+    np.testing.assert_array_equal(
+        _old(lambda: trees.fill_contour(poly, shape=(80, 80)), "use size="), trees.fill_contour(poly, (80, 80))
+    )
+    t = library[0]
+    new = trees.cages(t.resampled, [t], (128, 128), m=20)
+    old = _old(lambda: trees.cages(t.resampled, [t], shape=(128, 128), m=20), "use size=")
+    np.testing.assert_array_equal(old[0], new[0])

@@ -126,3 +126,23 @@ def test_branching_run_writes_image_skeleton_histograms_and_sidecar(tmp_path):
                  "--out", str(again), "--seed", "2", "-q"]) == 0  # fmt: skip
     assert np.abs(io.read_image(again) - img).max() <= 1 / 255 + 1e-6
     assert main(args) == 2  # no silent overwrite
+
+
+def test_old_k_and_c_flags_warn_and_give_the_same_skeleton(tmp_path, capsys):
+    from phloem.branching import Skeleton
+
+    _river_png(tmp_path / "river.png")
+    skel = tmp_path / "river.json"
+    assert main(["branching", "trace", str(tmp_path / "river.png"), "--kind", "mask", "--out", str(skel), "-q"]) == 0
+    capsys.readouterr()
+    outs = {}
+    for name, flags in (("old", ["--k", "2", "--c", "1"]), ("new", ["--order", "2", "--n-best", "1"])):
+        outs[name] = tmp_path / f"{name}.json"
+        assert main(["branching", "grow", str(skel), "--out", str(outs[name]), "--seed", "3", "-q", *flags]) == 0
+        err = capsys.readouterr().err
+        if name == "old":
+            assert "phloem branching grow: warning: --k is deprecated and goes in the next release; use --order" in err
+            assert "--c is deprecated and goes in the next release; use --n-best" in err
+        else:
+            assert err == ""
+    assert Skeleton.load(outs["old"]) == Skeleton.load(outs["new"])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from phloem import io
 from phloem.cli import main
@@ -25,12 +26,12 @@ def test_trees_writes_variations_sidecars_and_sheet(tmp_path, capsys):
         _tree_png(lib / f"t{i}.png", c, t)
     out = tmp_path / "out"
     sheet = tmp_path / "sheet.png"
-    args = ["trees", str(lib), "--count", "3", "--out-dir", str(out), "--size", "128", "--seed", "4", "-q"]
+    args = ["trees", str(lib), "--n-variations", "3", "--out-dir", str(out), "--size", "128", "--seed", "4", "-q"]
     assert main([*args, "--sheet", str(sheet)]) == 0
     files = sorted(p.name for p in out.iterdir())
     assert files == [f"tree_{i:04d}.png{s}" for i in range(3) for s in ("", ".json")]
     meta = json.loads((out / "tree_0001.png.json").read_text())
-    assert meta["seed"] == 4 and meta["parameters"]["sources"] == 2
+    assert meta["seed"] == 4 and meta["parameters"]["n_sources"] == 2
     assert len(meta["parameters"]["exemplars"]) == 2 and set(meta["parameters"]["exemplars"]) <= {
         "t0.png",
         "t1.png",
@@ -58,7 +59,7 @@ def test_trees_writes_variations_sidecars_and_sheet(tmp_path, capsys):
             [
                 "trees",
                 str(lib),
-                "--count",
+                "--n-variations",
                 "2",
                 "--out-dir",
                 str(tmp_path / "like"),
@@ -79,11 +80,37 @@ def test_trees_writes_variations_sidecars_and_sheet(tmp_path, capsys):
 def test_trees_bad_library_is_a_clean_error(tmp_path, capsys):
     rgb = tmp_path / "rgb.png"
     io.write_image(rgb, np.ones((40, 40, 3), np.float32))
-    assert main(["trees", str(rgb), "--count", "1", "--out-dir", str(tmp_path / "o"), "-q"]) == 2
+    assert main(["trees", str(rgb), "--n-variations", "1", "--out-dir", str(tmp_path / "o"), "-q"]) == 2
     assert "rgb.png: expected an RGBA image (trees need an alpha channel)" in capsys.readouterr().err
     one = tmp_path / "one"
     one.mkdir()
     _tree_png(one / "t.png", 30, 4)
-    assert main(["trees", str(one), "--count", "1", "--out-dir", str(tmp_path / "o2"), "--size", "96", "-q"]) == 2
-    assert "library: has 1 tree(s) but sources=2" in capsys.readouterr().err
+    assert (
+        main(["trees", str(one), "--n-variations", "1", "--out-dir", str(tmp_path / "o2"), "--size", "96", "-q"]) == 2
+    )
+    assert "library: has 1 tree(s) but n_sources=2" in capsys.readouterr().err
     assert not list((tmp_path / "o2").glob("*.png"))
+
+
+def test_old_count_and_sources_flags_warn_and_give_the_same_trees(tmp_path, capsys):
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    for i, (c, t) in enumerate([(30, 4), (40, 6), (25, 3)]):
+        _tree_png(lib / f"t{i}.png", c, t)
+    outs = {}
+    for name, flags in (
+        ("old", ["--count", "1", "--sources", "3"]),
+        ("new", ["--n-variations", "1", "--n-sources", "3"]),
+    ):
+        outs[name] = tmp_path / name
+        assert main(["trees", str(lib), "--out-dir", str(outs[name]), "--size", "96", "-q", *flags]) == 0
+        err = capsys.readouterr().err
+        if name == "old":
+            assert "--count is deprecated and goes in the next release; use --n-variations" in err
+            assert "--sources is deprecated and goes in the next release; use --n-sources" in err
+        else:
+            assert err == ""
+    assert (outs["old"] / "tree_0000.png").read_bytes() == (outs["new"] / "tree_0000.png").read_bytes()
+    with pytest.raises(SystemExit) as e:  # one of --n-variations (or the old --count) is required
+        main(["trees", str(lib), "--out-dir", str(tmp_path / "none"), "-q"])
+    assert e.value.code == 2 and "--n-variations" in capsys.readouterr().err

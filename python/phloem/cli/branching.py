@@ -11,7 +11,17 @@ from typing import Any
 import numpy as np
 
 from .. import __version__, branching, io
-from ._common import check_writable, common_options, params, parse_size, positive, preflight, run, save
+from ._common import (
+    check_writable,
+    common_options,
+    deprecated_alias,
+    params,
+    parse_size,
+    positive,
+    preflight,
+    run,
+    save,
+)
 
 _TRACE_KINDS = ("auto", "bright", "dark", "mask")
 
@@ -138,18 +148,20 @@ def _fragment_map(labels: np.ndarray) -> np.ndarray:
 def _grow_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("structure synthesis (§4)")
     g.add_argument("--h", type=float, default=None,
-                   help="resampling step in pixels (default: the input's median thickness). The model remembers k steps, so "
+                   help="resampling step in pixels (default: the input's median thickness). The model remembers --order steps, so "
                         "a larger h (e.g. 10 on a traced river) keeps long branches on course instead of curling")  # fmt: skip
-    g.add_argument("--k", type=positive, default=3, help="order of the Markov bending model (paper: 3)")
+    g.add_argument("--order", type=positive, default=3, help="order of the Markov bending model (the paper's k: 3)")
+    deprecated_alias(g, "--k", "--order", dest="order", type=positive)
     g.add_argument(
         "--m", type=positive, default=None, help="elements appended per step, the feature size s/h (default 4)"
     )
     g.add_argument(
-        "--c",
+        "--n-best",
         type=positive,
         default=2,
-        help="candidates: 1 follows the input exactly, more gives more variety (paper: 2)",
+        help="candidates to draw from (the paper's c): 1 follows the input exactly, more gives more variety (paper: 2)",
     )
+    deprecated_alias(g, "--c", "--n-best", dest="n_best", type=positive)
     g.add_argument("--generations", type=positive, default=3, help="branch generations to grow (default 3)")
     g.add_argument("--max-length", type=_length, default=None, metavar="PX|input",
                    help="stop at this total branch length in pixels, or 'input' for about as much structure as the example "
@@ -163,7 +175,7 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
 
 def _grow(args: argparse.Namespace, bend: Any, fur: Any, shape: tuple[int, int], bar: Any) -> branching.Skeleton:
     return branching.grow(
-        bend, fur, shape=shape, seed=args.seed, generations=args.generations, max_length=args.max_length,
+        bend, fur, size=shape, seed=args.seed, generations=args.generations, max_length=args.max_length,
         colonize=not args.no_colonize, guide=_guide(args.guide, args), progress=bar,
     )  # fmt: skip
 
@@ -178,7 +190,7 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     shape = args.size or source.shape
     if shape is None:
         raise ValueError("size: the skeleton file has no shape; pass --size WxH")
-    bend, fur = branching.fit_models(source, h=args.h, k=args.k, m=args.m, c=args.c)
+    bend, fur = branching.fit_models(source, h=args.h, order=args.order, m=args.m, n_best=args.n_best)
     new = run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
     _write_skeleton(out, new, args, "branching grow", h=bend.h, branches=len(new.branches))
     if args.preview is not None:
@@ -228,8 +240,8 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
     res = run(
         "branching run", args,
         lambda bar: branching.synthesize(
-            img, source, size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, k=args.k, m=args.m,
-            c=args.c, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize,
+            img, source, size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, order=args.order,
+            m=args.m, n_best=args.n_best, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize,
             guide=_guide(args.guide, args), render_options=_render_kwargs(args), threads=args.threads, progress=bar,
         ),
     )  # fmt: skip

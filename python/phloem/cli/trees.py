@@ -13,24 +13,23 @@ import cv2
 import numpy as np
 
 from .. import io, trees
-from ._common import check_writable, common_options, params, parse_square_size, positive, run
+from ._common import check_writable, common_options, deprecated_alias, params, parse_square_size, positive, run
 
 
 def _tree_library(args: argparse.Namespace, bar: Any) -> trees.Library:
     src = Path(args.library)
-    atlas = {"auto": None, "yes": True, "no": False}[args.atlas]
     clf = None
     if args.trunk_model is not None:
         clf = trees.TrunkClassifier.from_dict(json.loads(Path(args.trunk_model).read_text(encoding="utf-8")))
     return trees.Library.load(
-        src, atlas=atlas, size=args.size, skip_bad=args.skip_bad, classifier=clf, max_pixels=args.max_pixels,
+        src, atlas=args.atlas, size=args.size, skip_bad=args.skip_bad, classifier=clf, max_pixels=args.max_pixels,
         progress=bar,
     )  # fmt: skip
 
 
 def _cmd_trees(args: argparse.Namespace) -> None:
     out_dir = Path(args.out_dir)
-    targets = [out_dir / f"{args.prefix}{i:04d}.png" for i in range(args.count)]
+    targets = [out_dir / f"{args.prefix}{i:04d}.png" for i in range(args.n_variations)]
     if out_dir.exists() and not out_dir.is_dir():
         raise ValueError(f"out-dir: {out_dir} exists and is not a folder")
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -51,16 +50,16 @@ def _cmd_trees(args: argparse.Namespace) -> None:
             own = trees.prepare(like, size=args.size)
             out = []
             # One variation at a time so the bar moves; vary's draws for variation i depend only on (seed, i).
-            for i in range(args.count):
-                out += trees.vary(own, lib, n=1, seed=_sub_seed(args.seed, i), sources=args.sources, colors=colors,
+            for i in range(args.n_variations):
+                out += trees.vary(own, lib, n_variations=1, seed=_sub_seed(args.seed, i), n_sources=args.n_sources, colors=colors,
                                   histogram=args.histogram, threads=args.threads)  # fmt: skip
-                bar(i + 1, args.count)
+                bar(i + 1, args.n_variations)
             return out
         res = []
-        for i in range(args.count):
-            res.append(trees.variation(lib, sources=args.sources, seed=_sub_seed(args.seed, i), colors=colors,
+        for i in range(args.n_variations):
+            res.append(trees.variation(lib, n_sources=args.n_sources, seed=_sub_seed(args.seed, i), colors=colors,
                                        histogram=args.histogram, threads=args.threads))  # fmt: skip
-            bar(i + 1, args.count)
+            bar(i + 1, args.n_variations)
         return res
 
     variations = run("trees: variations", args, make)
@@ -117,14 +116,16 @@ def add_parsers(sub: Any) -> None:
     p = sub.add_parser("trees", help="new tree billboards from a library of RGBA trees (Argudo et al. 2017)",
                        description="Every tree of LIBRARY is normalised, segmented into crown and trunk and described by a "
                                    "2000-point contour (§4). Each new tree's contour is a random convex combination of the "
-                                   "contours of --sources trees, filled by mean value coordinate colour transfer from them (§5). "
+                                   "contours of --n-sources trees, filled by mean value coordinate colour transfer from them (§5). "
                                    "Writes DIR/PREFIX0000.png ... with a .json sidecar naming the sources and weights.")  # fmt: skip
     p.add_argument(
         "library",
         metavar="LIBRARY",
         help="folder of RGBA tree images (atlases of several trees are split), or one atlas image",
     )
-    p.add_argument("--count", type=positive, required=True, metavar="N", help="number of new trees")
+    count = p.add_mutually_exclusive_group(required=True)  # so that the old --count alone satisfies it
+    count.add_argument("--n-variations", type=positive, metavar="N", help="number of new trees")
+    deprecated_alias(count, "--count", "--n-variations", dest="n_variations", type=positive)
     p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for the new trees (created if missing)")
     p.add_argument("--prefix", default="tree_", help="file name prefix of the new trees (default tree_)")
     p.add_argument("--like", metavar="TREE", default=None,
@@ -137,8 +138,9 @@ def add_parsers(sub: Any) -> None:
         help="side N (or NxN) of the square output images; the library is normalised to it (default 1024)",
     )
     p.add_argument(
-        "--sources", type=positive, default=2, help="trees combined in each new tree, --like included (default 2)"
+        "--n-sources", type=positive, default=2, help="trees combined in each new tree, --like included (default 2)"
     )
+    deprecated_alias(p, "--sources", "--n-sources", dest="n_sources", type=positive)
     p.add_argument("--colors", choices=("random", "contour", "single"), default=None,
                    help="colour weights: an independent random convex combination (§5.2), the contour's weights, or one source "
                         "(default: random; contour with --like)")  # fmt: skip
