@@ -1,4 +1,8 @@
-"""Shared fixtures: real textures that ship with the tests (tests/data) or the package."""
+"""pytest wiring: hypothesis profiles, the real-image collection's folder, and fixtures of the
+images that ship with the tests (tests/data) or the package.
+
+Helpers that benches and users need too live in :mod:`phloem.testing`, not here.
+"""
 
 from __future__ import annotations
 
@@ -11,6 +15,8 @@ import pytest
 import phloem
 
 DATA = Path(__file__).parent / "data"
+# Set, not only found by phloem.testing, so that an installed phloem and the CLI tests'
+# subprocesses look in the same place: ../shared/data beside this checkout.
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 os.environ.setdefault("PHLOEM_SHARED_DATA", str(SHARED))
 

@@ -2,8 +2,8 @@
 
 Real images
     ``shared_data`` and ``shared_path`` find the project's optional real-image collection, whose
-    folder is ``$PHLOEM_SHARED_DATA`` or, when phloem is imported from a source checkout,
-    ``shared/data`` beside that checkout; ``shared_file`` gives one of its files or skips the
+    folder is ``$PHLOEM_SHARED_DATA`` or else ``shared/data`` beside the source checkout that
+    phloem is imported from or that the working directory is in; ``shared_file`` gives one of its files or skips the
     calling test when it is absent, as it is in CI.
 
 Synthetic branching scenes with a known skeleton
@@ -42,16 +42,24 @@ __all__ = [
 ]
 
 
-def _checkout_shared() -> Path:
-    """``shared/data`` beside the source checkout this module is imported from (may not exist)."""
-    root = Path(__file__).resolve().parents[2]  # python/phloem/testing.py -> the checkout
-    return root.parent / "shared" / "data"
+def _beside_checkout() -> Path | None:
+    """``shared/data`` beside the phloem checkout this module or the working directory is in."""
+    here = Path(__file__).resolve().parents[2]  # python/phloem/testing.py -> the checkout
+    cwd = Path.cwd().resolve()
+    for root in (here, cwd, *cwd.parents):
+        if (root / "pyproject.toml").is_file() and (root / "python" / "phloem").is_dir():
+            p = root.parent / "shared" / "data"
+            if p.is_dir():
+                return p
+    return None
 
 
 def shared_data() -> Path | None:
     """The folder of the optional real-image collection, or None when it is not there."""
     root = os.environ.get("PHLOEM_SHARED_DATA")
-    p = Path(root) if root else _checkout_shared()
+    if not root:
+        return _beside_checkout()
+    p = Path(root)
     return p if p.is_dir() else None
 
 

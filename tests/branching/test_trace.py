@@ -339,3 +339,10 @@ def test_colville_delta_trace_is_plausible():
     pts = np.vstack([b.points for b in sk.branches]).round().astype(int)
     assert (img[pts[:, 1], pts[:, 0]] > 0.5).mean() > 0.99
     assert max(b.thickness.max() for b in sk.branches) > 10  # the main channel is wide
+
+
+def test_a_bool_mask_traces_like_its_float_copy():
+    mask = Y_SHAPE.mask() > 0.5
+    assert mask.dtype == np.bool_
+    a, b = trace(mask, kind="mask"), trace(mask.astype(np.float32), kind="mask")
+    assert [br.points.tolist() for br in a.branches] == [br.points.tolist() for br in b.branches]

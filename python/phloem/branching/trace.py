@@ -477,7 +477,7 @@ def trace(
     Parameters
     ----------
     image : array, shape (H, W) or (H, W, C)
-        A photo or a mask; integer images are scaled by their dtype's maximum.
+        A photo or a mask (a bool array with ``kind="mask"``); integer images are scaled by their dtype's maximum.
     kind : {"auto", "bright", "dark", "mask"}
         What the structure looks like (see 1.).
     sigmas : float or sequence of float
@@ -540,6 +540,8 @@ def trace(
         raise ValueError(f"kind: expected one of {_KINDS}, got {kind!r}")
     if thickness not in ("auto", "mask", "gradient"):
         raise ValueError(f"thickness: expected 'auto', 'mask' or 'gradient', got {thickness!r}")
+    if kind == "mask" and np.asarray(image).dtype == np.bool_:
+        image = np.asarray(image, np.float32)  # True = structure
     gray = _gray(image, channel)
     shape = (int(gray.shape[0]), int(gray.shape[1]))
     sig = _sigmas(sigmas)
