@@ -18,7 +18,6 @@ both exist; :func:`cylinder_preview` wraps a texture around a trunk for a quick 
 from __future__ import annotations
 
 import math
-import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, overload
@@ -29,6 +28,7 @@ from numpy.typing import NDArray
 
 from . import shapes, texture
 from ._api import Seed, Size, old_flag, renamed
+from ._color import check_denoise, denoised_lab, rgb8
 from ._progress import Progress
 from ._validate import as_image, as_labels, check_int, check_seed, check_size, check_threads
 from .shapes import Rotations
@@ -102,26 +102,6 @@ def _majority(labels: NDArray[np.int32], k: int) -> NDArray[np.int32]:
     return np.where(own >= top, labels, counts.argmax(0)).astype(np.int32)
 
 
-def _check_denoise(denoise: Any) -> None:
-    if isinstance(denoise, bool) or not isinstance(denoise, numbers.Real) or not math.isfinite(denoise) or denoise < 0:
-        raise ValueError(f"denoise: expected a finite strength >= 0, got {denoise!r}")
-
-
-def _rgb8(img: NDArray[np.float32]) -> NDArray[np.uint8]:
-    """The first 3 channels (gray repeated) of a checked image as 8-bit RGB."""
-    rgb = img[..., :3] if img.shape[2] >= 3 else np.repeat(img[..., :1], 3, axis=2)
-    return np.clip(np.rint(rgb * 255), 0, 255).astype(np.uint8)
-
-
-def _denoised_lab(u8: NDArray[np.uint8], denoise: float) -> NDArray[np.float32]:
-    """CIELAB of an 8-bit RGB image after non-local-means denoising of strength ``denoise``
-    (0: none), as the thesis' label maps see colour (§3.5)."""
-    bgr: Any = np.ascontiguousarray(u8[..., ::-1])
-    if denoise > 0:
-        bgr = cv2.fastNlMeansDenoisingColored(bgr, None, float(denoise), float(denoise), 7, 21)
-    return np.asarray(cv2.cvtColor(bgr.astype(np.float32) / 255.0, cv2.COLOR_BGR2Lab), dtype=np.float32)
-
-
 @renamed(k="n_labels")
 def input_labels(
     image: Any,
@@ -176,12 +156,12 @@ def input_labels(
     img = as_image(image, "image")
     k = check_int(n_labels, "n_labels", 2)
     erosion = check_int(erosion, "erosion", 0)
-    _check_denoise(denoise)
-    u8 = _rgb8(img)
+    check_denoise(denoise)
+    u8 = rgb8(img)
     distinct = len(np.unique(u8.reshape(-1, 3), axis=0))
     if k > distinct:
         raise ValueError(f"n_labels: asked for {k} regions, but the image has only {distinct} distinct colours")
-    lab = _denoised_lab(u8, denoise)
+    lab = denoised_lab(u8, denoise)
     rng = np.random.default_rng(check_seed(seed))
     assign, centres = _kmeans(lab.reshape(-1, 3), k, rng)
     order = np.argsort(centres[:, 0], kind="stable")

@@ -21,8 +21,8 @@ from numpy.typing import NDArray
 from . import patch as _patch
 from . import shapes as _shapes
 from ._api import Seed
+from ._color import check_denoise, denoised_lab, rgb8
 from ._validate import as_image, as_mask, check_patch_size
-from .bark import _check_denoise, _denoised_lab, _rgb8
 from .branching.histograms import angle_histogram, histogram_distance, thickness_histogram
 
 __all__ = [
@@ -273,11 +273,11 @@ def label_agreement(image: Any, labels: Any, exemplar: Any, exemplar_labels: Any
     img = as_image(image, "image")
     ex = as_image(exemplar, "exemplar")
     lab, elab = _label_maps(labels, img.shape[:2], exemplar_labels, ex.shape[:2])
-    _check_denoise(denoise)
+    check_denoise(denoise)
     values = np.unique(elab)
-    ex_lab = _denoised_lab(_rgb8(ex), denoise)
+    ex_lab = denoised_lab(rgb8(ex), denoise)
     centres = np.stack([ex_lab[elab == v].mean(axis=0) for v in values])
-    img_lab = _denoised_lab(_rgb8(img), denoise)
+    img_lab = denoised_lab(rgb8(img), denoise)
     d = ((img_lab[:, :, None, :] - centres[None, None]) ** 2).sum(axis=-1)
     return float(np.mean(values[d.argmin(axis=-1)] == lab))
 

@@ -3,7 +3,7 @@ completion from the input's background only, then a gradient-domain paste of the
 against the painted structure.
 
 :func:`fill_gaps` is the step :func:`~phloem.branching.render` runs after the fragments.
-:func:`_complete_background` is Wexler-style completion whose patches may come only from the
+:func:`_complete_background` runs :func:`phloem.texture.complete` with patches only from the
 ``allowed`` pixels of the input (the source structure, dilated to the fragment radius, is
 excluded, so no pseudo-branches appear); :func:`_match_borders` shifts the completed gaps in the
 gradient domain so that they meet the structure without a colour step, as §5.3 does for the
@@ -18,9 +18,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import patch
+from .. import texture
 from ..blend import seamless
-from ..texture import WEXLER_GAMMA, WEXLER_SIGMA_PERCENTILE, _downsample, _fill_inward, _patch_masks, _upsample_field
 from ._pixels import F32, _clip_channels, _paste, _pt
 from .fragments import MIN_RADIUS
 from .skeleton import Skeleton
@@ -39,103 +38,53 @@ def _complete_background(
     seed: int,
     threads: int | None,
 ) -> F32:
-    """Wexler-style completion of ``hole`` in ``canvas`` whose patches come only from the
-    ``allowed`` pixels of ``source`` (the input's background), coarse to fine."""
+    """Completion of ``hole`` in ``canvas`` whose patches come only from the ``allowed`` pixels
+    of ``source`` (the input's background), by :func:`phloem.texture.complete` on one frame:
+    the canvas above, the source below, a separator between them."""
     p = patch_size
-    r = p // 2
     H, W = canvas.shape[:2]
     hs, ws = source.shape[:2]
-    gap = p
-    # One frame: the canvas above, the source below, a separator between them.
-    ww = max(W, ws)
-    frame = np.zeros((H + gap + hs, ww, canvas.shape[2]), np.float32)
-    frame[:H, :W] = canvas
-    frame[H + gap :, :ws] = source
-    fhole = np.zeros(frame.shape[:2], bool)
-    fhole[:H, :W] = hole
-    forbid = np.ones(frame.shape[:2], bool)  # pixels a source patch may not touch
-    forbid[H + gap :, :ws] = ~allowed
-    bg = source[allowed].mean(axis=0) if allowed.any() else source.reshape(-1, source.shape[2]).mean(axis=0)
-    frame[:H, :W][hole] = bg
-    outside = np.ones(frame.shape[:2], bool)
-    outside[:H, :W] = False
-    outside[H + gap :, :ws] = False
-    frame[outside] = bg
-
-    levels = 1
     ys, xs = np.nonzero(hole)
     extent = max(int(np.ptp(ys)) + 1, int(np.ptp(xs)) + 1)
     # Gaps are a few fragment radii wide: enough levels that they are a few patches wide.
     levels = max(1, min(5, int(math.log2(max(extent / (4 * p), 1.0))) + 1))
-    pyr: list[tuple[F32, NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]] = []
-    for lv in range(levels):
-        h, w = max(1, round(frame.shape[0] / 2**lv)), max(1, round(frame.shape[1] / 2**lv))
-        if lv == 0:
-            img_l, hole_l, forbid_l = frame, fhole, forbid
-        else:
-            img_l = _downsample(frame, (h, w))
-            hole_l = cv2.resize(fhole.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) > 0.001
-            forbid_l = cv2.resize(forbid.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) > 0.001
-        need, _ = _patch_masks(hole_l, p)
-        _, smask = _patch_masks(hole_l | forbid_l, p)
-        if min(h, w) < p or not smask.any():
-            break
-        pyr.append((img_l, hole_l, need, smask))
-    if not pyr:
+    # The separator is a patch wide at the coarsest level, so no level's pyramid kernel or patch
+    # reaches from the canvas's border into the source.
+    gap = p << (levels - 1)
+    frame = np.zeros((H + gap + hs, max(W, ws), canvas.shape[2]), np.float32)
+    frame[:H, :W] = canvas
+    frame[H + gap :, :ws] = source
+    # The separator is context for the canvas's border patches: the background's typical colour
+    # (a median: a mean over a mask's background is a grey that only branch pieces match).
+    bg = np.median(source[allowed] if allowed.any() else source.reshape(-1, source.shape[2]), axis=0)
+    outside = np.ones(frame.shape[:2], bool)
+    outside[:H, :W] = False
+    outside[H + gap :, :ws] = False
+    frame[outside] = bg
+    fhole = np.zeros(frame.shape[:2], bool)
+    fhole[:H, :W] = hole
+    sources = np.zeros(frame.shape[:2], bool)
+    sources[H + gap :, :ws] = allowed
+    # The field found at half resolution, upsampled, already copies full-resolution pixels, so
+    # the finest level only votes it, and the half-resolution level runs half the iterations.
+    schedule = (
+        [iterations] if levels == 1 else [0, iterations] if levels == 2 else [0, max(1, iterations // 2), iterations]
+    )
+    try:
+        out = texture.complete(
+            frame, fhole, sources=sources, patch_size=p, levels=levels, iterations=schedule,
+            search_iterations=[1] * (levels - 1) + [3], pyramid="strict", gradient_weight=0.0,
+            seed=seed, threads=threads,
+        )  # fmt: skip
+    except ValueError as e:
+        if "sources" not in str(e):
+            raise
         raise ValueError(
             "source_skeleton: the input image has no background region free of branches to complete the gaps from"
-        )
-    fieldv: NDArray[np.int32] | None = None
-    cur: F32 | None = None
-    for lv in range(len(pyr) - 1, -1, -1):
-        orig, hole_l, need, smask = pyr[lv]
-        depth = cv2.distanceTransform(hole_l.astype(np.uint8), cv2.DIST_L2, 3)
-        # Wexler's confidence γ^−d, with d capped: gaps between branches are hundreds of pixels
-        # wide and the weights deep inside underflowed float32 (pixels voted 0, black specks).
-        # Patches voting on one pixel have depths within a patch width, so the cap only
-        # flattens their relative weights where all are deep.
-        conf = np.power(WEXLER_GAMMA, -np.minimum(depth, 40.0)).astype(np.float32)
-        cur = orig.copy()
-        init = None
-        if fieldv is not None:
-            up = _upsample_field(fieldv, hole_l.shape, orig.shape[:2], r)
-            up[~need] = -1
-            bad = ~smask[np.maximum(up[..., 0], 0), np.maximum(up[..., 1], 0)] & need
-            up[bad] = -1
-            voted, wsum = patch.vote(orig, up, patch_size=p, threads=threads)
-            fill = hole_l & (wsum > 1e-30)
-            cur[fill] = voted[fill]
-            rest = hole_l & ~fill
-            if rest.any():
-                cur = _fill_inward(cur, rest)
-            init = up
-        # The upsampled half-resolution field already copies full-resolution pixels: no search
-        # at full resolution, half the iterations at half resolution (docs/pipelines/branching.md).
-        if lv == 0 and len(pyr) > 1:
-            n_it = 0
-        elif lv == 1 and len(pyr) > 2:
-            n_it = max(1, iterations // 2)
-        else:
-            n_it = iterations
-        for it in range(n_it):
-            # A warm-started search (from the previous iteration's field) needs one pass.
-            fieldv, dist = patch.nnf(
-                cur, cur, patch_size=p, iterations=3 if it == 0 else 1, levels=1,
-                seed=seed + 7919 * (lv * 64 + it + 1), source_mask=smask, target_mask=need,
-                init=init, threads=threads,
-            )  # fmt: skip
-            dd = dist[need]
-            sigma2 = max(float(np.percentile(dd, WEXLER_SIGMA_PERCENTILE)), 1e-8)
-            wvote = np.zeros(dist.shape, np.float32)
-            wvote[need] = np.exp(-dd / (2.0 * sigma2)) * conf[need]
-            voted, wsum = patch.vote(cur, fieldv, patch_size=p, weights=wvote, threads=threads)
-            fill = hole_l & (wsum > 1e-30)
-            cur[fill] = voted[fill]
-            init = fieldv
-    assert cur is not None
-    out: F32 = canvas.copy()
-    out[hole] = cur[:H, :W][hole]
-    return out
+        ) from None
+    res: F32 = canvas.copy()
+    res[hole] = out[:H, :W][hole]
+    return res
 
 
 def _smooth_masked(vals: F32, w: F32, sigma: float) -> tuple[F32, F32]:

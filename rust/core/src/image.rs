@@ -97,3 +97,60 @@ pub fn prescale(img: &Image<'_>, weights: Option<&[f32]>) -> Result<Vec<f32>> {
         .flat_map(|px| px.iter().zip(&s).map(|(v, k)| v * k))
         .collect())
 }
+
+/// The `h × w × c` buffer `data` mirrored by `r` pixels on every side, without repeating the
+/// edge (`abcd` → `cb|abcd|cb` for r = 2).
+pub(crate) fn mirror_pad(data: &[f32], h: usize, w: usize, c: usize, r: usize) -> Vec<f32> {
+    pad_with(data, h, w, c, r, |i, n| {
+        if n == 1 {
+            return 0;
+        }
+        let n = n as i64;
+        let mut i = i;
+        // Mirror without repeating the edge pixel; loop covers r >= n.
+        while i < 0 || i >= n {
+            i = if i < 0 { -i } else { 2 * (n - 1) - i };
+        }
+        i as usize
+    })
+}
+
+/// The `h × w × c` buffer `data` grown by `r` pixels on every side, the pixel at padded
+/// `(y, x)` copied from `(at(y − r, h), at(x − r, w))`.
+pub(crate) fn pad_with(
+    data: &[f32],
+    h: usize,
+    w: usize,
+    c: usize,
+    r: usize,
+    at: impl Fn(i64, usize) -> usize,
+) -> Vec<f32> {
+    let (ph, pw) = (h + 2 * r, w + 2 * r);
+    let mut out = Vec::with_capacity(ph * pw * c);
+    for y in 0..ph {
+        let sy = at(y as i64 - r as i64, h);
+        for x in 0..pw {
+            let sx = at(x as i64 - r as i64, w);
+            out.extend_from_slice(&data[(sy * w + sx) * c..][..c]);
+        }
+    }
+    out
+}
+
+/// The `r`-pixel border of a `h × w × c` buffer made by wrapping around.
+pub(crate) fn wrap_pad(data: &[f32], h: usize, w: usize, c: usize, r: usize) -> Vec<f32> {
+    pad_with(data, h, w, c, r, |i, n| i.rem_euclid(n as i64) as usize)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mirror_pad_reflects_without_repeating_the_edge() {
+        let d = [1f32, 2., 3., 4.];
+        let p = mirror_pad(&d, 1, 4, 1, 2);
+        // Rows also mirror: a 1-row image mirrors onto itself.
+        assert_eq!(&p[2 * 8..3 * 8], &[3., 2., 1., 2., 3., 4., 3., 2.]);
+    }
+}

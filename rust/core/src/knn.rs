@@ -18,11 +18,12 @@
 
 use rayon::prelude::*;
 
-use crate::error::{invalid, Result};
-use crate::image::{prescale, Image};
 #[cfg(target_arch = "x86_64")]
-use crate::patch::Avx2;
-use crate::patch::{avx2_enabled, Kernel, Portable, NONE};
+use crate::distance::Avx2;
+use crate::distance::{avx2_enabled, Kernel, Portable};
+use crate::error::{invalid, Result};
+use crate::image::{mirror_pad, prescale, Image};
+use crate::patch::NONE;
 use crate::rng::Rng;
 
 /// Parameters of [`knn`].
@@ -89,44 +90,6 @@ pub fn shift(e: u32, dy: i64, dx: i64, eh: usize, ew: usize, wrap: bool) -> u32 
     (y as usize * ew + x as usize) as u32
 }
 
-/// The exemplar mirrored by `r` pixels on every side (`abcd` → `cb|abcd|cb` for r = 2).
-pub(crate) fn mirror_pad(data: &[f32], h: usize, w: usize, c: usize, r: usize) -> Vec<f32> {
-    pad_with(data, h, w, c, r, |i, n| {
-        if n == 1 {
-            return 0;
-        }
-        let n = n as i64;
-        let mut i = i;
-        // Mirror without repeating the edge pixel; loop covers r >= n.
-        while i < 0 || i >= n {
-            i = if i < 0 { -i } else { 2 * (n - 1) - i };
-        }
-        i as usize
-    })
-}
-
-/// The `h × w × c` buffer `data` grown by `r` pixels on every side, the pixel at padded
-/// `(y, x)` copied from `(at(y − r, h), at(x − r, w))`.
-pub(crate) fn pad_with(
-    data: &[f32],
-    h: usize,
-    w: usize,
-    c: usize,
-    r: usize,
-    at: impl Fn(i64, usize) -> usize,
-) -> Vec<f32> {
-    let (ph, pw) = (h + 2 * r, w + 2 * r);
-    let mut out = Vec::with_capacity(ph * pw * c);
-    for y in 0..ph {
-        let sy = at(y as i64 - r as i64, h);
-        for x in 0..pw {
-            let sx = at(x as i64 - r as i64, w);
-            out.extend_from_slice(&data[(sy * w + sx) * c..][..c]);
-        }
-    }
-    out
-}
-
 struct Padded {
     data: Vec<f32>,
     pw: usize,
@@ -141,7 +104,7 @@ impl Padded {
         self.dist_with::<Portable>(a, b, cutoff)
     }
 
-    /// Patch distance with early termination every other row (see `patch::Kernel`).
+    /// Patch distance with early termination every other row (see `distance::Kernel`).
     #[inline(always)]
     fn dist_with<K: Kernel>(&self, a: u32, b: u32, cutoff: f32) -> f32 {
         let (ay, ax) = (a as usize / self.w, a as usize % self.w);
@@ -199,8 +162,7 @@ impl Pass<'_> {
     }
 
     /// Offers `b` as a neighbour of `a`. A method, not a closure: a closure that the compiler
-    /// does not inline is compiled without AVX2, and every intrinsic in it becomes a call (it
-    /// made the AVX2 path four times slower than the portable one).
+    /// does not inline is compiled without AVX2, and every intrinsic in it becomes a call.
     #[inline(always)]
     fn consider<K: Kernel>(&self, a: usize, b: u32, best: &mut Best<'_>) {
         if b != NONE && self.far(a, b as usize) {
@@ -517,14 +479,6 @@ mod tests {
     }
 
     #[test]
-    fn mirror_pad_reflects_without_repeating_the_edge() {
-        let d = [1f32, 2., 3., 4.];
-        let p = mirror_pad(&d, 1, 4, 1, 2);
-        // Rows also mirror: a 1-row image mirrors onto itself.
-        assert_eq!(&p[2 * 8..3 * 8], &[3., 2., 1., 2., 3., 4., 3., 2.]);
-    }
-
-    #[test]
     fn exact_lists_are_sorted_far_and_optimal() {
         let (h, w) = (14, 13);
         let d = tex(h, w);
@@ -624,7 +578,7 @@ mod tests {
 
     #[test]
     fn simd_and_portable_paths_agree() {
-        use crate::patch::FORCE_PORTABLE;
+        use crate::distance::FORCE_PORTABLE;
         use std::sync::atomic::Ordering;
         let (h, w) = (30, 33);
         let d = tex(h, w);

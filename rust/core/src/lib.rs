@@ -7,6 +7,7 @@
 //! Engines so far:
 //! - [`patch`]: nearest-neighbour fields by PatchMatch (Barnes et al. 2009), PatchMatch seeded
 //!   by PCA kd-tree search (He & Sun 2012), and exact search;
+//! - [`distance`]: the SIMD patch-distance kernels that [`patch`], [`knn`] and [`tbn`] share;
 //! - [`knn`]: k nearest patches inside one exemplar and the k-coherence candidate sets of
 //!   Tong et al. 2002;
 //! - [`vote`]: weighted patch voting, the M-step of texture optimisation (Kwatra et al. 2005)
@@ -26,6 +27,7 @@
 //!   (Hormann & Floater 2006), and the contour-to-contour image warp and multi-source colour
 //!   transfer they define (Argudo et al. 2017, §5.2).
 
+pub mod distance;
 pub mod error;
 pub mod field;
 pub mod image;

@@ -34,8 +34,6 @@ pub const NONE: u32 = u32::MAX;
 /// Extra uses per exemplar patch on top of the thesis' quota (see [`quotas`]). The exact
 /// quota forces every exemplar patch into the output, rare and noisy ones too, which then
 /// stamp specks and holes all over it; as a cap it still keeps any patch from dominating.
-/// On the thesis' four bark runs slack 3 lowers Eq. 3.9 of layered maps by 10–35 % and
-/// halves the matching time.
 pub const QUOTA_SLACK: u32 = 3;
 
 /// Candidates kept per query in one round.

@@ -27,43 +27,8 @@
 //! neighbour pair, so they are solved in parallel and the result does not depend on the
 //! number of threads.
 //!
-//! Measured on the thesis' four bark runs (bark1, bark2, eucalyptus, eucap5; seed 0; patch
-//! coherence / per-label histogram distance as ratios to the thesis' results, Laplacian
-//! variance as a ratio to the photo's), one round:
-//! - after the average E-step: 1.24/0.42/1.03, 1.17/0.31/0.95, 0.97/0.38/0.90,
-//!   0.99/0.40/0.71 (without: 1.18/0.52/0.75, 1.17/0.36/0.64, 0.94/0.49/0.72,
-//!   0.99/0.54/0.49): as coherent, much closer histograms, sharp again;
-//! - after the medoid E-step: 1.41/0.38/1.19, 1.34/0.35/1.02, 1.00/0.26/0.96,
-//!   1.11/0.33/0.80 (without: 1.67/0.43/1.31, 1.53/0.37/1.05, 1.14/0.28/0.98,
-//!   1.19/0.34/0.81).
-//!
-//! Without stand-ins, what is left is at the label boundaries: on bark1 after compositing,
-//! pixels within 3 px of an output label boundary (35% of them) hold 84% of the incoherence.
-//! Half of those 7×7 label patches occur nowhere in the exemplar's label map, so a copy that
-//! keeps every pixel's label must put a seam inside them; the thesis' result blurs across
-//! them instead. Three rounds with 6 candidates gain at most 0.04 over one round with 4; 48²
-//! windows, a squared seam cost, candidate offsets from a label-shape nearest-neighbour field
-//! or a label-mismatch data term did not help (within ±0.03, or worse).
-//!
-//! With stand-ins (average E-step, one round, seeds 0–2, coherence with the kd-tree search of
-//! `phloem.metrics`; label agreement is `phloem.metrics.label_agreement`, the thesis' results
-//! scoring 0.916 / 0.826 / 0.969 / 0.927):
-//!
-//! | W | coherence (bark1, bark2, eucalyptus, eucap5) | label agreement |
-//! |---|---|---|
-//! | none | 1.22–1.28, 1.18–1.23, 0.92–0.95, 1.00–1.01 | 0.934–0.937, 0.922–0.928, 0.977–0.978, 0.939–0.942 |
-//! | 3 | 0.82–0.84, 0.82–0.92, 0.58–0.61, 0.68–0.72 | 0.911–0.917, 0.883–0.901, 0.951–0.954, 0.916–0.920 |
-//! | 5 | 0.90–0.94, 0.92–0.99, 0.65–0.69, 0.75–0.81 | 0.915–0.924, 0.905–0.913, 0.963–0.964, 0.926–0.930 |
-//! | 8 | 1.00–1.05, 1.01–1.04, 0.70–0.75, 0.84–0.87 | 0.924–0.929, 0.912–0.917, 0.968, 0.933–0.939 |
-//!
-//! The Python default is 5: below the thesis' coherence on every run and seed, its label
-//! agreement or within 0.6 points of it. Stand-ins matched on the pixel's colour alone
-//! traded about as well on these runs (W = 24: 0.84–0.98 coherence, 0.887–0.969 agreement)
-//! but fail where labels are not a function of a pixel's colour: on the embedded bark with
-//! labels from a threshold of the blurred photo they took label agreement from 0.847 to
-//! 0.645 (0.80 with the window means). A squared data cost traded worse; a soft-label solver
-//! (stand-ins inside the M- and E-steps, the thesis' own soft constraint) was no more
-//! coherent and 1.5× slower. 8 candidates per window gain about 0.03 for 0.2 s on bark1.
+//! What compositing and stand-ins buy on the thesis' bark runs, and the variants that did
+//! not, is in `docs/engines/tbn.md`.
 
 use rayon::prelude::*;
 
@@ -78,12 +43,10 @@ use crate::rng::Rng;
 pub const WINDOW: usize = 32;
 /// Distance between neighbouring windows.
 pub const STRIDE: usize = 16;
-/// Points compared per stand-in search. On the thesis' four bark runs 32 or 64 gave the same
-/// coherence and label agreement as the exact search (within 0.01), at a tenth of its time
-/// (exact: 1.6 s on bark1, whose 6-d descriptors cluster tightly).
+/// Points compared per stand-in search: as good as exact search on the thesis' bark runs, at
+/// a tenth of its time.
 pub const STAND_IN_BUDGET: usize = 64;
-/// Offsets tried per window: its most frequent ones. On the thesis' bark runs 3 per window
-/// and 1 round came within 0.02 of 6 per window and 3 rounds in patch coherence.
+/// Offsets tried per window: its most frequent ones (more, or more rounds, gain little).
 pub const CANDIDATES: usize = 4;
 
 /// The exemplar and the label maps the compositing works on.

@@ -25,25 +25,21 @@
 //! output pixel references an exemplar pixel of its own label. An optional round of graph-cut
 //! compositing ([`composite`]) after the finest level grows whole exemplar pieces, and with
 //! stand-ins lets them run across output label boundaries the exemplar lacks.
-
-// `#[inline(always)]` on the distance helpers is deliberate: only code inlined into
-// `m_pixel_avx2` is compiled with AVX2 enabled (see `knn`).
-#![allow(clippy::inline_always)]
+//!
+//! Layout: this file holds the parameters, their validation and the pyramid driver; the
+//! private `solver` module one level's M-step and E-step.
 
 pub mod composite;
 pub mod init;
 pub mod pyramid;
-
-use rayon::prelude::*;
+mod solver;
 
 use crate::error::{invalid, Result};
 use crate::image::{prescale, Image};
-use crate::knn::{self, coherence_candidates, knn, mirror_pad, pad_with, shift, Knn, KnnParams};
-#[cfg(target_arch = "x86_64")]
-use crate::patch::Avx2;
-use crate::patch::{avx2_enabled, Kernel, Portable, NONE};
-use crate::rng::Rng;
+use crate::knn::shift;
+use crate::patch::NONE;
 use pyramid::{level_sizes, upsample_refs, Step};
+use solver::{out_index, ExLevel, Level};
 
 /// Initialisation of the coarsest level (§3.4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -71,11 +67,13 @@ pub enum Selection {
 }
 
 /// Parameters of [`by_numbers`].
+///
+/// [`TbnParams::default`] is what a Rust caller gets, and each field's doc names its Rust
+/// default: medoid selection, no compositing, no stand-ins. phloem's Python wrapper
+/// (`phloem.texture.by_numbers`) passes every field explicitly with defaults of its own.
 #[derive(Clone, Debug)]
 pub struct TbnParams {
-    /// Neighbourhood side, odd. Default 7 (with `k = 1`: on the thesis' four bark runs, more
-    /// coherent than 5 with `k = 2` and about as close in per-label histograms, at the same
-    /// time).
+    /// Neighbourhood side, odd. Default 7 (with `k = 1`; see `docs/engines/tbn.md`).
     pub patch_size: usize,
     /// k of k-coherence: each coherence candidate brings its `k − 1` nearest exemplar patches.
     /// Default 1 (coherence candidates only, no k-NN table).
@@ -103,8 +101,8 @@ pub struct TbnParams {
     /// label nearest in colour and in mean colour over a patch), at a data cost of `W` times
     /// that distance (see [`composite`]). Infinite (the default) forbids such offsets.
     pub stand_in_weight: f32,
-    /// Exemplar channels the compositing seams compare (the first `seam_channels`; 0 = all).
-    /// The Python wrapper passes the colour channels, leaving out the feature distance map.
+    /// Exemplar channels the compositing seams compare (the first `seam_channels`; 0, the
+    /// default, = all), e.g. the colour channels without a feature distance map.
     pub seam_channels: usize,
     /// Forward shifts that leave the exemplar wrap around (true) or are dropped. Default true.
     pub wrap: bool,
@@ -142,17 +140,9 @@ impl Default for TbnParams {
 pub const MIN_COARSE_SIDE: usize = 40;
 /// Most pyramid levels chosen automatically.
 pub const MAX_AUTO_LEVELS: usize = 5;
-/// Extra solver iterations at every level but the finest. They are cheap (a quarter of the
-/// pixels or fewer, M-step on a quarter of those) and the coarse layout decides the fine
-/// coherence: 3 → 5 coarse iterations measured patch coherence 3–6% lower on the thesis' four
-/// bark runs (mean of seeds 0–2), for 7% more time on bark1.
+/// Extra solver iterations at every level but the finest: they are cheap (a quarter of the
+/// pixels or fewer) and the coarse layout decides the fine coherence.
 pub const COARSE_EXTRA_ITERATIONS: usize = 2;
-/// E-step vote weights are `max(d, floor)^−ROBUST_POWER` for a match at distance `d`.
-const ROBUST_POWER: f32 = 0.6;
-/// Passes of the approximate k-NN search per level (2 measured as good as 4 on the thesis'
-/// bark runs, for 0.2 s less on bark1).
-const KNN_ITERATIONS: usize = 2;
-
 /// Inputs of [`by_numbers`].
 #[derive(Clone, Copy, Debug)]
 pub struct TbnInput<'a> {
@@ -209,137 +199,6 @@ pub fn forward_shifted(
         }
     }
     out
-}
-
-#[inline]
-fn out_index(y: i64, x: i64, h: usize, w: usize, tileable: bool) -> Option<usize> {
-    if tileable {
-        Some(y.rem_euclid(h as i64) as usize * w + x.rem_euclid(w as i64) as usize)
-    } else if y < 0 || x < 0 || y >= h as i64 || x >= w as i64 {
-        None
-    } else {
-        Some(y as usize * w + x as usize)
-    }
-}
-
-/// The `r`-pixel border of a `h × w × c` buffer made by wrapping around.
-fn wrap_pad(data: &[f32], h: usize, w: usize, c: usize, r: usize) -> Vec<f32> {
-    pad_with(data, h, w, c, r, |i, n| i.rem_euclid(n as i64) as usize)
-}
-
-/// A padded image whose `p × p` patches are contiguous rows of `p · c` values.
-struct Padded {
-    data: Vec<f32>,
-    pw: usize,
-    w: usize,
-    c: usize,
-}
-
-impl Padded {
-    #[inline]
-    fn row(&self, i: usize, k: usize, p: usize) -> &[f32] {
-        let (y, x) = (i / self.w, i % self.w);
-        &self.data[((y + k) * self.pw + x) * self.c..][..p * self.c]
-    }
-
-    #[inline]
-    fn centre(&self, i: usize, r: usize) -> &[f32] {
-        let (y, x) = (i / self.w, i % self.w);
-        &self.data[((y + r) * self.pw + x + r) * self.c..][..self.c]
-    }
-}
-
-#[inline]
-fn ssd(a: &[f32], b: &[f32]) -> f32 {
-    // Eight lanes, so the compiler vectorises without reassociating a single sum.
-    let mut acc = [0f32; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let (ra, rb) = (ca.remainder(), cb.remainder());
-    for (x, y) in ca.zip(cb) {
-        for l in 0..8 {
-            let d = x[l] - y[l];
-            acc[l] += d * d;
-        }
-    }
-    let mut s: f32 = acc.iter().sum();
-    for (x, y) in ra.iter().zip(rb) {
-        s += (x - y) * (x - y);
-    }
-    s
-}
-
-/// The weighted medoid of `votes` (exemplar index, weight): the vote `e` minimising
-/// `Σ_j w_j · ‖e − e_j‖` over the first `c0` channels of `aug` (pixel stride `ca`); ties go
-/// to the smallest index. Sorts `votes` and merges repeats (summing their weights) in place.
-fn weighted_medoid(votes: &mut Vec<(u32, f32)>, aug: &[f32], ca: usize, c0: usize) -> u32 {
-    votes.sort_unstable_by_key(|v| v.0);
-    votes.dedup_by(|b, a| {
-        if a.0 == b.0 {
-            a.1 += b.1;
-            true
-        } else {
-            false
-        }
-    });
-    let px = |e: u32| &aug[e as usize * ca..e as usize * ca + c0];
-    let mut best = votes[0].0;
-    let mut bc = f32::INFINITY;
-    for &(e, _) in votes.iter() {
-        let a = px(e);
-        let mut cost = 0f32;
-        for &(f, wf) in votes.iter() {
-            if f != e {
-                cost += wf * ssd(a, px(f)).sqrt();
-                if cost >= bc {
-                    break;
-                }
-            }
-        }
-        if cost < bc {
-            bc = cost;
-            best = e;
-        }
-    }
-    best
-}
-
-/// `N_lr` distance (the patch without its centre) between output pixel `i` of `s` and
-/// exemplar pixel `j` of `e`, stopping early once past `cutoff` (checked every other row; the
-/// centre is subtracted from the start, so a partial sum never overestimates).
-#[inline(always)]
-fn patch_dist<K: Kernel>(s: &Padded, i: usize, e: &Padded, j: usize, p: usize, cutoff: f32) -> f32 {
-    let r = p / 2;
-    let centre = ssd(s.centre(i, r), e.centre(j, r));
-    let mut acc = K::zero();
-    for k in 0..p {
-        K::add_row(&mut acc, s.row(i, k, p), e.row(j, k, p));
-        if k % 2 == 1 && k + 1 < p {
-            let partial = K::total(&acc) - centre;
-            if partial >= cutoff {
-                return partial;
-            }
-        }
-    }
-    K::total(&acc) - centre
-}
-
-/// What the M-step of one iteration shares.
-struct MStep<'b> {
-    s: &'b Padded,
-    cands: &'b [u32],
-    m: usize,
-    refs: &'b [u32],
-    key: u64,
-}
-
-/// One pyramid level's exemplar side.
-struct ExLevel {
-    h: usize,
-    w: usize,
-    /// Augmented channels: weighted exemplar channels then scaled one-hot labels.
-    aug: Vec<f32>,
-    labels: Vec<u32>,
-    by_label: Vec<Vec<u32>>,
 }
 
 fn check(input: &TbnInput<'_>, params: &TbnParams) -> Result<usize> {
@@ -602,379 +461,10 @@ pub fn by_numbers(
     Ok(Tbn { h: oh, w: ow, refs })
 }
 
-/// The solver at one pyramid level.
-struct Level<'a> {
-    el: &'a ExLevel,
-    labels_out: &'a [u32],
-    h: usize,
-    w: usize,
-    ca: usize,
-    c0: usize,
-    p: usize,
-    ex_pad: Padded,
-    table: Option<Knn>,
-    params: &'a TbnParams,
-    depth: usize,
-    lv: f32,
-}
-
-impl<'a> Level<'a> {
-    #[allow(clippy::too_many_arguments)]
-    fn new(
-        el: &'a ExLevel,
-        labels_out: &'a [u32],
-        h: usize,
-        w: usize,
-        ca: usize,
-        c0: usize,
-        p: usize,
-        params: &'a TbnParams,
-        level: usize,
-    ) -> Result<Self> {
-        let r = p / 2;
-        // A coarse level can be too small to hold k - 1 neighbours outside each patch's
-        // excluded window; it then searches coherence candidates only (k = 1). Every other
-        // k-NN failure is an error, not a silent fallback.
-        let table = if params.k > 1 && knn::fits(el.h, el.w, r, params.k - 1) {
-            let img = Image::new("exemplar", &el.aug, el.h, el.w, ca)?;
-            knn(
-                &img,
-                None,
-                &KnnParams {
-                    patch_size: p,
-                    k: params.k - 1,
-                    iterations: KNN_ITERATIONS,
-                    exact: false,
-                    exclude: r,
-                    seed: params.seed ^ (level as u64).wrapping_mul(0x9E37),
-                },
-            )
-            .map(Some)?
-        } else {
-            None
-        };
-        Ok(Self {
-            el,
-            labels_out,
-            h,
-            w,
-            ca,
-            c0,
-            p,
-            ex_pad: Padded {
-                data: mirror_pad(&el.aug, el.h, el.w, ca, r),
-                pw: el.w + 2 * r,
-                w: el.w,
-                c: ca,
-            },
-            table,
-            params,
-            depth: level,
-            lv: (params.label_weight / 2.0).sqrt(),
-        })
-    }
-
-    /// `concat(B, B'_ref)`, padded by mirroring (or wrapping for tileable outputs).
-    fn output_image(&self, refs: &[u32]) -> Padded {
-        let (ca, c0) = (self.ca, self.c0);
-        let mut s = vec![0f32; self.h * self.w * ca];
-        s.par_chunks_mut(ca).enumerate().for_each(|(i, px)| {
-            let e = refs[i] as usize;
-            px[..c0].copy_from_slice(&self.el.aug[e * ca..e * ca + c0]);
-            px[c0 + self.labels_out[i] as usize] = self.lv;
-        });
-        let r = self.p / 2;
-        let data = if self.params.tileable {
-            wrap_pad(&s, self.h, self.w, ca, r)
-        } else {
-            mirror_pad(&s, self.h, self.w, ca, r)
-        };
-        Padded {
-            data,
-            pw: self.w + 2 * r,
-            w: self.w,
-            c: ca,
-        }
-    }
-
-    /// Eq. 3.4 for output pixel `i`: the best same-label candidate and its distance, or
-    /// `NONE` when neither a candidate nor the current reference has the pixel's label.
-    #[inline(always)]
-    fn m_pixel_with<K: Kernel>(&self, ms: &MStep<'_>, i: usize) -> (u32, f32) {
-        let (p, eh, ew) = (self.p, self.el.h, self.el.w);
-        let lb = self.labels_out[i];
-        let mut best = NONE;
-        let mut bd = f32::INFINITY;
-        for &c in &ms.cands[i * ms.m..(i + 1) * ms.m] {
-            if c == NONE {
-                break;
-            }
-            if self.el.labels[c as usize] != lb {
-                continue;
-            }
-            let d = patch_dist::<K>(ms.s, i, &self.ex_pad, c as usize, p, bd);
-            if d < bd {
-                bd = d;
-                best = c;
-            }
-        }
-        if best == NONE {
-            let cur = ms.refs[i];
-            if self.el.labels[cur as usize] != lb {
-                return (NONE, f32::INFINITY);
-            }
-            best = cur;
-            bd = patch_dist::<K>(ms.s, i, &self.ex_pad, cur as usize, p, f32::INFINITY);
-        }
-        if self.params.random_search {
-            let mut rng = Rng::keyed(self.params.seed, ms.key, i as u64);
-            let (by, bx) = ((best as usize / ew) as i64, (best as usize % ew) as i64);
-            let mut rad = eh.max(ew) as i64;
-            while rad >= 1 {
-                let y = rng.range_inclusive((by - rad).max(0), (by + rad).min(eh as i64 - 1));
-                let x = rng.range_inclusive((bx - rad).max(0), (bx + rad).min(ew as i64 - 1));
-                let c = y as usize * ew + x as usize;
-                if self.el.labels[c] == lb {
-                    let d = patch_dist::<K>(ms.s, i, &self.ex_pad, c, p, bd);
-                    if d < bd {
-                        bd = d;
-                        best = c as u32;
-                    }
-                }
-                rad /= 2;
-            }
-        }
-        (best, bd)
-    }
-
-    /// [`Self::m_pixel_with`] with the fastest kernel the CPU has.
-    fn m_pixel(&self, ms: &MStep<'_>, i: usize, fast: bool) -> (u32, f32) {
-        #[cfg(target_arch = "x86_64")]
-        if fast {
-            // SAFETY: `fast` is only true when the CPU supports AVX2 (`avx2_enabled`).
-            return unsafe { self.m_pixel_avx2(ms, i) };
-        }
-        let _ = fast;
-        self.m_pixel_with::<Portable>(ms, i)
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn m_pixel_avx2(&self, ms: &MStep<'_>, i: usize) -> (u32, f32) {
-        self.m_pixel_with::<Avx2>(ms, i)
-    }
-
-    /// Whether iteration `it` at this level picks medoids (else nearest to the average).
-    fn medoid(&self, it: usize) -> bool {
-        match self.params.selection {
-            Selection::Average => false,
-            Selection::Medoid => true,
-            Selection::Hybrid => {
-                self.depth != 0 || it + 1 < level_iterations(self.params.iterations, 0)
-            }
-        }
-    }
-
-    /// One M-step + E-step.
-    fn iterate(&self, refs: &[u32], it: usize) -> Result<Vec<u32>> {
-        let (h, w, p) = (self.h, self.w, self.p);
-        let (eh, ew) = (self.el.h, self.el.w);
-        let r = (p / 2) as i64;
-        let seed = self.params.seed;
-        let key = (self.depth as u64) << 32 | it as u64;
-        let (cands, m) = coherence_candidates(
-            refs,
-            h,
-            w,
-            eh,
-            ew,
-            self.table.as_ref(),
-            p,
-            self.params.wrap,
-            self.params.wrap,
-        )?;
-        let s = self.output_image(refs);
-        // X†: every other row and column, at an offset drawn per iteration, at the coarse
-        // levels; every pixel at the finest, which decides the output's fine coherence
-        // (measured on the thesis' bark runs: patch coherence 1.4 → 1.2 × the thesis' result).
-        let st = if self.depth == 0 { 1 } else { 2 };
-        let mut grid_rng = Rng::keyed(seed, key, u64::MAX);
-        let (gy, gx) = (
-            grid_rng.below(st as u64) as usize,
-            grid_rng.below(st as u64) as usize,
-        );
-        let labels_in = &self.el.labels;
-        let labels_out = self.labels_out;
-
-        // M-step (Eq. 3.4).
-        let ms = MStep {
-            s: &s,
-            cands: &cands,
-            m,
-            refs,
-            key,
-        };
-        let fast = avx2_enabled();
-        let mut matches = vec![NONE; h * w];
-        let mut mdist = vec![f32::INFINITY; h * w];
-        matches
-            .par_chunks_mut(w)
-            .zip(mdist.par_chunks_mut(w))
-            .enumerate()
-            .for_each(|(y, (row, drow))| {
-                if y % st != gy {
-                    return;
-                }
-                for x in (gx..w).step_by(st) {
-                    let (best, bd) = self.m_pixel(&ms, y * w + x, fast);
-                    if best != NONE {
-                        row[x] = best;
-                        drow[x] = bd;
-                    }
-                }
-            });
-
-        // E-step (Eq. 3.5).
-        // Each vote weighs its match's N_lr distance to the power −0.6 (Kwatra et al. 2005's
-        // robust weights, exponent r = 0.8, as in texture::synthesize), floored at a tenth of
-        // the median. A plain mean pulls every pixel towards mid-tones where votes disagree;
-        // on the thesis' bark runs the weights cut the per-label histogram distance by a
-        // quarter to a third for about 5% more patch incoherence.
-        //
-        // Measured (coherence / histogram ratios to the thesis' results on bark1, bark2,
-        // eucalyptus, eucap5, seed 0, with 3 coarse iterations unless noted, against 1.26/0.57,
-        // 1.23/0.35, 0.98/0.52, 1.03/0.53 for the averaging E-step below):
-        // - the best-weighted vote instead of the one nearest the mean: 1.92/0.35, 1.90/0.31,
-        //   1.34/0.26, 1.32/0.35, crisp but pixel-wise mixed;
-        // - (now `Selection`, measured with 5 coarse iterations: average 1.18/0.53, 1.18/0.35,
-        //   0.94/0.49, 0.99/0.55; medoid 1.67/0.43, 1.55/0.36, 1.15/0.28, 1.19/0.33; hybrid
-        //   1.35/0.45, 1.33/0.36, 1.02/0.30, 1.00/0.36; two or three averaging iterations at
-        //   the end, 1.28/0.47, 1.26/0.37, 0.98/0.31, 0.96/0.39 and 1.23/0.48, 1.22/0.37,
-        //   0.95/0.35, 0.93/0.41, softer still.) Also tried: medoid at the finest level
-        //   only, 1.62/0.44, 1.50/0.30, 1.17/0.36, 1.24/0.38; medoid only at the last finest
-        //   iteration, 1.53/0.46, 1.43/0.31; medoid among the 9 (4) heaviest votes,
-        //   1.70/0.42, 1.54/0.36 (1.79/0.43, 1.66/0.36); Σ w·ssd^0.75 or Σ w·ssd instead of
-        //   Σ w·ssd^0.5, 1.56/0.47 and 1.54/0.51 on bark1, softer; a Gaussian-kernel mode,
-        //   1.68/0.43, oversharp (Laplacian variance 1.2× the photo's); the coherence
-        //   candidates as medoid candidates too: within noise; medoid vote-weight exponents 0,
-        //   0.3, 1: 1.70/0.47, 1.63/0.45, 1.76/0.44 on bark1, no clear gain;
-        // - a bonus for votes many neighbours agree on (Han et al. 2006), d·(1 − ½·share):
-        //   within the seed-to-seed noise (±0.03);
-        // - a final pass taking every pixel's M-step match directly: 2.03/0.43, 2.01/0.27;
-        // - weight exponents 0, 0.3, 1 and a dense M-step at all levels: no better;
-        // - the mode of the votes (the exemplar pixel with the largest summed weight, i.e.
-        //   the most-voted offset): 1.89/0.35, 1.77/0.31, 1.18/0.25, 1.30/0.34, oversharp
-        //   (Laplacian variance 1.58x the photo's on bark1);
-        // - ICM smoothing of the offsets (candidates: the neighbours' offsets; Potts or
-        //   Kwatra seam cost): coherence within ±0.02 (eucap5 1.19 -> 1.21-1.25 with Potts);
-        // - graph-cut compositing after the finest level (`composite`, [`composite`]): see
-        //   there; compositing at the end of every level as well: mixed (±0.1), not kept.
-        let pw = ROBUST_POWER;
-        let floor = {
-            let mut d: Vec<f32> = mdist.iter().copied().filter(|v| v.is_finite()).collect();
-            let n = d.len();
-            if n == 0 {
-                1.0
-            } else {
-                (*d.select_nth_unstable_by(n / 2, f32::total_cmp).1 * 0.1).max(1e-8)
-            }
-        };
-        let vote_weight: Vec<f32> = mdist
-            .par_iter()
-            .map(|d| {
-                if d.is_finite() {
-                    d.max(floor).powf(-pw)
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        let (ca, c0) = (self.ca, self.c0);
-        let aug = &self.el.aug;
-        let mut out = vec![NONE; h * w];
-        let medoid = self.medoid(it);
-        out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            let mut avg = vec![0f32; c0];
-            let mut votes: Vec<u32> = Vec::with_capacity(p * p);
-            let mut wvotes: Vec<(u32, f32)> = Vec::with_capacity(p * p);
-            for (x, slot) in row.iter_mut().enumerate() {
-                let i = y * w + x;
-                let lb = labels_out[i];
-                avg.fill(0.0);
-                votes.clear();
-                wvotes.clear();
-                let mut wsum = 0f32;
-                for dy in -r..=r {
-                    for dx in -r..=r {
-                        let Some(j) =
-                            out_index(y as i64 + dy, x as i64 + dx, h, w, self.params.tileable)
-                        else {
-                            continue;
-                        };
-                        let e = shift(matches[j], -dy, -dx, eh, ew, self.params.wrap);
-                        if e == NONE {
-                            continue;
-                        }
-                        let wt = vote_weight[j];
-                        if medoid {
-                            if labels_in[e as usize] == lb {
-                                wvotes.push((e, wt));
-                            }
-                        } else {
-                            for (a, v) in avg
-                                .iter_mut()
-                                .zip(&aug[e as usize * ca..e as usize * ca + c0])
-                            {
-                                *a += wt * v;
-                            }
-                            wsum += wt;
-                            votes.push(e);
-                        }
-                    }
-                }
-                let mut best = NONE;
-                let mut bd = f32::INFINITY;
-                if medoid {
-                    if !wvotes.is_empty() {
-                        best = weighted_medoid(&mut wvotes, aug, ca, c0);
-                    }
-                } else if !votes.is_empty() {
-                    let inv = 1.0 / wsum;
-                    for v in &mut avg {
-                        *v *= inv;
-                    }
-                    let cs = cands[i * m..(i + 1) * m].iter().take_while(|&&c| c != NONE);
-                    for &c in votes.iter().chain(cs) {
-                        if labels_in[c as usize] != lb {
-                            continue;
-                        }
-                        let d = ssd(&avg, &aug[c as usize * ca..c as usize * ca + c0]);
-                        if d < bd {
-                            bd = d;
-                            best = c;
-                        }
-                    }
-                }
-                if best == NONE {
-                    // Nothing of this label voted: keep the reference if it is of the right
-                    // label, or take a random exemplar pixel that is.
-                    let cur = refs[i];
-                    best = if labels_in[cur as usize] == lb {
-                        cur
-                    } else {
-                        init::pick(&self.el.by_label, lb, seed, key ^ 0xE, i)
-                    };
-                }
-                *slot = best;
-            }
-        });
-        Ok(out)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::rng::Rng;
 
     fn naive_neighbourhood(
         refs: &[u32],
@@ -1100,46 +590,6 @@ mod tests {
     }
 
     #[test]
-    fn medoid_matches_a_brute_force() {
-        // 30 exemplar pixels, 5 channels of which the first 3 count; votes with repeats.
-        let (ca, c0) = (5, 3);
-        for trial in 0..20u64 {
-            let mut rng = Rng::keyed(trial, 1, 2);
-            let aug: Vec<f32> = (0..30 * ca)
-                .map(|_| rng.below(1000) as f32 / 1000.0)
-                .collect();
-            let n = 1 + rng.below(12) as usize;
-            let votes: Vec<(u32, f32)> = (0..n)
-                .map(|_| (rng.below(30) as u32, 0.1 + rng.below(100) as f32 / 50.0))
-                .collect();
-            let px = |e: u32| &aug[e as usize * ca..e as usize * ca + c0];
-            let cost = |e: u32| -> f64 {
-                votes
-                    .iter()
-                    .map(|&(f, w)| {
-                        let d: f64 = px(e)
-                            .iter()
-                            .zip(px(f))
-                            .map(|(a, b)| f64::from(a - b).powi(2))
-                            .sum();
-                        f64::from(w) * d.sqrt()
-                    })
-                    .sum()
-            };
-            let brute = votes
-                .iter()
-                .map(|v| v.0)
-                .min_by(|&a, &b| cost(a).total_cmp(&cost(b)).then(a.cmp(&b)))
-                .unwrap();
-            let got = weighted_medoid(&mut votes.clone(), &aug, ca, c0);
-            assert!(
-                got == brute || (cost(got) - cost(brute)).abs() < 1e-5,
-                "trial {trial}: {got} vs {brute}"
-            );
-        }
-    }
-
-    #[test]
     fn medoid_selection_keeps_labels_and_determinism() {
         let params = TbnParams {
             levels: Some(2),
@@ -1207,7 +657,7 @@ mod tests {
 
     #[test]
     fn simd_and_portable_paths_agree() {
-        use crate::patch::FORCE_PORTABLE;
+        use crate::distance::FORCE_PORTABLE;
         use std::sync::atomic::Ordering;
         let params = TbnParams {
             levels: Some(2),

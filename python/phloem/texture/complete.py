@@ -1,0 +1,465 @@
+"""Image completion (Wexler, Shechtman, Irani 2007) on the patch-matching engine.
+
+Texture optimisation restricted to a hole: hole pixels are voted from patches of the known
+region, with Wexler's similarity weights and confidence falling off towards the hole's centre,
+coarse to fine over a mask-aware pyramid.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any, Literal
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import _core
+from .._progress import Progress
+from .._validate import (
+    as_image,
+    as_mask,
+    check_float,
+    check_int,
+    check_patch_size,
+    check_seed,
+    check_threads,
+    restore_ndim,
+)
+from ._pyramid import upsample_field
+
+__all__ = ["complete"]
+
+#: Wexler et al. 2007 confidence base: a pixel at distance d inside the hole has weight γ^−d.
+WEXLER_GAMMA = 1.3
+#: Wexler et al. 2007 take σ from the distribution of patch distances; their 75th percentile
+#: makes the weights nearly uniform and the fill soft, the 25th keeps edges
+#: (docs/engines/completion.md).
+WEXLER_SIGMA_PERCENTILE = 25.0
+#: Floor of the natural log of a completion vote weight: deep in a large hole γ^−d times a poor
+#: match's similarity underflows float32 and pixels got no vote; e^−80 ≈ 2e−35 stays a normal
+#: float32, so floored votes still average exactly.
+_LOG_WEIGHT_FLOOR = -80.0
+#: Completion matches patches on their values and their central-difference gradients
+#: (y and x, per channel, this weight each), the distance PyPatchMatch uses: gradients make a
+#: flat patch a poor match for a textured one, so the fill keeps its local contrast.
+COMPLETION_GRADIENT_WEIGHT = 1.0
+#: Mean-shift steps of the very last vote of completion (Wexler et al. 2007, §3.2; see
+#: :func:`phloem.patch.vote`): the final colours move from the mean of the overlapping
+#: patches' votes to their dominant mode, so that disagreeing votes do not blur the fill.
+COMPLETION_MEAN_SHIFT = 3
+
+
+def _patch_masks(hole: NDArray[np.bool_], p: int) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """For completion with ``p × p`` patches: the target pixels whose patch touches the hole
+    (they need a match) and the source centres whose patch is wholly known and inside."""
+    need = cv2.dilate(hole.astype(np.uint8), np.ones((p, p), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    source = ~need.astype(bool)
+    r = p // 2
+    if r:
+        source[:r, :] = source[-r:, :] = False
+        source[:, :r] = source[:, -r:] = False
+    return need.astype(bool), source
+
+
+def _with_gradients(img: NDArray[np.float32], weight: float) -> NDArray[np.float32]:
+    """``img`` with ``weight`` times its central-difference y and x gradients appended as
+    channels (C → 3C; zero on the image border), the features completion matches on."""
+    gy = np.zeros_like(img)
+    gx = np.zeros_like(img)
+    gy[1:-1] = (0.5 * weight) * (img[2:] - img[:-2])
+    gx[:, 1:-1] = (0.5 * weight) * (img[:, 2:] - img[:, :-2])
+    return np.ascontiguousarray(np.concatenate([img, gy, gx], axis=2), dtype=np.float32)
+
+
+def _fill_inward(img: NDArray[np.float32], hole: NDArray[np.bool_]) -> NDArray[np.float32]:
+    """Onion-peel start for the coarsest level: each ring of the hole takes the mean of its
+    already known 8-neighbours."""
+    img = img.copy()
+    ys, xs = np.nonzero(hole)
+    if ys.size == 0:
+        return img
+    # Only the hole's box and a one-pixel ring take part, so rings cost their box, not the image.
+    box = (slice(max(0, ys.min() - 1), ys.max() + 2), slice(max(0, xs.min() - 1), xs.max() + 2))
+    sub, remaining = img[box], hole[box].copy()
+    known = (~remaining).astype(np.float32)
+    sub[remaining] = 0.0
+    kernel = np.ones((3, 3), np.float32)
+    while remaining.any():
+        cnt = cv2.filter2D(known, -1, kernel, borderType=cv2.BORDER_CONSTANT)
+        ring = remaining & (cnt > 0)
+        if not ring.any():
+            break
+        acc = np.stack(
+            [
+                cv2.filter2D(np.ascontiguousarray(sub[..., c]) * known, -1, kernel, borderType=cv2.BORDER_CONSTANT)
+                for c in range(sub.shape[2])
+            ],
+            axis=-1,
+        )
+        sub[ring] = acc[ring] / cnt[ring][:, None]
+        known[ring] = 1.0
+        remaining &= ~ring
+    return img
+
+
+#: Mask-aware downsampling kernel of the completion pyramid (binomial, 6 taps: a coarse pixel
+#: sees fine pixels 2y − 2 … 2y + 3), as in Philippeau's completion that PyPatchMatch implements.
+_HOLE_KERNEL = np.array([1, 5, 10, 10, 5, 1], np.float32) / 32.0
+#: A coarse pixel counts as known when this much of its kernel weight falls on known pixels
+#: (below the smallest single-pixel weight 1/1024, so one known fine pixel is enough).
+_KNOWN_WEIGHT = 1e-4
+#: The strict pyramid's threshold: a coarse pixel is known only when its whole kernel is (the
+#: classic pyramid, whose hole grows). Rim pixels are then synthesised, not interpolated from the
+#: few known pixels they see, which are biased towards the rim (aliased stripes, a bright bank's
+#: halo).
+_STRICT_KNOWN_WEIGHT = 0.999
+#: ``pyramid="auto"``'s strict alternative differs from the interpolating pyramid from this level
+#: on (0: the finest), so the two share the finer levels and are compared one level below.
+_STRICT_FROM = 2
+#: ``pyramid="auto"`` keeps the interpolating pyramid's fill unless the strict one's patch
+#: energy is below this fraction of it: a structure broken at the coarse levels (stripes out of
+#: phase) raises it several-fold, while on natural photos the two stay within about 20 %.
+_AUTO_ENERGY_RATIO = 0.5
+
+Pyramid = Literal["auto", "interpolate", "strict"]
+_Level = tuple[NDArray[np.float32], NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]
+
+
+def _hole_pyramid(
+    img: NDArray[np.float32],
+    hole: NDArray[np.bool_],
+    p: int,
+    max_levels: int | None,
+    *,
+    allowed: NDArray[np.bool_] | None = None,
+    strict_from: int | None = None,
+) -> list[_Level]:
+    """Coarse-to-fine levels for :func:`complete`, finest first: (image, hole, pixels needing a
+    match, usable source centres).
+
+    Each level is a normalised convolution of the one below (known pixels only, weighted by
+    :data:`_HOLE_KERNEL`, then every second pixel), so a coarse pixel is known as soon as any
+    fine pixel under its kernel is: the hole *shrinks* by about two pixels per side at every
+    level instead of growing, and the coarsest levels see only a sliver of it, filled by
+    interpolation from its rim. From level ``strict_from`` on, a coarse pixel is known only when
+    its whole kernel is (:data:`_STRICT_KNOWN_WEIGHT`). Source centres need a wholly known
+    patch of ``allowed`` pixels (a coarse pixel is allowed when every fine pixel under its
+    kernel is). Levels are added until the hole vanishes, the image gets narrower than a patch,
+    or no usable source patch is left (or ``max_levels`` is reached).
+    """
+    forbid = None if allowed is None else ~allowed
+    need, source = _patch_masks(hole if forbid is None else hole | forbid, p)
+    if forbid is not None:
+        need = _patch_masks(hole, p)[0]
+    levels = [(img, hole, need, source)]
+    k = (~hole).astype(np.float32)
+    v = img * k[..., None]
+    f = None if forbid is None else forbid.astype(np.float32)
+    a = (2, 2)  # the anchor: output x sums input x − 2 … x + 3
+
+    def down(x: NDArray[np.float32]) -> NDArray[np.float32]:
+        y = cv2.sepFilter2D(x, -1, _HOLE_KERNEL, _HOLE_KERNEL, anchor=a, borderType=cv2.BORDER_CONSTANT)
+        return np.ascontiguousarray(y.reshape(x.shape[0], x.shape[1], -1)[::2, ::2])
+
+    while max_levels is None or len(levels) < max_levels:
+        k, v = down(k)[..., 0], down(v)
+        strict = strict_from is not None and len(levels) >= strict_from
+        hole_l = k < (_STRICT_KNOWN_WEIGHT if strict else _KNOWN_WEIGHT)
+        if not hole_l.any() or min(k.shape) < p:
+            break
+        need_l, source_l = _patch_masks(hole_l, p)
+        if f is not None:
+            f = (down(f)[..., 0] >= _KNOWN_WEIGHT).astype(np.float32)
+            source_l = _patch_masks(hole_l | (f > 0), p)[1]
+        if not source_l.any():
+            break
+        values = np.ascontiguousarray(v / np.maximum(k, _KNOWN_WEIGHT)[..., None], dtype=np.float32)
+        values[hole_l] = 0.0
+        levels.append((values, hole_l, need_l, source_l))
+    return levels
+
+
+def _schedule(value: Any, name: str, n_levels: int, default: Callable[[int], int], minimum: int) -> list[int]:
+    """Per-level counts, finest first, from None (``default(level)``), an int (every level) or a
+    sequence (the finest levels, each at least ``minimum``; the coarser ones repeat its last)."""
+    if value is None:
+        return [default(lv) for lv in range(n_levels)]
+    if isinstance(value, Sequence) and not isinstance(value, str):
+        counts = [check_int(c, name, minimum) for c in value]
+        if not counts:
+            raise ValueError(f"{name}: expected at least one count, got an empty sequence")
+        return [counts[min(lv, len(counts) - 1)] for lv in range(n_levels)]
+    return [check_int(value, name, 1)] * n_levels
+
+
+class _Filler:
+    """The search-and-vote loop of :func:`complete` over one pyramid's levels."""
+
+    def __init__(
+        self,
+        p: int,
+        seed: int,
+        threads: int | None,
+        gradient_weight: float,
+        progress: Progress,
+        base: NDArray[np.float32] | None,
+    ) -> None:
+        self.p, self.seed, self.threads, self.gw = p, seed, threads, gradient_weight
+        self.progress, self.done, self.total = progress, 0, 0
+        self.base = base
+
+    def features(self, img: NDArray[np.float32]) -> NDArray[np.float32]:
+        return _with_gradients(img, self.gw) if self.gw > 0 else img
+
+    def start(
+        self, level: _Level, field: NDArray[np.int32] | None
+    ) -> tuple[NDArray[np.float32], NDArray[np.int32] | None]:
+        """A level's first image: the coarser field upsampled and voted with this level's own
+        pixels (no blurred upsampled image is carried down); at the coarsest, the onion peel or
+        the ``base`` colour."""
+        orig, hole_l, need, smask = level
+        if field is None:
+            if self.base is None:
+                return _fill_inward(orig, hole_l), None
+            cur = orig.copy()
+            cur[hole_l] = self.base
+            return cur, None
+        cur = orig.copy()
+        up = upsample_field(field, hole_l.shape, orig.shape[:2], self.p // 2)
+        up[~need] = -1
+        bad = ~smask[np.maximum(up[..., 0], 0), np.maximum(up[..., 1], 0)] & need
+        up[bad] = -1
+        voted, wsum = _core.vote(orig, up, patch_size=self.p, threads=self.threads)
+        fill = hole_l & (wsum > 0)
+        cur[fill] = voted[fill]
+        rest = hole_l & ~fill
+        if rest.any():
+            cur = _fill_inward(cur, rest)
+        return cur, up
+
+    def iterate(
+        self,
+        level: _Level,
+        lv: int,
+        cur: NDArray[np.float32],
+        init: NDArray[np.int32] | None,
+        n_iters: int,
+        n_search: int,
+        mean_shift: int,
+    ) -> tuple[NDArray[np.float32], NDArray[np.int32] | None]:
+        """Search-and-vote iterations at one level; ``cur`` is this level's own copy."""
+        _, hole_l, need, smask = level
+        # Wexler's confidence γ^−d as a log: the vote weights are formed in the log domain and
+        # floored, so deep inside a large hole they cannot underflow float32.
+        depth = cv2.distanceTransform(hole_l.astype(np.uint8), cv2.DIST_L2, 3)
+        log_conf = -math.log(WEXLER_GAMMA) * depth[need]
+        field = init
+        for it in range(n_iters):
+            feat = self.features(cur)
+            field, dist, _ = _core.nnf(
+                feat, feat, patch_size=self.p, iterations=n_search, levels=1, exact=False,
+                seed=self.seed + 7919 * (lv * 64 + it + 1), source_mask=smask, target_mask=need,
+                init=field, threads=self.threads,
+            )  # fmt: skip
+            d = dist[need]
+            sigma2 = max(float(np.percentile(d, WEXLER_SIGMA_PERCENTILE)), 1e-8)
+            wvote = np.zeros(dist.shape, np.float32)
+            wvote[need] = np.exp(np.maximum(log_conf - d / (2.0 * sigma2), _LOG_WEIGHT_FLOOR))
+            shift = mean_shift if it == n_iters - 1 else 0
+            voted, wsum = _core.vote(
+                cur, field, patch_size=self.p, weights=wvote, threads=self.threads, mean_shift=shift
+            )
+            fill = hole_l & (wsum > 0)
+            cur[fill] = voted[fill]
+            self.done += 1
+            if self.progress is not None:
+                self.progress(self.done, self.total)
+        return cur, field
+
+    def run(
+        self, pyramid: list[_Level], stop: int, iters: list[int], search: list[int]
+    ) -> tuple[NDArray[np.float32], NDArray[np.int32] | None]:
+        """Levels from the coarsest down to ``stop``; returns the image and field there."""
+        field: NDArray[np.int32] | None = None
+        cur = pyramid[-1][0]
+        for lv in range(len(pyramid) - 1, stop - 1, -1):
+            cur, init = self.start(pyramid[lv], field)
+            shift = COMPLETION_MEAN_SHIFT if lv == 0 else 0
+            cur, new = self.iterate(pyramid[lv], lv, cur, init, iters[lv], search[lv], shift)
+            field = new if new is not None else init
+        return cur, field
+
+    def energy(self, level: _Level, cur: NDArray[np.float32], init: NDArray[np.int32] | None, lv: int) -> float:
+        """Mean patch distance of the hole's patches to their nearest sources (Wexler's
+        objective), searched from ``init``."""
+        _, _, need, smask = level
+        feat = self.features(cur)
+        _, dist, _ = _core.nnf(
+            feat, feat, patch_size=self.p, iterations=3, levels=1, exact=False,
+            seed=self.seed + 7919 * (lv * 64 + 63), source_mask=smask, target_mask=need, init=init,
+            threads=self.threads,
+        )  # fmt: skip
+        return float(dist[need].mean())
+
+
+def complete(
+    image: Any,
+    mask: Any,
+    *,
+    sources: Any = None,
+    patch_size: int = 7,
+    levels: int | None = None,
+    iterations: int | Sequence[int] | None = None,
+    search_iterations: int | Sequence[int] | None = None,
+    pyramid: Pyramid = "auto",
+    gradient_weight: float = COMPLETION_GRADIENT_WEIGHT,
+    seed: int | np.random.Generator = 0,
+    threads: int | None = None,
+    progress: Progress = None,
+) -> NDArray[np.float32]:
+    """Fill the masked pixels of an image from its known pixels (Wexler-style completion).
+
+    The image is completed coarse to fine (Wexler, Shechtman, Irani 2007): at every pyramid
+    level, each patch touching the hole finds its nearest wholly known patch by PatchMatch
+    (warm-started from the coarser level's field; compared on values and gradients), and
+    each hole pixel becomes the mean of the pixels the overlapping matches put there,
+    weighted by Wexler's similarity
+    ``exp(−d / 2σ²)`` (σ² at the 25th percentile of the distances) times the confidence
+    ``1.3^−depth``. The next level starts from the field upsampled and voted with the finer
+    level's own pixels, so no blurred upsampled image is ever carried down. The very last
+    vote moves each pixel from the mean of its votes to their dominant mode by mean-shift,
+    as Wexler et al. propose (:data:`COMPLETION_MEAN_SHIFT`).
+
+    Three choices follow Philippeau's completion as implemented in PyPatchMatch. The first
+    two make fills of structured photos accurate: the pyramid is mask-aware and the hole
+    *shrinks* on the way up (a coarse pixel is known if any fine pixel under its 6-tap
+    binomial kernel is), down to the level where the hole disappears, so large structures
+    are settled by interpolation across a sliver of hole and only refined below; and the
+    iteration schedule spends many cheap iterations on coarse levels and one at the finest.
+    The third keeps fills sharp: patch distances include the gradients
+    (:data:`COMPLETION_GRADIENT_WEIGHT`).
+
+    Parameters
+    ----------
+    image : (M, N[, C]) array_like
+        The image; values under the mask are ignored.
+    mask : (M, N) array_like of bool
+        True where pixels are to be filled.
+    sources : (M, N) array_like of bool, optional
+        Pixels patches may be copied from (default: every known pixel). A patch is a source
+        only if all its pixels are known and in ``sources``; known pixels outside it still
+        guide the matching as the hole's surroundings, but the coarsest level starts from the
+        sources' median colour rather than from the rim. To fill a hole from another image, place
+        both in one frame and pass the other image's region.
+    patch_size : int, optional
+        Patch side, odd (default 7).
+    levels : int, optional
+        Most pyramid levels (default: until the hole vanishes at the coarsest level).
+    iterations : int or sequence of int, optional
+        Search-and-vote iterations per level (default ``1 + 2·level``, level 0 the finest:
+        one at full resolution, more on the cheap coarse levels). A sequence gives them per
+        level, finest first, the coarser levels repeating its last entry; 0 at a level only
+        votes the coarser level's field upsampled (a cheap schedule for large fills).
+    search_iterations : int or sequence of int, optional
+        PatchMatch iterations per search step (default ``min(7, 1 + level)``), per level like
+        ``iterations``.
+    pyramid : {"auto", "interpolate", "strict"}, optional
+        How coarse levels treat pixels on the hole's rim. ``"interpolate"``: a coarse pixel is
+        known as soon as one fine pixel under its kernel is (the shrinking hole above).
+        ``"strict"``: only when all of them are (the hole grows); rim pixels are synthesised
+        instead of interpolated from the few fine pixels they see, which keeps fine periodic
+        structure in phase and a bright rim from bleeding into the fill. ``"auto"`` (default)
+        runs both (strict from the third level on) and keeps the interpolating fill unless the
+        strict one is far more coherent.
+    gradient_weight : float, optional
+        Weight of the gradients in the patch distance (default
+        :data:`COMPLETION_GRADIENT_WEIGHT`; 0: values only, faster).
+    seed : int or numpy.random.Generator, optional
+        Seed (default 0); identical output for any thread count.
+    threads : int, optional
+        Worker threads.
+    progress : callable, optional
+        Called as ``progress(done, total)`` after every iteration.
+
+    Returns
+    -------
+    completed : (M, N[, C]) ndarray of float32
+        The image with the hole filled; pixels outside the mask are returned unchanged.
+
+    References
+    ----------
+    .. [1] Y. Wexler, E. Shechtman, M. Irani, "Space-time completion of video", IEEE TPAMI
+       29(3), 2007.
+    .. [2] X. Philippeau, "Inpainting by PatchMatch" (2010); its C++ port in PyPatchMatch
+       (J. Mao, https://github.com/vacancy/PyPatchMatch) is the peer in ``benches/peers.py``.
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> img = phloem.data.bark()[:96, :96, :3]
+    >>> hole = np.zeros((96, 96), bool); hole[40:56, 40:56] = True
+    >>> out = phloem.texture.complete(img, hole, seed=0)
+    >>> bool(np.array_equal(out[~hole], img[~hole]))
+    True
+    """
+    img = as_image(image, "image")
+    hole = as_mask(mask, "mask", img.shape[:2])
+    allowed = None if sources is None else as_mask(sources, "sources", img.shape[:2])
+    p = check_patch_size(patch_size)
+    if not hole.any():
+        raise ValueError("mask: no pixel is selected for filling (the mask is empty)")
+    if pyramid not in ("auto", "interpolate", "strict"):
+        raise ValueError(f"pyramid: expected 'auto', 'interpolate' or 'strict', got {pyramid!r}")
+    gw = check_float(gradient_weight, "gradient_weight", 0.0)
+    s = check_seed(seed)
+    t = check_threads(threads)
+    max_levels = None if levels is None else check_int(levels, "levels", 1)
+
+    main = _hole_pyramid(img, hole, p, max_levels, allowed=allowed, strict_from=1 if pyramid == "strict" else None)
+    if not main[0][3].any():  # the full-resolution level's usable source centres
+        where = "the known region" if allowed is None else "the known pixels in sources"
+        raise ValueError(f"mask: {where} holds no complete {p}×{p} patch to copy from")
+    alt = None
+    if pyramid == "auto" and len(main) > _STRICT_FROM:
+        # No deeper than the interpolating pyramid: the strict hole never vanishes, and its
+        # extra levels would cost most of the time.
+        alt = _hole_pyramid(img, hole, p, len(main), allowed=allowed, strict_from=_STRICT_FROM)
+        if len(alt) <= _STRICT_FROM:
+            alt = None
+    n = max(len(main), len(alt) if alt is not None else 0)
+    iters = _schedule(iterations, "iterations", n, lambda lv: 1 + 2 * lv, 0)
+    search = _schedule(search_iterations, "search_iterations", n, lambda lv: min(7, 1 + lv), 1)
+    # With restricted sources the hole's rim need not look like what fills it (a branch beside a
+    # gap), so the coarsest level starts from the sources' median colour instead of the rim's.
+    base = None if allowed is None else np.median(img[allowed & ~hole], axis=0).astype(np.float32)
+    filler = _Filler(p, s, t, gw, progress, base)
+    # The alternative only has to show whether its fill is far better: one iteration less a level.
+    alt_iters = [max(1, n - 1) for n in iters]
+    filler.total = sum(iters[: len(main)]) + (sum(alt_iters[_STRICT_FROM : len(alt)]) if alt is not None else 0)
+    if alt is None:
+        cur, _ = filler.run(main, 0, iters, search)
+    else:
+        # Both pyramids down to the first level they share; there, the fill whose patches are
+        # better explained by known ones continues.
+        starts = []
+        for pyr in (main, alt):
+            _, field = filler.run(pyr, _STRICT_FROM, iters if pyr is main else alt_iters, search)
+            cur1, up = filler.start(pyr[_STRICT_FROM - 1], field)
+            starts.append((filler.energy(pyr[_STRICT_FROM - 1], cur1, up, _STRICT_FROM - 1), cur1, up))
+        pick = 1 if starts[1][0] < _AUTO_ENERGY_RATIO * starts[0][0] else 0
+        _, cur, field = starts[pick]
+        lv = _STRICT_FROM - 1
+        cur, new = filler.iterate(
+            main[lv], lv, cur, field, iters[lv], search[lv], COMPLETION_MEAN_SHIFT if lv == 0 else 0
+        )
+        field = new if new is not None else field
+        for lv in range(_STRICT_FROM - 2, -1, -1):
+            cur, init = filler.start(main[lv], field)
+            shift = COMPLETION_MEAN_SHIFT if lv == 0 else 0
+            cur, new = filler.iterate(main[lv], lv, cur, init, iters[lv], search[lv], shift)
+            field = new if new is not None else init
+    out = img.copy()
+    out[hole] = cur[hole]
+    return restore_ndim(out, image)
