@@ -160,6 +160,34 @@ def test_shape_similarity_takes_threads():
 # -- texture, branching, trees ------------------------------------------------------------------------
 
 
+def test_quilt_return_sources(photo):
+    from phloem import texture
+
+    res = texture.quilt(photo, 48, block=24, seed=1, full_output=True)
+    assert isinstance(res, texture.QuiltResult)
+    np.testing.assert_array_equal(res.texture, texture.quilt(photo, 48, block=24, seed=1))
+    out, src = _old(lambda: texture.quilt(photo, 48, block=24, seed=1, return_sources=True), "full_output=True")
+    np.testing.assert_array_equal(out, res.texture)
+    np.testing.assert_array_equal(src, res.sources)
+
+
+def test_by_numbers_return_sources_and_k(photo):
+    from phloem import texture
+
+    a = (photo.mean(axis=2) > 0.3).astype(np.int32)
+    b = np.zeros((32, 40), np.int32)
+    b[:, 10:30] = 1
+    res = texture.by_numbers(photo, a, b, coherence_k=2, seed=1, full_output=True)
+    assert isinstance(res, texture.ByNumbersResult)
+    np.testing.assert_array_equal(res.image, texture.by_numbers(photo, a, b, coherence_k=2, seed=1))
+    out, src = _old(lambda: texture.by_numbers(photo, a, b, coherence_k=2, seed=1, return_sources=True), "full_output")
+    np.testing.assert_array_equal(out, res.image)
+    np.testing.assert_array_equal(src, res.sources)
+    np.testing.assert_array_equal(
+        _old(lambda: texture.by_numbers(photo, a, b, k=2, seed=1), "use coherence_k="), res.image
+    )
+
+
 @pytest.fixture(scope="module")
 def models():
     from phloem import branching

@@ -496,12 +496,13 @@ def generate(
         if hm.shape[:2] != img.shape[:2] or hm.shape[2] != 1:
             raise ValueError(f"height_map: expected shape {img.shape[:2]} to match image, got {hm.shape}")
         ex = np.ascontiguousarray(np.concatenate([img, hm], axis=2))
-    out, sources = texture.by_numbers(
+    painted = texture.by_numbers(
         ex, lab_in, lab_out, label_weight=label_weight, feature_weight=feature_weight, init=init,
         stand_in_weight=stand_in_weight,
-        tileable=tileable, seed=int(seeds[2]), threads=threads, return_sources=True,
+        tileable=tileable, seed=int(seeds[2]), threads=threads, full_output=True,
         progress=_stage(progress, 40, 100),
     )  # fmt: skip
+    out, sources = painted.image, painted.sources
     tex = np.ascontiguousarray(out[..., :channels])
     height = np.ascontiguousarray(out[..., channels]) if height_map is not None else None
     if not full_output:
