@@ -124,9 +124,9 @@ def test_input_labels_agree_with_the_thesis_pipeline(run):
 
 def test_input_labels_errors():
     img = phloem.data.bark()
-    with pytest.raises(ValueError, match="^k: asked for 3 regions, but the image has only 2 distinct colours"):
+    with pytest.raises(ValueError, match="^n_labels: asked for 3 regions, but the image has only 2 distinct colours"):
         bark.input_labels(np.repeat(np.array([[0.0], [1.0]], np.float32), 5, axis=1), 3)
-    with pytest.raises(ValueError, match="^k:"):
+    with pytest.raises(ValueError, match="^n_labels:"):
         bark.input_labels(img, 1)
     with pytest.raises(ValueError, match="^denoise:"):
         bark.input_labels(img, 2, denoise=float("nan"))
@@ -196,7 +196,7 @@ def test_cylinder_preview_geometry():
 def small_run():
     photo = phloem.data.bark()[:128, :128, :3].copy()
     height = photo.mean(axis=2)
-    res = bark.generate(photo, (72, 88), labels=2, height_map=height, seed=5, return_intermediates=True)
+    res = bark.generate(photo, (72, 88), n_labels=2, height_map=height, seed=5, full_output=True)
     return photo, height, res
 
 
@@ -229,7 +229,7 @@ def test_generate_resumes_from_its_own_maps(small_run):
     # an edited output map is painted as edited
     edited = res.labels_out.copy()
     edited[:, :30] = 0
-    out = bark.generate(photo, labels_in=res.labels_in, labels_out=edited, seed=5, return_intermediates=True)
+    out = bark.generate(photo, labels_in=res.labels_in, labels_out=edited, seed=5, full_output=True)
     np.testing.assert_array_equal(res.labels_in[out.sources[..., 0], out.sources[..., 1]], edited)
 
 
@@ -255,7 +255,7 @@ def test_generate_errors():
         bark.generate(photo, labels_in=lab, labels_out=np.full((32, 32), 7, np.int32))
     with pytest.raises(ValueError, match="^height_map: expected shape"):
         bark.generate(photo, 32, height_map=np.zeros((10, 10), np.float32))
-    with pytest.raises(ValueError, match="^k: "):
+    with pytest.raises(ValueError, match="^n_labels: "):
         bark.generate(np.zeros((64, 64, 3), np.float32), 32)
     with pytest.raises(ValueError, match="size"):
         bark.generate(photo, (2, 2))

@@ -106,8 +106,9 @@ def test_residual_of_the_returned_image_is_small(scene, mode, shape, offset):
         "touches_border": _disk(n, 44),
         "two_parts": _disk(n, 15, 20, 20) | _disk(n, 20, 60, 62),
     }[shape]
-    out, info = seamless(src, dst, mask, offset, mode=mode, return_info=True)
-    assert info["residual"] < 1e-6 and 1 <= info["iterations"] <= 20, info
+    info = seamless(src, dst, mask, offset, mode=mode, full_output=True)
+    out = info.image
+    assert info.residual < 1e-6 and 1 <= info.iterations <= 20, info
     assert relative_residual(out, src, dst, mask, offset, mode=mode) < 1e-4
     # Outside the region dst is untouched.
     _A, _b, (uy, ux) = poisson_system(src, dst, mask, offset)
@@ -174,9 +175,10 @@ def test_self_blend_changes_nothing(water):
     src = dst[20:100, 30:110].copy()
     mask = _ring(80)
     for mode in ("normal", "mixed"):
-        out, info = seamless(src, dst, mask, (20, 30), mode=mode, return_info=True)
+        info = seamless(src, dst, mask, (20, 30), mode=mode, full_output=True)
+        out = info.image
         assert np.array_equal(out, dst)
-        assert info["iterations"] == 0
+        assert info.iterations == 0
 
 
 def test_fixed_pixels_keep_the_source_exactly(scene):
@@ -218,9 +220,10 @@ def test_whole_destination_keeps_the_source_mean(bark):
     """No Dirichlet pixel at all: the solution keeps the mean of the source (documented)."""
     src = np.ascontiguousarray(bark[:50, :60])
     dst = np.zeros_like(src)
-    out, info = seamless(src, dst, np.ones((50, 60), bool), (0, 0), return_info=True)
+    info = seamless(src, dst, np.ones((50, 60), bool), (0, 0), full_output=True)
+    out = info.image
     np.testing.assert_allclose(out, src, atol=1e-4)
-    assert info["residual"] < 1e-6
+    assert info.residual < 1e-6
 
 
 def test_gray_and_many_channels(scene):
@@ -323,12 +326,13 @@ def test_field_matches_a_sparse_direct_solve(seed):
             points.append((ys[i], xs[i]))
     points = np.array(points)
     values = rng.normal(size=(len(points), 2))
-    ours, info = interpolate_field(region, points, values, return_info=True)
+    info = interpolate_field(region, points, values, full_output=True)
+    ours = info.field
     ref, _L = field_reference(region, points, values)
     assert np.array_equal(np.isnan(ours), np.isnan(ref))
     assert np.array_equal(ours[points[:, 0], points[:, 1]], values.astype(np.float32))
     np.testing.assert_allclose(ours[region], ref[region], atol=1e-4 * (1 + np.abs(values).max()))
-    assert info["residual"] <= 1e-10
+    assert info.residual <= 1e-10
 
 
 def test_field_is_smooth():
@@ -351,8 +355,9 @@ def test_field_on_a_large_region():
     region = _disk(256, 125)
     pts = np.array([(128, 128), (40, 128), (200, 60), (128, 230)])
     vals = np.array([(1.0, 0.0), (0.0, 1.0), (-1.0, 0.5), (0.2, -0.3)])
-    d, info = interpolate_field(region, pts, vals, tol=1e-8, return_info=True)
-    assert info["residual"] <= 1e-8
+    info = interpolate_field(region, pts, vals, tol=1e-8, full_output=True)
+    d = info.field
+    assert info.residual <= 1e-8
     assert np.array_equal(d[pts[:, 0], pts[:, 1]], vals.astype(np.float32))
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import astuple
+
 import maxflow
 import numpy as np
 import pytest
@@ -238,7 +240,7 @@ def test_real_image_seam_flow_matches_pymaxflow(bark, shape):
     region[:, 1:-1] = True
     cols = np.arange(w)
     am, bm = np.broadcast_to(cols < w - 1, (h, w)), np.broadcast_to(cols > 0, (h, w))
-    take_b, energy = seam(a, b, region, a_mask=am, b_mask=bm, return_energy=True)
+    take_b, energy = astuple(seam(a, b, region, a_mask=am, b_mask=bm, full_output=True))
     # Edges from the tied border columns into the region are not cut by seam() (those pixels
     # are outside the region), so compare against the flow on the region's own edges.
     inner = edges.copy()
@@ -259,8 +261,8 @@ def test_seam_costs_match_independent_numpy_costs(bark):
     region = np.ones((40, 50), bool)
     seeds = np.zeros((40, 50), np.int8)
     seeds[:, 0], seeds[:, -1] = 1, 2
-    _mask, e_builtin = seam(a, b, region, seeds=seeds, return_energy=True)
-    _mask2, e_numpy = seam(a, b, region, seeds=seeds, cost=kwatra_edges(a, b), return_energy=True)
+    _mask, e_builtin = astuple(seam(a, b, region, seeds=seeds, full_output=True))
+    _mask2, e_numpy = astuple(seam(a, b, region, seeds=seeds, cost=kwatra_edges(a, b), full_output=True))
     assert e_builtin == pytest.approx(e_numpy, rel=1e-5)
     # Luo's cost from its definition: min(d(s), d(t)) / G(s, t) on 0-255 colours.
     a8, b8 = 255.0 * a.astype(np.float64), 255.0 * b.astype(np.float64)
@@ -281,8 +283,8 @@ def test_seam_costs_match_independent_numpy_costs(bark):
     e = np.zeros((40, 50, 2))
     e[:, :-1, 0] = np.minimum(d[:, :-1], d[:, 1:]) / (delta[:, :-1] + delta[:, 1:] + 1e-6)
     e[:-1, :, 1] = np.minimum(d[:-1], d[1:]) / (delta[:-1] + delta[1:] + 1e-6)
-    _, e_luo = seam(a, b, region, seeds=seeds, cost="luo", return_energy=True)
-    _, e_luo_np = seam(a, b, region, seeds=seeds, cost=e.astype(np.float32), return_energy=True)
+    _, e_luo = astuple(seam(a, b, region, seeds=seeds, cost="luo", full_output=True))
+    _, e_luo_np = astuple(seam(a, b, region, seeds=seeds, cost=e.astype(np.float32), full_output=True))
     assert e_luo == pytest.approx(e_luo_np, rel=1e-4)
 
 
@@ -316,7 +318,7 @@ def test_seeds_are_hard_and_identical_images_cost_nothing(bark):
     region = np.ones((30, 30), bool)
     seeds = np.zeros((30, 30), int)
     seeds[10, 10], seeds[20, 20] = 2, 1
-    take_b, energy = seam(a, a, region, seeds=seeds, return_energy=True)
+    take_b, energy = astuple(seam(a, a, region, seeds=seeds, full_output=True))
     assert energy == 0
     assert take_b[10, 10] and not take_b[20, 20]
 
@@ -326,8 +328,8 @@ def test_threads_do_not_change_the_seam(bark):
     region = np.ones(a.shape[:2], bool)
     seeds = np.zeros(a.shape[:2], int)
     seeds[:, 0], seeds[:, -1] = 1, 2
-    one = seam(a, b, region, seeds=seeds, cost="gradient", threads=1, return_energy=True)
-    two = seam(a, b, region, seeds=seeds, cost="gradient", threads=2, return_energy=True)
+    one = astuple(seam(a, b, region, seeds=seeds, cost="gradient", threads=1, full_output=True))
+    two = astuple(seam(a, b, region, seeds=seeds, cost="gradient", threads=2, full_output=True))
     assert np.array_equal(one[0], two[0]) and one[1] == two[1]
 
 

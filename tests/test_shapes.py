@@ -20,7 +20,7 @@ def blobs(h: int, w: int, seed: int, k: int = 2, sigma: float = 3.0) -> np.ndarr
     return np.digitize(f, np.sort(cuts)).astype(np.int32)
 
 
-def brute_similarity(a: np.ndarray, b: np.ndarray, p: int, rotations: bool) -> float:
+def brute_similarity(a: np.ndarray, b: np.ndarray, p: int, rotations: str) -> float:
     """Eq. 3.7-3.9 by brute force, independent of the Rust code."""
 
     def boundary(m: np.ndarray) -> np.ndarray:
@@ -39,14 +39,14 @@ def brute_similarity(a: np.ndarray, b: np.ndarray, p: int, rotations: bool) -> f
     pa, pb = patches(a), patches(b)
 
     def one_way(x: np.ndarray, y: np.ndarray) -> float:
-        turns = [np.rot90(y, t, axes=(1, 2)) for t in range(4 if rotations else 1)]
+        turns = [np.rot90(y, t, axes=(1, 2)) for t in range(4 if rotations == "all" else 1)]
         d = np.min([(x[:, None] != t[None]).sum(axis=(2, 3)) for t in turns], axis=0)
         return float(d.min(axis=1).sum())
 
     return (one_way(pa, pb) + one_way(pb, pa)) / (len(pa) + len(pb))
 
 
-@pytest.mark.parametrize("rotations", [True, False])
+@pytest.mark.parametrize("rotations", ["all", "none"])
 @pytest.mark.parametrize(("k", "p", "seed"), [(2, 7, 0), (2, 5, 1), (3, 7, 2), (4, 3, 3)])
 def test_similarity_equals_brute_force(k, p, seed, rotations):
     a = blobs(18, 22, seed, k, sigma=1.5)
@@ -61,7 +61,7 @@ def test_similarity_under_rotation_and_flips():
     wedge = (yy > 2 * xx) | ((yy - 30) ** 2 + (xx - 28) ** 2 < 40)
     for t in (1, 2, 3):
         assert shapes.shape_similarity(wedge, np.rot90(wedge, t)) == 0.0
-        assert shapes.shape_similarity(wedge, np.rot90(wedge, t), rotations=False) > 0.5
+        assert shapes.shape_similarity(wedge, np.rot90(wedge, t), rotations="none") > 0.5
     # A mirror image is no rotation of this shape (Eq. 3.7 minimises over rotations only) ...
     assert shapes.shape_similarity(wedge, np.fliplr(wedge)) > 0.5
     # ... but a rectangle's mirror image is one.
@@ -268,7 +268,7 @@ def test_rotations_keep_a_vertical_input_vertical():
     for cy, cx in rng.uniform(0, 128, (14, 2)):  # tall thin ellipses, like bark furrows
         ex |= ((yy - cy) / 30.0) ** 2 + ((xx - cx) / 5.0) ** 2 < 1
     assert _vertical_share(ex) > 0.8
-    for rot in (False, "half"):
+    for rot in ("none", "half"):
         out = shapes.synthesize(ex, 128, patch_size=9, rotations=rot, seed=0)
         assert _vertical_share(out) > 0.7, rot
         lab = shapes.synthesize_labels(
@@ -276,8 +276,8 @@ def test_rotations_keep_a_vertical_input_vertical():
         )
         assert _vertical_share(lab) > 0.6, rot
     # With all four turns a furrow's patch also matches its quarter turn; only print it.
-    out = shapes.synthesize(ex, 128, patch_size=9, rotations=True, seed=0)
-    print("vertical share with rotations=True:", _vertical_share(out))
+    out = shapes.synthesize(ex, 128, patch_size=9, rotations="all", seed=0)
+    print("vertical share with rotations='all':", _vertical_share(out))
 
 
 def test_rotations_half_is_between_none_and_all():
@@ -285,7 +285,7 @@ def test_rotations_half_is_between_none_and_all():
     a = yy > 2 * xx
     assert shapes.shape_similarity(a, np.rot90(a, 2), rotations="half") == 0.0
     assert shapes.shape_similarity(a, np.rot90(a), rotations="half") > 0
-    assert shapes.shape_similarity(a, np.rot90(a, 2), rotations=False) > 0
+    assert shapes.shape_similarity(a, np.rot90(a, 2), rotations="none") > 0
     for bad in ("full", 2, None):
         with pytest.raises(ValueError, match="^rotations"):
             shapes.synthesize(a, 32, rotations=bad)

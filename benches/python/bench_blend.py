@@ -69,12 +69,12 @@ def job(request: pytest.FixtureRequest) -> dict[str, Any]:
 
 @pytest.mark.parametrize("threads", [1, 2])
 def test_phloem_seamless(benchmark, job, threads):
-    out, info = benchmark(
-        phloem.blend.seamless, job["src"], job["dst"], job["mask"], job["offset"], threads=threads, return_info=True
+    res = benchmark(
+        phloem.blend.seamless, job["src"], job["dst"], job["mask"], job["offset"], threads=threads, full_output=True
     )
-    benchmark.extra_info.update(info)
-    assert info["residual"] < 1e-4
-    assert out.shape == job["dst"].shape
+    benchmark.extra_info.update(iterations=res.iterations, residual=res.residual)
+    assert res.residual < 1e-4
+    assert res.image.shape == job["dst"].shape
 
 
 def test_cv2_seamless_clone(benchmark, job):
@@ -118,7 +118,7 @@ def table(rounds: int = 15) -> None:
         runs: dict[str, Any] = {
             f"phloem tol=1e-6 threads={t}": (
                 lambda t=t: phloem.blend.seamless(
-                    job["src"], job["dst"], job["mask"], job["offset"], threads=t, return_info=True
+                    job["src"], job["dst"], job["mask"], job["offset"], threads=t, full_output=True
                 )
             )
             for t in (1, 2)
@@ -127,7 +127,7 @@ def table(rounds: int = 15) -> None:
             {
                 f"phloem tol=1e-4 threads={t}": (
                     lambda t=t: phloem.blend.seamless(
-                        job["src"], job["dst"], job["mask"], job["offset"], tol=1e-4, threads=t, return_info=True
+                        job["src"], job["dst"], job["mask"], job["offset"], tol=1e-4, threads=t, full_output=True
                     )
                 )
                 for t in (1, 2)
@@ -145,12 +145,11 @@ def table(rounds: int = 15) -> None:
                 results[name] = fn()
                 times[name].append(time.perf_counter() - t0)
         for name in runs:
-            out, info = results[name]
-            if info is None:
-                res = relative_residual(out.astype(np.float32) / 255, job)
-                iters = "-"
+            if isinstance(results[name], phloem.blend.SeamlessResult):
+                res, iters = results[name].residual, str(results[name].iterations)
             else:
-                res, iters = info["residual"], str(info["iterations"])
+                res = relative_residual(results[name][0].astype(np.float32) / 255, job)
+                iters = "-"
             ts = np.array(times[name]) * 1e3
             print(f"{n:>4}² {shape[0]} {name:>28} {ts.min():8.1f} {np.median(ts):9.1f} {iters:>5} {res:9.2e}")
         cv = np.array(times["cv2.seamlessClone NORMAL_CLONE"])
@@ -158,7 +157,7 @@ def table(rounds: int = 15) -> None:
             ts = np.array(times[name])
             ratio = f"cv2 / {name}: {cv.min() / ts.min():.2f}x best, {np.median(cv) / np.median(ts):.2f}x median"
             print(f"{'':>8} {ratio}")
-        ours8 = (results["phloem tol=1e-6 threads=1"][0].clip(0, 1) * 255 + 0.5).astype(np.uint8)
+        ours8 = (results["phloem tol=1e-6 threads=1"].image.clip(0, 1) * 255 + 0.5).astype(np.uint8)
         print(
             f"{n:>4}² {shape[0]} {'phloem rounded to 8 bits':>28} {'':>8} {'':>9} {'':>5} {relative_residual(ours8 / 255, job):9.2e}"
         )

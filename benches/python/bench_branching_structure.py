@@ -49,7 +49,7 @@ def grow_nodes(bending: BendingModel, furcation: FurcationModel, nodes: int, see
     return grow(
         bending,
         furcation,
-        shape=(512, 512),
+        size=(512, 512),
         seed=seed,
         generations=3,
         children=4,
@@ -107,7 +107,7 @@ def real_rows() -> list[str]:
         bend = BendingModel.fit(src)
         fur = FurcationModel.fit(src, h=bend.h)
         t0 = time.perf_counter()
-        out = grow(bend, fur, shape=img.shape[:2], seed=1, max_length="input")
+        out = grow(bend, fur, size=img.shape[:2], seed=1, max_length="input")
         dt = time.perf_counter() - t0
         ha, e = angle_histogram(src, h=bend.h)
         hb, _ = angle_histogram(out, h=bend.h, range=(e[0], e[-1]))

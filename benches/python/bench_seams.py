@@ -76,8 +76,7 @@ def run_seam(p: dict[str, np.ndarray]) -> float:
     h, w = p["source"].shape
     seeds = np.zeros((h, w), np.uint8)
     seeds[:, 0], seeds[:, -1] = 1, 2
-    _, e = seam(p["a"], p["b"], np.ones((h, w), bool), seeds=seeds, return_energy=True)
-    return e
+    return seam(p["a"], p["b"], np.ones((h, w), bool), seeds=seeds, full_output=True).energy
 
 
 def best_of(fns: dict[str, Callable[[], Any]], runs: int) -> dict[str, tuple[float, Any]]:

@@ -29,13 +29,13 @@ RUNS = ("bark1", "bark2", "eucalyptus", "eucap5")
 
 
 def pipeline_row(
-    name: str, photo: np.ndarray, k: int, size: tuple[int, int], rotations: bool | str = "half"
+    name: str, photo: np.ndarray, k: int, size: tuple[int, int], rotations: str = "half"
 ) -> list[np.ndarray]:
-    opts = {"labels": k, "rotations": rotations}
+    opts = {"n_labels": k, "rotations": rotations}
     t0 = time.perf_counter()
-    joint = bark.generate(photo, size, seed=1, return_intermediates=True, **opts)
+    joint = bark.generate(photo, size, seed=1, full_output=True, **opts)
     t_joint = time.perf_counter() - t0
-    lay = bark.generate(photo, size, method="layered", seed=1, return_intermediates=True, **opts)
+    lay = bark.generate(photo, size, method="layered", seed=1, full_output=True, **opts)
     tile = bark.generate(photo, (size[0] // 2, size[1] // 2), tileable=True, seed=2, **opts)
     tiled = np.tile(tile, (2, 2, 1))
     sim_l = phloem.metrics.shape_similarity(lay.labels_in, lay.labels_out, rotations=rotations)
@@ -87,7 +87,7 @@ def main(out: Path) -> None:
     if SHARED.exists():
         for run in RUNS:
             ai = phloem.io.read_image(next((SHARED / "thesis_runs" / run).glob("ai.*")))[..., :3].copy()
-            rows.append(pipeline_row(run, ai, 3, (384, 384), rotations=True))  # plane-tree bark has no grain
+            rows.append(pipeline_row(run, ai, 3, (384, 384), rotations="all"))  # plane-tree bark has no grain
         rows.extend(thesis_row(run) for run in RUNS)
     sheet = write_sheet(rows, out)
     print(f"wrote {out} ({sheet.shape[1]}x{sheet.shape[0]}); tile {TILE}px")

@@ -153,7 +153,7 @@ def main() -> None:
         row("identity", img, src, src),
     ]
     # The whole §4 + §5 pipeline: models learnt from the source skeleton grow the target.
-    grown = grow(BendingModel.fit(src), FurcationModel.fit(src), shape=(320, 560), seed=3, generations=2)
+    grown = grow(BendingModel.fit(src), FurcationModel.fit(src), size=(320, 560), seed=3, generations=2)
     rows.append(row("river, grown target", img, src, grown))
     # Fig. 8: a slanted view of the river, rectified, synthesised frontally, distorted back.
     h, w = src.shape  # type: ignore[misc]

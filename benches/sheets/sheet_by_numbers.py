@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import astuple
 
 import cv2
 import numpy as np
@@ -33,7 +34,7 @@ RUNS = shared_path("bark", "thesis_runs")
 
 def row(name: str, ai: np.ndarray, a: np.ndarray, b: np.ndarray, bi: np.ndarray | None) -> tuple[np.ndarray, str]:
     t0 = time.perf_counter()
-    out, src = phloem.texture.by_numbers(ai, a, b, seed=0, return_sources=True)
+    out, src = astuple(phloem.texture.by_numbers(ai, a, b, seed=0, full_output=True))
     dt = time.perf_counter() - t0
     strict = phloem.texture.by_numbers(ai, a, b, seed=0, stand_in_weight=None)
     coh, hist, agree = patch_coherence(out, ai), label_histogram_distance(out, b, ai, a), label_agreement(out, b, ai, a)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import astuple
 from pathlib import Path
 
 import numpy as np
@@ -71,7 +72,7 @@ def _rgb3(img: np.ndarray) -> np.ndarray:
 def quilt_row(name: str, ex: np.ndarray) -> list[np.ndarray]:
     ex = _rgb3(ex)
     t0 = time.perf_counter()
-    out, src = phloem.texture.quilt(ex, 384, seed=1, return_sources=True)
+    out, src = astuple(phloem.texture.quilt(ex, 384, seed=1, full_output=True))
     dt = time.perf_counter() - t0
     grad = phloem.texture.quilt(ex, 384, seed=1, cost="gradient")
     rep = phloem.metrics.repetition(out)

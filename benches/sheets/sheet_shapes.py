@@ -55,15 +55,15 @@ def bark_row() -> list[np.ndarray]:
         _label(_fit(_gray(lab)), f"k-means labels (3) c={shapes.chord_length(lab):.0f}"),
     ]
     for method, size, rot in [
-        ("layered", 256, True),
-        ("joint", 256, True),
-        ("joint", 512, True),
-        ("joint", 256, False),
+        ("layered", 256, "all"),
+        ("joint", 256, "all"),
+        ("joint", 512, "all"),
+        ("joint", 256, "none"),
         ("joint", 256, "half"),
     ]:
         out, dt = _timed(shapes.synthesize_labels, lab, size, method=method, rotations=rot, seed=0)
         sim = shapes.shape_similarity(lab, out)
-        name = f"{method} {size}" + {True: "", False: " no rot.", "half": " half"}[rot]
+        name = f"{method} {size}" + {"all": "", "none": " no rot.", "half": " half"}[rot]
         tiles.append(_label(_fit(_gray(out)), f"{name}: D={sim:.2f} c={shapes.chord_length(out):.0f} {dt:.1f}s"))
     return tiles
 

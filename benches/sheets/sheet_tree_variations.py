@@ -81,7 +81,7 @@ def main() -> int:
         print(f"variation {s}: {v.describe(lib)}")
     mine = lib.trees[2]
     others = trees.Library(lib.trees[:2] + lib.trees[3:], lib.names[:2] + lib.names[3:])
-    like = trees.vary(mine, others, n=per - 1, seed=3)
+    like = trees.vary(mine, others, n_variations=per - 1, seed=3)
     hist = [trees.variation(lib, seed=s, histogram=True) for s in range(per)]
     rows = [tables]
     for r in range(0, len(variations), per):

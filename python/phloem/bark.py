@@ -3,7 +3,7 @@
 The pipeline (thesis §3.2) has three stages, each with a result an artist can inspect, edit and
 feed back in:
 
-1. :func:`input_labels` segments the photo into ``k`` regions (§3.5): non-local-means
+1. :func:`input_labels` segments the photo into ``n_labels`` regions (§3.5): non-local-means
    denoising, CIELAB, k-means, majority-filter erosion of tiny regions;
 2. :func:`synthesize_labels` grows a new label map of any size with the same shapes (§3.6:
    Rosenberger et al. 2009 layered shape synthesis, or phloem's joint multi-label variant);
@@ -27,9 +27,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import shapes, texture
+from ._api import Seed, Size, old_flag, renamed
 from ._color import check_denoise, denoised_lab, rgb8
 from ._progress import Progress
 from ._validate import as_image, as_labels, check_int, check_seed, check_size, check_threads
+from .shapes import Rotations
 
 __all__ = [
     "BarkResult",
@@ -41,8 +43,6 @@ __all__ = [
     "input_labels",
     "synthesize_labels",
 ]
-
-Rotations = bool | Literal["half"]
 
 
 def _kmeans(
@@ -102,31 +102,32 @@ def _majority(labels: NDArray[np.int32], k: int) -> NDArray[np.int32]:
     return np.where(own >= top, labels, counts.argmax(0)).astype(np.int32)
 
 
+@renamed(k="n_labels")
 def input_labels(
     image: Any,
-    k: int = 2,
+    n_labels: int = 2,
     *,
     denoise: float = 10.0,
     erosion: int = 1,
-    seed: int | np.random.Generator = 0,
+    seed: Seed = 0,
 ) -> NDArray[np.int32]:
-    """Segment a bark photo into ``k`` regions: the input label map of the bark thesis (§3.5).
+    """Segment a bark photo into ``n_labels`` regions: the input label map of the bark thesis (§3.5).
 
     Steps: non-local-means denoising (Buades et al., OpenCV's ``fastNlMeansDenoisingColored``,
-    which itself works in CIELAB), conversion to CIELAB, k-means of the pixel colours into ``k``
-    clusters (Lloyd's algorithm with k-means++ seeding, best of 3; the thesis used scikit-learn's
+    which itself works in CIELAB), conversion to CIELAB, k-means of the pixel colours into
+    ``n_labels`` clusters (Lloyd's algorithm with k-means++ seeding, best of 3; the thesis used scikit-learn's
     mini-batch approximation of the same objective), then ``erosion`` passes of the majority
     filter that removes tiny regions (§3.5.4: every pixel becomes its most common neighbour).
     The thesis keeps only a grey level per region (§3.5.5); phloem numbers the regions
-    ``0 … k-1`` from dark to light by the L* of their cluster centre.
+    ``0 … n_labels - 1`` from dark to light by the L* of their cluster centre.
 
     Parameters
     ----------
     image : array_like, shape (H, W, 3) or (H, W, 4) or (H, W)
         The bark photo; uint8/uint16 are scaled to [0, 1], floats are taken as [0, 1]. Alpha
         is ignored.
-    k : int, optional
-        Number of regions (default 2; the thesis uses 2–5, §3.5).
+    n_labels : int, optional
+        Number of regions (default 2; the thesis uses 2–5, §3.5). ``k`` before (deprecated).
     denoise : float, optional
         Filter strength ``h`` of the non-local-means denoising on the 0–255 scale, for both
         lightness and colour (default 10, OpenCV's documented example value); 0 skips it.
@@ -138,12 +139,12 @@ def input_labels(
     Returns
     -------
     numpy.ndarray of int32, shape (H, W)
-        Labels ``0 … k-1``, darkest region first.
+        Labels ``0 … n_labels - 1``, darkest region first.
 
     Raises
     ------
     ValueError
-        If ``k`` is below 2 or larger than the number of distinct colours in ``image``.
+        If ``n_labels`` is below 2 or larger than the number of distinct colours in ``image``.
 
     Examples
     --------
@@ -153,13 +154,13 @@ def input_labels(
     ((256, 256), dtype('int32'), [0, 1, 2])
     """
     img = as_image(image, "image")
-    k = check_int(k, "k", 2)
+    k = check_int(n_labels, "n_labels", 2)
     erosion = check_int(erosion, "erosion", 0)
     check_denoise(denoise)
     u8 = rgb8(img)
     distinct = len(np.unique(u8.reshape(-1, 3), axis=0))
     if k > distinct:
-        raise ValueError(f"k: asked for {k} regions, but the image has only {distinct} distinct colours")
+        raise ValueError(f"n_labels: asked for {k} regions, but the image has only {distinct} distinct colours")
     lab = denoised_lab(u8, denoise)
     rng = np.random.default_rng(check_seed(seed))
     assign, centres = _kmeans(lab.reshape(-1, 3), k, rng)
@@ -247,13 +248,13 @@ def decode_labels(image: Any, *, max_labels: int = 16) -> NDArray[np.int32]:
 
 def synthesize_labels(
     labels: Any,
-    size: int | tuple[int, int],
+    size: Size,
     *,
     method: Literal["layered", "joint"] = "joint",
     order: Sequence[int] | None = None,
     rotations: Rotations = "half",
     tileable: bool = False,
-    seed: int | np.random.Generator = 0,
+    seed: Seed = 0,
     threads: int | None = None,
     progress: Progress = None,
     **options: Any,
@@ -318,9 +319,9 @@ def _stage(progress: Progress, lo: int, hi: int) -> Progress:
 @overload
 def generate(
     image: Any,
-    size: int | tuple[int, int] | None = ...,
+    size: Size | None = ...,
     *,
-    labels: int = ...,
+    n_labels: int = ...,
     height_map: Any = ...,
     labels_in: Any = ...,
     labels_out: Any = ...,
@@ -333,17 +334,17 @@ def generate(
     feature_weight: float = ...,
     stand_in_weight: float | None = ...,
     init: Literal["smart", "random"] = ...,
-    seed: int | np.random.Generator = ...,
+    seed: Seed = ...,
     threads: int | None = ...,
     progress: Progress = ...,
-    return_intermediates: Literal[False] = ...,
+    full_output: Literal[False] = ...,
 ) -> NDArray[np.float32]: ...
 @overload
 def generate(
     image: Any,
-    size: int | tuple[int, int] | None = ...,
+    size: Size | None = ...,
     *,
-    labels: int = ...,
+    n_labels: int = ...,
     height_map: Any = ...,
     labels_in: Any = ...,
     labels_out: Any = ...,
@@ -356,16 +357,19 @@ def generate(
     feature_weight: float = ...,
     stand_in_weight: float | None = ...,
     init: Literal["smart", "random"] = ...,
-    seed: int | np.random.Generator = ...,
+    seed: Seed = ...,
     threads: int | None = ...,
     progress: Progress = ...,
-    return_intermediates: Literal[True],
+    full_output: Literal[True],
 ) -> BarkResult: ...
+
+
+@renamed(labels="n_labels", return_intermediates=old_flag(lambda r: r))
 def generate(
     image: Any,
-    size: int | tuple[int, int] | None = None,
+    size: Size | None = None,
     *,
-    labels: int = 2,
+    n_labels: int = 2,
     height_map: Any = None,
     labels_in: Any = None,
     labels_out: Any = None,
@@ -378,10 +382,10 @@ def generate(
     feature_weight: float = 8.0,
     stand_in_weight: float | None = 5.0,
     init: Literal["smart", "random"] = "smart",
-    seed: int | np.random.Generator = 0,
+    seed: Seed = 0,
     threads: int | None = None,
     progress: Progress = None,
-    return_intermediates: bool = False,
+    full_output: bool = False,
 ) -> NDArray[np.float32] | BarkResult:
     """A bark texture of any size from one small bark photo: the whole pipeline of the thesis.
 
@@ -401,8 +405,9 @@ def generate(
         The bark photo (uint8/uint16 scaled to [0, 1]; an alpha channel is dropped).
     size : int or (int, int), optional
         Output (height, width). Required unless ``labels_out`` is given (its shape is used).
-    labels : int, optional
-        Number of regions ``k`` of the input label map (default 2; §4.3 found 2–3 work best).
+    n_labels : int, optional
+        Number of regions of the input label map (default 2; §4.3 found 2–3 work best).
+        ``labels`` before (deprecated).
     height_map : array_like, shape (H, W), optional
         A height (or any other) map of the photo, synthesised along with the colours.
     labels_in, labels_out : array_like of int, optional
@@ -412,11 +417,11 @@ def generate(
         multi-label variant (default), or the thesis' nested layers (§3.6.4). Joint scores
         better on Eq. 3.9 on all four of the thesis' runs and does not degrade beyond three
         labels as layers do (§4.4).
-    rotations : {"half", True, False}, optional
+    rotations : {"half", "all", "none"}, optional
         Which turns of the photo's shapes label-map synthesis may use (Eq. 3.7; see
         :func:`phloem.shapes.synthesize`). Default "half" (0° and 180°): bark grows along the
-        trunk, and shapes turned by 90° make furrows look woven. True allows all four turns,
-        for bark without a grain such as plane trees; False none.
+        trunk, and shapes turned by 90° make furrows look woven. "all" allows all four turns,
+        for bark without a grain such as plane trees; "none" none.
     edge_label : bool, optional
         Add the §3.5.5 edge region to both maps before texture-by-numbers (default False).
     tileable : bool, optional
@@ -438,14 +443,14 @@ def generate(
         Worker threads (default: ``PHLOEM_NUM_THREADS`` or all cores).
     progress : callable, optional
         ``progress(done, total)`` with ``total = 100`` over the whole pipeline.
-    return_intermediates : bool, optional
-        Return a :class:`BarkResult` with the label maps, height map and sources.
+    full_output : bool, optional
+        Return a :class:`BarkResult` with the label maps, height map and sources
+        (``return_intermediates`` before; it still works, deprecated).
 
     Returns
     -------
     numpy.ndarray of float32, shape (h, w, C), or BarkResult
-        The texture (colour channels of the photo), or everything when
-        ``return_intermediates``.
+        The texture (colour channels of the photo), or everything with ``full_output``.
 
     Examples
     --------
@@ -461,7 +466,7 @@ def generate(
     threads = check_threads(threads)
     seeds = np.random.SeedSequence(check_seed(seed)).generate_state(3, np.uint64)
     if labels_in is None:
-        lab_in = input_labels(img, labels, denoise=denoise, seed=int(seeds[0]))
+        lab_in = input_labels(img, n_labels, denoise=denoise, seed=int(seeds[0]))
     else:
         lab_in = as_labels(labels_in, "labels_in")
         if lab_in.shape != img.shape[:2]:
@@ -491,15 +496,16 @@ def generate(
         if hm.shape[:2] != img.shape[:2] or hm.shape[2] != 1:
             raise ValueError(f"height_map: expected shape {img.shape[:2]} to match image, got {hm.shape}")
         ex = np.ascontiguousarray(np.concatenate([img, hm], axis=2))
-    out, sources = texture.by_numbers(
+    painted = texture.by_numbers(
         ex, lab_in, lab_out, label_weight=label_weight, feature_weight=feature_weight, init=init,
         stand_in_weight=stand_in_weight,
-        tileable=tileable, seed=int(seeds[2]), threads=threads, return_sources=True,
+        tileable=tileable, seed=int(seeds[2]), threads=threads, full_output=True,
         progress=_stage(progress, 40, 100),
     )  # fmt: skip
+    out, sources = painted.image, painted.sources
     tex = np.ascontiguousarray(out[..., :channels])
     height = np.ascontiguousarray(out[..., channels]) if height_map is not None else None
-    if not return_intermediates:
+    if not full_output:
         return tex
     return BarkResult(texture=tex, height=height, labels_in=lab_in, labels_out=lab_out, sources=sources)
 

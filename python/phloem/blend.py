@@ -10,15 +10,55 @@ from __future__ import annotations
 
 import numbers
 import warnings
+from dataclasses import dataclass
 from typing import Any, Literal, overload
 
 import numpy as np
 from numpy.typing import NDArray
 
 from . import _core
+from ._api import old_flag, renamed
 from ._validate import as_image, as_mask, check_int, check_threads, restore_ndim
 
-__all__ = ["interpolate_field", "seamless"]
+__all__ = ["FieldResult", "SeamlessResult", "interpolate_field", "seamless"]
+
+
+@dataclass(frozen=True)
+class SeamlessResult:
+    """What :func:`seamless` returns with ``full_output=True``.
+
+    Attributes
+    ----------
+    image : (M, N[, C]) ndarray of float32
+        The blended image (the default return value).
+    iterations : int
+        Conjugate-gradient iterations run.
+    residual : float
+        Final relative residual ``‖b − A f‖ / ‖b‖`` (the largest over channels).
+    """
+
+    image: NDArray[np.float32]
+    iterations: int
+    residual: float
+
+
+@dataclass(frozen=True)
+class FieldResult:
+    """What :func:`interpolate_field` returns with ``full_output=True``.
+
+    Attributes
+    ----------
+    field : (M, N, D) or (M, N) ndarray of float32
+        The interpolated field (the default return value).
+    iterations : int
+        Conjugate-gradient iterations run (the most over components).
+    residual : float
+        Final relative residual of the normal equations (the largest over components).
+    """
+
+    field: NDArray[np.float32]
+    iterations: int
+    residual: float
 
 
 def _tol(tol: Any) -> float:
@@ -60,7 +100,7 @@ def seamless(
     tol: float = ...,
     max_iterations: int = ...,
     threads: int | None = ...,
-    return_info: Literal[False] = ...,
+    full_output: Literal[False] = ...,
 ) -> NDArray[np.float32]: ...
 @overload
 def seamless(
@@ -74,10 +114,11 @@ def seamless(
     tol: float = ...,
     max_iterations: int = ...,
     threads: int | None = ...,
-    return_info: Literal[True],
-) -> tuple[NDArray[np.float32], dict[str, Any]]: ...
+    full_output: Literal[True],
+) -> SeamlessResult: ...
 
 
+@renamed(return_info=old_flag(lambda r: (r.image, {"iterations": r.iterations, "residual": r.residual})))
 def seamless(
     src: Any,
     dst: Any,
@@ -89,8 +130,8 @@ def seamless(
     tol: float = 1e-6,
     max_iterations: int = 200,
     threads: int | None = None,
-    return_info: bool = False,
-) -> NDArray[np.float32] | tuple[NDArray[np.float32], dict[str, Any]]:
+    full_output: bool = False,
+) -> NDArray[np.float32] | SeamlessResult:
     """Paste the gradients of ``src`` into ``dst`` over ``mask`` (Poisson image editing).
 
     Solves, per channel, the discrete Poisson equation of Pérez et al. (2003, Eq. 7) on the
@@ -131,15 +172,15 @@ def seamless(
         ``RuntimeWarning`` says if ``tol`` was not reached.
     threads : int, optional
         Worker threads (default: ``PHLOEM_NUM_THREADS`` or all cores).
-    return_info : bool, optional
-        Also return ``{"iterations": int, "residual": float}``.
+    full_output : bool, optional
+        Return a :class:`SeamlessResult` (the image, iterations and final residual) instead
+        of the image alone (``return_info`` before; it still works, deprecated).
 
     Returns
     -------
     image : (M, N[, C]) ndarray of float32
-        ``dst`` (as float32) with the region replaced by the solution.
-    info : dict
-        Only with ``return_info=True``: iterations and the final relative residual.
+        ``dst`` (as float32) with the region replaced by the solution; a
+        :class:`SeamlessResult` with ``full_output=True``.
 
     References
     ----------
@@ -154,10 +195,10 @@ def seamless(
     >>> dst = np.full((128, 128, 3), 0.5, np.float32)
     >>> yy, xx = np.mgrid[:64, :64]
     >>> disk = (yy - 31.5) ** 2 + (xx - 31.5) ** 2 < 30**2
-    >>> out, info = phloem.blend.seamless(bark[:64, :64], dst, disk, (32, 32), return_info=True)
-    >>> out.shape, info["residual"] < 1e-6
+    >>> res = phloem.blend.seamless(bark[:64, :64], dst, disk, (32, 32), full_output=True)
+    >>> res.image.shape, res.residual < 1e-6
     ((128, 128, 3), True)
-    >>> bool(np.all(out[0] == 0.5))   # outside the region dst is unchanged
+    >>> bool(np.all(res.image[0] == 0.5))   # outside the region dst is unchanged
     True
     """
     s = as_image(src, "src", finite=False)  # the core checks src before it solves
@@ -182,9 +223,7 @@ def seamless(
     )
     _converged(residual, t)
     image = restore_ndim(out, dst)
-    if return_info:
-        return image, {"iterations": iterations, "residual": residual}
-    return image
+    return SeamlessResult(image, iterations, residual) if full_output else image
 
 
 @overload
@@ -196,7 +235,7 @@ def interpolate_field(
     tol: float = ...,
     max_iterations: int = ...,
     threads: int | None = ...,
-    return_info: Literal[False] = ...,
+    full_output: Literal[False] = ...,
 ) -> NDArray[np.float32]: ...
 @overload
 def interpolate_field(
@@ -207,10 +246,11 @@ def interpolate_field(
     tol: float = ...,
     max_iterations: int = ...,
     threads: int | None = ...,
-    return_info: Literal[True],
-) -> tuple[NDArray[np.float32], dict[str, Any]]: ...
+    full_output: Literal[True],
+) -> FieldResult: ...
 
 
+@renamed(return_info=old_flag(lambda r: (r.field, {"iterations": r.iterations, "residual": r.residual})))
 def interpolate_field(
     region: Any,
     points: Any,
@@ -219,8 +259,8 @@ def interpolate_field(
     tol: float = 1e-10,
     max_iterations: int = 2000,
     threads: int | None = None,
-    return_info: bool = False,
-) -> NDArray[np.float32] | tuple[NDArray[np.float32], dict[str, Any]]:
+    full_output: bool = False,
+) -> NDArray[np.float32] | FieldResult:
     """The smoothest field over ``region`` that takes ``values`` at ``points``.
 
     Minimises ``E = Σ_p ‖(L d)_p‖²`` over the pixels of ``region`` subject to
@@ -250,15 +290,15 @@ def interpolate_field(
         Most conjugate-gradient iterations per component (default 2000).
     threads : int, optional
         Worker threads; components are solved in parallel.
-    return_info : bool, optional
-        Also return ``{"iterations": int, "residual": float}``.
+    full_output : bool, optional
+        Return a :class:`FieldResult` (the field, iterations and final residual) instead of
+        the field alone (``return_info`` before; it still works, deprecated).
 
     Returns
     -------
     field : (M, N, D) or (M, N) ndarray of float32
-        The field (2-D when ``values`` is 1-D); NaN outside ``region``.
-    info : dict
-        Only with ``return_info=True``.
+        The field (2-D when ``values`` is 1-D); NaN outside ``region``. A
+        :class:`FieldResult` with ``full_output=True``.
 
     References
     ----------
@@ -307,6 +347,4 @@ def interpolate_field(
     )
     _converged(residual, t)
     field = out[:, :, 0] if flat else out
-    if return_info:
-        return field, {"iterations": iterations, "residual": residual}
-    return field
+    return FieldResult(field, iterations, residual) if full_output else field

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from . import patch as _patch
 from . import shapes as _shapes
+from ._api import Seed
 from ._color import check_denoise, denoised_lab, rgb8
 from ._validate import as_image, as_mask, check_patch_size
 from .branching.histograms import angle_histogram, histogram_distance, thickness_histogram
@@ -45,7 +46,7 @@ def coherence_map(
     patch_size: int = 7,
     method: Literal["kdtree", "patchmatch", "exact"] = "kdtree",
     mask: Any = None,
-    seed: int = 0,
+    seed: Seed = 0,
     threads: int | None = None,
 ) -> NDArray[np.float32]:
     """Per-pixel distance of each ``image`` patch to its nearest ``exemplar`` patch.
@@ -68,6 +69,10 @@ def coherence_map(
         Search used to find the nearest patches (default "kdtree").
     mask : (M, N) array_like of bool, optional
         Pixels of ``image`` to score (default all); NaN elsewhere.
+    seed : int or numpy.random.Generator, optional
+        Seed of the search (default 0).
+    threads : int, optional
+        Worker threads (default: ``PHLOEM_NUM_THREADS`` or all cores).
 
     Returns
     -------
@@ -277,7 +282,9 @@ def label_agreement(image: Any, labels: Any, exemplar: Any, exemplar_labels: Any
     return float(np.mean(values[d.argmin(axis=-1)] == lab))
 
 
-def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool | Literal["half"] = True) -> float:
+def shape_similarity(
+    a: Any, b: Any, *, patch_size: int = 7, rotations: _shapes.Rotations = "all", threads: int | None = None
+) -> float:
     """Boundary-patch distance of two shapes or label maps (thesis Eq. 3.9); lower is better.
 
     The same function as :func:`phloem.shapes.shape_similarity`, listed here with the other
@@ -290,7 +297,7 @@ def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool | L
     >>> phloem.metrics.shape_similarity(a, np.rot90(a))
     0.0
     """
-    return _shapes.shape_similarity(a, b, patch_size=patch_size, rotations=rotations)
+    return _shapes.shape_similarity(a, b, patch_size=patch_size, rotations=rotations, threads=threads)
 
 
 def chord_length(labels: Any) -> float:

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import _core
+from ._api import Seed
 from ._validate import as_image, as_mask, check_int, check_patch_size, check_seed, check_threads
 
 __all__ = ["EXACT_LIMIT", "candidates", "knn", "nnf", "vote"]
@@ -45,7 +46,7 @@ def nnf(
     init: Any = None,
     levels: int = 1,
     enrich: int | NDArray[np.int32] = 0,
-    seed: int | np.random.Generator = 0,
+    seed: Seed = 0,
     threads: int | None = None,
 ) -> tuple[NDArray[np.int32], NDArray[np.float32]]:
     """Nearest-neighbour field from ``target`` patches to ``source`` patches.
@@ -172,7 +173,7 @@ def knn(
     exclude: int | None = None,
     iterations: int = 6,
     weights: Any = None,
-    seed: int | np.random.Generator = 0,
+    seed: Seed = 0,
     threads: int | None = None,
 ) -> tuple[NDArray[np.int32], NDArray[np.float32]]:
     """The ``k`` most similar patches of every exemplar pixel, inside the exemplar.

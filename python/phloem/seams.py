@@ -12,18 +12,36 @@ branching structures (Sibbing et al. 2010 §5.3) and of stroke-based editing (Lu
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Literal, overload
 
 import numpy as np
 from numpy.typing import NDArray
 
 from . import _core
+from ._api import old_flag, renamed
 from ._validate import as_image, as_mask, check_threads
 
-__all__ = ["COSTS", "grid_maxflow", "seam"]
+__all__ = ["COSTS", "SeamResult", "grid_maxflow", "seam"]
 
 #: The built-in seam costs of :func:`seam`.
 COSTS = ("kwatra", "gradient", "luo")
+
+
+@dataclass(frozen=True)
+class SeamResult:
+    """What :func:`seam` returns with ``full_output=True``.
+
+    Attributes
+    ----------
+    take_b : (H, W) ndarray of bool
+        Where the composite takes ``b`` (the default return value).
+    energy : float
+        The cut's energy: seam costs plus broken border ties.
+    """
+
+    take_b: NDArray[np.bool_]
+    energy: float
 
 
 def _connectivity(connectivity: Any) -> int:
@@ -134,8 +152,8 @@ def seam(
     seeds: Any = ...,
     border_weight: float | None = ...,
     connectivity: int = ...,
-    return_energy: Literal[False] = ...,
     threads: int | None = ...,
+    full_output: Literal[False] = ...,
 ) -> NDArray[np.bool_]: ...
 @overload
 def seam(
@@ -149,9 +167,12 @@ def seam(
     seeds: Any = ...,
     border_weight: float | None = ...,
     connectivity: int = ...,
-    return_energy: Literal[True],
     threads: int | None = ...,
-) -> tuple[NDArray[np.bool_], float]: ...
+    full_output: Literal[True],
+) -> SeamResult: ...
+
+
+@renamed(return_energy=old_flag(lambda r: (r.take_b, r.energy)))
 def seam(
     a: Any,
     b: Any,
@@ -163,9 +184,9 @@ def seam(
     seeds: Any = None,
     border_weight: float | None = None,
     connectivity: int = 4,
-    return_energy: bool = False,
     threads: int | None = None,
-) -> NDArray[np.bool_] | tuple[NDArray[np.bool_], float]:
+    full_output: bool = False,
+) -> NDArray[np.bool_] | SeamResult:
     """Minimum-cost seam between two overlapping images.
 
     ``a`` and ``b`` live in one frame; ``region`` is where both exist (the overlap, of any
@@ -204,18 +225,17 @@ def seam(
         10000 for ``"luo"`` unless given.
     connectivity : {4, 8}, optional
         Pixel neighbourhood of the seam (default 4).
-    return_energy : bool, optional
-        Also return the cut's energy (seam costs plus broken border ties).
     threads : int, optional
         Worker threads for the cost computation.
+    full_output : bool, optional
+        Return a :class:`SeamResult` (``take_b`` and the cut's energy) instead of ``take_b``
+        alone (``return_energy`` before; it still works, deprecated).
 
     Returns
     -------
     take_b : (H, W) bool ndarray
         ``True`` where the composite takes ``b``: the cut inside the region, and outside it
-        wherever only ``b`` exists.
-    energy : float
-        Only with ``return_energy=True``.
+        wherever only ``b`` exists. A :class:`SeamResult` with ``full_output=True``.
 
     Examples
     --------
@@ -228,8 +248,8 @@ def seam(
     >>> b[:, 4:6] = 0
     >>> cols = np.arange(8)
     >>> a_mask, b_mask = np.broadcast_to(cols < 6, (4, 8)), np.broadcast_to(cols >= 2, (4, 8))
-    >>> take_b, energy = seam(a, b, a_mask & b_mask, a_mask=a_mask, b_mask=b_mask, return_energy=True)
-    >>> take_b[0].astype(int).tolist(), energy
+    >>> res = seam(a, b, a_mask & b_mask, a_mask=a_mask, b_mask=b_mask, full_output=True)
+    >>> res.take_b[0].astype(int).tolist(), res.energy
     ([0, 0, 0, 0, 0, 1, 1, 1], 0.0)
     """
     ia = as_image(a, "a")
@@ -277,4 +297,4 @@ def seam(
         edges=edges,
         threads=check_threads(threads),
     )
-    return (take_b, energy) if return_energy else take_b
+    return SeamResult(take_b, energy) if full_output else take_b

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import _core
+from ._api import Seed, Size, warn_deprecated
 from ._progress import Progress
 from ._validate import as_mask, check_int, check_patch_size, check_seed, check_size, check_threads
 
@@ -26,6 +27,8 @@ __all__ = [
     "MAX_LABELS",
     "MAX_PATCH",
     "METHODS",
+    "ROTATIONS",
+    "Rotations",
     "chord_length",
     "layer_order",
     "shape_similarity",
@@ -39,6 +42,13 @@ MAX_PATCH = 11
 MAX_LABELS = 64
 #: The ways :func:`synthesize_labels` makes a label map.
 METHODS = ("layered", "joint")
+#: The values of ``rotations``: which 90° turns of the example's boundary patches count.
+ROTATIONS = ("all", "half", "none")
+_TURNS = {"all": 4, "half": 2, "none": 1}
+
+#: The type of ``rotations`` (True and False, the old spellings of "all" and "none", still
+#: work for one release with a ``DeprecationWarning``).
+Rotations = Literal["all", "half", "none"]
 
 
 def _labels(labels: Any, name: str) -> tuple[NDArray[np.uint8], NDArray[Any]]:
@@ -64,12 +74,14 @@ def _labels(labels: Any, name: str) -> tuple[NDArray[np.uint8], NDArray[Any]]:
 
 
 def _turns(rotations: Any) -> int:
-    """How many 90° turns ``rotations`` allows: 4 (True), 1 (False) or 2 (``"half"``)."""
+    """How many 90° turns ``rotations`` allows: 4 ("all"), 2 ("half") or 1 ("none")."""
     if rotations is True or rotations is False or isinstance(rotations, np.bool_):
-        return 4 if rotations else 1
-    if isinstance(rotations, str) and rotations == "half":
-        return 2
-    raise ValueError(f"rotations: expected True, False or 'half', got {rotations!r}")
+        new = "all" if rotations else "none"
+        warn_deprecated(f"rotations={bool(rotations)} is deprecated and goes in the next release; use {new!r}")
+        rotations = new
+    if isinstance(rotations, str) and rotations in _TURNS:
+        return _TURNS[rotations]
+    raise ValueError(f"rotations: expected one of {ROTATIONS}, got {rotations!r}")
 
 
 def _patch_size(patch_size: Any) -> int:
@@ -97,15 +109,15 @@ def _options(
 
 def synthesize(
     shape: Any,
-    size: int | tuple[int, int],
+    size: Size,
     *,
     patch_size: int = 11,
     levels: int | None = None,
     iterations: int = 5,
-    rotations: bool | Literal["half"] = True,
+    rotations: Rotations = "all",
     tileable: bool = False,
     mask: Any = None,
-    seed: int | np.random.Generator = 0,
+    seed: Seed = 0,
     threads: int | None = None,
     progress: Progress = None,
 ) -> NDArray[np.bool_]:
@@ -126,9 +138,9 @@ def synthesize(
     iterations : int, optional
         Matching and adjustment steps per level (default 5); a level stops early once the
         shape no longer changes.
-    rotations : bool or "half", optional
-        The turns under which boundary patches are compared: ``True`` (default, the paper)
-        all four 90° rotations; ``False`` none, for shapes with a preferred direction;
+    rotations : {"all", "half", "none"}, optional
+        The turns under which boundary patches are compared: ``"all"`` (default, the paper)
+        all four 90° rotations; ``"none"``, for shapes with a preferred direction;
         ``"half"`` 0° and 180° only, which keeps a vertical axis vertical (e.g. bark furrows
         along the trunk) while still mirroring their ends.
     tileable : bool, optional
@@ -212,16 +224,16 @@ def layer_order(labels: Any) -> list[int]:
 
 def synthesize_labels(
     labels: Any,
-    size: int | tuple[int, int],
+    size: Size,
     *,
     method: Literal["layered", "joint"] = "layered",
     order: Any = None,
     patch_size: int = 11,
     levels: int | None = None,
     iterations: int = 5,
-    rotations: bool | Literal["half"] = True,
+    rotations: Rotations = "all",
     tileable: bool = False,
-    seed: int | np.random.Generator = 0,
+    seed: Seed = 0,
     threads: int | None = None,
     progress: Progress = None,
 ) -> NDArray[np.int32]:
@@ -302,7 +314,9 @@ def synthesize_labels(
     return np.asarray(values.astype(np.int32)[out], dtype=np.int32)
 
 
-def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool | Literal["half"] = True) -> float:
+def shape_similarity(
+    a: Any, b: Any, *, patch_size: int = 7, rotations: Rotations = "all", threads: int | None = None
+) -> float:
     """The shape distance of Rosenberger et al. (thesis Eq. 3.7–3.9); lower is more alike.
 
     For every boundary pixel of either map (a pixel with a 4-neighbour of another label), the
@@ -318,9 +332,11 @@ def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool | L
         The two maps.
     patch_size : int, optional
         Odd patch side, at most :data:`MAX_PATCH` (default 7).
-    rotations : bool or "half", optional
-        Minimise over the four 90° rotations of the other map's patch (Eq. 3.7; ``True``),
-        none (``False``) or the half-turn only (``"half"``).
+    rotations : {"all", "half", "none"}, optional
+        Minimise over the four 90° rotations of the other map's patch (Eq. 3.7; ``"all"``,
+        the default), none (``"none"``) or the half-turn only (``"half"``).
+    threads : int, optional
+        Worker threads (default: ``PHLOEM_NUM_THREADS`` or all cores); the same value for any.
 
     Returns
     -------
@@ -333,7 +349,7 @@ def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool | L
     >>> a = yy > 2 * xx                      # a steep wedge
     >>> phloem.shapes.shape_similarity(a, np.rot90(a))
     0.0
-    >>> phloem.shapes.shape_similarity(a, np.rot90(a), rotations=False) > 1
+    >>> phloem.shapes.shape_similarity(a, np.rot90(a), rotations="none") > 1
     True
     """
     p = _patch_size(patch_size)
@@ -347,9 +363,14 @@ def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool | L
         raise ValueError(f"b: expected at most {MAX_LABELS} labels in a and b together, got {len(union)}")
     ua = np.searchsorted(union, va).astype(np.uint8)[la]
     ub = np.searchsorted(union, vb).astype(np.uint8)[lb]
-    return float(
-        _core.shape_similarity(np.ascontiguousarray(ua), np.ascontiguousarray(ub), patch_size=p, rotations=turns)
+    sim = _core.shape_similarity(
+        np.ascontiguousarray(ua),
+        np.ascontiguousarray(ub),
+        patch_size=p,
+        rotations=turns,
+        threads=check_threads(threads),
     )
+    return float(sim)
 
 
 def chord_length(labels: Any) -> float:

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import _core
+from ._api import Size
 from ._validate import as_image, as_mask, check_convex_weights, check_size, check_threads, restore_ndim
 
 __all__ = ["mvc", "mvc_combine", "mvc_weights"]
@@ -140,7 +141,7 @@ def mvc(
     image: Any,
     source_contour: Any,
     target_contour: Any,
-    size: int | tuple[int, int] | None = None,
+    size: Size | None = None,
     *,
     region: Any = None,
     threads: int | None = None,
@@ -205,7 +206,7 @@ def mvc_combine(
     source_contours: Sequence[Any],
     target_contour: Any,
     weights: Any,
-    size: int | tuple[int, int],
+    size: Size,
     *,
     region: Any = None,
     threads: int | None = None,

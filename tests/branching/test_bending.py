@@ -18,7 +18,7 @@ def test_c1_large_k_reproduces_the_source_branch(walk_branch: Callable[..., Bran
     sk = Skeleton([src], (300, 400))
     model = BendingModel.fit(sk, h=H, k=20, m=15, c=1, omega_g=0.0)
     out = grow(
-        model, shape=(300, 400), start=(*src.points[0], src.heading()), branch_length=src.length(), colonize=False
+        model, size=(300, 400), start=(*src.points[0], src.heading()), branch_length=src.length(), colonize=False
     )
     got, want = out.branches[0].angles(), model.source.branches[0].angles()
     n = len(want) - model.m
@@ -29,7 +29,7 @@ def test_c1_large_k_reproduces_the_source_branch(walk_branch: Callable[..., Bran
     varied = BendingModel.fit(sk, h=H, k=20, m=15, c=2, omega_g=0.0)
     loose = grow(
         varied,
-        shape=(300, 400),
+        size=(300, 400),
         start=(*src.points[0], src.heading()),
         branch_length=src.length(),
         colonize=False,

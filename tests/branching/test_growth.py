@@ -60,7 +60,7 @@ def test_grown_histograms_match_the_input(
     second = Skeleton([Branch(b.points, b.thickness) for b in bend.source.branches[split:]])
     spread_a = histogram_distance(angle_histogram(first, range=ra)[0], angle_histogram(second, range=ra)[0])
     spread_r = histogram_distance(thickness_histogram(first, range=rr)[0], thickness_histogram(second, range=rr)[0])
-    out = grow(bend, fur, shape=(400, 400), seed=2, generations=2)
+    out = grow(bend, fur, size=(400, 400), seed=2, generations=2)
     n_out = sum(len(b) for b in out.branches)
     assert n_out > 200
     da = histogram_distance(angle_histogram(out, range=ra)[0], bend.hist_alpha)
@@ -70,7 +70,7 @@ def test_grown_histograms_match_the_input(
     assert dr < bound_r, (dr, spread_r)
     # The bound has teeth: a structure bending twice as strongly is rejected by it.
     other = forest(40, sigma=0.6)
-    wild = grow(BendingModel.fit(other, h=H), shape=(400, 400), seed=2, generations=1)
+    wild = grow(BendingModel.fit(other, h=H), size=(400, 400), seed=2, generations=1)
     assert histogram_distance(angle_histogram(wild, range=ra)[0], bend.hist_alpha) > bound_a
 
 
@@ -81,7 +81,7 @@ def test_histogram_matching_brings_histograms_closer(source: Skeleton, models: t
     def distance(model: BendingModel) -> float:
         total = 0.0
         for seed in range(3):
-            out = grow(model, fur, shape=(400, 400), seed=seed, generations=2)
+            out = grow(model, fur, size=(400, 400), seed=seed, generations=2)
             total += histogram_distance(angle_histogram(out, range=bend.range_alpha)[0], bend.hist_alpha)
             total += histogram_distance(thickness_histogram(out, range=bend.range_r)[0], bend.hist_r)
         return total
@@ -92,7 +92,7 @@ def test_histogram_matching_brings_histograms_closer(source: Skeleton, models: t
 def test_no_crossings_with_colonisation(models: tuple[BendingModel, FurcationModel]):
     bend, fur = models
     # a cramped image with many branches: without the crossing test branches would cross
-    out = grow(bend, fur, shape=(160, 160), seed=5, generations=3, children=4, start=(5, 80, 0.0))
+    out = grow(bend, fur, size=(160, 160), seed=5, generations=3, children=4, start=(5, 80, 0.0))
     assert len(out.branches) >= 4
     assert count_crossings(out) == 0
     # every vertex inside and every edge of length h
@@ -107,7 +107,7 @@ def test_colonisation_keeps_branches_apart(models: tuple[BendingModel, Furcation
         vals = []
         # single structures vary a lot (mean gaps from 7 to 55 px per seed): average over 8
         for seed in range(8):
-            out = grow(bend, fur, shape=(220, 220), seed=seed, generations=2, children=3, colonize=colonize)
+            out = grow(bend, fur, size=(220, 220), seed=seed, generations=2, children=3, colonize=colonize)
             for i, b in enumerate(out.branches[1:], 1):
                 others = np.vstack(
                     [o.points for j, o in enumerate(out.branches) if j not in (i, b.parent[0])] or [[1e9, 1e9]]
@@ -136,7 +136,7 @@ def test_crossing_candidates_get_zero_quality(walk_branch: Callable[..., Branch]
 
 def test_children_copy_the_input_branching_angles(models: tuple[BendingModel, FurcationModel]):
     bend, fur = models
-    out = grow(bend, fur, shape=(400, 400), seed=3, generations=2)
+    out = grow(bend, fur, size=(400, 400), seed=3, generations=2)
     kids = [b for b in out.branches if b.parent is not None]
     assert kids
     for b in kids:
@@ -150,24 +150,24 @@ def test_children_copy_the_input_branching_angles(models: tuple[BendingModel, Fu
 
 def test_grow_is_deterministic_for_a_seed(models: tuple[BendingModel, FurcationModel]):
     bend, fur = models
-    a = grow(bend, fur, shape=(256, 256), seed=11, generations=2)
-    b = grow(bend, fur, shape=(256, 256), seed=11, generations=2)
-    c = grow(bend, fur, shape=(256, 256), seed=12, generations=2)
+    a = grow(bend, fur, size=(256, 256), seed=11, generations=2)
+    b = grow(bend, fur, size=(256, 256), seed=11, generations=2)
+    c = grow(bend, fur, size=(256, 256), seed=12, generations=2)
     assert a == b
     assert a != c
 
 
 def test_stop_criteria(models: tuple[BendingModel, FurcationModel]):
     bend, fur = models
-    short = grow(bend, fur, shape=(300, 300), seed=0, max_length=80.0)
+    short = grow(bend, fur, size=(300, 300), seed=0, max_length=80.0)
     assert short.total_length() <= 80.0 + bend.m * bend.h + 2 * bend.h
-    one = grow(bend, fur, shape=(300, 300), seed=0, generations=1)
+    one = grow(bend, fur, size=(300, 300), seed=0, generations=1)
     assert len(one.branches) == 1
-    sparse = grow(bend, fur, shape=(300, 300), seed=0, generations=3, children=4, max_density=0.02)
-    dense = grow(bend, fur, shape=(300, 300), seed=0, generations=3, children=4)
+    sparse = grow(bend, fur, size=(300, 300), seed=0, generations=3, children=4, max_density=0.02)
+    dense = grow(bend, fur, size=(300, 300), seed=0, generations=3, children=4)
     assert sparse.total_length() < dense.total_length()
     calls: list[tuple[int, int]] = []
-    grow(bend, fur, shape=(300, 300), seed=0, generations=2, progress=lambda d, t: calls.append((d, t)))
+    grow(bend, fur, size=(300, 300), seed=0, generations=2, progress=lambda d, t: calls.append((d, t)))
     assert calls and calls[-1][0] == calls[-1][1]
 
 
@@ -177,27 +177,27 @@ def test_input_sized_forest(
     bend, fur = models
     assert source.shape is not None
     L = bend.source.total_length()
-    out = grow(bend, fur, shape=source.shape, seed=0, max_length="input")
+    out = grow(bend, fur, size=source.shape, seed=0, max_length="input")
     # about the input's length: it stops within one extension (plus a new branch's first edge)
     assert 0.9 * L < out.total_length() <= L + (bend.m + 2) * bend.h
     assert sum(b.parent is None for b in out.branches) >= 2  # the input is a forest of 3 trees
     assert count_crossings(out) == 0
-    assert out == grow(bend, fur, shape=source.shape, seed=0, max_length="input")
+    assert out == grow(bend, fur, size=source.shape, seed=0, max_length="input")
     # the same structure density in two and three times the area: that multiple of the input's
     # length, reached (growth stops at the limit, not before) and overshot by at most one extension
     H2, W2 = source.shape
     roots = sum(b.parent is None for b in out.branches)
     for factor in (2, 3):
-        big = grow(bend, fur, shape=(factor * H2, W2), seed=0, max_length="input")
+        big = grow(bend, fur, size=(factor * H2, W2), seed=0, max_length="input")
         assert factor * L - 1e-6 <= big.total_length() <= factor * L + (bend.m + 2) * bend.h
         assert sum(b.parent is None for b in big.branches) > roots  # more room: more root trees
     # roots caps the number of trees; a length limit still holds
-    two = grow(bend, fur, shape=source.shape, seed=0, roots=2, max_length=4 * L)
+    two = grow(bend, fur, size=source.shape, seed=0, roots=2, max_length=4 * L)
     assert sum(b.parent is None for b in two.branches) <= 2
     with pytest.raises(ValueError, match="^max_length:"):
-        grow(bend, shape=(100, 100), max_length="all")
+        grow(bend, size=(100, 100), max_length="all")
     with pytest.raises(ValueError, match="^roots:"):
-        grow(bend, shape=(100, 100), roots=0)
+        grow(bend, size=(100, 100), roots=0)
 
 
 def test_warm_start_keeps_the_stem_thickness(source: Skeleton, models: tuple[BendingModel, FurcationModel]):
@@ -208,7 +208,7 @@ def test_warm_start_keeps_the_stem_thickness(source: Skeleton, models: tuple[Ben
         # thickness right after the first extension over the last copied stem element
         r = []
         for seed in range(6):
-            t = grow(model, fur, shape=(400, 400), seed=seed, generations=1).branches[0].thickness
+            t = grow(model, fur, size=(400, 400), seed=seed, generations=1).branches[0].thickness
             s = model.k + 2
             r.append(t[s + model.m] / t[s - 1])
         return float(np.median(r))
@@ -227,7 +227,7 @@ def test_guided_growth_follows_the_path(models: tuple[BendingModel, FurcationMod
         vals = []
         for seed in range(3):
             out = grow(
-                bend, shape=(300, 300), seed=seed, start=(10, 150, 0.7), guide=guide, branch_length=250, guide_width=12
+                bend, size=(300, 300), seed=seed, start=(10, 150, 0.7), guide=guide, branch_length=250, guide_width=12
             )
             vals.append(np.abs(out.branches[0].points[:, 1] - 150.0).mean())
         return float(np.mean(vals))
@@ -244,7 +244,7 @@ def test_guided_growth_follows_the_path(models: tuple[BendingModel, FurcationMod
 
 def test_extend_appends_to_one_branch(models: tuple[BendingModel, FurcationModel]):
     bend, fur = models
-    sk = grow(bend, fur, shape=(300, 300), seed=4, generations=2, branch_length=60)
+    sk = grow(bend, fur, size=(300, 300), seed=4, generations=2, branch_length=60)
     # a branch whose tip has room to grow (not at the image border)
     bi = next(i for i, b in enumerate(sk.branches) if (np.abs(b.points[-1] - 150.0) < 110.0).all())
     out = extend(sk, bi, bend, steps=5, seed=1)
@@ -318,7 +318,7 @@ def test_river_delta_statistics_carry_over():
     ]
     spread_a = histogram_distance(*(angle_histogram(x, range=ra)[0] for x in halves))
     spread_r = histogram_distance(*(thickness_histogram(x, range=rr)[0] for x in halves))
-    out = grow(bend, fur, shape=(500, 500), seed=0)
+    out = grow(bend, fur, size=(500, 500), seed=0)
     assert sum(len(b) for b in out.branches) > 300
     assert count_crossings(out) == 0
     assert histogram_distance(angle_histogram(out, range=ra)[0], bend.hist_alpha) < 1.5 * spread_a
@@ -355,7 +355,7 @@ def check_input_sized(src: Skeleton, shape: tuple[int, int]) -> None:
     halves = input_halves(bend)
     spread_a = histogram_distance(*(angle_histogram(x, range=ra)[0] for x in halves))
     spread_r = histogram_distance(*(thickness_histogram(x, range=rr)[0] for x in halves))
-    out = grow(bend, fur, shape=shape, seed=0, max_length="input")
+    out = grow(bend, fur, size=shape, seed=0, max_length="input")
     L = bend.source.total_length()
     assert 0.9 * L < out.total_length() <= L + (bend.m + 2) * bend.h
     assert count_crossings(out) == 0
@@ -394,19 +394,19 @@ def test_river_mask_input_sized_structure_matches_the_input():
 def test_bad_input_errors(models: tuple[BendingModel, FurcationModel]) -> None:
     bend, fur = models
     with pytest.raises(ValueError, match="^start:"):
-        grow(bend, shape=(100, 100), start=(np.nan, 3))
+        grow(bend, size=(100, 100), start=(np.nan, 3))
     with pytest.raises(ValueError, match="^start:"):
-        grow(bend, shape=(100, 100), start=(500, 3))
+        grow(bend, size=(100, 100), start=(500, 3))
     with pytest.raises(ValueError, match="^guide:"):
-        grow(bend, shape=(100, 100), guide=np.zeros((5, 3)))
+        grow(bend, size=(100, 100), guide=np.zeros((5, 3)))
     with pytest.raises(ValueError, match="^max_density:"):
-        grow(bend, shape=(100, 100), max_density=2.0)
+        grow(bend, size=(100, 100), max_density=2.0)
     with pytest.raises(TypeError, match="^bending:"):
-        grow(fur, shape=(100, 100))  # type: ignore[arg-type]
+        grow(fur, size=(100, 100))  # type: ignore[arg-type]
     other = FurcationModel.fit(synthetic_skeleton(0), h=3.0)
     with pytest.raises(ValueError, match="^furcation: was fitted with h"):
-        grow(bend, other, shape=(100, 100))
+        grow(bend, other, size=(100, 100))
     with pytest.raises(ValueError, match="^branch_index:"):
         extend(Skeleton([Branch([[0, 0], [5, 0]], 1.0)], (10, 10)), 3, bend)
-    with pytest.raises(ValueError, match="^shape:"):
+    with pytest.raises(ValueError, match="^size:"):
         extend(Skeleton([Branch([[0, 0], [5, 0]], 1.0)]), 0, bend)

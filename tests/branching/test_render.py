@@ -54,7 +54,7 @@ def test_render_is_deterministic_for_a_seed() -> None:
     assert np.array_equal(a.image, b.image) and np.array_equal(a.choice, b.choice)
     one = render(img, sk, tgt, seed=7, threads=1)
     assert np.array_equal(one, a.image)  # whatever the number of threads
-    others = [render(img, sk, tgt, seed=s, c=4, complete=False, full_output=True).choice for s in range(4)]
+    others = [render(img, sk, tgt, seed=s, n_best=4, complete=False, full_output=True).choice for s in range(4)]
     assert any(not np.array_equal(others[0], o) for o in others[1:])
 
 
@@ -73,7 +73,7 @@ def test_concurrent_painting_equals_painting_in_order() -> None:
             parent = (len(branches) - 1, 35)
             branches.append(wavy_branch(tuple(main.points[35]), turn, 40, (3.0, 2.0), amp=0.1, parent=parent))
     tgt = Skeleton(branches, (220, 260))
-    runs = [render(img, sk, tgt, seed=3, c=4, complete=False, full_output=True, threads=t) for t in (1, 2, 3)]
+    runs = [render(img, sk, tgt, seed=3, n_best=4, complete=False, full_output=True, threads=t) for t in (1, 2, 3)]
     for r in runs[1:]:
         assert np.array_equal(r.image, runs[0].image)
         assert np.array_equal(r.choice, runs[0].choice) and np.array_equal(r.labels, runs[0].labels)
@@ -188,8 +188,8 @@ def test_bad_inputs_name_the_argument() -> None:
         render(np.full((128, 224), np.nan), sk, sk)
     with pytest.raises(TypeError, match="target_skeleton"):
         render(img, sk, [[0, 0], [1, 1]])  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match="c:"):
-        render(img, sk, sk, c=0)
+    with pytest.raises(ValueError, match="n_best:"):
+        render(img, sk, sk, n_best=0)
 
 
 def test_sub_branches_connect_to_their_parent() -> None:

@@ -3,6 +3,8 @@ pixel from an exemplar pixel of its own label, deterministically, and coherently
 
 from __future__ import annotations
 
+from dataclasses import astuple
+
 import numpy as np
 import pytest
 
@@ -65,8 +67,8 @@ def test_upsampling_a_verbatim_copy_gives_a_verbatim_copy():
 @pytest.mark.parametrize("composite", [0, 2])
 def test_every_pixel_is_a_copy_from_its_own_label(scene, init, wrap, selection, composite):
     ex, a, b = scene
-    out, src = by_numbers(
-        ex, a, b, init=init, wrap=wrap, selection=selection, composite=composite, seed=2, return_sources=True
+    out, src = astuple(
+        by_numbers(ex, a, b, init=init, wrap=wrap, selection=selection, composite=composite, seed=2, full_output=True)
     )
     assert out.shape == (*b.shape, 3) and out.dtype == np.float32
     assert src.shape == (*b.shape, 2) and src.dtype == np.int32
@@ -79,7 +81,7 @@ def test_labels_are_matched_by_value_not_position(scene):
     # The same maps with other label values (and a third label absent from the output).
     a2, b2 = np.where(a == 1, 70, -3), np.where(b == 1, 70, -3)
     a2[:3, :3] = 12
-    _out, src = by_numbers(ex, a2, b2, seed=1, return_sources=True)
+    _out, src = astuple(by_numbers(ex, a2, b2, seed=1, full_output=True))
     np.testing.assert_array_equal(a2[src[..., 0], src[..., 1]], b2)
 
 
@@ -123,7 +125,9 @@ def test_compositing_makes_the_averaging_estep_sharp_and_coherent(bark):
     a = _labels2(ex)
     b = np.ascontiguousarray(a[::-1, ::-1][:160, :160])
     photo = cv2.Laplacian(ex.mean(axis=2), cv2.CV_32F).var()
-    runs = {c: by_numbers(ex, a, b, seed=0, selection="average", composite=c, return_sources=True) for c in (0, 1)}
+    runs = {
+        c: astuple(by_numbers(ex, a, b, seed=0, selection="average", composite=c, full_output=True)) for c in (0, 1)
+    }
     lap = {c: cv2.Laplacian(out.mean(axis=2), cv2.CV_32F).var() for c, (out, _) in runs.items()}
     assert lap[0] < 0.7 * photo < 0.9 * photo < lap[1] < 1.2 * photo, (lap, photo)
 
@@ -143,7 +147,7 @@ def test_stand_ins_carry_pieces_across_boundaries_the_exemplar_lacks(scene):
     # against 0.0061 without), and every pixel still comes from its own label.
     ex, a, b = scene
     plain = by_numbers(ex, a, b, seed=0, stand_in_weight=None)
-    out, src = by_numbers(ex, a, b, seed=0, return_sources=True)
+    out, src = astuple(by_numbers(ex, a, b, seed=0, full_output=True))
     np.testing.assert_array_equal(a[src[..., 0], src[..., 1]], b)
     assert patch_coherence(out, ex) < 0.88 * patch_coherence(plain, ex)
     # Without compositing there is nothing to stand in for.
@@ -181,7 +185,7 @@ def test_extra_channels_follow_the_same_sources(scene):
     ex, a, b = scene
     height = np.linspace(0, 1, ex.shape[0] * ex.shape[1], dtype=np.float32).reshape(ex.shape[:2])
     ex4 = np.concatenate([ex, height[..., None]], axis=2)
-    out, src = by_numbers(ex4, a, b, seed=3, return_sources=True)
+    out, src = astuple(by_numbers(ex4, a, b, seed=3, full_output=True))
     assert out.shape == (*b.shape, 4)
     np.testing.assert_array_equal(out[..., 3], height[src[..., 0], src[..., 1]])
     np.testing.assert_array_equal(out[..., :3], ex[src[..., 0], src[..., 1]])
@@ -212,7 +216,7 @@ def test_feature_options(scene):
 
 def test_tileable_output(scene):
     ex, a, b = scene
-    _out, src = by_numbers(ex, a, b, tileable=True, seed=1, return_sources=True)
+    _out, src = astuple(by_numbers(ex, a, b, tileable=True, seed=1, full_output=True))
     np.testing.assert_array_equal(a[src[..., 0], src[..., 1]], b)
 
 
@@ -287,7 +291,7 @@ THESIS_LIMITS = {
 @pytest.mark.parametrize(("name", "config"), sorted(THESIS_LIMITS))
 def test_thesis_runs(name, config):
     ai, a, b, bi = _thesis_run(name)
-    out, src = by_numbers(ai, a, b, seed=0, return_sources=True, **THESIS_CONFIGS[config])
+    out, src = astuple(by_numbers(ai, a, b, seed=0, full_output=True, **THESIS_CONFIGS[config]))
     assert (a[src[..., 0], src[..., 1]] == b).all()
     coh = patch_coherence(out, ai) / patch_coherence(bi, ai)
     hist = label_histogram_distance(out, b, ai, a) / label_histogram_distance(bi, b, ai, a)
@@ -363,8 +367,8 @@ def test_errors_name_the_argument(scene):
         by_numbers(ex[:8, :8], a[:8, :8], b, patch_size=9)
     with pytest.raises(ValueError, match="^patch_size"):
         by_numbers(ex, a, b[:6, :6], patch_size=7)
-    with pytest.raises(ValueError, match="^k"):
-        by_numbers(ex, a, b, k=0)
+    with pytest.raises(ValueError, match="^coherence_k"):
+        by_numbers(ex, a, b, coherence_k=0)
     bad = ex.copy()
     bad[3, 4, 1] = np.nan
     with pytest.raises(ValueError, match="^exemplar"):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import astuple
+
 import numpy as np
 import pytest
 
@@ -13,7 +15,7 @@ from phloem.texture import quilt
 
 @pytest.fixture(scope="module")
 def quilted(bark):
-    return quilt(bark, (200, 260), block=48, overlap=12, seed=3, return_sources=True)
+    return astuple(quilt(bark, (200, 260), block=48, overlap=12, seed=3, full_output=True))
 
 
 def test_every_output_pixel_is_copied_from_the_exemplar(bark, quilted):
@@ -37,7 +39,7 @@ def test_seams_are_the_minimum_cuts_of_the_overlaps(bark):
     """The second block of the first row overlaps the first in columns 36..47. Cutting that
     overlap independently with seams.seam gives the labels quilting used (rows 0..35, which
     later blocks do not touch)."""
-    out, src = quilt(bark, (84, 84), block=48, overlap=12, randomness=1.0, seed=0, return_sources=True)
+    out, src = astuple(quilt(bark, (84, 84), block=48, overlap=12, randomness=1.0, seed=0, full_output=True))
     (ay, ax), (by, bx) = src[0, 0], src[0, 83] - [0, 83 - 36]
     a = np.zeros((48, 84, 3), np.float32)
     b = np.zeros((48, 84, 3), np.float32)
@@ -55,7 +57,7 @@ def test_seams_are_the_minimum_cuts_of_the_overlaps(bark):
 def test_quilting_beats_random_placement_at_the_seams(bark):
     """Entire-patch matching plus seams: the colour jump between neighbouring pixels that come
     from different pieces is far smaller than for randomly placed pieces with straight cuts."""
-    out, src = quilt(bark, (192, 192), block=48, overlap=12, seed=2, return_sources=True)
+    out, src = astuple(quilt(bark, (192, 192), block=48, overlap=12, seed=2, full_output=True))
     yy, xx = np.mgrid[0:192, 0:192]
     off = (src[..., 0] - yy) * 10000 + (src[..., 1] - xx)
 
@@ -96,7 +98,7 @@ def test_quilt_deterministic_and_seed_dependent(bark):
 
 def test_greedy_quilt_and_other_costs(bark, gravel):
     for cost in ("gradient", "luo"):
-        out, src = quilt(bark, (100, 100), block=40, randomness=0.0, cost=cost, return_sources=True)
+        out, src = astuple(quilt(bark, (100, 100), block=40, randomness=0.0, cost=cost, full_output=True))
         assert np.array_equal(out, bark[src[..., 0], src[..., 1]])
     g = quilt(gravel, (150, 90), block=32)
     assert g.shape == (150, 90) and g.dtype == np.float32
@@ -107,7 +109,7 @@ def test_extra_channels_ride_along(bark):
     copied from the same exemplar pixels as the colours."""
     yy, xx = np.mgrid[0:256, 0:256]
     ex = np.dstack([bark, (yy / 255.0)[..., None], ((xx // 32) / 8.0)[..., None]]).astype(np.float32)
-    out, src = quilt(ex, (90, 90), block=40, seed=1, return_sources=True)
+    out, src = astuple(quilt(ex, (90, 90), block=40, seed=1, full_output=True))
     assert out.shape == (90, 90, 5)
     assert np.array_equal(out, ex[src[..., 0], src[..., 1]])
 

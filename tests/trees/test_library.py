@@ -37,5 +37,5 @@ def test_library_load_splits_atlases(ragged_tree, tmp_path: Path):
     phloem.io.write_image(tmp_path / "atlas.png", atlas)
     lib = trees.Library.load(tmp_path, size=128)
     assert lib.names == ["atlas.png[0]", "atlas.png[1]"]
-    whole = trees.Library.load(tmp_path, size=128, atlas=False)
+    whole = trees.Library.load(tmp_path, size=128, atlas="no")
     assert whole.names == ["atlas.png"]

@@ -23,7 +23,7 @@ def test_variation_deterministic_for_seed_and_threads(library):
 
 @pytest.mark.parametrize("colors", ["random", "contour", "single"])
 def test_variation_colour_weights(library, colors):
-    v = trees.variation(library, seed=4, sources=3, colors=colors)
+    v = trees.variation(library, seed=4, n_sources=3, colors=colors)
     assert len(v.sources) == 3 and v.color_weights.sum() == pytest.approx(1.0)
     if colors == "contour":
         assert np.array_equal(v.color_weights, v.weights)
@@ -38,26 +38,26 @@ def test_variation_histogram_reference(library):
 
 def test_vary_gives_the_tree_the_higher_weight(library, ragged_tree):
     own = ragged_tree(9, crown=(75, 55))
-    vs = trees.vary(own, library, n=3, seed=5)
+    vs = trees.vary(own, library, n_variations=3, seed=5)
     assert len(vs) == 3
     for v in vs:
         assert 0.6 <= v.weights[0] <= 0.9 and v.weights.sum() == pytest.approx(1.0)
         assert np.array_equal(v.color_weights, v.weights)
         assert v.image.shape == (library.size, library.size, 4)
-    again = trees.vary(own, library, n=3, seed=5)
+    again = trees.vary(own, library, n_variations=3, seed=5)
     assert all(np.array_equal(x.image, y.image) for x, y in zip(vs, again))
 
 
 def test_variation_errors(library, ragged_tree):
     one = trees.Library([library[0]], ["only"])
-    with pytest.raises(ValueError, match=r"^library: has 1 tree\(s\) but sources=2"):
+    with pytest.raises(ValueError, match=r"^library: has 1 tree\(s\) but n_sources=2"):
         trees.variation(one)
     with pytest.raises(TypeError, match=r"^library: expected a phloem.trees.Library"):
         trees.variation([library[0]])  # type: ignore[arg-type]
     with pytest.raises(ValueError, match=r"^colors"):
         trees.variation(library, colors="mean")
-    with pytest.raises(ValueError, match=r"^sources: a variation of a tree"):
-        trees.vary(ragged_tree(0), library, n=1, sources=1)
+    with pytest.raises(ValueError, match=r"^n_sources: a variation of a tree"):
+        trees.vary(ragged_tree(0), library, n_variations=1, n_sources=1)
 
 
 @pytest.mark.shared

@@ -33,6 +33,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from .._api import Seed, Size, renamed
 from .._progress import Progress
 from .._validate import check_float, check_int, check_seed
 from ._elements import F64, I64, _bin, _check_skeleton, _direction, _elements, _tangent, _wrap
@@ -600,13 +601,14 @@ def _place_root(
     return None
 
 
+@renamed(shape="size")
 def grow(
     bending: BendingModel,
     furcation: FurcationModel | None = None,
     *,
-    shape: Any,
+    size: Size,
     start: Any = None,
-    seed: Any = 0,
+    seed: Seed = 0,
     generations: int = 3,
     max_length: float | str | None = None,
     roots: int | None = None,
@@ -643,12 +645,13 @@ def grow(
         The bending model.
     furcation : FurcationModel, optional
         The furcation model; without it only the main branch grows.
-    shape : (int, int)
-        ``(H, W)`` of the output image; every vertex stays inside.
+    size : int or (int, int)
+        ``(H, W)`` of the output image (an int: square); every vertex stays inside.
+        ``shape`` before (deprecated).
     start : (x, y) or (x, y, heading), optional
         Start of the main branch (heading in radians, counter-clockwise on screen from ``+x``).
         Default: the first point of a polyline ``guide``, else the input root's start scaled
-        to ``shape``; the heading defaults to the guide's or the input root's.
+        to ``size``; the heading defaults to the guide's or the input root's.
     seed : int or numpy.random.Generator
         Seed; the same seed gives the same structure.
     generations : int
@@ -697,22 +700,22 @@ def grow(
     >>> src = synthetic_skeleton(0)
     >>> bend = BendingModel.fit(src, h=2.0)
     >>> fur = FurcationModel.fit(src, h=2.0)
-    >>> out = grow(bend, fur, shape=(200, 300), seed=1, generations=2)
+    >>> out = grow(bend, fur, size=(200, 300), seed=1, generations=2)
     >>> out.shape, len(out.branches) >= 1
     ((200, 300), True)
-    >>> out == grow(bend, fur, shape=(200, 300), seed=1, generations=2)
+    >>> out == grow(bend, fur, size=(200, 300), seed=1, generations=2)
     True
 
     About as much structure as the input, in as many trees as it takes:
 
-    >>> forest = grow(bend, fur, shape=src.shape, seed=1, max_length="input")
+    >>> forest = grow(bend, fur, size=src.shape, seed=1, max_length="input")
     >>> bool(forest.total_length() > 0.9 * src.total_length()), len(forest.branches) > len(out.branches)
     (True, True)
     """
     from .._validate import check_size
 
     _check_models(bending, furcation)
-    shape = check_size(shape, "shape")
+    shape = check_size(size, "size")
     st = _check_start(start)
     rng = np.random.default_rng(check_seed(seed))
     generations = check_int(generations, "generations", 1)
@@ -849,16 +852,17 @@ def grow(
     return Skeleton(out, shape)
 
 
+@renamed(shape="size")
 def extend(
     skeleton: Skeleton,
     branch_index: int,
     bending: BendingModel,
     *,
     steps: int = 1,
-    seed: Any = 0,
+    seed: Seed = 0,
     colonize: bool = True,
     rho: float | None = None,
-    shape: Any = None,
+    size: Size | None = None,
 ) -> Skeleton:
     """Extend one branch's tip by ``steps`` Markov steps of ``m`` elements (§6, interactive use).
 
@@ -881,8 +885,9 @@ def extend(
         Use the density map (§4.4).
     rho : float, optional
         Density width; default ``m h``.
-    shape : (int, int), optional
-        Image size; default the skeleton's ``shape`` (required when it has none).
+    size : int or (int, int), optional
+        Image ``(H, W)``; default the skeleton's ``shape`` (required when it has none).
+        ``shape`` before (deprecated).
 
     Returns
     -------
@@ -894,7 +899,7 @@ def extend(
     >>> from phloem.branching import BendingModel, synthetic_skeleton
     >>> src = synthetic_skeleton(0)
     >>> bend = BendingModel.fit(src, h=2.0)
-    >>> grown = grow(bend, shape=(200, 300), seed=0, branch_length=60)
+    >>> grown = grow(bend, size=(200, 300), seed=0, branch_length=60)
     >>> longer = extend(grown, 0, bend, steps=3, seed=0)
     >>> len(longer.branches[0]) > len(grown.branches[0])
     True
@@ -909,11 +914,11 @@ def extend(
         raise ValueError(f"branch_index: expected 0 .. {len(skeleton.branches) - 1}, got {branch_index}")
     bi = int(branch_index)
     steps = check_int(steps, "steps", 0)
-    if shape is None:
+    if size is None:
         if skeleton.shape is None:
-            raise ValueError("shape: the skeleton has no shape; pass shape=(H, W)")
-        shape = skeleton.shape
-    shape = check_size(shape, "shape")
+            raise ValueError("size: the skeleton has no shape; pass size=(H, W)")
+        size = skeleton.shape
+    shape = check_size(size, "size")
     rng = np.random.default_rng(check_seed(seed))
     h, m = bending.h, bending.m
     rho = m * h if rho is None else check_float(rho, "rho", 0.0, inclusive=False)

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._api import Seed, Size, renamed
 from .._progress import Progress
 from .._validate import as_image, check_size
 from .bending import BendingModel
@@ -47,12 +48,28 @@ class SynthesisResult:
     render: RenderResult
 
 
+@renamed(k="order", c="n_best")
 def fit_models(
-    skeleton: Skeleton, *, h: float | None = None, k: int = 3, m: int | None = None, c: int = 2
+    skeleton: Skeleton, *, h: float | None = None, order: int = 3, m: int | None = None, n_best: int = 2
 ) -> tuple[BendingModel, FurcationModel | None]:
     """The bending model (§4.2) and, if the skeleton branches at all, the furcation model (§4.3).
 
     Both use the bending model's resampling step ``h``.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        The example structure.
+    h : float, optional
+        Resampling step in pixels (default: the input's median thickness).
+    order : int, optional
+        Order of the Markov bending model, the paper's ``k`` (default 3); also the half-width
+        of the furcation model's neighbourhood. ``k`` before (deprecated).
+    m : int, optional
+        Elements appended per step (see :meth:`BendingModel.fit`).
+    n_best : int, optional
+        Candidates to draw from, the paper's ``c`` (default 2; 1 follows the input exactly).
+        ``c`` before (deprecated).
 
     Examples
     --------
@@ -61,23 +78,24 @@ def fit_models(
     >>> bend.h, fur is not None
     (2.0, True)
     """
-    bending = BendingModel.fit(skeleton, h=h, k=k, m=m, c=c)
+    bending = BendingModel.fit(skeleton, h=h, k=order, m=m, c=n_best)
     has_children = any(b.parent is not None for b in skeleton.branches)
-    furcation = FurcationModel.fit(skeleton, h=bending.h, k=k, c=c) if has_children else None
+    furcation = FurcationModel.fit(skeleton, h=bending.h, k=order, c=n_best) if has_children else None
     return bending, furcation
 
 
+@renamed(k="order", c="n_best")
 def synthesize(
     image: Any,
     skeleton: Skeleton | None = None,
     *,
-    size: Any = None,
-    seed: int = 0,
+    size: Size | None = None,
+    seed: Seed = 0,
     trace_options: dict[str, Any] | None = None,
     h: float | None = None,
-    k: int = 3,
+    order: int = 3,
     m: int | None = None,
-    c: int = 2,
+    n_best: int = 2,
     generations: int = 3,
     max_length: float | str | None = "input",
     colonize: bool = True,
@@ -102,14 +120,14 @@ def synthesize(
         The example image.
     skeleton : Skeleton, optional
         Its skeleton; traced when omitted.
-    size : (int, int), optional
+    size : int or (int, int), optional
         ``(H, W)`` of the new image (default: the input's).
-    seed : int, optional
+    seed : int or numpy.random.Generator, optional
         Seed of the growth and of the fragment choices.
     trace_options : dict, optional
         Keyword arguments for :func:`trace` (e.g. ``{"kind": "dark", "sigmas": (1.5, 3, 5)}``).
-    h, k, m, c : optional
-        Bending model parameters (see :meth:`BendingModel.fit`; paper: ``k = 3``, ``c = 2``).
+    h, order, m, n_best : optional
+        Model parameters, as in :func:`fit_models` (``k`` and ``c`` before, deprecated).
     generations, max_length, colonize, guide : optional
         See :func:`grow`.
     render_options : dict, optional
@@ -150,10 +168,10 @@ def synthesize(
     else:
         raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
     tick(1)
-    bending, furcation = fit_models(source, h=h, k=k, m=m, c=c)
+    bending, furcation = fit_models(source, h=h, order=order, m=m, n_best=n_best)
     tick(2)
     target = grow(
-        bending, furcation, shape=shape, seed=seed, generations=generations, max_length=max_length,
+        bending, furcation, size=shape, seed=seed, generations=generations, max_length=max_length,
         colonize=colonize, guide=guide,
     )  # fmt: skip
     tick(3)

@@ -12,7 +12,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validate import as_image, check_int
+from .._api import Size, renamed
+from .._validate import as_image, check_size
 from ._pixels import F32, F64, _check_skeleton
 from .skeleton import Branch, Skeleton
 
@@ -111,7 +112,8 @@ def rectify(image: Any, skeleton: Skeleton, homography: Any) -> tuple[F32, Skele
     return rect, Skeleton(branches, (int(size[1]), int(size[0]))), Hs, np.asarray(valid)
 
 
-def unrectify(image: Any, homography: Any, shape: tuple[int, int]) -> F32:
+@renamed(shape="size")
+def unrectify(image: Any, homography: Any, size: Size) -> F32:
     """Distort a result synthesised in the rectified frame back to the photo's view (Fig. 8 e).
 
     Parameters
@@ -120,8 +122,8 @@ def unrectify(image: Any, homography: Any, shape: tuple[int, int]) -> F32:
         An image in the rectified frame (e.g. the output of :func:`render`).
     homography : (3, 3) array_like
         The homography returned by :func:`rectify`.
-    shape : (int, int)
-        ``(H, W)`` of the output, in the photo's view.
+    size : int or (int, int)
+        ``(H, W)`` of the output, in the photo's view (``shape`` before, deprecated).
 
     Returns
     -------
@@ -129,7 +131,7 @@ def unrectify(image: Any, homography: Any, shape: tuple[int, int]) -> F32:
     """
     img = as_image(image, "image")
     Hm = _homography(homography)
-    h, w = (check_int(shape[0], "shape[0]", 1), check_int(shape[1], "shape[1]", 1))
+    h, w = check_size(size)
     out = cv2.warpPerspective(
         img, Hm, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_CONSTANT
     )

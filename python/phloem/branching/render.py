@@ -46,6 +46,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import _core
+from .._api import Seed, renamed
 from .._progress import Progress
 from .._validate import as_image, as_mask, check_float, check_int, check_patch_size, check_seed, check_threads
 from ..blend import interpolate_field, seamless
@@ -94,8 +95,8 @@ def render(
     source_skeleton: Skeleton,
     target_skeleton: Skeleton,
     *,
-    seed: int | np.random.Generator = ...,
-    c: int = ...,
+    seed: Seed = ...,
+    n_best: int = ...,
     omega_s: float = ...,
     omega_c: float = ...,
     lam: float = ...,
@@ -120,8 +121,8 @@ def render(
     source_skeleton: Skeleton,
     target_skeleton: Skeleton,
     *,
-    seed: int | np.random.Generator = ...,
-    c: int = ...,
+    seed: Seed = ...,
+    n_best: int = ...,
     omega_s: float = ...,
     omega_c: float = ...,
     lam: float = ...,
@@ -142,13 +143,14 @@ def render(
 ) -> RenderResult: ...
 
 
+@renamed(c="n_best")
 def render(
     image: Any,
     source_skeleton: Skeleton,
     target_skeleton: Skeleton,
     *,
-    seed: int | np.random.Generator = 0,
-    c: int = 2,
+    seed: Seed = 0,
+    n_best: int = 2,
     omega_s: float = 2.0,
     omega_c: float = 1.0,
     lam: float = 0.75,
@@ -184,9 +186,10 @@ def render(
     target_skeleton : Skeleton
         The structure to paint; its ``shape`` gives the output size.
     seed : int or numpy.random.Generator, optional
-        Seed of the random choice among the ``c`` best and of the completion (default 0).
-    c : int, optional
-        Number of best candidates to choose from (default 2, as in §4.2; 1 is deterministic).
+        Seed of the random choice among the ``n_best`` best and of the completion (default 0).
+    n_best : int, optional
+        Number of best candidates to choose from (the paper's ``c``: default 2, as in §4.2; 1 is
+        deterministic). ``c`` before (deprecated).
     omega_s : float, optional
         Weight ω_S of the thickness term of the shape distance (default 2).
     omega_c : float, optional
@@ -268,7 +271,7 @@ def render(
         raise ValueError("target_skeleton: its shape (the output size) must be set")
     tgt_sk = _check_skeleton(target_skeleton, "target_skeleton", target_skeleton.shape)
     lam_f, rf, k = check_params(lam, radius_factor, samples)
-    c_n = check_int(c, "c", 1)
+    c_n = check_int(n_best, "n_best", 1)
     w_s = check_float(omega_s, "omega_s", 0.0)
     w_c = check_float(omega_c, "omega_c", 0.0)
     p = check_patch_size(patch_size)

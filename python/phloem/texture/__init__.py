@@ -9,9 +9,9 @@
 
 from __future__ import annotations
 
-from .by_numbers import by_numbers, feature_distance_map
+from .by_numbers import ByNumbersResult, by_numbers, feature_distance_map
 from .complete import complete
-from .quilt import quilt
+from .quilt import QuiltResult, quilt
 from .synthesis import synthesize
 
-__all__ = ["by_numbers", "complete", "feature_distance_map", "quilt", "synthesize"]
+__all__ = ["ByNumbersResult", "QuiltResult", "by_numbers", "complete", "feature_distance_map", "quilt", "synthesize"]

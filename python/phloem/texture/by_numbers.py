@@ -4,6 +4,7 @@ map it matches on (Lefebvre and Hoppe 2006, §4.3)."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any, Literal, overload
 
 import cv2
@@ -11,10 +12,28 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import _core
+from .._api import Seed, old_flag, renamed
 from .._progress import Progress
 from .._validate import as_image, check_float, check_int, check_patch_size, check_seed, check_threads, restore_ndim
 
-__all__ = ["by_numbers", "feature_distance_map"]
+__all__ = ["ByNumbersResult", "by_numbers", "feature_distance_map"]
+
+
+@dataclass(frozen=True)
+class ByNumbersResult:
+    """What :func:`by_numbers` returns with ``full_output=True``.
+
+    Attributes
+    ----------
+    image : (H, W[, C]) ndarray of float32
+        ``B'`` (the default return value).
+    sources : (H, W, 2) ndarray of int32
+        The exemplar (row, col) each output pixel was copied from:
+        ``image == exemplar[sources[..., 0], sources[..., 1]]``.
+    """
+
+    image: NDArray[np.float32]
+    sources: NDArray[np.int32]
 
 
 def feature_distance_map(image: Any, *, sigma: float = 3.0, radius: float = 12.0) -> NDArray[np.float32]:
@@ -101,7 +120,7 @@ def by_numbers(
     labels_out: Any,
     *,
     patch_size: int = ...,
-    k: int = ...,
+    coherence_k: int = ...,
     label_weight: float = ...,
     feature_weight: float = ...,
     features: Any = ...,
@@ -113,10 +132,10 @@ def by_numbers(
     stand_in_weight: float | None = ...,
     wrap: bool = ...,
     tileable: bool = ...,
-    seed: int | np.random.Generator = ...,
+    seed: Seed = ...,
     threads: int | None = ...,
-    return_sources: Literal[False] = ...,
     progress: Progress = ...,
+    full_output: Literal[False] = ...,
 ) -> NDArray[np.float32]: ...
 @overload
 def by_numbers(
@@ -125,7 +144,7 @@ def by_numbers(
     labels_out: Any,
     *,
     patch_size: int = ...,
-    k: int = ...,
+    coherence_k: int = ...,
     label_weight: float = ...,
     feature_weight: float = ...,
     features: Any = ...,
@@ -137,18 +156,21 @@ def by_numbers(
     stand_in_weight: float | None = ...,
     wrap: bool = ...,
     tileable: bool = ...,
-    seed: int | np.random.Generator = ...,
+    seed: Seed = ...,
     threads: int | None = ...,
-    return_sources: Literal[True],
     progress: Progress = ...,
-) -> tuple[NDArray[np.float32], NDArray[np.int32]]: ...
+    full_output: Literal[True],
+) -> ByNumbersResult: ...
+
+
+@renamed(k="coherence_k", return_sources=old_flag(lambda r: (r.image, r.sources)))
 def by_numbers(
     exemplar: Any,
     labels_in: Any,
     labels_out: Any,
     *,
     patch_size: int = 7,
-    k: int = 1,
+    coherence_k: int = 1,
     label_weight: float = 3.0,
     feature_weight: float = 8.0,
     features: Any = "auto",
@@ -160,11 +182,11 @@ def by_numbers(
     stand_in_weight: float | None = 5.0,
     wrap: bool = True,
     tileable: bool = False,
-    seed: int | np.random.Generator = 0,
+    seed: Seed = 0,
     threads: int | None = None,
-    return_sources: bool = False,
     progress: Progress = None,
-) -> NDArray[np.float32] | tuple[NDArray[np.float32], NDArray[np.int32]]:
+    full_output: bool = False,
+) -> NDArray[np.float32] | ByNumbersResult:
     """Texture-by-numbers: paint an output label map with the exemplar's matching material.
 
     Given an exemplar ``A'``, its label map ``A`` and an output label map ``B``, synthesise
@@ -191,12 +213,13 @@ def by_numbers(
         ``B``; defines the output size. Every value must occur in ``labels_in``.
     patch_size : int, optional
         Neighbourhood side, odd (default 7).
-    k : int, optional
-        k of k-coherence search: every coherence candidate brings its ``k − 1`` nearest
-        exemplar patches (default 1: coherence candidates only). ``patch_size=7, k=1``
-        measured more coherent than ``5, 2`` on the thesis' bark runs and about as close in
-        per-label histograms, at the same time; larger patches or ``k`` raise coherence and
-        lower histogram fidelity, at up to twice the time.
+    coherence_k : int, optional
+        The ``k`` of k-coherence search (Tong et al. 2002): every coherence candidate brings
+        its ``k − 1`` nearest exemplar patches (default 1: coherence candidates only; ``k``
+        before, deprecated). ``patch_size=7, coherence_k=1`` measured more coherent than
+        ``5, 2`` on the thesis' bark runs and about as close in per-label histograms, at the
+        same time; larger patches or ``coherence_k`` raise coherence and lower histogram
+        fidelity, at up to twice the time.
     label_weight : float, optional
         ``w`` of Eq. 3.3 (default 3, the thesis' bark value; Fan et al. used 1).
     feature_weight : float, optional
@@ -262,17 +285,16 @@ def by_numbers(
         Seed (default 0). The output is identical for any number of threads.
     threads : int, optional
         Worker threads (default: ``PHLOEM_NUM_THREADS`` or all cores).
-    return_sources : bool, optional
-        Also return the exemplar (row, col) each output pixel was copied from.
     progress : callable, optional
         Called as ``progress(done, total)`` after every solver iteration.
+    full_output : bool, optional
+        Return a :class:`ByNumbersResult` with the exemplar (row, col) each output pixel was
+        copied from (``return_sources`` before; it still works, deprecated).
 
     Returns
     -------
     image : (H, W[, C]) ndarray of float32
-        ``B'``, 2-D if the exemplar was.
-    sources : (H, W, 2) ndarray of int32
-        Only with ``return_sources=True``: ``image == exemplar[sources[..., 0], sources[..., 1]]``.
+        ``B'``, 2-D if the exemplar was; a :class:`ByNumbersResult` with ``full_output=True``.
 
     References
     ----------
@@ -286,15 +308,16 @@ def by_numbers(
     >>> ex = phloem.data.bark()[:96, :96, :3]
     >>> a = (ex.mean(axis=2) > 0.3).astype(np.int32)      # dark furrows 0, plates 1
     >>> b = np.zeros((80, 100), np.int32); b[:, 30:70] = 1  # one wide plate
-    >>> out, src = phloem.texture.by_numbers(ex, a, b, seed=1, return_sources=True)
-    >>> out.shape, bool((a[src[..., 0], src[..., 1]] == b).all())
+    >>> res = phloem.texture.by_numbers(ex, a, b, seed=1, full_output=True)
+    >>> src = res.sources
+    >>> res.image.shape, bool((a[src[..., 0], src[..., 1]] == b).all())
     ((80, 100, 3), True)
     """
     ex = as_image(exemplar, "exemplar")
     eh, ew, nc = ex.shape
     la, lb = _compact_labels(labels_in, labels_out, (eh, ew))
     p = check_patch_size(patch_size)
-    kk = check_int(k, "k", 1)
+    kk = check_int(coherence_k, "coherence_k", 1)
     w = check_float(label_weight, "label_weight", 0.0)
     z = check_float(feature_weight, "feature_weight", 0.0)
     n_levels = None if levels is None else check_int(levels, "levels", 1)
@@ -340,6 +363,4 @@ def by_numbers(
         progress=progress,
     )  # fmt: skip
     out = restore_ndim(np.ascontiguousarray(ex[src[..., 0], src[..., 1]]), exemplar)
-    if return_sources:
-        return out, src
-    return out
+    return ByNumbersResult(out, src) if full_output else out

@@ -4,6 +4,7 @@ entire-patch matching and joined along minimum-cost seams."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any, Literal, overload
 
 import cv2
@@ -11,10 +12,27 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import seams
+from .._api import Seed, Size, old_flag, renamed
 from .._progress import Progress
 from .._validate import as_image, check_int, check_seed, check_size, check_threads, restore_ndim
 
-__all__ = ["quilt"]
+__all__ = ["QuiltResult", "quilt"]
+
+
+@dataclass(frozen=True)
+class QuiltResult:
+    """What :func:`quilt` returns with ``full_output=True``.
+
+    Attributes
+    ----------
+    texture : (H, W[, C]) ndarray of float32
+        The quilted texture (the default return value).
+    sources : (H, W, 2) ndarray of int32
+        The exemplar (row, col) each output pixel was copied from.
+    """
+
+    texture: NDArray[np.float32]
+    sources: NDArray[np.int32]
 
 
 def _masked_ssd(ex: NDArray[np.float32], tmpl: NDArray[np.float32], mask: NDArray[np.bool_]) -> NDArray[np.float32]:
@@ -34,47 +52,50 @@ def _masked_ssd(ex: NDArray[np.float32], tmpl: NDArray[np.float32], mask: NDArra
 @overload
 def quilt(
     exemplar: Any,
-    size: int | tuple[int, int],
+    size: Size,
     *,
     block: int | None = ...,
     overlap: int | None = ...,
     randomness: float = ...,
     cost: Literal["kwatra", "gradient", "luo"] = ...,
     max_pixels: int = ...,
-    seed: int | np.random.Generator = ...,
+    seed: Seed = ...,
     threads: int | None = ...,
-    return_sources: Literal[False] = ...,
     progress: Progress = ...,
+    full_output: Literal[False] = ...,
 ) -> NDArray[np.float32]: ...
 @overload
 def quilt(
     exemplar: Any,
-    size: int | tuple[int, int],
+    size: Size,
     *,
     block: int | None = ...,
     overlap: int | None = ...,
     randomness: float = ...,
     cost: Literal["kwatra", "gradient", "luo"] = ...,
     max_pixels: int = ...,
-    seed: int | np.random.Generator = ...,
+    seed: Seed = ...,
     threads: int | None = ...,
-    return_sources: Literal[True],
     progress: Progress = ...,
-) -> tuple[NDArray[np.float32], NDArray[np.int32]]: ...
+    full_output: Literal[True],
+) -> QuiltResult: ...
+
+
+@renamed(return_sources=old_flag(lambda r: (r.texture, r.sources)))
 def quilt(
     exemplar: Any,
-    size: int | tuple[int, int],
+    size: Size,
     *,
     block: int | None = None,
     overlap: int | None = None,
     randomness: float = 0.01,
     cost: Literal["kwatra", "gradient", "luo"] = "kwatra",
     max_pixels: int = 2**28,
-    seed: int | np.random.Generator = 0,
+    seed: Seed = 0,
     threads: int | None = None,
-    return_sources: bool = False,
     progress: Progress = None,
-) -> NDArray[np.float32] | tuple[NDArray[np.float32], NDArray[np.int32]]:
+    full_output: bool = False,
+) -> NDArray[np.float32] | QuiltResult:
     """Synthesise a texture by placing exemplar blocks and joining them along graph-cut seams.
 
     The output is covered in scanline order by ``block × block`` pieces of the exemplar that
@@ -108,17 +129,17 @@ def quilt(
         Seed of the placement choices (default 0).
     threads : int, optional
         Worker threads of the seam computation.
-    return_sources : bool, optional
-        Also return, for every output pixel, the exemplar (row, col) it was copied from.
     progress : callable, optional
         Called as ``progress(done, total)`` after every placed block.
+    full_output : bool, optional
+        Return a :class:`QuiltResult` with, for every output pixel, the exemplar (row, col) it
+        was copied from (``return_sources`` before; it still works, deprecated).
 
     Returns
     -------
     texture : (H, W[, C]) ndarray of float32
-        The quilted texture, 2-D if the exemplar was.
-    sources : (H, W, 2) ndarray of int32
-        Only with ``return_sources=True``.
+        The quilted texture, 2-D if the exemplar was; a :class:`QuiltResult` with
+        ``full_output=True``.
 
     References
     ----------
@@ -129,8 +150,9 @@ def quilt(
     --------
     >>> import numpy as np, phloem
     >>> ex = phloem.data.bark()[:128, :128, :3]
-    >>> out, src = phloem.texture.quilt(ex, (100, 150), block=48, seed=1, return_sources=True)
-    >>> out.shape, bool((out == ex[src[..., 0], src[..., 1]]).all())
+    >>> res = phloem.texture.quilt(ex, (100, 150), block=48, seed=1, full_output=True)
+    >>> src = res.sources
+    >>> res.texture.shape, bool((res.texture == ex[src[..., 0], src[..., 1]]).all())
     ((100, 150, 3), True)
     """
     ex = as_image(exemplar, "exemplar")
@@ -195,6 +217,4 @@ def quilt(
         if progress is not None:
             progress(n + 1, ny * nx)
     out = restore_ndim(np.ascontiguousarray(canvas[:h, :w]), exemplar)
-    if return_sources:
-        return out, np.ascontiguousarray(src[:h, :w])
-    return out
+    return QuiltResult(out, np.ascontiguousarray(src[:h, :w])) if full_output else out

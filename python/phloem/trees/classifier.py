@@ -9,7 +9,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .._validate import as_mask, check_float, check_int
+from .._api import Seed
+from .._validate import as_mask, check_float, check_int, check_seed
 from ._checks import F32, F64, Mask, as_rgba, check_alpha_threshold
 from .segmentation import segment
 
@@ -126,7 +127,7 @@ class TrunkClassifier:
         *,
         samples: int = 20000,
         l2: float = 1e-3,
-        seed: int = 0,
+        seed: Seed = 0,
         alpha_threshold: float = 0.5,
     ) -> TrunkClassifier:
         """Train on normalised exemplars and their trunk masks.
@@ -141,7 +142,7 @@ class TrunkClassifier:
             Opaque pixels drawn per image, half trunk and half crown where possible.
         l2 : float, optional
             Ridge penalty on the weights.
-        seed : int, optional
+        seed : int or numpy.random.Generator, optional
             Seed of the pixel sampling.
         alpha_threshold : float, optional
 
@@ -166,7 +167,7 @@ class TrunkClassifier:
         samples = check_int(samples, "samples", 10)
         l2 = check_float(l2, "l2", 0.0)
         t = check_alpha_threshold(alpha_threshold)
-        rng = np.random.default_rng(check_int(seed, "seed", 0))
+        rng = np.random.default_rng(check_seed(seed))
         xs_, ys_ = [], []
         for i, (im, tm) in enumerate(zip(imgs, masks)):
             img = as_rgba(im, f"images[{i}]")

@@ -8,13 +8,15 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .._validate import check_convex_weights
+from .._api import Size, renamed
+from .._validate import check_convex_weights, check_size
 from ._checks import F64, Mask, as_points
 
 __all__ = ["combine_contours", "fill_contour"]
 
 
-def fill_contour(points: Any, shape: tuple[int, int]) -> Mask:
+@renamed(shape="size")
+def fill_contour(points: Any, size: Size) -> Mask:
     """Preliminary alpha of a synthesised contour: draw it, then clear from outside (§5.1).
 
     The closed polyline is drawn onto an all-opaque canvas, and a flood fill from outside the
@@ -26,8 +28,8 @@ def fill_contour(points: Any, shape: tuple[int, int]) -> Mask:
     ----------
     points : (K, 2) ndarray
         Closed contour, ``(x, y)``.
-    shape : (int, int)
-        ``(H, W)`` of the mask.
+    size : int or (int, int)
+        ``(H, W)`` of the mask (``shape`` before, deprecated).
 
     Returns
     -------
@@ -43,9 +45,7 @@ def fill_contour(points: Any, shape: tuple[int, int]) -> Mask:
     (True, True, False, False)
     """
     p = as_points(points, "points")
-    h, w = (int(s) for s in shape)
-    if h < 1 or w < 1:
-        raise ValueError(f"shape: expected a positive (H, W), got {shape!r}")
+    h, w = check_size(size)
     # A one-pixel margin joins every outside region to the seed; the canvas also holds the curve's
     # parts outside the image (clamped at one image size beyond), so no gap lets the fill in.
     lim = np.array([w, h], np.float64)

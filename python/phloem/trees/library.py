@@ -6,9 +6,10 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from .. import io
+from .._api import warn_deprecated
 from .atlas import split_atlas
 from .classifier import TrunkClassifier
 from .preprocessing import Tree, prepare
@@ -112,7 +113,7 @@ class Library:
         cls,
         path: str | os.PathLike[str],
         *,
-        atlas: bool | None = None,
+        atlas: Literal["auto", "yes", "no"] = "auto",
         size: int = 1024,
         alpha_threshold: float = 0.5,
         skip_bad: bool = False,
@@ -126,10 +127,11 @@ class Library:
         ----------
         path : path-like
             A folder, or one image (typically an atlas of several trees).
-        atlas : bool, optional
-            ``True``: every image is an atlas of several trees (:func:`split_atlas`);
-            ``False``: one tree per image; ``None`` (default): split every image and keep
-            all its pieces (an image of one tree gives one piece).
+        atlas : {"auto", "yes", "no"}, optional
+            ``"yes"``: every image is an atlas of several trees (:func:`split_atlas`);
+            ``"no"``: one tree per image; ``"auto"`` (default): split every image and keep
+            all its pieces (an image of one tree gives one piece). ``None``, ``True`` and
+            ``False``, the old spellings of these, still work (deprecated).
         size, alpha_threshold : optional
             See :func:`normalize`.
         skip_bad : bool, optional
@@ -147,6 +149,12 @@ class Library:
         ValueError
             If an image cannot be used (unless ``skip_bad``) or no tree is found.
         """
+        if atlas is None or isinstance(atlas, bool):
+            new = {None: "auto", True: "yes", False: "no"}[atlas]
+            warn_deprecated(f"atlas={atlas} is deprecated and goes in the next release; use {new!r}")
+            atlas = new
+        if atlas not in ("auto", "yes", "no"):
+            raise ValueError(f"atlas: expected 'auto', 'yes' or 'no', got {atlas!r}")
         folder = Path(path)
         if folder.is_dir():
             files = sorted(p for p in folder.iterdir() if p.suffix.lower() in {".png", ".tif", ".tiff", ".webp"})
@@ -163,7 +171,7 @@ class Library:
                 img = io.read_image(f, max_pixels=max_pixels)
                 if img.ndim != 3 or img.shape[2] != 4:
                     raise ValueError("expected an RGBA image (trees need an alpha channel)")
-                pieces = [img] if atlas is False else split_atlas(img, alpha_threshold=alpha_threshold)
+                pieces = [img] if atlas == "no" else split_atlas(img, alpha_threshold=alpha_threshold)
                 for i, piece in enumerate(pieces):
                     trees_.append(prepare(piece, size=size, alpha_threshold=alpha_threshold, classifier=classifier))
                     names.append(f.name if len(pieces) == 1 else f"{f.name}[{i}]")

@@ -7,7 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import check_float, check_int
+from .._api import Seed, renamed
+from .._validate import check_float, check_int, check_seed
 from ._checks import F32, F64
 from .library import Library
 from .preprocessing import Tree, prepare
@@ -69,10 +70,10 @@ def _color_weights(rng: np.random.Generator, w: F64, colors: str, spread: float)
     return _draw_weights(rng, len(w), spread)
 
 
-def _check_variation_args(library: Any, sources: Any, spread: Any, colors: Any) -> tuple[int, float]:
+def _check_variation_args(library: Any, n_sources: Any, spread: Any, colors: Any) -> tuple[int, float]:
     if not isinstance(library, Library):
         raise TypeError(f"library: expected a phloem.trees.Library, got {type(library).__name__}")
-    k = check_int(sources, "sources", 1)
+    k = check_int(n_sources, "n_sources", 1)
     spread = check_float(spread, "spread", 0.0)
     if spread > 1.0:
         raise ValueError(f"spread: expected a value in [0, 1], got {spread}")
@@ -81,17 +82,18 @@ def _check_variation_args(library: Any, sources: Any, spread: Any, colors: Any) 
     return k, spread
 
 
+@renamed(sources="n_sources")
 def variation(
     library: Library,
     *,
-    sources: int = 2,
-    seed: int = 0,
+    n_sources: int = 2,
+    seed: Seed = 0,
     spread: float = 0.4,
     colors: str = "random",
     histogram: bool = False,
     threads: int | None = None,
 ) -> Variation:
-    """A new tree from ``sources`` exemplars drawn at random from the library (paper §3, §5).
+    """A new tree from ``n_sources`` exemplars drawn at random from the library (paper §3, §5).
 
     The contour is a random convex combination of the exemplars' contours (§5.1) and is filled
     by RGBA colour transfer from all of them (§5.2); see :func:`morph`.
@@ -99,9 +101,10 @@ def variation(
     Parameters
     ----------
     library : Library
-    sources : int, optional
-        How many distinct exemplars to combine (2 in the paper's Fig. 16).
-    seed : int, optional
+    n_sources : int, optional
+        How many distinct exemplars to combine (2 in the paper's Fig. 16; ``sources``
+        before, deprecated).
+    seed : int or numpy.random.Generator, optional
         Seed of the random choices; the same seed gives the same tree.
     spread : float, optional
         Contour weights are ``(1 - spread)/k + spread * Dirichlet(1, ..., 1)``; with two sources
@@ -121,7 +124,7 @@ def variation(
     Raises
     ------
     ValueError
-        If the library holds fewer than ``sources`` trees.
+        If the library holds fewer than ``n_sources`` trees.
 
     Examples
     --------
@@ -133,12 +136,12 @@ def variation(
     >>> v.image.shape, len(v.sources), bool(abs(v.weights.sum() - 1) < 1e-9)
     ((128, 128, 4), 2, True)
     """
-    k, spread = _check_variation_args(library, sources, spread, colors)
+    k, spread = _check_variation_args(library, n_sources, spread, colors)
     if len(library) < k:
         raise ValueError(
-            f"library: has {len(library)} tree(s) but sources={k}; a variation combines {k} distinct exemplars"
+            f"library: has {len(library)} tree(s) but n_sources={k}; a variation combines {k} distinct exemplars"
         )
-    rng = np.random.default_rng(check_int(seed, "seed", 0))
+    rng = np.random.default_rng(check_seed(seed))
     idx = [int(i) for i in rng.choice(len(library), size=k, replace=False)]
     w = _draw_weights(rng, k, spread)
     cw = _color_weights(rng, w, colors, spread)
@@ -166,23 +169,24 @@ def _make(
     return Variation(img, idx, w, cw, ref)
 
 
+@renamed(n="n_variations", sources="n_sources")
 def vary(
     tree: Any,
     library: Library,
     *,
-    n: int,
-    seed: int = 0,
-    sources: int = 2,
+    n_variations: int,
+    seed: Seed = 0,
+    n_sources: int = 2,
     weight: tuple[float, float] = (0.6, 0.9),
     spread: float = 0.4,
     colors: str = "contour",
     histogram: bool = False,
     threads: int | None = None,
 ) -> list[Variation]:
-    """``n`` variations of one tree ``T``, combined with library exemplars at a lower weight (§3).
+    """``n_variations`` variations of one tree ``T``, combined with library exemplars at a lower weight (§3).
 
     ``T`` is preprocessed like the exemplars (an RGBA image, or a :class:`Tree` made at the
-    library's size), then each variation combines ``T`` with ``sources - 1`` random library
+    library's size), then each variation combines ``T`` with ``n_sources - 1`` random library
     exemplars. ``T``'s contour weight is drawn uniformly from ``weight``; the rest is shared
     among the others as in :func:`variation`. By default the colour weights equal the contour
     weights, so the variations keep ``T``'s look.
@@ -192,11 +196,11 @@ def vary(
     tree : (M, N, 4) ndarray or Tree
         The user's tree ``T``.
     library : Library
-    n : int
-        Number of variations.
-    seed : int, optional
-    sources : int, optional
-        Trees per variation, ``T`` included (at least 2).
+    n_variations : int
+        Number of variations (``n`` before, deprecated).
+    seed : int or numpy.random.Generator, optional
+    n_sources : int, optional
+        Trees per variation, ``T`` included (at least 2; ``sources`` before, deprecated).
     weight : (float, float), optional
         Range of ``T``'s contour weight.
     spread, colors, histogram, threads : optional
@@ -213,16 +217,16 @@ def vary(
     >>> img = np.zeros((120, 80, 4), np.float32); img[..., 1] = 0.5
     >>> img[..., 3] = 0; img[10:70, 10:70, 3] = 1.0; img[70:110, 35:45, 3] = 1.0
     >>> lib = phloem.trees.Library.from_images([img[:, ::-1], img[20:]], size=128)
-    >>> vs = phloem.trees.vary(img, lib, n=2, seed=1)
+    >>> vs = phloem.trees.vary(img, lib, n_variations=2, seed=1)
     >>> len(vs), [bool(0.6 <= v.weights[0] <= 0.9) for v in vs]
     (2, [True, True])
     """
-    k, spread = _check_variation_args(library, sources, spread, colors)
-    n = check_int(n, "n", 1)
+    k, spread = _check_variation_args(library, n_sources, spread, colors)
+    n = check_int(n_variations, "n_variations", 1)
     if k < 2:
-        raise ValueError(f"sources: a variation of a tree combines it with at least one exemplar, got {k}")
+        raise ValueError(f"n_sources: a variation of a tree combines it with at least one exemplar, got {k}")
     if len(library) < k - 1:
-        raise ValueError(f"library: has {len(library)} tree(s) but sources={k} needs {k - 1} besides the tree")
+        raise ValueError(f"library: has {len(library)} tree(s) but n_sources={k} needs {k - 1} besides the tree")
     lo, hi = (check_float(v, "weight", 0.0) for v in weight)
     if not lo <= hi <= 1.0:
         raise ValueError(f"weight: expected 0 <= low <= high <= 1, got {weight!r}")
@@ -230,7 +234,7 @@ def vary(
     first = library.trees[0]
     if t.image.shape != first.image.shape or t.split != first.split:
         raise ValueError("tree: prepared with another size or split than the library's trees")
-    rng = np.random.default_rng(check_int(seed, "seed", 0))
+    rng = np.random.default_rng(check_seed(seed))
     out = []
     for _ in range(n):
         idx = [int(i) for i in rng.choice(len(library), size=k - 1, replace=False)]

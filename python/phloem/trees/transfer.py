@@ -13,7 +13,8 @@ import cv2
 import numpy as np
 
 from .. import warp
-from .._validate import as_mask, check_convex_weights, check_float, check_int
+from .._api import Size, renamed
+from .._validate import as_mask, check_convex_weights, check_float, check_int, check_size
 from ._checks import F32, F64, as_points, as_rgba
 from ._outline import dilated_outline, points_at
 from .contour_space import combine_contours, fill_contour
@@ -58,10 +59,11 @@ def _monotone_match(anchors: F64, loop: F64) -> F64:
     return np.asarray(c[idx], dtype=np.float64)
 
 
+@renamed(shape="size")
 def cages(
     target: Any,
     sources: Sequence[Tree],
-    shape: tuple[int, int],
+    size: Size,
     *,
     m: int = 100,
     dilation: int = 8,
@@ -83,8 +85,8 @@ def cages(
         The synthesised resampled contour ``C_r'``, with the sources' number of points.
     sources : sequence of Tree
         The source exemplars.
-    shape : (int, int)
-        ``(H, W)`` of the images.
+    size : int or (int, int)
+        ``(H, W)`` of the images (``shape`` before, deprecated).
     m, dilation : int, optional
         Cage points (the paper's M = 100) and dilation iterations (8 in the paper).
     mask : (H, W) bool ndarray, optional
@@ -113,7 +115,7 @@ def cages(
         raise ValueError(f"target: expected {n} points like the sources' resampled contours, got {len(cr)}")
     m = check_int(m, "m", 3)
     dilation = check_int(dilation, "dilation", 0)
-    h, w = (int(s) for s in shape)
+    h, w = check_size(size)
     tmask = fill_contour(cr, (h, w)) if mask is None else as_mask(mask, "mask", (h, w))
     closed = np.vstack([cr, cr[:1]])
     cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))])

@@ -1,0 +1,150 @@
+"""What every sub-command shares: argument types, the common options, output checks before the
+computation, sidecars, the progress bar and deprecated flag spellings."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+
+from .. import io
+from .._progress import Bar
+
+T = TypeVar("T")
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``--size WxH`` or ``--size N`` (N×N) as ``(height, width)``."""
+    try:
+        parts = [int(v) for v in text.lower().split("x")]
+    except ValueError:
+        parts = []
+    if len(parts) == 1:
+        parts *= 2
+    if len(parts) != 2:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 512x384, or N for NxN, got {text!r}")
+    w, h = parts
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"expected positive sizes, got {text!r}")
+    return h, w
+
+
+def parse_square_size(text: str) -> int:
+    """``--size N`` or ``--size NxN`` for outputs that must be square, as the side ``N``."""
+    h, w = parse_size(text)
+    if h != w:
+        raise argparse.ArgumentTypeError(f"expected a square size N or NxN, got {text!r}")
+    return h
+
+
+def positive(text: str) -> int:
+    v = int(text)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text}")
+    return v
+
+
+def non_negative(text: str) -> float:
+    v = float(text)
+    if not (v >= 0 and v != float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text}")
+    return v
+
+
+def common_options(p: argparse.ArgumentParser, *, writes: bool = True) -> None:
+    g = p.add_argument_group("common options")
+    g.add_argument(
+        "--seed", type=int, default=0, help="seed of every random choice; same seed, same output (default 0)"
+    )
+    g.add_argument(
+        "--threads", type=positive, default=None, help="worker threads (default: PHLOEM_NUM_THREADS or all cores)"
+    )
+    g.add_argument(
+        "--max-pixels",
+        type=positive,
+        default=io.DEFAULT_MAX_PIXELS,
+        help="refuse input images larger than this many pixels (default %(default)s)",
+    )
+    g.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    if writes:
+        g.add_argument("--force", action="store_true", help="replace OUT and OUT.json if they exist")
+        g.add_argument(
+            "--bit-depth",
+            type=int,
+            choices=(8, 16),
+            default=8,
+            help="bits per channel of OUT (16 for PNG/TIFF only; default 8)",
+        )
+
+
+def deprecated_alias(
+    p: argparse.ArgumentParser | argparse._ArgumentGroup,
+    old: str,
+    new: str,
+    *,
+    dest: str,
+    type: Callable[[str], Any] | None = None,
+    const: Any = None,
+    flag: bool = False,
+) -> None:
+    """A hidden old spelling of a flag: it works as ``new`` (a ``flag`` stores ``const``) and
+    prints one deprecation line on stderr."""
+
+    class Alias(argparse.Action):
+        def __call__(
+            self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any, option: Any = None
+        ) -> None:
+            print(
+                f"{parser.prog}: warning: {old} is deprecated and goes in the next release; use {new}", file=sys.stderr
+            )
+            setattr(namespace, self.dest, const if flag else values)
+
+    if flag:
+        p.add_argument(old, dest=dest, nargs=0, action=Alias, help=argparse.SUPPRESS)
+    else:
+        p.add_argument(old, dest=dest, type=type or str, action=Alias, help=argparse.SUPPRESS)
+
+
+def check_writable(path: Path, args: argparse.Namespace) -> None:
+    io._encode(path, np.zeros((1, 1), np.float32), args.bit_depth)  # extension and bit depth
+    io._check_target(path, args.force)
+
+
+def preflight(args: argparse.Namespace, extra: Sequence[Path] = ()) -> None:
+    """Fail before computing if the output, its sidecar or an ``extra`` file cannot be written."""
+    out = Path(args.out)
+    check_writable(out, args)
+    io._check_target(io.sidecar_path(out), args.force)
+    for path in extra:
+        check_writable(path, args)
+
+
+def params(args: argparse.Namespace, skip: Sequence[str] = ()) -> dict[str, Any]:
+    drop = {"func", "command", "quiet", "force", "threads", "seed", "max_pixels", *skip}
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items() if k not in drop}
+
+
+def run(label: str, args: argparse.Namespace, work: Callable[[Any], T]) -> T:
+    bar = Bar(label, enabled=not args.quiet)
+    t0 = time.perf_counter()
+    try:
+        out = work(bar)
+    finally:
+        bar.close()
+    if not args.quiet:
+        print(f"{label}: {time.perf_counter() - t0:.2f} s", file=sys.stderr)
+    return out
+
+
+def save(args: argparse.Namespace, command: str, image: np.ndarray, **extra: Any) -> None:
+    side = io.write_result(
+        args.out, image, command=command, parameters={**params(args), **extra}, seed=args.seed,
+        overwrite=args.force, bit_depth=args.bit_depth,
+    )  # fmt: skip
+    if not args.quiet:
+        print(f"wrote {args.out} and {side}", file=sys.stderr)

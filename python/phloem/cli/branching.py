@@ -1,0 +1,326 @@
+"""``phloem branching trace|grow|render|run``: :mod:`phloem.branching` on images and skeleton files."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import __version__, branching, io
+from ._common import (
+    check_writable,
+    common_options,
+    deprecated_alias,
+    params,
+    parse_size,
+    positive,
+    preflight,
+    run,
+    save,
+)
+
+_TRACE_KINDS = ("auto", "bright", "dark", "mask")
+
+
+def _trace_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("tracing (when no skeleton file is given)")
+    g.add_argument("--kind", choices=_TRACE_KINDS, default="auto",
+                   help="what the structure looks like: a binary mask, bright ridges (lightning, ridges of an elevation model) "
+                        "or dark ones (vessels, cracks, rivers on land); auto decides (default)")  # fmt: skip
+    g.add_argument("--sigmas", type=float, nargs="+", default=[1.0, 2.0, 3.0], metavar="S",
+                   help="ridge-filter scales in pixels, about the radii of the structures to find (default 1 2 3)")  # fmt: skip
+    g.add_argument(
+        "--channel",
+        type=int,
+        default=None,
+        help="trace this channel of a colour image (e.g. 1 = green for retinas; default: luminance)",
+    )
+    g.add_argument(
+        "--min-length", type=float, default=8.0, help="drop traced branches shorter than this many pixels (default 8)"
+    )
+
+
+def _trace_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    return {"kind": args.kind, "sigmas": tuple(args.sigmas), "channel": args.channel, "min_length": args.min_length}
+
+
+def _write_skeleton(path: Path, sk: branching.Skeleton, args: argparse.Namespace, command: str, **extra: Any) -> None:
+    """A skeleton file and its sidecar, both checked before either is written."""
+    side = io.sidecar_path(path)
+    io._check_target(path, args.force)
+    io._check_target(side, args.force)
+    sk.save(path, overwrite=args.force)
+    meta = {"phloem_version": __version__, "command": command, "seed": getattr(args, "seed", None),
+            "parameters": {**params(args), **extra}, "output": path.name}  # fmt: skip
+    io._atomic_write(side, (json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n").encode(), args.force)
+    if not args.quiet:
+        print(f"wrote {path} and {side}", file=sys.stderr)
+
+
+def _check_json_target(path: Path, args: argparse.Namespace) -> None:
+    if path.suffix.lower() != ".json":
+        raise ValueError(f"out: expected a .json file for the skeleton, got {path.name}")
+    io._check_target(path, args.force)
+    io._check_target(io.sidecar_path(path), args.force)
+
+
+def _cmd_branching_trace(args: argparse.Namespace) -> None:
+    out = Path(args.out)
+    _check_json_target(out, args)
+    if args.overlay is not None:
+        check_writable(Path(args.overlay), args)
+    img = io.read_image(args.input, max_pixels=args.max_pixels)
+    sk = run("branching trace", args, lambda bar: branching.trace(img, **_trace_kwargs(args)))
+    _write_skeleton(
+        out, sk, args, "branching trace", branches=len(sk.branches), total_length=round(sk.total_length(), 1)
+    )
+    if args.overlay is not None:
+        io.write_image(args.overlay, sk.draw(img, width=2), overwrite=args.force, bit_depth=args.bit_depth)
+        if not args.quiet:
+            print(f"wrote {args.overlay}", file=sys.stderr)
+
+
+def _guide(path: str | None, args: argparse.Namespace) -> Any:
+    if path is None:
+        return None
+    p = Path(path)
+    if p.suffix.lower() == ".json":
+        pts = np.asarray(json.loads(p.read_text(encoding="utf-8")), dtype=np.float64)
+        if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2:
+            raise ValueError(f"guide: {p} must hold a JSON list of at least two [x, y] points")
+        return pts
+    g = io.read_image(p, max_pixels=args.max_pixels)
+    return (g.mean(axis=2) if g.ndim == 3 else g) > 0.5
+
+
+def _length(text: str) -> float | str:
+    if text == "input":
+        return text
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a length in pixels or 'input', got {text!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"expected a positive length, got {text}")
+    return v
+
+
+def _render_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("image synthesis (§5)")
+    g.add_argument(
+        "--omega-s",
+        type=float,
+        default=2.0,
+        help="weight of the thickness term of the fragment shape distance (paper: 2)",
+    )
+    g.add_argument(
+        "--omega-c",
+        type=float,
+        default=1.0,
+        help="weight of colour consistency with the fragments already placed (default 1)",
+    )
+    g.add_argument(
+        "--no-complete",
+        action="store_true",
+        help="leave the background black instead of completing it from the example (§5.4)",
+    )
+    g.add_argument(
+        "--fragment-map", metavar="PNG", default=None, help="also write the map of which fragment painted each pixel"
+    )
+
+
+def _render_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    return {"omega_s": args.omega_s, "omega_c": args.omega_c, "complete": not args.no_complete}
+
+
+def _fragment_map(labels: np.ndarray) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    colours = rng.uniform(0.25, 1.0, (int(labels.max()) + 2, 3)).astype(np.float32)
+    colours[0] = 0.0
+    out: np.ndarray = colours[labels + 1]
+    return out
+
+
+def _grow_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("structure synthesis (§4)")
+    g.add_argument("--h", type=float, default=None,
+                   help="resampling step in pixels (default: the input's median thickness). The model remembers --order steps, so "
+                        "a larger h (e.g. 10 on a traced river) keeps long branches on course instead of curling")  # fmt: skip
+    g.add_argument("--order", type=positive, default=3, help="order of the Markov bending model (the paper's k: 3)")
+    deprecated_alias(g, "--k", "--order", dest="order", type=positive)
+    g.add_argument(
+        "--m", type=positive, default=None, help="elements appended per step, the feature size s/h (default 4)"
+    )
+    g.add_argument(
+        "--n-best",
+        type=positive,
+        default=2,
+        help="candidates to draw from (the paper's c): 1 follows the input exactly, more gives more variety (paper: 2)",
+    )
+    deprecated_alias(g, "--c", "--n-best", dest="n_best", type=positive)
+    g.add_argument("--generations", type=positive, default=3, help="branch generations to grow (default 3)")
+    g.add_argument("--max-length", type=_length, default=None, metavar="PX|input",
+                   help="stop at this total branch length in pixels, or 'input' for about as much structure as the example "
+                        "(root trees are added until then; default: one tree for grow, 'input' for run)")  # fmt: skip
+    g.add_argument(
+        "--no-colonize", action="store_true", help="turn off space colonisation (§4.4; crossings are still refused)"
+    )
+    g.add_argument("--guide", metavar="PATH", default=None,
+                   help="guided synthesis (§4.5): a JSON list of [x, y] points or a mask image the structure should follow")  # fmt: skip
+
+
+def _grow(args: argparse.Namespace, bend: Any, fur: Any, shape: tuple[int, int], bar: Any) -> branching.Skeleton:
+    return branching.grow(
+        bend, fur, size=shape, seed=args.seed, generations=args.generations, max_length=args.max_length,
+        colonize=not args.no_colonize, guide=_guide(args.guide, args), progress=bar,
+    )  # fmt: skip
+
+
+def _cmd_branching_grow(args: argparse.Namespace) -> None:
+    out = Path(args.out)
+    _check_json_target(out, args)
+    extra = [Path(x) for x in (args.preview, args.histograms) if x is not None]
+    for x in extra:
+        check_writable(x, args)
+    source = branching.Skeleton.load(args.skeleton)
+    shape = args.size or source.shape
+    if shape is None:
+        raise ValueError("size: the skeleton file has no shape; pass --size WxH")
+    bend, fur = branching.fit_models(source, h=args.h, order=args.order, m=args.m, n_best=args.n_best)
+    new = run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
+    _write_skeleton(out, new, args, "branching grow", h=bend.h, branches=len(new.branches))
+    if args.preview is not None:
+        io.write_image(
+            args.preview,
+            new.draw(shape=shape, color=(1.0, 1.0, 1.0), width=2),
+            overwrite=args.force,
+            bit_depth=args.bit_depth,
+        )
+    if args.histograms is not None:
+        fig = branching.histogram_figure(source, new, h=bend.h)
+        io.write_image(args.histograms, fig, overwrite=args.force, bit_depth=args.bit_depth)
+
+
+def _cmd_branching_render(args: argparse.Namespace) -> None:
+    extra = [Path(args.fragment_map)] if args.fragment_map else []
+    preflight(args, extra)
+    img = io.read_image(args.input, max_pixels=args.max_pixels)
+    source = branching.Skeleton.load(args.skeleton)
+    target = branching.Skeleton.load(args.target)
+    if target.shape is None:
+        raise ValueError(f"target: {args.target} has no shape; the new image's size comes from it")
+    res = run(
+        "branching render", args,
+        lambda bar: branching.render(img, source, target, seed=args.seed, threads=args.threads, progress=bar,
+                                     full_output=True, **_render_kwargs(args)),
+    )  # fmt: skip
+    save(args, "branching render", res.image)
+    if args.fragment_map:
+        io.write_image(args.fragment_map, _fragment_map(res.labels), overwrite=args.force, bit_depth=args.bit_depth)
+
+
+def _branching_run_targets(args: argparse.Namespace) -> dict[str, Path]:
+    stem = Path(args.out).with_suffix("")
+    files = {"skeleton": Path(f"{stem}_skeleton.json"), "histograms": Path(f"{stem}_histograms.png")}
+    if args.fragment_map:
+        files["fragments"] = Path(args.fragment_map)
+    return files
+
+
+def _cmd_branching_run(args: argparse.Namespace) -> None:
+    files = _branching_run_targets(args)
+    preflight(args, [p for r, p in files.items() if r != "skeleton"])
+    _check_json_target(files["skeleton"], args)
+    img = io.read_image(args.input, max_pixels=args.max_pixels)
+    source = None if args.skeleton is None else branching.Skeleton.load(args.skeleton)
+    res = run(
+        "branching run", args,
+        lambda bar: branching.synthesize(
+            img, source, size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, order=args.order,
+            m=args.m, n_best=args.n_best, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize,
+            guide=_guide(args.guide, args), render_options=_render_kwargs(args), threads=args.threads, progress=bar,
+        ),
+    )  # fmt: skip
+    written = {role: str(p) for role, p in files.items()}
+    save(args, "branching run", res.image, h=res.bending.h, files=written,
+          source_branches=len(res.source.branches), target_branches=len(res.target.branches))  # fmt: skip
+    _write_skeleton(files["skeleton"], res.target, args, "branching run", h=res.bending.h)
+    fig = branching.histogram_figure(res.source, res.target, h=res.bending.h)
+    io.write_image(files["histograms"], fig, overwrite=args.force, bit_depth=args.bit_depth)
+    if "fragments" in files:
+        io.write_image(
+            files["fragments"], _fragment_map(res.render.labels), overwrite=args.force, bit_depth=args.bit_depth
+        )
+    if not args.quiet:
+        print(f"wrote {files['histograms']}", file=sys.stderr)
+
+
+def add_parsers(sub: Any) -> None:
+    p = sub.add_parser("branching", help="branching structures: trace, learn and grow skeletons, render images (Sibbing et al. 2010)",
+                       description="Rivers, cracks, lightning, ridges and vessels from one example image: trace or load its skeleton, "
+                                   "learn how it bends and branches (§4), grow a new skeleton and compose a new image from "
+                                   "fragments of the example (§5).")  # fmt: skip
+    bsub = p.add_subparsers(dest="action", metavar="ACTION", required=True, help="each has its own --help")
+    q = bsub.add_parser("trace", help="trace the skeleton of a structure in an image into a skeleton JSON file",
+                        description="Ridge filter (or a binary mask), skeletonisation, and a tree of branches with parents; "
+                                    "thickness from the image (the paper's §3 operator).")  # fmt: skip
+    q.add_argument("input", metavar="IN", help="image of the structure (PNG, JPEG or TIFF)")
+    q.add_argument("--out", required=True, metavar="SKEL.json", help="skeleton file to write")
+    q.add_argument("--overlay", metavar="PNG", default=None, help="also draw the traced skeleton over IN into PNG")
+    _trace_options(q)
+    common_options(q)
+    q.set_defaults(func=_cmd_branching_trace)
+    q = bsub.add_parser("grow", help="learn an example skeleton's bending and branching and grow a new one",
+                        description="Markov bending model with histogram matching (§4.2), SVM furcation model (§4.3), "
+                                    "space colonisation (§4.4) and optional guidance (§4.5).")  # fmt: skip
+    q.add_argument("skeleton", metavar="SKEL.json", help="the example skeleton (phloem.skeleton JSON)")
+    q.add_argument("--out", required=True, metavar="NEW.json", help="new skeleton file to write")
+    q.add_argument(
+        "--size",
+        type=parse_size,
+        default=None,
+        metavar="WxH",
+        help="width x height of the new structure's image, or N for NxN (default: the example's)",
+    )
+    q.add_argument("--preview", metavar="PNG", default=None, help="also draw the new skeleton into PNG")
+    q.add_argument(
+        "--histograms",
+        metavar="PNG",
+        default=None,
+        help="also write the input and output angle and thickness histograms (Fig. 7)",
+    )
+    _grow_options(q)
+    common_options(q)
+    q.set_defaults(func=_cmd_branching_grow)
+    q = bsub.add_parser("render", help="paint a new skeleton with fragments of the example image (§5)",
+                        description="Fragments along both skeletons, shape and colour matching, deformation by a smooth "
+                                    "displacement field, photometric correction, graph-cut seams, gap completion.")  # fmt: skip
+    q.add_argument("input", metavar="IN", help="the example image")
+    q.add_argument("skeleton", metavar="SKEL.json", help="the example's skeleton")
+    q.add_argument("target", metavar="NEW.json", help="the skeleton to paint (its shape sets the output size)")
+    q.add_argument("--out", required=True, metavar="OUT", help="output image (.png, .jpg, .tif)")
+    _render_options(q)
+    common_options(q)
+    q.set_defaults(func=_cmd_branching_render)
+    q = bsub.add_parser("run", help="image in, new image out: trace (or load) the skeleton, grow a new one, render it",
+                        description="The whole pipeline. Writes OUT, OUT.json, the new skeleton OUT_skeleton.json and the "
+                                    "input/output angle and thickness histograms OUT_histograms.png (Fig. 7).")  # fmt: skip
+    q.add_argument("input", metavar="IN", help="the example image")
+    q.add_argument("--skeleton", metavar="SKEL.json", default=None, help="the example's skeleton (default: trace it)")
+    q.add_argument("--out", required=True, metavar="OUT", help="output image (.png, .jpg, .tif)")
+    q.add_argument(
+        "--size",
+        type=parse_size,
+        default=None,
+        metavar="WxH",
+        help="width x height of the new image, or N for NxN (default: the example's)",
+    )
+    _trace_options(q)
+    _grow_options(q)
+    _render_options(q)
+    common_options(q)
+    q.set_defaults(func=_cmd_branching_run, max_length="input")

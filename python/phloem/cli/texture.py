@@ -1,0 +1,119 @@
+"""``phloem synthesize``, ``phloem quilt`` and ``phloem complete``: :mod:`phloem.texture` on files."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from typing import Any
+
+from .. import io, texture
+from ._common import common_options, parse_size, positive, preflight, run, save
+
+
+def _from_exemplar(args: argparse.Namespace, command: str, job: Callable[[Any, Any], Any]) -> None:
+    """One exemplar file in, one texture file out: ``job(exemplar, bar)`` makes the texture."""
+    preflight(args)
+    ex = io.read_image(args.input, max_pixels=args.max_pixels)
+    save(args, command, run(command, args, lambda bar: job(ex, bar)))
+
+
+def _cmd_synthesize(args: argparse.Namespace) -> None:
+    _from_exemplar(args, "synthesize", lambda ex, bar: texture.synthesize(
+        ex, args.size, patch_size=args.patch_size, levels=args.levels, iterations=args.iterations, seed=args.seed,
+        threads=args.threads, progress=bar,
+    ))  # fmt: skip
+
+
+def _cmd_quilt(args: argparse.Namespace) -> None:
+    _from_exemplar(args, "quilt", lambda ex, bar: texture.quilt(
+        ex, args.size, block=args.block, overlap=args.overlap, randomness=args.randomness, cost=args.cost,
+        seed=args.seed, threads=args.threads, progress=bar,
+    ))  # fmt: skip
+
+
+def _cmd_complete(args: argparse.Namespace) -> None:
+    preflight(args)
+    img = io.read_image(args.input, max_pixels=args.max_pixels)
+    m = io.read_image(args.mask, max_pixels=args.max_pixels)
+    if m.ndim == 3:
+        m = m[..., 3] if m.shape[2] == 4 and args.mask_alpha else m[..., :3].max(axis=2)
+    if m.shape != img.shape[:2]:
+        raise ValueError(
+            f"mask: {args.mask} is {m.shape[1]}×{m.shape[0]}, but the image is {img.shape[1]}×{img.shape[0]}"
+        )
+    hole = (m < 0.5) if args.mask_alpha else (m >= 0.5)
+    out = run(
+        "complete",
+        args,
+        lambda bar: texture.complete(
+            img,
+            hole,
+            patch_size=args.patch_size,
+            levels=args.levels,
+            iterations=args.iterations,
+            seed=args.seed,
+            threads=args.threads,
+            progress=bar,
+        ),
+    )
+    save(args, "complete", out)
+
+
+def _exemplar_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", metavar="IN", help="exemplar image (PNG, JPEG or TIFF)")
+    p.add_argument(
+        "--size",
+        type=parse_size,
+        required=True,
+        metavar="WxH",
+        help="output width x height in pixels, e.g. 512x384, or N for NxN",
+    )
+    p.add_argument("--out", required=True, metavar="OUT", help="output image (.png, .jpg, .tif)")
+
+
+def add_parsers(sub: Any) -> None:
+    p = sub.add_parser("synthesize", help="synthesise a texture of any size from an exemplar image",
+                       description="Texture optimisation (Kwatra et al. 2005) over an image pyramid, with PatchMatch search and robust patch voting.")  # fmt: skip
+    _exemplar_arguments(p)
+    p.add_argument("--patch-size", type=int, default=7, help="patch side, odd (default 7)")
+    p.add_argument("--levels", type=positive, default=None, help="pyramid levels (default: from the exemplar size)")
+    p.add_argument("--iterations", type=positive, default=4, help="search-and-vote iterations per level (default 4)")
+    common_options(p)
+    p.set_defaults(func=_cmd_synthesize)
+
+    p = sub.add_parser("quilt", help="texture of any size from exemplar blocks joined along graph-cut seams",
+                       description="Graph-cut quilting (Kwatra et al. 2003): exemplar blocks placed by entire-patch matching, "
+                                   "cut into the output along minimum-cost seams. Every output pixel is an exemplar pixel.")  # fmt: skip
+    _exemplar_arguments(p)
+    p.add_argument(
+        "--block",
+        type=positive,
+        default=None,
+        help="side of the exemplar blocks (default: 64, or half the exemplar's shorter side)",
+    )
+    p.add_argument(
+        "--overlap", type=positive, default=None, help="overlap of neighbouring blocks in pixels (default: block/4)"
+    )
+    p.add_argument("--randomness", type=float, default=0.01,
+                   help="Kwatra's k: 0 always takes the best-matching block, larger values pick worse matches more often (default 0.01)")  # fmt: skip
+    p.add_argument("--cost", choices=("kwatra", "gradient", "luo"), default="kwatra",
+                   help="seam cost: colour difference, gradient-normalised colour difference, or Luo et al.'s d^4/G (default kwatra)")  # fmt: skip
+    common_options(p)
+    p.set_defaults(func=_cmd_quilt)
+
+    p = sub.add_parser("complete", help="fill a masked region of an image from the rest of it",
+                       description="Coarse-to-fine patch-based completion (Wexler et al. 2007) on PatchMatch.")  # fmt: skip
+    p.add_argument("input", metavar="IN", help="image with a region to fill")
+    p.add_argument("mask", metavar="MASK", help="image of the same size, white where pixels are to be filled")
+    p.add_argument("--out", required=True, metavar="OUT", help="output image (.png, .jpg, .tif)")
+    p.add_argument(
+        "--mask-alpha",
+        action="store_true",
+        help="take the hole from MASK's alpha channel: transparent pixels are filled",
+    )
+    p.add_argument("--patch-size", type=int, default=7, help="patch side, odd (default 7)")
+    p.add_argument("--levels", type=positive, default=None, help="pyramid levels (default: from the hole size)")
+    p.add_argument("--iterations", type=positive, default=None,
+                   help="search-and-vote iterations per level (default: 1 + 2 x level, coarsest level highest)")  # fmt: skip
+    common_options(p)
+    p.set_defaults(func=_cmd_complete)

@@ -1,0 +1,148 @@
+"""phloem branching trace, grow, render and run: skeletons and images with sidecars, clean errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from phloem import io
+from phloem.cli import main
+
+
+def _river_png(path) -> None:
+    import cv2
+
+    img = np.zeros((160, 200), np.uint8)
+    cv2.line(img, (10, 150), (100, 80), 255, 9)
+    cv2.line(img, (100, 80), (190, 20), 255, 7)
+    cv2.line(img, (100, 80), (120, 150), 255, 5)
+    cv2.line(img, (60, 112), (30, 60), 255, 5)
+    io.write_image(path, img.astype(np.float32) / 255)
+
+
+def test_branching_trace_and_grow_write_skeletons_with_sidecars(tmp_path, capsys):
+    from phloem.branching import Skeleton
+
+    _river_png(tmp_path / "river.png")
+    skel = tmp_path / "river.json"
+    assert main(["branching", "trace", str(tmp_path / "river.png"), "--kind", "mask", "--out", str(skel),
+                 "--overlay", str(tmp_path / "overlay.png"), "-q"]) == 0  # fmt: skip
+    sk = Skeleton.load(skel)
+    assert sk.shape == (160, 200) and len(sk.branches) >= 3
+    assert json.loads((tmp_path / "river.json.json").read_text())["command"] == "branching trace"
+    assert io.read_image(tmp_path / "overlay.png").shape == (160, 200, 3)
+    new = tmp_path / "new.json"
+    args = [
+        "branching",
+        "grow",
+        str(skel),
+        "--out",
+        str(new),
+        "--seed",
+        "5",
+        "--histograms",
+        str(tmp_path / "h.png"),
+        "-q",
+    ]
+    assert main(args) == 0
+    grown = Skeleton.load(new)
+    assert grown.shape == (160, 200) and len(grown.branches) >= 1
+    assert json.loads((tmp_path / "new.json.json").read_text())["seed"] == 5
+    # Same seed, same skeleton; no silent overwrite.
+    assert main(["branching", "grow", str(skel), "--out", str(tmp_path / "again.json"), "--seed", "5", "-q"]) == 0
+    assert Skeleton.load(tmp_path / "again.json") == grown
+    assert main(args) == 2
+    assert "already exists" in capsys.readouterr().err
+
+
+def test_branching_errors_name_the_problem(tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"branches": [{"points": [[1, 2]]}]}')
+    assert main(["branching", "grow", str(bad), "--out", str(tmp_path / "x.json"), "-q"]) == 2
+    assert "branches[0]: a branch needs at least 2 points" in capsys.readouterr().err
+    bad.write_text("{not json")
+    assert main(["branching", "grow", str(bad), "--out", str(tmp_path / "x.json"), "-q"]) == 2
+    assert "not a valid JSON skeleton" in capsys.readouterr().err
+    io.write_image(tmp_path / "blank.png", np.zeros((40, 40), np.float32))
+    assert main(["branching", "trace", str(tmp_path / "blank.png"), "--out", str(tmp_path / "y.json"), "-q"]) == 2
+    assert "nothing to trace" in capsys.readouterr().err
+    assert main(["branching", "trace", str(tmp_path / "blank.png"), "--out", str(tmp_path / "y.png"), "-q"]) == 2
+    assert "expected a .json file" in capsys.readouterr().err
+    assert not list(tmp_path.glob("x.json*")) and not list(tmp_path.glob("y.*"))
+
+
+def _dark_river_png(path) -> None:
+    import cv2
+
+    img = np.full((120, 160, 3), (0.55, 0.6, 0.35), np.float32)
+    rng = np.random.default_rng(0)
+    img += rng.normal(0, 0.03, img.shape).astype(np.float32)
+    for a, b, t in [((5, 110), (80, 60), 7), ((80, 60), (155, 10), 5), ((80, 60), (100, 115), 4)]:
+        cv2.line(img, a, b, (0.1, 0.15, 0.4), t)
+    io.write_image(path, img.clip(0, 1))
+
+
+def test_branching_run_writes_image_skeleton_histograms_and_sidecar(tmp_path):
+    from phloem.branching import Skeleton
+
+    _dark_river_png(tmp_path / "river.png")
+    out = tmp_path / "new.png"
+    args = ["branching", "run", str(tmp_path / "river.png"), "--kind", "dark", "--sigmas", "2", "3",
+            "--out", str(out), "--seed", "2", "--fragment-map", str(tmp_path / "fm.png"), "-q"]  # fmt: skip
+    assert main(args) == 0
+    img = io.read_image(out)
+    assert img.shape == (120, 160, 3)
+    target = Skeleton.load(tmp_path / "new_skeleton.json")
+    assert target.shape == (120, 160) and target.branches
+    assert io.read_image(tmp_path / "new_histograms.png").shape[2] == 3
+    meta = json.loads((tmp_path / "new.png.json").read_text())
+    assert meta["seed"] == 2 and meta["parameters"]["max_length"] == "input"
+    # The painted structure is dark like the input's river; the rest keeps the land's colour.
+    river = target.mask()
+    assert img[river].mean() < img[~river].mean() - 0.1
+    # render from the written skeletons reproduces the run's image (same seed).
+    sk = tmp_path / "src.json"
+    assert (
+        main(
+            [
+                "branching",
+                "trace",
+                str(tmp_path / "river.png"),
+                "--kind",
+                "dark",
+                "--sigmas",
+                "2",
+                "3",
+                "--out",
+                str(sk),
+                "-q",
+            ]
+        )
+        == 0
+    )
+    again = tmp_path / "again.png"
+    assert main(["branching", "render", str(tmp_path / "river.png"), str(sk), str(tmp_path / "new_skeleton.json"),
+                 "--out", str(again), "--seed", "2", "-q"]) == 0  # fmt: skip
+    assert np.abs(io.read_image(again) - img).max() <= 1 / 255 + 1e-6
+    assert main(args) == 2  # no silent overwrite
+
+
+def test_old_k_and_c_flags_warn_and_give_the_same_skeleton(tmp_path, capsys):
+    from phloem.branching import Skeleton
+
+    _river_png(tmp_path / "river.png")
+    skel = tmp_path / "river.json"
+    assert main(["branching", "trace", str(tmp_path / "river.png"), "--kind", "mask", "--out", str(skel), "-q"]) == 0
+    capsys.readouterr()
+    outs = {}
+    for name, flags in (("old", ["--k", "2", "--c", "1"]), ("new", ["--order", "2", "--n-best", "1"])):
+        outs[name] = tmp_path / f"{name}.json"
+        assert main(["branching", "grow", str(skel), "--out", str(outs[name]), "--seed", "3", "-q", *flags]) == 0
+        err = capsys.readouterr().err
+        if name == "old":
+            assert "phloem branching grow: warning: --k is deprecated and goes in the next release; use --order" in err
+            assert "--c is deprecated and goes in the next release; use --n-best" in err
+        else:
+            assert err == ""
+    assert Skeleton.load(outs["old"]) == Skeleton.load(outs["new"])
