@@ -393,6 +393,7 @@ pub fn knn(exemplar: &Image<'_>, weights: Option<&[f32]>, params: &KnnParams) ->
             }
         });
     for it in 0..params.iterations {
+        crate::cancel::check()?;
         let prev_i = idx.clone();
         let pass = Pass {
             prev: &prev_i,

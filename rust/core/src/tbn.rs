@@ -557,9 +557,11 @@ pub fn by_numbers(
         } else {
             refs = upsample_refs(&refs, &out_steps[l], &ex_steps[l], params.wrap);
         }
+        crate::cancel::check()?;
         let solver = Level::new(el, lo, h, w, ca, c0, p, params, l)?;
         let iterations = level_iterations(params.iterations, l);
         for it in 0..iterations {
+            crate::cancel::check()?;
             refs = solver.iterate(&refs, it)?;
             done += 1;
             if let Some(f) = progress {
@@ -822,7 +824,7 @@ impl<'a> Level<'a> {
             .zip(mdist.par_chunks_mut(w))
             .enumerate()
             .for_each(|(y, (row, drow))| {
-                if y % st != gy {
+                if y % st != gy || crate::cancel::cancelled() {
                     return;
                 }
                 for x in (gx..w).step_by(st) {
@@ -833,6 +835,7 @@ impl<'a> Level<'a> {
                     }
                 }
             });
+        crate::cancel::check()?;
 
         // E-step (Eq. 3.5).
         // Each vote weighs its match's N_lr distance to the power −0.6 (Kwatra et al. 2005's
@@ -894,6 +897,9 @@ impl<'a> Level<'a> {
         let mut out = vec![NONE; h * w];
         let medoid = self.medoid(it);
         out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            if crate::cancel::cancelled() {
+                return;
+            }
             let mut avg = vec![0f32; c0];
             let mut votes: Vec<u32> = Vec::with_capacity(p * p);
             let mut wvotes: Vec<(u32, f32)> = Vec::with_capacity(p * p);
@@ -968,6 +974,7 @@ impl<'a> Level<'a> {
                 *slot = best;
             }
         });
+        crate::cancel::check()?;
         Ok(out)
     }
 }
