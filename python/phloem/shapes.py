@@ -348,7 +348,9 @@ def shape_similarity(a: Any, b: Any, *, patch_size: int = 7, rotations: bool | L
     ua = np.searchsorted(union, va).astype(np.uint8)[la]
     ub = np.searchsorted(union, vb).astype(np.uint8)[lb]
     return float(
-        _core.shape_similarity(np.ascontiguousarray(ua), np.ascontiguousarray(ub), patch_size=p, rotations=turns)
+        _core.shape_similarity(
+            np.ascontiguousarray(ua), np.ascontiguousarray(ub), patch_size=p, rotations=turns, threads=None
+        )
     )
 
 

@@ -247,16 +247,17 @@ def synthesize(
             field = _block_field(shape, ex_l.shape[:2], p, np.random.default_rng(s))
         else:
             field = _upsample_field(field, shape, ex_l.shape[:2], r)
-        out, _ = _core.vote(ex_l, field, patch_size=p, threads=t)
+        out, _ = _core.vote(ex_l, field, patch_size=p, weights=None, threads=t, mean_shift=0)
         last = 0.0
         for it in range(iters):
             cost = _occurrence_cost(field, ex_l.shape[:2], p, lam, last) if lam > 0 and it else None
             field, dist, _ = _core.nnf(
                 ex_l, out, patch_size=p, iterations=s_iters, levels=1, exact=False,
-                seed=s + 7919 * (lv * 64 + it + 1), weights=wts, init=field, source_cost=cost, threads=t,
+                seed=s + 7919 * (lv * 64 + it + 1), weights=wts, source_mask=None, target_mask=None, init=field,
+                source_knn=None, source_cost=cost, threads=t, kdtree=False,
             )  # fmt: skip
             last = float(np.median(dist))
-            out, _ = _core.vote(ex_l, field, patch_size=p, weights=_robust_weights(dist), threads=t)
+            out, _ = _core.vote(ex_l, field, patch_size=p, weights=_robust_weights(dist), threads=t, mean_shift=0)
             done += 1
             if progress is not None:
                 progress(done, total)
@@ -470,7 +471,7 @@ def complete(
                 up[~need] = -1
                 bad = ~smask[np.maximum(up[..., 0], 0), np.maximum(up[..., 1], 0)] & need
                 up[bad] = -1
-                voted, wsum = _core.vote(orig, up, patch_size=p, threads=t)
+                voted, wsum = _core.vote(orig, up, patch_size=p, weights=None, threads=t, mean_shift=0)
                 fill = hole_l & (wsum > 0)
                 cur[fill] = voted[fill]
                 rest = hole_l & ~fill
@@ -482,8 +483,8 @@ def complete(
             feat = _with_gradients(cur, COMPLETION_GRADIENT_WEIGHT)
             field, dist, _ = _core.nnf(
                 feat, feat, patch_size=p, iterations=n_search, levels=1, exact=False,
-                seed=s + 7919 * (lv * 64 + it + 1), source_mask=smask, target_mask=need,
-                init=init, threads=t,
+                seed=s + 7919 * (lv * 64 + it + 1), weights=None, source_mask=smask, target_mask=need,
+                init=init, source_knn=None, source_cost=None, threads=t, kdtree=False,
             )  # fmt: skip
             d = dist[need]
             sigma2 = max(float(np.percentile(d, WEXLER_SIGMA_PERCENTILE)), 1e-8)

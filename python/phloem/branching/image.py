@@ -599,7 +599,7 @@ def _complete_background(
             up[~need] = -1
             bad = ~smask[np.maximum(up[..., 0], 0), np.maximum(up[..., 1], 0)] & need
             up[bad] = -1
-            voted, wsum = _core.vote(orig, up, patch_size=p, threads=threads)
+            voted, wsum = _core.vote(orig, up, patch_size=p, weights=None, threads=threads, mean_shift=0)
             fill = hole_l & (wsum > 1e-30)
             cur[fill] = voted[fill]
             rest = hole_l & ~fill
@@ -620,14 +620,14 @@ def _complete_background(
             # A warm-started search (from the previous iteration's field) needs one pass.
             fieldv, dist, _ = _core.nnf(
                 cur, cur, patch_size=p, iterations=3 if it == 0 else 1, levels=1, exact=False,
-                seed=seed + 7919 * (lv * 64 + it + 1), source_mask=smask, target_mask=need,
-                init=init, threads=threads,
+                seed=seed + 7919 * (lv * 64 + it + 1), weights=None, source_mask=smask, target_mask=need,
+                init=init, source_knn=None, source_cost=None, threads=threads, kdtree=False,
             )  # fmt: skip
             dd = dist[need]
             sigma2 = max(float(np.percentile(dd, WEXLER_SIGMA_PERCENTILE)), 1e-8)
             wvote = np.zeros(dist.shape, np.float32)
             wvote[need] = np.exp(-dd / (2.0 * sigma2)) * conf[need]
-            voted, wsum = _core.vote(cur, fieldv, patch_size=p, weights=wvote, threads=threads)
+            voted, wsum = _core.vote(cur, fieldv, patch_size=p, weights=wvote, threads=threads, mean_shift=0)
             fill = hole_l & (wsum > 1e-30)
             cur[fill] = voted[fill]
             init = fieldv
