@@ -795,6 +795,7 @@ impl<'a> Level<'a> {
             self.params.wrap,
             self.params.wrap,
         )?;
+        crate::cancel::check()?;
         let s = self.output_image(refs);
         // X†: every other row and column, at an offset drawn per iteration, at the coarse
         // levels; every pixel at the finest, which decides the output's fine coherence

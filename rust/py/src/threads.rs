@@ -5,7 +5,8 @@
 //! same time from several Python threads (the GIL is released around the work) each get
 //! their own workers instead of queueing on one shared pool: two `threads=1` calls from two
 //! threads run on two cores. Pools are kept for reuse, at most as many per size as were ever
-//! in use at once.
+//! in use at once. Every worker of a pool carries the pool's cancellation token, through which
+//! `call::run` stops the work it runs there.
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
