@@ -151,7 +151,9 @@ def core_maxflow(source, sink, edges, *, directed=False, k=4, method="auto"):
     def f32(a):
         return np.ascontiguousarray(a, np.float32)
 
-    return _core.grid_maxflow(f32(source), f32(sink), f32(edges), connectivity=k, directed=directed, method=method)
+    return _core.grid_maxflow(
+        f32(source), f32(sink), f32(edges), connectivity=k, directed=directed, threads=None, method=method
+    )
 
 
 @pytest.mark.parametrize("directed", [False, True])

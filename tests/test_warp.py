@@ -300,13 +300,13 @@ def test_core_checks_hold_without_the_python_layer():
 
     sq = np.array(SQ, float)
     with pytest.raises(ValueError, match="^target_contour: expected at least 3"):
-        _core.mvc_warp([IMG], [sq], sq[:2].copy(), (8, 8))
+        _core.mvc_warp([IMG], [sq], sq[:2].copy(), (8, 8), region=None, threads=None)
     with pytest.raises(ValueError, match="^source_contours: expected 4 points"):
-        _core.mvc_warp([IMG], [sq[:3].copy()], sq, (8, 8))
+        _core.mvc_warp([IMG], [sq[:3].copy()], sq, (8, 8), region=None, threads=None)
     with pytest.raises(ValueError, match="^weights: expected weights summing to 1"):
-        _core.mvc_combine([IMG, IMG], [sq, sq], sq, np.array([0.2, 0.2]), (8, 8))
+        _core.mvc_combine([IMG, IMG], [sq, sq], sq, np.array([0.2, 0.2]), (8, 8), region=None, threads=None)
     with pytest.raises(ValueError, match="^sources: expected at least one"):
-        _core.mvc_warp([], [], sq, (8, 8))
+        _core.mvc_warp([], [], sq, (8, 8), region=None, threads=None)
 
 
 def test_region_computes_only_its_pixels():

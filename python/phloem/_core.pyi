@@ -1,4 +1,5 @@
 # Hand-written stub of the native module; checked with `python -m mypy.stubtest phloem._core`.
+# Every option is explicit: the defaults live in the Python modules that call these.
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -38,14 +39,14 @@ def nnf(
     levels: int,
     exact: bool,
     seed: int,
-    weights: NDArray[np.float32] | None = None,
-    source_mask: NDArray[np.bool_] | None = None,
-    target_mask: NDArray[np.bool_] | None = None,
-    init: NDArray[np.int32] | None = None,
-    source_knn: NDArray[np.int32] | None = None,
-    source_cost: NDArray[np.float32] | None = None,
-    threads: int | None = None,
-    kdtree: bool = False,
+    weights: NDArray[np.float32] | None,
+    source_mask: NDArray[np.bool_] | None,
+    target_mask: NDArray[np.bool_] | None,
+    init: NDArray[np.int32] | None,
+    source_knn: NDArray[np.int32] | None,
+    source_cost: NDArray[np.float32] | None,
+    threads: int | None,
+    kdtree: bool,
 ) -> tuple[NDArray[np.int32], NDArray[np.float32], int]: ...
 def knn(
     exemplar: NDArray[np.float32],
@@ -56,8 +57,8 @@ def knn(
     exact: bool,
     exclude: int,
     seed: int,
-    weights: NDArray[np.float32] | None = None,
-    threads: int | None = None,
+    weights: NDArray[np.float32] | None,
+    threads: int | None,
 ) -> tuple[NDArray[np.int32], NDArray[np.float32]]: ...
 def coherence_candidates(
     refs: NDArray[np.int32],
@@ -65,8 +66,8 @@ def coherence_candidates(
     *,
     patch_size: int,
     wrap: bool,
-    knn_idx: NDArray[np.int32] | None = None,
-    threads: int | None = None,
+    knn_idx: NDArray[np.int32] | None,
+    threads: int | None,
 ) -> NDArray[np.int32]: ...
 def by_numbers(
     exemplar: NDArray[np.float32],
@@ -82,13 +83,13 @@ def by_numbers(
     wrap: bool,
     tileable: bool,
     seed: int,
-    selection: str = "medoid",
-    composite: int = 0,
-    stand_in_weight: float = ...,
-    seam_channels: int = 0,
-    weights: NDArray[np.float32] | None = None,
-    threads: int | None = None,
-    progress: Callable[[int, int], object] | None = None,
+    selection: str,
+    composite: int,
+    stand_in_weight: float,
+    seam_channels: int,
+    weights: NDArray[np.float32] | None,
+    threads: int | None,
+    progress: Callable[[int, int], object] | None,
 ) -> NDArray[np.int32]: ...
 def tbn_upsample(
     refs: NDArray[np.int32], out_shape: tuple[int, int], exemplar_shape: tuple[int, int], *, wrap: bool
@@ -99,9 +100,9 @@ def vote(
     field: NDArray[np.int32],
     *,
     patch_size: int,
-    weights: NDArray[np.float32] | None = None,
-    threads: int | None = None,
-    mean_shift: int = 0,
+    weights: NDArray[np.float32] | None,
+    threads: int | None,
+    mean_shift: int,
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]: ...
 def seamless(
     src: NDArray[np.float32],
@@ -112,8 +113,8 @@ def seamless(
     mixed: bool,
     tol: float,
     max_iterations: int,
-    fixed: NDArray[np.bool_] | None = None,
-    threads: int | None = None,
+    fixed: NDArray[np.bool_] | None,
+    threads: int | None,
 ) -> tuple[NDArray[np.float32], int, float]: ...
 def interpolate_field(
     region: NDArray[np.bool_],
@@ -122,10 +123,10 @@ def interpolate_field(
     *,
     tol: float,
     max_iterations: int,
-    threads: int | None = None,
+    threads: int | None,
 ) -> tuple[NDArray[np.float32], int, float]: ...
 def mvc_weights(
-    polygon: NDArray[np.float64], points: NDArray[np.float64], *, threads: int | None = None
+    polygon: NDArray[np.float64], points: NDArray[np.float64], *, threads: int | None
 ) -> NDArray[np.float64]: ...
 def mvc_warp(
     sources: Sequence[NDArray[np.float32]],
@@ -133,8 +134,8 @@ def mvc_warp(
     target_contour: NDArray[np.float64],
     size: tuple[int, int],
     *,
-    region: NDArray[np.bool_] | None = None,
-    threads: int | None = None,
+    region: NDArray[np.bool_] | None,
+    threads: int | None,
 ) -> list[NDArray[np.float32]]: ...
 def mvc_combine(
     sources: Sequence[NDArray[np.float32]],
@@ -143,8 +144,8 @@ def mvc_combine(
     weights: NDArray[np.float64],
     size: tuple[int, int],
     *,
-    region: NDArray[np.bool_] | None = None,
-    threads: int | None = None,
+    region: NDArray[np.bool_] | None,
+    threads: int | None,
 ) -> NDArray[np.float32]: ...
 def default_threads() -> int: ...
 def _after_fork_in_child() -> None: ...
@@ -155,8 +156,8 @@ def grid_maxflow(
     *,
     connectivity: int,
     directed: bool,
-    threads: int | None = None,
-    method: str = "auto",
+    threads: int | None,
+    method: str,
 ) -> tuple[float, NDArray[np.bool_], str]: ...
 def seam(
     a: NDArray[np.float32],
@@ -165,12 +166,12 @@ def seam(
     *,
     cost: str,
     connectivity: int,
-    border_weight: float | None = None,
-    a_mask: NDArray[np.bool_] | None = None,
-    b_mask: NDArray[np.bool_] | None = None,
-    seeds: NDArray[np.uint8] | None = None,
-    edges: NDArray[np.float32] | None = None,
-    threads: int | None = None,
+    border_weight: float | None,
+    a_mask: NDArray[np.bool_] | None,
+    b_mask: NDArray[np.bool_] | None,
+    seeds: NDArray[np.uint8] | None,
+    edges: NDArray[np.float32] | None,
+    threads: int | None,
 ) -> tuple[NDArray[np.bool_], float, tuple[int, int]]: ...
 def shape_synthesize(
     shape: NDArray[np.uint8],
@@ -183,9 +184,9 @@ def shape_synthesize(
     rotations: int,
     tileable: bool,
     seed: int,
-    mask: NDArray[np.bool_] | None = None,
-    threads: int | None = None,
-    progress: Callable[[int, int], object] | None = None,
+    mask: NDArray[np.bool_] | None,
+    threads: int | None,
+    progress: Callable[[int, int], object] | None,
 ) -> NDArray[np.uint8]: ...
 def shape_synthesize_labels(
     labels: NDArray[np.uint8],
@@ -200,11 +201,11 @@ def shape_synthesize_labels(
     rotations: int,
     tileable: bool,
     seed: int,
-    order: Sequence[int] | None = None,
-    threads: int | None = None,
-    progress: Callable[[int, int], object] | None = None,
+    order: Sequence[int] | None,
+    threads: int | None,
+    progress: Callable[[int, int], object] | None,
 ) -> NDArray[np.uint8]: ...
 def shape_similarity(
-    a: NDArray[np.uint8], b: NDArray[np.uint8], *, patch_size: int, rotations: int, threads: int | None = None
+    a: NDArray[np.uint8], b: NDArray[np.uint8], *, patch_size: int, rotations: int, threads: int | None
 ) -> float: ...
 def shape_layer_order(labels: NDArray[np.uint8], *, k: int) -> list[int]: ...

@@ -1,4 +1,10 @@
-"""Progress reporting: API functions take ``progress(done, total)``; the CLI draws a bar."""
+"""Progress reporting: API functions take ``progress(done, total)``; the CLI draws a bar.
+
+The Rust engines queue their reports and the calling thread hands them to the callback, in
+order, while it waits for the work (``rust/py/src/call.rs``), so a callback runs on the thread
+that made the call. An exception it raises, like a Ctrl-C, stops the run within a fraction of
+a second and propagates from the call.
+"""
 
 from __future__ import annotations
 

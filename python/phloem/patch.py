@@ -158,6 +158,7 @@ def nnf(
         target_mask=tmask,
         init=ini,
         source_knn=table,
+        source_cost=None,
         threads=check_threads(threads),
         kdtree=method == "kdtree",
     )

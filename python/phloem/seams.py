@@ -135,7 +135,7 @@ def grid_maxflow(
         y, x = np.argwhere(both)[0]
         raise ValueError(f"sink: pixel ({y}, {x}) has infinite capacity to both terminals")
     flow, side, _ = _core.grid_maxflow(
-        s, t, e, connectivity=conn, directed=bool(directed), threads=check_threads(threads)
+        s, t, e, connectivity=conn, directed=bool(directed), threads=check_threads(threads), method="auto"
     )
     return flow, side
 

@@ -231,7 +231,7 @@ class _Filler:
         up[~need] = -1
         bad = ~smask[np.maximum(up[..., 0], 0), np.maximum(up[..., 1], 0)] & need
         up[bad] = -1
-        voted, wsum = _core.vote(orig, up, patch_size=self.p, threads=self.threads)
+        voted, wsum = _core.vote(orig, up, patch_size=self.p, weights=None, threads=self.threads, mean_shift=0)
         fill = hole_l & (wsum > 0)
         cur[fill] = voted[fill]
         rest = hole_l & ~fill
@@ -260,8 +260,8 @@ class _Filler:
             feat = self.features(cur)
             field, dist, _ = _core.nnf(
                 feat, feat, patch_size=self.p, iterations=n_search, levels=1, exact=False,
-                seed=self.seed + 7919 * (lv * 64 + it + 1), source_mask=smask, target_mask=need,
-                init=field, threads=self.threads,
+                seed=self.seed + 7919 * (lv * 64 + it + 1), weights=None, source_mask=smask, target_mask=need,
+                init=field, source_knn=None, source_cost=None, threads=self.threads, kdtree=False,
             )  # fmt: skip
             d = dist[need]
             sigma2 = max(float(np.percentile(d, WEXLER_SIGMA_PERCENTILE)), 1e-8)
@@ -298,8 +298,8 @@ class _Filler:
         feat = self.features(cur)
         _, dist, _ = _core.nnf(
             feat, feat, patch_size=self.p, iterations=3, levels=1, exact=False,
-            seed=self.seed + 7919 * (lv * 64 + 63), source_mask=smask, target_mask=need, init=init,
-            threads=self.threads,
+            seed=self.seed + 7919 * (lv * 64 + 63), weights=None, source_mask=smask, target_mask=need, init=init,
+            source_knn=None, source_cost=None, threads=self.threads, kdtree=False,
         )  # fmt: skip
         return float(dist[need].mean())
 

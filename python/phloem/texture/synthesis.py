@@ -188,16 +188,17 @@ def synthesize(
             field = _block_field(shape, ex_l.shape[:2], p, np.random.default_rng(s))
         else:
             field = upsample_field(field, shape, ex_l.shape[:2], r)
-        out, _ = _core.vote(ex_l, field, patch_size=p, threads=t)
+        out, _ = _core.vote(ex_l, field, patch_size=p, weights=None, threads=t, mean_shift=0)
         last = 0.0
         for it in range(iters):
             cost = _occurrence_cost(field, ex_l.shape[:2], p, lam, last) if lam > 0 and it else None
             field, dist, _ = _core.nnf(
                 ex_l, out, patch_size=p, iterations=s_iters, levels=1, exact=False,
-                seed=s + 7919 * (lv * 64 + it + 1), weights=wts, init=field, source_cost=cost, threads=t,
+                seed=s + 7919 * (lv * 64 + it + 1), weights=wts, source_mask=None, target_mask=None, init=field,
+                source_knn=None, source_cost=cost, threads=t, kdtree=False,
             )  # fmt: skip
             last = float(np.median(dist))
-            out, _ = _core.vote(ex_l, field, patch_size=p, weights=_robust_weights(dist), threads=t)
+            out, _ = _core.vote(ex_l, field, patch_size=p, weights=_robust_weights(dist), threads=t, mean_shift=0)
             done += 1
             if progress is not None:
                 progress(done, total)

@@ -17,6 +17,9 @@ pub enum Error {
     /// An internal failure (a bug, or the thread pool could not be built).
     #[error("internal error: {0}")]
     Internal(String),
+    /// The run was stopped through its [`crate::cancel::Token`].
+    #[error("cancelled")]
+    Cancelled,
 }
 
 /// `Result` with [`Error`].

@@ -355,6 +355,7 @@ pub fn knn(exemplar: &Image<'_>, weights: Option<&[f32]>, params: &KnnParams) ->
             }
         });
     for it in 0..params.iterations {
+        crate::cancel::check()?;
         let prev_i = idx.clone();
         let pass = Pass {
             prev: &prev_i,
@@ -425,6 +426,9 @@ pub fn coherence_candidates(
     let m = patch_size * patch_size * (1 + kk);
     let mut out = vec![NONE; h * w * m];
     out.par_chunks_mut(m).enumerate().for_each(|(i, set)| {
+        if crate::cancel::cancelled() {
+            return;
+        }
         let (y0, x0) = ((i / w) as i64, (i % w) as i64);
         let mut n = 0usize;
         let mut push = |v: u32, set: &mut [u32]| {

@@ -27,6 +27,7 @@
 //!   (Hormann & Floater 2006), and the contour-to-contour image warp and multi-source colour
 //!   transfer they define (Argudo et al. 2017, §5.2).
 
+pub mod cancel;
 pub mod distance;
 pub mod error;
 pub mod field;

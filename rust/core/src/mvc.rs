@@ -533,6 +533,9 @@ pub fn warp(
         }
     }
     rows.into_par_iter().enumerate().for_each(|(y, mut parts)| {
+        if crate::cancel::cancelled() {
+            return;
+        }
         let sp = span(region, y, width);
         let mut q = vec![(0.0f32, 0.0f32); k_count * width];
         map.row(y, width, sp, &mut q);
@@ -546,6 +549,7 @@ pub fn warp(
             }
         }
     });
+    crate::cancel::check()?;
     Ok(out)
 }
 
@@ -609,6 +613,9 @@ pub fn warp_combine(
     out.par_chunks_mut(width * c)
         .enumerate()
         .for_each(|(y, o)| {
+            if crate::cancel::cancelled() {
+                return;
+            }
             let sp = span(region, y, width);
             let mut q = vec![(0.0f32, 0.0f32); k_count * width];
             map.row(y, width, sp, &mut q);
@@ -662,6 +669,7 @@ pub fn warp_combine(
                 dst[c - 1] = alpha;
             }
         });
+    crate::cancel::check()?;
     Ok(out)
 }
 

@@ -1,24 +1,18 @@
 //! Bindings of `phloem_core::{poisson, field}` for `phloem.blend`.
 
-use ndarray::Array3;
-use numpy::{IntoPyArray, PyArray3, PyReadonlyArray2, PyReadonlyArray3};
+use numpy::{PyArray3, PyReadonlyArray2, PyReadonlyArray3};
 use phloem_core::field::{self, FieldParams};
-use phloem_core::image::Image;
 use phloem_core::poisson::{self, BlendInput, BlendParams, Mode};
 use pyo3::prelude::*;
 
-use crate::errors::{guarded, not_contiguous, opt_slice, to_py};
-use crate::threads::install;
-
-fn image<'a>(name: &'static str, a: &'a PyReadonlyArray3<'_, f32>) -> PyResult<Image<'a>> {
-    let (h, w, c) = a.as_array().dim();
-    Image::new(name, a.as_slice().map_err(not_contiguous(name))?, h, w, c).map_err(to_py)
-}
+use crate::call::run;
+use crate::convert::{array, image};
+use crate::errors::{not_contiguous, opt_slice, to_py};
 
 type Out<'py> = (Bound<'py, PyArray3<f32>>, usize, f64);
 
 #[pyfunction]
-#[pyo3(name = "seamless", signature = (src, dst, mask, offset, *, mixed, tol, max_iterations, fixed=None, threads=None))]
+#[pyo3(name = "seamless", signature = (src, dst, mask, offset, *, mixed, tol, max_iterations, fixed, threads))]
 pub fn seamless_py<'py>(
     py: Python<'py>,
     src: PyReadonlyArray3<'py, f32>,
@@ -43,16 +37,13 @@ pub fn seamless_py<'py>(
         tol,
         max_iterations,
     };
-    let b = py
-        .detach(|| guarded(|| install(threads, || poisson::seamless(&input, &params))))
-        .map_err(to_py)?;
+    let b = run(py, threads, None, |_| poisson::seamless(&input, &params))?;
     let (h, w, c) = (input.dst.h, input.dst.w, input.dst.c);
-    let img = Array3::from_shape_vec((h, w, c), b.image).expect("blend shape");
-    Ok((img.into_pyarray(py), b.iterations, b.residual))
+    Ok((array(py, (h, w, c), b.image), b.iterations, b.residual))
 }
 
 #[pyfunction]
-#[pyo3(name = "interpolate_field", signature = (region, points, values, *, tol, max_iterations, threads=None))]
+#[pyo3(name = "interpolate_field", signature = (region, points, values, *, tol, max_iterations, threads))]
 pub fn interpolate_field_py<'py>(
     py: Python<'py>,
     region: PyReadonlyArray2<'py, bool>,
@@ -89,15 +80,8 @@ pub fn interpolate_field_py<'py>(
         tol,
         max_iterations,
     };
-    let f = py
-        .detach(|| {
-            guarded(|| {
-                install(threads, || {
-                    field::interpolate_field(reg, h, w, &pts, vals, d, &params)
-                })
-            })
-        })
-        .map_err(to_py)?;
-    let out = Array3::from_shape_vec((h, w, d), f.values).expect("field shape");
-    Ok((out.into_pyarray(py), f.iterations, f.residual))
+    let f = run(py, threads, None, |_| {
+        field::interpolate_field(reg, h, w, &pts, vals, d, &params)
+    })?;
+    Ok((array(py, (h, w, d), f.values), f.iterations, f.residual))
 }

@@ -11,7 +11,8 @@ use pyo3::PyErr;
 pub fn to_py(e: Error) -> PyErr {
     match e {
         Error::InvalidArgument { .. } => PyValueError::new_err(e.to_string()),
-        Error::Internal(_) => PyRuntimeError::new_err(e.to_string()),
+        // Only a run the caller cancelled stops so, and the caller raises its own exception.
+        Error::Internal(_) | Error::Cancelled => PyRuntimeError::new_err(e.to_string()),
     }
 }
 

@@ -1,6 +1,8 @@
-//! `phloem._core`: the thin PyO3 layer over phloem-core. It converts arrays, releases the GIL
-//! around every parallel kernel, maps errors, and nothing else; the algorithms live in
-//! `rust/core`.
+//! `phloem._core`: the thin PyO3 layer over phloem-core. It converts arrays (`convert`), runs
+//! core work with the GIL released on a pool of its own while serving Ctrl-C and progress
+//! (`call`, `threads`, `progress`), maps errors (`errors`), and nothing else: the algorithms
+//! live in `rust/core`, and every option's default lives in the Python package, so each
+//! binding takes every option explicitly.
 
 // PyO3 hands every argument over by value (borrowed arrays included); the lint cannot see that.
 #![allow(clippy::needless_pass_by_value)]
@@ -8,8 +10,11 @@
 use pyo3::prelude::*;
 
 mod blend;
+mod call;
+mod convert;
 mod errors;
 mod patch;
+mod progress;
 mod seams;
 mod shapes;
 mod tbn;

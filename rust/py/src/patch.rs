@@ -1,61 +1,24 @@
 //! Bindings of `phloem_core::{patch, knn, vote}` for `phloem.patch`.
 
-use ndarray::{Array2, Array3, Array4};
-use numpy::{
-    IntoPyArray, PyArray2, PyArray3, PyArray4, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
-};
-use phloem_core::image::Image;
+use numpy::{PyArray2, PyArray3, PyArray4, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use phloem_core::knn::{self, KnnParams};
-use phloem_core::patch::{self, Method, NnfInput, NnfParams, NONE};
+use phloem_core::patch::{self, Method, NnfInput, NnfParams};
 use phloem_core::vote;
 use pyo3::prelude::*;
 
-use crate::errors::{guarded, not_contiguous, opt_slice, to_py};
-use crate::threads::install;
+use crate::call::run;
+use crate::convert::{array, flat, image, rowcol};
+use crate::errors::{not_contiguous, opt_slice, to_py};
 
-pub(crate) fn image<'a>(
-    name: &'static str,
-    a: &'a PyReadonlyArray3<'_, f32>,
-) -> PyResult<Image<'a>> {
-    let (h, w, c) = a.as_array().dim();
-    Image::new(name, a.as_slice().map_err(not_contiguous(name))?, h, w, c).map_err(to_py)
-}
-
-fn rowcol(idx: &[u32], sw: usize) -> Vec<i32> {
-    idx.iter()
-        .flat_map(|&i| {
-            if i == NONE {
-                [-1, -1]
-            } else {
-                [(i as usize / sw) as i32, (i as usize % sw) as i32]
-            }
-        })
-        .collect()
-}
-
-/// The inverse of [`rowcol`]: (row, col) pairs to flat indices into an `h × w` image,
-/// `(-1, -1)` to [`NONE`]; any other pair outside the image is an error naming `name`.
-fn flat_indices(name: &'static str, rc: &[i32], h: usize, w: usize) -> PyResult<Vec<u32>> {
-    rc.chunks_exact(2)
-        .map(|p| {
-            if p[0] == -1 && p[1] == -1 {
-                Ok(NONE)
-            } else if p[0] < 0 || p[1] < 0 || p[0] as usize >= h || p[1] as usize >= w {
-                Err(to_py(phloem_core::error::invalid(
-                    name,
-                    format!("({}, {}) is outside the {h}×{w} image", p[0], p[1]),
-                )))
-            } else {
-                Ok((p[0] as usize * w + p[1] as usize) as u32)
-            }
-        })
-        .collect()
+/// (row, col) pairs of an array argument to flat indices, `(-1, -1)` to `NONE`.
+fn indices(name: &'static str, a: &[i32], shape: (usize, usize)) -> PyResult<Vec<u32>> {
+    flat(name, a, shape, "image", true)
 }
 
 type NnfOut<'py> = (Bound<'py, PyArray3<i32>>, Bound<'py, PyArray2<f32>>, u64);
 
 #[pyfunction]
-#[pyo3(name = "nnf", signature = (source, target, *, patch_size, iterations, levels, exact, seed, weights=None, source_mask=None, target_mask=None, init=None, source_knn=None, source_cost=None, threads=None, kdtree=false))]
+#[pyo3(name = "nnf", signature = (source, target, *, patch_size, iterations, levels, exact, seed, weights, source_mask, target_mask, init, source_knn, source_cost, threads, kdtree))]
 pub fn nnf_py<'py>(
     py: Python<'py>,
     source: PyReadonlyArray3<'py, f32>,
@@ -78,11 +41,10 @@ pub fn nnf_py<'py>(
     let table = match &source_knn {
         Some(t) => {
             let k = t.as_array().dim().2;
-            let flat = flat_indices(
+            let flat = indices(
                 "source_knn",
                 t.as_slice().map_err(not_contiguous("source_knn"))?,
-                sh,
-                sw,
+                (sh, sw),
             )?;
             Some((flat, k))
         }
@@ -112,18 +74,15 @@ pub fn nnf_py<'py>(
         seed,
         method,
     };
-    let f = py
-        .detach(|| guarded(|| install(threads, || patch::nnf(&input, &params))))
-        .map_err(to_py)?;
-    let field = Array3::from_shape_vec((f.h, f.w, 2), f.to_rowcol()).expect("field shape");
-    let dist = Array2::from_shape_vec((f.h, f.w), f.dist).expect("dist shape");
-    Ok((field.into_pyarray(py), dist.into_pyarray(py), f.evaluations))
+    let f = run(py, threads, None, |_| patch::nnf(&input, &params))?;
+    let field = array(py, (f.h, f.w, 2), f.to_rowcol());
+    Ok((field, array(py, (f.h, f.w), f.dist), f.evaluations))
 }
 
 type KnnOut<'py> = (Bound<'py, PyArray4<i32>>, Bound<'py, PyArray3<f32>>);
 
 #[pyfunction]
-#[pyo3(name = "knn", signature = (exemplar, *, k, patch_size, iterations, exact, exclude, seed, weights=None, threads=None))]
+#[pyo3(name = "knn", signature = (exemplar, *, k, patch_size, iterations, exact, exclude, seed, weights, threads))]
 pub fn knn_py<'py>(
     py: Python<'py>,
     exemplar: PyReadonlyArray3<'py, f32>,
@@ -146,16 +105,13 @@ pub fn knn_py<'py>(
         exclude,
         seed,
     };
-    let t = py
-        .detach(|| guarded(|| install(threads, || knn::knn(&img, weights, &params))))
-        .map_err(to_py)?;
-    let idx = Array4::from_shape_vec((t.h, t.w, t.k, 2), rowcol(&t.idx, t.w)).expect("knn shape");
-    let dist = Array3::from_shape_vec((t.h, t.w, t.k), t.dist).expect("knn dist shape");
-    Ok((idx.into_pyarray(py), dist.into_pyarray(py)))
+    let t = run(py, threads, None, |_| knn::knn(&img, weights, &params))?;
+    let idx = array(py, (t.h, t.w, t.k, 2), rowcol(&t.idx, t.w));
+    Ok((idx, array(py, (t.h, t.w, t.k), t.dist)))
 }
 
 #[pyfunction]
-#[pyo3(name = "coherence_candidates", signature = (refs, exemplar_shape, *, patch_size, wrap, knn_idx=None, threads=None))]
+#[pyo3(name = "coherence_candidates", signature = (refs, exemplar_shape, *, patch_size, wrap, knn_idx, threads))]
 pub fn coherence_candidates_py<'py>(
     py: Python<'py>,
     refs: PyReadonlyArray3<'py, i32>,
@@ -167,20 +123,18 @@ pub fn coherence_candidates_py<'py>(
 ) -> PyResult<Bound<'py, PyArray4<i32>>> {
     let (eh, ew) = exemplar_shape;
     let (h, w, _) = refs.as_array().dim();
-    let r = flat_indices(
+    let r = indices(
         "refs",
         refs.as_slice().map_err(not_contiguous("refs"))?,
-        eh,
-        ew,
+        (eh, ew),
     )?;
     let table = match &knn_idx {
         Some(t) => {
             let (th, tw, k, _) = t.as_array().dim();
-            let idx = flat_indices(
+            let idx = indices(
                 "knn_idx",
                 t.as_slice().map_err(not_contiguous("knn_idx"))?,
-                eh,
-                ew,
+                (eh, ew),
             )?;
             Some(knn::Knn {
                 h: th,
@@ -192,33 +146,16 @@ pub fn coherence_candidates_py<'py>(
         }
         None => None,
     };
-    let (c, m) = py
-        .detach(|| {
-            guarded(|| {
-                install(threads, || {
-                    knn::coherence_candidates(
-                        &r,
-                        h,
-                        w,
-                        eh,
-                        ew,
-                        table.as_ref(),
-                        patch_size,
-                        wrap,
-                        false,
-                    )
-                })
-            })
-        })
-        .map_err(to_py)?;
-    let out = Array4::from_shape_vec((h, w, m, 2), rowcol(&c, ew)).expect("candidate shape");
-    Ok(out.into_pyarray(py))
+    let (c, m) = run(py, threads, None, |_| {
+        knn::coherence_candidates(&r, h, w, eh, ew, table.as_ref(), patch_size, wrap, false)
+    })?;
+    Ok(array(py, (h, w, m, 2), rowcol(&c, ew)))
 }
 
 type VoteOut<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray2<f32>>);
 
 #[pyfunction]
-#[pyo3(name = "vote", signature = (source, field, *, patch_size, weights=None, threads=None, mean_shift=0))]
+#[pyo3(name = "vote", signature = (source, field, *, patch_size, weights, threads, mean_shift))]
 pub fn vote_py<'py>(
     py: Python<'py>,
     source: PyReadonlyArray3<'py, f32>,
@@ -244,16 +181,11 @@ pub fn vote_py<'py>(
     )
     .map_err(to_py)?;
     let wts = opt_slice("weights", weights.as_ref())?;
-    let v = py
-        .detach(|| {
-            guarded(|| {
-                install(threads, || {
-                    vote::vote_mode(&src, &idx, h, w, wts, patch_size, mean_shift)
-                })
-            })
-        })
-        .map_err(to_py)?;
-    let img = Array3::from_shape_vec((h, w, src.c), v.image).expect("vote shape");
-    let wt = Array2::from_shape_vec((h, w), v.weight).expect("weight shape");
-    Ok((img.into_pyarray(py), wt.into_pyarray(py)))
+    let v = run(py, threads, None, |_| {
+        vote::vote_mode(&src, &idx, h, w, wts, patch_size, mean_shift)
+    })?;
+    Ok((
+        array(py, (h, w, src.c), v.image),
+        array(py, (h, w), v.weight),
+    ))
 }

@@ -1,15 +1,14 @@
 //! Bindings of `phloem_core::{maxflow, seams}` for `phloem.seams`.
 
-use ndarray::Array2;
-use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2, PyReadonlyArray3};
+use numpy::{PyArray2, PyReadonlyArray2, PyReadonlyArray3};
 use phloem_core::error::invalid;
 use phloem_core::maxflow::{EdgeLayout, GridGraph, Method};
 use phloem_core::seams::{self, SeamCost, SeamInput};
 use pyo3::prelude::*;
 
-use crate::errors::{guarded, not_contiguous, opt_slice, to_py};
-use crate::patch::image;
-use crate::threads::install;
+use crate::call::run;
+use crate::convert::{array, image};
+use crate::errors::{not_contiguous, opt_slice, to_py};
 
 type FlowOut<'py> = (f64, Bound<'py, PyArray2<bool>>, &'static str);
 
@@ -17,7 +16,7 @@ type FlowOut<'py> = (f64, Bound<'py, PyArray2<bool>>, &'static str);
 /// `"auto"` picks the planar dual shortest path where it applies, `"planar"` and `"bk"`
 /// force one (tests compare them).
 #[pyfunction]
-#[pyo3(name = "grid_maxflow", signature = (source, sink, edges, *, connectivity, directed, threads=None, method="auto"))]
+#[pyo3(name = "grid_maxflow", signature = (source, sink, edges, *, connectivity, directed, threads, method))]
 #[allow(clippy::too_many_arguments)]
 pub fn grid_maxflow_py<'py>(
     py: Python<'py>,
@@ -56,34 +55,27 @@ pub fn grid_maxflow_py<'py>(
     } else {
         EdgeLayout::Symmetric
     };
-    let (flow, side, used) = py
-        .detach(|| {
-            guarded(|| {
-                install(threads, || {
-                    let mut g = GridGraph::new(h, w, connectivity)?;
-                    g.set_edges("edges", e, layout)?;
-                    g.set_terminals(s, t)?;
-                    let flow = match method {
-                        None => g.maxflow(),
-                        Some(m) => g.maxflow_with(m)?,
-                    };
-                    let used = match g.method() {
-                        Some(Method::Planar) => "planar",
-                        _ => "bk",
-                    };
-                    Ok((flow, g.sink_side().unwrap_or_default().to_vec(), used))
-                })
-            })
-        })
-        .map_err(to_py)?;
-    let side = Array2::from_shape_vec((h, w), side).expect("label shape");
-    Ok((flow, side.into_pyarray(py), used))
+    let (flow, side, used) = run(py, threads, None, |_| {
+        let mut g = GridGraph::new(h, w, connectivity)?;
+        g.set_edges("edges", e, layout)?;
+        g.set_terminals(s, t)?;
+        let flow = match method {
+            None => g.maxflow(),
+            Some(m) => g.maxflow_with(m)?,
+        };
+        let used = match g.method() {
+            Some(Method::Planar) => "planar",
+            _ => "bk",
+        };
+        Ok((flow, g.sink_side().unwrap_or_default().to_vec(), used))
+    })?;
+    Ok((flow, array(py, (h, w), side), used))
 }
 
 type SeamOut<'py> = (Bound<'py, PyArray2<bool>>, f64, (usize, usize));
 
 #[pyfunction]
-#[pyo3(name = "seam", signature = (a, b, region, *, cost, connectivity, border_weight=None, a_mask=None, b_mask=None, seeds=None, edges=None, threads=None))]
+#[pyo3(name = "seam", signature = (a, b, region, *, cost, connectivity, border_weight, a_mask, b_mask, seeds, edges, threads))]
 pub fn seam_py<'py>(
     py: Python<'py>,
     a: PyReadonlyArray3<'py, f32>,
@@ -129,9 +121,6 @@ pub fn seam_py<'py>(
         border_weight: border_weight.unwrap_or_else(|| cost.default_border_weight()),
         connectivity,
     };
-    let s = py
-        .detach(|| guarded(|| install(threads, || seams::seam(&input))))
-        .map_err(to_py)?;
-    let take_b = Array2::from_shape_vec((h, w), s.take_b).expect("seam shape");
-    Ok((take_b.into_pyarray(py), s.energy, s.tied))
+    let s = run(py, threads, None, |_| seams::seam(&input))?;
+    Ok((array(py, (h, w), s.take_b), s.energy, s.tied))
 }

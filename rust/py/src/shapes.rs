@@ -1,15 +1,13 @@
 //! Bindings of `phloem_core::shapes` for `phloem.shapes`.
 
-use std::sync::Mutex;
-
-use ndarray::Array2;
-use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
+use numpy::{PyArray2, PyReadonlyArray2};
 use phloem_core::error::invalid;
 use phloem_core::shapes::{self, LabelMap, Method, Rotations, ShapeParams};
 use pyo3::prelude::*;
 
-use crate::errors::{guarded, not_contiguous, opt_slice, to_py};
-use crate::threads::install;
+use crate::call::run;
+use crate::convert::array;
+use crate::errors::{not_contiguous, opt_slice, to_py};
 
 fn label_map(name: &'static str, a: &PyReadonlyArray2<'_, u8>, k: usize) -> PyResult<LabelMap> {
     let (h, w) = a.as_array().dim();
@@ -17,35 +15,19 @@ fn label_map(name: &'static str, a: &PyReadonlyArray2<'_, u8>, k: usize) -> PyRe
     LabelMap::new(name, data, h, w, k).map_err(to_py)
 }
 
-/// Runs `f` with a progress callback that calls `progress` under the GIL; an exception it
-/// raises cancels the run and is re-raised. With `progress` None, `f` gets no callback.
+/// Runs `f` through [`run`], handing it the engine's form of the progress callback.
 fn with_progress<T: Send>(
     py: Python<'_>,
     progress: Option<Py<PyAny>>,
     threads: Option<usize>,
     f: impl FnOnce(shapes::Progress<'_>) -> phloem_core::Result<T> + Send,
 ) -> PyResult<T> {
-    let failure: Mutex<Option<PyErr>> = Mutex::new(None);
-    let call = |done: usize, total: usize| -> bool {
-        let Some(cb) = progress.as_ref() else {
-            return true;
-        };
-        Python::attach(|py| match cb.call1(py, (done, total)) {
-            Ok(_) => true,
-            Err(e) => {
-                if let Ok(mut slot) = failure.lock() {
-                    *slot = Some(e);
-                }
-                false
-            }
-        })
-    };
-    let cb: &(dyn Fn(usize, usize) -> bool + Sync) = &call;
-    let r = py.detach(|| guarded(|| install(threads, || f(progress.is_some().then_some(cb)))));
-    if let Some(e) = failure.lock().ok().and_then(|mut s| s.take()) {
-        return Err(e);
-    }
-    r.map_err(to_py)
+    run(py, threads, progress.as_ref(), |reports| {
+        let report = reports.map(|r| move |done, total| r.push_and_go_on(done, total));
+        f(report
+            .as_ref()
+            .map(|f| f as &(dyn Fn(usize, usize) -> bool + Sync)))
+    })
 }
 
 fn params(
@@ -67,13 +49,11 @@ fn params(
 }
 
 fn to_array(py: Python<'_>, m: LabelMap) -> Bound<'_, PyArray2<u8>> {
-    Array2::from_shape_vec((m.h, m.w), m.data)
-        .expect("shape")
-        .into_pyarray(py)
+    array(py, (m.h, m.w), m.data)
 }
 
 #[pyfunction]
-#[pyo3(name = "shape_synthesize", signature = (shape, *, height, width, patch_size, levels, iterations, rotations, tileable, seed, mask=None, threads=None, progress=None))]
+#[pyo3(name = "shape_synthesize", signature = (shape, *, height, width, patch_size, levels, iterations, rotations, tileable, seed, mask, threads, progress))]
 pub fn synthesize_py<'py>(
     py: Python<'py>,
     shape: PyReadonlyArray2<'py, u8>,
@@ -99,7 +79,7 @@ pub fn synthesize_py<'py>(
 }
 
 #[pyfunction]
-#[pyo3(name = "shape_synthesize_labels", signature = (labels, *, k, height, width, method, patch_size, levels, iterations, rotations, tileable, seed, order=None, threads=None, progress=None))]
+#[pyo3(name = "shape_synthesize_labels", signature = (labels, *, k, height, width, method, patch_size, levels, iterations, rotations, tileable, seed, order, threads, progress))]
 pub fn synthesize_labels_py<'py>(
     py: Python<'py>,
     labels: PyReadonlyArray2<'py, u8>,
@@ -136,7 +116,7 @@ pub fn synthesize_labels_py<'py>(
 }
 
 #[pyfunction]
-#[pyo3(name = "shape_similarity", signature = (a, b, *, patch_size, rotations, threads=None))]
+#[pyo3(name = "shape_similarity", signature = (a, b, *, patch_size, rotations, threads))]
 pub fn similarity_py(
     py: Python<'_>,
     a: PyReadonlyArray2<'_, u8>,

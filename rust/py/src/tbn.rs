@@ -1,16 +1,13 @@
 //! Bindings of `phloem_core::tbn` for `phloem.texture.by_numbers`.
 
-use std::sync::Mutex;
-
-use ndarray::Array3;
-use numpy::{IntoPyArray, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
+use numpy::{PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use phloem_core::error::invalid;
 use phloem_core::tbn::{self, pyramid, Init, Selection, TbnInput, TbnParams};
 use pyo3::prelude::*;
 
-use crate::errors::{guarded, not_contiguous, opt_slice, to_py};
-use crate::patch::image;
-use crate::threads::install;
+use crate::call::run;
+use crate::convert::{array, flat, image, rowcol};
+use crate::errors::{not_contiguous, opt_slice, to_py};
 
 fn labels(name: &'static str, a: &PyReadonlyArray2<'_, i32>) -> PyResult<Vec<u32>> {
     a.as_slice()
@@ -27,36 +24,8 @@ fn labels(name: &'static str, a: &PyReadonlyArray2<'_, i32>) -> PyResult<Vec<u32
         .collect()
 }
 
-fn rowcol(refs: &[u32], w: usize) -> Vec<i32> {
-    refs.iter()
-        .flat_map(|&e| [(e as usize / w) as i32, (e as usize % w) as i32])
-        .collect()
-}
-
-fn flat(
-    name: &'static str,
-    rc: &PyReadonlyArray3<'_, i32>,
-    eh: usize,
-    ew: usize,
-) -> PyResult<Vec<u32>> {
-    rc.as_slice()
-        .map_err(not_contiguous(name))?
-        .chunks_exact(2)
-        .map(|p| {
-            if p[0] < 0 || p[1] < 0 || p[0] as usize >= eh || p[1] as usize >= ew {
-                Err(to_py(invalid(
-                    name,
-                    format!("({}, {}) is outside the {eh}×{ew} exemplar", p[0], p[1]),
-                )))
-            } else {
-                Ok((p[0] as usize * ew + p[1] as usize) as u32)
-            }
-        })
-        .collect()
-}
-
 #[pyfunction]
-#[pyo3(name = "by_numbers", signature = (exemplar, labels_in, labels_out, *, patch_size, k, label_weight, levels, iterations, init, wrap, tileable, seed, selection="medoid", composite=0, stand_in_weight=f32::INFINITY, seam_channels=0, weights=None, threads=None, progress=None))]
+#[pyo3(name = "by_numbers", signature = (exemplar, labels_in, labels_out, *, patch_size, k, label_weight, levels, iterations, init, wrap, tileable, seed, selection, composite, stand_in_weight, seam_channels, weights, threads, progress))]
 pub fn by_numbers_py<'py>(
     py: Python<'py>,
     exemplar: PyReadonlyArray3<'py, f32>,
@@ -138,27 +107,12 @@ pub fn by_numbers_py<'py>(
         random_search: true,
         seed,
     };
-    // The callback's first exception is kept and raised once the solver returns.
-    let failure: Mutex<Option<PyErr>> = Mutex::new(None);
-    let report = |done: usize, total: usize| {
-        if let Some(cb) = &progress {
-            Python::attach(|py| {
-                if let Err(e) = cb.call1(py, (done, total)) {
-                    if let Ok(mut f) = failure.lock() {
-                        f.get_or_insert(e);
-                    }
-                }
-            });
-        }
-    };
-    let t = py
-        .detach(|| guarded(|| install(threads, || tbn::by_numbers(&input, &params, Some(&report)))))
-        .map_err(to_py)?;
-    if let Some(e) = failure.into_inner().ok().flatten() {
-        return Err(e);
-    }
-    let out = Array3::from_shape_vec((t.h, t.w, 2), rowcol(&t.refs, ex.w)).expect("sources shape");
-    Ok(out.into_pyarray(py))
+    let t = run(py, threads, progress.as_ref(), |reports| {
+        let report = reports.map(|r| move |done, total| r.push(done, total));
+        let report = report.as_ref().map(|f| f as &(dyn Fn(usize, usize) + Sync));
+        tbn::by_numbers(&input, &params, report)
+    })?;
+    Ok(array(py, (t.h, t.w, 2), rowcol(&t.refs, ex.w)))
 }
 
 #[pyfunction]
@@ -174,11 +128,15 @@ pub fn tbn_upsample_py<'py>(
     let (oh, ow) = out_shape;
     let (eh, ew) = exemplar_shape;
     let (os, es) = steps(ch, cw, oh, ow, eh, ew)?;
-    let coarse = flat("refs", &refs, es.ch(), es.cw())?;
+    let coarse = flat(
+        "refs",
+        refs_slice(&refs)?,
+        (es.ch(), es.cw()),
+        "exemplar",
+        false,
+    )?;
     let fine = pyramid::upsample_refs(&coarse, &os, &es, wrap);
-    Ok(Array3::from_shape_vec((oh, ow, 2), rowcol(&fine, ew))
-        .expect("shape")
-        .into_pyarray(py))
+    Ok(array(py, (oh, ow, 2), rowcol(&fine, ew)))
 }
 
 #[pyfunction]
@@ -191,13 +149,13 @@ pub fn tbn_downsample_py<'py>(
     let (oh, ow, _) = refs.as_array().dim();
     let (eh, ew) = exemplar_shape;
     let (os, es) = steps(oh.div_ceil(2), ow.div_ceil(2), oh, ow, eh, ew)?;
-    let fine = flat("refs", &refs, eh, ew)?;
+    let fine = flat("refs", refs_slice(&refs)?, (eh, ew), "exemplar", false)?;
     let coarse = pyramid::downsample_refs(&fine, &os, &es);
-    Ok(
-        Array3::from_shape_vec((os.ch(), os.cw(), 2), rowcol(&coarse, es.cw()))
-            .expect("shape")
-            .into_pyarray(py),
-    )
+    Ok(array(py, (os.ch(), os.cw(), 2), rowcol(&coarse, es.cw())))
+}
+
+fn refs_slice<'a>(refs: &'a PyReadonlyArray3<'_, i32>) -> PyResult<&'a [i32]> {
+    refs.as_slice().map_err(not_contiguous("refs"))
 }
 
 /// The one-level steps of the pyramid `level_sizes(_, 2)` for output and exemplar.

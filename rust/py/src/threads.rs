@@ -5,16 +5,18 @@
 //! same time from several Python threads (the GIL is released around the work) each get
 //! their own workers instead of queueing on one shared pool: two `threads=1` calls from two
 //! threads run on two cores. Pools are kept for reuse, at most as many per size as were ever
-//! in use at once.
+//! in use at once. Every worker of a pool carries the pool's cancellation token, through which
+//! `call::run` stops the work it runs there.
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
+use phloem_core::cancel::Token;
 use phloem_core::{Error, Result};
 use pyo3::prelude::*;
 use rayon::ThreadPool;
 
-type Free = HashMap<usize, Vec<Arc<ThreadPool>>>;
+type Free = HashMap<usize, Vec<Arc<Pool>>>;
 
 fn pools() -> &'static Mutex<Free> {
     static POOLS: OnceLock<Mutex<Free>> = OnceLock::new();
@@ -61,10 +63,22 @@ fn poisoned<T>(_: T) -> Error {
     Error::Internal("thread pool cache poisoned".into())
 }
 
+/// A pool and the cancellation token bound to each of its workers.
+pub struct Pool {
+    pub pool: ThreadPool,
+    pub token: Token,
+}
+
 /// A pool of `n` workers checked out of the cache; it goes back when dropped.
-struct Lease {
+pub struct Lease {
     n: usize,
-    pool: Arc<ThreadPool>,
+    pool: Arc<Pool>,
+}
+
+impl Lease {
+    pub fn pool(&self) -> &Pool {
+        &self.pool
+    }
 }
 
 impl Drop for Lease {
@@ -75,27 +89,8 @@ impl Drop for Lease {
     }
 }
 
-fn lease(n: usize) -> Result<Lease> {
-    let cached = pools()
-        .lock()
-        .map_err(poisoned)?
-        .get_mut(&n)
-        .and_then(Vec::pop);
-    let pool = match cached {
-        Some(p) => p,
-        None => Arc::new(
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .thread_name(|i| format!("phloem-{i}"))
-                .build()
-                .map_err(|e| Error::Internal(format!("cannot start {n} threads: {e}")))?,
-        ),
-    };
-    Ok(Lease { n, pool })
-}
-
-/// Runs `f` on a pool of `threads` workers of its own.
-pub fn install<T: Send>(threads: Option<usize>, f: impl FnOnce() -> Result<T> + Send) -> Result<T> {
+/// Checks out a pool of `threads` workers (`None`: the default count) with its token cleared.
+pub fn lease(threads: Option<usize>) -> Result<Lease> {
     let n = match threads {
         Some(0) => {
             return Err(phloem_core::error::invalid(
@@ -106,5 +101,25 @@ pub fn install<T: Send>(threads: Option<usize>, f: impl FnOnce() -> Result<T> + 
         Some(n) => n,
         None => default_threads(),
     };
-    lease(n)?.pool.install(f)
+    let cached = pools()
+        .lock()
+        .map_err(poisoned)?
+        .get_mut(&n)
+        .and_then(Vec::pop);
+    let pool = if let Some(p) = cached {
+        p
+    } else {
+        let token = Token::new();
+        let bound = token.clone();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .thread_name(|i| format!("phloem-{i}"))
+            .start_handler(move |_| bound.bind())
+            .build()
+            .map_err(|e| Error::Internal(format!("cannot start {n} threads: {e}")))?;
+        Arc::new(Pool { pool, token })
+    };
+    // A cancelled run has stopped before its pool came back; its request must not carry over.
+    pool.token.reset();
+    Ok(Lease { n, pool })
 }

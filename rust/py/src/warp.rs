@@ -1,17 +1,14 @@
 //! Bindings of `phloem_core::mvc` for `phloem.warp`.
 
-use ndarray::{Array2, Array3};
-use numpy::{
-    IntoPyArray, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
-};
+use numpy::{PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use phloem_core::error::invalid;
 use phloem_core::image::Image;
 use phloem_core::mvc::{self, Point};
 use pyo3::prelude::*;
 
-use crate::errors::{guarded, not_contiguous, opt_slice, to_py};
-use crate::patch::image;
-use crate::threads::install;
+use crate::call::run;
+use crate::convert::{array, image};
+use crate::errors::{not_contiguous, opt_slice, to_py};
 
 fn points(name: &'static str, a: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<Point>> {
     let (n, two) = a.as_array().dim();
@@ -37,7 +34,7 @@ fn contours(name: &'static str, a: &[PyReadonlyArray2<'_, f64>]) -> PyResult<Vec
 }
 
 #[pyfunction]
-#[pyo3(name = "mvc_weights", signature = (polygon, points, *, threads=None))]
+#[pyo3(name = "mvc_weights", signature = (polygon, points, *, threads))]
 pub fn mvc_weights_py<'py>(
     py: Python<'py>,
     polygon: PyReadonlyArray2<'py, f64>,
@@ -46,21 +43,14 @@ pub fn mvc_weights_py<'py>(
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let poly = self::points("polygon", &polygon)?;
     let pts = self::points("points", &points)?;
-    let w = py
-        .detach(|| {
-            guarded(|| {
-                install(threads, || {
-                    mvc::weights_many(&poly, &pts, "polygon", "points")
-                })
-            })
-        })
-        .map_err(to_py)?;
-    let out = Array2::from_shape_vec((pts.len(), poly.len()), w).expect("weights shape");
-    Ok(out.into_pyarray(py))
+    let w = run(py, threads, None, |_| {
+        mvc::weights_many(&poly, &pts, "polygon", "points")
+    })?;
+    Ok(array(py, (pts.len(), poly.len()), w))
 }
 
 #[pyfunction]
-#[pyo3(name = "mvc_warp", signature = (sources, source_contours, target_contour, size, *, region=None, threads=None))]
+#[pyo3(name = "mvc_warp", signature = (sources, source_contours, target_contour, size, *, region, threads))]
 pub fn mvc_warp_py<'py>(
     py: Python<'py>,
     sources: Vec<PyReadonlyArray3<'py, f32>>,
@@ -76,22 +66,18 @@ pub fn mvc_warp_py<'py>(
     let target = points("target_contour", &target_contour)?;
     let refs: Vec<&[Point]> = conts.iter().map(Vec::as_slice).collect();
     let (h, w) = size;
-    let out = py
-        .detach(|| guarded(|| install(threads, || mvc::warp(&srcs, &refs, &target, h, w, reg))))
-        .map_err(to_py)?;
+    let out = run(py, threads, None, |_| {
+        mvc::warp(&srcs, &refs, &target, h, w, reg)
+    })?;
     let c = srcs[0].c;
     Ok(out
         .into_iter()
-        .map(|img| {
-            Array3::from_shape_vec((h, w, c), img)
-                .expect("warp shape")
-                .into_pyarray(py)
-        })
+        .map(|img| array(py, (h, w, c), img))
         .collect())
 }
 
 #[pyfunction]
-#[pyo3(name = "mvc_combine", signature = (sources, source_contours, target_contour, weights, size, *, region=None, threads=None))]
+#[pyo3(name = "mvc_combine", signature = (sources, source_contours, target_contour, weights, size, *, region, threads))]
 pub fn mvc_combine_py<'py>(
     py: Python<'py>,
     sources: Vec<PyReadonlyArray3<'py, f32>>,
@@ -109,16 +95,9 @@ pub fn mvc_combine_py<'py>(
     let wts = weights.as_slice().map_err(not_contiguous("weights"))?;
     let refs: Vec<&[Point]> = conts.iter().map(Vec::as_slice).collect();
     let (h, w) = size;
-    let out = py
-        .detach(|| {
-            guarded(|| {
-                install(threads, || {
-                    mvc::warp_combine(&srcs, &refs, &target, wts, h, w, reg)
-                })
-            })
-        })
-        .map_err(to_py)?;
+    let out = run(py, threads, None, |_| {
+        mvc::warp_combine(&srcs, &refs, &target, wts, h, w, reg)
+    })?;
     let c = srcs.first().map_or(0, |s| s.c);
-    let img = Array3::from_shape_vec((h, w, c), out).expect("combine shape");
-    Ok(img.into_pyarray(py))
+    Ok(array(py, (h, w, c), out))
 }

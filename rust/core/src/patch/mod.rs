@@ -388,6 +388,7 @@ pub fn nnf(input: &NnfInput<'_>, params: &NnfParams) -> Result<Nnf> {
         });
         let mut evaluations = finest.kd_seed(&mut cells);
         for it in 0..params.iterations {
+            crate::cancel::check()?;
             evaluations += finest.iterate(&mut cells, params.seed, 0, it);
         }
         return Ok(to_nnf(&finest, &cells, evaluations));
@@ -414,6 +415,7 @@ pub fn nnf(input: &NnfInput<'_>, params: &NnfParams) -> Result<Nnf> {
     let mut evaluations = 0u64;
     let mut cells: Vec<Cell> = Vec::new();
     for li in (0..levels.len()).rev() {
+        crate::cancel::check()?;
         let lvl = &levels[li];
         cells = if li + 1 == levels.len() {
             match input.init {
@@ -442,6 +444,7 @@ pub fn nnf(input: &NnfInput<'_>, params: &NnfParams) -> Result<Nnf> {
             })
         };
         for it in 0..params.iterations {
+            crate::cancel::check()?;
             evaluations += lvl.iterate(&mut cells, params.seed, li, it);
         }
     }

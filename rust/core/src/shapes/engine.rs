@@ -353,6 +353,7 @@ impl<'a> Engine<'a> {
             };
             let mut its = 0;
             for it in 0..self.params.iterations {
+                crate::cancel::check()?;
                 let key = mix64(self.params.seed ^ mix64(level_key ^ (it as u64) << 20));
                 let centres: Vec<u32> = boundary(&map.data, hl, wl, wrap)
                     .into_iter()
@@ -386,6 +387,7 @@ impl<'a> Engine<'a> {
                 let mut matched = vec![Patch::default(); n];
                 let mut dists = vec![0u32; n];
                 for (b, members) in &buckets {
+                    crate::cancel::check()?;
                     if *b == u16::MAX && global.is_none() && !all.is_empty() {
                         let dims = (exs[l].h, exs[l].w);
                         global = Some(Group::new(&self.g, &all, self.params.rotations, 0, dims));
@@ -436,6 +438,7 @@ impl<'a> Engine<'a> {
                         }
                     }
                 }
+                crate::cancel::check()?;
                 let keep: Vec<usize> = (0..n).filter(|&i| src[i].0 != NONE).collect();
                 for &i in &keep {
                     field[centres[i] as usize] = src[i];

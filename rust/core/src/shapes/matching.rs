@@ -117,6 +117,9 @@ pub fn propagate(
     let mut best: Vec<Vec<(u32, u32)>> = vec![Vec::new(); n];
     let (eh, ew) = (lookup.h as isize, lookup.w as isize);
     for pass in 0..passes {
+        if crate::cancel::cancelled() {
+            break;
+        }
         let f: &[(u32, u8)] = field;
         best = std::mem::take(&mut best)
             .into_par_iter()
@@ -495,6 +498,9 @@ pub fn match_all(
         .collect();
     assign(&mut edges, &index.ids, &mut quota, &mut out);
     for round in 0.. {
+        if crate::cancel::cancelled() {
+            break;
+        }
         let left: Vec<u32> = (0..n as u32)
             .filter(|&s| out[s as usize].0 == NONE)
             .collect();

@@ -196,6 +196,7 @@ pub fn composite_offsets(
         let ny = (h + oy as usize).div_ceil(STRIDE);
         let nx = (w + ox as usize).div_ceil(STRIDE);
         for phase in 0..9 {
+            crate::cancel::check()?;
             let (py, px) = (phase / 3, phase % 3);
             let wins: Vec<(usize, usize, usize, usize)> = (py..ny)
                 .step_by(3)
@@ -330,6 +331,7 @@ fn window(
     (y1, x1, y2, x2): (usize, usize, usize, usize),
     candidates: usize,
 ) -> Result<Vec<(usize, (i32, i32))>> {
+    crate::cancel::check()?;
     let (h, w) = (scene.h, scene.w);
     let (wh, ww) = (y2 - y1, x2 - x1);
     // Local copy of the offsets of the window and its one-pixel ring.

@@ -180,7 +180,7 @@ pub fn smart_init(a: &LabelMap<'_>, b: &LabelMap<'_>, patch_size: usize, seed: u
     let mut rng = Rng::keyed(seed, 0x5EED, 0);
     let mut stack = Vec::new();
     let mut remaining = n;
-    while remaining > 0 {
+    while remaining > 0 && !crate::cancel::cancelled() {
         // A random uncovered pixel: draw from the list, dropping covered entries lazily.
         let pb = loop {
             let j = rng.below(uncovered.len() as u64) as usize;

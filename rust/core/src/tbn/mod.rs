@@ -416,9 +416,11 @@ pub fn by_numbers(
         } else {
             refs = upsample_refs(&refs, &out_steps[l], &ex_steps[l], params.wrap);
         }
+        crate::cancel::check()?;
         let solver = Level::new(el, lo, h, w, ca, c0, p, params, l)?;
         let iterations = level_iterations(params.iterations, l);
         for it in 0..iterations {
+            crate::cancel::check()?;
             refs = solver.iterate(&refs, it)?;
             done += 1;
             if let Some(f) = progress {

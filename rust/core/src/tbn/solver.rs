@@ -341,6 +341,7 @@ impl<'a> Level<'a> {
             self.params.wrap,
             self.params.wrap,
         )?;
+        crate::cancel::check()?;
         let s = self.output_image(refs);
         // X†: every other row and column, at an offset drawn per iteration, at the coarse
         // levels; every pixel at the finest, which decides the output's fine coherence.
@@ -369,7 +370,7 @@ impl<'a> Level<'a> {
             .zip(mdist.par_chunks_mut(w))
             .enumerate()
             .for_each(|(y, (row, drow))| {
-                if y % st != gy {
+                if y % st != gy || crate::cancel::cancelled() {
                     return;
                 }
                 for x in (gx..w).step_by(st) {
@@ -380,6 +381,7 @@ impl<'a> Level<'a> {
                     }
                 }
             });
+        crate::cancel::check()?;
 
         // E-step (Eq. 3.5). Each vote weighs its match's N_lr distance to the power −0.6
         // (Kwatra et al. 2005's robust weights), floored at a tenth of the median: a plain
@@ -410,6 +412,9 @@ impl<'a> Level<'a> {
         let mut out = vec![NONE; h * w];
         let medoid = self.medoid(it);
         out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            if crate::cancel::cancelled() {
+                return;
+            }
             let mut avg = vec![0f32; c0];
             let mut votes: Vec<u32> = Vec::with_capacity(p * p);
             let mut wvotes: Vec<(u32, f32)> = Vec::with_capacity(p * p);
@@ -484,6 +489,7 @@ impl<'a> Level<'a> {
                 *slot = best;
             }
         });
+        crate::cancel::check()?;
         Ok(out)
     }
 }
