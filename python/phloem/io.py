@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -21,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 from PIL import Image as _PILImage
 
-from ._validate import as_image
+from ._files import atomic_write, check_target, encode
 
 __all__ = [
     "DEFAULT_MAX_PIXELS",
@@ -35,8 +34,6 @@ __all__ = [
 #: Largest image (width × height) :func:`read_image` decodes unless told otherwise: 2**28
 #: pixels, about 16k × 16k, or 1 GiB as float32 RGB.
 DEFAULT_MAX_PIXELS = 2**28
-
-_WRITE_EXTENSIONS = {".png": 16, ".tif": 16, ".tiff": 16, ".jpg": 8, ".jpeg": 8}
 
 
 class ImageReadError(ValueError):
@@ -122,76 +119,6 @@ def read_image(path: str | os.PathLike[str], *, max_pixels: int = DEFAULT_MAX_PI
     return np.ascontiguousarray(out, dtype=np.float32)
 
 
-def _to_storage(image: Any, bit_depth: int) -> NDArray[Any]:
-    arr = as_image(image, "image")
-    c = arr.shape[2]
-    if c not in (1, 3, 4):
-        raise ValueError(f"image: expected 1 (gray), 3 (RGB) or 4 (RGBA) channels to write, got {c}")
-    scale, dtype = (255.0, np.uint8) if bit_depth == 8 else (65535.0, np.uint16)
-    out: NDArray[Any] = np.rint(np.clip(arr, 0.0, 1.0) * scale).astype(dtype)
-    if c == 3:
-        out = out[:, :, ::-1]
-    elif c == 4:
-        out = out[:, :, [2, 1, 0, 3]]
-    return np.ascontiguousarray(out[:, :, 0] if c == 1 else out)
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def _atomic_write(path: Path, data: bytes, overwrite: bool) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        # mkstemp makes the file private (0600); an output file gets the usual umask mode.
-        os.chmod(tmp, 0o666 & ~_umask())
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        if overwrite:
-            os.replace(tmp, path)
-        else:
-            try:
-                os.link(tmp, path)  # fails atomically if path exists
-            except FileExistsError:
-                raise FileExistsError(
-                    f"out: {path} already exists (pass overwrite=True / --force to replace it)"
-                ) from None
-            except OSError:
-                if path.exists():
-                    raise FileExistsError(f"out: {path} already exists (pass overwrite=True / --force)") from None
-                os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-
-
-def _check_target(path: Path, overwrite: bool) -> None:
-    if not path.parent.is_dir():
-        raise FileNotFoundError(f"out: folder {path.parent} does not exist")
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"out: {path} already exists (pass overwrite=True / --force to replace it)")
-
-
-def _encode(path: Path, image: Any, bit_depth: int | None) -> bytes:
-    ext = path.suffix.lower()
-    if ext not in _WRITE_EXTENSIONS:
-        raise ValueError(f"out: unsupported extension {ext!r}; expected one of {sorted(_WRITE_EXTENSIONS)}")
-    depth = bit_depth if bit_depth is not None else 8
-    if depth not in (8, 16):
-        raise ValueError(f"bit_depth: expected 8 or 16, got {depth}")
-    if depth > _WRITE_EXTENSIONS[ext]:
-        raise ValueError(f"bit_depth: {ext} files hold at most {_WRITE_EXTENSIONS[ext]} bits per channel, got {depth}")
-    params = [cv2.IMWRITE_JPEG_QUALITY, 95] if ext in (".jpg", ".jpeg") else []
-    ok, buf = cv2.imencode(ext, _to_storage(image, depth), params)
-    if not ok:
-        raise RuntimeError(f"out: OpenCV could not encode {path.name}")
-    return buf.tobytes()
-
-
 def write_image(
     path: str | os.PathLike[str], image: Any, *, overwrite: bool = False, bit_depth: int | None = None
 ) -> None:
@@ -211,9 +138,9 @@ def write_image(
         Bits per channel (default 8; 16 for PNG and TIFF only).
     """
     p = Path(path)
-    data = _encode(p, image, bit_depth)
-    _check_target(p, overwrite)
-    _atomic_write(p, data, overwrite)
+    data = encode(p, image, bit_depth)
+    check_target(p, overwrite)
+    atomic_write(p, data, overwrite)
 
 
 def sidecar_path(path: str | os.PathLike[str]) -> Path:
@@ -241,9 +168,9 @@ def write_result(
 
     p = Path(path)
     side = sidecar_path(p)
-    data = _encode(p, image, bit_depth)
-    _check_target(p, overwrite)
-    _check_target(side, overwrite)
+    data = encode(p, image, bit_depth)
+    check_target(p, overwrite)
+    check_target(side, overwrite)
     meta = {
         "phloem_version": __version__,
         "command": command,
@@ -251,6 +178,6 @@ def write_result(
         "parameters": {k: (str(v) if isinstance(v, os.PathLike) else v) for k, v in parameters.items()},
         "output": p.name,
     }
-    _atomic_write(p, data, overwrite)
-    _atomic_write(side, (json.dumps(meta, indent=2, sort_keys=True) + "\n").encode(), overwrite)
+    atomic_write(p, data, overwrite)
+    atomic_write(side, (json.dumps(meta, indent=2, sort_keys=True) + "\n").encode(), overwrite)
     return side

@@ -512,9 +512,9 @@ class Skeleton:
 
     def save(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> None:
         """Write the skeleton file atomically; refuses to overwrite unless asked."""
-        from ..io import _atomic_write
+        from .._files import atomic_write
 
-        _atomic_write(Path(path), self.to_json().encode("utf-8"), overwrite)
+        atomic_write(Path(path), self.to_json().encode("utf-8"), overwrite)
 
 
 def _pt(p: F64) -> tuple[int, int]:

@@ -12,7 +12,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from .. import io
+from .. import _files, io
 from .._progress import Bar
 
 T = TypeVar("T")
@@ -111,15 +111,15 @@ def deprecated_alias(
 
 
 def check_writable(path: Path, args: argparse.Namespace) -> None:
-    io._encode(path, np.zeros((1, 1), np.float32), args.bit_depth)  # extension and bit depth
-    io._check_target(path, args.force)
+    _files.encode(path, np.zeros((1, 1), np.float32), args.bit_depth)  # extension and bit depth
+    _files.check_target(path, args.force)
 
 
 def preflight(args: argparse.Namespace, extra: Sequence[Path] = ()) -> None:
     """Fail before computing if the output, its sidecar or an ``extra`` file cannot be written."""
     out = Path(args.out)
     check_writable(out, args)
-    io._check_target(io.sidecar_path(out), args.force)
+    _files.check_target(io.sidecar_path(out), args.force)
     for path in extra:
         check_writable(path, args)
 

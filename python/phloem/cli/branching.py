@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import __version__, branching, io
+from .. import __version__, _files, branching, io
 from ._common import (
     check_writable,
     common_options,
@@ -51,12 +51,12 @@ def _trace_kwargs(args: argparse.Namespace) -> dict[str, Any]:
 def _write_skeleton(path: Path, sk: branching.Skeleton, args: argparse.Namespace, command: str, **extra: Any) -> None:
     """A skeleton file and its sidecar, both checked before either is written."""
     side = io.sidecar_path(path)
-    io._check_target(path, args.force)
-    io._check_target(side, args.force)
+    _files.check_target(path, args.force)
+    _files.check_target(side, args.force)
     sk.save(path, overwrite=args.force)
     meta = {"phloem_version": __version__, "command": command, "seed": getattr(args, "seed", None),
             "parameters": {**params(args), **extra}, "output": path.name}  # fmt: skip
-    io._atomic_write(side, (json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n").encode(), args.force)
+    _files.atomic_write(side, (json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n").encode(), args.force)
     if not args.quiet:
         print(f"wrote {path} and {side}", file=sys.stderr)
 
@@ -64,8 +64,8 @@ def _write_skeleton(path: Path, sk: branching.Skeleton, args: argparse.Namespace
 def _check_json_target(path: Path, args: argparse.Namespace) -> None:
     if path.suffix.lower() != ".json":
         raise ValueError(f"out: expected a .json file for the skeleton, got {path.name}")
-    io._check_target(path, args.force)
-    io._check_target(io.sidecar_path(path), args.force)
+    _files.check_target(path, args.force)
+    _files.check_target(io.sidecar_path(path), args.force)
 
 
 def _cmd_branching_trace(args: argparse.Namespace) -> None:

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import io, patch
+from .. import _files, io, patch
 from ._common import common_options, positive
 
 
@@ -19,7 +19,7 @@ def _cmd_nnf(args: argparse.Namespace) -> None:
     out = Path(args.out)
     if out.suffix.lower() != ".npz":
         raise ValueError(f"out: expected a .npz file for the field, got {out.name}")
-    io._check_target(out, args.force)
+    _files.check_target(out, args.force)
     src = io.read_image(args.source, max_pixels=args.max_pixels)
     tgt = io.read_image(args.target, max_pixels=args.max_pixels)
     t0 = time.perf_counter()
@@ -29,7 +29,7 @@ def _cmd_nnf(args: argparse.Namespace) -> None:
     )  # fmt: skip
     buf = _pyio.BytesIO()
     np.savez_compressed(buf, field=field, distance=dist)
-    io._atomic_write(out, buf.getvalue(), args.force)
+    _files.atomic_write(out, buf.getvalue(), args.force)
     if not args.quiet:
         print(
             f"nnf: {time.perf_counter() - t0:.2f} s, mean distance {float(dist.mean()):.4g}; wrote {out}",

@@ -12,7 +12,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .. import io, trees
+from .. import _files, io, trees
 from ._common import check_writable, common_options, deprecated_alias, params, parse_square_size, positive, run
 
 
@@ -35,7 +35,7 @@ def _cmd_trees(args: argparse.Namespace) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
     for t in targets:
         check_writable(t, args)
-        io._check_target(io.sidecar_path(t), args.force)
+        _files.check_target(io.sidecar_path(t), args.force)
     if args.sheet is not None:
         check_writable(Path(args.sheet), args)
     like = None if args.like is None else io.read_image(args.like, max_pixels=args.max_pixels)
