@@ -26,12 +26,12 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from . import shapes, texture
-from ._api import Seed, Size, old_flag, renamed
-from ._color import check_denoise, denoised_lab, rgb8
-from ._progress import Progress
-from ._validate import as_image, as_labels, check_int, check_seed, check_size, check_threads
-from .shapes import Rotations
+from .. import shapes, texture
+from .._api import Seed, Size, old_flag, renamed
+from .._color import check_denoise, denoised_lab, rgb8
+from .._progress import Progress
+from .._validate import as_image, as_labels, check_int, check_seed, check_size, check_threads
+from ..shapes import Rotations
 
 __all__ = [
     "BarkResult",
