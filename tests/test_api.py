@@ -218,6 +218,18 @@ def test_grow_and_extend_shape(models):
     assert _old(lambda: branching.extend(new, 0, bend, steps=1, seed=0, shape=(96, 96)), "use size=") == longer
 
 
+def test_skeleton_draw_and_mask_shape(models):
+    sk, _ = models
+    mask = sk.mask(size=(90, 110))
+    assert mask.shape == (90, 110)
+    np.testing.assert_array_equal(_old(lambda: sk.mask(shape=(90, 110)), "use size="), mask)
+    np.testing.assert_array_equal(sk.mask((90, 110)), mask)  # positional, as before: no warning
+    drawn = sk.draw(size=(90, 110), width=2)
+    assert drawn.shape == (90, 110, 3)
+    np.testing.assert_array_equal(_old(lambda: sk.draw(shape=(90, 110), width=2), "use size="), drawn)
+    np.testing.assert_array_equal(sk.draw(size=64), sk.draw(size=(64, 64)))  # an int is a square
+
+
 def test_render_c(models):
     from phloem import branching
 

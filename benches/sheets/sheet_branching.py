@@ -77,7 +77,7 @@ def main() -> int:
         print(f"{name}: {img.shape[1]}x{img.shape[0]}, source {len(res.source.branches)} branches, new {len(res.target.branches)} "
               f"branches ({n_new} vertices at h={res.bending.h:.2f}; source {n_src}), {len(res.render.targets)} fragments, {dt:.1f} s")  # fmt: skip
         traced = res.source.draw(_rgb(img), color=(1, 0.1, 0.1), width=2)
-        grown = res.target.draw(shape=res.target.shape, color=(1, 1, 1), width=2)
+        grown = res.target.draw(size=res.target.shape, color=(1, 1, 1), width=2)
         tiles = [
             _label(_fit(img, args.tile, cv2.INTER_AREA), name),
             _label(_fit(traced, args.tile, cv2.INTER_AREA), "traced skeleton"),

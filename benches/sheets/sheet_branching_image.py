@@ -86,7 +86,7 @@ def row(
     return [
         _label(_fit(img), f"{name}: input"),
         _label(_fit(_disks(_rgb(img), src)), "source skeleton + fragments"),
-        _label(_fit(tgt.draw(shape=tgt.shape, width=2)), "target skeleton"),
+        _label(_fit(tgt.draw(size=tgt.shape, width=2)), "target skeleton"),
         _label(_fit(_rgb(res.structure)), "structure (5.1-5.3)"),
         _label(_fit(_rgb(res.image)), f"output, {dt:.1f} s"),
         _label(_fit(_labels(res.labels)), "fragment map"),

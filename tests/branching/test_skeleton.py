@@ -118,7 +118,7 @@ def test_check_inside_names_the_argument_and_drawing():
         sk.check_inside((12, 10), "target")
     m = sk.mask((12, 30))
     assert m.shape == (12, 30) and m[2:6, 2:20].any() and not m[11].any()
-    img = sk.draw(shape=(12, 30), color=(1, 0, 0))
+    img = sk.draw(size=(12, 30), color=(1, 0, 0))
     assert img.shape == (12, 30, 3) and img[..., 0].max() > 0.5 and img[..., 1].max() == 0
     with pytest.raises(SkeletonError, match=r"mask: the skeleton has no shape"):
         sk.mask()

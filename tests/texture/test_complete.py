@@ -111,7 +111,7 @@ def test_auto_keeps_the_interpolating_fill_on_a_photo(hole_case):
 
 
 def test_completion_copies_only_from_sources(bark):
-    # A frame of a target (top, a hole in it) and a source (bottom): with sources=, the fill is
+    # A frame of a target (top, a hole in it) and a source (bottom): with source_mask=, the fill is
     # made of the bottom's pixels only, even though the top's known pixels match as well.
     top = np.full((64, 96, 3), 0.9, np.float32)  # a bright canvas that must not be copied
     bottom = np.ascontiguousarray(bark[:64, :96])
@@ -120,15 +120,15 @@ def test_completion_copies_only_from_sources(bark):
     hole[12:52, 20:76] = True
     src = np.zeros_like(hole)
     src[64:] = True
-    out = complete(frame, hole, sources=src, seed=0)
+    out = complete(frame, hole, source_mask=src, seed=0)
     fill = out[hole]
     assert float(np.isclose(fill, 0.9, atol=1e-3).all(axis=1).mean()) < 0.01
     without = complete(frame, hole, seed=0)
     assert float(np.isclose(without[hole], 0.9, atol=1e-3).all(axis=1).mean()) > 0.5
-    with pytest.raises(ValueError, match="sources"):
-        complete(frame, hole, sources=np.zeros_like(hole))
-    with pytest.raises(ValueError, match="sources"):
-        complete(frame, hole, sources=np.zeros((3, 3), bool))
+    with pytest.raises(ValueError, match="^mask: the known pixels in source_mask holds no"):
+        complete(frame, hole, source_mask=np.zeros_like(hole))
+    with pytest.raises(ValueError, match="^source_mask:"):
+        complete(frame, hole, source_mask=np.zeros((3, 3), bool))
 
 
 def test_completion_schedules(hole_case):
@@ -172,7 +172,7 @@ def test_strict_pyramid_does_not_grow_spurs_off_a_bright_rim():
     fill[:160] = hole
     sources = np.zeros_like(fill)
     sources[216:] = True
-    kw = dict(sources=sources, levels=4, iterations=[0, 2, 4], search_iterations=[1, 1, 3], gradient_weight=0.0)
+    kw = dict(source_mask=sources, levels=4, iterations=[0, 2, 4], search_iterations=[1, 1, 3], gradient_weight=0.0)
     white = {
         pyr: int((complete(frame, fill, pyramid=pyr, **kw)[:160][hole] > 0.5).sum())
         for pyr in ("strict", "interpolate")

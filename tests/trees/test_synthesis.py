@@ -48,6 +48,27 @@ def test_vary_gives_the_tree_the_higher_weight(library, ragged_tree):
     assert all(np.array_equal(x.image, y.image) for x, y in zip(vs, again))
 
 
+def test_vary_reports_each_finished_variation_and_stops_on_an_exception(library, ragged_tree):
+    own = trees.prepare(ragged_tree(9, crown=(75, 55)), size=library.size)
+    calls = []
+    vs = trees.vary(own, library, n_variations=3, seed=5, progress=lambda done, total: calls.append((done, total)))
+    assert calls == [(1, 3), (2, 3), (3, 3)]
+    plain = trees.vary(own, library, n_variations=3, seed=5)
+    assert all(np.array_equal(x.image, y.image) for x, y in zip(vs, plain))
+
+    class Stop(Exception):
+        pass
+
+    def stop(done, total):
+        calls.append((done, total))
+        raise Stop
+
+    calls.clear()
+    with pytest.raises(Stop):
+        trees.vary(own, library, n_variations=3, seed=5, progress=stop)
+    assert calls == [(1, 3)]
+
+
 def test_variation_errors(library, ragged_tree):
     one = trees.Library([library[0]], ["only"])
     with pytest.raises(ValueError, match=r"^library: has 1 tree\(s\) but n_sources=2"):

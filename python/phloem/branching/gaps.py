@@ -63,8 +63,8 @@ def _complete_background(
     frame[outside] = bg
     fhole = np.zeros(frame.shape[:2], bool)
     fhole[:H, :W] = hole
-    sources = np.zeros(frame.shape[:2], bool)
-    sources[H + gap :, :ws] = allowed
+    source_mask = np.zeros(frame.shape[:2], bool)
+    source_mask[H + gap :, :ws] = allowed
     # The field found at half resolution, upsampled, already copies full-resolution pixels, so
     # the finest level only votes it, and the half-resolution level runs half the iterations.
     schedule = (
@@ -72,12 +72,12 @@ def _complete_background(
     )
     try:
         out = texture.complete(
-            frame, fhole, sources=sources, patch_size=p, levels=levels, iterations=schedule,
+            frame, fhole, source_mask=source_mask, patch_size=p, levels=levels, iterations=schedule,
             search_iterations=[1] * (levels - 1) + [3], pyramid="strict", gradient_weight=0.0,
             seed=seed, threads=threads,
         )  # fmt: skip
     except ValueError as e:
-        if "sources" not in str(e):
+        if "source_mask" not in str(e):
             raise
         raise ValueError(
             "source_skeleton: the input image has no background region free of branches to complete the gaps from"

@@ -35,7 +35,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validate import as_image, check_float
+from .._api import Size, renamed
+from .._validate import as_image, check_float, check_size
 
 __all__ = ["Branch", "Skeleton", "SkeletonError"]
 
@@ -372,23 +373,29 @@ class Skeleton:
 
     # -- drawing ----------------------------------------------------------------------------
 
-    def mask(self, shape: tuple[int, int] | None = None) -> NDArray[np.bool_]:
-        """The structure as a boolean ``(H, W)`` mask: every edge drawn with its thickness."""
-        shape = shape or self.shape
-        if shape is None:
-            raise SkeletonError("mask: the skeleton has no shape; pass shape=(H, W)")
-        out = np.zeros(shape, np.uint8)
+    @renamed(shape="size")
+    def mask(self, size: Size | None = None) -> NDArray[np.bool_]:
+        """The structure as a boolean ``(H, W)`` mask: every edge drawn with its thickness.
+
+        ``size`` is the mask's ``(H, W)`` (an int: a square; default: the skeleton's own
+        ``shape``); ``shape=`` before (deprecated).
+        """
+        hw = self.shape if size is None else check_size(size)
+        if hw is None:
+            raise SkeletonError("mask: the skeleton has no shape; pass size=(H, W)")
+        out = np.zeros(hw, np.uint8)
         for b in self.branches:
             for (p, q), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
                 r = max(0.5 * (r0 + r1), 0.5)
                 cv2.line(out, _pt(p), _pt(q), 1, thickness=max(1, round(2 * r)), lineType=cv2.LINE_8, shift=4)
         return out.astype(bool)
 
+    @renamed(shape="size")
     def draw(
         self,
         image: Any = None,
         *,
-        shape: tuple[int, int] | None = None,
+        size: Size | None = None,
         color: Sequence[float] = (1.0, 0.2, 0.1),
         width: int = 1,
         vertices: bool = False,
@@ -398,8 +405,10 @@ class Skeleton:
         Parameters
         ----------
         image : array, optional
-            ``(H, W)`` or ``(H, W, C)`` float image in ``[0, 1]``; a black canvas of ``shape``
+            ``(H, W)`` or ``(H, W, C)`` float image in ``[0, 1]``; a black canvas of ``size``
             (or the skeleton's shape) when omitted.
+        size : int or (int, int), optional
+            ``(H, W)`` of that black canvas (an int: a square); ``shape`` before (deprecated).
         color : sequence of float
             RGB colour of the lines.
         width : int
@@ -412,10 +421,10 @@ class Skeleton:
         ndarray of float32, shape (H, W, 3)
         """
         if image is None:
-            shape = shape or self.shape
-            if shape is None:
-                raise SkeletonError("draw: pass an image or shape=(H, W)")
-            canvas = np.zeros((*shape, 3), np.float32)
+            hw = self.shape if size is None else check_size(size)
+            if hw is None:
+                raise SkeletonError("draw: pass an image or size=(H, W)")
+            canvas = np.zeros((*hw, 3), np.float32)
         else:
             img = as_image(image, "image")
             canvas = np.repeat(img, 3, axis=2) if img.shape[2] == 1 else np.ascontiguousarray(img[:, :, :3]).copy()

@@ -196,7 +196,7 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     if args.preview is not None:
         io.write_image(
             args.preview,
-            new.draw(shape=shape, color=(1.0, 1.0, 1.0), width=2),
+            new.draw(size=shape, color=(1.0, 1.0, 1.0), width=2),
             overwrite=args.force,
             bit_depth=args.bit_depth,
         )

@@ -49,7 +49,8 @@ def _cmd_trees(args: argparse.Namespace) -> None:
         if like is not None:
             own = trees.prepare(like, size=args.size)
             out = []
-            # One variation at a time so the bar moves; vary's draws for variation i depend only on (seed, i).
+            # One vary call per variation, each with its own seed (the sidecar's variation_seed), so any
+            # tree can be remade alone; vary(progress=) would draw all from one seed, so the loop draws the bar.
             for i in range(args.n_variations):
                 out += trees.vary(own, lib, n_variations=1, seed=_sub_seed(args.seed, i), n_sources=args.n_sources, colors=colors,
                                   histogram=args.histogram, threads=args.threads)  # fmt: skip

@@ -308,7 +308,7 @@ def complete(
     image: Any,
     mask: Any,
     *,
-    sources: Any = None,
+    source_mask: Any = None,
     patch_size: int = 7,
     levels: int | None = None,
     iterations: int | Sequence[int] | None = None,
@@ -347,12 +347,13 @@ def complete(
         The image; values under the mask are ignored.
     mask : (M, N) array_like of bool
         True where pixels are to be filled.
-    sources : (M, N) array_like of bool, optional
-        Pixels patches may be copied from (default: every known pixel). A patch is a source
-        only if all its pixels are known and in ``sources``; known pixels outside it still
-        guide the matching as the hole's surroundings, but the coarsest level starts from the
-        sources' median colour rather than from the rim. To fill a hole from another image, place
-        both in one frame and pass the other image's region.
+    source_mask : (M, N) array_like of bool, optional
+        Pixels patches may be copied from (default: every known pixel), as in
+        :func:`phloem.patch.nnf`. A patch is a source only if all its pixels are known and in
+        ``source_mask``; known pixels outside it still guide the matching as the hole's
+        surroundings, but the coarsest level starts from the sources' median colour rather
+        than from the rim. To fill a hole from another image, place both in one frame and pass
+        the other image's region.
     patch_size : int, optional
         Patch side, odd (default 7).
     levels : int, optional
@@ -406,7 +407,7 @@ def complete(
     """
     img = as_image(image, "image")
     hole = as_mask(mask, "mask", img.shape[:2])
-    allowed = None if sources is None else as_mask(sources, "sources", img.shape[:2])
+    allowed = None if source_mask is None else as_mask(source_mask, "source_mask", img.shape[:2])
     p = check_patch_size(patch_size)
     if not hole.any():
         raise ValueError("mask: no pixel is selected for filling (the mask is empty)")
@@ -419,7 +420,7 @@ def complete(
 
     main = _hole_pyramid(img, hole, p, max_levels, allowed=allowed, strict_from=1 if pyramid == "strict" else None)
     if not main[0][3].any():  # the full-resolution level's usable source centres
-        where = "the known region" if allowed is None else "the known pixels in sources"
+        where = "the known region" if allowed is None else "the known pixels in source_mask"
         raise ValueError(f"mask: {where} holds no complete {p}×{p} patch to copy from")
     alt = None
     if pyramid == "auto" and len(main) > _STRICT_FROM:

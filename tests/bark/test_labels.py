@@ -1,5 +1,5 @@
-"""The bark pipeline: input label maps, edge labels, label-map files, the cylinder preview,
-and the whole pipeline end to end (thesis Laitoch 2018)."""
+"""phloem.bark.labels: the photo's label map (§3.5), its majority-filter erosion and the edge
+label (§3.5.5)."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import pytest
 
 import phloem
 from phloem import bark
+from phloem.bark.labels import _majority
 
 THESIS_RUNS = ("bark1", "bark2", "eucalyptus", "eucap5")
 
@@ -94,7 +95,7 @@ def _majority_reference(labels: np.ndarray, k: int) -> np.ndarray:
 def test_majority_erosion_matches_pixelwise_reference():
     rng = np.random.default_rng(0)
     labels = rng.integers(0, 3, (17, 23)).astype(np.int32)
-    np.testing.assert_array_equal(bark._majority(labels, 3), _majority_reference(labels, 3))
+    np.testing.assert_array_equal(_majority(labels, 3), _majority_reference(labels, 3))
 
 
 def test_erosion_removes_isolated_pixels():
@@ -136,7 +137,7 @@ def test_input_labels_errors():
         bark.input_labels(np.zeros((2, 8, 8, 3), np.float32), 2)
 
 
-# -- edge label (§3.5.5) and label-map files ---------------------------------------------------
+# -- edge label (§3.5.5) ---------------------------------------------------------------------
 
 
 @pytest.mark.parametrize("width", [1, 2])
@@ -154,108 +155,8 @@ def test_edge_label_matches_brute_force(width):
         bark.add_edge_label(labels, label=2)
 
 
-def test_label_maps_round_trip_through_png(tmp_path):
-    labels = _blobs((30, 40), 4, seed=3) * 7 + 2  # any values
-    path = tmp_path / "labels.png"
-    phloem.io.write_image(path, bark.encode_labels(labels))
-    back = bark.decode_labels(phloem.io.read_image(path))
-    np.testing.assert_array_equal(back, np.unique(labels, return_inverse=True)[1].reshape(labels.shape))
-    with pytest.raises(ValueError, match="^image: found 256 distinct colours"):
-        bark.decode_labels(np.linspace(0, 1, 256, dtype=np.float32).reshape(16, 16))
-
-
 def test_label_map_argument_errors():
     with pytest.raises(TypeError, match="^labels: expected an integer label map"):
         bark.add_edge_label(np.zeros((4, 4), np.float32))
     with pytest.raises(ValueError, match=r"^labels: expected an \(H, W\) label map"):
         bark.add_edge_label(np.zeros((4, 4, 3), np.int32))
-
-
-# -- cylinder preview ---------------------------------------------------------------------------
-
-
-def test_cylinder_preview_geometry():
-    h, w = 8, 64
-    tex = np.tile(np.arange(w, dtype=np.float32)[None, :, None] / w, (h, 1, 3))
-    prev = bark.cylinder_preview(tex, light=(0.0, 0.0, 1.0), ambient=0.0)
-    radius = w / (2 * np.pi)
-    assert prev.shape == (h, round(2 * radius) + 2, 3)
-    xs = (np.arange(prev.shape[1]) + 0.5 - prev.shape[1] / 2) / radius
-    inside = np.abs(xs) < 1
-    assert (prev[:, ~inside] == 0).all()
-    # head-on light, no ambient: brightness = texture column at u(θ) times cos θ
-    theta = np.arcsin(xs[inside])
-    u = (theta / (2 * np.pi) + 0.25) * w - 0.5
-    np.testing.assert_allclose(prev[0, inside, 0], u / w * np.cos(theta), atol=1e-5)
-
-
-# -- the whole pipeline ---------------------------------------------------------------------------
-
-
-@pytest.fixture(scope="module")
-def small_run():
-    photo = phloem.data.bark()[:128, :128, :3].copy()
-    height = photo.mean(axis=2)
-    res = bark.generate(photo, (72, 88), n_labels=2, height_map=height, seed=5, full_output=True)
-    return photo, height, res
-
-
-def test_generate_paints_each_label_from_its_region(small_run):
-    photo, height, res = small_run
-    assert res.texture.shape == (72, 88, 3) and res.texture.dtype == np.float32
-    assert res.labels_out.shape == (72, 88) and res.sources.shape == (72, 88, 2)
-    sy, sx = res.sources[..., 0], res.sources[..., 1]
-    assert (sy >= 0).all() and (sy < 128).all() and (sx >= 0).all() and (sx < 128).all()
-    # every output pixel is the photo pixel it names, from a region with the same label
-    np.testing.assert_array_equal(res.texture, photo[sy, sx])
-    np.testing.assert_array_equal(res.labels_in[sy, sx], res.labels_out)
-    # the height map went along with the colours
-    np.testing.assert_array_equal(res.height, height[sy, sx])
-
-
-def test_generate_keeps_label_areas(small_run):
-    _, _, res = small_run
-    k = int(res.labels_in.max()) + 1
-    frac_in = np.bincount(res.labels_in.ravel(), minlength=k) / res.labels_in.size
-    frac_out = np.bincount(res.labels_out.ravel(), minlength=k) / res.labels_out.size
-    assert np.abs(frac_in - frac_out).max() <= 0.03
-
-
-def test_generate_resumes_from_its_own_maps(small_run):
-    """§3.2: stop, edit a map, resume. Given the maps it made, the pipeline repeats itself."""
-    photo, height, res = small_run
-    again = bark.generate(photo, labels_in=res.labels_in, labels_out=res.labels_out, height_map=height, seed=5)
-    np.testing.assert_array_equal(again[..., :3], res.texture)
-    # an edited output map is painted as edited
-    edited = res.labels_out.copy()
-    edited[:, :30] = 0
-    out = bark.generate(photo, labels_in=res.labels_in, labels_out=edited, seed=5, full_output=True)
-    np.testing.assert_array_equal(res.labels_in[out.sources[..., 0], out.sources[..., 1]], edited)
-
-
-def test_generate_is_deterministic_across_threads():
-    photo = phloem.data.bark()[:96, :96, :3].copy()
-    a = bark.generate(photo, (48, 64), seed=9, threads=1)
-    b = bark.generate(photo, (48, 64), seed=9, threads=2)
-    np.testing.assert_array_equal(a, b)
-    c = bark.generate(photo, (48, 64), seed=10, threads=2)
-    assert not np.array_equal(a, c)
-
-
-def test_generate_errors():
-    photo = phloem.data.bark()[:64, :64, :3].copy()
-    lab = bark.input_labels(photo, 2)
-    with pytest.raises(ValueError, match="^size: required unless labels_out"):
-        bark.generate(photo)
-    with pytest.raises(ValueError, match="^labels_in: expected shape"):
-        bark.generate(photo, 32, labels_in=lab[:40])
-    with pytest.raises(ValueError, match="^size: .* does not match labels_out"):
-        bark.generate(photo, 32, labels_out=lab[:40, :40])
-    with pytest.raises(ValueError, match="^labels_out"):
-        bark.generate(photo, labels_in=lab, labels_out=np.full((32, 32), 7, np.int32))
-    with pytest.raises(ValueError, match="^height_map: expected shape"):
-        bark.generate(photo, 32, height_map=np.zeros((10, 10), np.float32))
-    with pytest.raises(ValueError, match="^n_labels: "):
-        bark.generate(np.zeros((64, 64, 3), np.float32), 32)
-    with pytest.raises(ValueError, match="size"):
-        bark.generate(photo, (2, 2))
