@@ -380,3 +380,10 @@ def test_concurrent_calls_get_workers_of_their_own(bark):
         worker.join()
     assert waited == [True]
     assert np.array_equal(got[0], expected)
+
+
+@pytest.mark.parametrize("shape", [(0, 5, 2), (5, 0, 2), (0, 0, 2)])
+def test_vote_refuses_an_empty_field(shape):
+    src = np.zeros((8, 8, 3), np.float32)
+    with pytest.raises(ValueError, match=r"^field: expected a non-empty field"):
+        vote(src, np.zeros(shape, np.int32), patch_size=3)

@@ -331,6 +331,8 @@ def vote(
     f = np.ascontiguousarray(np.asarray(field), dtype=np.int32)
     if f.ndim != 3 or f.shape[2] != 2:
         raise ValueError(f"field: expected shape (M, N, 2), got {f.shape}")
+    if 0 in f.shape:
+        raise ValueError(f"field: expected a non-empty field, got shape {f.shape}")
     w = None
     if weights is not None:
         w = np.ascontiguousarray(np.asarray(weights, dtype=np.float32))
