@@ -150,6 +150,25 @@ def test_coherence_map_takes_a_generator(photo):
     np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize("seed", [2**63, 2**64 - 1, 2**64, 10**30])
+def test_any_non_negative_seed_is_accepted(photo, seed):
+    from phloem import texture
+
+    a = texture.synthesize(photo[:16, :16], 16, patch_size=5, seed=seed)
+    np.testing.assert_array_equal(a, texture.synthesize(photo[:16, :16], 16, patch_size=5, seed=seed))
+    assert phloem._validate.check_seed(seed) < 2**64
+    assert phloem._validate.check_seed(2**64 - 1) == 2**64 - 1  # every u64 seed is kept as it is
+    hole = np.zeros((16, 16), bool)
+    hole[6:10, 6:10] = True
+    texture.complete(photo[:16, :16], hole, patch_size=5, seed=seed)
+
+
+@pytest.mark.parametrize("seed", [-1, True])
+def test_negative_and_bool_seeds_are_refused(seed):
+    with pytest.raises((ValueError, TypeError), match=r"^seed: "):
+        phloem._validate.check_seed(seed)
+
+
 def test_shape_similarity_takes_threads():
     yy, xx = np.mgrid[:40, :40]
     a, b = yy > 2 * xx, (yy - 20) ** 2 + (xx - 18) ** 2 < 120

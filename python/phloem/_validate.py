@@ -6,6 +6,7 @@ starts with the parameter's name, so a user knows which argument to fix.
 
 from __future__ import annotations
 
+import hashlib
 import numbers
 from typing import Any
 
@@ -21,6 +22,7 @@ __all__ = [
     "check_seed",
     "check_size",
     "check_threads",
+    "derive_seed",
     "restore_ndim",
 ]
 
@@ -129,14 +131,27 @@ def check_float(value: Any, name: str, minimum: float, *, inclusive: bool = True
 
 
 def check_seed(seed: Any) -> int:
-    """Return a 64-bit seed from an int or a ``numpy.random.Generator``."""
+    """Return a u64 seed from an int ``>= 0`` or a ``numpy.random.Generator``.
+
+    Seeds below ``2**64`` are kept as they are; larger ones are mapped into that range by a
+    stable hash. Derived seeds of later stages go through :func:`derive_seed`, which wraps.
+    """
     if isinstance(seed, np.random.Generator):
         return int(seed.integers(0, 2**63))
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
         raise TypeError(f"seed: expected an integer or a numpy.random.Generator, got {seed!r}")
-    if not 0 <= int(seed) < 2**64:
-        raise ValueError(f"seed: expected an integer in [0, 2**64), got {seed}")
-    return int(seed)
+    s = int(seed)
+    if s < 0:
+        raise ValueError(f"seed: expected an integer >= 0, got {s}")
+    if s < 2**64:
+        return s
+    digest = hashlib.blake2b(s.to_bytes((s.bit_length() + 7) // 8, "little"), digest_size=8).digest()
+    return int.from_bytes(digest, "little")
+
+
+def derive_seed(seed: int, k: int) -> int:
+    """Return the seed of stage ``k`` from a checked seed, ``seed + 7919 * k`` wrapped to u64."""
+    return (seed + 7919 * k) % 2**64
 
 
 def check_threads(threads: Any) -> int | None:

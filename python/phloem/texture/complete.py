@@ -25,6 +25,7 @@ from .._validate import (
     check_patch_size,
     check_seed,
     check_threads,
+    derive_seed,
     restore_ndim,
 )
 from ._pyramid import upsample_field
@@ -260,7 +261,7 @@ class _Filler:
             feat = self.features(cur)
             field, dist, _ = _core.nnf(
                 feat, feat, patch_size=self.p, iterations=n_search, levels=1, exact=False,
-                seed=self.seed + 7919 * (lv * 64 + it + 1), weights=None, source_mask=smask, target_mask=need,
+                seed=derive_seed(self.seed, lv * 64 + it + 1), weights=None, source_mask=smask, target_mask=need,
                 init=field, source_knn=None, source_cost=None, threads=self.threads, kdtree=False,
             )  # fmt: skip
             d = dist[need]
@@ -298,7 +299,7 @@ class _Filler:
         feat = self.features(cur)
         _, dist, _ = _core.nnf(
             feat, feat, patch_size=self.p, iterations=3, levels=1, exact=False,
-            seed=self.seed + 7919 * (lv * 64 + 63), weights=None, source_mask=smask, target_mask=need, init=init,
+            seed=derive_seed(self.seed, lv * 64 + 63), weights=None, source_mask=smask, target_mask=need, init=init,
             source_knn=None, source_cost=None, threads=self.threads, kdtree=False,
         )  # fmt: skip
         return float(dist[need].mean())

@@ -18,7 +18,16 @@ from numpy.typing import NDArray
 
 from .. import _core
 from .._progress import Progress
-from .._validate import as_image, check_int, check_patch_size, check_seed, check_size, check_threads, restore_ndim
+from .._validate import (
+    as_image,
+    check_int,
+    check_patch_size,
+    check_seed,
+    check_size,
+    check_threads,
+    derive_seed,
+    restore_ndim,
+)
 from ._pyramid import downsample, upsample_field
 
 __all__ = ["synthesize"]
@@ -194,7 +203,7 @@ def synthesize(
             cost = _occurrence_cost(field, ex_l.shape[:2], p, lam, last) if lam > 0 and it else None
             field, dist, _ = _core.nnf(
                 ex_l, out, patch_size=p, iterations=s_iters, levels=1, exact=False,
-                seed=s + 7919 * (lv * 64 + it + 1), weights=wts, source_mask=None, target_mask=None, init=field,
+                seed=derive_seed(s, lv * 64 + it + 1), weights=wts, source_mask=None, target_mask=None, init=field,
                 source_knn=None, source_cost=cost, threads=t, kdtree=False,
             )  # fmt: skip
             last = float(np.median(dist))
