@@ -326,3 +326,12 @@ def test_fill_contour_and_cages_shape(library):
     new = trees.cages(t.resampled, [t], (128, 128), m=20)
     old = _old(lambda: trees.cages(t.resampled, [t], shape=(128, 128), m=20), "use size=")
     np.testing.assert_array_equal(old[0], new[0])
+
+
+@pytest.mark.parametrize("dtype", ["int8", "int16", "int32", "int64", "uint32", "uint64"])
+def test_images_of_other_integer_dtypes_are_refused(dtype):
+    img = np.full((8, 8, 3), 100, dtype=dtype)
+    with pytest.raises(TypeError, match=r"^image: expected dtype uint8, uint16 or float, got " + dtype):
+        phloem._validate.as_image(img, "image")
+    with pytest.raises(TypeError, match=r"^exemplar: expected dtype uint8, uint16 or float"):
+        phloem.texture.synthesize(img, 8, patch_size=3)

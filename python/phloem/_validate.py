@@ -30,7 +30,7 @@ __all__ = [
 def as_image(image: Any, name: str, *, finite: bool = True) -> NDArray[np.float32]:
     """Return ``image`` as a C-contiguous ``(H, W, C)`` float32 array.
 
-    Integer dtypes are scaled to [0, 1] by their maximum value (uint8 by 255, uint16 by 65535);
+    uint8 and uint16 are scaled to [0, 1] (by 255 and 65535), other integer dtypes refused;
     float inputs keep their values. Rejects booleans, complex numbers, the wrong number of
     dimensions, empty axes and (unless ``finite=False``, for callees that check while they
     read the values anyway) non-finite values.
@@ -38,6 +38,8 @@ def as_image(image: Any, name: str, *, finite: bool = True) -> NDArray[np.float3
     arr = np.asarray(image)
     if arr.dtype == np.bool_ or not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
         raise TypeError(f"{name}: expected a real-valued image array, got dtype {arr.dtype}")
+    if np.issubdtype(arr.dtype, np.integer) and arr.dtype not in (np.uint8, np.uint16):
+        raise TypeError(f"{name}: expected dtype uint8, uint16 or float, got {arr.dtype}")
     if arr.ndim == 2:
         arr = arr[:, :, None]
     elif arr.ndim != 3:
