@@ -117,7 +117,10 @@ def test_ctrl_c_stops_seamless_blending() -> None:
     dst = rng.random((n, n, 3), dtype=np.float32)
     mask = np.zeros((n, n), bool)
     mask[1:-1, 1:-1] = True
-    job = lambda: blend.seamless(src, dst, mask, (0, 0), tol=1e-12, max_iterations=1000, threads=1)
+
+    def job() -> Any:
+        return blend.seamless(src, dst, mask, (0, 0), tol=1e-12, max_iterations=1000, threads=1)
+
     assert _interrupt_latency(job, delay=0.3) < LATENCY
 
 
@@ -129,7 +132,10 @@ def test_ctrl_c_stops_grid_maxflow() -> None:
     source = rng.random((n, n), dtype=np.float32) * (rng.random((n, n)) < 0.5)
     sink = rng.random((n, n), dtype=np.float32) * (rng.random((n, n)) < 0.5)
     edges = rng.random((n, n, 4), dtype=np.float32)
-    job = lambda: seams.grid_maxflow(source, sink, edges, connectivity=8, threads=1)
+
+    def job() -> Any:
+        return seams.grid_maxflow(source, sink, edges, connectivity=8, threads=1)
+
     assert _interrupt_latency(job, delay=0.3) < LATENCY
 
 
