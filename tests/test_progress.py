@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import phloem
-from phloem import patch, shapes, texture
+from phloem import blend, patch, seams, shapes, texture
 
 # The interrupt must be acted on within this many seconds (the promise is "about a second";
 # the margin is for a machine shared with other jobs).
@@ -107,6 +107,36 @@ def test_ctrl_c_stops_shape_synthesis() -> None:
 
 def test_ctrl_c_stops_patchmatch() -> None:
     assert _interrupt_latency(_nnf_job(np.random.default_rng(0), 512)) < LATENCY
+
+
+def test_ctrl_c_stops_seamless_blending() -> None:
+    # A tolerance f32 never reaches: 1000 PCG iterations on a 2048² region run for about 5 s.
+    rng = np.random.default_rng(0)
+    n = 2048
+    src = rng.random((n, n, 3), dtype=np.float32)
+    dst = rng.random((n, n, 3), dtype=np.float32)
+    mask = np.zeros((n, n), bool)
+    mask[1:-1, 1:-1] = True
+
+    def job() -> Any:
+        return blend.seamless(src, dst, mask, (0, 0), tol=1e-12, max_iterations=1000, threads=1)
+
+    assert _interrupt_latency(job, delay=0.3) < LATENCY
+
+
+def test_ctrl_c_stops_grid_maxflow() -> None:
+    # Random 8-connected 1024² graph, terminals on half the pixels: Boykov–Kolmogorov runs
+    # for about 15 s.
+    rng = np.random.default_rng(0)
+    n = 1024
+    source = rng.random((n, n), dtype=np.float32) * (rng.random((n, n)) < 0.5)
+    sink = rng.random((n, n), dtype=np.float32) * (rng.random((n, n)) < 0.5)
+    edges = rng.random((n, n, 4), dtype=np.float32)
+
+    def job() -> Any:
+        return seams.grid_maxflow(source, sink, edges, connectivity=8, threads=1)
+
+    assert _interrupt_latency(job, delay=0.3) < LATENCY
 
 
 def test_a_raising_progress_callback_cancels_the_run_with_its_exception(bark: np.ndarray) -> None:

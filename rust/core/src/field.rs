@@ -226,7 +226,7 @@ pub fn interpolate_field(
             1.0
         }
     };
-    let solved: Vec<Solution<1>> = if free.len() <= DIRECT {
+    let solved: Result<Vec<Solution<1>>> = if free.len() <= DIRECT {
         // Small systems: the exact factor as the preconditioner, so CG takes one step.
         let (factor, rhs) = normal_equations(&free, &deg, &fixed, nbrs, values, d);
         let cells: Vec<usize> = free.iter().map(|&i| grid.cell[i]).collect();
@@ -272,6 +272,7 @@ pub fn interpolate_field(
             })
             .collect()
     };
+    let solved = solved?;
     let (mut iterations, mut residual) = (0, 0f64);
     for (c, s) in solved.iter().enumerate() {
         iterations = iterations.max(s.iterations);

@@ -456,25 +456,26 @@ pub fn seamless(input: &BlendInput<'_>, params: &BlendParams) -> Result<Blended>
     let (setup, out) = rayon::join(setup, || copy_finite(dst, "dst"));
     let (grid, diag, mg) = setup?;
     let mut out = out?;
+    crate::cancel::check()?;
     let (mut iterations, mut residual) = (0, 0.0f64);
     let c = src.c;
     match c {
         1 => {
-            let (i, r) = solve_group::<1>(input, params, &grid, &diag, &mg, 0, &mut out);
+            let (i, r) = solve_group::<1>(input, params, &grid, &diag, &mg, 0, &mut out)?;
             (iterations, residual) = (i, r);
         }
         2 => {
-            let (i, r) = solve_group::<2>(input, params, &grid, &diag, &mg, 0, &mut out);
+            let (i, r) = solve_group::<2>(input, params, &grid, &diag, &mg, 0, &mut out)?;
             (iterations, residual) = (i, r);
         }
         // RGB as three lanes, not four with one idle: a quarter less memory traffic.
         3 => {
-            let (i, r) = solve_group::<3>(input, params, &grid, &diag, &mg, 0, &mut out);
+            let (i, r) = solve_group::<3>(input, params, &grid, &diag, &mg, 0, &mut out)?;
             (iterations, residual) = (i, r);
         }
         _ => {
             for c0 in (0..c).step_by(4) {
-                let (i, r) = solve_group::<4>(input, params, &grid, &diag, &mg, c0, &mut out);
+                let (i, r) = solve_group::<4>(input, params, &grid, &diag, &mg, c0, &mut out)?;
                 iterations = iterations.max(i);
                 residual = residual.max(r);
             }
@@ -526,7 +527,8 @@ fn copy_finite(img: &Image<'_>, name: &'static str) -> Result<Vec<f32>> {
     Ok(out)
 }
 
-/// Solves channels `c0..c0 + L` and writes them into `out`; returns (iterations, residual).
+/// Solves channels `c0..c0 + L` and writes them into `out`; returns (iterations, residual),
+/// or `Err(Error::Cancelled)` from the solver.
 fn solve_group<const L: usize>(
     input: &BlendInput<'_>,
     params: &BlendParams,
@@ -535,7 +537,7 @@ fn solve_group<const L: usize>(
     mg: &Hierarchy,
     c0: usize,
     out: &mut [f32],
-) -> (usize, f64) {
+) -> Result<(usize, f64)> {
     let vals = Values::<L>::new(input, grid, c0, params.mode);
     let (h, w) = (grid.h, grid.w);
     let mut b = vec![[0f64; L]; h * w];
@@ -577,6 +579,7 @@ fn solve_group<const L: usize>(
         s
     });
     let scale = sum_lanes(&parts).map(|s| if s > 0.0 { s.sqrt() } else { 1.0 });
+    crate::cancel::check()?;
     let Solution {
         mut x,
         iterations: it,
@@ -589,7 +592,7 @@ fn solve_group<const L: usize>(
         scale,
         params.tol,
         params.max_iterations,
-    );
+    )?;
     // Pinned components keep the source's mean: shift their correction to mean zero.
     if grid.ncomp > 0 {
         let mut sum = vec![([0f64; L], 0usize); grid.ncomp];
@@ -648,7 +651,7 @@ fn solve_group<const L: usize>(
     } else {
         rows.for_each(|(gy, row)| write_row(gy, row));
     }
-    (it, residual)
+    Ok((it, residual))
 }
 
 /// Largest relative residual over lanes of `f = g + h` in the system of the user's problem

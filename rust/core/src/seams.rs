@@ -424,6 +424,7 @@ pub fn seam(inp: &SeamInput<'_>) -> Result<Seam> {
     }
     g.set_terminals(&source, &sink)?;
     let energy = g.maxflow();
+    crate::cancel::check()?;
     let Some(side) = g.sink_side() else {
         return Err(crate::Error::Internal("max-flow left no cut".into()));
     };

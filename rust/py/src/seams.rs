@@ -63,6 +63,7 @@ pub fn grid_maxflow_py<'py>(
             None => g.maxflow(),
             Some(m) => g.maxflow_with(m)?,
         };
+        phloem_core::cancel::check()?;
         let used = match g.method() {
             Some(Method::Planar) => "planar",
             _ => "bk",

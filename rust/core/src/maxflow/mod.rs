@@ -283,6 +283,10 @@ impl GridGraph {
     /// the case of a seam across a strip tied to one image on one side and to the other on
     /// the opposite side), the cut is a shortest path in the dual graph; otherwise it is
     /// [`Method::BoykovKolmogorov`]'s. Both are exact; [`GridGraph::method`] tells which ran.
+    ///
+    /// Once the thread's work is cancelled ([`crate::cancel`]) the search stops within a few
+    /// thousand steps and leaves no cut ([`GridGraph::sink_side`] is `None`); callers check
+    /// [`crate::cancel::check`] after it. Plain Rust callers are never cancelled.
     pub fn maxflow(&mut self) -> f64 {
         if let Some(arcs) = self.planar_arcs() {
             if let Some(flow) = self.planar_solve(&arcs) {
@@ -306,15 +310,18 @@ impl GridGraph {
                          border, the source-tied pixels in one arc and the sink-tied ones in another",
                     )
                 })?;
-                let flow = self
-                    .planar_solve(&arcs)
-                    .ok_or_else(|| crate::Error::Internal("planar cut check failed".into()))?;
+                let flow = self.planar_solve(&arcs);
+                crate::cancel::check()?;
+                let flow =
+                    flow.ok_or_else(|| crate::Error::Internal("planar cut check failed".into()))?;
                 self.method = Some(Method::Planar);
                 Ok(flow)
             }
             Method::BoykovKolmogorov => {
                 self.method = Some(Method::BoykovKolmogorov);
-                Ok(self.maxflow_split(SPLIT_DEPTH))
+                let flow = self.maxflow_split(SPLIT_DEPTH);
+                crate::cancel::check()?;
+                Ok(flow)
             }
         }
     }
@@ -417,7 +424,11 @@ impl GridGraph {
             time: 0,
             flow: self.base_flow,
         };
-        s.run();
+        if s.run() {
+            // Cancelled: no cut; the residual capacities hold a partial flow.
+            self.solved = false;
+            return f64::NAN;
+        }
         let flow = s.flow;
         let (parent, is_sink) = (s.parent, s.is_sink);
         self.sink_side = (0..self.h)
@@ -481,7 +492,9 @@ impl Solver<'_> {
         None
     }
 
-    fn run(&mut self) {
+    /// Returns `true` if it stopped because the thread's work was cancelled (checked every
+    /// 1024 steps of the growth/augmentation loop).
+    fn run(&mut self) -> bool {
         for i in 0..self.tr.len() {
             let t = self.tr[i];
             if t != 0.0 {
@@ -492,7 +505,12 @@ impl Solver<'_> {
             }
         }
         let mut current: Option<usize> = None;
+        let mut steps = 0u32;
         loop {
+            if steps % 1024 == 0 && crate::cancel::cancelled() {
+                return true;
+            }
+            steps = steps.wrapping_add(1);
             let i = match current.take() {
                 Some(i) if self.parent[i] != FREE => i,
                 _ => match self.next_active() {
@@ -507,6 +525,7 @@ impl Solver<'_> {
                 current = Some(i);
             }
         }
+        false
     }
 
     /// Grows the tree of `i` by one layer; returns a source-tree node, a sink-tree node and

@@ -29,6 +29,7 @@ use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
 use super::{opp, GridGraph};
+use crate::cancel;
 
 const E: usize = 0;
 const S: usize = 1;
@@ -128,7 +129,8 @@ impl GridGraph {
     }
 
     /// Solves the cut by a shortest dual path; `None` if the labels it yields are not a cut of
-    /// the path's length (never expected; the caller then runs Boykov–Kolmogorov).
+    /// the path's length (never expected; the caller then runs Boykov–Kolmogorov) or once the
+    /// thread's work is cancelled (the search checks every few thousand faces).
     pub(super) fn planar_solve(&mut self, arcs: &Arcs) -> Option<f64> {
         let (h, w, pw) = (self.h, self.w, self.pw);
         let l = self.cycle_len();
@@ -148,7 +150,7 @@ impl GridGraph {
             self.cap[p * 4 + d] = 0.0;
             self.cap[q * 4 + opp(d)] = 0.0;
         }
-        let (length, cut) = found;
+        let (length, cut) = found?;
 
         // Flood the source side: from the source arc's pixels whose ray is not cut, through
         // the edges the path does not cross.
@@ -223,7 +225,7 @@ impl GridGraph {
     /// pixel, so the search reads capacities without conversions; rows `0` and `h + 2` and
     /// column `w + 1` are not faces. Ties go to the smaller face index, so the result is
     /// deterministic.
-    fn dual_path(&self, arcs: &Arcs) -> (f64, Vec<u8>) {
+    fn dual_path(&self, arcs: &Arcs) -> Option<(f64, Vec<u8>)> {
         let (h, w, pw) = (self.h, self.w, self.pw);
         let nf = (h + 3) * pw;
         let mut state = vec![OPEN; nf];
@@ -273,7 +275,12 @@ impl GridGraph {
         let cap = &self.cap;
         let steps = [1isize, pw as isize, -1, -(pw as isize)];
         let mut target = usize::MAX;
+        let mut pops = 0u32;
         while let Some(Reverse((key, g))) = heap.pop() {
+            pops = pops.wrapping_add(1);
+            if pops % 4096 == 0 && cancel::cancelled() {
+                return None;
+            }
             let g = g as usize;
             let d = f64::from_bits(key);
             if state[g] == DONE || d > dist[g] {
@@ -323,7 +330,7 @@ impl GridGraph {
             cut[b] |= 1 << db;
             g = f;
         }
-        (dist[target], cut)
+        Some((dist[target], cut))
     }
 }
 

@@ -60,7 +60,8 @@ mod tests {
             scale,
             1e-10,
             100,
-        );
+        )
+        .unwrap();
         assert!(
             it.residual <= 1e-10 && it.iterations <= 20,
             "{}",

@@ -16,6 +16,7 @@ use std::ops::{Add, AddAssign, Mul, Sub, SubAssign};
 use rayon::prelude::*;
 
 use super::bands::{bands, sum_lanes, BAND, PARALLEL_CELLS};
+use crate::{cancel, Result};
 
 /// The working precision of the vectors of a solve: `f32` or `f64`.
 pub(crate) trait Real:
@@ -94,7 +95,8 @@ pub(crate) struct Solution<const L: usize> {
 }
 
 /// Solves `A x = b` (vectors of grid rows `w` long) until every lane's residual is at most
-/// `tol · scale[c]` or `max_iterations` iterations have run.
+/// `tol · scale[c]` or `max_iterations` iterations have run; `Err(Error::Cancelled)` once the
+/// thread's work is cancelled (checked once per iteration).
 ///
 /// The update of `x` by an iteration's step is deferred to the pass that updates the search
 /// direction of the next one (the same arithmetic, one pass over the vectors less).
@@ -106,7 +108,7 @@ pub(crate) fn pcg<T: Real, const L: usize>(
     scale: [f64; L],
     tol: f64,
     max_iterations: usize,
-) -> Solution<L> {
+) -> Result<Solution<L>> {
     let n = b.len();
     let mut r: Vec<[T; L]> = b.iter().map(|v| v.map(T::of_f64)).collect();
     let mut z = vec![[T::ZERO; L]; n];
@@ -148,6 +150,7 @@ pub(crate) fn pcg<T: Real, const L: usize>(
             });
             rr = update_residual(&mut r, &q, w, alpha.map(T::of_f64));
             it += 1;
+            cancel::check()?;
             if done(rr) || it >= max_iterations {
                 step(&mut x, &mut p, &z, w, alpha, None);
                 break;
@@ -165,11 +168,11 @@ pub(crate) fn pcg<T: Real, const L: usize>(
         }
     }
     let residual = (0..L).map(|c| rr[c].sqrt() / scale[c]).fold(0.0, f64::max);
-    Solution {
+    Ok(Solution {
         x,
         iterations: it,
         residual,
-    }
+    })
 }
 
 /// `‖b‖²` per lane, summed over bands of rows `w` long.

@@ -443,6 +443,7 @@ fn window(
         graph.set_edges("edges", &edges, EdgeLayout::Directed)?;
         graph.set_terminals(&src, &snk)?;
         graph.maxflow();
+        crate::cancel::check()?;
         let side = graph.sink_side().expect("solved");
         for y in y1..y2 {
             for x in x1..x2 {
