@@ -99,3 +99,15 @@ def test_api_errors_name_the_flags_not_the_python_parameters(tmp_path, exemplar_
     assert "--size: required unless --labels-out is given" in err
     err = _cli_error(tmp_path, "synthesize", exemplar_png, "--size", "8", "--out", exemplar_png)
     assert "--force" in err and "overwrite=True" not in err and "--out:" in err
+
+
+@pytest.mark.parametrize("cmd", [["synthesize", "{ex}"], ["bark", "{ex}"]])
+@pytest.mark.parametrize("size", [["--size", "-5x5"], ["--size=-5x5"], ["--size", "-5"]])
+def test_negative_size_is_named_not_taken_for_an_option(tmp_path, exemplar_png, cmd, size):
+    argv = [a.format(ex=exemplar_png) for a in cmd] + size + ["--out", str(tmp_path / "o.png"), "-q"]
+    r = subprocess.run([sys.executable, "-m", "phloem.cli", *argv], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    last = r.stderr.strip().splitlines()[-1]  # argparse puts its usage lines above the one error line
+    assert "--size: expected WxH or N with positive integers" in last and "'-5" in last, r.stderr
+    assert "expected one argument" not in r.stderr
+    assert not (tmp_path / "o.png").exists()

@@ -14,6 +14,7 @@ import sys
 from collections.abc import Sequence
 
 from .. import io
+from ._common import join_negative_values
 from .parser import build_parser
 
 __all__ = ["build_parser", "main"]
@@ -70,7 +71,7 @@ def _in_flags(message: str, ap: argparse.ArgumentParser, args: argparse.Namespac
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``phloem`` command; returns the exit status."""
     ap = build_parser()
-    args = ap.parse_args(argv)
+    args = ap.parse_args(join_negative_values(sys.argv[1:] if argv is None else argv))
     try:
         args.func(args)
     except (ValueError, TypeError, FileExistsError, FileNotFoundError, io.ImageReadError) as e:
