@@ -78,3 +78,36 @@ def test_every_size_flag_takes_n(capsys):
                     assert a.type("48") in ((48, 48), 48), label
                     seen.append(label)
     assert {"synthesize", "quilt", "bark", "trees", "demo", "branching grow", "branching run"} <= set(seen)
+
+
+def _cli_error(tmp_path, *argv):
+    """Run the command in a subprocess; it must fail with exit 2 and one stderr line, no traceback."""
+    r = subprocess.run([sys.executable, "-m", "phloem.cli", *map(str, argv)], capture_output=True, text=True,
+                       timeout=120, cwd=tmp_path)  # fmt: skip
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    return r.stderr
+
+
+def test_api_errors_name_the_flags_not_the_python_parameters(tmp_path, exemplar_png):
+    out = tmp_path / "o.png"
+    err = _cli_error(tmp_path, "bark", exemplar_png, "--size", "64", "--n-labels", "200", "--out", out, "-q")
+    assert "--n-labels:" in err and " k:" not in err and " labels:" not in err
+    err = _cli_error(tmp_path, "bark", tmp_path / "missing.png", "--size", "64", "--out", out)
+    assert "error: IN:" in err and "path:" not in err
+    err = _cli_error(tmp_path, "bark", exemplar_png, "--out", out)
+    assert "--size: required unless --labels-out is given" in err
+    err = _cli_error(tmp_path, "synthesize", exemplar_png, "--size", "8", "--out", exemplar_png)
+    assert "--force" in err and "overwrite=True" not in err and "--out:" in err
+
+
+@pytest.mark.parametrize("cmd", [["synthesize", "{ex}"], ["bark", "{ex}"]])
+@pytest.mark.parametrize("size", [["--size", "-5x5"], ["--size=-5x5"], ["--size", "-5"]])
+def test_negative_size_is_named_not_taken_for_an_option(tmp_path, exemplar_png, cmd, size):
+    argv = [a.format(ex=exemplar_png) for a in cmd] + size + ["--out", str(tmp_path / "o.png"), "-q"]
+    r = subprocess.run([sys.executable, "-m", "phloem.cli", *argv], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    last = r.stderr.strip().splitlines()[-1]  # argparse puts its usage lines above the one error line
+    assert "--size: expected WxH or N with positive integers" in last and "'-5" in last, r.stderr
+    assert "expected one argument" not in r.stderr
+    assert not (tmp_path / "o.png").exists()

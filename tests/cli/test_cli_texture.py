@@ -71,10 +71,10 @@ def test_complete_from_mask_file(tmp_path, bark):
     [
         (["synthesize", "{ex}", "--size", "32x32", "--out", "{tmp}/o.bmp"], "extension"),
         (["synthesize", "{tmp}/missing.png", "--size", "32x32", "--out", "{tmp}/o.png"], "no such file"),
-        (["synthesize", "{ex}", "--size", "32x32", "--out", "{tmp}/o.png", "--patch-size", "4"], "patch_size"),
+        (["synthesize", "{ex}", "--size", "32x32", "--out", "{tmp}/o.png", "--patch-size", "4"], "--patch-size"),
         (["synthesize", "{ex}", "--size", "32x32", "--out", "{tmp}/o.png", "--max-pixels", "100"], "over the limit"),
-        (["complete", "{ex}", "{white}", "--out", "{tmp}/o.png"], "mask"),
-        (["complete", "{ex}", "{small}", "--out", "{tmp}/o.png"], "mask"),
+        (["complete", "{ex}", "{white}", "--out", "{tmp}/o.png"], "MASK"),
+        (["complete", "{ex}", "{small}", "--out", "{tmp}/o.png"], "MASK"),
     ],
 )
 def test_errors_are_clean_and_write_nothing(tmp_path, exemplar_png, capsys, args, message):

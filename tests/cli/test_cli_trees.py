@@ -88,7 +88,7 @@ def test_trees_bad_library_is_a_clean_error(tmp_path, capsys):
     assert (
         main(["trees", str(one), "--n-variations", "1", "--out-dir", str(tmp_path / "o2"), "--size", "96", "-q"]) == 2
     )
-    assert "library: has 1 tree(s) but n_sources=2" in capsys.readouterr().err
+    assert "LIBRARY: has 1 tree(s) but --n-sources=2" in capsys.readouterr().err
     assert not list((tmp_path / "o2").glob("*.png"))
 
 

@@ -26,12 +26,32 @@ def parse_size(text: str) -> tuple[int, int]:
         parts = []
     if len(parts) == 1:
         parts *= 2
-    if len(parts) != 2:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 512x384, or N for NxN, got {text!r}")
+    if len(parts) != 2 or min(parts) < 1:
+        raise argparse.ArgumentTypeError(
+            f"expected WxH or N with positive integers (WIDTHxHEIGHT such as 512x384, or N for NxN), got {text!r}"
+        )
     w, h = parts
-    if w < 1 or h < 1:
-        raise argparse.ArgumentTypeError(f"expected positive sizes, got {text!r}")
     return h, w
+
+
+def join_negative_values(argv: Sequence[str], flags: Sequence[str] = ("--size",)) -> list[str]:
+    """``--size -5x5`` as ``--size=-5x5``: argparse takes a value that starts with ``-`` and is no
+    plain negative number for an option and says "expected one argument"; joined, it reaches the
+    size type, which names what is wrong with it."""
+    out: list[str] = []
+    it = iter(argv)
+    for a in it:
+        if a in flags:
+            v = next(it, None)
+            if v is not None and v[:1] == "-" and v[1:2].isdigit():
+                out.append(f"{a}={v}")
+                continue
+            out.append(a)
+            if v is not None:
+                out.append(v)
+            continue
+        out.append(a)
+    return out
 
 
 def parse_square_size(text: str) -> int:
