@@ -40,8 +40,9 @@ def test_bad_size_is_a_usage_error(capsys):
     assert e.value.code == 2 and "WIDTHxHEIGHT" in capsys.readouterr().err
 
 
-def test_console_script_is_installed(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "phloem.cli", "--version"], capture_output=True, text=True, check=True)
+@pytest.mark.parametrize("module", ["phloem.cli", "phloem"])
+def test_python_dash_m_runs_the_command(module):
+    r = subprocess.run([sys.executable, "-m", module, "--version"], capture_output=True, text=True, check=True)
     assert r.stdout.startswith("phloem ")
 
 
