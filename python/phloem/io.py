@@ -11,13 +11,15 @@ file unless asked.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
 import re
 import struct
+import threading
 import warnings
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import IO, Any
 
@@ -226,6 +228,44 @@ def _orient(img: NDArray[Any], orientation: int) -> NDArray[Any]:
     return np.rot90(img, turns) if turns else img
 
 
+_stderr_lock = threading.Lock()
+_stderr_users = 0
+_stderr_saved = -1
+
+
+@contextlib.contextmanager
+def _c_stderr_dropped() -> Iterator[None]:
+    """Send file descriptor 2 to the null device while C decoders run.
+
+    libpng, libjpeg, libtiff and OpenCV print their own lines ("libpng error: Not enough
+    image data", "[ERROR:0@...] imdecode_ ...") straight to it; a failed decode raises our
+    one-line ImageReadError instead. Counted, so threads reading at the same time (the
+    decoders release the GIL) share one redirection and the last one restores it.
+    """
+    global _stderr_users, _stderr_saved
+    with _stderr_lock:
+        if _stderr_users == 0:
+            try:
+                saved = os.dup(2)
+            except OSError:  # no stderr at all: nothing to keep quiet
+                saved = -1
+            if saved >= 0:
+                null = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(null, 2)
+                os.close(null)
+            _stderr_saved = saved
+        _stderr_users += 1
+    try:
+        yield
+    finally:
+        with _stderr_lock:
+            _stderr_users -= 1
+            if _stderr_users == 0 and _stderr_saved >= 0:
+                os.dup2(_stderr_saved, 2)
+                os.close(_stderr_saved)
+                _stderr_saved = -1
+
+
 def _to_unit(img: NDArray[Any], path: Path) -> NDArray[np.float32]:
     """Samples as float32 in [0, 1]: integers by their range, floats as described in read_image."""
     out: NDArray[np.float32] = img.astype(np.float32)
@@ -300,14 +340,11 @@ def read_image(path: str | os.PathLike[str], *, max_pixels: int = DEFAULT_MAX_PI
         raise ImageReadError(f"path: {p} is a truncated JPEG (the data ends before the end-of-image marker)")
     if w * h > _CV2_MAX_PIXELS:
         raise ImageReadError(f"path: {p} is {w}×{h} = {w * h} pixels; the decoder (OpenCV) reads at most 2**30")
-    level = cv2.utils.logging.getLogLevel()
-    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)  # its "[ERROR:0] ..." lines
-    try:
-        img = cv2.imdecode(raw, cv2.IMREAD_UNCHANGED)
-    except cv2.error:
-        img = None
-    finally:
-        cv2.utils.logging.setLogLevel(level)
+    with _c_stderr_dropped():
+        try:
+            img = cv2.imdecode(raw, cv2.IMREAD_UNCHANGED)
+        except cv2.error:
+            img = None
     if img is None or img.shape[0] != h or img.shape[1] != w:
         raise ImageReadError(f"path: {p} could not be decoded as a {fmt} image (corrupt or truncated)")
     out = _to_unit(img, p)
