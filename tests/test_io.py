@@ -309,6 +309,15 @@ def test_jpeg_exif_orientation_is_applied(tmp_path, orientation):
     assert np.abs(got - pil).max() < 0.1  # different JPEG decoders: close, not equal
 
 
+def test_jpeg_with_damaged_exif_is_read_without_a_warning(tmp_path):
+    Image.fromarray(np.full((8, 8, 3), 200, np.uint8)).save(
+        tmp_path / "e.jpg", exif=b"Exif\x00\x00MM\x00*\x00\x00\x00\x08\xff\xff"
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert read_image(tmp_path / "e.jpg").shape == (8, 8, 3)
+
+
 def _orient_like_pil(plain: np.ndarray, orientation: int) -> np.ndarray:
     im = Image.fromarray((plain * 255).round().astype(np.uint8))
     transpose = {2: 0, 3: 3, 4: 1, 5: 5, 6: 4, 7: 6, 8: 2}.get(orientation)

@@ -88,15 +88,25 @@ def _pillow_header(fp: IO[bytes], fmt: str) -> tuple[int, int, int]:
         "JPEG": JpegImagePlugin.jpeg_factory,
         "WEBP": WebPImagePlugin.WebPImageFile,
     }[fmt]
-    im = factory(fp)
-    try:
-        w, h = im.size
-        orientation = int(im.getexif().get(0x0112, 1)) if fmt != "PNG" else 1
-        if fmt == "PNG":
-            im.verify()  # chunk CRCs: catches corruption and truncation without decoding
-    finally:
-        im.close()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # "Corrupt EXIF data ...": Pillow's two lines; the pixels are fine
+        im = factory(fp)
+        try:
+            w, h = im.size
+            orientation = _exif_orientation(im) if fmt != "PNG" else 1
+            if fmt == "PNG":
+                im.verify()  # chunk CRCs: catches corruption and truncation without decoding
+        finally:
+            im.close()
     return w, h, orientation
+
+
+def _exif_orientation(im: _PILImage.Image) -> int:
+    """The EXIF orientation tag; 1 when absent or when the EXIF block is damaged (the pixels are fine)."""
+    try:
+        return int(im.getexif().get(0x0112, 1))
+    except Exception:  # Pillow's EXIF parser raises many kinds on damaged blocks
+        return 1
 
 
 def _tiff_header(fp: IO[bytes]) -> tuple[int, int, int, bool]:
