@@ -27,6 +27,14 @@ __all__ = [
 ]
 
 
+def _array(value: Any, name: str) -> NDArray[Any]:
+    """``np.asarray(value)``, with numpy's own errors (ragged nesting, odd objects) as ours."""
+    try:
+        return np.asarray(value)
+    except (ValueError, TypeError, OverflowError):
+        raise TypeError(f"{name}: expected an array of numbers, got a ragged or mixed {type(value).__name__}") from None
+
+
 def as_image(image: Any, name: str, *, finite: bool = True) -> NDArray[np.float32]:
     """Return ``image`` as a C-contiguous ``(H, W, C)`` float32 array.
 
@@ -35,17 +43,17 @@ def as_image(image: Any, name: str, *, finite: bool = True) -> NDArray[np.float3
     dimensions, empty axes and (unless ``finite=False``, for callees that check while they
     read the values anyway) non-finite values.
     """
-    arr = np.asarray(image)
+    arr = _array(image, name)
     if arr.dtype == np.bool_ or not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
         raise TypeError(f"{name}: expected a real-valued image array, got dtype {arr.dtype}")
     if np.issubdtype(arr.dtype, np.integer) and arr.dtype not in (np.uint8, np.uint16):
         raise TypeError(f"{name}: expected dtype uint8, uint16 or float, got {arr.dtype}")
-    if arr.ndim == 2:
-        arr = arr[:, :, None]
-    elif arr.ndim != 3:
+    if arr.ndim not in (2, 3):
         raise ValueError(f"{name}: expected shape (H, W) or (H, W, C), got {arr.shape}")
     if 0 in arr.shape:
         raise ValueError(f"{name}: expected a non-empty image, got shape {arr.shape}")
+    if arr.ndim == 2:
+        arr = arr[:, :, None]
     if np.issubdtype(arr.dtype, np.integer):
         info = np.iinfo(arr.dtype)
         out = arr.astype(np.float32) / np.float32(info.max)
@@ -65,7 +73,7 @@ def restore_ndim(out: NDArray[np.float32], like: Any) -> NDArray[np.float32]:
 
 def as_labels(labels: Any, name: str) -> NDArray[np.int32]:
     """Return ``labels`` as a C-contiguous ``(H, W)`` int32 label map."""
-    arr = np.asarray(labels)
+    arr = _array(labels, name)
     if arr.ndim == 3 and arr.shape[2] == 1:
         arr = arr[:, :, 0]
     if arr.ndim != 2:
@@ -87,7 +95,7 @@ def as_mask(mask: Any, name: str, shape: tuple[int, int]) -> NDArray[np.bool_]:
     Accepts bool arrays and integer or float arrays of 0 and 1 (any non-zero counts as set).
     A trailing channel axis of length 1 is dropped.
     """
-    arr = np.asarray(mask)
+    arr = _array(mask, name)
     if arr.ndim == 3 and arr.shape[2] == 1:
         arr = arr[:, :, 0]
     if arr.ndim != 2:
@@ -174,7 +182,7 @@ def check_size(size: Any, name: str = "size") -> tuple[int, int]:
 
 def check_convex_weights(weights: Any, count: int, name: str = "weights") -> NDArray[np.float64]:
     """``count`` real, finite, non-negative weights summing to 1 (within 1e-6), as float64."""
-    arr = np.asarray(weights)
+    arr = _array(weights, name)
     if arr.dtype == np.bool_ or not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
         raise TypeError(f"{name}: expected real numbers, got dtype {arr.dtype}")
     if arr.shape != (count,):

@@ -1,30 +1,41 @@
 """Reading and writing images and result sidecars.
 
 Images are read as float32 arrays in [0, 1] — ``(H, W)`` gray or ``(H, W, C)`` RGB / RGBA in
-that channel order — from 8- and 16-bit PNG, JPEG and TIFF files. The image size is read from
-the file header and checked against a pixel limit *before* any pixel is decoded, so a
-decompression bomb costs nothing. Writes are atomic (a temporary file in the same folder, then
-a rename) and never replace an existing file unless asked.
+that channel order — from 8- and 16-bit PNG, JPEG, TIFF and WebP files and from float TIFFs
+(see :func:`read_image` for how float values are mapped). The image size is read from the file
+header and checked against one pixel limit, ours, *before* any pixel is decoded, so a
+decompression bomb costs nothing. EXIF orientation is applied, so photos read upright. Writes
+are atomic (a temporary file in the same folder, then a rename) and never replace an existing
+file unless asked.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import os
-from collections.abc import Mapping
+import re
+import struct
+import threading
+import warnings
+from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 from PIL import Image as _PILImage
+from PIL import JpegImagePlugin, PngImagePlugin, WebPImagePlugin
 
 from ._files import atomic_write, check_target, encode
 
 __all__ = [
     "DEFAULT_MAX_PIXELS",
+    "IMAGE_SUFFIXES",
     "ImageReadError",
+    "RescaledImageWarning",
     "read_image",
     "sidecar_path",
     "write_image",
@@ -35,45 +46,281 @@ __all__ = [
 #: pixels, about 16k × 16k, or 1 GiB as float32 RGB.
 DEFAULT_MAX_PIXELS = 2**28
 
+#: File name endings of the formats :func:`read_image` reads (it goes by the content, not the
+#: name; folder readers such as :meth:`phloem.trees.Library.load` collect these).
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".webp")
+
+# OpenCV refuses to decode more pixels than this (its CV_IO_MAX_IMAGE_PIXELS default).
+_CV2_MAX_PIXELS = 2**30
+
 
 class ImageReadError(ValueError):
     """A file could not be read as an image (missing, corrupt, truncated or too large)."""
 
 
-def _header(path: Path, max_pixels: int) -> tuple[str, int, int]:
-    try:
-        with _PILImage.open(path) as im:
-            fmt, (w, h) = im.format or "?", im.size
+class RescaledImageWarning(UserWarning):
+    """A float image had values outside [0, 1] and was rescaled from its min..max to [0, 1]."""
+
+
+def _format(prefix: bytes) -> str | None:
+    """The format of a file from its first bytes, for the formats we read; None for others."""
+    if prefix.startswith(b"\x89PNG\r\n\x1a\n"):
+        return "PNG"
+    if prefix.startswith(b"\xff\xd8\xff"):
+        return "JPEG"
+    if prefix[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):  # classic and BigTIFF
+        return "TIFF"
+    if prefix[:4] == b"RIFF" and prefix[8:12] == b"WEBP":
+        return "WEBP"
+    return None
+
+
+def _pillow_header(fp: IO[bytes], fmt: str) -> tuple[int, int, int]:
+    """Width, height and EXIF orientation from Pillow's format plugin.
+
+    The plugin classes are used directly, not ``Image.open``: that applies Pillow's own
+    decompression-bomb ceiling (a warning above 89 Mpx, an error above 179 Mpx) that is not
+    ours and that ``max_pixels`` could not raise, and changing ``Image.MAX_IMAGE_PIXELS``
+    instead would change it for the user's own Pillow calls too.
+    """
+    factory = {
+        "PNG": PngImagePlugin.PngImageFile,
+        "JPEG": JpegImagePlugin.jpeg_factory,
+        "WEBP": WebPImagePlugin.WebPImageFile,
+    }[fmt]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # "Corrupt EXIF data ...": Pillow's two lines; the pixels are fine
+        im = factory(fp)
+        try:
+            w, h = im.size
+            orientation = _exif_orientation(im) if fmt != "PNG" else 1
             if fmt == "PNG":
                 im.verify()  # chunk CRCs: catches corruption and truncation without decoding
+        finally:
+            im.close()
+    return w, h, orientation
+
+
+def _exif_orientation(im: _PILImage.Image) -> int:
+    """The EXIF orientation tag; 1 when absent or when the EXIF block is damaged (the pixels are fine)."""
+    try:
+        return int(im.getexif().get(0x0112, 1))
+    except Exception:  # Pillow's EXIF parser raises many kinds on damaged blocks
+        return 1
+
+
+def _tiff_header(fp: IO[bytes]) -> tuple[int, int, int, bool]:
+    """Width, height, orientation and "is white-is-zero" of a TIFF's first page (no pixel read).
+
+    Pillow cannot open float RGB(A) TIFFs at all, which OpenCV decodes; tifffile (a
+    dependency of scikit-image) reads the tags of any of them. Layouts that OpenCV decodes
+    wrongly without a word (gray + alpha becomes 8-bit gray, CMYK comes back as BGRA, planar
+    float and float16 are garbage or refused) are refused here with a message instead.
+    """
+    import tifffile
+
+    log = logging.getLogger("tifffile")
+    level = log.level
+    log.setLevel(logging.CRITICAL)  # it logs damage to stderr ("contains no pages"); we raise instead
+    try:
+        tf = tifffile.TiffFile(fp)
+    finally:
+        log.setLevel(level)
+    with tf:
+        if not len(tf.pages):
+            raise ImageReadError(f"path: {fp.name} is a TIFF without any image in it")
+        page = tf.pages.first
+        photometric, spp = int(page.photometric), int(page.samplesperpixel)
+        is_float = int(page.sampleformat) == 3
+        layout = None
+        if photometric not in (0, 1, 2, 3, 6):  # white/black-is-zero, RGB, palette, YCbCr
+            layout = f"photometric {getattr(page.photometric, 'name', photometric)}"
+        elif photometric in (0, 1) and spp != 1:
+            layout = f"{spp} samples per gray pixel (gray + alpha)"
+        elif is_float and int(page.bitspersample) not in (32, 64):
+            layout = f"{page.bitspersample}-bit float samples"
+        elif is_float and spp > 1 and int(page.planarconfig) != 1:
+            layout = "float samples in separate planes"
+        if layout is not None:
+            raise ImageReadError(
+                f"path: {fp.name} is a TIFF with {layout}; expected gray, RGB or RGBA with 8- or"
+                " 16-bit integer or 32-/64-bit float samples"
+            )
+        tag = page.tags.get(274)  # Orientation
+        orientation = int(tag.value) if tag is not None else 1
+        return int(page.imagewidth), int(page.imagelength), orientation, photometric == 0
+
+
+def _header(path: Path, max_pixels: int) -> tuple[str, int, int, int, bool]:
+    """Format, width, height, EXIF orientation (1–8) and whether 0 is white; pixel limit checked."""
+    try:
+        with open(path, "rb") as fp:
+            fmt = _format(fp.read(16))
+            fp.seek(0)
+            if fmt is None:
+                raise ImageReadError(f"path: {path} is {_other_format(path)}; expected PNG, JPEG, TIFF or WebP")
+            w, h, orientation, inverted = _tiff_header(fp) if fmt == "TIFF" else (*_pillow_header(fp, fmt), False)
     except FileNotFoundError:
         raise ImageReadError(f"path: no such file: {path}") from None
     except IsADirectoryError:
         raise ImageReadError(f"path: {path} is a folder, not an image file") from None
-    except _PILImage.DecompressionBombError:
-        raise ImageReadError(f"path: {path} exceeds the pixel limit of {max_pixels} pixels") from None
-    except (OSError, SyntaxError, ValueError) as e:
-        raise ImageReadError(f"path: {path} is not a readable PNG, JPEG or TIFF image ({e})") from None
-    if fmt not in ("PNG", "JPEG", "TIFF", "MPO"):
-        raise ImageReadError(f"path: {path} is a {fmt} file; expected PNG, JPEG or TIFF")
+    except PermissionError:
+        raise ImageReadError(f"path: {path} cannot be read (permission denied)") from None
+    except ImageReadError:
+        raise
+    except (OSError, SyntaxError, ValueError, struct.error, IndexError, KeyError, TypeError, EOFError) as e:
+        why = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise ImageReadError(f"path: {path} is not a readable {fmt} image ({why})") from None
     if w * h > max_pixels:
         raise ImageReadError(
             f"path: {path} is {w}×{h} = {w * h} pixels, over the limit of {max_pixels}"
             " (pass a larger max_pixels / --max-pixels if you trust this file)"
         )
-    return fmt, w, h
+    return str(fmt), w, h, orientation if 1 <= orientation <= 8 else 1, inverted
+
+
+def _other_format(path: Path) -> str:
+    """What a file we do not read is, for the message: 'a BMP file' or 'not an image'."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # Pillow's bomb warning: we only want the name
+            with _PILImage.open(path) as im:
+                return f"a {im.format} file"
+    except Exception:  # anything Pillow cannot identify is "not an image" to us
+        return "not a readable image"
+
+
+# In a scan's entropy-coded data, 0xFF is followed by 0x00 (a stuffed byte) or by a restart
+# marker 0xD0–0xD7; any other byte after 0xFF is the marker that ends the scan.
+_SCAN_END = re.compile(rb"\xff[^\x00\xd0-\xd7\xff]")
+
+
+def _jpeg_complete(data: memoryview) -> bool:
+    """Whether a JPEG stream reaches its end-of-image marker.
+
+    Walks the marker segments by their lengths and each scan to the marker that ends it, so
+    an EOI inside an EXIF thumbnail does not count and bytes after the real EOI (thumbnails,
+    MPF images, padding that cameras write) do not matter.
+    """
+    n, pos = len(data), 2  # after SOI
+    while pos + 1 < n:
+        if data[pos] != 0xFF:  # extraneous bytes between segments: libjpeg skips them too
+            nxt = bytes(data[pos:]).find(b"\xff")
+            if nxt < 0:
+                return False
+            pos += nxt
+            continue
+        marker = data[pos + 1]
+        if marker == 0xD9:
+            return True
+        if marker == 0xFF:  # fill byte
+            pos += 1
+            continue
+        if 0xD0 <= marker <= 0xD7 or marker == 0x01:  # standalone markers
+            pos += 2
+            continue
+        if pos + 4 > n:
+            return False
+        pos += 2 + int.from_bytes(data[pos + 2 : pos + 4], "big")
+        if marker == 0xDA:  # start of scan: the entropy-coded data runs to the next marker
+            hit = _SCAN_END.search(data, pos)
+            if hit is None:
+                return False
+            pos = hit.start()
+    return False
+
+
+def _orient(img: NDArray[Any], orientation: int) -> NDArray[Any]:
+    """Apply an EXIF orientation (1–8) as Pillow's ``ImageOps.exif_transpose`` does."""
+    if orientation in (2, 4, 5, 7):  # the mirrored ones: mirror first, then rotate as 1, 3, 6, 8
+        img = img[:, ::-1]
+    turns = {1: 0, 2: 0, 3: 2, 4: 2, 5: 1, 6: -1, 7: -1, 8: 1}[orientation]
+    return np.rot90(img, turns) if turns else img
+
+
+_stderr_lock = threading.Lock()
+_stderr_users = 0
+_stderr_saved = -1
+
+
+@contextlib.contextmanager
+def _c_stderr_dropped() -> Iterator[None]:
+    """Send file descriptor 2 to the null device while C decoders run.
+
+    libpng, libjpeg, libtiff and OpenCV print their own lines ("libpng error: Not enough
+    image data", "[ERROR:0@...] imdecode_ ...") straight to it; a failed decode raises our
+    one-line ImageReadError instead. Counted, so threads reading at the same time (the
+    decoders release the GIL) share one redirection and the last one restores it.
+    """
+    global _stderr_users, _stderr_saved
+    with _stderr_lock:
+        if _stderr_users == 0:
+            try:
+                saved = os.dup(2)
+            except OSError:  # no stderr at all: nothing to keep quiet
+                saved = -1
+            if saved >= 0:
+                null = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(null, 2)
+                os.close(null)
+            _stderr_saved = saved
+        _stderr_users += 1
+    try:
+        yield
+    finally:
+        with _stderr_lock:
+            _stderr_users -= 1
+            if _stderr_users == 0 and _stderr_saved >= 0:
+                os.dup2(_stderr_saved, 2)
+                os.close(_stderr_saved)
+                _stderr_saved = -1
+
+
+def _to_unit(img: NDArray[Any], path: Path) -> NDArray[np.float32]:
+    """Samples as float32 in [0, 1]: integers by their range, floats as described in read_image."""
+    out: NDArray[np.float32] = img.astype(np.float32)
+    if img.dtype in (np.uint8, np.uint16):
+        out /= np.float32(255.0 if img.dtype == np.uint8 else 65535.0)
+        return out
+    if not np.issubdtype(img.dtype, np.floating):
+        raise ImageReadError(f"path: {path} has {img.dtype} samples; expected 8- or 16-bit unsigned integers or floats")
+    finite = np.isfinite(out)
+    if not finite.all():
+        raise ImageReadError(
+            f"path: {path} has {int(out.size - np.count_nonzero(finite))} NaN or infinite samples;"
+            " expected finite values"
+        )
+    lo, hi = float(out.min()), float(out.max())
+    if lo < 0.0 or hi > 1.0:
+        warnings.warn(
+            f"{path}: float samples span [{lo:.6g}, {hi:.6g}], outside [0, 1]; rescaled {lo:.6g}..{hi:.6g} to 0..1",
+            RescaledImageWarning,
+            stacklevel=3,
+        )
+        out = (out - np.float32(lo)) / np.float32(hi - lo) if hi > lo else np.zeros_like(out)
+        np.clip(out, 0.0, 1.0, out=out)  # float32 rounding can leave 1 + eps
+    return out
 
 
 def read_image(path: str | os.PathLike[str], *, max_pixels: int = DEFAULT_MAX_PIXELS) -> NDArray[np.float32]:
     """Read an image file as a float32 array in [0, 1].
 
+    The size in the header is checked against ``max_pixels`` before anything is decoded. An
+    EXIF orientation (1–8, as cameras write it) is applied, so the array is upright the way
+    viewers and Pillow's ``ImageOps.exif_transpose`` show it.
+
     Parameters
     ----------
     path : str or path-like
-        A PNG, JPEG or TIFF file with 8 or 16 bits per channel, gray, RGB or RGBA.
+        A PNG, JPEG, TIFF or WebP file, gray, RGB or RGBA. Integer samples must have 8 or 16
+        bits and are divided by 255 or 65535. Float samples (TIFF, 32 or 64 bits) in [0, 1]
+        are taken as they are; a float image with values outside [0, 1] is rescaled from its
+        min..max to [0, 1] (all channels together), with a :class:`RescaledImageWarning`
+        naming the range found. NaN or infinite samples are refused.
     max_pixels : int, optional
-        Refuse images with more pixels than this (default :data:`DEFAULT_MAX_PIXELS`). The
-        size comes from the header, so the check happens before decoding.
+        Refuse images with more pixels than this (default :data:`DEFAULT_MAX_PIXELS`). This
+        is the only limit: Pillow's own decompression-bomb ceiling is not applied. OpenCV,
+        which decodes, stops at 2**30 pixels.
 
     Returns
     -------
@@ -83,7 +330,8 @@ def read_image(path: str | os.PathLike[str], *, max_pixels: int = DEFAULT_MAX_PI
     Raises
     ------
     ImageReadError
-        If the file is missing, not an image, corrupt, truncated or over ``max_pixels``.
+        If the file is missing, not an image, corrupt, truncated, over ``max_pixels`` or has
+        NaN or infinite samples.
 
     Examples
     --------
@@ -96,26 +344,29 @@ def read_image(path: str | os.PathLike[str], *, max_pixels: int = DEFAULT_MAX_PI
     p = Path(path)
     if int(max_pixels) < 1:
         raise ValueError(f"max_pixels: expected a positive pixel count, got {max_pixels}")
-    fmt, w, h = _header(p, int(max_pixels))
+    fmt, w, h, orientation, inverted = _header(p, int(max_pixels))
     raw = np.fromfile(p, dtype=np.uint8)
-    if fmt in ("JPEG", "MPO") and b"\xff\xd9" not in raw[-64:].tobytes():
-        raise ImageReadError(f"path: {p} is a truncated JPEG (no end-of-image marker)")
-    img = cv2.imdecode(raw, cv2.IMREAD_UNCHANGED)
+    if fmt == "JPEG" and not _jpeg_complete(raw.data):
+        raise ImageReadError(f"path: {p} is a truncated JPEG (the data ends before the end-of-image marker)")
+    if w * h > _CV2_MAX_PIXELS:
+        raise ImageReadError(f"path: {p} is {w}×{h} = {w * h} pixels; the decoder (OpenCV) reads at most 2**30")
+    with _c_stderr_dropped():
+        try:
+            img = cv2.imdecode(raw, cv2.IMREAD_UNCHANGED)
+        except cv2.error:
+            img = None
     if img is None or img.shape[0] != h or img.shape[1] != w:
-        raise ImageReadError(f"path: {p} could not be decoded as a {fmt} image")
-    if img.dtype == np.uint8:
-        out = img.astype(np.float32) / 255.0
-    elif img.dtype == np.uint16:
-        out = img.astype(np.float32) / 65535.0
-    elif img.dtype == np.float32:
-        out = img.astype(np.float32)
-    else:
-        raise ImageReadError(f"path: {p} has {img.dtype} samples; expected 8- or 16-bit integers")
+        raise ImageReadError(f"path: {p} could not be decoded as a {fmt} image (corrupt or truncated)")
+    out = _to_unit(img, p)
+    if inverted:  # photometric white-is-zero: OpenCV hands over the stored samples
+        out = np.float32(1.0) - out
     if out.ndim == 3:
         if out.shape[2] == 3:
             out = out[:, :, ::-1]
         elif out.shape[2] == 4:
             out = out[:, :, [2, 1, 0, 3]]
+    if orientation != 1:
+        out = _orient(out, orientation)
     return np.ascontiguousarray(out, dtype=np.float32)
 
 

@@ -39,3 +39,16 @@ def test_library_load_splits_atlases(ragged_tree, tmp_path: Path):
     assert lib.names == ["atlas.png[0]", "atlas.png[1]"]
     whole = trees.Library.load(tmp_path, size=128, atlas="no")
     assert whole.names == ["atlas.png"]
+
+
+def test_library_load_collects_only_what_read_image_reads(ragged_tree, tmp_path: Path):
+    from PIL import Image
+
+    tree = (np.clip(ragged_tree(0), 0, 1) * 255).round().astype(np.uint8)
+    Image.fromarray(tree, "RGBA").save(tmp_path / "a.webp", lossless=True, exact=True)  # read, not refused
+    phloem.io.write_image(tmp_path / "b.png", ragged_tree(1))
+    phloem.io.write_image(tmp_path / "c.jpg", ragged_tree(1)[..., :3])  # no alpha: not collected
+    (tmp_path / "d.bmp").write_bytes(b"BM")  # not an image we read: not collected
+    lib = trees.Library.load(tmp_path, size=128, atlas="no")
+    assert lib.names == ["a.webp", "b.png"]
+    np.testing.assert_allclose(lib[0].image, trees.prepare(tree / np.float32(255), size=128).image)

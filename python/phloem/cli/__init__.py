@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+import warnings
 from collections.abc import Sequence
 
 from .. import io
@@ -72,10 +73,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``phloem`` command; returns the exit status."""
     ap = build_parser()
     args = ap.parse_args(join_negative_values(sys.argv[1:] if argv is None else argv))
+    name = f"{args.command} {args.action}" if getattr(args, "action", None) else args.command
+
+    def one_line(message: Warning | str, *_: object, **__: object) -> None:
+        # a warning (e.g. io.RescaledImageWarning) as one line, not Python's file:line + source
+        print(f"phloem {name}: warning: {message}", file=sys.stderr)
+
     try:
-        args.func(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = one_line
+            args.func(args)
     except (ValueError, TypeError, FileExistsError, FileNotFoundError, io.ImageReadError) as e:
-        name = f"{args.command} {args.action}" if getattr(args, "action", None) else args.command
         print(f"phloem {name}: error: {_in_flags(str(e), ap, args)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -157,7 +157,9 @@ class Library:
             raise ValueError(f"atlas: expected 'auto', 'yes' or 'no', got {atlas!r}")
         folder = Path(path)
         if folder.is_dir():
-            files = sorted(p for p in folder.iterdir() if p.suffix.lower() in {".png", ".tif", ".tiff", ".webp"})
+            # what read_image reads, less JPEG: it has no alpha channel, and trees need one
+            suffixes = set(io.IMAGE_SUFFIXES) - {".jpg", ".jpeg"}
+            files = sorted(p for p in folder.iterdir() if p.suffix.lower() in suffixes)
             if not files:
                 raise ValueError(f"path: {folder} has no PNG, TIFF or WebP images")
         elif folder.is_file():
