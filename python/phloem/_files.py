@@ -49,12 +49,14 @@ class OutputError(OSError):
     """An output file that cannot be written, in one line that names it."""
 
 
-def _oserror(path: Path, e: OSError) -> OutputError:
-    return OutputError(f"out: cannot write {path}: {e.strerror or e}")
+def _oserror(path: Path, e: OSError, what: str = "") -> OutputError:
+    err = OutputError(f"out: cannot write {what or path}: {e.strerror or e}")
+    err.errno = e.errno  # so callers can still tell a full disk (ENOSPC) from a read-only one (EROFS)
+    return err
 
 
 # Hidden temporaries of our own: ``.NAME.PID.XXXXXXXX.tmp`` (mkstemp's 8 random characters). The
-# pid says whether the writer still runs; the older form without it (before 0.x) is matched too.
+# pid says whether the writer still runs; the older pid-less form of earlier versions is matched too.
 _RANDOM = r"[a-z0-9_]{8}"
 #: A temporary whose writer's pid is alive is left alone unless it is this old (s): the pid may
 #: belong to another process by now. Staging writes a file in well under this.
@@ -113,12 +115,19 @@ def remove_stale_temporaries(path: Path) -> list[Path]:
     return removed
 
 
+_PROBE = "phloem-probe"
+
+
 def _probe(folder: Path) -> None:
-    """Create and remove a temporary in ``folder``: read-only folders and file systems fail here."""
+    """Create and remove a temporary in ``folder``: read-only folders and file systems fail here
+    (permission bits alone say nothing to root)."""
+    remove_stale_temporaries(folder / _PROBE)  # a run killed between the two steps
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".phloem-probe.{os.getpid()}.", suffix=".tmp", dir=folder)
+        fd, tmp = tempfile.mkstemp(prefix=f".{_PROBE}.{os.getpid()}.", suffix=".tmp", dir=folder)
     except OSError as e:
-        raise OutputError(f"out: cannot write into folder {folder}: {e.strerror or e}") from None
+        if e.errno == errno.ENOENT:  # /proc: the folder exists but takes no new files
+            e = OSError(e.errno, "it takes no new files")
+        raise _oserror(folder, e, f"into folder {folder}") from None
     os.close(fd)
     os.unlink(tmp)
 

@@ -133,7 +133,7 @@ def test_an_image_is_never_left_without_its_sidecar(tmp_path, monkeypatch):
     assert os.listdir(tmp_path) == []
 
 
-@pytest.mark.parametrize(("folder", "reason"), [("/proc", "No such file or directory"), ("/sys", "Permission denied")])
+@pytest.mark.parametrize(("folder", "reason"), [("/proc", "it takes no new files"), ("/sys", "Permission denied")])
 def test_an_unwritable_folder_is_one_line_before_computing(folder, reason):
     # (We run as root, where chmod does not stop writes: /proc and /sys refuse new files to root too.)
     r = _phloem("demo", "--size", "32", "--out", f"{folder}/o.png", "-q")
@@ -173,6 +173,8 @@ def test_force_onto_a_folder_is_refused_up_front(tmp_path):
         ("branching run", ["branching", "run", str(BRICK), "--out", "{o}/r.png", "--fragment-map", "{o}/r_histograms.png"]),
         ("branching run", ["branching", "run", str(BRICK), "--out", "{o}/r.png", "--fragment-map", "{o}/r.png"]),
         ("branching run", ["branching", "run", str(BRICK), "--out", "{o}/r.png", "--fragment-map", "{o}/../o/r.png"]),
+        ("branching grow", ["branching", "grow", "{skel}", "--out", "{o}/n.json", "--preview", "{o}/p.png",
+                            "--histograms", "{o}/p.png"]),
         ("bark", ["bark", "--size", "32", "--out", "{o}/b.png", "--keep-intermediates",
                   "--cylinder-preview", "{o}/b_labels_out.png"]),
         ("trees", ["trees", "{lib}", "--n-variations", "2", "--out-dir", "{o}", "--sheet", "{o}/tree_0001.png"]),
@@ -185,9 +187,16 @@ def test_two_outputs_of_one_name_are_refused_before_computing(tmp_path, library,
     def never(*a: object, **k: object) -> None:
         raise AssertionError("computed before the output names were checked")
 
-    for mod, fn in ((phloem.branching, "synthesize"), (phloem.bark, "generate"), (phloem.trees.Library, "load")):
+    skel = tmp_path / "s.json"
+    skel.write_text("{}")  # never read: the names are checked first
+    for mod, fn in (
+        (phloem.branching, "synthesize"),
+        (phloem.branching.Skeleton, "load"),
+        (phloem.bark, "generate"),
+        (phloem.trees.Library, "load"),
+    ):
         monkeypatch.setattr(mod, fn, never)
-    status = main([a.format(o=o, lib=library) for a in argv] + ["-q"])
+    status = main([a.format(o=o, lib=library, skel=skel) for a in argv] + ["-q"])
     assert status == 2
     assert "must be different files" in _one_line(capsys.readouterr().err, command)
     assert os.listdir(o) == []
