@@ -5,8 +5,14 @@ Shared by ``phloem.io`` and the command line, which must write several files of 
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import os
+import re
+import secrets
+import stat
 import tempfile
+import time
 from pathlib import Path
 from typing import Any
 
@@ -39,38 +45,289 @@ def umask() -> int:
     return mask
 
 
-def atomic_write(path: Path, data: bytes, overwrite: bool) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+class OutputError(OSError):
+    """An output file that cannot be written, in one line that names it."""
+
+
+def _oserror(path: Path, e: OSError, what: str = "") -> OutputError:
+    err = OutputError(f"out: cannot write {what or path}: {e.strerror or e}")
+    err.errno = e.errno  # so callers can still tell a full disk (ENOSPC) from a read-only one (EROFS)
+    return err
+
+
+# Hidden temporaries of our own: ``.NAME.PID.XXXXXXXX.tmp`` (mkstemp's 8 random characters). The
+# pid says whether the writer still runs; the older pid-less form of earlier versions is matched too.
+_RANDOM = r"[a-z0-9_]{8}"
+#: A temporary whose writer's pid is alive is left alone unless it is this old (s): the pid may
+#: belong to another process by now. Staging writes a file in well under this.
+STALE_AFTER_S = 3600.0
+#: The older form has no pid; a writer of it held its temporary for a fraction of a second.
+STALE_OLD_FORM_AFTER_S = 60.0
+
+
+def _pid_alive(pid: int) -> bool:
     try:
-        # mkstemp makes the file private (0600); an output file gets the usual umask mode.
-        os.chmod(tmp, 0o666 & ~umask())
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        if overwrite:
-            os.replace(tmp, path)
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # EPERM: it exists, owned by someone else
+        return True
+    return True
+
+
+def remove_stale_temporaries(path: Path) -> list[Path]:
+    """Remove hidden temporaries of our own naming for ``path`` that a killed run left behind.
+
+    Only names of the exact form this module makes for this very target are considered, and of
+    those only ones whose writer is gone (pid dead, not ours) or that are older than
+    :data:`STALE_AFTER_S`, so neither a user's file nor a running writer's temporary is touched.
+    """
+    folder = path.parent
+    new_form = re.compile(rf"\.{re.escape(path.name)}\.(\d+)\.{_RANDOM}\.tmp")
+    old_form = re.compile(rf"\.{re.escape(path.name)}\.{_RANDOM}\.tmp")
+    removed: list[Path] = []
+    try:
+        names = [n for n in os.listdir(folder) if n.startswith(f".{path.name}.") and n.endswith(".tmp")]
+    except OSError:
+        return removed
+    now = time.time()
+    for name in names:
+        tmp = folder / name
+        try:
+            st = tmp.lstat()
+        except OSError:
+            continue
+        if not stat.S_ISREG(st.st_mode):
+            continue
+        age = now - st.st_mtime
+        m = new_form.fullmatch(name)
+        if m is not None:
+            pid = int(m.group(1))
+            stale = pid != os.getpid() and (not _pid_alive(pid) or age > STALE_AFTER_S)
         else:
+            stale = old_form.fullmatch(name) is not None and age > STALE_OLD_FORM_AFTER_S
+        if stale:
             try:
-                os.link(tmp, path)  # fails atomically if path exists
-            except FileExistsError:
-                raise FileExistsError(
-                    f"out: {path} already exists (pass overwrite=True / --force to replace it)"
-                ) from None
+                tmp.unlink()
+                removed.append(tmp)
             except OSError:
-                if path.exists():
-                    raise FileExistsError(f"out: {path} already exists (pass overwrite=True / --force)") from None
-                os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+                pass
+    return removed
+
+
+_PROBE = "phloem-probe"
+
+
+def _probe(folder: Path) -> None:
+    """Create and remove a temporary in ``folder``: read-only folders and file systems fail here
+    (permission bits alone say nothing to root)."""
+    remove_stale_temporaries(folder / _PROBE)  # a run killed between the two steps
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{_PROBE}.{os.getpid()}.", suffix=".tmp", dir=folder)
+    except OSError as e:
+        if e.errno == errno.ENOENT:  # /proc: the folder exists but takes no new files
+            e = OSError(e.errno, "it takes no new files")
+        raise _oserror(folder, e, f"into folder {folder}") from None
+    os.close(fd)
+    os.unlink(tmp)
+
+
+def _existing_ancestor(folder: Path) -> Path:
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    return folder
+
+
+# errnos of os.link on file systems without hard links; then os.replace, after an existence check
+_NO_LINKS = {errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EXDEV, errno.EMLINK, errno.ENOSYS}
+
+
+class Transaction:
+    """Several output files written together: all of them or none.
+
+    :meth:`reserve` checks a target before the computation (folder, writability, an existing
+    file or folder, two outputs of one name); :meth:`stage` writes its bytes to a hidden
+    temporary beside it; :meth:`commit` moves every temporary into place, and only then. Any
+    failure in between, or :meth:`rollback`, removes every temporary and every file this
+    transaction had already put in place, and nothing else. Without ``overwrite`` an existing
+    file is never replaced (``os.link`` fails atomically if the name exists); with it, replaced
+    files are kept as hard-link backups until the commit has succeeded, so a failed commit puts
+    them back.
+
+    Use it as a context manager: leaving the block by an exception rolls back.
+    """
+
+    def __init__(self, overwrite: bool = False, *, make_folders: bool = False) -> None:
+        self.overwrite = overwrite
+        self.make_folders = make_folders
+        self._reserved: dict[Path, Path] = {}  # resolved -> as given
+        self._staged: list[tuple[Path, Path]] = []  # (temporary, target)
+        self._created_folders: list[Path] = []
+        self._probed: set[Path] = set()
+        self._committed = False
+        self.notes: list[str] = []
+
+    def __enter__(self) -> Transaction:
+        return self
+
+    def __exit__(self, kind: object, value: object, tb: object) -> None:
+        if not self._committed:
+            self.rollback()
+
+    # -- before the computation -------------------------------------------------------------
+    def reserve(self, path: str | os.PathLike[str]) -> Path:
+        """Check that ``path`` can be written by this transaction; raise the one-line reason if not."""
+        p = Path(path)
+        key = _key(p)
+        if key in self._reserved:
+            raise ValueError(f"out: {p} is named for two outputs of this command; they must be different files")
+        if p.name in ("", ".", ".."):
+            raise ValueError(f"out: expected a file name, got {str(p)!r}")
+        folder = p.parent
+        if folder.exists() and not folder.is_dir():
+            raise ValueError(f"out: {folder} is not a folder")
+        if not folder.exists():
+            if not self.make_folders:
+                raise FileNotFoundError(f"out: folder {folder} does not exist")
+            folder = _existing_ancestor(folder)
+            if not folder.is_dir():
+                raise ValueError(f"out: {folder} is not a folder")
+        if p.is_dir():
+            raise IsADirectoryError(f"out: {p} is a folder; expected a file name")
+        if (p.exists() or p.is_symlink()) and not self.overwrite:
+            raise FileExistsError(f"out: {p} already exists (pass overwrite=True / --force to replace it)")
+        if folder not in self._probed:
+            _probe(folder)
+            self._probed.add(folder)
+        remove_stale_temporaries(p)
+        self._reserved[key] = p
+        return p
+
+    # -- after it ----------------------------------------------------------------------------
+    def _folder(self, folder: Path) -> None:
+        if folder.is_dir() or not self.make_folders:
+            return
+        missing = []
+        f = folder
+        while not f.exists() and f != f.parent:
+            missing.append(f)
+            f = f.parent
+        for f in reversed(missing):
+            os.mkdir(f)
+            self._created_folders.append(f)
+
+    def stage(self, path: str | os.PathLike[str], data: bytes) -> None:
+        """Write ``data`` to a hidden temporary beside ``path``; it takes the name at :meth:`commit`."""
+        p = Path(path)
+        key = _key(p)
+        if key not in self._reserved:
+            self.reserve(p)
+        if any(_key(t) == key for _tmp, t in self._staged):
+            raise ValueError(f"out: {p} is named for two outputs of this command; they must be different files")
+        try:
+            self._folder(p.parent)
+            fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.{os.getpid()}.", suffix=".tmp", dir=p.parent)
+        except OSError as e:
+            raise _oserror(p, e) from None
+        self._staged.append((Path(tmp), p))
+        try:
+            # mkstemp makes the file private (0600); an output file gets the usual umask mode.
+            os.fchmod(fd, 0o666 & ~umask())
+            view = memoryview(data)
+            while view:
+                view = view[os.write(fd, view) :]
+            os.fsync(fd)
+        except OSError as e:
+            raise _oserror(p, e) from None
+        finally:
+            os.close(fd)
+
+    def commit(self) -> None:
+        """Give every staged file its name; on any failure undo what was done and raise."""
+        placed: list[tuple[Path, Path | None]] = []  # (target, backup of the file it replaced)
+        try:
+            for tmp, p in self._staged:
+                placed.append((p, self._place(tmp, p)))
+        except BaseException:
+            for p, backup in reversed(placed):
+                try:
+                    if backup is not None:
+                        os.replace(backup, p)
+                    else:
+                        os.unlink(p)
+                except OSError:
+                    pass
+            self.rollback()
+            raise
+        for _p, backup in placed:
+            if backup is not None:
+                _unlink(backup)
+        for tmp, _p in self._staged:
+            _unlink(tmp)
+        self._staged.clear()
+        self._committed = True
+
+    def _place(self, tmp: Path, p: Path) -> Path | None:
+        if self.overwrite:
+            backup = None
+            if p.is_file() and not p.is_symlink():
+                backup = p.parent / f".{p.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+                try:
+                    os.link(p, backup)
+                except OSError:
+                    backup = None
+            try:
+                os.replace(tmp, p)
+            except OSError as e:
+                if backup is not None:
+                    _unlink(backup)
+                raise _oserror(p, e) from None
+            return backup
+        try:
+            os.link(tmp, p)  # fails atomically if p exists
+        except FileExistsError:
+            raise FileExistsError(f"out: {p} already exists (pass overwrite=True / --force to replace it)") from None
+        except OSError as e:
+            if e.errno not in _NO_LINKS:
+                raise _oserror(p, e) from None
+            if p.exists():
+                raise FileExistsError(f"out: {p} already exists (pass overwrite=True / --force)") from None
+            try:
+                os.replace(tmp, p)
+            except OSError as e2:
+                raise _oserror(p, e2) from None
+        return None
+
+    def rollback(self) -> None:
+        """Remove every temporary, and every folder this transaction made that is still empty."""
+        for tmp, _p in self._staged:
+            _unlink(tmp)
+        self._staged.clear()
+        for f in reversed(self._created_folders):
+            with contextlib.suppress(OSError):
+                os.rmdir(f)
+        self._created_folders.clear()
+
+
+def _key(p: Path) -> Path:
+    """One spelling per file, whether or not it exists yet (``a/../o.png`` is ``o.png``)."""
+    return Path(os.path.abspath(p.parent)).resolve() / p.name
+
+
+def _unlink(path: Path) -> None:
+    with contextlib.suppress(OSError):
+        os.unlink(path)
+
+
+def atomic_write(path: Path, data: bytes, overwrite: bool) -> None:
+    """One file, all or nothing (a :class:`Transaction` of one)."""
+    with Transaction(overwrite) as tx:
+        tx.stage(path, data)
+        tx.commit()
 
 
 def check_target(path: Path, overwrite: bool) -> None:
-    if not path.parent.is_dir():
-        raise FileNotFoundError(f"out: folder {path.parent} does not exist")
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"out: {path} already exists (pass overwrite=True / --force to replace it)")
+    Transaction(overwrite).reserve(path)
 
 
 def encode(path: Path, image: Any, bit_depth: int | None) -> bytes:

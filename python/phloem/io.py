@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from PIL import Image as _PILImage
 from PIL import JpegImagePlugin, PngImagePlugin, WebPImagePlugin
 
-from ._files import atomic_write, check_target, encode
+from ._files import Transaction, encode
 
 __all__ = [
     "DEFAULT_MAX_PIXELS",
@@ -390,14 +390,29 @@ def write_image(
     """
     p = Path(path)
     data = encode(p, image, bit_depth)
-    check_target(p, overwrite)
-    atomic_write(p, data, overwrite)
+    with Transaction(overwrite) as tx:
+        tx.stage(p, data)
+        tx.commit()
 
 
 def sidecar_path(path: str | os.PathLike[str]) -> Path:
     """The JSON sidecar of an output file: ``out.png`` → ``out.png.json``."""
     p = Path(path)
     return p.with_name(p.name + ".json")
+
+
+def _sidecar(path: Path, command: str, parameters: Mapping[str, Any], seed: int | None, default: Any = None) -> bytes:
+    """The bytes of ``path``'s sidecar: parameters, seed and phloem version."""
+    from . import __version__
+
+    meta = {
+        "phloem_version": __version__,
+        "command": command,
+        "seed": seed,
+        "parameters": {k: (str(v) if isinstance(v, os.PathLike) else v) for k, v in parameters.items()},
+        "output": path.name,
+    }
+    return (json.dumps(meta, indent=2, sort_keys=True, default=default) + "\n").encode()
 
 
 def write_result(
@@ -412,23 +427,17 @@ def write_result(
 ) -> Path:
     """Write an output image and its sidecar (parameters, seed, phloem version).
 
-    Both targets are checked before either is written, so a refused overwrite leaves nothing
-    behind. Returns the sidecar's path.
+    Both targets are checked before either is written, and both take their names together, so
+    a refused overwrite or a failed write (a full disk) leaves neither behind. Returns the
+    sidecar's path.
     """
-    from . import __version__
-
     p = Path(path)
     side = sidecar_path(p)
     data = encode(p, image, bit_depth)
-    check_target(p, overwrite)
-    check_target(side, overwrite)
-    meta = {
-        "phloem_version": __version__,
-        "command": command,
-        "seed": seed,
-        "parameters": {k: (str(v) if isinstance(v, os.PathLike) else v) for k, v in parameters.items()},
-        "output": p.name,
-    }
-    atomic_write(p, data, overwrite)
-    atomic_write(side, (json.dumps(meta, indent=2, sort_keys=True) + "\n").encode(), overwrite)
+    with Transaction(overwrite) as tx:
+        tx.reserve(p)
+        tx.reserve(side)
+        tx.stage(p, data)
+        tx.stage(side, _sidecar(p, command, parameters, seed))
+        tx.commit()
     return side

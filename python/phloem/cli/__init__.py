@@ -15,7 +15,7 @@ import warnings
 from collections.abc import Sequence
 
 from .. import io
-from ._common import join_negative_values
+from ._common import join_negative_values, outputs
 from .parser import build_parser
 
 __all__ = ["build_parser", "main"]
@@ -69,6 +69,15 @@ def _in_flags(message: str, ap: argparse.ArgumentParser, args: argparse.Namespac
     return re.sub(r"\b[a-z]+(?:_[a-z]+)+\b", word, message)
 
 
+def _message(e: BaseException) -> str:
+    """One line for an error: ours as they are, the system's (``[Errno 28] ...: 'o.png'``) as
+    ``FILE: reason``."""
+    if isinstance(e, OSError) and e.errno is not None and e.strerror:
+        files = [str(f) for f in (e.filename, e.filename2) if f is not None]
+        return f"{' -> '.join(files)}: {e.strerror}" if files else e.strerror
+    return str(e)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``phloem`` command; returns the exit status."""
     ap = build_parser()
@@ -80,13 +89,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"phloem {name}: warning: {message}", file=sys.stderr)
 
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), outputs(args) as tx:
             warnings.showwarning = one_line
             args.func(args)
-    except (ValueError, TypeError, FileExistsError, FileNotFoundError, io.ImageReadError) as e:
-        print(f"phloem {name}: error: {_in_flags(str(e), ap, args)}", file=sys.stderr)
+            tx.commit()
+    except (ValueError, TypeError, OSError, io.ImageReadError) as e:
+        print(f"phloem {name}: error: {_in_flags(_message(e), ap, args)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"phloem {args.command}: interrupted; nothing was written", file=sys.stderr)
         return 130
+    for note in tx.notes:
+        print(note, file=sys.stderr)
     return 0

@@ -4,9 +4,10 @@ computation, sidecars, the progress bar and deprecated flag spellings."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -130,18 +131,71 @@ def deprecated_alias(
         p.add_argument(old, dest=dest, type=type or str, action=Alias, help=argparse.SUPPRESS)
 
 
+_active: list[_files.Transaction] = []
+
+
+@contextlib.contextmanager
+def outputs(args: argparse.Namespace) -> Iterator[_files.Transaction]:
+    """The transaction of one command's output files: ``main`` opens it around the command and
+    commits it when the command returned, so a failure or Ctrl-C anywhere leaves nothing behind."""
+    with _files.Transaction(getattr(args, "force", False)) as tx:
+        _active.append(tx)
+        try:
+            yield tx
+        finally:
+            _active.pop()
+
+
+def transaction() -> _files.Transaction:
+    """The output transaction of the running command (see :func:`outputs`)."""
+    if not _active:
+        raise RuntimeError("no output transaction: run sub-commands through phloem.cli.main")
+    return _active[-1]
+
+
 def check_writable(path: Path, args: argparse.Namespace) -> None:
     _files.encode(path, np.zeros((1, 1), np.float32), args.bit_depth)  # extension and bit depth
-    _files.check_target(path, args.force)
+    transaction().reserve(path)
 
 
 def preflight(args: argparse.Namespace, extra: Sequence[Path] = ()) -> None:
     """Fail before computing if the output, its sidecar or an ``extra`` file cannot be written."""
     out = Path(args.out)
     check_writable(out, args)
-    _files.check_target(io.sidecar_path(out), args.force)
+    transaction().reserve(io.sidecar_path(out))
     for path in extra:
         check_writable(path, args)
+
+
+def stage(path: str | Path, data: bytes, args: argparse.Namespace, note: str | None = None) -> None:
+    """Write ``data`` to ``path`` when the command has succeeded; ``note`` is printed then."""
+    tx = transaction()
+    tx.stage(Path(path), data)
+    if not getattr(args, "quiet", False):
+        tx.notes.append(note or f"wrote {path}")
+
+
+def stage_image(path: str | Path, image: Any, args: argparse.Namespace, bit_depth: int | None = None) -> None:
+    p = Path(path)
+    stage(p, _files.encode(p, image, args.bit_depth if bit_depth is None else bit_depth), args)
+
+
+def stage_result(
+    path: str | Path,
+    image: Any,
+    args: argparse.Namespace,
+    command: str,
+    parameters: dict[str, Any],
+    quiet: bool = False,
+) -> None:
+    """An image and its sidecar, staged together (see :func:`phloem.io.write_result`)."""
+    p = Path(path)
+    side = io.sidecar_path(p)
+    tx = transaction()
+    tx.stage(p, _files.encode(p, image, args.bit_depth))
+    tx.stage(side, io._sidecar(p, command, parameters, args.seed))
+    if not (quiet or args.quiet):
+        tx.notes.append(f"wrote {p} and {side}")
 
 
 def params(args: argparse.Namespace, skip: Sequence[str] = ()) -> dict[str, Any]:
@@ -162,9 +216,4 @@ def run(label: str, args: argparse.Namespace, work: Callable[[Any], T]) -> T:
 
 
 def save(args: argparse.Namespace, command: str, image: np.ndarray, **extra: Any) -> None:
-    side = io.write_result(
-        args.out, image, command=command, parameters={**params(args), **extra}, seed=args.seed,
-        overwrite=args.force, bit_depth=args.bit_depth,
-    )  # fmt: skip
-    if not args.quiet:
-        print(f"wrote {args.out} and {side}", file=sys.stderr)
+    stage_result(args.out, image, args, command, {**params(args), **extra})

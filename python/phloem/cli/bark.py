@@ -3,12 +3,21 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Any
 
 from .. import bark, data, io, shapes
-from ._common import common_options, deprecated_alias, non_negative, parse_size, positive, preflight, run, save
+from ._common import (
+    common_options,
+    deprecated_alias,
+    non_negative,
+    parse_size,
+    positive,
+    preflight,
+    run,
+    save,
+    stage_image,
+)
 
 
 def _weight(text: str) -> float | None:
@@ -33,9 +42,7 @@ def _targets(args: argparse.Namespace) -> dict[str, Path]:
 
 def _cmd_bark(args: argparse.Namespace) -> None:
     extra = _targets(args)
-    preflight(args, list(extra.values()))
-    if len({Path(args.out).resolve(), *(p.resolve() for p in extra.values())}) != len(extra) + 1:
-        raise ValueError("out: OUT, the intermediate maps and the preview must be different files")
+    preflight(args, list(extra.values()))  # also refuses two outputs of one name
     photo = data.bark() if args.input is None else io.read_image(args.input, max_pixels=args.max_pixels)
     hm = None if args.height_map is None else io.read_image(args.height_map, max_pixels=args.max_pixels)
     if hm is not None and hm.ndim == 3:
@@ -82,9 +89,7 @@ def _cmd_bark(args: argparse.Namespace) -> None:
             img = res.height
         else:
             img = bark.cylinder_preview(res.texture, height=res.height)
-        io.write_image(path, img, overwrite=args.force, bit_depth=16 if role == "height" else args.bit_depth)
-        if not args.quiet:
-            print(f"wrote {path}", file=sys.stderr)
+        stage_image(path, img, args, bit_depth=16 if role == "height" else None)
 
 
 def add_parsers(sub: Any) -> None:

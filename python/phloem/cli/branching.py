@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .. import __version__, _files, branching, io
+from .. import __version__, branching, io
 from ._common import (
     check_writable,
     common_options,
@@ -21,6 +20,9 @@ from ._common import (
     preflight,
     run,
     save,
+    stage,
+    stage_image,
+    transaction,
 )
 
 _TRACE_KINDS = ("auto", "bright", "dark", "mask")
@@ -49,23 +51,19 @@ def _trace_kwargs(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _write_skeleton(path: Path, sk: branching.Skeleton, args: argparse.Namespace, command: str, **extra: Any) -> None:
-    """A skeleton file and its sidecar, both checked before either is written."""
+    """A skeleton file and its sidecar, staged together."""
     side = io.sidecar_path(path)
-    _files.check_target(path, args.force)
-    _files.check_target(side, args.force)
-    sk.save(path, overwrite=args.force)
+    stage(path, sk.to_json().encode("utf-8"), args, note=f"wrote {path} and {side}")
     meta = {"phloem_version": __version__, "command": command, "seed": getattr(args, "seed", None),
             "parameters": {**params(args), **extra}, "output": path.name}  # fmt: skip
-    _files.atomic_write(side, (json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n").encode(), args.force)
-    if not args.quiet:
-        print(f"wrote {path} and {side}", file=sys.stderr)
+    transaction().stage(side, (json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n").encode())
 
 
 def _check_json_target(path: Path, args: argparse.Namespace) -> None:
     if path.suffix.lower() != ".json":
         raise ValueError(f"out: expected a .json file for the skeleton, got {path.name}")
-    _files.check_target(path, args.force)
-    _files.check_target(io.sidecar_path(path), args.force)
+    transaction().reserve(path)
+    transaction().reserve(io.sidecar_path(path))
 
 
 def _cmd_branching_trace(args: argparse.Namespace) -> None:
@@ -79,9 +77,7 @@ def _cmd_branching_trace(args: argparse.Namespace) -> None:
         out, sk, args, "branching trace", branches=len(sk.branches), total_length=round(sk.total_length(), 1)
     )
     if args.overlay is not None:
-        io.write_image(args.overlay, sk.draw(img, width=2), overwrite=args.force, bit_depth=args.bit_depth)
-        if not args.quiet:
-            print(f"wrote {args.overlay}", file=sys.stderr)
+        stage_image(args.overlay, sk.draw(img, width=2), args)
 
 
 def _guide(path: str | None, args: argparse.Namespace) -> Any:
@@ -194,15 +190,9 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     new = run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
     _write_skeleton(out, new, args, "branching grow", h=bend.h, branches=len(new.branches))
     if args.preview is not None:
-        io.write_image(
-            args.preview,
-            new.draw(size=shape, color=(1.0, 1.0, 1.0), width=2),
-            overwrite=args.force,
-            bit_depth=args.bit_depth,
-        )
+        stage_image(args.preview, new.draw(size=shape, color=(1.0, 1.0, 1.0), width=2), args)
     if args.histograms is not None:
-        fig = branching.histogram_figure(source, new, h=bend.h)
-        io.write_image(args.histograms, fig, overwrite=args.force, bit_depth=args.bit_depth)
+        stage_image(args.histograms, branching.histogram_figure(source, new, h=bend.h), args)
 
 
 def _cmd_branching_render(args: argparse.Namespace) -> None:
@@ -220,7 +210,7 @@ def _cmd_branching_render(args: argparse.Namespace) -> None:
     )  # fmt: skip
     save(args, "branching render", res.image)
     if args.fragment_map:
-        io.write_image(args.fragment_map, _fragment_map(res.labels), overwrite=args.force, bit_depth=args.bit_depth)
+        stage_image(args.fragment_map, _fragment_map(res.labels), args)
 
 
 def _branching_run_targets(args: argparse.Namespace) -> dict[str, Path]:
@@ -233,7 +223,7 @@ def _branching_run_targets(args: argparse.Namespace) -> dict[str, Path]:
 
 def _cmd_branching_run(args: argparse.Namespace) -> None:
     files = _branching_run_targets(args)
-    preflight(args, [p for r, p in files.items() if r != "skeleton"])
+    preflight(args, [p for r, p in files.items() if r != "skeleton"])  # also refuses two outputs of one name
     _check_json_target(files["skeleton"], args)
     img = io.read_image(args.input, max_pixels=args.max_pixels)
     source = None if args.skeleton is None else branching.Skeleton.load(args.skeleton)
@@ -249,14 +239,9 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
     save(args, "branching run", res.image, h=res.bending.h, files=written,
           source_branches=len(res.source.branches), target_branches=len(res.target.branches))  # fmt: skip
     _write_skeleton(files["skeleton"], res.target, args, "branching run", h=res.bending.h)
-    fig = branching.histogram_figure(res.source, res.target, h=res.bending.h)
-    io.write_image(files["histograms"], fig, overwrite=args.force, bit_depth=args.bit_depth)
+    stage_image(files["histograms"], branching.histogram_figure(res.source, res.target, h=res.bending.h), args)
     if "fragments" in files:
-        io.write_image(
-            files["fragments"], _fragment_map(res.render.labels), overwrite=args.force, bit_depth=args.bit_depth
-        )
-    if not args.quiet:
-        print(f"wrote {files['histograms']}", file=sys.stderr)
+        stage_image(files["fragments"], _fragment_map(res.render.labels), args)
 
 
 def add_parsers(sub: Any) -> None:

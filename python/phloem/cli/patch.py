@@ -4,22 +4,21 @@ from __future__ import annotations
 
 import argparse
 import io as _pyio
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .. import _files, io, patch
-from ._common import common_options, positive
+from .. import io, patch
+from ._common import common_options, positive, stage, transaction
 
 
 def _cmd_nnf(args: argparse.Namespace) -> None:
     out = Path(args.out)
     if out.suffix.lower() != ".npz":
         raise ValueError(f"out: expected a .npz file for the field, got {out.name}")
-    _files.check_target(out, args.force)
+    transaction().reserve(out)
     src = io.read_image(args.source, max_pixels=args.max_pixels)
     tgt = io.read_image(args.target, max_pixels=args.max_pixels)
     t0 = time.perf_counter()
@@ -29,12 +28,8 @@ def _cmd_nnf(args: argparse.Namespace) -> None:
     )  # fmt: skip
     buf = _pyio.BytesIO()
     np.savez_compressed(buf, field=field, distance=dist)
-    _files.atomic_write(out, buf.getvalue(), args.force)
-    if not args.quiet:
-        print(
-            f"nnf: {time.perf_counter() - t0:.2f} s, mean distance {float(dist.mean()):.4g}; wrote {out}",
-            file=sys.stderr,
-        )
+    note = f"nnf: {time.perf_counter() - t0:.2f} s, mean distance {float(dist.mean()):.4g}; wrote {out}"
+    stage(out, buf.getvalue(), args, note=note)
 
 
 def add_parsers(sub: Any) -> None:

@@ -12,8 +12,19 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .. import _files, io, trees
-from ._common import check_writable, common_options, deprecated_alias, params, parse_square_size, positive, run
+from .. import io, trees
+from ._common import (
+    check_writable,
+    common_options,
+    deprecated_alias,
+    params,
+    parse_square_size,
+    positive,
+    run,
+    stage_image,
+    stage_result,
+    transaction,
+)
 
 
 def _tree_library(args: argparse.Namespace, bar: Any) -> trees.Library:
@@ -32,10 +43,10 @@ def _cmd_trees(args: argparse.Namespace) -> None:
     targets = [out_dir / f"{args.prefix}{i:04d}.png" for i in range(args.n_variations)]
     if out_dir.exists() and not out_dir.is_dir():
         raise ValueError(f"out-dir: {out_dir} exists and is not a folder")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    transaction().make_folders = True  # DIR is made when the trees are written, and removed if that fails
     for t in targets:
         check_writable(t, args)
-        _files.check_target(io.sidecar_path(t), args.force)
+        transaction().reserve(io.sidecar_path(t))
     if args.sheet is not None:
         check_writable(Path(args.sheet), args)
     like = None if args.like is None else io.read_image(args.like, max_pixels=args.max_pixels)
@@ -68,18 +79,13 @@ def _cmd_trees(args: argparse.Namespace) -> None:
         rec = v.describe(lib)
         if like is not None:
             rec["exemplars"] = [str(args.like), *rec["exemplars"]]
-        io.write_result(
-            path, v.image, command="trees",
-            parameters={**params(args), "colors": colors, **rec, "variation_seed": _sub_seed(args.seed, i)},
-            seed=args.seed, overwrite=args.force, bit_depth=args.bit_depth,
-        )  # fmt: skip
+        stage_result(path, v.image, args, "trees", quiet=True,
+                     parameters={**params(args), "colors": colors, **rec, "variation_seed": _sub_seed(args.seed, i)})  # fmt: skip
     if not args.quiet:
-        print(f"wrote {len(targets)} trees (and their .json) to {out_dir}", file=sys.stderr)
+        transaction().notes.append(f"wrote {len(targets)} trees (and their .json) to {out_dir}")
     if args.sheet is not None:
         sheet = run("trees: sheet", args, lambda bar: _tree_sheet(lib, variations, args))
-        io.write_image(args.sheet, sheet, overwrite=args.force, bit_depth=args.bit_depth)
-        if not args.quiet:
-            print(f"wrote {args.sheet}", file=sys.stderr)
+        stage_image(args.sheet, sheet, args)
 
 
 def _sub_seed(seed: int, i: int) -> int:
