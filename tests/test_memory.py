@@ -90,6 +90,12 @@ def _calls(spots, lab, photo, branch, tree_lib, size):
             "size",
             lambda mm: phloem.branching.synthesize(img, src, size=size, max_memory=mm),
         ),
+        "branching.grow": (
+            "size",
+            lambda mm: phloem.branching.grow(
+                phloem.branching.BendingModel.fit(src, h=2.0), size=size, branch_length=20, max_memory=mm
+            ),
+        ),
         "branching.render": ("target_skeleton", lambda mm: phloem.branching.render(img, src, tgt, max_memory=mm)),
         "trees.Library.from_images": (
             "size",
@@ -102,14 +108,14 @@ def _calls(spots, lab, photo, branch, tree_lib, size):
 
 JOBS = [
     "shapes.synthesize", "shapes.synthesize_labels", "bark.synthesize_labels", "bark.generate", "texture.synthesize",
-    "texture.quilt", "texture.by_numbers", "branching.synthesize", "branching.render", "trees.Library.from_images",
+    "texture.quilt", "texture.by_numbers", "branching.synthesize", "branching.grow", "branching.render", "trees.Library.from_images",
     "trees.variation", "trees.vary",
 ]  # fmt: skip
 
 
 @pytest.mark.parametrize("job", [j for j in JOBS if j != "texture.by_numbers"])  # labels_out: an array
 def test_a_huge_request_is_refused_before_it_allocates(job, spots, lab, photo, branch, tree_lib):
-    # 16000² (under max_pixels) needs 8 to 100 GB: refused at once, in one line naming the argument
+    # 16000² (under max_pixels) needs 3 to 100 GB: refused at once under 2 GiB, in one line naming the argument
     name, call = _calls(spots, lab, photo, branch, tree_lib, 16_000)[job]
     if job.startswith("trees.v"):
         call = _calls(spots, lab, photo, branch, tree_lib, 64)[job][1]
@@ -117,10 +123,10 @@ def test_a_huge_request_is_refused_before_it_allocates(job, spots, lab, photo, b
             call(1000)
         return
     with pytest.raises(phloem.MemoryLimitError) as e:
-        call(4 * GB)
+        call(2 * GB)
     msg = str(e.value)
     assert msg.startswith(f"{name}: ") and "needs about" in msg and "max_memory" in msg and "\n" not in msg
-    assert "over the memory limit of 4 GiB" in msg  # the estimate and the limit
+    assert "over the memory limit of 2 GiB" in msg  # the estimate and the limit
     assert isinstance(e.value, ValueError)
 
 

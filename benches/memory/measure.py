@@ -26,6 +26,10 @@ SETUP = {
         "cv2.line(img, (70, 40), (125, 5), 0.1, 4); cv2.line(img, (70, 40), (90, 92), 0.1, 3); "
         "src = phloem.branching.trace(img, kind='dark', sigmas=(1.5, 2.5))"
     ),
+    "grow": (
+        "from phloem.branching.synthetic import synthetic_skeleton; "
+        "bend = phloem.branching.BendingModel.fit(synthetic_skeleton(0), h=2.0)"
+    ),
     "tree": (
         "img = np.zeros((120, 80, 4), np.float32); img[..., 1] = 0.5; img[..., 3] = 0; "
         "img[10:70, 10:70, 3] = 1.0; img[70:110, 35:45, 3] = 1.0"
@@ -81,6 +85,12 @@ CASES: dict[str, tuple[str, str, str, tuple[int, int]]] = {
         "phloem.branching.synthesize(img, src, size={n}, threads=2)",
         "M.branching(({n}, {n}), img.shape)",
         (192, 384),
+    ),
+    "branching.grow": (
+        "grow",
+        "phloem.branching.grow(bend, size={n}, seed=0, branch_length=60, max_length=2000)",
+        "M.grow(({n}, {n}), colonize=True, guide=False)",
+        (1024, 2048),
     ),
     "trees.variation": (
         "tree",

@@ -184,6 +184,12 @@ def branching(size: tuple[int, int], image: tuple[int, ...]) -> int:
     return (100 + 20 * c) * _px(size) + (100 + 20 * c) * _px(image) + 5 * 2**20
 
 
+def grow(size: tuple[int, int], *, colonize: bool, guide: bool) -> int:
+    """Growing a skeleton: the colonisation density and its two owner maps (f32, i32 ×2) and
+    the guide's distance and direction maps (f64 ×2) over the canvas."""
+    return (12 * colonize + 16 * guide) * _px(size) + 2**20
+
+
 def trees(size: int, n_trees: int) -> int:
     """Tree billboards: each prepared tree holds its RGBA image, alpha and crown/trunk maps at
     ``size``², and a variation warps and blends at that size."""

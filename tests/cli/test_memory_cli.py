@@ -70,6 +70,7 @@ def files(tmp_path, bark):
         ["synthesize", "tex.png", "--size", "16000", "--out", "o.png"],  # 16000² is under --max-pixels
         ["quilt", "tex.png", "--size", "16000", "--out", "o.png"],
         ["branching", "run", "river.png", "--skeleton", "river.json", "--size", "100000x100000", "--out", "o.png"],
+        ["branching", "grow", "river.json", "--size", "100000x100000", "--out", "new.json"],
         ["trees", "trees", "--size", "10000", "--n-variations", "1", "--out-dir", "out"],
     ],
     ids=lambda a: " ".join(a[:2]),

@@ -176,7 +176,7 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
 def _grow(args: argparse.Namespace, bend: Any, fur: Any, shape: tuple[int, int], bar: Any) -> branching.Skeleton:
     return branching.grow(
         bend, fur, size=shape, seed=args.seed, generations=args.generations, max_length=args.max_length,
-        colonize=not args.no_colonize, guide=_guide(args.guide, args), progress=bar,
+        colonize=not args.no_colonize, guide=_guide(args.guide, args), progress=bar, max_memory=args.max_memory,
     )  # fmt: skip
 
 
