@@ -191,3 +191,13 @@ def test_machine_memory_reads_the_cgroup_limit(monkeypatch):
         assert _memory._machine_memory() == 2 * GB
     finally:
         _memory._machine_memory.cache_clear()
+
+
+def test_bark_generate_refuses_before_computing_the_input_labels(photo, monkeypatch):
+    # the input labels take seconds on a big photo; a huge size must not wait for them
+    def boom(*args, **kwargs):
+        raise AssertionError("input_labels ran before the memory check")
+
+    monkeypatch.setattr(phloem.bark.pipeline, "input_labels", boom)
+    with pytest.raises(phloem.MemoryLimitError, match=r"^size: 100000×100000"):
+        phloem.bark.generate(photo, 100_000)
