@@ -22,6 +22,7 @@ from __future__ import annotations
 import os
 
 from . import _core, bark, blend, branching, data, io, metrics, patch, seams, shapes, texture, trees, warp
+from ._memory import MemoryLimitError
 
 __version__: str = _core.__version__
 
@@ -31,6 +32,7 @@ if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_core._after_fork_in_child)
 
 __all__ = [
+    "MemoryLimitError",
     "__version__",
     "bark",
     "blend",

@@ -13,7 +13,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from . import _core
+from . import _core, _memory
 from ._api import Seed
 from ._validate import as_image, as_mask, check_int, check_patch_size, check_seed, check_threads
 
@@ -48,6 +48,7 @@ def nnf(
     enrich: int | NDArray[np.int32] = 0,
     seed: Seed = 0,
     threads: int | None = None,
+    max_memory: int | None = None,
 ) -> tuple[NDArray[np.int32], NDArray[np.float32]]:
     """Nearest-neighbour field from ``target`` patches to ``source`` patches.
 
@@ -94,6 +95,9 @@ def nnf(
         number of threads.
     threads : int, optional
         Worker threads (default: ``PHLOEM_NUM_THREADS`` or all cores).
+    max_memory : int, optional
+        Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak memory is
+        over this many bytes (default None: 75% of the machine's memory; see ``docs/hardening/memory.md``).
 
     Returns
     -------
@@ -121,6 +125,9 @@ def nnf(
     tgt = as_image(target, "target")
     if src.shape[2] != tgt.shape[2]:
         raise ValueError(f"target: expected {src.shape[2]} channels like source, got {tgt.shape[2]}")
+    _memory.check_size(
+        _memory.nnf(src.shape, tgt.shape, kdtree=method == "kdtree"), max_memory, tgt.shape[:2], "target"
+    )
     if method not in ("patchmatch", "kdtree", "exact"):
         raise ValueError(f"method: expected 'patchmatch', 'kdtree' or 'exact', got {method!r}")
     if method == "exact":
@@ -176,6 +183,7 @@ def knn(
     weights: Any = None,
     seed: Seed = 0,
     threads: int | None = None,
+    max_memory: int | None = None,
 ) -> tuple[NDArray[np.int32], NDArray[np.float32]]:
     """The ``k`` most similar patches of every exemplar pixel, inside the exemplar.
 
@@ -206,6 +214,9 @@ def knn(
         Seed (default 0); results do not depend on the thread count.
     threads : int, optional
         Worker threads.
+    max_memory : int, optional
+        Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak memory is
+        over this many bytes (default None: 75% of the machine's memory; see ``docs/hardening/memory.md``).
 
     Returns
     -------
@@ -223,9 +234,16 @@ def knn(
     """
     img = as_image(exemplar, "exemplar")
     p = check_patch_size(patch_size)
+    kk = check_int(k, "k", 1)
+    _memory.check(
+        _memory.nnf(img.shape, img.shape, kk),
+        max_memory,
+        "k",
+        f"{kk} neighbours of {img.shape[0]}×{img.shape[1]} pixels",
+    )
     return _core.knn(
         img,
-        k=check_int(k, "k", 1),
+        k=kk,
         patch_size=p,
         iterations=check_int(iterations, "iterations", 0),
         exact=bool(exact),

@@ -18,7 +18,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from . import _core
+from . import _core, _memory
 from ._api import Seed, Size, warn_deprecated
 from ._progress import Progress
 from ._validate import as_mask, check_int, check_patch_size, check_seed, check_size, check_threads
@@ -120,6 +120,7 @@ def synthesize(
     seed: Seed = 0,
     threads: int | None = None,
     progress: Progress = None,
+    max_memory: int | None = None,
 ) -> NDArray[np.bool_]:
     """A new binary shape of ``size`` like ``shape`` (Rosenberger et al. 2009).
 
@@ -155,6 +156,9 @@ def synthesize(
     progress : callable, optional
         Called as ``progress(done, total)`` after every iteration; an exception it raises
         stops the run.
+    max_memory : int, optional
+        Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak memory is
+        over this many bytes (default None: 75% of the machine's memory; see ``docs/hardening/memory.md``).
 
     Returns
     -------
@@ -182,6 +186,7 @@ def synthesize(
     if ex.all() or not ex.any():
         raise ValueError("shape: expected both inside and outside pixels, the shape is empty or full")
     p, lev, its, h, w = _options(patch_size, levels, iterations, size, ex.shape, "shape")
+    _memory.check_size(_memory.shapes_synthesize((h, w), ex.shape), max_memory, (h, w))
     m = None if mask is None else as_mask(mask, "mask", (h, w))
     out = _core.shape_synthesize(
         np.ascontiguousarray(ex),
@@ -236,6 +241,7 @@ def synthesize_labels(
     seed: Seed = 0,
     threads: int | None = None,
     progress: Progress = None,
+    max_memory: int | None = None,
 ) -> NDArray[np.int32]:
     """A new label map of ``size`` like ``labels`` (Rosenberger et al. 2009, thesis §3.6.4).
 
@@ -256,6 +262,9 @@ def synthesize_labels(
         method only (checked, then ignored, by the joint one).
     patch_size, levels, iterations, rotations, tileable, seed, threads, progress
         As in :func:`synthesize`.
+    max_memory : int, optional
+        Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak memory is
+        over this many bytes (default None: 75% of the machine's memory; see ``docs/hardening/memory.md``).
 
     Returns
     -------
@@ -283,6 +292,7 @@ def synthesize_labels(
     if k < 2:
         raise ValueError("labels: expected at least 2 distinct labels, got 1 (the map is empty)")
     p, lev, its, h, w = _options(patch_size, levels, iterations, size, lab.shape, "labels")
+    _memory.check_size(_memory.shapes_labels((h, w), lab.shape, k), max_memory, (h, w))
     idx: list[int] | None = None
     if order is not None:
         try:

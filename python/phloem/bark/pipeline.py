@@ -8,7 +8,7 @@ from typing import Any, Literal, overload
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import texture
+from .. import _memory, texture
 from .._api import Seed, Size, old_flag, renamed
 from .._progress import Progress
 from .._validate import as_image, as_labels, check_seed, check_size, check_threads
@@ -76,6 +76,7 @@ def generate(
     seed: Seed = ...,
     threads: int | None = ...,
     progress: Progress = ...,
+    max_memory: int | None = ...,
     full_output: Literal[False] = ...,
 ) -> NDArray[np.float32]: ...
 @overload
@@ -99,6 +100,7 @@ def generate(
     seed: Seed = ...,
     threads: int | None = ...,
     progress: Progress = ...,
+    max_memory: int | None = ...,
     full_output: Literal[True],
 ) -> BarkResult: ...
 
@@ -124,6 +126,7 @@ def generate(
     seed: Seed = 0,
     threads: int | None = None,
     progress: Progress = None,
+    max_memory: int | None = None,
     full_output: bool = False,
 ) -> NDArray[np.float32] | BarkResult:
     """A bark texture of any size from one small bark photo: the whole pipeline of the thesis.
@@ -182,6 +185,9 @@ def generate(
         Worker threads (default: ``PHLOEM_NUM_THREADS`` or all cores).
     progress : callable, optional
         ``progress(done, total)`` with ``total = 100`` over the whole pipeline.
+    max_memory : int, optional
+        Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak memory is
+        over this many bytes (default None: 75% of the machine's memory; see ``docs/hardening/memory.md``).
     full_output : bool, optional
         Return a :class:`BarkResult` with the label maps, height map and sources
         (``return_intermediates`` before; it still works, deprecated).
@@ -203,6 +209,10 @@ def generate(
         img = img[..., :-1]
     img = np.ascontiguousarray(img)
     threads = check_threads(threads)
+    if labels_out is None and size is not None:  # before the input labels: refuse in a moment, not after them
+        shape = check_size(size)
+        channels = img.shape[2] + (height_map is not None) + 1  # + the feature-distance channel
+        _memory.check_size(_memory.bark(shape, img.shape, channels), max_memory, shape)
     seeds = np.random.SeedSequence(check_seed(seed)).generate_state(3, np.uint64)
     if labels_in is None:
         lab_in = input_labels(img, n_labels, denoise=denoise, seed=int(seeds[0]))
@@ -218,7 +228,7 @@ def generate(
         shape = check_size(size)
         lab_out = synthesize_labels(
             lab_in, shape, method=method, rotations=rotations, tileable=tileable, seed=int(seeds[1]), threads=threads,
-            progress=_stage(progress, 10, 40),
+            progress=_stage(progress, 10, 40), max_memory=max_memory,
         )  # fmt: skip
     else:
         lab_out = as_labels(labels_out, "labels_out")
@@ -239,7 +249,7 @@ def generate(
         ex, lab_in, lab_out, label_weight=label_weight, feature_weight=feature_weight, init=init,
         stand_in_weight=stand_in_weight,
         tileable=tileable, seed=int(seeds[2]), threads=threads, full_output=True,
-        progress=_stage(progress, 40, 100),
+        progress=_stage(progress, 40, 100), max_memory=max_memory,
     )  # fmt: skip
     out, sources = painted.image, painted.sources
     tex = np.ascontiguousarray(out[..., :channels])

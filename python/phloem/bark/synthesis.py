@@ -27,6 +27,7 @@ def synthesize_labels(
     seed: Seed = 0,
     threads: int | None = None,
     progress: Progress = None,
+    max_memory: int | None = None,
     **options: Any,
 ) -> NDArray[np.int32]:
     """A new label map of any size with the shapes of ``labels`` (thesis §3.6).
@@ -34,7 +35,7 @@ def synthesize_labels(
     The bark-pipeline name of :func:`phloem.shapes.synthesize_labels` (Rosenberger et al. 2009
     boundary-patch shape synthesis) with the bark pipeline's defaults: the joint method, and only
     half turns of the photo's shapes (bark grows along the trunk). See there for ``method``,
-    ``order``, ``rotations`` and ``options`` (``patch_size``, ``levels``, ``iterations``).
+    ``order``, ``rotations``, ``max_memory`` and ``options`` (``patch_size``, ``levels``, ``iterations``).
 
     Examples
     --------
@@ -46,5 +47,5 @@ def synthesize_labels(
     """
     return shapes.synthesize_labels(
         labels, size, method=method, order=order, rotations=rotations, tileable=tileable, seed=seed, threads=threads,
-        progress=progress, **options,
+        progress=progress, max_memory=max_memory, **options,
     )  # fmt: skip

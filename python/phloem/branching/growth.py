@@ -33,6 +33,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import _memory
 from .._api import Seed, Size, renamed
 from .._progress import Progress
 from .._validate import check_float, check_int, check_seed
@@ -621,6 +622,7 @@ def grow(
     guide_width: float | None = None,
     min_spacing: int | None = None,
     progress: Progress = None,
+    max_memory: int | None = None,
 ) -> Skeleton:
     """Synthesise a new branching structure (§4): a main branch, then furcations, recursively.
 
@@ -688,6 +690,9 @@ def grow(
         Minimum index distance between furcations on a branch (default: the model's).
     progress : callable, optional
         ``progress(done, total)`` in finished branches.
+    max_memory : int, optional
+        Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak memory is
+        over this many bytes (default None: 75% of the machine's memory; see ``docs/hardening/memory.md``).
 
     Returns
     -------
@@ -716,6 +721,7 @@ def grow(
 
     _check_models(bending, furcation)
     shape = check_size(size, "size")
+    _memory.check_size(_memory.grow(shape, colonize=bool(colonize), guide=guide is not None), max_memory, shape)
     st = _check_start(start)
     rng = np.random.default_rng(check_seed(seed))
     generations = check_int(generations, "generations", 1)

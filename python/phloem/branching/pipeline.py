@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import _memory
 from .._api import Seed, Size, renamed
 from .._progress import Progress
 from .._validate import as_image, check_size
@@ -103,6 +104,7 @@ def synthesize(
     render_options: dict[str, Any] | None = None,
     threads: int | None = None,
     progress: Progress = None,
+    max_memory: int | None = None,
 ) -> SynthesisResult:
     """A new image of a branching structure like the one in ``image`` (Sibbing et al. 2010).
 
@@ -136,6 +138,9 @@ def synthesize(
         Worker threads for the pixel work.
     progress : callable, optional
         ``progress(done, total)`` over the four stages' work.
+    max_memory : int, optional
+        Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak memory is
+        over this many bytes (default None: 75% of the machine's memory; see ``docs/hardening/memory.md``).
 
     Returns
     -------
@@ -153,6 +158,7 @@ def synthesize(
     """
     img = as_image(image, "image")
     shape = img.shape[:2] if size is None else check_size(size, "size")
+    _memory.check_size(_memory.branching(shape, img.shape), max_memory, shape)
     steps = 4
 
     def tick(i: int) -> None:
@@ -175,6 +181,15 @@ def synthesize(
         colonize=colonize, guide=guide,
     )  # fmt: skip
     tick(3)
-    res = render(img, source, target, seed=seed, threads=threads, full_output=True, **(render_options or {}))
+    res = render(
+        img,
+        source,
+        target,
+        seed=seed,
+        threads=threads,
+        full_output=True,
+        max_memory=max_memory,
+        **(render_options or {}),
+    )
     tick(4)
     return SynthesisResult(res.image, source, target, bending, furcation, res)

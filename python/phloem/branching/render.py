@@ -45,7 +45,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import _core
+from .. import _core, _memory
 from .._api import Seed, renamed
 from .._progress import Progress
 from .._validate import as_image, as_mask, check_float, check_int, check_patch_size, check_seed, check_threads
@@ -113,6 +113,7 @@ def render(
     completion_iterations: int = ...,
     threads: int | None = ...,
     progress: Progress = ...,
+    max_memory: int | None = ...,
     full_output: Literal[False] = ...,
 ) -> F32: ...
 @overload
@@ -139,6 +140,7 @@ def render(
     completion_iterations: int = ...,
     threads: int | None = ...,
     progress: Progress = ...,
+    max_memory: int | None = ...,
     full_output: Literal[True],
 ) -> RenderResult: ...
 
@@ -167,6 +169,7 @@ def render(
     completion_iterations: int = 4,
     threads: int | None = None,
     progress: Progress = None,
+    max_memory: int | None = None,
     full_output: bool = False,
 ) -> F32 | RenderResult:
     """Synthesise an image of ``target_skeleton`` from fragments of ``image`` (§5).
@@ -238,6 +241,9 @@ def render(
         solve only add overhead.) The gap completion uses all of them.
     progress : callable, optional
         Called as ``progress(done, total)`` after each target fragment (and once at the end).
+    max_memory : int, optional
+        Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak memory is
+        over this many bytes (default None: 75% of the machine's memory; see ``docs/hardening/memory.md``).
     full_output : bool, optional
         Return a :class:`RenderResult` (with the fragment map) instead of the image.
 
@@ -270,6 +276,9 @@ def render(
     if target_skeleton.shape is None:
         raise ValueError("target_skeleton: its shape (the output size) must be set")
     tgt_sk = _check_skeleton(target_skeleton, "target_skeleton", target_skeleton.shape)
+    _memory.check_size(
+        _memory.branching(target_skeleton.shape, img.shape), max_memory, target_skeleton.shape, "target_skeleton"
+    )
     lam_f, rf, k = check_params(lam, radius_factor, samples)
     c_n = check_int(n_best, "n_best", 1)
     w_s = check_float(omega_s, "omega_s", 0.0)

@@ -22,7 +22,7 @@ __all__ = ["build_parser", "main"]
 
 
 # API parameter names that the CLI spells differently and that are no ``dest`` of any flag
-_API_NAMES = {"k": "n_labels", "labels": "n_labels", "overwrite": "force"}
+_API_NAMES = {"k": "n_labels", "labels": "n_labels", "overwrite": "force", "target_skeleton": "target"}
 
 
 def _command_parser(ap: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:

@@ -13,7 +13,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from .. import _files, io
+from .. import _files, _memory, io
 from .._progress import Bar
 
 T = TypeVar("T")
@@ -77,6 +77,13 @@ def non_negative(text: str) -> float:
     return v
 
 
+def max_memory(text: str) -> int:
+    try:
+        return _memory.parse_memory(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
 def common_options(p: argparse.ArgumentParser, *, writes: bool = True) -> None:
     g = p.add_argument_group("common options")
     g.add_argument(
@@ -90,6 +97,13 @@ def common_options(p: argparse.ArgumentParser, *, writes: bool = True) -> None:
         type=positive,
         default=io.DEFAULT_MAX_PIXELS,
         help="refuse input images larger than this many pixels (default %(default)s)",
+    )
+    g.add_argument(
+        "--max-memory",
+        type=max_memory,
+        default=None,
+        metavar="BYTES",
+        help="refuse a job whose estimated peak memory is over this (e.g. 8G, 512M; default 75%% of this machine's)",
     )
     g.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     if writes:
@@ -199,7 +213,7 @@ def stage_result(
 
 
 def params(args: argparse.Namespace, skip: Sequence[str] = ()) -> dict[str, Any]:
-    drop = {"func", "command", "quiet", "force", "threads", "seed", "max_pixels", *skip}
+    drop = {"func", "command", "quiet", "force", "threads", "seed", "max_pixels", "max_memory", *skip}
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items() if k not in drop}
 
 

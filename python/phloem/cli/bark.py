@@ -74,6 +74,7 @@ def _cmd_bark(args: argparse.Namespace) -> None:
             seed=args.seed,
             stand_in_weight=args.stand_in_weight,
             threads=args.threads,
+            max_memory=args.max_memory,
             progress=bar,
             full_output=True,
         ),

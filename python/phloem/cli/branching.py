@@ -172,7 +172,7 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
 def _grow(args: argparse.Namespace, bend: Any, fur: Any, shape: tuple[int, int], bar: Any) -> branching.Skeleton:
     return branching.grow(
         bend, fur, size=shape, seed=args.seed, generations=args.generations, max_length=args.max_length,
-        colonize=not args.no_colonize, guide=_guide(args.guide, args), progress=bar,
+        colonize=not args.no_colonize, guide=_guide(args.guide, args), progress=bar, max_memory=args.max_memory,
     )  # fmt: skip
 
 
@@ -206,7 +206,7 @@ def _cmd_branching_render(args: argparse.Namespace) -> None:
     res = run(
         "branching render", args,
         lambda bar: branching.render(img, source, target, seed=args.seed, threads=args.threads, progress=bar,
-                                     full_output=True, **_render_kwargs(args)),
+                                     full_output=True, max_memory=args.max_memory, **_render_kwargs(args)),
     )  # fmt: skip
     save(args, "branching render", res.image)
     if args.fragment_map:
@@ -233,6 +233,7 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
             img, source, size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, order=args.order,
             m=args.m, n_best=args.n_best, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize,
             guide=_guide(args.guide, args), render_options=_render_kwargs(args), threads=args.threads, progress=bar,
+            max_memory=args.max_memory,
         ),
     )  # fmt: skip
     written = {role: str(p) for role, p in files.items()}

@@ -14,7 +14,9 @@ def _cmd_demo(args: argparse.Namespace) -> None:
     out = run(
         "demo: bark texture",
         args,
-        lambda bar: bark.generate(data.bark(), args.size, seed=args.seed, threads=args.threads, progress=bar),
+        lambda bar: bark.generate(
+            data.bark(), args.size, seed=args.seed, threads=args.threads, progress=bar, max_memory=args.max_memory
+        ),
     )
     save(args, "demo", out, input="phloem.data.bark()", pipeline="phloem.bark.generate")
 

@@ -24,7 +24,7 @@ def _cmd_nnf(args: argparse.Namespace) -> None:
     t0 = time.perf_counter()
     field, dist = patch.nnf(
         src, tgt, patch_size=args.patch_size, iterations=args.iterations, method=args.method, levels=args.levels,
-        seed=args.seed, threads=args.threads,
+        seed=args.seed, threads=args.threads, max_memory=args.max_memory,
     )  # fmt: skip
     buf = _pyio.BytesIO()
     np.savez_compressed(buf, field=field, distance=dist)

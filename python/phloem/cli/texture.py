@@ -20,14 +20,14 @@ def _from_exemplar(args: argparse.Namespace, command: str, job: Callable[[Any, A
 def _cmd_synthesize(args: argparse.Namespace) -> None:
     _from_exemplar(args, "synthesize", lambda ex, bar: texture.synthesize(
         ex, args.size, patch_size=args.patch_size, levels=args.levels, iterations=args.iterations, seed=args.seed,
-        threads=args.threads, progress=bar,
+        threads=args.threads, progress=bar, max_memory=args.max_memory,
     ))  # fmt: skip
 
 
 def _cmd_quilt(args: argparse.Namespace) -> None:
     _from_exemplar(args, "quilt", lambda ex, bar: texture.quilt(
         ex, args.size, block=args.block, overlap=args.overlap, randomness=args.randomness, cost=args.cost,
-        seed=args.seed, threads=args.threads, progress=bar,
+        seed=args.seed, threads=args.threads, progress=bar, max_memory=args.max_memory,
     ))  # fmt: skip
 
 
@@ -53,6 +53,7 @@ def _cmd_complete(args: argparse.Namespace) -> None:
             iterations=args.iterations,
             seed=args.seed,
             threads=args.threads,
+            max_memory=args.max_memory,
             progress=bar,
         ),
     )

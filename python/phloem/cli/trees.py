@@ -34,7 +34,7 @@ def _tree_library(args: argparse.Namespace, bar: Any) -> trees.Library:
         clf = trees.TrunkClassifier.from_dict(json.loads(Path(args.trunk_model).read_text(encoding="utf-8")))
     return trees.Library.load(
         src, atlas=args.atlas, size=args.size, skip_bad=args.skip_bad, classifier=clf, max_pixels=args.max_pixels,
-        progress=bar,
+        progress=bar, max_memory=args.max_memory,
     )  # fmt: skip
 
 
@@ -64,13 +64,13 @@ def _cmd_trees(args: argparse.Namespace) -> None:
             # tree can be remade alone; vary(progress=) would draw all from one seed, so the loop draws the bar.
             for i in range(args.n_variations):
                 out += trees.vary(own, lib, n_variations=1, seed=_sub_seed(args.seed, i), n_sources=args.n_sources, colors=colors,
-                                  histogram=args.histogram, threads=args.threads)  # fmt: skip
+                                  histogram=args.histogram, threads=args.threads, max_memory=args.max_memory)  # fmt: skip
                 bar(i + 1, args.n_variations)
             return out
         res = []
         for i in range(args.n_variations):
             res.append(trees.variation(lib, n_sources=args.n_sources, seed=_sub_seed(args.seed, i), colors=colors,
-                                       histogram=args.histogram, threads=args.threads))  # fmt: skip
+                                       histogram=args.histogram, threads=args.threads, max_memory=args.max_memory))  # fmt: skip
             bar(i + 1, args.n_variations)
         return res
 

@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import _core
+from .. import _core, _memory
 from .._api import Seed, old_flag, renamed
 from .._progress import Progress
 from .._validate import as_image, check_float, check_int, check_patch_size, check_seed, check_threads, restore_ndim
@@ -135,6 +135,7 @@ def by_numbers(
     seed: Seed = ...,
     threads: int | None = ...,
     progress: Progress = ...,
+    max_memory: int | None = ...,
     full_output: Literal[False] = ...,
 ) -> NDArray[np.float32]: ...
 @overload
@@ -159,6 +160,7 @@ def by_numbers(
     seed: Seed = ...,
     threads: int | None = ...,
     progress: Progress = ...,
+    max_memory: int | None = ...,
     full_output: Literal[True],
 ) -> ByNumbersResult: ...
 
@@ -185,6 +187,7 @@ def by_numbers(
     seed: Seed = 0,
     threads: int | None = None,
     progress: Progress = None,
+    max_memory: int | None = None,
     full_output: bool = False,
 ) -> NDArray[np.float32] | ByNumbersResult:
     """Texture-by-numbers: paint an output label map with the exemplar's matching material.
@@ -290,6 +293,9 @@ def by_numbers(
     full_output : bool, optional
         Return a :class:`ByNumbersResult` with the exemplar (row, col) each output pixel was
         copied from (``return_sources`` before; it still works, deprecated).
+    max_memory : int, optional
+        Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak memory is
+        over this many bytes (default None: 75% of the machine's memory; see ``docs/hardening/memory.md``).
 
     Returns
     -------
@@ -334,6 +340,8 @@ def by_numbers(
         raise ValueError(f"patch_size: {p} does not fit in the {lb.shape[0]}×{lb.shape[1]} output")
     s = check_seed(seed)
     t = check_threads(threads)
+    # the exemplar's channels and (by default) its feature-distance channel
+    _memory.check_size(_memory.by_numbers(lb.shape, ex.shape, nc + 1), max_memory, lb.shape, "labels_out")
     if isinstance(features, str):
         if features != "auto":
             raise ValueError(f"features: expected 'auto', None or an array, got {features!r}")

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import _core
+from .. import _core, _memory
 from .._progress import Progress
 from .._validate import (
     as_image,
@@ -319,6 +319,7 @@ def complete(
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
     progress: Progress = None,
+    max_memory: int | None = None,
 ) -> NDArray[np.float32]:
     """Fill the masked pixels of an image from its known pixels (Wexler-style completion).
 
@@ -384,6 +385,9 @@ def complete(
         Worker threads.
     progress : callable, optional
         Called as ``progress(done, total)`` after every iteration.
+    max_memory : int, optional
+        Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak memory is
+        over this many bytes (default None: 75% of the machine's memory; see ``docs/hardening/memory.md``).
 
     Returns
     -------
@@ -407,6 +411,7 @@ def complete(
     True
     """
     img = as_image(image, "image")
+    _memory.check_size(_memory.complete(img.shape), max_memory, img.shape[:2], "image")
     hole = as_mask(mask, "mask", img.shape[:2])
     allowed = None if source_mask is None else as_mask(source_mask, "source_mask", img.shape[:2])
     p = check_patch_size(patch_size)

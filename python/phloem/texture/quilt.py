@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import seams
+from .. import _memory, seams
 from .._api import Seed, Size, old_flag, renamed
 from .._progress import Progress
 from .._validate import as_image, check_int, check_seed, check_size, check_threads, restore_ndim
@@ -59,6 +59,7 @@ def quilt(
     randomness: float = ...,
     cost: Literal["kwatra", "gradient", "luo"] = ...,
     max_pixels: int = ...,
+    max_memory: int | None = ...,
     seed: Seed = ...,
     threads: int | None = ...,
     progress: Progress = ...,
@@ -74,6 +75,7 @@ def quilt(
     randomness: float = ...,
     cost: Literal["kwatra", "gradient", "luo"] = ...,
     max_pixels: int = ...,
+    max_memory: int | None = ...,
     seed: Seed = ...,
     threads: int | None = ...,
     progress: Progress = ...,
@@ -91,6 +93,7 @@ def quilt(
     randomness: float = 0.01,
     cost: Literal["kwatra", "gradient", "luo"] = "kwatra",
     max_pixels: int = 2**28,
+    max_memory: int | None = None,
     seed: Seed = 0,
     threads: int | None = None,
     progress: Progress = None,
@@ -134,6 +137,9 @@ def quilt(
     full_output : bool, optional
         Return a :class:`QuiltResult` with, for every output pixel, the exemplar (row, col) it
         was copied from (``return_sources`` before; it still works, deprecated).
+    max_memory : int, optional
+        Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak memory is
+        over this many bytes (default None: 75% of the machine's memory; see ``docs/hardening/memory.md``).
 
     Returns
     -------
@@ -159,6 +165,7 @@ def quilt(
     h, w = check_size(size)
     if h * w > check_int(max_pixels, "max_pixels", 1):
         raise ValueError(f"size: {w}×{h} = {h * w} pixels exceeds max_pixels = {max_pixels}")
+    _memory.check_size(_memory.quilt((h, w), ex.shape), max_memory, (h, w))
     eh, ew, nc = ex.shape
     if min(eh, ew) < 2:
         raise ValueError(f"exemplar: expected at least 2×2 pixels, got {eh}×{ew}")

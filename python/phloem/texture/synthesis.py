@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import _core
+from .. import _core, _memory
 from .._progress import Progress
 from .._validate import (
     as_image,
@@ -100,6 +100,7 @@ def synthesize(
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
     progress: Progress = None,
+    max_memory: int | None = None,
 ) -> NDArray[np.float32]:
     """Synthesise a texture of any size from an exemplar by texture optimisation.
 
@@ -138,6 +139,9 @@ def synthesize(
         Worker threads (default: ``PHLOEM_NUM_THREADS`` or all cores).
     progress : callable, optional
         Called as ``progress(done, total)`` after every iteration.
+    max_memory : int, optional
+        Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak memory is
+        over this many bytes (default None: 75% of the machine's memory; see ``docs/hardening/memory.md``).
 
     Returns
     -------
@@ -163,6 +167,7 @@ def synthesize(
     h, w = check_size(size)
     if h * w > check_int(max_pixels, "max_pixels", 1):
         raise ValueError(f"size: {w}×{h} = {h * w} pixels exceeds max_pixels = {max_pixels}")
+    _memory.check_size(_memory.texture_synthesize((h, w), ex.shape), max_memory, (h, w))
     p = check_patch_size(patch_size)
     if p > min(ex.shape[:2]):
         raise ValueError(f"patch_size: {p} does not fit in the {ex.shape[0]}×{ex.shape[1]} exemplar")

@@ -8,8 +8,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from .. import io
+from .. import _memory, io
 from .._api import warn_deprecated
+from .._validate import check_int
 from .atlas import split_atlas
 from .classifier import TrunkClassifier
 from .preprocessing import Tree, prepare
@@ -73,6 +74,7 @@ class Library:
         alpha_threshold: float = 0.5,
         classifier: TrunkClassifier | None = None,
         progress: Any = None,
+        max_memory: int | None = None,
     ) -> Library:
         """Preprocess RGBA images (one tree each) into a library.
 
@@ -86,6 +88,9 @@ class Library:
             Crown/trunk segmentation by this classifier instead of :func:`segment`.
         progress : callable, optional
             ``progress(done, total)`` after each tree.
+        max_memory : int, optional
+            Refuse (:class:`phloem.MemoryLimitError`) before preparing a tree that would take the
+            estimated memory of the library over this many bytes (default None: 75% of the machine's).
 
         Examples
         --------
@@ -98,7 +103,9 @@ class Library:
         """
         imgs = list(images)
         out = []
+        side = check_int(size, "size", 2)
         for i, img in enumerate(imgs):
+            _memory.check(_memory.trees(side, i + 1), max_memory, "size", f"{i + 1} trees of {side}×{side}")
             try:
                 out.append(prepare(img, size=size, alpha_threshold=alpha_threshold, classifier=classifier))
             except ValueError as exc:
@@ -120,6 +127,7 @@ class Library:
         classifier: TrunkClassifier | None = None,
         max_pixels: int = io.DEFAULT_MAX_PIXELS,
         progress: Any = None,
+        max_memory: int | None = None,
     ) -> Library:
         """Read a folder of PNG/TIFF/WebP images (sorted by name), or one image, into a library.
 
@@ -143,6 +151,9 @@ class Library:
             Refuse images with more pixels (see :func:`phloem.io.read_image`).
         progress : callable, optional
             ``progress(done, total)`` after each image.
+        max_memory : int, optional
+            Refuse (:class:`phloem.MemoryLimitError`) before preparing a tree that would take the
+            estimated memory of the library over this many bytes (default None: 75% of the machine's).
 
         Raises
         ------
@@ -168,6 +179,7 @@ class Library:
             raise ValueError(f"path: {folder} does not exist")
         trees_: list[Tree] = []
         names: list[str] = []
+        side = check_int(size, "size", 2)
         for k, f in enumerate(files):
             try:
                 img = io.read_image(f, max_pixels=max_pixels)
@@ -175,8 +187,12 @@ class Library:
                     raise ValueError("expected an RGBA image (trees need an alpha channel)")
                 pieces = [img] if atlas == "no" else split_atlas(img, alpha_threshold=alpha_threshold)
                 for i, piece in enumerate(pieces):
+                    n = len(trees_) + 1
+                    _memory.check(_memory.trees(side, n), max_memory, "size", f"{n} trees of {side}×{side}")
                     trees_.append(prepare(piece, size=size, alpha_threshold=alpha_threshold, classifier=classifier))
                     names.append(f.name if len(pieces) == 1 else f"{f.name}[{i}]")
+            except _memory.MemoryLimitError:
+                raise
             except ValueError as exc:
                 if not skip_bad:
                     raise ValueError(f"{f}: {exc}") from None

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _memory
 from .._api import Seed, renamed
 from .._progress import Progress
 from .._validate import check_float, check_int, check_seed
@@ -93,6 +94,7 @@ def variation(
     colors: str = "random",
     histogram: bool = False,
     threads: int | None = None,
+    max_memory: int | None = None,
 ) -> Variation:
     """A new tree from ``n_sources`` exemplars drawn at random from the library (paper §3, §5).
 
@@ -117,6 +119,9 @@ def variation(
         Match the colour histogram to another random exemplar of the library (§5.3).
     threads : int, optional
         Worker threads for the warp.
+    max_memory : int, optional
+        Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak memory is
+        over this many bytes (default None: 75% of the machine's memory; see ``docs/hardening/memory.md``).
 
     Returns
     -------
@@ -142,6 +147,7 @@ def variation(
         raise ValueError(
             f"library: has {len(library)} tree(s) but n_sources={k}; a variation combines {k} distinct exemplars"
         )
+    _memory.check(_memory.trees(library.size, 0), max_memory, "library", f"a tree of {library.size}×{library.size}")
     rng = np.random.default_rng(check_seed(seed))
     idx = [int(i) for i in rng.choice(len(library), size=k, replace=False)]
     w = _draw_weights(rng, k, spread)
@@ -184,6 +190,7 @@ def vary(
     histogram: bool = False,
     threads: int | None = None,
     progress: Progress = None,
+    max_memory: int | None = None,
 ) -> list[Variation]:
     """``n_variations`` variations of one tree ``T``, combined with library exemplars at a lower weight (§3).
 
@@ -211,6 +218,9 @@ def vary(
         ``progress(done, n_variations)`` after each finished variation (about 0.2 s each at
         1024²); an exception it raises stops the run. :func:`variation` makes one tree and
         takes none.
+    max_memory : int, optional
+        Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak memory is
+        over this many bytes (default None: 75% of the machine's memory; see ``docs/hardening/memory.md``).
 
     Returns
     -------
@@ -236,6 +246,7 @@ def vary(
     lo, hi = (check_float(v, "weight", 0.0) for v in weight)
     if not lo <= hi <= 1.0:
         raise ValueError(f"weight: expected 0 <= low <= high <= 1, got {weight!r}")
+    _memory.check(_memory.trees(library.size, 1), max_memory, "library", f"a tree of {library.size}×{library.size}")
     t = tree if isinstance(tree, Tree) else prepare(tree, size=library.size)
     first = library.trees[0]
     if t.image.shape != first.image.shape or t.split != first.split:
