@@ -52,10 +52,10 @@ FUZZ_FLAGS = -max_total_time=$(FUZZ_SECONDS) -timeout=10 -rss_limit_mb=2048 -pri
 fuzz:  ## run each fuzz target for FUZZ_SECONDS (default 60) on fuzz/corpus; needs ".[fuzz]"; not in CI
 	@status=0; for t in $(FUZZ_TARGETS); do \
 	  mkdir -p $(FUZZ_OUT)/corpus/$$t $(FUZZ_OUT)/crashes/$$t; \
-	  echo "== fuzz $$t ($(FUZZ_SECONDS) s)"; \
+	  before=$$(ls $(FUZZ_OUT)/crashes/$$t | wc -l); echo "== fuzz $$t ($(FUZZ_SECONDS) s)"; \
 	  python fuzz/fuzz_$$t.py $(FUZZ_FLAGS) -artifact_prefix=$(FUZZ_OUT)/crashes/$$t/ \
 	    $(FUZZ_OUT)/corpus/$$t fuzz/corpus/$$t 2>&1 | grep -v '^INFO: Instrumenting' || true; \
-	  if [ -n "$$(ls $(FUZZ_OUT)/crashes/$$t)" ]; then echo "== fuzz $$t: crashes in $(FUZZ_OUT)/crashes/$$t"; status=1; fi; \
+	  if [ "$$(ls $(FUZZ_OUT)/crashes/$$t | wc -l)" != "$$before" ]; then echo "== fuzz $$t: new crash in $(FUZZ_OUT)/crashes/$$t"; status=1; fi; \
 	done; exit $$status
 
 fuzz-merge:  ## minimise the new inputs of make fuzz (out/fuzz/corpus) into fuzz/corpus, for review and commit
