@@ -44,4 +44,23 @@ sheet:  ## contact sheets of the texture, graph-cut, shape, bark and tree jobs (
 	python -m benches.sheets.sheet_branching_image --out out/branching_image_sheet.png
 	python -m benches.sheets.sheet_branching out/branching_sheet.png
 
-.PHONY: help install dev test lint bench peers sheet
+FUZZ_SECONDS ?= 60
+FUZZ_TARGETS ?= skeleton guide trunk_model label_map mask image
+FUZZ_OUT ?= out/fuzz
+FUZZ_FLAGS = -max_total_time=$(FUZZ_SECONDS) -timeout=10 -rss_limit_mb=2048 -print_final_stats=1
+
+fuzz:  ## run each fuzz target for FUZZ_SECONDS (default 60) on fuzz/corpus; needs ".[fuzz]"; not in CI
+	@status=0; for t in $(FUZZ_TARGETS); do \
+	  mkdir -p $(FUZZ_OUT)/corpus/$$t $(FUZZ_OUT)/crashes/$$t; \
+	  before=$$(ls $(FUZZ_OUT)/crashes/$$t | wc -l); echo "== fuzz $$t ($(FUZZ_SECONDS) s)"; \
+	  python fuzz/fuzz_$$t.py $(FUZZ_FLAGS) -artifact_prefix=$(FUZZ_OUT)/crashes/$$t/ \
+	    $(FUZZ_OUT)/corpus/$$t fuzz/corpus/$$t 2>&1 | grep -v '^INFO: Instrumenting' || true; \
+	  if [ "$$(ls $(FUZZ_OUT)/crashes/$$t | wc -l)" != "$$before" ]; then echo "== fuzz $$t: new crash in $(FUZZ_OUT)/crashes/$$t"; status=1; fi; \
+	done; exit $$status
+
+fuzz-merge:  ## minimise the new inputs of make fuzz (out/fuzz/corpus) into fuzz/corpus, for review and commit
+	@for t in $(FUZZ_TARGETS); do \
+	  python fuzz/fuzz_$$t.py -merge=1 fuzz/corpus/$$t $(FUZZ_OUT)/corpus/$$t 2>&1 | grep -v '^INFO: Instrumenting' | tail -1; \
+	done
+
+.PHONY: help install dev test lint bench peers sheet fuzz fuzz-merge

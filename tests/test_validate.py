@@ -39,3 +39,12 @@ def test_views_and_byte_orders_are_accepted():
     out = as_image(big[:, ::2], "image")
     assert out.flags.c_contiguous and out.dtype == np.float32 and out.shape == (4, 3, 1)
     np.testing.assert_array_equal(out[..., 0], big[:, ::2].astype(np.float32))
+
+
+@pytest.mark.filterwarnings("error")
+def test_float64_beyond_float32_is_refused_without_numpy_warning():
+    # the cast to float32 made 1e300 inf with numpy's "overflow encountered in cast" on stderr
+    with pytest.raises(
+        ValueError, match=r"^image: expected finite values, found 1e\+300 at \(row 0, col 1, channel 0\)$"
+    ):
+        as_image(np.array([[0.5, 1e300]]), "image")

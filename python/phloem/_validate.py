@@ -58,7 +58,8 @@ def as_image(image: Any, name: str, *, finite: bool = True) -> NDArray[np.float3
         info = np.iinfo(arr.dtype)
         out = arr.astype(np.float32) / np.float32(info.max)
     else:
-        out = np.ascontiguousarray(arr, dtype=np.float32)
+        with np.errstate(over="ignore"):  # float64 beyond float32 becomes inf, refused below in our words
+            out = np.ascontiguousarray(arr, dtype=np.float32)
         bad = ~np.isfinite(out) if finite else np.zeros((), bool)
         if bad.any():
             y, x, c = np.argwhere(bad)[0]

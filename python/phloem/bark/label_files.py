@@ -28,9 +28,13 @@ def decode_labels(image: Any, *, max_labels: int = 16) -> NDArray[np.int32]:
     """A label map from an image of flat colours or grey levels: ``0 … n-1`` by sorted colour.
 
     Raises ``ValueError`` if the image has more than ``max_labels`` distinct colours (an
-    anti-aliased brush or a JPEG, most likely).
+    anti-aliased brush or a JPEG, most likely) or values outside [0, 1].
     """
     img = as_image(image, "image")
+    lo, hi = float(img.min()), float(img.max())
+    if lo < 0 or hi > 1:
+        # outside [0, 1] the 8-bit channel keys below overlap: two colours would share a label
+        raise ValueError(f"image: expected values in [0, 1] (a label map image), got {lo:g} to {hi:g}")
     q = np.rint(img * 255).astype(np.int64)
     key = np.zeros(img.shape[:2], np.int64)
     for c in range(img.shape[2]):
