@@ -165,6 +165,9 @@ def synthesize(
         source = skeleton
         if source.shape is not None and source.shape != img.shape[:2]:
             raise ValueError(f"skeleton: made for a {source.shape} image, but image is {img.shape[:2]}")
+        # Before fitting: a skeleton without a shape is only known to fit the image here, and
+        # the models' resampling would otherwise walk far-away coordinates vertex by vertex.
+        source.check_inside(img.shape[:2], "skeleton")
     else:
         raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
     tick(1)
