@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from .. import texture
 from ..blend import seamless
-from ._pixels import F32, _clip_channels, _paste, _pt
+from ._pixels import F32, _by_channels, _clip_channels, _paste, _pt
 from .fragments import MIN_RADIUS
 from .skeleton import Skeleton
 
@@ -93,12 +93,12 @@ def _smooth_masked(vals: F32, w: F32, sigma: float) -> tuple[F32, F32]:
     h, wd = w.shape
     f = max(1, int(sigma / 4))
     small = (max(1, -(-wd // f)), max(1, -(-h // f)))
-    num = cv2.resize(vals * w[..., None], small, interpolation=cv2.INTER_AREA).reshape(small[1], small[0], -1)
+    num = _by_channels(lambda part: cv2.resize(part, small, interpolation=cv2.INTER_AREA), vals * w[..., None])
     den = cv2.resize(w, small, interpolation=cv2.INTER_AREA)
-    num = cv2.GaussianBlur(num, (0, 0), sigma / f).reshape(small[1], small[0], -1)
+    num = _by_channels(lambda part: cv2.GaussianBlur(part, (0, 0), sigma / f), num)
     den = cv2.GaussianBlur(den, (0, 0), sigma / f)
     m = num / np.maximum(den, 1e-12)[..., None] * (den > 1e-6)[..., None]
-    out = cv2.resize(m, (wd, h), interpolation=cv2.INTER_LINEAR).reshape(h, wd, -1)
+    out = _by_channels(lambda part: cv2.resize(part, (wd, h), interpolation=cv2.INTER_LINEAR), m)
     dens = cv2.resize(den, (wd, h), interpolation=cv2.INTER_LINEAR)
     return out.astype(np.float32), dens.astype(np.float32)
 

@@ -27,8 +27,8 @@ class SynthesisResult:
 
     Attributes
     ----------
-    image : (H, W, C) float32 ndarray
-        The new image.
+    image : (H, W[, C]) float32 ndarray
+        The new image (2-D for a 2-D input).
     source : Skeleton
         The input's skeleton (given or traced).
     target : Skeleton
@@ -149,7 +149,7 @@ def synthesize(
     >>> _ = cv2.line(img, (70, 40), (90, 92), 0.1, 3)
     >>> res = synthesize(img, trace_options={"kind": "dark", "sigmas": (1.5, 2.5)}, seed=1)
     >>> res.image.shape, res.target.shape
-    ((96, 128, 1), (96, 128))
+    ((96, 128), (96, 128))
     """
     img = as_image(image, "image")
     shape = img.shape[:2] if size is None else check_size(size, "size")
@@ -178,6 +178,15 @@ def synthesize(
         colonize=colonize, guide=guide,
     )  # fmt: skip
     tick(3)
-    res = render(img, source, target, seed=seed, threads=threads, full_output=True, **(render_options or {}))
+    # A 2-D input goes to render as 2-D, so that the new image is 2-D as well.
+    res = render(
+        img[..., 0] if np.ndim(image) == 2 else img,
+        source,
+        target,
+        seed=seed,
+        threads=threads,
+        full_output=True,
+        **(render_options or {}),
+    )
     tick(4)
     return SynthesisResult(res.image, source, target, bending, furcation, res)
