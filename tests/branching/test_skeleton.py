@@ -214,3 +214,17 @@ def test_synthesize_checks_a_shapeless_skeleton_against_the_image_before_fitting
         SkeletonError, match=r"^skeleton: branches\[0\].points\[1\] = \(900000.0, 5.0\) is outside the 32x32"
     ):
         branching.synthesize(np.zeros((32, 32), np.float32), sk)
+
+
+def test_thick_skeletons_draw_without_an_opencv_error():
+    # Before: the gap completion drew radius_factor x 8000 px wide lines, past OpenCV's MAX_THICKNESS.
+    from phloem import branching
+
+    sk = Skeleton([Branch([[4, 20], [60, 22], [100, 30]], 8000.0)], (48, 110))
+    assert sk.mask().all()
+    from phloem.branching.gaps import _background
+
+    assert not _background(sk, (48, 110), 3.0).any()
+    img = np.random.default_rng(0).random((48, 110)).astype(np.float32)
+    out = branching.render(img, sk, sk, seed=0)
+    assert out.shape == (48, 110) and np.isfinite(out).all()

@@ -162,7 +162,9 @@ def _background(skeleton: Skeleton, shape: tuple[int, int], factor: float) -> ND
     for b in skeleton.branches:
         for (a, bb), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
             rr = max(factor * 0.5 * (r0 + r1), MIN_RADIUS)
-            cv2.line(zone, _pt(a), _pt(bb), 1, thickness=max(1, round(2 * rr)), lineType=cv2.LINE_8, shift=4)
+            cv2.line(
+                zone, _pt(a), _pt(bb), 1, thickness=min(max(1, round(2 * rr)), 32767), lineType=cv2.LINE_8, shift=4
+            )
     return np.asarray(zone == 0)
 
 

@@ -652,6 +652,6 @@ def _branch_map(skeleton: Skeleton, shape: tuple[int, int]) -> NDArray[np.int32]
         m = np.zeros(shape, np.uint8)
         for (a, bb), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
             r = max(0.5 * (r0 + r1), 0.5) + 2.0
-            cv2.line(m, _pt(a), _pt(bb), 1, thickness=max(1, round(2 * r)), lineType=cv2.LINE_8, shift=4)
+            cv2.line(m, _pt(a), _pt(bb), 1, thickness=min(max(1, round(2 * r)), 32767), lineType=cv2.LINE_8, shift=4)
         out[m > 0] = i
     return out

@@ -445,7 +445,9 @@ class Skeleton:
         for b in self.branches:
             for (p, q), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
                 r = max(0.5 * (r0 + r1), 0.5)
-                cv2.line(out, _pt(p), _pt(q), 1, thickness=max(1, round(2 * r)), lineType=cv2.LINE_8, shift=4)
+                cv2.line(
+                    out, _pt(p), _pt(q), 1, thickness=min(max(1, round(2 * r)), 32767), lineType=cv2.LINE_8, shift=4
+                )
         return out.astype(bool)
 
     @renamed(shape="size")
