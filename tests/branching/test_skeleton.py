@@ -69,21 +69,30 @@ def test_json_round_trip_and_atomic_save(tmp_path):
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ("{not json", r"not a valid JSON skeleton"),
+        ("{not json", r"^path: .*bad.json line 1 column 2: Expecting property name"),
         ("[1, 2]", r"a skeleton must be a JSON object"),
         ('{"branches": []}', r"'branches' must be a non-empty list"),
         ('{"format": "svg", "branches": [{"points": [[0, 0], [1, 1]]}]}', r"format must be 'phloem.skeleton'"),
         ('{"version": 9, "branches": [{"points": [[0, 0], [1, 1]]}]}', r"unsupported skeleton version 9"),
         ('{"branches": [{"thickness": [1]}]}', r"branches\[0\] must be an object with 'points'"),
         ('{"branches": [{"points": [[0, 0]]}]}', r"branches\[0\]: a branch needs at least 2 points"),
-        ('{"branches": [{"points": [[0, 0, 0], [1, 1, 1]]}]}', r"branches\[0\]: points must have shape \(n, 2\)"),
-        ('{"branches": [{"points": [[0, "a"], [1, 1]]}]}', r"branches\[0\]: points must be a list of \[x, y\] pairs"),
-        ('{"branches": [{"points": [[0, NaN], [1, 1]]}]}', r"branches\[0\]: points contain NaN"),
+        (
+            '{"branches": [{"points": [[0, 0, 0], [1, 1, 1]]}]}',
+            r"branches\[0\].points\[0\] must be \[x, y\] with two numbers, got \[0, 0, 0\]",
+        ),
+        (
+            '{"branches": [{"points": [[0, "a"], [1, 1]]}]}',
+            r"branches\[0\].points\[0\] must be \[x, y\] with two numbers",
+        ),
+        ('{"branches": [{"points": [[0, NaN], [1, 1]]}]}', r"bad.json line 1 column 31: NaN is not a JSON number"),
         (
             '{"branches": [{"points": [[0, 0], [1, 1]], "thickness": [1, 2, 3]}]}',
             r"thickness must have one value per point",
         ),
-        ('{"branches": [{"points": [[0, 0], [1, 1]], "thickness": [1, -2]}]}', r"thickness must be finite and >= 0"),
+        (
+            '{"branches": [{"points": [[0, 0], [1, 1]], "thickness": [1, -2]}]}',
+            r"branches\[0\].thickness\[1\]: expected a radius in \[0, 8192\] px, got -2.0",
+        ),
         (
             '{"branches": [{"points": [[0, 0], [1, 1]], "parent": [0, 0]}]}',
             r"branches\[0\].parent: branch index 0 must refer to an earlier",
@@ -122,3 +131,100 @@ def test_check_inside_names_the_argument_and_drawing():
     assert img.shape == (12, 30, 3) and img[..., 0].max() > 0.5 and img[..., 1].max() == 0
     with pytest.raises(SkeletonError, match=r"mask: the skeleton has no shape"):
         sk.mask()
+
+
+# -- bounds (issue 16: a skeleton file with far-away coordinates made run/fit_models loop for minutes)
+
+
+@pytest.mark.parametrize(
+    ("branch", "message"),
+    [
+        (
+            '{"points": [[0, 0], [1e12, 5]]}',
+            r"branches\[0\].points\[1\]: coordinates must be finite \(no NaN or infinity\) and within ±1048576",
+        ),
+        ('{"points": [[0, 0], [1, -3e9]]}', r"branches\[0\].points\[1\]: coordinates must be finite"),
+        ('{"points": [[0, 0], [1, 1e400]]}', r"1e400 is too large for a number"),
+        (
+            '{"points": [[0, 0], [1, 1]], "thickness": 1e6}',
+            r"branches\[0\].thickness\[0\]: expected a radius in \[0, 8192\]",
+        ),
+        (
+            '{"points": [[0, 0], ["1", 1]]}',
+            r"branches\[0\].points\[1\] must be \[x, y\] with two numbers, got \['1', 1\]",
+        ),
+        ('{"points": [[0, 0], [true, 1]]}', r"branches\[0\].points\[1\] must be \[x, y\] with two numbers"),
+        ('{"points": {"x": 1}}', r"branches\[0\].points must be a list of \[x, y\] pairs, got dict"),
+        ('{"points": [[0, 0], [1, 1]], "thickness": ["2", 1]}', r"branches\[0\].thickness\[0\] must be a number"),
+        ('{"points": [[0, 0], [1, 1]], "thickness": [1, Infinity]}', r"Infinity is not a JSON number"),
+        ('{"points": [[0, 0], [1, 1]], "parent": [0, 99999999999999999999]}', r"branches\[0\].parent: branch index 0"),
+    ],
+)
+def test_file_bounds_and_types(tmp_path, branch, message):
+    p = tmp_path / "bad.json"
+    p.write_text('{"branches": [' + branch + "]}")
+    with pytest.raises(SkeletonError, match=r"^path: .*bad.json[: ].*" + message):
+        Skeleton.load(p)
+
+
+def test_file_shape_and_total_length_bounds(tmp_path):
+    p = tmp_path / "s.json"
+    p.write_text('{"shape": [10, 2000000], "branches": [{"points": [[0, 0], [1, 1]]}]}')
+    with pytest.raises(SkeletonError, match=r"'shape' must be \[H, W\] with integers in 1..1048576"):
+        Skeleton.load(p)
+    far = [[0, 0], [1_000_000, 0]] * 200
+    with pytest.raises(SkeletonError, match=r"^branches: a total length of 3.99e\+08 px is more than"):
+        Skeleton([Branch(far, 1.0)])
+
+
+def test_branch_refuses_huge_coordinates_and_thickness():
+    with pytest.raises(
+        SkeletonError, match=r"branch.points\[1\]: coordinates must be finite \(no NaN or infinity\) and within"
+    ):
+        Branch([[0, 0], [0, 1e15]], 1.0)
+    with pytest.raises(SkeletonError, match=r"branch.points\[0\]: coordinates must be finite"):
+        Branch([[np.nan, 0], [0, 1]], 1.0)
+    with pytest.raises(SkeletonError, match=r"branch.thickness\[1\]: expected a radius in \[0, 8192\] px, got 40000.0"):
+        Branch([[0, 0], [0, 1]], [1.0, 40000.0])
+
+
+def test_resample_bounds_the_vertex_count():
+    sk = Skeleton([Branch([[0, 0], [1_000_000, 0]], 1.0)])
+    with pytest.raises(
+        ValueError, match=r"^h: resampling 1e\+06 px of branches at h=0.5 would make about 2e\+06 vertices"
+    ):
+        sk.resample(0.5)
+    assert len(sk.resample(100.0).branches[0]) >= 10_000
+
+
+def test_from_json_names_line_and_column_and_refuses_deep_nesting():
+    with pytest.raises(SkeletonError, match=r"^text: line 2 column 1: Expecting value"):
+        Skeleton.from_json("[1,\n")
+    with pytest.raises(SkeletonError, match=r"^text: line 1 column 65: nested more than 64 levels deep"):
+        Skeleton.from_json("[" * 100_000)
+    with pytest.raises(TypeError, match=r"^text: expected a str, got bytes"):
+        Skeleton.from_json(b"{}")  # type: ignore[arg-type]
+
+
+def test_synthesize_checks_a_shapeless_skeleton_against_the_image_before_fitting():
+    from phloem import branching
+
+    sk = Skeleton([Branch([[0, 0], [900_000, 5]], 1.0)])
+    with pytest.raises(
+        SkeletonError, match=r"^skeleton: branches\[0\].points\[1\] = \(900000.0, 5.0\) is outside the 32x32"
+    ):
+        branching.synthesize(np.zeros((32, 32), np.float32), sk)
+
+
+def test_thick_skeletons_draw_without_an_opencv_error():
+    # Before: the gap completion drew radius_factor x 8000 px wide lines, past OpenCV's MAX_THICKNESS.
+    from phloem import branching
+
+    sk = Skeleton([Branch([[4, 20], [60, 22], [100, 30]], 8000.0)], (48, 110))
+    assert sk.mask().all()
+    from phloem.branching.gaps import _background
+
+    assert not _background(sk, (48, 110), 3.0).any()
+    img = np.random.default_rng(0).random((48, 110)).astype(np.float32)
+    out = branching.render(img, sk, sk, seed=0)
+    assert out.shape == (48, 110) and np.isfinite(out).all()

@@ -346,3 +346,11 @@ def test_a_bool_mask_traces_like_its_float_copy():
     assert mask.dtype == np.bool_
     a, b = trace(mask, kind="mask"), trace(mask.astype(np.float32), kind="mask")
     assert [br.points.tolist() for br in a.branches] == [br.points.tolist() for br in b.branches]
+
+
+@pytest.mark.parametrize("size", [(1, 50), (50, 1), (2, 40)])
+def test_images_thinner_than_three_pixels_are_refused_in_one_line(size):
+    # Before: numpy's "Shape of array too small to calculate a numerical gradient".
+    img = np.random.default_rng(0).random(size).astype(np.float32)
+    with pytest.raises(ValueError, match=r"^image: nothing to trace in a \d+x\d+ image; it needs at least 3x3 pixels$"):
+        trace(img, kind="dark")

@@ -78,3 +78,31 @@ def test_trunk_classifier_leave_one_out_on_hand_labels(hand_labelled):
     # About as good as the width profile (mean 0.86 against 0.87); the per-tree table is in
     # docs/pipelines/trees.md.
     assert np.mean(ious) > 0.82 and np.median(ious) > 0.9
+
+
+def _record(**change):
+    d = 11
+    rec = {"format": "phloem.trees.TrunkClassifier", "version": 1, "coef": [0.0] * (1 + d + d * (d + 1) // 2),
+           "mean": [0.0] * d, "scale": [1.0] * d, "alpha_threshold": 0.5}  # fmt: skip
+    rec.update(change)
+    return rec
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"version": 7}, r"unsupported TrunkClassifier version 7"),
+        ({"coef": "x"}, r"'coef' must be a list of numbers"),
+        ({"coef": [0.0, 1.0]}, r"'coef' must hold 78 numbers, got 2"),
+        ({"mean": [0.0] * 10}, r"'mean' must hold 11 numbers, got 10"),
+        ({"mean": [10**400] + [0.0] * 10}, r"'mean' must hold finite numbers"),
+        ({"scale": [0.0] * 11}, r"'scale' must hold positive numbers"),
+        ({"scale": [True] * 11}, r"'scale' must be a list of numbers"),
+        ({"alpha_threshold": None}, r"'alpha_threshold' must be a number in \(0, 1\], got None"),
+        ({"alpha_threshold": 3}, r"'alpha_threshold' must be a number in \(0, 1\]"),
+    ],
+)
+def test_trunk_classifier_from_dict_names_what_is_wrong(change, message):
+    assert trees.TrunkClassifier.from_dict(_record()).alpha_threshold == 0.5
+    with pytest.raises(ValueError, match=r"^data: " + message):
+        trees.TrunkClassifier.from_dict(_record(**change))

@@ -5,6 +5,7 @@ check, row-wise masked copies, per-channel clipping, rotations and sub-pixel lin
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -27,6 +28,21 @@ def _check_skeleton(skeleton: Any, name: str, shape: tuple[int, int] | None) -> 
     if shape is not None:
         skeleton.check_inside(shape, name)
     return skeleton
+
+
+def _by_channels(fn: Callable[[Any], Any], img: NDArray[Any]) -> NDArray[Any]:
+    """``fn(img)`` for an (H, W, C) image with any ``C``, keeping the channel axis.
+
+    Some OpenCV functions (``resize`` with ``INTER_AREA``; ``remap`` and ``warpPerspective`` in
+    some versions) take at most 4 channels, so wider images go through in chunks of 4.
+    """
+    c = img.shape[2]
+    parts = [img] if c <= 4 else [np.ascontiguousarray(img[..., i : i + 4]) for i in range(0, c, 4)]
+    outs = []
+    for part in parts:
+        out = np.asarray(fn(part))
+        outs.append(out.reshape(*out.shape[:2], part.shape[2]))  # OpenCV drops a single channel
+    return outs[0] if len(outs) == 1 else np.concatenate(outs, axis=2)
 
 
 def _clip_channels(x: F32, lo: F32, hi: F32) -> F32:

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from .. import texture
 from ..blend import seamless
-from ._pixels import F32, _clip_channels, _paste, _pt
+from ._pixels import F32, _by_channels, _clip_channels, _paste, _pt
 from .fragments import MIN_RADIUS
 from .skeleton import Skeleton
 
@@ -93,12 +93,12 @@ def _smooth_masked(vals: F32, w: F32, sigma: float) -> tuple[F32, F32]:
     h, wd = w.shape
     f = max(1, int(sigma / 4))
     small = (max(1, -(-wd // f)), max(1, -(-h // f)))
-    num = cv2.resize(vals * w[..., None], small, interpolation=cv2.INTER_AREA).reshape(small[1], small[0], -1)
+    num = _by_channels(lambda part: cv2.resize(part, small, interpolation=cv2.INTER_AREA), vals * w[..., None])
     den = cv2.resize(w, small, interpolation=cv2.INTER_AREA)
-    num = cv2.GaussianBlur(num, (0, 0), sigma / f).reshape(small[1], small[0], -1)
+    num = _by_channels(lambda part: cv2.GaussianBlur(part, (0, 0), sigma / f), num)
     den = cv2.GaussianBlur(den, (0, 0), sigma / f)
     m = num / np.maximum(den, 1e-12)[..., None] * (den > 1e-6)[..., None]
-    out = cv2.resize(m, (wd, h), interpolation=cv2.INTER_LINEAR).reshape(h, wd, -1)
+    out = _by_channels(lambda part: cv2.resize(part, (wd, h), interpolation=cv2.INTER_LINEAR), m)
     dens = cv2.resize(den, (wd, h), interpolation=cv2.INTER_LINEAR)
     return out.astype(np.float32), dens.astype(np.float32)
 
@@ -162,7 +162,9 @@ def _background(skeleton: Skeleton, shape: tuple[int, int], factor: float) -> ND
     for b in skeleton.branches:
         for (a, bb), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
             rr = max(factor * 0.5 * (r0 + r1), MIN_RADIUS)
-            cv2.line(zone, _pt(a), _pt(bb), 1, thickness=max(1, round(2 * rr)), lineType=cv2.LINE_8, shift=4)
+            cv2.line(
+                zone, _pt(a), _pt(bb), 1, thickness=min(max(1, round(2 * rr)), 32767), lineType=cv2.LINE_8, shift=4
+            )
     return np.asarray(zone == 0)
 
 

@@ -28,8 +28,8 @@ class SynthesisResult:
 
     Attributes
     ----------
-    image : (H, W, C) float32 ndarray
-        The new image.
+    image : (H, W[, C]) float32 ndarray
+        The new image (2-D for a 2-D input).
     source : Skeleton
         The input's skeleton (given or traced).
     target : Skeleton
@@ -154,7 +154,7 @@ def synthesize(
     >>> _ = cv2.line(img, (70, 40), (90, 92), 0.1, 3)
     >>> res = synthesize(img, trace_options={"kind": "dark", "sigmas": (1.5, 2.5)}, seed=1)
     >>> res.image.shape, res.target.shape
-    ((96, 128, 1), (96, 128))
+    ((96, 128), (96, 128))
     """
     img = as_image(image, "image")
     shape = img.shape[:2] if size is None else check_size(size, "size")
@@ -171,6 +171,9 @@ def synthesize(
         source = skeleton
         if source.shape is not None and source.shape != img.shape[:2]:
             raise ValueError(f"skeleton: made for a {source.shape} image, but image is {img.shape[:2]}")
+        # Before fitting: a skeleton without a shape is only known to fit the image here, and
+        # the models' resampling would otherwise walk far-away coordinates vertex by vertex.
+        source.check_inside(img.shape[:2], "skeleton")
     else:
         raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
     tick(1)
@@ -181,8 +184,9 @@ def synthesize(
         colonize=colonize, guide=guide,
     )  # fmt: skip
     tick(3)
+    # A 2-D input goes to render as 2-D, so that the new image is 2-D as well.
     res = render(
-        img,
+        img[..., 0] if np.ndim(image) == 2 else img,
         source,
         target,
         seed=seed,

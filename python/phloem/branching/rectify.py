@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from .._api import Size, renamed
 from .._validate import as_image, check_size
-from ._pixels import F32, F64, _check_skeleton
+from ._pixels import F32, F64, _by_channels, _check_skeleton
 from .skeleton import Branch, Skeleton
 
 __all__ = ["rectify", "unrectify"]
@@ -93,10 +93,13 @@ def rectify(image: Any, skeleton: Skeleton, homography: Any) -> tuple[F32, Skele
     if size.max() > 32768:
         raise ValueError(f"homography: the rectified image would be {size[0]}x{size[1]} pixels")
     Hs = np.array([[1.0, 0.0, -lo[0]], [0.0, 1.0, -lo[1]], [0.0, 0.0, 1.0]]) @ Hm
-    out = cv2.warpPerspective(
-        img, Hs, (int(size[0]), int(size[1])), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT
+    out = _by_channels(
+        lambda part: cv2.warpPerspective(
+            part, Hs, (int(size[0]), int(size[1])), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT
+        ),
+        img,
     )
-    rect: F32 = np.ascontiguousarray(out.reshape(int(size[1]), int(size[0]), img.shape[2]), dtype=np.float32)
+    rect: F32 = np.ascontiguousarray(out, dtype=np.float32)
     ones = np.ones(img.shape[:2], np.uint8)
     valid = cv2.warpPerspective(ones, Hs, (int(size[0]), int(size[1])), flags=cv2.INTER_NEAREST) > 0
     branches = []
@@ -132,7 +135,10 @@ def unrectify(image: Any, homography: Any, size: Size) -> F32:
     img = as_image(image, "image")
     Hm = _homography(homography)
     h, w = check_size(size)
-    out = cv2.warpPerspective(
-        img, Hm, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_CONSTANT
+    out = _by_channels(
+        lambda part: cv2.warpPerspective(
+            part, Hm, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_CONSTANT
+        ),
+        img,
     )
-    return np.ascontiguousarray(out.reshape(h, w, img.shape[2]), dtype=np.float32)
+    return np.ascontiguousarray(out, dtype=np.float32)

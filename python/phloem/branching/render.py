@@ -51,7 +51,7 @@ from .._progress import Progress
 from .._validate import as_image, as_mask, check_float, check_int, check_patch_size, check_seed, check_threads
 from ..blend import interpolate_field, seamless
 from ..seams import seam
-from ._pixels import F32, F64, _check_skeleton, _clip_channels, _paste, _pt, _rot
+from ._pixels import F32, F64, _by_channels, _check_skeleton, _clip_channels, _paste, _pt, _rot
 from .fragments import DEFAULT_SAMPLES, Fragment, FragmentLibrary, check_params, cover, foreign_fragments
 from .gaps import fill_gaps
 from .skeleton import Skeleton
@@ -65,7 +65,7 @@ class RenderResult:
 
     Attributes
     ----------
-    image : ndarray of float32, shape (H, W, C)
+    image : ndarray of float32, shape (H, W, C), or (H, W) for a 2-D input
         The synthesised image.
     labels : ndarray of int32, shape (H, W)
         Index into ``targets`` of the fragment each pixel came from; ``-1`` for pixels filled
@@ -76,7 +76,7 @@ class RenderResult:
         ``sources`` index chosen for each target fragment.
     mirrored : ndarray of bool
         Whether that source fragment was used mirrored (furcations only, see ``mirror``).
-    structure : ndarray of float32, shape (H, W, C)
+    structure : ndarray of float32, shape (H, W, C), or (H, W) for a 2-D input
         The image before gap completion (unpainted pixels are 0).
     """
 
@@ -249,8 +249,8 @@ def render(
 
     Returns
     -------
-    image : (H, W, C) ndarray of float32, or RenderResult
-        ``H, W`` from ``target_skeleton.shape``; ``C`` as in ``image``.
+    image : (H, W[, C]) ndarray of float32, or RenderResult
+        ``H, W`` from ``target_skeleton.shape``; ``C`` as in ``image`` (2-D for a 2-D ``image``).
 
     References
     ----------
@@ -266,8 +266,9 @@ def render(
     >>> tgt = Skeleton([Branch([[31.5, 2], [31.5, 61]], 3.0)], (64, 64))  # the same, vertical
     >>> out = render(img, src, tgt, seed=0)
     >>> out.shape, bool(out[30, 29:35].mean() < 0.3), bool(out[30, 5].mean() > 0.6)
-    ((64, 64, 1), True, True)
+    ((64, 64), True, True)
     """
+    flat = np.ndim(image) == 2  # a 2-D input gives a 2-D output, as everywhere else in phloem
     img = as_image(image, "image")
     H0, W0 = img.shape[:2]
     src_sk = _check_skeleton(source_skeleton, "source_skeleton", (H0, W0))
@@ -305,6 +306,8 @@ def render(
         )  # fmt: skip
     if progress is not None:
         progress(len(targets) + 1, len(targets) + 1)
+    if flat:
+        canvas, structure = canvas[..., 0], structure[..., 0]
     if full_output:
         return RenderResult(canvas, painter.labels, sources, targets, painter.choice, painter.mirrored, structure)
     return canvas
@@ -549,8 +552,11 @@ def _reaches_out(f: Fragment, ok: NDArray[np.bool_]) -> bool:
 
 
 def _sample(img: F32, mapx: F32, mapy: F32) -> F32:
-    out = cv2.remap(img, mapx, mapy, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
-    return np.ascontiguousarray(out.reshape(*mapx.shape, img.shape[2]), dtype=np.float32)
+    out = _by_channels(
+        lambda part: cv2.remap(part, mapx, mapy, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101),
+        img,
+    )
+    return np.ascontiguousarray(out, dtype=np.float32)
 
 
 def _displacement(disk_shape: tuple[int, int], y0: int, x0: int, q_abs: F64, d: F64, r: float) -> F32:
@@ -655,6 +661,6 @@ def _branch_map(skeleton: Skeleton, shape: tuple[int, int]) -> NDArray[np.int32]
         m = np.zeros(shape, np.uint8)
         for (a, bb), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
             r = max(0.5 * (r0 + r1), 0.5) + 2.0
-            cv2.line(m, _pt(a), _pt(bb), 1, thickness=max(1, round(2 * r)), lineType=cv2.LINE_8, shift=4)
+            cv2.line(m, _pt(a), _pt(bb), 1, thickness=min(max(1, round(2 * r)), 32767), lineType=cv2.LINE_8, shift=4)
         out[m > 0] = i
     return out

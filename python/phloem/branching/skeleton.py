@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._api import Size, renamed
+from .._json import parse_json, read_json
 from .._validate import as_image, check_float, check_size
 
 __all__ = ["Branch", "Skeleton", "SkeletonError"]
@@ -43,6 +44,14 @@ __all__ = ["Branch", "Skeleton", "SkeletonError"]
 F64 = NDArray[np.float64]
 FORMAT = "phloem.skeleton"
 VERSION = 1
+# Bounds that keep every loop over a skeleton finite and every OpenCV drawing call valid: no
+# image phloem reads is wider than 2^20 px (the pixel limit is 2^28), OpenCV refuses line
+# thicknesses over 32767 (a radius of 2^14), and resampling makes at most MAX_VERTICES vertices
+# (model fitting takes about 0.1 ms a vertex, so 2^20 is a couple of minutes at worst).
+MAX_COORD = 2.0**20
+MAX_THICKNESS = 2.0**13
+MAX_VERTICES = 2**20
+_MAX_LENGTH = 2**28
 
 
 class SkeletonError(ValueError):
@@ -52,29 +61,67 @@ class SkeletonError(ValueError):
 def _as_points(points: Any, where: str) -> F64:
     try:
         arr = np.asarray(points, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise SkeletonError(f"{where}: points must be a list of [x, y] pairs ({exc})") from None
+    except (TypeError, ValueError, OverflowError):
+        raise SkeletonError(f"{where}: points must be a list of [x, y] number pairs") from None
     if arr.ndim != 2 or arr.shape[1] != 2:
         raise SkeletonError(f"{where}: points must have shape (n, 2), got {arr.shape}")
     if arr.shape[0] < 2:
         raise SkeletonError(f"{where}: a branch needs at least 2 points, got {arr.shape[0]}")
-    if not np.isfinite(arr).all():
-        raise SkeletonError(f"{where}: points contain NaN or infinity")
+    bad = ~(np.abs(arr) <= MAX_COORD).all(axis=1)
+    if bad.any():
+        j = int(np.argmax(bad))
+        raise SkeletonError(
+            f"{where}.points[{j}]: coordinates must be finite (no NaN or infinity) and within ±{MAX_COORD:.0f} px, got {arr[j].tolist()}"
+        )
     return np.ascontiguousarray(arr)
 
 
 def _as_thickness(thickness: Any, n: int, where: str) -> F64:
     try:
         arr = np.asarray(thickness, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise SkeletonError(f"{where}: thickness must be a list of numbers ({exc})") from None
+    except (TypeError, ValueError, OverflowError):
+        raise SkeletonError(f"{where}: thickness must be a number or a list of numbers") from None
     if arr.ndim == 0:
         arr = np.full(n, float(arr))
     if arr.shape != (n,):
         raise SkeletonError(f"{where}: thickness must have one value per point ({n}), got shape {arr.shape}")
-    if not np.isfinite(arr).all() or (arr < 0).any():
-        raise SkeletonError(f"{where}: thickness must be finite and >= 0")
+    bad = ~((arr >= 0) & (arr <= MAX_THICKNESS))
+    if bad.any():
+        j = int(np.argmax(bad))
+        raise SkeletonError(
+            f"{where}.thickness[{j}]: expected a radius in [0, {MAX_THICKNESS:.0f}] px, got {float(arr[j])!r}"
+        )
     return np.ascontiguousarray(arr)
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _json_points(points: Any, where: str) -> Any:
+    """The points of a file's branch, type-checked (numpy would read "1" or true as numbers)."""
+    if not isinstance(points, list):
+        raise SkeletonError(f"{where}.points must be a list of [x, y] pairs, got {type(points).__name__}")
+    for j, p in enumerate(points):
+        if not (isinstance(p, list) and len(p) == 2 and _is_number(p[0]) and _is_number(p[1])):
+            raise SkeletonError(f"{where}.points[{j}] must be [x, y] with two numbers, got {_short(p)}")
+    return points
+
+
+def _json_thickness(thickness: Any, where: str) -> Any:
+    if _is_number(thickness):
+        return thickness
+    if not isinstance(thickness, list):
+        raise SkeletonError(f"{where}.thickness must be a number or a list of numbers, got {type(thickness).__name__}")
+    for j, t in enumerate(thickness):
+        if not _is_number(t):
+            raise SkeletonError(f"{where}.thickness[{j}] must be a number, got {_short(t)}")
+    return thickness
+
+
+def _short(v: Any) -> str:
+    text = repr(v)
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 @dataclass
@@ -293,6 +340,11 @@ class Skeleton:
                     )
         if self.shape is not None:
             self.check_inside(self.shape)
+        elif (total := self.total_length()) > _MAX_LENGTH:
+            raise SkeletonError(
+                f"branches: a total length of {total:.3g} px is more than any image phloem reads can hold"
+                f" ({_MAX_LENGTH} px, the pixel limit)"
+            )
 
     def check_inside(self, shape: tuple[int, int], name: str = "") -> None:
         """Raise :class:`SkeletonError` naming the first vertex outside an ``(H, W)`` image.
@@ -358,6 +410,12 @@ class Skeleton:
         A child's parent vertex becomes the resampled parent vertex nearest to the old one.
         """
         h = check_float(h, "h", 0.0, inclusive=False)
+        count = sum(b.length() / h + 2 for b in self.branches)
+        if count > MAX_VERTICES:
+            raise ValueError(
+                f"h: resampling {self.total_length():.3g} px of branches at h={h:g} would make about {count:.3g} vertices,"
+                f" more than the limit of {MAX_VERTICES}; pass a larger h"
+            )
         new = [b.resample(h) for b in self.branches]
         for b in new:
             if b.parent is not None:
@@ -387,7 +445,9 @@ class Skeleton:
         for b in self.branches:
             for (p, q), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
                 r = max(0.5 * (r0 + r1), 0.5)
-                cv2.line(out, _pt(p), _pt(q), 1, thickness=max(1, round(2 * r)), lineType=cv2.LINE_8, shift=4)
+                cv2.line(
+                    out, _pt(p), _pt(q), 1, thickness=min(max(1, round(2 * r)), 32767), lineType=cv2.LINE_8, shift=4
+                )
         return out.astype(bool)
 
     @renamed(shape="size")
@@ -476,8 +536,8 @@ class Skeleton:
             where = f"branches[{i}]"
             if not isinstance(b, dict) or "points" not in b:
                 raise SkeletonError(f"{where} must be an object with 'points' (and 'thickness', 'parent')")
-            pts = _as_points(b["points"], where)
-            thick = _as_thickness(b.get("thickness", 1.0), len(pts), where)
+            pts = _as_points(_json_points(b["points"], where), where)
+            thick = _as_thickness(_json_thickness(b.get("thickness", 1.0), where), len(pts), where)
             parent = b.get("parent")
             if parent is not None:
                 if not (
@@ -485,7 +545,9 @@ class Skeleton:
                     and len(parent) == 2
                     and all(isinstance(v, int) and not isinstance(v, bool) for v in parent)
                 ):
-                    raise SkeletonError(f"{where}.parent must be null or [branch index, vertex index], got {parent!r}")
+                    raise SkeletonError(
+                        f"{where}.parent must be null or [branch index, vertex index], got {_short(parent)}"
+                    )
                 parent = (parent[0], parent[1])
             out.append(Branch(pts, thick, parent))
         shape = data.get("shape")
@@ -493,31 +555,27 @@ class Skeleton:
             if not (
                 isinstance(shape, (list, tuple))
                 and len(shape) == 2
-                and all(isinstance(v, int) and v > 0 for v in shape)
+                and all(isinstance(v, int) and not isinstance(v, bool) and 0 < v <= MAX_COORD for v in shape)
             ):
-                raise SkeletonError(f"'shape' must be [H, W] with positive integers, got {shape!r}")
+                raise SkeletonError(f"'shape' must be [H, W] with integers in 1..{MAX_COORD:.0f}, got {_short(shape)}")
             shape = (shape[0], shape[1])
         return cls(out, shape)
 
     @classmethod
     def from_json(cls, text: str) -> Skeleton:
         """Parse the JSON file format."""
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise SkeletonError(f"not a valid JSON skeleton: {exc}") from None
-        return cls.from_dict(data)
+        if not isinstance(text, str):
+            raise TypeError(f"text: expected a str, got {type(text).__name__}")
+        return cls.from_dict(parse_json(text, "text", "", error=SkeletonError))
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Skeleton:
-        """Read a skeleton file."""
-        p = Path(path)
-        if p.stat().st_size > 256 * 1024 * 1024:
-            raise SkeletonError(f"{p}: skeleton file is larger than 256 MiB")
+        """Read a skeleton file; every error is one line that names the file."""
+        data = read_json(path, "path", error=SkeletonError)
         try:
-            return cls.from_json(p.read_text(encoding="utf-8"))
+            return cls.from_dict(data)
         except SkeletonError as exc:
-            raise SkeletonError(f"{p}: {exc}") from None
+            raise SkeletonError(f"path: {path}: {exc}") from None
 
     def save(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> None:
         """Write the skeleton file atomically; refuses to overwrite unless asked."""

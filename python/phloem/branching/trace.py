@@ -567,6 +567,9 @@ def trace(
     lo, hi = float(gray.min()), float(gray.max())
     if hi - lo <= 1e-12:
         raise ValueError(f"image: nothing to trace, the image is constant ({lo})")
+    if min(shape) < 3:
+        # The ridge filter's derivatives need 3 pixels a side (numpy's gradient would say "Shape of array too small").
+        raise ValueError(f"image: nothing to trace in a {shape[1]}x{shape[0]} image; it needs at least 3x3 pixels")
 
     if kind == "auto":
         kind = "mask" if np.unique(gray).size <= 2 else _polarity(gray, sig)  # type: ignore[assignment]

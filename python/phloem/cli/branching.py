@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import __version__, branching, io
+from .. import __version__, _json, branching, io
 from ._common import (
     check_writable,
     common_options,
@@ -85,10 +85,18 @@ def _guide(path: str | None, args: argparse.Namespace) -> Any:
         return None
     p = Path(path)
     if p.suffix.lower() == ".json":
-        pts = np.asarray(json.loads(p.read_text(encoding="utf-8")), dtype=np.float64)
-        if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2:
+        data = _json.read_json(p, "guide")
+        ok = isinstance(data, list) and len(data) >= 2
+        for i, q in enumerate(data if ok else []):
+            if not (
+                isinstance(q, list)
+                and len(q) == 2
+                and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in q)
+            ):
+                raise ValueError(f"guide: {p}: point [{i}] must be [x, y] with two numbers")
+        if not ok:
             raise ValueError(f"guide: {p} must hold a JSON list of at least two [x, y] points")
-        return pts
+        return np.asarray(data, dtype=np.float64)
     g = io.read_image(p, max_pixels=args.max_pixels)
     return (g.mean(axis=2) if g.ndim == 3 else g) > 0.5
 

@@ -35,13 +35,23 @@ def _cmd_complete(args: argparse.Namespace) -> None:
     preflight(args)
     img = io.read_image(args.input, max_pixels=args.max_pixels)
     m = io.read_image(args.mask, max_pixels=args.max_pixels)
-    if m.ndim == 3:
-        m = m[..., 3] if m.shape[2] == 4 and args.mask_alpha else m[..., :3].max(axis=2)
+    channels = 1 if m.ndim == 2 else m.shape[2]
+    if args.mask_alpha:
+        # Gray+alpha or RGBA; anything else has no alpha, and its colours would be taken for one.
+        if channels not in (2, 4):
+            raise ValueError(f"mask_alpha: {args.mask} has no alpha channel ({channels} channels); drop --mask-alpha")
+        m = m[..., channels - 1]
+    elif m.ndim == 3:
+        m = m[..., : min(channels, 3)].max(axis=2)
     if m.shape != img.shape[:2]:
         raise ValueError(
             f"mask: {args.mask} is {m.shape[1]}×{m.shape[0]}, but the image is {img.shape[1]}×{img.shape[0]}"
         )
-    hole = (m < 0.5) if args.mask_alpha else (m >= 0.5)
+    # With alpha, every pixel that is not fully opaque is filled: soft edges (alpha 0.5-1) kept
+    # as they are would leave a pale ring of half-transparent colour around the fill.
+    hole = (m < 1.0 - 0.5 / 65535) if args.mask_alpha else (m >= 0.5)
+    if args.invert_mask:
+        hole = ~hole
     out = run(
         "complete",
         args,
@@ -110,7 +120,13 @@ def add_parsers(sub: Any) -> None:
     p.add_argument(
         "--mask-alpha",
         action="store_true",
-        help="take the hole from MASK's alpha channel: transparent pixels are filled",
+        help="take the hole from MASK's alpha channel: every pixel that is not fully opaque is filled "
+        "(MASK must have alpha)",
+    )
+    p.add_argument(
+        "--invert-mask",
+        action="store_true",
+        help="flip the mask's meaning: fill where MASK is black (or, with --mask-alpha, opaque)",
     )
     p.add_argument("--patch-size", type=int, default=7, help="patch side, odd (default 7)")
     p.add_argument("--levels", type=positive, default=None, help="pyramid levels (default: from the hole size)")

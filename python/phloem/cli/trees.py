@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -12,7 +11,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .. import io, trees
+from .. import _json, io, trees
 from ._common import (
     check_writable,
     common_options,
@@ -31,7 +30,11 @@ def _tree_library(args: argparse.Namespace, bar: Any) -> trees.Library:
     src = Path(args.library)
     clf = None
     if args.trunk_model is not None:
-        clf = trees.TrunkClassifier.from_dict(json.loads(Path(args.trunk_model).read_text(encoding="utf-8")))
+        data = _json.read_json(args.trunk_model, "trunk_model")
+        try:
+            clf = trees.TrunkClassifier.from_dict(data)
+        except ValueError as exc:
+            raise ValueError(f"trunk_model: {args.trunk_model}: {str(exc).removeprefix('data: ')}") from None
     return trees.Library.load(
         src, atlas=args.atlas, size=args.size, skip_bad=args.skip_bad, classifier=clf, max_pixels=args.max_pixels,
         progress=bar, max_memory=args.max_memory,

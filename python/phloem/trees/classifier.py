@@ -65,6 +65,25 @@ def _trunk_features(img: F32, opaque: Mask, prior: Mask) -> F64:
     return np.asarray(f, dtype=np.float64)
 
 
+# The columns of _trunk_features.
+_N_FEATURES = 11
+
+
+def _number_list(data: dict[str, Any], key: str, n: int) -> F64:
+    v = data.get(key)
+    if not (isinstance(v, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
+        raise ValueError(f"data: {key!r} must be a list of numbers")
+    if len(v) != n:
+        raise ValueError(f"data: {key!r} must hold {n} numbers, got {len(v)}")
+    try:
+        arr = np.asarray(v, np.float64)
+    except OverflowError:  # an integer beyond float64
+        arr = np.full(1, np.inf)
+    if not np.isfinite(arr).all():
+        raise ValueError(f"data: {key!r} must hold finite numbers")
+    return arr
+
+
 def _quadratic(f: F64) -> F64:
     iu = np.triu_indices(f.shape[1])
     return np.hstack([np.ones((len(f), 1)), f, f[:, iu[0]] * f[:, iu[1]]])
@@ -236,13 +255,17 @@ class TrunkClassifier:
 
     @classmethod
     def from_dict(cls, data: Any) -> TrunkClassifier:
-        """Rebuild a classifier saved with :meth:`to_dict`."""
+        """Rebuild a classifier saved with :meth:`to_dict`; malformed data gives a one-line error."""
         if not isinstance(data, dict) or data.get("format") != "phloem.trees.TrunkClassifier":
-            raise ValueError("data: not a phloem.trees.TrunkClassifier record")
-        coef = np.asarray(data["coef"], np.float64)
-        mean = np.asarray(data["mean"], np.float64)
-        scale = np.asarray(data["scale"], np.float64)
-        d = mean.size
-        if scale.shape != (d,) or coef.shape != (1 + d + d * (d + 1) // 2,):
-            raise ValueError("data: coefficient sizes do not match")
-        return cls(coef=coef, mean=mean, scale=scale, alpha_threshold=float(data["alpha_threshold"]))
+            raise ValueError("data: not a phloem.trees.TrunkClassifier record (its 'format' must say so)")
+        if data.get("version", 1) != 1:
+            raise ValueError(f"data: unsupported TrunkClassifier version {data.get('version')!r} (this phloem reads 1)")
+        d = _N_FEATURES
+        sizes = {"coef": 1 + d + d * (d + 1) // 2, "mean": d, "scale": d}
+        arrays = {key: _number_list(data, key, n) for key, n in sizes.items()}
+        if not (arrays["scale"] > 0).all():
+            raise ValueError("data: 'scale' must hold positive numbers")
+        t = data.get("alpha_threshold")
+        if not (isinstance(t, (int, float)) and not isinstance(t, bool) and 0.0 < t <= 1.0):
+            raise ValueError(f"data: 'alpha_threshold' must be a number in (0, 1], got {t!r:.40}")
+        return cls(coef=arrays["coef"], mean=arrays["mean"], scale=arrays["scale"], alpha_threshold=float(t))
