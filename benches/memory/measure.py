@@ -13,7 +13,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+import phloem
+
 
 # (job, setup code defining the inputs, the call with {n} for the size) — each a few seconds at most
 SETUP = {
@@ -131,7 +132,12 @@ def measure(job: str, n: int, env: dict[str, str] | None = None) -> tuple[int, i
     """(measured peak over baseline, estimate) in bytes for ``job`` at size ``n``."""
     setup, call, estimate, _ = CASES[job]
     code = PROG.format(setup=SETUP[setup], call=call.format(n=n), estimate=estimate.format(n=n))
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "python"), "PHLOEM_NUM_THREADS": "2", **(env or {})}
+    env = {
+        **os.environ,
+        "PYTHONPATH": str(Path(phloem.__file__).resolve().parents[1]),
+        "PHLOEM_NUM_THREADS": "2",
+        **(env or {}),
+    }
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300, check=True)
     got, est = json.loads(out.stdout.strip().splitlines()[-1])
     return int(got), int(est)

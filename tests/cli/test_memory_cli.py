@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import phloem
 from phloem import branching, io
 
-ROOT = Path(__file__).resolve().parents[2]
 CAP = 4 * 2**30  # RLIMIT_AS: without the budget these runs abort ("memory allocation of ... failed") or die
 
 
@@ -23,7 +23,7 @@ def _cap() -> None:
 
 
 def phloem_capped(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "python"), "PHLOEM_NUM_THREADS": "2"}
+    env = {**os.environ, "PYTHONPATH": str(Path(phloem.__file__).resolve().parents[1]), "PHLOEM_NUM_THREADS": "2"}
     return subprocess.run(
         [sys.executable, "-m", "phloem", *args, "-q"], cwd=cwd, env=env, preexec_fn=_cap,
         capture_output=True, text=True, timeout=120,
