@@ -15,7 +15,6 @@ from pathlib import Path
 
 import phloem
 
-
 # (job, setup code defining the inputs, the call with {n} for the size) — each a few seconds at most
 SETUP = {
     "spots": "yy, xx = np.mgrid[:64, :64]; spots = np.sin(yy / 4.0) * np.sin(xx / 5.0) > 0.3",
