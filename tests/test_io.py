@@ -400,3 +400,13 @@ def test_decoder_messages_do_not_leak(tmp_path, bark, capfd):
     assert err == "" and out == ""
     print("stderr works again", file=sys.stderr)
     assert "works again" in capfd.readouterr().err
+
+
+def test_damaged_tiff_pages_print_nothing(tmp_path):
+    # tifffile logs "invalid circular reference to IFD" while its pages load, after the header;
+    # a subprocess, because pytest's log capture would hide it
+    p = tmp_path / "circular.tif"
+    p.write_bytes(b"II*\x00" + struct.pack("<IHI", 8, 0, 8))  # an empty IFD whose next IFD is itself
+    code = f"import phloem\ntry:\n    phloem.io.read_image({str(p)!r})\nexcept phloem.io.ImageReadError as e:\n    print(e)"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=CLI_ENV, timeout=60)
+    assert "circular.tif" in r.stdout and r.stderr == ""

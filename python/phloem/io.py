@@ -121,14 +121,19 @@ def _tiff_header(fp: IO[bytes]) -> tuple[int, int, int, bool]:
 
     log = logging.getLogger("tifffile")
     level = log.level
-    log.setLevel(logging.CRITICAL)  # it logs damage to stderr ("contains no pages"); we raise instead
+    # it logs damage to stderr ("contains no pages", "circular reference to IFD"), also while the
+    # pages load lazily below; we raise instead
+    log.setLevel(logging.CRITICAL)
     try:
-        tf = tifffile.TiffFile(fp)
+        return _tiff_layout(tifffile.TiffFile(fp), fp.name)
     finally:
         log.setLevel(level)
+
+
+def _tiff_layout(tf: Any, name: str) -> tuple[int, int, int, bool]:
     with tf:
         if not len(tf.pages):
-            raise ImageReadError(f"path: {fp.name} is a TIFF without any image in it")
+            raise ImageReadError(f"path: {name} is a TIFF without any image in it")
         page = tf.pages.first
         photometric, spp = int(page.photometric), int(page.samplesperpixel)
         is_float = int(page.sampleformat) == 3
@@ -143,7 +148,7 @@ def _tiff_header(fp: IO[bytes]) -> tuple[int, int, int, bool]:
             layout = "float samples in separate planes"
         if layout is not None:
             raise ImageReadError(
-                f"path: {fp.name} is a TIFF with {layout}; expected gray, RGB or RGBA with 8- or"
+                f"path: {name} is a TIFF with {layout}; expected gray, RGB or RGBA with 8- or"
                 " 16-bit integer or 32-/64-bit float samples"
             )
         tag = page.tags.get(274)  # Orientation
