@@ -25,6 +25,7 @@ from .._validate import as_image, check_float, check_int
 __all__ = ["extract"]
 
 F32 = NDArray[np.float32]
+Box = tuple[int, int, int, int]
 
 # Half weight for lightness: a shadow changes lightness by 20-30 and chroma by a few units, a leaf
 # on white paper changes lightness by 50+ and chroma by 20+ (measured on the shared scans and
@@ -39,12 +40,14 @@ _MIN_THRESHOLD = 8.0
 _MIN_SEPARATION = 2.4
 # At most this fraction of the image may be leaf: beyond it there is no background to model.
 _MAX_FOREGROUND = 0.95
+# Depth (px) of a leaf's interior below its edge: photos' edges (lens blur, JPEG chroma) mix leaf
+# and background over up to 3 px, so colour beyond 3 px inside is taken as pure leaf.
+_INTERIOR = 3
 # A leaf has at least this many pixels whatever min_area says (a blank page with dust holds none).
 _MIN_PIXELS = 64
 
 
-def _lab_distance(rgb: F32, background: NDArray[np.float64]) -> F32:
-    lab = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2Lab)
+def _lab_distance(lab: F32, background: NDArray[np.float64]) -> F32:
     d_l = _LIGHTNESS_WEIGHT * (lab[..., 0] - background[0])
     d_a = lab[..., 1] - background[1]
     d_b = lab[..., 2] - background[2]
@@ -73,7 +76,7 @@ def _check_background(background: Any) -> NDArray[np.float64] | None:
     return arr
 
 
-def _reading_order(boxes: list[tuple[int, int, int, int]]) -> list[int]:
+def _reading_order(boxes: list[Box]) -> list[int]:
     """Indices of ``boxes`` (y0, y1, x0, x1) in reading order: rows of boxes whose vertical centre
     lies within the row's span, top to bottom, then left to right within each row."""
     order = sorted(range(len(boxes)), key=lambda i: (boxes[i][0], boxes[i][2]))
@@ -90,9 +93,9 @@ def _reading_order(boxes: list[tuple[int, int, int, int]]) -> list[int]:
     return [i for row in rows for i in sorted(row, key=lambda j: (boxes[j][2], boxes[j][0]))]
 
 
-def _components(mask: NDArray[np.bool_], min_area: float) -> tuple[NDArray[np.int32], list[int]]:
-    """8-connected components of ``mask`` and the labels of those kept as leaves (at least
-    ``min_area`` times the largest and ``_MIN_PIXELS``), in reading order."""
+def _components(mask: NDArray[np.bool_], min_area: float) -> tuple[NDArray[np.int32], list[tuple[int, Box]]]:
+    """8-connected components of ``mask`` and the labels and boxes (y0, y1, x0, x1) of those kept
+    as leaves (at least ``min_area`` times the largest and ``_MIN_PIXELS``), in reading order."""
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
     areas = stats[1:, cv2.CC_STAT_AREA]
     if areas.size == 0:
@@ -110,12 +113,12 @@ def _components(mask: NDArray[np.bool_], min_area: float) -> tuple[NDArray[np.in
     for k in kept:
         bx, by, bw_k, bh_k = (int(v) for v in stats[k, :4])
         boxes.append((by, by + bh_k, bx, bx + bw_k))
-    return np.asarray(labels, np.int32), [kept[i] for i in _reading_order(boxes)]
+    return np.asarray(labels, np.int32), [(kept[i], boxes[i]) for i in _reading_order(boxes)]
 
 
-def _box(labels: NDArray[np.int32], k: int, margin: int) -> tuple[int, int, int, int]:
-    ys, xs = np.nonzero(labels == k)
-    return int(ys.min()) - margin, int(ys.max()) + 1 + margin, int(xs.min()) - margin, int(xs.max()) + 1 + margin
+def _grow(box: Box, margin: int) -> Box:
+    y0, y1, x0, x1 = box
+    return y0 - margin, y1 + margin, x0 - margin, x1 + margin
 
 
 def _crop(a: NDArray[Any], box: tuple[int, int, int, int]) -> NDArray[Any]:
@@ -149,16 +152,18 @@ def _from_alpha(img: F32, min_area: float, margin: int) -> list[F32]:
     rgba = img if img.shape[2] == 4 else np.concatenate([np.repeat(img[..., :1], 3, axis=2), img[..., 1:]], axis=2)
     # Components of alpha > 0 keep each leaf's own soft edge; one must be at least half opaque.
     labels, kept = _components(alpha > 0, 0.0)
-    kept = [k for k in kept if (alpha[labels == k] >= 0.5).any()]
+    half = np.zeros(int(labels.max()) + 1, bool)
+    half[labels[alpha >= 0.5]] = True
+    kept = [(k, b) for k, b in kept if half[k]]
     if kept:
-        areas = {k: int((labels == k).sum()) for k in kept}
-        largest = max(areas.values())
-        kept = [k for k in kept if areas[k] >= min_area * largest]
+        areas = np.bincount(labels.ravel())
+        largest = max(int(areas[k]) for k, _ in kept)
+        kept = [(k, b) for k, b in kept if areas[k] >= min_area * largest]
     if not kept:
         raise ValueError("image: found no leaf in the alpha channel (nothing at least half opaque)")
     out = []
-    for k in kept:
-        box = _box(labels, k, margin)
+    for k, b in kept:
+        box = _grow(b, margin)
         piece = _crop(rgba, box)
         piece[_crop(labels, box) != k, 3] = 0.0  # other leaves in the box, and the margin beyond the image
         out.append(np.ascontiguousarray(piece, dtype=np.float32))
@@ -259,12 +264,12 @@ def extract(
     if min(h, w) < 8:
         raise ValueError(f"image: expected at least 8 pixels a side to find a background, got shape {img.shape}")
 
+    lab = np.asarray(cv2.cvtColor(rgb, cv2.COLOR_RGB2Lab), dtype=np.float32)
     if bg is None:
-        lab = cv2.cvtColor(rgb, cv2.COLOR_RGB2Lab)
         bg_lab = np.median(_border(lab, max(2, round(0.02 * min(h, w)))), axis=0).astype(np.float64)
     else:
         bg_lab = cv2.cvtColor(bg.astype(np.float32).reshape(1, 1, 3), cv2.COLOR_RGB2Lab).reshape(3).astype(np.float64)
-    dist = _lab_distance(rgb, bg_lab)
+    dist = _lab_distance(lab, bg_lab)
 
     if (dist > (threshold if threshold is not None else _MIN_THRESHOLD)).mean() > _MAX_FOREGROUND:
         raise ValueError("image: all foreground (no background around the leaves to model); pass background=")
@@ -284,7 +289,6 @@ def extract(
     # Hysteresis: weak pixels (beyond the background's own spread) joined to strong ones are leaf.
     weak_t = min(t, max(t / 2, float(bgd.mean()) + 3 * float(bgd.std())))
     # A weak pixel darker than the background with little chroma of its own is shadow, not leaf edge.
-    lab = cv2.cvtColor(rgb, cv2.COLOR_RGB2Lab)
     chroma = np.hypot(lab[..., 1] - bg_lab[1], lab[..., 2] - bg_lab[2])
     shadow = (lab[..., 0] < bg_lab[0]) & (chroma < 0.25 * t)
     weak = ((dist > weak_t) & ~shadow) | strong
@@ -299,7 +303,7 @@ def extract(
         raise ValueError(
             f"image: found no leaf of at least {_MIN_PIXELS} pixels (only specks depart from the background)"
         )
-    # Soft edge and colour: pixels within `band` of a leaf's interior (the mask eroded by 2 px) are a
+    # Soft edge and colour: pixels within `band` of a leaf's interior (the mask eroded by 3 px) are a
     # mix of the leaf's colour F (that of the nearest interior pixel) and the background's B; their
     # alpha is the projection of C - B on F - B, so edges neither fringe with the background nor go
     # hard. Mask pixels beyond the threshold keep alpha >= 0.5; pixels beyond the mask get
@@ -307,15 +311,15 @@ def extract(
     bg_rgb = np.median(_border(rgb, max(2, round(0.02 * min(h, w)))), axis=0) if bg is None else bg
     bg_rgb = np.asarray(bg_rgb, np.float32)
     kernel = np.ones((3, 3), np.uint8)
-    band = 2.0 + 1.5 + feather
+    band = _INTERIOR + 1.5 + feather
     out = []
-    for k in kept:
-        box = _box(labels, k, margin)
+    for k, b in kept:
+        box = _grow(b, margin)
         found = _crop(labels, box) == k
         leaf = _fill_small_holes(found, holes)
         colour = _crop(rgb, box)
         alpha = leaf.astype(np.float32)
-        interior = cv2.erode(leaf.astype(np.uint8), kernel, iterations=2) > 0
+        interior = cv2.erode(leaf.astype(np.uint8), kernel, iterations=_INTERIOR) > 0
         if interior.any():
             near, (iy, ix) = ndimage.distance_transform_edt(~interior, return_indices=True)
             fg_c = colour[iy, ix]
@@ -331,9 +335,11 @@ def extract(
             mixed = edge & (leaf | outside)
             colour[mixed] = fg_c[mixed]
         # Pixels that only hysteresis joined (below the threshold) are mixed or noise: their alpha is
-        # the same projection, towards the nearest pixel beyond the threshold.
+        # the same projection, towards the nearest pixel beyond the threshold ...
         core = leaf & (_crop(strong, box) | ~found)  # filled holes are leaf
-        weak_only = leaf & ~core
+        # ... near the leaf's edge only: a pale fleck deep inside the blade is leaf, not a pinhole.
+        depth = cv2.distanceTransform(leaf.astype(np.uint8), cv2.DIST_L2, 3)
+        weak_only = leaf & ~core & (depth <= 2.0)
         if weak_only.any() and core.any():
             _, (sy, sx) = ndimage.distance_transform_edt(~core, return_indices=True)
             f_w = colour[sy[weak_only], sx[weak_only]]
