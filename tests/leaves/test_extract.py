@@ -213,3 +213,29 @@ def test_shared_scans(name: str, count: int) -> None:
         # Each leaf covers 4-30 % of the A4 scan and most of its (elongated) bounding box.
         assert 0.04 * frame < area < 0.3 * frame
         assert area > 0.25 * leaf.shape[0] * leaf.shape[1]
+
+
+def test_faint_antialiased_petiole_kept_whole() -> None:
+    # A 1.2 px pale stalk drawn at 4x and averaged down: its partly covered pixels fall below the
+    # threshold, hysteresis keeps them joined to the blade.
+    scan, masks, _ = _scan([(200, 150)])
+    big = np.zeros((scan.shape[0] * 4, scan.shape[1] * 4), np.uint8)
+    cv2.line(big, (800, 560), (944, 940), 255, 5)
+    line = cv2.resize(big, scan.shape[1::-1], interpolation=cv2.INTER_AREA).astype(np.float32) / 255
+    line[masks[0]] = 0
+    pale = np.array((0.7, 0.68, 0.5), np.float32)
+    scan = scan * (1 - line[..., None]) + pale * line[..., None]
+    (leaf,) = extract(scan)
+    stalk = line >= 0.6
+    placed = _placed(leaf, masks[0] | stalk)
+    assert placed[stalk].mean() >= 0.9
+    assert placed[225:236].any()  # its tip, 90 px below the blade, is still attached
+
+
+def test_feather_is_the_outer_soft_edge() -> None:
+    scan, _, _ = _scan([(200, 150)])
+    (soft,) = extract(scan)
+    (hard,) = extract(scan, feather=0)
+    ring = lambda a: ((a > 0) & (a < 0.5)).sum()  # noqa: E731
+    assert ring(hard[..., 3]) < 20  # only stray pixels that hysteresis joined and matting found pale
+    assert ring(soft[..., 3]) > 100

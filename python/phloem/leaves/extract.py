@@ -335,19 +335,30 @@ def extract(
             mixed = edge & (leaf | outside)
             colour[mixed] = fg_c[mixed]
         # Pixels that only hysteresis joined (below the threshold) are mixed or noise: their alpha is
-        # the same projection, towards the nearest pixel beyond the threshold ...
+        # the same projection, towards the most leaf-like colour within 2 px (the stalk's own centre
+        # for a faint petiole, the real edge for a noise pixel beside it) ...
         core = leaf & (_crop(strong, box) | ~found)  # filled holes are leaf
         # ... near the leaf's edge only: a pale fleck deep inside the blade is leaf, not a pinhole.
         depth = cv2.distanceTransform(leaf.astype(np.uint8), cv2.DIST_L2, 3)
         weak_only = leaf & ~core & (depth <= 2.0)
-        if weak_only.any() and core.any():
-            _, (sy, sx) = ndimage.distance_transform_edt(~core, return_indices=True)
-            f_w = colour[sy[weak_only], sx[weak_only]]
-            c_w = colour[weak_only]
+        if weak_only.any():
+            ys, xs = np.nonzero(weak_only)
+            d_box = np.where(leaf, _crop(dist, box), -1.0)
+            source = _crop(rgb, box)
+            best = np.full(ys.size, -np.inf, np.float32)
+            by, bx = ys.copy(), xs.copy()
+            hh, ww = leaf.shape
+            for dy in range(-2, 3):
+                for dx in range(-2, 3):
+                    yy, xx = np.clip(ys + dy, 0, hh - 1), np.clip(xs + dx, 0, ww - 1)
+                    better = d_box[yy, xx] > best
+                    best[better] = d_box[yy, xx][better]
+                    by[better], bx[better] = yy[better], xx[better]
+            f_w = source[by, bx]
             diff = f_w - bg_rgb
-            proj = ((c_w - bg_rgb) * diff).sum(-1) / np.maximum((diff * diff).sum(-1), 1e-6)
-            alpha[weak_only] = np.minimum(alpha[weak_only], np.clip(proj, 0.0, 1.0))
-            colour[weak_only] = f_w
+            proj = ((source[ys, xs] - bg_rgb) * diff).sum(-1) / np.maximum((diff * diff).sum(-1), 1e-6)
+            alpha[ys, xs] = np.minimum(alpha[ys, xs], np.clip(proj, 0.0, 1.0))
+            colour[ys, xs] = f_w
         # Colour under no leaf: the nearest leaf pixel's, defined and free of background fringes.
         _, idx = ndimage.distance_transform_edt(alpha <= 0, return_indices=True)
         clear = alpha <= 0
