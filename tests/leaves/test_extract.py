@@ -19,7 +19,7 @@ def _scan(
     *,
     size: tuple[int, int] = (400, 600),
     paper: tuple[float, float, float] = (0.94, 0.94, 0.92),
-    shadow: bool = False,
+    shadow: float = 0.0,
     seed: int = 0,
 ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
     """Leaf polygons with a 2 px petiole on paper, with noise and dark specks. Returns the scan, each
@@ -33,11 +33,11 @@ def _scan(
         t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
         r = 1 + 0.08 * np.sin(7 * t)  # serrated outline
         pts = np.stack([cx + 28 * r * np.cos(t), cy - 60 + 60 * r * np.sin(t)], 1).round().astype(np.int32)
-        if shadow:  # a soft shadow beside the leaf: darker paper, same hue
+        if shadow:  # a soft shadow beside the leaf, `shadow` darker at its centre, same hue
             sh = np.zeros((h, w), np.float32)
             cv2.fillPoly(sh, [pts + np.array([14, 10], np.int32)], 1.0)
             sh = cv2.GaussianBlur(sh, (0, 0), 6)
-            img *= (1 - 0.35 * sh)[..., None]
+            img *= (1 - shadow * sh)[..., None]
         m = np.zeros((h, w), np.uint8)
         cv2.fillPoly(m, [pts], 1)
         p = np.zeros((h, w), np.uint8)
@@ -103,8 +103,9 @@ def test_blue_cloth() -> None:
         assert _iou(placed, mask) >= 0.95 and placed[pet].mean() >= 0.95
 
 
-def test_soft_shadow_is_background() -> None:
-    scan, masks, _ = _scan([(200, 150)], shadow=True, seed=2)
+@pytest.mark.parametrize("strength", [0.35, 0.5])
+def test_soft_shadow_is_background(strength: float) -> None:
+    scan, masks, _ = _scan([(200, 150)], shadow=strength, seed=2)
     (leaf,) = extract(scan)
     assert _iou(_placed(leaf, masks[0]), masks[0]) >= 0.95
 
