@@ -12,6 +12,7 @@ seams     exact grid max-flow / min-cut and graph-cut seams between overlapping 
 texture   texture synthesis, texture-by-numbers, graph-cut quilting and image completion
 shapes    boundary-patch synthesis of binary shapes and label maps (Rosenberger et al. 2009)
 trees     tree billboards: atlas splitting, contours, crown/trunk, pin points (Argudo et al. 2017)
+leaves    new leaves by structural layering: leaf extraction (Assa & Cohen-Or)
 metrics   measures of result quality
 warp      image warps between contours by mean value coordinates (Hormann & Floater 2006)
 cli       the ``phloem`` command
@@ -21,7 +22,7 @@ from __future__ import annotations
 
 import os
 
-from . import _core, bark, blend, branching, data, io, metrics, patch, seams, shapes, texture, trees, warp
+from . import _core, bark, blend, branching, data, io, leaves, metrics, patch, seams, shapes, texture, trees, warp
 from ._memory import MemoryLimitError
 
 __version__: str = _core.__version__
@@ -39,6 +40,7 @@ __all__ = [
     "branching",
     "data",
     "io",
+    "leaves",
     "metrics",
     "patch",
     "seams",
