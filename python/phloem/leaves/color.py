@@ -43,10 +43,11 @@ def _lab(image: NDArray[np.float32]) -> NDArray[np.float32]:
 
 def _nearest(points: NDArray[np.float64], centres: NDArray[np.float64]) -> NDArray[np.int32]:
     out = np.empty(len(points), np.int32)
-    cc = (centres**2).sum(1)
-    for s in range(0, len(points), 1 << 18):
-        p = points[s : s + (1 << 18)]
-        d = cc[None, :] - 2.0 * p @ centres.T  # |p|² is the same for every centre
+    c = centres.astype(np.float32)
+    cc = (c**2).sum(1)
+    for s in range(0, len(points), 1 << 16):
+        p = points[s : s + (1 << 16)].astype(np.float32)
+        d = cc[None, :] - 2.0 * (p @ c.T)  # |p|² is the same for every centre
         out[s : s + len(p)] = np.argmin(d, axis=1)
     return out
 
