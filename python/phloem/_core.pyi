@@ -12,6 +12,8 @@ __all__ = [
     "by_numbers",
     "coherence_candidates",
     "default_threads",
+    "emd",
+    "emd_map",
     "grid_maxflow",
     "interpolate_field",
     "knn",
@@ -147,6 +149,15 @@ def mvc_combine(
     region: NDArray[np.bool_] | None,
     threads: int | None,
 ) -> NDArray[np.float32]: ...
+def emd_map(
+    labels: NDArray[np.int32],
+    ground: NDArray[np.float64],
+    target: NDArray[np.float64],
+    *,
+    window: int,
+    threads: int | None,
+) -> NDArray[np.float32]: ...
+def emd(hist_a: NDArray[np.float64], hist_b: NDArray[np.float64], ground: NDArray[np.float64]) -> float: ...
 def default_threads() -> int: ...
 def _after_fork_in_child() -> None: ...
 def grid_maxflow(

@@ -3,22 +3,25 @@ Synthesizing a Variety by Structural Layering* (the paper of issue 17).
 
 From a handful of photos or scans of leaves of one species the pipeline registers each exemplar to a
 training leaf (§3), induces the user's layers on every exemplar (§4) and synthesises new leaves by
-mixing layers of different exemplars under random warps (§5). This first piece brings the leaves in:
+mixing layers of different exemplars under random warps (§5). Built so far:
 
 1. :func:`extract` cuts the leaves from a plain background (scanner white, cloth, a photo's backdrop)
    into RGBA, one array per leaf, petiole included (the input of every later stage).
+2. :func:`color_distance` is the colour term S of layer induction (Eq. 1): the normalised earth
+   mover's distance between the colours of the user's layer and each pixel's 8×8 neighbourhood.
 
 Modules
 -------
 extract        extract (leaves in)
+color          color_distance (Eq. 1)
 """
 
 from __future__ import annotations
 
-# Leaves in (extract.py).
+from .color import color_distance
 from .extract import extract
 
 __all__ = [
-    # Leaves in (extract.py).
+    "color_distance",
     "extract",
 ]

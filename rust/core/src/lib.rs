@@ -7,6 +7,8 @@
 //! Engines so far:
 //! - [`patch`]: nearest-neighbour fields by PatchMatch (Barnes et al. 2009), PatchMatch seeded
 //!   by PCA kd-tree search (He & Sun 2012), and exact search;
+//! - [`emd`]: exact earth mover's distance between small histograms and its sliding-window map
+//!   (the colour term of Assa & Cohen-Or, Eq. 1);
 //! - [`distance`]: the SIMD patch-distance kernels that [`patch`], [`knn`] and [`tbn`] share;
 //! - [`knn`]: k nearest patches inside one exemplar and the k-coherence candidate sets of
 //!   Tong et al. 2002;
@@ -29,6 +31,7 @@
 
 pub mod cancel;
 pub mod distance;
+pub mod emd;
 pub mod error;
 pub mod field;
 pub mod image;

@@ -12,6 +12,7 @@ use pyo3::prelude::*;
 mod blend;
 mod call;
 mod convert;
+mod emd;
 mod errors;
 mod patch;
 mod progress;
@@ -42,6 +43,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(warp::mvc_weights_py, m)?)?;
     m.add_function(wrap_pyfunction!(warp::mvc_warp_py, m)?)?;
     m.add_function(wrap_pyfunction!(warp::mvc_combine_py, m)?)?;
+    m.add_function(wrap_pyfunction!(emd::emd_map_py, m)?)?;
+    m.add_function(wrap_pyfunction!(emd::emd_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::default_threads_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::after_fork_in_child_py, m)?)?;
     Ok(())
