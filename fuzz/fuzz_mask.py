@@ -20,6 +20,7 @@ from _common import fuzz, instrumented, target, temp_file
 with instrumented():
     from phloem import bark, io
     from phloem._validate import as_mask
+    from phloem.cli.texture import hole_from_mask
 
 MAX_PIXELS = 4096
 DTYPES = [np.bool_, np.uint8, np.uint16, np.int8, np.int32, np.int64, np.float16, np.float32, np.float64, np.complex64]
@@ -32,12 +33,12 @@ def _mask_file(data: bytes, alpha: bool) -> None:
         raise
     except ValueError:
         return
-    # the lines of cli/texture.py::_cmd_complete that turn the mask image into a hole
-    if m.ndim == 3:
-        m = m[..., 3] if m.shape[2] == 4 and alpha else m[..., :3].max(axis=2)
-    hole = (m < 0.5) if alpha else (m >= 0.5)
+    try:
+        hole = hole_from_mask(m, "mask.png", alpha=alpha, invert=False)
+    except ValueError:
+        return
     out = as_mask(hole, "mask", hole.shape)
-    assert out.dtype == np.bool_ and out.shape == m.shape
+    assert out.dtype == np.bool_ and out.shape == m.shape[:2]
 
 
 def _array(data: bytes) -> tuple[np.ndarray, tuple[int, int]]:

@@ -6,6 +6,8 @@ import argparse
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from .. import io, texture
 from ._common import common_options, parse_size, positive, preflight, run, save
 
@@ -31,27 +33,32 @@ def _cmd_quilt(args: argparse.Namespace) -> None:
     ))  # fmt: skip
 
 
-def _cmd_complete(args: argparse.Namespace) -> None:
-    preflight(args)
-    img = io.read_image(args.input, max_pixels=args.max_pixels)
-    m = io.read_image(args.mask, max_pixels=args.max_pixels)
+def hole_from_mask(m: np.ndarray, name: str, *, alpha: bool, invert: bool) -> np.ndarray:
+    """The hole of ``phloem complete`` from its mask image: white (or, with ``alpha``, not fully
+    opaque) pixels, flipped by ``invert``."""
     channels = 1 if m.ndim == 2 else m.shape[2]
-    if args.mask_alpha:
+    if alpha:
         # Gray+alpha or RGBA; anything else has no alpha, and its colours would be taken for one.
         if channels not in (2, 4):
-            raise ValueError(f"mask_alpha: {args.mask} has no alpha channel ({channels} channels); drop --mask-alpha")
+            raise ValueError(f"mask_alpha: {name} has no alpha channel ({channels} channels); drop --mask-alpha")
         m = m[..., channels - 1]
     elif m.ndim == 3:
         m = m[..., : min(channels, 3)].max(axis=2)
-    if m.shape != img.shape[:2]:
-        raise ValueError(
-            f"mask: {args.mask} is {m.shape[1]}×{m.shape[0]}, but the image is {img.shape[1]}×{img.shape[0]}"
-        )
     # With alpha, every pixel that is not fully opaque is filled: soft edges (alpha 0.5-1) kept
     # as they are would leave a pale ring of half-transparent colour around the fill.
-    hole = (m < 1.0 - 0.5 / 65535) if args.mask_alpha else (m >= 0.5)
-    if args.invert_mask:
-        hole = ~hole
+    hole: np.ndarray = (m < 1.0 - 0.5 / 65535) if alpha else (m >= 0.5)
+    return ~hole if invert else hole
+
+
+def _cmd_complete(args: argparse.Namespace) -> None:
+    preflight(args)
+    img = io.read_image(args.input, max_pixels=args.max_pixels)
+    hole = hole_from_mask(io.read_image(args.mask, max_pixels=args.max_pixels), args.mask, alpha=args.mask_alpha,
+                          invert=args.invert_mask)  # fmt: skip
+    if hole.shape != img.shape[:2]:
+        raise ValueError(
+            f"mask: {args.mask} is {hole.shape[1]}×{hole.shape[0]}, but the image is {img.shape[1]}×{img.shape[0]}"
+        )
     out = run(
         "complete",
         args,
