@@ -47,7 +47,7 @@ VERSION = 1
 # Bounds that keep every loop over a skeleton finite and every OpenCV drawing call valid: no
 # image phloem reads is wider than 2^20 px (the pixel limit is 2^28), OpenCV refuses line
 # thicknesses over 32767 (a radius of 2^14), and resampling makes at most MAX_VERTICES vertices
-# (model fitting takes about 0.1 ms a vertex, so 2^20 is a couple of minutes at worst).
+# (what that costs to fit: docs/hardening/inputs.md).
 MAX_COORD = 2.0**20
 MAX_THICKNESS = 2.0**13
 MAX_VERTICES = 2**20

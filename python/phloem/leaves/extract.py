@@ -27,9 +27,8 @@ __all__ = ["extract"]
 F32 = NDArray[np.float32]
 Box = tuple[int, int, int, int]
 
-# Half weight for lightness: a shadow changes lightness by 20-30 and chroma by a few units, a leaf
-# on white paper changes lightness by 50+ and chroma by 20+ (measured on the shared scans and
-# photos), so halving lightness keeps leaves well above shadows without losing dark leaves.
+# Half weight for lightness: shadows differ from the backdrop mostly in lightness, leaves in
+# chroma too (docs/pipelines/leaves/extract.md), so shadows stay background and dark leaves stay.
 _LIGHTNESS_WEIGHT = 0.5
 # Smallest threshold (Lab units): below it two colours are not told apart by eye, so an image
 # whose only departures from the background are smaller holds no leaf.
