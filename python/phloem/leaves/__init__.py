@@ -7,12 +7,15 @@ mixing layers of different exemplars under random warps (§5). Built so far:
 
 1. :func:`extract` cuts the leaves from a plain background (scanner white, cloth, a photo's backdrop)
    into RGBA, one array per leaf, petiole included (the input of every later stage).
-2. :func:`color_distance` is the colour term S of layer induction (Eq. 1): the normalised earth
+2. :func:`register` aligns an exemplar to the training leaf by TPS-RPM (§3): dense forward and
+   inverse displacement fields.
+3. :func:`color_distance` is the colour term S of layer induction (Eq. 1): the normalised earth
    mover's distance between the colours of the user's layer and each pixel's 8×8 neighbourhood.
 
 Modules
 -------
 extract        extract (leaves in)
+registration   register, Registration, keypoints (§3)
 color          color_distance (Eq. 1)
 """
 
@@ -20,8 +23,12 @@ from __future__ import annotations
 
 from .color import color_distance
 from .extract import extract
+from .registration import Registration, keypoints, register
 
 __all__ = [
+    "Registration",
     "color_distance",
     "extract",
+    "keypoints",
+    "register",
 ]

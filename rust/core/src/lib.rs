@@ -28,6 +28,8 @@
 //! - [`mvc`]: mean value coordinates for arbitrary planar polygons, inside and outside
 //!   (Hormann & Floater 2006), and the contour-to-contour image warp and multi-source colour
 //!   transfer they define (Argudo et al. 2017, §5.2).
+//! - [`tps`]: thin-plate splines and non-rigid point registration by TPS-RPM (Chui &
+//!   Rangarajan 2003) with dense forward and inverse warps (Assa & Cohen-Or, §3).
 
 pub mod cancel;
 pub mod distance;
@@ -46,6 +48,7 @@ pub mod seams;
 pub mod shapes;
 pub(crate) mod solver;
 pub mod tbn;
+pub mod tps;
 pub mod vote;
 
 pub use error::{Error, Result};

@@ -20,6 +20,7 @@ mod seams;
 mod shapes;
 mod tbn;
 mod threads;
+mod tps;
 mod warp;
 
 #[pymodule(gil_used = false)]
@@ -45,6 +46,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(warp::mvc_combine_py, m)?)?;
     m.add_function(wrap_pyfunction!(emd::emd_map_py, m)?)?;
     m.add_function(wrap_pyfunction!(emd::emd_py, m)?)?;
+    m.add_function(wrap_pyfunction!(tps::tps_register_py, m)?)?;
+    m.add_function(wrap_pyfunction!(tps::tps_sample_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::default_threads_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::after_fork_in_child_py, m)?)?;
     Ok(())
