@@ -17,15 +17,18 @@ Modules
 extract        extract (leaves in)
 registration   register, Registration, keypoints (§3)
 color          color_distance (Eq. 1)
+model          LeafModel (what analysis learns, what synthesis uses)
 """
 
 from __future__ import annotations
 
 from .color import color_distance
 from .extract import extract
+from .model import LeafModel
 from .registration import Registration, keypoints, register
 
 __all__ = [
+    "LeafModel",
     "Registration",
     "color_distance",
     "extract",
