@@ -25,13 +25,17 @@ from __future__ import annotations
 from .color import color_distance
 from .extract import extract
 from .model import LeafModel
+from .pose import pose
 from .registration import Registration, keypoints, register
+from .sheet import contact_sheet
 
 __all__ = [
     "LeafModel",
     "Registration",
     "color_distance",
+    "contact_sheet",
     "extract",
     "keypoints",
+    "pose",
     "register",
 ]
