@@ -39,7 +39,7 @@ def _tile(rgba: F32, tile: int) -> F32:
 
 def _overlay(model: LeafModel, i: int) -> F32:
     """Exemplar ``i`` aligned, its layers tinted in their colours (the background untinted)."""
-    img = model.aligned[i].copy()
+    img: F32 = np.array(model.aligned[i], np.float32)
     for k, m in enumerate(model.masks[i]):
         c = _LAYER_COLORS[k % len(_LAYER_COLORS)]
         img[m, :3] = 0.35 * img[m, :3] + 0.65 * c
@@ -49,7 +49,8 @@ def _overlay(model: LeafModel, i: int) -> F32:
 def _label(row: F32, text: str) -> F32:
     u8 = np.ascontiguousarray((np.clip(row, 0, 1) * 255).astype(np.uint8))
     cv2.putText(u8, text, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (40, 40, 40), 1, cv2.LINE_AA)
-    return u8.astype(np.float32) / 255.0
+    out: F32 = np.asarray(u8, np.float32) / np.float32(255.0)
+    return out
 
 
 def contact_sheet(model: LeafModel, new_leaves: Sequence[Any] = (), *, tile: int = 200) -> F32:
