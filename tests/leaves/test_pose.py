@@ -33,7 +33,14 @@ def _iou(a: np.ndarray, b: np.ndarray) -> float:
 
 @pytest.mark.parametrize(
     ("angle", "scale", "mirror"),
-    [(0.0, 1.0, False), (37.0, 0.7, False), (90.0, 1.3, False), (180.0, 1.0, False), (-120.0, 0.8, True), (15.0, 1.0, True)],
+    [
+        (0.0, 1.0, False),
+        (37.0, 0.7, False),
+        (90.0, 1.3, False),
+        (180.0, 1.0, False),
+        (-120.0, 0.8, True),
+        (15.0, 1.0, True),
+    ],
 )
 def test_pose_undoes_a_similarity(angle: float, scale: float, mirror: bool) -> None:
     train = _leaf()
