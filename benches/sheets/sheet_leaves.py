@@ -82,7 +82,12 @@ def main() -> None:
     t_syn = (time.perf_counter() - t0) / args.count
     write_sheet([leaves.contact_sheet(model, new)], args.out)
     print(f"analysis {t_an:.1f} s, {t_syn:.2f} s per new leaf; canvas {model.size[1]}x{model.size[0]}")
-    print("residual px:", " ".join(f"{r:.1f}" for r in model.residual), " scale:", " ".join(f"{s:.2f}" for s in model.scale))
+    print(
+        "residual px:",
+        " ".join(f"{r:.1f}" for r in model.residual),
+        " scale:",
+        " ".join(f"{s:.2f}" for s in model.scale),
+    )
     for k, label in enumerate(model.order[:-1]):
         print(f"layer {label}: lambda {model.lam[k]:.2f} delta {model.delta[k]:.3f} objective {model.objective[k]:.2f}")
     own = [coherence(e, [o for j, o in enumerate(exemplars) if j != i]) for i, e in enumerate(exemplars)]
