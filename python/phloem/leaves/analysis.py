@@ -218,7 +218,7 @@ def analyze(
         inverse.append(reg.inverse)
         residual.append(float(reg.residual))
 
-    labels = layers_from_scribbles(placed[t], scribble_canvas, order=removal, seed=derive_seed(s, 201))
+    labels = layers_from_scribbles(placed[t], scribble_canvas, order=removal, seed=derive_seed(s, 201), threads=th)
     tick()
 
     current = list(aligned)
