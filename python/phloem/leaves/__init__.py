@@ -27,11 +27,16 @@ from .extract import extract
 from .model import LeafModel
 from .registration import Registration, keypoints, register
 
+# scribbles
+from .scribbles import layers_from_scribbles, read_scribbles
+
 __all__ = [
     "LeafModel",
     "Registration",
     "color_distance",
     "extract",
     "keypoints",
+    "layers_from_scribbles",
+    "read_scribbles",
     "register",
 ]
