@@ -90,6 +90,13 @@ def test_smoothness_holds_a_noisy_leaf_together() -> None:
         assert _iou(got == k, truth == k) >= 0.8, k
 
 
+def test_same_result_for_any_thread_count() -> None:
+    img, truth = _leaf(200, 300, noise=0.15)  # over 2^13 pixels: the cuts split across threads
+    scribbles = _strokes(truth)
+    one = layers_from_scribbles(img, scribbles, threads=1)
+    assert (layers_from_scribbles(img, scribbles, threads=2) == one).all()
+
+
 def test_two_colour_leaf_comes_back() -> None:
     img, planted = _leaf(veins=False, noise=0.08, seed=3)
     labels = np.select([planted == 2, planted == 3], [1, 2], 0).astype(np.int32)
@@ -229,6 +236,8 @@ def test_layers_from_scribbles_errors() -> None:
         layers_from_scribbles(np.zeros_like(img), scribbles)
     with pytest.raises(ValueError, match="^seed:"):
         layers_from_scribbles(img, scribbles, seed=-1)
+    with pytest.raises(ValueError, match="^threads:"):
+        layers_from_scribbles(img, scribbles, threads=0)
 
 
 # -- the shared scans --------------------------------------------------------------------------

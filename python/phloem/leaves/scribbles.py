@@ -21,13 +21,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage  # type: ignore[import-untyped]
 from skimage.segmentation import watershed
 
 from .._api import Seed
-from .._validate import as_image, check_seed, derive_seed
+from .._validate import as_image, check_seed, check_threads, derive_seed
 from ..seams import grid_maxflow
 from .color import _lab, palette
 
@@ -194,19 +194,22 @@ def _regions(lab: NDArray[np.float32], leaf: NDArray[np.bool_]) -> I32:
     """Watershed over-segmentation of the leaf (Lazy Snapping's pre-segmentation), 0 off it."""
     grad = np.zeros(leaf.shape, np.float32)
     for c in range(3):
-        gy = ndimage.sobel(lab[..., c], axis=0)
-        gx = ndimage.sobel(lab[..., c], axis=1)
+        gx = cv2.Sobel(lab[..., c], cv2.CV_32F, 1, 0)
+        gy = cv2.Sobel(lab[..., c], cv2.CV_32F, 0, 1)
         grad += gx * gx + gy * gy
     # Local minima of the gradient seed the basins; plateaus (flat colour) are one basin each.
     return np.asarray(watershed(np.sqrt(grad), mask=leaf, connectivity=1), np.int32)  # type: ignore[no-untyped-call]
 
 
 def _nearest_distance(colours: NDArray[np.float64], centres: NDArray[np.float64]) -> NDArray[np.float64]:
-    d2 = ((colours[:, None, :] - centres[None, :, :]) ** 2).sum(-1)
-    return np.asarray(np.sqrt(d2.min(axis=1)))
+    """Distance of each colour to its nearest centre (|a - b|² = |a|² - 2a·b + |b|², one product)."""
+    d2 = (centres**2).sum(1)[None, :] - 2.0 * (colours @ centres.T)
+    return np.asarray(np.sqrt(np.maximum(d2.min(axis=1) + (colours**2).sum(1), 0.0)))
 
 
-def layers_from_scribbles(training: Any, scribbles: Any, *, order: Any = None, seed: Seed = 0) -> I32:
+def layers_from_scribbles(
+    training: Any, scribbles: Any, *, order: Any = None, seed: Seed = 0, threads: int | None = None
+) -> I32:
     """Expand the user's scribbles on the training leaf to full layers.
 
     Parameters
@@ -222,6 +225,9 @@ def layers_from_scribbles(training: Any, scribbles: Any, *, order: Any = None, s
         which takes every leaf pixel no earlier layer took.
     seed : int or numpy.random.Generator
         Seeds the k-means colour clusters.
+    threads : int, optional
+        Worker threads of the cuts (default: phloem's pool size); the result is the same for
+        any number.
 
     Returns
     -------
@@ -241,6 +247,7 @@ def layers_from_scribbles(training: Any, scribbles: Any, *, order: Any = None, s
     labels, n = read_scribbles(scribbles, img.shape)
     removal = _check_order(order, n)
     rng_seed = check_seed(seed)
+    threads = check_threads(threads)
     leaf = img[..., 3] > 0.5 if img.shape[2] == 4 else np.ones(img.shape[:2], bool)
     if not leaf.any():
         raise ValueError("training: no leaf pixel (alpha > 0.5)")
@@ -263,7 +270,7 @@ def layers_from_scribbles(training: Any, scribbles: Any, *, order: Any = None, s
         )
         / np.maximum(count, 1)[:, None]
     )
-    colour = means[regions]  # (h, w, 3): each pixel its region's mean colour
+    colour = means.astype(np.float32)[regions]  # (h, w, 3): each pixel its region's mean colour
 
     # Distance of every region's colour to each layer's nearest colour cluster.
     # Seeded by place in the removal order, so relabelling the strokes changes nothing.
@@ -286,10 +293,9 @@ def layers_from_scribbles(training: Any, scribbles: Any, *, order: Any = None, s
     free = sub_leaf.copy()
     for step, k in enumerate(removal[:-1]):
         later = removal[step + 1 :]
-        d_f = dist[k - 1][regions]
-        d_b = dist[[j - 1 for j in later]].min(axis=0)[regions]
+        d_f, d_b = dist[k - 1], dist[[j - 1 for j in later]].min(axis=0)
         total = d_f + d_b
-        e_f = np.where(total > 0, d_f / np.where(total > 0, total, 1.0), 0.5)  # cost of joining layer k
+        e_f = np.where(total > 0, d_f / np.where(total > 0, total, 1.0), 0.5)[regions]  # cost of joining layer k
         source = np.where(free, 1.0 - e_f, 0.0)
         sink = np.where(free, e_f, 0.0)
         source[free & (sub_marks == k)] = np.inf
@@ -297,7 +303,7 @@ def layers_from_scribbles(training: Any, scribbles: Any, *, order: Any = None, s
         edges = np.zeros((*sub_leaf.shape, 2))
         edges[:, :-1, 0] = np.where(free[:, 1:] & free[:, :-1], w_e, 0.0)
         edges[:-1, :, 1] = np.where(free[1:] & free[:-1], w_s, 0.0)
-        _, sink_side = grid_maxflow(source, sink, edges)
+        _, sink_side = grid_maxflow(source, sink, edges, threads=threads)
         taken = free & ~sink_side
         out[taken] = k
         free &= ~taken
