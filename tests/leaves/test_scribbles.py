@@ -163,6 +163,8 @@ def test_read_scribbles_forms(tmp_path: Path) -> None:
     rgb[1, 2] = (1, 0, 0)
     labels, n = read_scribbles(rgb, (2, 3))
     assert n == 2 and labels.tolist() == [[0, 0, 1], [2, 0, 1]]
+    Image.fromarray((rgb * 255).astype(np.uint8)).save(tmp_path / "rgb.png")  # an RGB PNG reads alike
+    assert read_scribbles(tmp_path / "rgb.png", (2, 3))[0].tolist() == [[0, 0, 1], [2, 0, 1]]
     rgba = np.zeros((2, 3, 4), np.float32)
     rgba[0, 0] = (0.2, 0.4, 0.6, 1.0)
     rgba[0, 1] = (0.2, 0.4, 0.6, 0.99)  # not opaque: unmarked

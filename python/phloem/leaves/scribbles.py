@@ -60,7 +60,7 @@ def _check_shape(shape: Any) -> tuple[int, int]:
 
 
 def _read_png(path: Path) -> NDArray[Any]:
-    """The file's pixels as stored: integers for a gray PNG (labels), RGBA otherwise."""
+    """The file's pixels as stored: integers for a gray PNG (labels), else RGBA or RGB."""
     from PIL import Image, UnidentifiedImageError
 
     try:
@@ -68,7 +68,9 @@ def _read_png(path: Path) -> NDArray[Any]:
             im.load()
             if im.mode in ("1", "L", "I", "I;16", "I;16B", "I;16L"):
                 return np.asarray(im.convert("I") if im.mode == "1" else im).astype(np.int64)
-            return np.asarray(im.convert("RGBA"))
+            # With transparency the RGBA rule applies (opaque = marked), without it the RGB one.
+            alpha = im.mode in ("RGBA", "LA", "PA") or "transparency" in im.info
+            return np.asarray(im.convert("RGBA" if alpha else "RGB"))
     except FileNotFoundError:
         raise FileNotFoundError(f"scribbles: no such file {str(path)!r}") from None
     except (UnidentifiedImageError, OSError) as err:
@@ -126,7 +128,8 @@ def read_scribbles(scribbles: Any, shape: Any) -> tuple[I32, int]:
     scribbles : array_like or path
         Either an integer image ``(H, W)``: 0 unmarked, ``1..n`` the layers (a gray PNG file
         is read this way too); or a colour image ``(H, W, 4)`` RGBA / ``(H, W, 3)`` RGB
-        (array, or a PNG file of any other mode) with one colour per layer. In RGBA only
+        (array, or a colour PNG file: read as RGBA when it has transparency, else as RGB)
+        with one colour per layer. In RGBA only
         opaque pixels are marks (alpha at its maximum: anti-aliased stroke edges and the
         transparent rest are unmarked); in RGB black is unmarked. The colours are numbered
         ``1, 2, …`` in order of first appearance in raster order (row by row, top to bottom,
