@@ -11,12 +11,15 @@ mixing layers of different exemplars under random warps (§5). Built so far:
    inverse displacement fields.
 3. :func:`color_distance` is the colour term S of layer induction (Eq. 1): the normalised earth
    mover's distance between the colours of the user's layer and each pixel's 8×8 neighbourhood.
+4. :func:`induce` carries the user's layer to every aligned exemplar (§4, Eqs. 2–6): colour and
+   position fused into D, the threshold δ fitted on the training leaf, λ from the layer's overlap.
 
 Modules
 -------
 extract        extract (leaves in)
 registration   register, Registration, keypoints (§3)
 color          color_distance (Eq. 1)
+induction      induce, Induction (§4, Eqs. 2–6)
 model          LeafModel (what analysis learns, what synthesis uses)
 """
 
@@ -24,6 +27,9 @@ from __future__ import annotations
 
 from .color import color_distance
 from .extract import extract
+
+# induction
+from .induction import Induction, induce
 from .model import LeafModel
 from .registration import Registration, keypoints, register
 
@@ -35,3 +41,6 @@ __all__ = [
     "keypoints",
     "register",
 ]
+
+# induction
+__all__ += ["Induction", "induce"]
