@@ -18,7 +18,7 @@ from scipy import ndimage  # type: ignore[import-untyped]
 
 from phloem import metrics
 from phloem.leaves import Induction, induce
-from phloem.leaves.induction import best_threshold
+from phloem.leaves.induction import best_threshold, liberal_layer, spatial_term
 
 BLADE, VEIN, SPOT = (0.25, 0.55, 0.15), (0.80, 0.82, 0.45), (0.45, 0.25, 0.10)
 H, W = 120, 160
@@ -136,11 +136,43 @@ def test_best_threshold_splits_ties_and_separates_adjacent_floats() -> None:
     d = np.array([[0.1, 0.1, 0.3, 0.2, 0.5, 0.5]], np.float32)
     delta, obj = best_threshold(d, layer, leaf)
     assert obj == 1.0 and 0.2 < delta <= 0.3 and delta == pytest.approx(0.25)
+    # Equal values are never split, even where splitting would score better.
+    delta, obj = best_threshold(
+        np.array([[0.1, 0.1, 0.4]], np.float32), np.array([[True, False, False]]), np.ones((1, 3), bool)
+    )
+    assert obj == 0.5 and 0.1 < delta <= 0.4
     # Two values one float32 step apart still get a threshold between them.
     a = np.float32(0.5)
     b = np.nextafter(a, np.float32(1))
     delta, obj = best_threshold(np.array([[a, b]], np.float32), np.array([[True, False]]), np.ones((1, 2), bool))
     assert obj == 1.0 and a < np.float32(delta) <= b
+
+
+def test_spatial_term_is_eq3_with_the_training_separability() -> None:
+    layer = np.zeros((5, 9), bool)
+    layer[2, 0] = True
+    d = ndimage.distance_transform_edt(~layer)
+    s_t = np.tile(np.linspace(0.0, 1.0, 9, dtype=np.float32), (5, 1))
+    s_t[2, 0] = 1.0  # a layer pixel unlike its own layer: F is still 1 there
+    leaf = np.ones((5, 9), bool)
+    leaf[:, 7:] = False  # off the training leaf: S^t of the nearest leaf pixel (column 6)
+    s_t[:, 7:] = np.nan
+    f = spatial_term(d, s_t, leaf, 4.0)
+    filled = s_t.copy()
+    filled[:, 7:] = s_t[:, 6:7]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        want = np.exp(-(d**2) / (16.0 * (1.0 - filled.astype(np.float64))))
+    want[layer] = 1.0
+    np.testing.assert_allclose(f, want, rtol=1e-12, atol=0)
+    assert f[2, 1] > 0.9 and f[2, 6] < f[2, 1]  # well separated (S^t near 1): a narrower falloff
+    s_t[:, 1:7] = 1.0
+    assert (spatial_term(d, s_t, leaf, 4.0)[:, 1:] == 0.0).all()  # S^t = 1: no width, F = 0 off the layer
+
+
+def test_liberal_layer_is_eq6_read_as_distance_below_two_epsilon() -> None:
+    s = np.array([[0.05, 0.05, 0.05, 0.1, np.nan]], np.float32)
+    d = np.array([[0.0, 19.9, 20.1, 0.0, 0.0]])
+    np.testing.assert_array_equal(liberal_layer(s, d, 10.0), [[True, True, False, False, False]])
 
 
 def test_maps_and_their_relations(pair: dict[str, Any], veins: Induction) -> None:
@@ -159,6 +191,13 @@ def test_maps_and_their_relations(pair: dict[str, Any], veins: Induction) -> Non
     assert far.sum() > 300 and f[far].max() <= np.exp(-4) + 1e-6
     assert (f[leaf] <= np.exp(-(dist[leaf] ** 2) / EPS**2) + 1e-6).all()
     np.testing.assert_array_equal(veins.masks[1], leaf & (d < np.float32(veins.delta)))
+    # Inside the training leaf F is Eq. 3 with the training leaf's own S^t (exemplar 0 here).
+    s_t = veins.color[0].astype(np.float64)
+    both = leaf & np.isfinite(s_t)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        want = np.exp(-(dist**2) / (EPS**2 * (1.0 - s_t)))
+    want[pair["veins"][0]] = 1.0
+    np.testing.assert_allclose(f[both], want[both], atol=1e-6)
 
 
 def test_passing_the_training_leaf_as_an_exemplar_changes_nothing(pair: dict[str, Any], veins: Induction) -> None:
