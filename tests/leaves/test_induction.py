@@ -254,3 +254,31 @@ def test_bad_input_gives_one_line_errors(pair: dict[str, Any], over: dict[str, A
     with pytest.raises(error, match=message) as info:
         induce(args.pop("training"), args.pop("layer"), args.pop("exemplars"), **args)
     assert "\n" not in str(info.value)
+
+
+def test_real_spots_are_found_by_colour_with_a_small_lam() -> None:
+    """Optional, on a shared scan: the orange leaf-miner trails of two leaves of one species."""
+    import phloem
+    from phloem.leaves import extract, register
+    from phloem.testing import shared_file
+
+    scan = phloem.io.read_image(shared_file("leaves", "leafarea_A300-2.jpeg"))
+    leaves = extract(scan)
+    h, w = max(x.shape[0] for x in leaves) + 40, max(x.shape[1] for x in leaves) + 40
+
+    def place(leaf: np.ndarray) -> np.ndarray:
+        canvas = np.zeros((h, w, 4), np.float32)
+        y, x = (h - leaf.shape[0]) // 2, (w - leaf.shape[1]) // 2
+        canvas[y : y + leaf.shape[0], x : x + leaf.shape[1]] = leaf
+        return canvas
+
+    def trails(leaf: np.ndarray) -> np.ndarray:  # a colour rule that sees the orange, not the green
+        m = (leaf[..., 3] > 0.5) & (leaf[..., 0] > leaf[..., 1] + 0.04) & (leaf[..., 0] > 0.25)
+        return cv2.morphologyEx(m.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)).astype(bool)
+
+    training, moving = place(leaves[0]), place(leaves[1])
+    aligned = register(moving, training).warp(moving)
+    result = induce(training, trails(training), [aligned], threads=2)
+    assert result.lam < 0.15, result.lam  # trails lie in different places on each leaf
+    assert result.objective >= 0.6
+    assert metrics.layer_iou(result.masks[0], trails(aligned)) >= 0.6
