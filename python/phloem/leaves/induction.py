@@ -11,7 +11,9 @@ For a layer ``c`` (pixels of the training leaf ``t``) and an exemplar ``e`` alig
 - ``D(x) = λ (1 − F(x)) + S^e(x)`` — Eq. 2 read as a dissimilarity (printed ``λF + S`` would
   penalise the pixels near the layer that F exists to favour).
 - ``λ = κ |∩ L̃| / |∪ L̃|`` over the training leaf and the exemplars — Eqs. 5–6, with
-  ``L̃ = {x : S(x) < 0.1 and d(x) < 2ε}``.
+  ``L̃ = {x : S(x) < τ and d(x) < 2ε}``, ``τ`` the printed 0.1 or, if larger, the threshold at
+  which colour alone best reproduces the layer on the training leaf (a layer thinner than the
+  window never gets ``S < 0.1``).
 - ``δ`` maximises the Eq. 4 objective, read as the IoU of ``{D^t < δ}`` with ``c`` on the
   training leaf; the induced layer on ``e`` is ``{D^e < δ}``.
 
@@ -36,7 +38,7 @@ __all__ = ["Induction", "induce", "liberal_layer"]
 
 F32 = NDArray[np.float32]
 
-#: The colour threshold of Eq. 6's liberal layer (the paper's 0.1).
+#: The colour threshold of Eq. 6's liberal layer (the paper's 0.1), the least one used.
 LIBERAL_COLOR = 0.1
 
 
@@ -61,7 +63,8 @@ class Induction:
         so it is the same map on every exemplar, cut to that exemplar's leaf.
     lam : float
         ``λ`` of Eq. 5, in ``[0, kappa]``: large for a structural layer (its liberal layers
-        overlap across the leaves), small for one that is not (spots).
+        overlap across the leaves), small for one that is not (spots); 0 when no leaf has a
+        liberal pixel.
     delta : float
         The threshold ``δ``; a float32 value, so ``D < delta`` reads the same in float32 and
         float64.
@@ -115,10 +118,12 @@ def spatial_term(
     return np.asarray(f)
 
 
-def liberal_layer(color: NDArray[np.float32], distance: NDArray[np.float64], epsilon: float) -> NDArray[np.bool_]:
-    """Eq. 6's liberal layer ``{x : S(x) < 0.1 and d(x) < 2ε}`` (NaN ``S`` is never in it)."""
+def liberal_layer(
+    color: NDArray[np.float32], distance: NDArray[np.float64], epsilon: float, tau: float = LIBERAL_COLOR
+) -> NDArray[np.bool_]:
+    """Eq. 6's liberal layer ``{x : S(x) < tau and d(x) < 2ε}`` (NaN ``S`` is never in it)."""
     with np.errstate(invalid="ignore"):
-        return np.asarray((color < LIBERAL_COLOR) & (distance < 2.0 * epsilon))
+        return np.asarray((color < tau) & (distance < 2.0 * epsilon))
 
 
 def best_threshold(
@@ -237,8 +242,12 @@ def induce(
     s_e = [s_t if np.array_equal(e, t) else s_of(e, t) for e in ex]
 
     # λ (Eqs. 5–6): the training leaf is always one of the leaves compared (∩ and ∪ are
-    # idempotent, so passing it among the exemplars too changes nothing).
-    liberal = [liberal_layer(s, d, epsilon) for s in [s_t, *s_e]]
+    # idempotent, so passing it among the exemplars too changes nothing). The colour bound is
+    # never stricter than what colour alone needs to find the layer on the training leaf: no
+    # window of a vein thinner than the window is all vein, so S < 0.1 would leave thin
+    # layers no liberal pixels and λ = 0, the opposite of what Eq. 5 is for.
+    tau = max(LIBERAL_COLOR, best_threshold(s_t, c, leaf_t)[0])
+    liberal = [liberal_layer(s, d, epsilon, tau) for s in [s_t, *s_e]]
     inter = np.logical_and.reduce(liberal)
     union = np.logical_or.reduce(liberal)
     n_union = int(union.sum())
