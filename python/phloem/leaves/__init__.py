@@ -18,6 +18,7 @@ extract        extract (leaves in)
 registration   register, Registration, keypoints (§3)
 color          color_distance (Eq. 1)
 model          LeafModel (what analysis learns, what synthesis uses)
+synthesis      synthesize, random_warp, blend_fields (§5, Eq. 7)
 """
 
 from __future__ import annotations
@@ -27,11 +28,17 @@ from .extract import extract
 from .model import LeafModel
 from .registration import Registration, keypoints, register
 
+# synthesis
+from .synthesis import blend_fields, random_warp, synthesize
+
 __all__ = [
     "LeafModel",
     "Registration",
+    "blend_fields",  # synthesis
     "color_distance",
     "extract",
     "keypoints",
+    "random_warp",  # synthesis
     "register",
+    "synthesize",  # synthesis
 ]

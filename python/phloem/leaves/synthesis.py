@@ -1,0 +1,396 @@
+"""New leaves from a :class:`LeafModel` (Assa & Cohen-Or, §5).
+
+Each new leaf is composed on the shared canvas in the training frame and then put into a new
+shape:
+
+1. the inpainted background of a random exemplar, under a small smooth random warp whose peak
+   displacement is that exemplar's registration error (the paper: "should not exceed the
+   initial registration error");
+2. every other layer taken from a random exemplar other than the background's (mixing is the
+   point), under its own random warp, ``1 − λ/κ`` times as large, so structural layers (veins,
+   ``λ`` near ``κ``) stay put and stochastic ones (spots, ``λ`` near 0) move; the layers are
+   fused with weights from their dissimilarity ``D`` normalised per pixel, the background
+   taking what the layers leave;
+3. the composition warped back by Eq. 7, ``W⁻¹ = Σ a_i W_i⁻¹``, the coefficients ``a_i(x)``
+   a few random values on a coarse grid, Gaussian-blurred and normalised per pixel;
+4. texture correction where that warp stretches or squeezes (``leaves.correct_texture``,
+   when this build has it), the largest leaf component kept, and the leaf cropped.
+
+``docs/pipelines/leaves/synthesis.md`` gives the readings of the paper this module makes.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage  # type: ignore[import-untyped]
+
+from .._api import Seed, Size
+from .._progress import Progress
+from .._validate import check_float, check_int, check_seed, check_size, check_threads, derive_seed
+from ._fields import as_field, sample
+from .model import LeafModel
+
+__all__ = ["blend_fields", "random_warp", "synthesize"]
+
+F32 = NDArray[np.float32]
+
+#: κ of Eq. 5 (the paper's 1.5, ``leaves.induce``'s default): ``λ/κ`` is the layers' overlap
+#: ratio, 1 for a perfectly structural layer. The model stores ``λ`` only.
+KAPPA = 1.5
+#: The largest Frobenius norm of a random warp's Jacobian: ``I + J`` then has singular values
+#: of at least 0.5, so the map ``x ↦ x + field(x)`` cannot fold.
+MAX_GRADIENT = 0.5
+#: Random layer warps vary over this fraction of the canvas's smaller side ("sufficiently
+#: smooth"): a leaf bends as a whole, it does not ripple.
+WARP_SMOOTHNESS = 0.2
+#: Eq. 7's coefficient grid: this fraction of the smaller side between random coefficients
+#: (Fig. 8 shows a handful of blobs over the leaf).
+BLEND_SMOOTHNESS = 0.3
+#: Transparent margin in px around each cropped leaf.
+MARGIN = 8
+# D/δ = 1 (the layer's threshold) gets half weight; the fourth power keeps the layer's core
+# at full weight (D/δ = 0.5 → 0.94) and fades it within the mask's rim.
+_FALLOFF = 4.0
+
+
+def _basis(n: int, spacing: float, sigma: float) -> NDArray[np.float64]:
+    """``(n, m)`` rows of normalised Gaussian weights (σ = ``sigma``) of ``m`` nodes ``spacing``
+    apart covering ``[-spacing, n - 1 + spacing]``: a separable Gaussian blur of values on a
+    coarse grid."""
+    m = math.ceil((n - 1) / spacing) + 3
+    nodes = (np.arange(m) - 1.0) * spacing
+    x = np.arange(n, dtype=np.float64)[:, None]
+    w = np.exp(-0.5 * ((x - nodes[None, :]) / sigma) ** 2)
+    return np.asarray(w / w.sum(axis=1, keepdims=True), dtype=np.float64)
+
+
+def _smooth(rows: NDArray[np.float64], cols: NDArray[np.float64], values: NDArray[np.float64]) -> F32:
+    """``(H, W, C)`` smooth maps from ``(m_r, m_c, C)`` node values: ``rows @ v_c @ colsᵀ``."""
+    out = np.einsum("ij,jkc->ikc", rows, values)
+    out = np.einsum("ikc,lk->ilc", out, cols)
+    return np.ascontiguousarray(out, dtype=np.float32)
+
+
+def _rng(seed: Seed) -> np.random.Generator:
+    return np.random.default_rng(check_seed(seed))
+
+
+def random_warp(size: Size, magnitude: float, *, smoothness: float, seed: Seed = 0) -> F32:
+    """A smooth random displacement field that moves no pixel by more than ``magnitude`` and
+    cannot fold.
+
+    Gaussian noise on a grid of nodes ``smoothness`` px apart, blurred by a Gaussian of that
+    σ, scaled so the longest displacement is ``magnitude``, or less where that would make the
+    Jacobian of ``x ↦ x + field(x)`` reach a Frobenius norm of 0.5 (then its singular values
+    stay above 0.5: fold-free, never squeezed to under half or stretched past 1.5).
+
+    Parameters
+    ----------
+    size : int or (int, int)
+        ``(H, W)`` of the field.
+    magnitude : float
+        The largest displacement in px (>= 0; 0 gives the identity).
+    smoothness : float
+        Node spacing and blur σ in px (> 0): larger is smoother.
+    seed : int or numpy.random.Generator, default 0
+
+    Returns
+    -------
+    (H, W, 2) ndarray of float32
+        ``(dx, dy)`` per pixel, the convention of :func:`phloem.leaves.register`'s fields.
+    """
+    h, w = check_size(size)
+    mag = check_float(magnitude, "magnitude", 0.0)
+    s = check_float(smoothness, "smoothness", 0.0, inclusive=False)
+    rng = _rng(seed)
+    rows, cols = _basis(h, s, s), _basis(w, s, s)
+    field = _smooth(rows, cols, rng.standard_normal((rows.shape[1], cols.shape[1], 2)))
+    peak = float(np.sqrt((field.astype(np.float64) ** 2).sum(axis=2)).max())
+    if mag == 0.0 or peak == 0.0:
+        return np.zeros((h, w, 2), np.float32)
+    grad = _max_gradient(field)
+    scale = mag / peak
+    if grad * scale > MAX_GRADIENT:
+        scale = MAX_GRADIENT / grad
+    return np.ascontiguousarray(field * np.float32(scale), dtype=np.float32)
+
+
+def _max_gradient(field: F32) -> float:
+    """The largest Frobenius norm of the field's Jacobian (central differences)."""
+    if min(field.shape[:2]) < 2:
+        return 0.0
+    f = field.astype(np.float64)
+    d_row = np.gradient(f, axis=0)
+    d_col = np.gradient(f, axis=1)
+    return float(np.sqrt((d_row**2).sum(axis=2) + (d_col**2).sum(axis=2)).max())
+
+
+def _coefficients(n: int, size: tuple[int, int], *, smoothness: float, seed: Seed) -> F32:
+    """Eq. 7's ``a_i(x)``: ``(H, W, n)``, non-negative, summing to 1 at every pixel.
+
+    Independent exponential values at nodes ``smoothness`` px apart (uniform on the simplex
+    once normalised), Gaussian-blurred (σ = half the spacing: a wider blur averages several
+    nodes and pulls every pixel towards the mean shape), normalised per pixel."""
+    rng = _rng(seed)
+    sigma = 0.5 * smoothness
+    rows, cols = _basis(size[0], smoothness, sigma), _basis(size[1], smoothness, sigma)
+    a = _smooth(rows, cols, rng.standard_exponential((rows.shape[1], cols.shape[1], n)) + 1e-6)
+    return np.ascontiguousarray(a / a.sum(axis=2, keepdims=True), dtype=np.float32)
+
+
+def blend_fields(fields: Sequence[Any], *, seed: Seed = 0, smoothness: float) -> F32:
+    """Eq. 7: a random convex combination ``W⁻¹(x) = Σ_i a_i(x) W_i⁻¹(x)`` of ``fields``.
+
+    The coefficient map ``a_i(x)`` is a small set of random coefficients (nodes ``smoothness``
+    px apart), blurred by a Gaussian (σ = ``smoothness / 2``) and normalised per pixel, so at every pixel the result
+    lies in the convex hull of the fields' values there.
+
+    Parameters
+    ----------
+    fields : sequence of (H, W, 2) array_like of float
+        The exemplars' inverse registration fields (``LeafModel.inverse``), all one size.
+    seed : int or numpy.random.Generator, default 0
+    smoothness : float
+        Spacing of the random coefficients in px (> 0).
+
+    Returns
+    -------
+    (H, W, 2) ndarray of float32
+    """
+    if isinstance(fields, np.ndarray) and fields.ndim == 4:
+        fields = list(fields)
+    if not isinstance(fields, Sequence) or len(fields) == 0:
+        raise ValueError("fields: expected a non-empty sequence of (H, W, 2) fields")
+    fs = [as_field(fields[0], "fields[0]")]
+    fs += [as_field(f, f"fields[{i}]", fs[0].shape[:2]) for i, f in enumerate(fields) if i > 0]
+    s = check_float(smoothness, "smoothness", 0.0, inclusive=False)
+    a = _coefficients(len(fs), fs[0].shape[:2], smoothness=s, seed=seed)
+    out = np.zeros_like(fs[0])
+    for i, f in enumerate(fs):
+        out += a[:, :, i : i + 1] * f
+    return out
+
+
+def _check_model(model: Any) -> LeafModel:
+    if not isinstance(model, LeafModel):
+        raise TypeError(f"model: expected a phloem.leaves.LeafModel, got {type(model).__name__}")
+    n, k = model.n_exemplars, model.n_layers - 1
+    if n < 2:
+        raise ValueError(f"model: expected at least two exemplars to mix, got {n}")
+    if k < 0:
+        raise ValueError("model: expected at least the background layer, got an empty order")
+    h, w = model.size
+    per_exemplar: dict[str, Sequence[object]] = {
+        "inverse": model.inverse,
+        "residual": model.residual,
+        "background": model.background,
+        "layers": model.layers,
+        "dissimilarity": model.dissimilarity,
+    }
+    for name, values in per_exemplar.items():
+        if len(values) != n:
+            raise ValueError(f"model: expected {n} {name} entries, one per exemplar, got {len(values)}")
+    for name, per_layer in (("lam", model.lam), ("delta", model.delta)):
+        if len(per_layer) != k:
+            raise ValueError(f"model: expected {k} {name} values, one per non-background layer, got {len(per_layer)}")
+    for i in range(n):
+        as_field(model.inverse[i], f"model.inverse[{i}]", (h, w))
+        if np.shape(model.background[i]) != (h, w, 4):
+            raise ValueError(f"model: background[{i}] has shape {np.shape(model.background[i])}, expected {(h, w, 4)}")
+        if len(model.layers[i]) != k or len(model.dissimilarity[i]) != k:
+            raise ValueError(f"model: exemplar {i} has {len(model.layers[i])} layers, expected {k}")
+        for j in range(k):
+            if np.shape(model.layers[i][j]) != (h, w, 4) or np.shape(model.dissimilarity[i][j]) != (h, w):
+                raise ValueError(f"model: layer {j} of exemplar {i} is not on the {h}×{w} canvas")
+    return model
+
+
+def _bounds(model: LeafModel) -> list[float]:
+    """Each exemplar's random-warp bound: its registration error. The training leaf's 0 is
+    by construction, not a measurement, so it gets the others' mean."""
+    res = [float(r) if math.isfinite(float(r)) and float(r) > 0 else 0.0 for r in model.residual]
+    others = [r for i, r in enumerate(res) if i != model.training]
+    mean = float(np.mean(others)) if others else 0.0
+    return [mean if i == model.training else r for i, r in enumerate(res)]
+
+
+def _premultiplied(rgba: Any) -> F32:
+    x = np.asarray(rgba, dtype=np.float32)
+    out = np.empty(x.shape, np.float32)
+    out[..., :3] = x[..., :3] * x[..., 3:4]
+    out[..., 3] = x[..., 3]
+    return out
+
+
+def _straight(pre: F32) -> F32:
+    a = pre[..., 3:4]
+    out = np.zeros_like(pre)
+    np.divide(pre[..., :3], a, out=out[..., :3], where=a > 1e-6)
+    out[..., :3] = np.clip(out[..., :3], 0.0, 1.0)
+    out[..., 3] = np.clip(pre[..., 3], 0.0, 1.0)
+    return out
+
+
+def _compose(background: F32, layers: list[F32], dissimilarity: list[F32], delta: list[float]) -> F32:
+    """Premultiplied composition: layer ``k`` weighs ``α_k / (1 + (D_k/δ_k)⁴)``, the background
+    ``Π_k (1 − w_k)``; colours are averaged with the weights normalised per pixel (the total is
+    at least 1), the alpha is the background's."""
+    keep = np.ones(background.shape[:2], np.float32)
+    total = np.ones(background.shape[:2], np.float32)
+    rgb = np.zeros(background.shape[:2] + (3,), np.float32)
+    for layer, d, dl in zip(layers, dissimilarity, delta, strict=True):
+        alpha = np.clip(layer[..., 3], 0.0, 1.0)
+        g = 1.0 / (1.0 + (np.maximum(d, 0.0) / np.float32(dl)) ** _FALLOFF) if dl > 0 else np.ones_like(d)
+        w = alpha * g
+        # layer[..., :3] is premultiplied, so g · (α c) is w · c
+        rgb += g[..., None] * layer[..., :3]
+        total += w
+        keep *= 1.0 - w
+    total += keep - 1.0
+    out = np.empty_like(background)
+    a = background[..., 3]
+    bg_rgb = np.zeros_like(rgb)
+    np.divide(background[..., :3], a[..., None], out=bg_rgb, where=a[..., None] > 1e-6)
+    colour = (keep[..., None] * bg_rgb + rgb) / total[..., None]
+    out[..., :3] = colour * a[..., None]
+    out[..., 3] = a
+    return out
+
+
+def _one_leaf(alpha: NDArray[np.float32]) -> NDArray[np.float32]:
+    """``alpha`` with only the largest component of ``alpha > 0.5`` and its soft rim (pixels
+    of alpha <= 0.5 within 2 px of it): the new leaf is one connected piece."""
+    solid = alpha > 0.5
+    labels, n = ndimage.label(solid)
+    if n <= 1:
+        return alpha
+    sizes = np.bincount(labels.ravel())[1:]
+    main = labels == (1 + int(np.argmax(sizes)))
+    rim = ndimage.binary_dilation(main, iterations=2) & ~solid
+    return np.where(main | rim, alpha, np.float32(0)).astype(np.float32)
+
+
+def _crop(rgba: F32, margin: int) -> F32:
+    ys, xs = np.nonzero(rgba[..., 3] > 0)
+    if len(ys) == 0:
+        return rgba
+    y0, y1, x0, x1 = int(ys.min()), int(ys.max()) + 1, int(xs.min()), int(xs.max()) + 1
+    out = np.zeros((y1 - y0 + 2 * margin, x1 - x0 + 2 * margin, 4), np.float32)
+    out[margin : margin + y1 - y0, margin : margin + x1 - x0] = rgba[y0:y1, x0:x1]
+    return out
+
+
+def _corrector() -> Callable[..., Any] | None:
+    """``leaves.correct_texture`` where this build has it (texture correction is its own piece)."""
+    try:
+        module = importlib.import_module("phloem.leaves.correction")
+    except ImportError:
+        return None
+    fn = getattr(module, "correct_texture", None)
+    return fn if callable(fn) else None
+
+
+def _training_frame(
+    m: LeafModel, rng: np.random.Generator, bounds: list[float], structure: list[float], threads: int | None
+) -> F32:
+    """Steps 1–2: a background and layers of other exemplars, randomly warped and fused by D,
+    in the training frame (premultiplied RGBA)."""
+    n_ex, n_layers = m.n_exemplars, m.n_layers - 1
+    h, w = m.size
+    j_bg = int(rng.integers(n_ex))
+    others = [j for j in range(n_ex) if j != j_bg]
+    j_layers = [others[int(rng.integers(len(others)))] for _ in range(n_layers)]
+    seeds = rng.integers(0, 2**63, size=n_layers + 1)
+    smooth = max(WARP_SMOOTHNESS * min(h, w), 1.0)
+    field = random_warp((h, w), bounds[j_bg], smoothness=smooth, seed=int(seeds[0]))
+    bg = sample(_premultiplied(m.background[j_bg]), field, threads=threads)
+    layers, diss = [], []
+    for k, j in enumerate(j_layers):
+        field = random_warp((h, w), (1.0 - structure[k]) * bounds[j], smoothness=smooth, seed=int(seeds[1 + k]))
+        d = np.asarray(m.dissimilarity[j][k], np.float32)[..., None]
+        warped = sample(np.concatenate([_premultiplied(m.layers[j][k]), d], axis=2), field, threads=threads)
+        layers.append(np.ascontiguousarray(warped[..., :4]))
+        diss.append(np.ascontiguousarray(warped[..., 4]))
+    return _compose(bg, layers, diss, [float(d) for d in m.delta])
+
+
+def synthesize(
+    model: LeafModel,
+    *,
+    count: int = 1,
+    seed: Seed = 0,
+    threads: int | None = None,
+    progress: Progress = None,
+) -> list[F32]:
+    """New leaves of the species of ``model`` (Assa & Cohen-Or §5).
+
+    Each leaf mixes exemplars: the inpainted background of one under a small smooth random
+    warp (no larger than its registration error), each other layer from another exemplar under
+    its own random warp (``1 − λ/κ`` times that, so structural layers barely move), fused by
+    weights from ``D`` normalised per pixel; the composition is then warped into a new shape
+    by a random convex combination of the exemplars' inverse registration fields (Eq. 7),
+    texture-corrected where that warp distorts (when ``leaves.correct_texture`` is available),
+    reduced to its largest connected leaf and cropped.
+
+    Parameters
+    ----------
+    model : LeafModel
+        The analysis of at least two exemplars (:func:`phloem.leaves.analyze`).
+    count : int, default 1
+        How many leaves (>= 1).
+    seed : int or numpy.random.Generator, default 0
+        Leaf ``n`` depends only on the seed and ``n``: the first leaves of a larger ``count``
+        are the same leaves.
+    threads : int, optional
+        Worker threads of the samplers (default: the core's pool); the leaves do not depend
+        on it.
+    progress : callable, optional
+        Called as ``progress(done, count)`` after each leaf; an exception it raises stops
+        the run.
+
+    Returns
+    -------
+    list of (h, w, 4) ndarray of float32
+        RGBA leaves, straight alpha in [0, 1], each cropped to its leaf's bounding box with a
+        transparent margin of 8 px (sizes vary).
+
+    Raises
+    ------
+    ValueError
+        ``count < 1``, a model with one exemplar, or fields not on the model's canvas.
+    """
+    m = _check_model(model)
+    n_leaves = check_int(count, "count", 1)
+    s = check_seed(seed)
+    nt = check_threads(threads)
+    if progress is not None and not callable(progress):
+        raise TypeError(f"progress: expected a callable progress(done, total), got {progress!r}")
+    side = float(min(m.size))
+    bounds = _bounds(m)
+    structure = [min(max(float(lam) / KAPPA, 0.0), 1.0) for lam in m.lam]
+    correct = _corrector()
+    inverse = [np.asarray(f, np.float32) for f in m.inverse]
+    out: list[F32] = []
+    for leaf in range(n_leaves):
+        rng = np.random.default_rng(derive_seed(s, leaf))
+        composition = _training_frame(m, rng, bounds, structure, nt)
+        seeds = rng.integers(0, 2**63, size=2)
+        back = blend_fields(inverse, seed=int(seeds[0]), smoothness=max(BLEND_SMOOTHNESS * side, 1.0))
+        leaf_img = _straight(sample(composition, back, threads=nt))
+        if correct is not None:
+            corrected = np.asarray(
+                correct(leaf_img, _straight(composition), back, seed=int(seeds[-1]) % 2**32, threads=nt), np.float32
+            )
+            leaf_img = np.concatenate([corrected[..., :3], leaf_img[..., 3:4]], axis=2)
+        leaf_img[..., 3] = _one_leaf(leaf_img[..., 3])
+        leaf_img[leaf_img[..., 3] <= 0] = 0.0
+        out.append(_crop(np.ascontiguousarray(leaf_img, dtype=np.float32), MARGIN))
+        if progress is not None:
+            progress(leaf + 1, n_leaves)
+    return out
