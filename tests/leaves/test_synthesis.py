@@ -105,7 +105,7 @@ def test_random_warp_is_bounded_and_fold_free(magnitude: float, smoothness: floa
     det = (1 + g[1][..., 0]) * (1 + g[0][..., 1]) - g[0][..., 0] * g[1][..., 1]
     assert det.min() > 0.2
     if magnitude == 6.0:  # a smooth warp reaches its bound; a rough one is capped by the Jacobian
-        assert norm.max() >= 0.999 * magnitude
+        assert norm.max() >= 0.98 * magnitude
     if magnitude == 40.0:
         assert 1.0 < norm.max() < magnitude
     assert np.array_equal(f, random_warp((80, 120), magnitude, smoothness=smoothness, seed=4))

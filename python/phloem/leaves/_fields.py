@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from .. import _core
 from .._validate import as_image, check_threads, restore_ndim
 
-__all__ = ["as_field", "sample"]
+__all__ = ["as_field", "sample", "sample_checked"]
 
 
 def as_field(field: Any, name: str, shape: tuple[int, int] | None = None) -> NDArray[np.float32]:
@@ -48,5 +48,10 @@ def sample(image: Any, field: Any, *, threads: int | None = None) -> NDArray[np.
     """
     img = as_image(image, "image")
     f = as_field(field, "field", img.shape[:2])
-    out = np.asarray(_core.tps_sample(img, f, threads=check_threads(threads)), dtype=np.float32)
-    return restore_ndim(out, image)
+    return restore_ndim(sample_checked(img, f, check_threads(threads)), image)
+
+
+def sample_checked(image: NDArray[np.float32], field: NDArray[np.float32], threads: int | None) -> NDArray[np.float32]:
+    """:func:`sample` for arrays already checked: C-contiguous float32 ``(H, W, C)`` and
+    ``(H, W, 2)`` (a stage's own intermediates; skips the copies and finiteness scans)."""
+    return np.asarray(_core.tps_sample(image, field, threads=threads), dtype=np.float32)
