@@ -163,6 +163,17 @@ def test_new_leaves_are_single_leaves_in_the_exemplars_range_and_not_copies() ->
             assert np.abs(a[both, :3] - b[both, :3]).mean() > 0.01
 
 
+def test_shapes_come_from_eq7() -> None:
+    """Without random warps (no registration error) the shape is the Eq. 7 blend alone: it
+    varies from leaf to leaf, between the exemplars' shapes."""
+    model = _model()
+    model = LeafModel(**{**model.__dict__, "residual": [0.0, 0.0, 0.0]})
+    areas = [int((leaf[..., 3] > 0.5).sum()) for leaf in model.leaves]
+    new = [int((leaf[..., 3] > 0.5).sum()) for leaf in synthesize(model, count=8, seed=1)]
+    assert min(areas) < min(new) and max(new) < max(areas)
+    assert np.ptp(new) > 0.1 * np.ptp(areas)
+
+
 def test_layers_of_other_exemplars_show_up() -> None:
     model = _model()
     found = False
@@ -205,11 +216,12 @@ def test_texture_correction_is_applied_when_available(monkeypatch: pytest.Monkey
         out[..., 3] = 1.0  # must not leak: the alpha stays the warped one
         return out
 
+    plain = synthesize(_model(), seed=2)[0]
     monkeypatch.setattr(synth, "_corrector", lambda: fake)
     leaf = synthesize(_model(), seed=2)[0]
     assert seen == [((H, W, 4), (H, W, 4), (H, W, 2), ["seed", "threads"])]
-    solid = leaf[..., 3] > 0.5
-    assert np.allclose(leaf[solid, :3], 0.5) and (leaf[..., 3] == 0).any()
+    assert np.array_equal(leaf[..., 3], plain[..., 3])
+    assert np.allclose(leaf[leaf[..., 3] > 0, :3], 0.5)
 
 
 def test_bad_input() -> None:
@@ -228,3 +240,16 @@ def test_bad_input() -> None:
         random_warp(10, -1.0, smoothness=3.0)
     with pytest.raises(ValueError, match="smoothness"):
         random_warp(10, 1.0, smoothness=0.0)
+
+
+def test_only_the_largest_leaf_is_kept() -> None:
+    alpha = np.zeros((40, 60), np.float32)
+    alpha[5:30, 5:30] = 1.0
+    alpha[4, 5:30] = 0.3  # its soft rim stays
+    alpha[2:6, 40:44] = 1.0  # a crumb of another component goes (labelled first)
+    alpha[20, 50] = 0.4  # and so does a stray rim pixel far away
+    out = synth._one_leaf(alpha)
+    assert ndimage.label(out > 0)[1] == 1
+    assert np.array_equal(out[:35, :35], alpha[:35, :35]) and out[:, 35:].max() == 0
+    alpha[2:6, 40:44] = 0.0  # one solid component: stray soft pixels still go
+    assert np.array_equal(synth._one_leaf(alpha), out)

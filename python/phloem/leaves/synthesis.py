@@ -301,7 +301,7 @@ def _one_leaf(alpha: NDArray[np.float32]) -> NDArray[np.float32]:
     of alpha <= 0.5 within 2 px of it): the new leaf is one connected piece."""
     solid = alpha > 0.5
     labels, n = ndimage.label(solid)
-    if n <= 1:
+    if n == 0:
         return alpha
     sizes = np.bincount(labels.ravel())[1:]
     main = labels == (1 + int(np.argmax(sizes)))
