@@ -224,6 +224,43 @@ def test_texture_correction_is_applied_when_available(monkeypatch: pytest.Monkey
     assert np.allclose(leaf[leaf[..., 3] > 0, :3], 0.5)
 
 
+def test_undefined_dissimilarity_off_the_leaf_weighs_nothing() -> None:
+    """``leaves.induce`` leaves D NaN off each exemplar's leaf: it must not reach a colour."""
+    model = _model()
+    off = [leaf[..., 3] <= 0.5 for leaf in model.background]
+    nan = [[np.where(o, np.float32(np.nan), d) for d in per] for o, per in zip(off, model.dissimilarity, strict=True)]
+    far = [[np.where(o, np.float32(1e4), d) for d in per] for o, per in zip(off, model.dissimilarity, strict=True)]
+    with_nan = synthesize(LeafModel(**{**model.__dict__, "dissimilarity": nan}), count=3, seed=4)
+    with_far = synthesize(LeafModel(**{**model.__dict__, "dissimilarity": far}), count=3, seed=4)
+    assert all(np.isfinite(a).all() and np.array_equal(a, b) for a, b in zip(with_nan, with_far, strict=True))
+
+
+def _with_scale(model: LeafModel, scale: list[float]) -> LeafModel:
+    """The model with the analysis' per-exemplar pose scales (a field of the lead's model;
+    set directly so this works with and without it)."""
+    out = LeafModel(**model.__dict__)
+    object.__setattr__(out, "scale", scale)
+    return out
+
+
+def test_pose_scales_set_the_new_leaves_size() -> None:
+    """Exemplars 1 and 2 were scaled by 1/2 to the training leaf's size: new leaves are
+    between 1 and 2 times the canvas leaf's linear size, as Eq. 7 blends their shapes."""
+    model = _model()
+    plain = synthesize(model, count=4, seed=6)
+    same = synthesize(_with_scale(model, [1.0, 1.0, 1.0]), count=4, seed=6)
+    big = synthesize(_with_scale(model, [1.0, 0.5, 0.5]), count=4, seed=6)
+    assert all(np.array_equal(a, b) for a, b in zip(plain, same, strict=True))
+    for a, b in zip(plain, big, strict=True):
+        ratio = (b[..., 3] > 0.5).sum() / (a[..., 3] > 0.5).sum()
+        assert 1.3 < ratio < 4.0
+        assert ndimage.label(b[..., 3] > 0.5)[1] == 1
+    with pytest.raises(ValueError, match="model: expected 3 scale values"):
+        synthesize(_with_scale(model, [1.0, 0.5]))
+    with pytest.raises(ValueError, match="model: expected finite positive scales"):
+        synthesize(_with_scale(model, [1.0, 0.0, 1.0]))
+
+
 def test_bad_input() -> None:
     model = _model()
     with pytest.raises(ValueError, match="count"):

@@ -14,7 +14,9 @@ shape:
 3. the composition warped back by Eq. 7, ``W⁻¹ = Σ a_i W_i⁻¹``, the coefficients ``a_i(x)``
    a few random values on a coarse grid, Gaussian-blurred and normalised per pixel;
 4. texture correction where that warp stretches or squeezes (``leaves.correct_texture``,
-   when this build has it), the largest leaf component kept, and the leaf cropped.
+   when this build has it); where the analysis normalised the exemplars' sizes (a model's
+   ``scale``), the leaf is scaled to the blend of their sizes Eq. 7 gave its shape; the
+   largest leaf component is kept and the leaf cropped.
 
 ``docs/pipelines/leaves/synthesis.md`` gives the readings of the paper this module makes.
 """
@@ -55,6 +57,8 @@ WARP_SMOOTHNESS = 0.2
 BLEND_SMOOTHNESS = 0.3
 #: Transparent margin in px around each cropped leaf.
 MARGIN = 8
+# D where it is undefined (NaN off a leaf): far beyond any threshold, weight ~1e-16.
+_FAR = 1e4
 # A layer's weight is 1 / (1 + (D/δ)⁴): D/δ = 1 (the layer's threshold) gets half weight; the
 # fourth power keeps the layer's core at full weight (D/δ = 0.5 → 0.94) and fades it within
 # the mask's rim.
@@ -187,15 +191,16 @@ def blend_fields(fields: Sequence[Any], *, seed: Seed = 0, smoothness: float) ->
         raise ValueError("fields: expected a non-empty sequence of (H, W, 2) fields")
     fs = [as_field(fields[0], "fields[0]")]
     fs += [as_field(f, f"fields[{i}]", fs[0].shape[:2]) for i, f in enumerate(fields) if i > 0]
-    return _blend(fs, seed, check_float(smoothness, "smoothness", 0.0, inclusive=False))
+    return _blend(fs, seed, check_float(smoothness, "smoothness", 0.0, inclusive=False))[0]
 
 
-def _blend(fs: list[F32], seed: Seed, smoothness: float) -> F32:
+def _blend(fs: list[F32], seed: Seed, smoothness: float) -> tuple[F32, F32]:
+    """Eq. 7's field and its coefficient map."""
     a = _coefficients(len(fs), (fs[0].shape[0], fs[0].shape[1]), smoothness=smoothness, seed=seed)
     out = np.zeros_like(fs[0])
     for i, f in enumerate(fs):
         out += a[:, :, i : i + 1] * f
-    return out
+    return out, a
 
 
 def _check_model(model: Any) -> LeafModel:
@@ -240,6 +245,37 @@ def _bounds(model: LeafModel) -> list[float]:
     others = [r for i, r in enumerate(res) if i != model.training]
     mean = float(np.mean(others)) if others else 0.0
     return [mean if i == model.training else r for i, r in enumerate(res)]
+
+
+def _sizes(model: LeafModel) -> NDArray[np.float64] | None:
+    """Each exemplar's linear size relative to the training leaf's, ``1 / scale`` (the factor
+    the analysis' pose scaled it by), or None where the model has no scales (all 1)."""
+    scale = list(getattr(model, "scale", None) or [])
+    if not scale:
+        return None
+    if len(scale) != model.n_exemplars:
+        raise ValueError(f"model: expected {model.n_exemplars} scale values, one per exemplar, got {len(scale)}")
+    s = np.asarray(scale, np.float64)
+    if not (np.isfinite(s).all() and (s > 0).all()):
+        raise ValueError(f"model: expected finite positive scales, got {scale}")
+    return np.asarray(1.0 / s, np.float64)
+
+
+def _size_factor(coefficients: F32, leaf: NDArray[np.bool_], sizes: NDArray[np.float64]) -> float:
+    """The new leaf's linear size: the exemplars' sizes weighed by Eq. 7's mean coefficients
+    over the leaf, so its size follows the same blend as its shape."""
+    a = coefficients[leaf].mean(axis=0) if leaf.any() else np.full(len(sizes), 1.0 / len(sizes))
+    return float(np.dot(a, sizes) / a.sum())
+
+
+def _resize(rgba: F32, factor: float) -> F32:
+    """``rgba`` (straight alpha) scaled by ``factor``, premultiplied while it is resampled."""
+    if abs(factor - 1.0) < 1e-3:
+        return rgba
+    h, w = rgba.shape[:2]
+    size = (max(round(w * factor), 1), max(round(h * factor), 1))
+    mode = cv2.INTER_AREA if factor < 1 else cv2.INTER_LINEAR
+    return _straight(np.asarray(cv2.resize(_premultiplied(rgba), size, interpolation=mode), np.float32))
 
 
 def _premultiplied(rgba: Any) -> F32:
@@ -351,7 +387,8 @@ def _training_frame(
     layers, diss = [], []
     for k, j in enumerate(j_layers):
         field = random_warp((h, w), (1.0 - structure[k]) * bounds[j], smoothness=smooth, seed=int(seeds[1 + k]))
-        d = np.asarray(m.dissimilarity[j][k], np.float32)[..., None]
+        # D is NaN off the exemplar's leaf (leaves.induce): there the layer has no weight
+        d = np.nan_to_num(np.asarray(m.dissimilarity[j][k], np.float32), nan=_FAR, posinf=_FAR, neginf=0.0)[..., None]
         warped = sample_checked(np.concatenate([_premultiplied(m.layers[j][k]), d], axis=2), field, threads)
         layers.append(np.ascontiguousarray(warped[..., :4]))
         diss.append(np.ascontiguousarray(warped[..., 4]))
@@ -374,7 +411,9 @@ def synthesize(
     weights from ``D`` normalised per pixel; the composition is then warped into a new shape
     by a random convex combination of the exemplars' inverse registration fields (Eq. 7),
     texture-corrected where that warp distorts (when ``leaves.correct_texture`` is available),
-    reduced to its largest connected leaf and cropped.
+    scaled to a size between the exemplars' own where the model records their pose scales
+    (the same blend: Eq. 7's mean coefficients over the leaf), reduced to its largest
+    connected leaf and cropped.
 
     Parameters
     ----------
@@ -411,6 +450,7 @@ def synthesize(
         raise TypeError(f"progress: expected a callable progress(done, total), got {progress!r}")
     side = float(min(m.size))
     bounds = _bounds(m)
+    sizes = _sizes(m)
     structure = [min(max(float(lam) / KAPPA, 0.0), 1.0) for lam in m.lam]
     correct = _corrector()
     inverse = [as_field(f, f"model.inverse[{i}]") for i, f in enumerate(m.inverse)]
@@ -419,7 +459,7 @@ def synthesize(
         rng = np.random.default_rng(derive_seed(s, leaf))
         composition = _training_frame(m, rng, bounds, structure, nt)
         seeds = rng.integers(0, 2**63, size=2)
-        back = _blend(inverse, int(seeds[0]), max(BLEND_SMOOTHNESS * side, 1.0))
+        back, coefficients = _blend(inverse, int(seeds[0]), max(BLEND_SMOOTHNESS * side, 1.0))
         pre = sample_checked(composition, back, nt)
         box = _box(pre[..., 3] > 0)
         if correct is None:
@@ -429,6 +469,8 @@ def synthesize(
             fixed = np.asarray(correct(full, _straight(composition), back, seed=int(seeds[1]), threads=nt), np.float32)
             full[..., :3] = fixed[..., :3]  # the alpha stays the warped one
             leaf_img = full[box]
+        if sizes is not None:
+            leaf_img = _resize(leaf_img, _size_factor(coefficients, pre[..., 3] > 0.5, sizes))
         leaf_img[..., 3] = _one_leaf(leaf_img[..., 3])
         leaf_img[leaf_img[..., 3] <= 0] = 0.0
         out.append(_crop(np.ascontiguousarray(leaf_img, dtype=np.float32), MARGIN))
