@@ -46,8 +46,8 @@ F32 = NDArray[np.float32]
 #: κ of Eq. 5 (the paper's 1.5, ``leaves.induce``'s default): ``λ/κ`` is the layers' overlap
 #: ratio, 1 for a perfectly structural layer. The model stores ``λ`` only.
 KAPPA = 1.5
-#: The largest Frobenius norm of a random warp's Jacobian: ``I + J`` then has singular values
-#: of at least 0.5, so the map ``x ↦ x + field(x)`` cannot fold.
+#: The largest Frobenius norm of a random warp's Jacobian ``J``: ``I + J`` then has singular
+#: values in [0.5, 1.5], so the map ``x ↦ x + field(x)`` cannot fold.
 MAX_GRADIENT = 0.5
 #: Random layer warps vary over this fraction of the canvas's smaller side ("sufficiently
 #: smooth"): a leaf bends as a whole, it does not ripple.
@@ -111,9 +111,10 @@ def random_warp(size: Size, magnitude: float, *, smoothness: float, seed: Seed =
     cannot fold.
 
     Gaussian noise on a grid of nodes ``smoothness`` px apart, blurred by a Gaussian of that
-    σ, scaled so the longest displacement is ``magnitude``, or less where that would make the
-    Jacobian of ``x ↦ x + field(x)`` reach a Frobenius norm of 0.5 (then its singular values
-    stay above 0.5: fold-free, never squeezed to under half or stretched past 1.5).
+    σ, scaled so the longest displacement is ``magnitude`` (on the field's exact samples; the
+    interpolated pixels never exceed it), or less where that would let the displacement's
+    Jacobian ``J`` reach ``‖J‖_F = 0.5``: the map ``x ↦ x + field(x)`` then has singular values
+    in [0.5, 1.5], so it cannot fold and never squeezes to under half or stretches past 1.5.
 
     Parameters
     ----------
@@ -122,7 +123,7 @@ def random_warp(size: Size, magnitude: float, *, smoothness: float, seed: Seed =
     magnitude : float
         The largest displacement in px (>= 0; 0 gives the identity).
     smoothness : float
-        Node spacing and blur σ in px (> 0): larger is smoother.
+        Node spacing and blur σ in px (>= 1: a node per pixel at most): larger is smoother.
     seed : int or numpy.random.Generator, default 0
 
     Returns
@@ -132,7 +133,7 @@ def random_warp(size: Size, magnitude: float, *, smoothness: float, seed: Seed =
     """
     h, w = check_size(size)
     mag = check_float(magnitude, "magnitude", 0.0)
-    s = check_float(smoothness, "smoothness", 0.0, inclusive=False)
+    s = check_float(smoothness, "smoothness", 1.0)
     rng = _rng(seed)
     m = math.ceil((h - 1) / s) + 3, math.ceil((w - 1) / s) + 3
     smooth = _Smooth((h, w), s, s, rng.standard_normal(m + (2,)))
@@ -170,8 +171,8 @@ def blend_fields(fields: Sequence[Any], *, seed: Seed = 0, smoothness: float) ->
     """Eq. 7: a random convex combination ``W⁻¹(x) = Σ_i a_i(x) W_i⁻¹(x)`` of ``fields``.
 
     The coefficient map ``a_i(x)`` is a small set of random coefficients (nodes ``smoothness``
-    px apart), blurred by a Gaussian (σ = ``smoothness / 2``) and normalised per pixel, so at every pixel the result
-    lies in the convex hull of the fields' values there.
+    px apart), blurred by a Gaussian (σ = ``smoothness / 2``) and normalised per pixel, so at
+    every pixel the result lies in the convex hull of the fields' values there.
 
     Parameters
     ----------
@@ -179,7 +180,7 @@ def blend_fields(fields: Sequence[Any], *, seed: Seed = 0, smoothness: float) ->
         The exemplars' inverse registration fields (``LeafModel.inverse``), all one size.
     seed : int or numpy.random.Generator, default 0
     smoothness : float
-        Spacing of the random coefficients in px (> 0).
+        Spacing of the random coefficients in px (>= 1).
 
     Returns
     -------
@@ -191,7 +192,7 @@ def blend_fields(fields: Sequence[Any], *, seed: Seed = 0, smoothness: float) ->
         raise ValueError("fields: expected a non-empty sequence of (H, W, 2) fields")
     fs = [as_field(fields[0], "fields[0]")]
     fs += [as_field(f, f"fields[{i}]", fs[0].shape[:2]) for i, f in enumerate(fields) if i > 0]
-    return _blend(fs, seed, check_float(smoothness, "smoothness", 0.0, inclusive=False))[0]
+    return _blend(fs, seed, check_float(smoothness, "smoothness", 1.0))[0]
 
 
 def _blend(fs: list[F32], seed: Seed, smoothness: float) -> tuple[F32, F32]:
