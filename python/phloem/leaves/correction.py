@@ -27,8 +27,8 @@ F32 = NDArray[np.float32]
 # Search-and-vote rounds after the quilted start, and PatchMatch passes per search: the start is
 # already source texture, so the rounds only mend block seams (more changed nothing measurable,
 # docs/pipelines/leaves/correction.md).
-_ROUNDS = 3
-_SEARCH_ITERATIONS = 4
+_ROUNDS = 2
+_SEARCH_ITERATIONS = 3
 # Side of the rigid source blocks of the quilted start, in patch sides.
 _BLOCK = 1
 # Search radius of a block around the warp's position, in patch sides, and the small cost per
@@ -135,7 +135,7 @@ def correct_texture(
        of where the warp maps its centre, choosing the position whose rim best matches the
        pixels already known around the block (undistorted ones and earlier blocks) and whose
        alpha matches the warped alpha (Efros & Freeman's image quilting with the warp as guide).
-    2. *Search and vote.* Three rounds of texture optimisation restricted to the region
+    2. *Search and vote.* Two rounds of texture optimisation restricted to the region
        (Kwatra et al. 2005; Wexler et al. 2007) mend the block seams: every patch touching the
        region is matched to a source patch by PatchMatch (the engine of
        :func:`phloem.patch.nnf`, with masks, started from the quilted positions) and each
