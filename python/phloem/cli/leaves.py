@@ -21,25 +21,45 @@ from ._common import (
     transaction,
 )
 
+#: A leaf's source file size ``(H, W)`` and its box ``(y0, y1, x0, x1)`` in it.
+Cut = tuple[tuple[int, ...], tuple[int, int, int, int]]
+
 
 def _sub_seed(seed: int, i: int) -> int:
     """The seed of new leaf ``i`` of a run with ``--seed seed`` (recorded in its sidecar)."""
     return int(np.random.SeedSequence([seed, i]).generate_state(1)[0])
 
 
-def _read_leaves(files: list[str], args: argparse.Namespace) -> tuple[list[np.ndarray], list[str]]:
-    """Every leaf of every file, in file order then reading order; and where each came from."""
+def _read_leaves(files: list[str], args: argparse.Namespace) -> tuple[list[np.ndarray], list[str], list[Cut]]:
+    """Every leaf of every file, in file order then reading order; where each came from; and its
+    cut (the file's size and the leaf's box in it)."""
     out: list[np.ndarray] = []
     where: list[str] = []
+    cuts: list[Cut] = []
     for f in files:
         img = io.read_image(f, max_pixels=args.max_pixels)
         try:
-            found = leaves.extract(img)
+            found = leaves.extract(img, full_output=True)
         except ValueError as e:
             raise ValueError(f"LEAF: {f}: {str(e).split(': ', 1)[-1]}") from None
-        out += found
-        where += [f"{f}#{j}" for j in range(len(found))]
-    return out, where
+        out += found.leaves
+        where += [f"{f}#{j}" for j in range(len(found.leaves))]
+        cuts += [(img.shape[:2], box) for box in found.boxes]
+    return out, where, cuts
+
+
+def _scribbles(args: argparse.Namespace, leaf: np.ndarray, cut: Cut) -> Any:
+    """The scribbles file as labels of the training leaf: drawn on the leaf as ``phloem leaves
+    extract`` writes it, taken as they are; drawn on the whole scan, cut with the leaf's box."""
+    (fh, fw), (y0, y1, x0, x1) = cut
+    size = io.read_image(args.scribbles, max_pixels=args.max_pixels).shape[:2]
+    if size == leaf.shape[:2] or size != (fh, fw):
+        return args.scribbles  # leaves.analyze reads it, or says which size it expected
+    labels, _ = leaves.read_scribbles(args.scribbles, (fh, fw))
+    out = np.zeros((y1 - y0, x1 - x0), np.int32)
+    sy, sx = slice(max(0, y0), min(fh, y1)), slice(max(0, x0), min(fw, x1))
+    out[sy.start - y0 : sy.stop - y0, sx.start - x0 : sx.stop - x0] = labels[sy, sx]
+    return out
 
 
 def _order(text: str | None) -> list[int] | None:
@@ -73,12 +93,13 @@ def _stage_model(model: leaves.LeafModel, folder: Path, args: argparse.Namespace
 
 def _analyze(args: argparse.Namespace, model_dir: Path | None) -> tuple[leaves.LeafModel, list[str]]:
     """Read the leaves and scribbles, analyse them, and stage the model when asked to."""
-    imgs, where = run("leaves: extract", args, lambda bar: _read_leaves(args.leaves, args))
-    if args.training >= len(imgs):
-        raise ValueError(f"training: the LEAF files hold {len(imgs)} leaves, so it must be below {len(imgs)}")
+    imgs, where, cuts = run("leaves: extract", args, lambda bar: _read_leaves(args.leaves, args))
+    if not 0 <= args.training < len(imgs):
+        raise ValueError(f"training: the LEAF files hold {len(imgs)} leaves, so it must be 0 to {len(imgs) - 1}")
+    scribbles = _scribbles(args, imgs[args.training], cuts[args.training])
     model = run(
         "leaves: analyze", args,
-        lambda bar: leaves.analyze(imgs, args.scribbles, training=args.training, order=_order(args.order),
+        lambda bar: leaves.analyze(imgs, scribbles, training=args.training, order=_order(args.order),
                                    points=args.points, epsilon=args.epsilon, kappa=args.kappa, seed=args.seed,
                                    threads=args.threads, progress=bar, max_memory=args.max_memory),
     )  # fmt: skip
@@ -126,7 +147,7 @@ def _cmd_leaves_extract(args: argparse.Namespace) -> None:
     if out_dir.exists() and not out_dir.is_dir():
         raise ValueError(f"out-dir: {out_dir} exists and is not a folder")
     transaction().make_folders = True
-    imgs, where = _read_leaves(args.leaves, args)
+    imgs, where, _ = _read_leaves(args.leaves, args)
     for k, (img, origin) in enumerate(zip(imgs, where)):
         f, j = origin.rsplit("#", 1)
         path = out_dir / f"{Path(f).stem}_{int(j)}.png"
@@ -175,9 +196,9 @@ def _analysis_options(p: argparse.ArgumentParser) -> None:
                    help="scans or photos of leaves of one species on a plain background, or RGBA leaf PNGs; a scan with "
                         "several leaves gives several exemplars (at least 2 in all)")  # fmt: skip
     p.add_argument("--scribbles", required=True, metavar="PNG",
-                   help="strokes on the training leaf, the size of that leaf as 'phloem leaves extract' writes it: one opaque "
-                        "colour per layer (numbered in order of first appearance, row by row) or an integer PNG "
-                        "(0 unmarked, 1..n); the last layer is the residual (blade)")  # fmt: skip
+                   help="strokes on the training leaf, drawn on its scan or on the leaf as 'phloem leaves extract' writes "
+                        "it: one opaque colour per layer (numbered in order of first appearance, row by row) or an integer "
+                        "PNG (0 unmarked, 1..n); the last layer is the residual (blade)")  # fmt: skip
     p.add_argument("--training", type=int, default=0, metavar="K",
                    help="which leaf the scribbles are on, counting the leaves of all LEAF files in order from 0 (default 0)")  # fmt: skip
     p.add_argument("--order", default=None, metavar="L1,L2,...",

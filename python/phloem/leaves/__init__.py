@@ -41,7 +41,7 @@ from __future__ import annotations
 from .analysis import analyze
 from .color import color_distance
 from .correction import correct_texture, distortion
-from .extract import extract
+from .extract import ExtractResult, extract
 from .induction import Induction, induce
 from .model import LeafModel
 from .pose import pose
@@ -51,6 +51,7 @@ from .sheet import contact_sheet
 from .synthesis import blend_fields, random_warp, synthesize
 
 __all__ = [
+    "ExtractResult",
     "Induction",
     "LeafModel",
     "Registration",

@@ -234,10 +234,11 @@ def analyze(
         delta.append(float(ind.delta))
         objective.append(float(ind.objective))
         for i in range(n):
-            leaf = current[i][..., 3] > 0.5
-            m = (user if i == t else np.asarray(ind.masks[i], bool)) & leaf
+            m = (user if i == t else np.asarray(ind.masks[i], bool)) & (current[i][..., 3] > 0.5)
             masks[i].append(m)
-            dissimilarity[i].append(np.asarray(ind.dissimilarity[i], np.float32))
+            # D is undefined (NaN) off the leaf; there it is stored as the largest D there is, 1 + λ
+            d = np.asarray(ind.dissimilarity[i], np.float32)
+            dissimilarity[i].append(np.where(np.isnan(d), np.float32(1.0 + ind.lam), d).astype(np.float32))
             layer = current[i].copy()
             layer[..., 3] = np.where(m, current[i][..., 3], 0.0)
             layers[i].append(layer)
