@@ -15,6 +15,7 @@ __all__ = [
     "emd",
     "emd_map",
     "grid_maxflow",
+    "guided_quilt",
     "interpolate_field",
     "knn",
     "mvc_combine",
@@ -177,6 +178,20 @@ def tps_register(
 def tps_sample(
     image: NDArray[np.float32], field: NDArray[np.float32], *, threads: int | None
 ) -> NDArray[np.float32]: ...
+
+# correction
+def guided_quilt(
+    target: NDArray[np.float32],
+    source: NDArray[np.float32],
+    hole: NDArray[np.bool_],
+    field: NDArray[np.float32],
+    *,
+    block: int,
+    rim: int,
+    radius: int,
+    bias: float,
+    alpha_known: bool,
+) -> NDArray[np.int32]: ...
 def default_threads() -> int: ...
 def _after_fork_in_child() -> None: ...
 def grid_maxflow(

@@ -287,49 +287,17 @@ def _quilt(
     """Source (row, col) of every hole pixel after guided quilting; ``-1`` elsewhere.
 
     Blocks of ``_BLOCK × patch_size`` pixels cover the hole in raster order. Each is copied
-    rigidly (so at the source's scale) from the source position, within ``_RADIUS`` of where the
-    warp maps its centre, whose surroundings best match the pixels already known around the
-    block, undistorted or placed before (squared differences over an ``patch_size // 2`` rim,
-    alpha over the whole block for RGBA, since it is known everywhere), as image quilting
-    places blocks (Efros & Freeman 2001) with the warp as guide.
+    rigidly (so at the source's scale) from the source position, within ``_RADIUS`` patch sides
+    of where the warp maps its centre, whose surroundings best match the pixels already known
+    around the block, undistorted or placed before (squared differences over a
+    ``patch_size // 2`` rim, and alpha over the whole block for RGBA, since it is known
+    everywhere), as image quilting places blocks (Efros & Freeman 2001) with the warp as guide.
+    The loop is sequential, in Rust (``rust/core/src/correction.rs``).
     """
-    h, w, nc = target.shape
-    b, o = _BLOCK * patch_size, patch_size // 2
-    radius = _RADIUS * patch_size
-    pad = radius + b + o
-    padded = np.pad(source, ((pad, pad), (pad, pad), (0, 0)))
-    cur = target.copy()
-    known = ~hole
-    pos = np.full((h, w, 2), -1, np.int32)
-    ys, xs = np.nonzero(hole)
-    span = np.arange(-radius, radius + 1, dtype=np.float32) ** 2
-    bias = np.float32(_BIAS) * (span[:, None] + span[None, :])
-    for by in range(int(ys.min()), int(ys.max()) + 1, b):
-        for bx in range(int(xs.min()), int(xs.max()) + 1, b):
-            block = hole[by : by + b, bx : bx + b]
-            if not block.any():
-                continue
-            ty0, tx0, ty1, tx1 = max(by - o, 0), max(bx - o, 0), min(by + b + o, h), min(bx + b + o, w)
-            th, tw = ty1 - ty0, tx1 - tx0
-            cy, cx = min(by + b // 2, h - 1), min(bx + b // 2, w - 1)
-            # Padded-source top-left of the window of candidate positions for the template.
-            wy = int(np.clip(np.rint(ty0 + field[cy, cx, 1]) + pad - radius, 0, padded.shape[0] - th - 2 * radius))
-            wx = int(np.clip(np.rint(tx0 + field[cy, cx, 0]) + pad - radius, 0, padded.shape[1] - tw - 2 * radius))
-            window = padded[wy : wy + th + 2 * radius, wx : wx + tw + 2 * radius]
-            mask = np.repeat(known[ty0:ty1, tx0:tx1, None], nc, axis=2).astype(np.float32)
-            if rgba:
-                mask[..., 3] = 1.0
-            cost = bias.copy()
-            if mask.any():
-                cost += cv2.matchTemplate(window, cur[ty0:ty1, tx0:tx1], cv2.TM_SQDIFF, mask=mask)
-            ky, kx = np.unravel_index(int(np.argmin(cost)), cost.shape)
-            sy, sx = wy + int(ky) - pad - ty0, wx + int(kx) - pad - tx0  # source = target + (sy, sx)
-            ly, lx = np.nonzero(block)
-            yy, xx = ly + by, lx + bx
-            cur[yy, xx] = padded[yy + sy + pad, xx + sx + pad]
-            pos[yy, xx, 0], pos[yy, xx, 1] = yy + sy, xx + sx
-            known[yy, xx] = True
-    return pos
+    return _core.guided_quilt(
+        target, source, np.ascontiguousarray(hole), field, block=_BLOCK * patch_size, rim=patch_size // 2,
+        radius=_RADIUS * patch_size, bias=_BIAS, alpha_known=rgba,
+    )  # fmt: skip
 
 
 def _paste(out: F32, hole: NDArray[np.bool_], voted: F32, weight: F32) -> None:

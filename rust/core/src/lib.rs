@@ -30,8 +30,11 @@
 //!   transfer they define (Argudo et al. 2017, §5.2).
 //! - [`tps`]: thin-plate splines and non-rigid point registration by TPS-RPM (Chui &
 //!   Rangarajan 2003) with dense forward and inverse warps (Assa & Cohen-Or, §3).
+//! - [`correction`]: guided quilting, the start of texture correction after a warp (Assa &
+//!   Cohen-Or §3, after Fang & Hart 2007).
 
 pub mod cancel;
+pub mod correction;
 pub mod distance;
 pub mod emd;
 pub mod error;
