@@ -261,4 +261,5 @@ def analyze(
         lam=lam,
         delta=delta,
         objective=objective,
+        kappa=kap,
     )

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import os
 import zipfile
 import zlib
@@ -74,6 +75,9 @@ class LeafModel:
     scale : list of float
         Per exemplar, the linear factor its pose scaled it by to the training leaf's area
         (empty: all 1); synthesis gives each new leaf a size between the exemplars' own.
+    kappa : float
+        κ of Eq. 5 that ``lam`` was computed with: ``λ/κ`` is the layer's overlap across the
+        exemplars, 1 for a perfectly structural layer, and sets how far synthesis moves it.
     """
 
     training: int
@@ -91,6 +95,7 @@ class LeafModel:
     delta: list[float]
     objective: list[float]
     scale: list[float] = field(default_factory=list)
+    kappa: float = 1.5
 
     @property
     def n_exemplars(self) -> int:
@@ -141,6 +146,7 @@ class LeafModel:
             "lam": [float(v) for v in self.lam],
             "delta": [float(v) for v in self.delta],
             "objective": [float(v) for v in self.objective],
+            "kappa": float(self.kappa),
         }
         out = {"model.json": (json.dumps(meta, indent=1) + "\n").encode()}
         for i in range(self.n_exemplars):
@@ -188,10 +194,13 @@ class LeafModel:
             order = [int(v) for v in meta["order"]]
             lists = {k: [float(v) for v in meta[k]] for k in ("residual", "scale", "lam", "delta", "objective")}
             training = int(meta["training"])
+            kappa = float(meta["kappa"])
         except (KeyError, TypeError, ValueError):
             raise ValueError(f"path: {folder / 'model.json'} lacks a field or has one of the wrong type") from None
         n_k = len(order) - 1
-        if not (n >= 2 and 0 <= training < n and h > 0 and w > 0 and sorted(order) == list(range(1, n_k + 2))):
+        if not (n >= 2 and 0 <= training < n and h > 0 and w > 0 and sorted(order) == list(range(1, n_k + 2))) or not (
+            math.isfinite(kappa) and kappa > 0
+        ):
             raise ValueError(
                 f"path: {folder / 'model.json'} is inconsistent (exemplars, training index, size or order)"
             )
@@ -245,4 +254,5 @@ class LeafModel:
             delta=lists["delta"],
             objective=lists["objective"],
             scale=lists["scale"],
+            kappa=kappa,
         )

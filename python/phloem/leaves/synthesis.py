@@ -23,7 +23,6 @@ shape:
 
 from __future__ import annotations
 
-import importlib
 import math
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -37,15 +36,13 @@ from .._api import Seed, Size
 from .._progress import Progress
 from .._validate import check_float, check_int, check_seed, check_size, check_threads, derive_seed
 from ._fields import as_field, sample_checked
+from .correction import correct_texture
 from .model import LeafModel
 
 __all__ = ["blend_fields", "random_warp", "synthesize"]
 
 F32 = NDArray[np.float32]
 
-#: κ of Eq. 5 (the paper's 1.5, ``leaves.induce``'s default): ``λ/κ`` is the layers' overlap
-#: ratio, 1 for a perfectly structural layer. The model stores ``λ`` only.
-KAPPA = 1.5
 #: The largest Frobenius norm of a random warp's Jacobian ``J``: ``I + J`` then has singular
 #: values in [0.5, 1.5], so the map ``x ↦ x + field(x)`` cannot fold.
 MAX_GRADIENT = 0.5
@@ -251,7 +248,7 @@ def _bounds(model: LeafModel) -> list[float]:
 def _sizes(model: LeafModel) -> NDArray[np.float64] | None:
     """Each exemplar's linear size relative to the training leaf's, ``1 / scale`` (the factor
     the analysis' pose scaled it by), or None where the model has no scales (all 1)."""
-    scale = list(getattr(model, "scale", None) or [])
+    scale = list(model.scale)
     if not scale:
         return None
     if len(scale) != model.n_exemplars:
@@ -361,14 +358,9 @@ def _crop(rgba: F32, margin: int) -> F32:
     return out
 
 
-def _corrector() -> Callable[..., Any] | None:
-    """``leaves.correct_texture`` where this build has it (texture correction is its own piece)."""
-    try:
-        module = importlib.import_module("phloem.leaves.correction")
-    except ImportError:
-        return None
-    fn = getattr(module, "correct_texture", None)
-    return fn if callable(fn) else None
+def _corrector() -> Callable[..., Any]:
+    """The texture correction of the last step (a seam the tests replace with a stand-in)."""
+    return correct_texture
 
 
 def _training_frame(
@@ -452,7 +444,7 @@ def synthesize(
     side = float(min(m.size))
     bounds = _bounds(m)
     sizes = _sizes(m)
-    structure = [min(max(float(lam) / KAPPA, 0.0), 1.0) for lam in m.lam]
+    structure = [min(max(float(lam) / m.kappa, 0.0), 1.0) for lam in m.lam]
     correct = _corrector()
     inverse = [as_field(f, f"model.inverse[{i}]") for i, f in enumerate(m.inverse)]
     out: list[F32] = []
