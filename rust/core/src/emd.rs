@@ -998,6 +998,26 @@ mod tests {
     }
 
     #[test]
+    fn the_cache_tells_histograms_with_one_hash_apart() {
+        let mut cache = Cache::new(3);
+        cache.put(7, &[1, 2, 3], 0.25);
+        cache.put(7, &[3, 2, 1], 0.5); // the same hash: a collision
+        assert_eq!(cache.get(7, &[1, 2, 3]), Some(0.25));
+        assert_eq!(cache.get(7, &[3, 2, 1]), Some(0.5));
+        assert_eq!(cache.get(7, &[2, 2, 2]), None);
+        assert_eq!(cache.get(8, &[1, 2, 3]), None);
+        // The sliding hash is a function of the histogram alone.
+        let h = |c: &[u32]| {
+            c.iter().enumerate().fold(0u64, |s, (b, &k)| {
+                s.wrapping_add(multiplier(b).wrapping_mul(k.into()))
+            })
+        };
+        assert_ne!(h(&[1, 2, 3]), h(&[3, 2, 1]));
+        cache.clear();
+        assert_eq!(cache.get(7, &[1, 2, 3]), None);
+    }
+
+    #[test]
     fn bad_map_input_is_an_error() {
         let g = line_ground(2);
         let ok = MapInput {
