@@ -63,3 +63,18 @@ def test_pose_chooses_the_half_turn_by_overlap() -> None:
 def test_pose_of_an_empty_leaf() -> None:
     with pytest.raises(ValueError, match="alpha channel is empty"):
         pose(np.zeros((10, 10, 4), np.float32), _leaf())
+
+
+def test_the_canvas_holds_the_whole_training_image_and_every_posed_leaf() -> None:
+    from phloem.leaves.pose import CANVAS_MARGIN, canvas
+
+    train = np.zeros((300, 200, 4), np.float32)
+    train[100:200, 50:150] = _leaf(100)  # a small leaf in a large transparent image
+    big = _transform(_leaf(), 70.0, 1.0, False, out=400)
+    mats, scales, (h, w) = canvas([train, big], 0)
+    assert np.allclose(mats[0][:, :2], np.eye(2)) and np.allclose(mats[0][:, 2], np.round(mats[0][:, 2]))
+    ty, tx = int(mats[0][1, 2]), int(mats[0][0, 2])
+    assert ty >= CANVAS_MARGIN and tx >= CANVAS_MARGIN and ty + 300 <= h and tx + 200 <= w
+    posed = cv2.warpAffine(big[..., 3], mats[1], (w, h)) > 0.5
+    assert posed.sum() == pytest.approx((big[..., 3] > 0.5).sum() * scales[1] ** 2, rel=0.05)  # nothing cut off
+    assert not posed[:CANVAS_MARGIN].any() and not posed[:, -CANVAS_MARGIN:].any()

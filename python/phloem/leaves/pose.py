@@ -117,8 +117,11 @@ def canvas(leaves: list[F32], t: int) -> tuple[list[NDArray[np.float64]], list[f
             scales.append(s)
     lo = np.array([np.inf, np.inf])
     hi = -lo
-    for leaf, m in zip(leaves, mats):
-        ys, xs = np.nonzero(leaf[..., 3] > 0)
+    for i, (leaf, m) in enumerate(zip(leaves, mats)):
+        if i == t:  # all of it: the scribbles drawn on it are placed whole
+            ys, xs = np.array([0, leaf.shape[0] - 1]), np.array([0, leaf.shape[1] - 1])
+        else:
+            ys, xs = np.nonzero(leaf[..., 3] > 0)
         pts = np.array([[xs.min(), ys.min()], [xs.max(), ys.min()], [xs.min(), ys.max()], [xs.max(), ys.max()]], float)
         q = pts @ m[:, :2].T + m[:, 2]
         lo, hi = np.minimum(lo, q.min(axis=0)), np.maximum(hi, q.max(axis=0))
