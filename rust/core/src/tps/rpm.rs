@@ -7,24 +7,28 @@
 //! (the larger RMS radius), so the temperatures and regularisers are scale-free; the result is
 //! converted back to a plain [`Tps`] in the input coordinates (see [`to_input`]).
 //!
-//! At temperature `T`, with `v_i = f(x_i)`:
-//! - `m_ij = exp(−|v_i − y_j|² / T) / √T` for real pairs, and the outlier column and row hold
-//!   the constant `exp(−1) / √T_init` (Chui's code: a point whose best partner is farther than
-//!   about `√(T (1 + ½ ln(T_init / T)))` prefers to be an outlier);
-//! - Sinkhorn: real rows normalised over all `m + 1` columns, real columns over all `n + 1`
-//!   rows, alternately, `sinkhorn` times;
-//! - targets `ŷ_i = (Σ_j m_ij y_j + m_i,out v_i) / (Σ_j m_ij + m_i,out)`: the mass a point
-//!   gives the outlier column keeps it where it is (Chui's code divides by `Σ_j m_ij` alone,
-//!   which sends a point that is almost all outlier to an arbitrary place);
-//! - `f` refitted to `ŷ` with `λ1 = λ1_init · n · T` and `λ2 = λ2_init · n · T` (the paper
-//!   writes `λ_init · T` for an energy summed over points; the `n` is the scaling of Chui's
-//!   reference code, which makes the defaults independent of the number of points);
-//! - `iterations` such steps per temperature, then `T ← rate · T`, until `T < T_final`.
+//! At temperature `T`, with `v_i = f(x_i)` (values: [`Params::default`]; checked against
+//! Chui & Rangarajan 2003 and Chui's `cMIX.m` in `docs/pipelines/leaves/registration.md`):
+//! - `m_ij = exp(−|v_i − y_j|² / T) / √T` for real pairs (Chui's code), and the outlier
+//!   column and row hold `exp(−k) / √T` (`k = Params::outlier`), so an outlier's best
+//!   partner must come closer as `T` falls. Chui's constant
+//!   `exp(−1) / √T_init` lets that radius grow as `T` falls, and random outliers then kept
+//!   partners to the end and dragged the outline along (measured in the docs);
+//! - Sinkhorn in scaling form (`r_i K_ij c_j`): real rows normalised over all `m + 1`
+//!   columns, real columns over all `n + 1` rows, warm-started from the last update's column
+//!   scalings, until every row sums to 1 within `tolerance` (at most `sinkhorn` sweeps);
+//! - each point's inlier mass `ω_i = Σ_j m_ij` and Chui's target `ŷ_i = Σ_j m_ij y_j / ω_i`;
+//!   the spline is fitted to `ŷ` weighted by `ω`, by majorisation: `inner` unweighted fits
+//!   to `ω ŷ + (1 − ω) f(x)`, each from the last `f` (Chui's code fits `ŷ` unweighted, which
+//!   lets a point that is almost all outlier pull the spline anywhere);
+//! - `λ1 = λ1_init · n · T` and `λ2 = λ2_init · n · T` (the scaling of Chui's code, which
+//!   makes the values independent of the number of points);
+//! - `iterations` such updates per temperature, then `T ← rate · T`, until `T < T_final`.
 
 use crate::cancel;
 use crate::error::{invalid, Result};
 
-use super::spline::{Basis, Point, Tps};
+use super::spline::{axpy, dot, Basis, Point, Tps};
 
 /// Parameters of [`rpm`]; [`Params::default`] holds the values phloem uses.
 #[derive(Clone, Debug, PartialEq)]
@@ -42,8 +46,8 @@ pub struct Params {
     pub sinkhorn: usize,
     /// Sinkhorn stops early once every real row sums to 1 within this.
     pub tolerance: f64,
-    /// Outlier entry `exp(−k)/√T` (a partner farther than `√(k T)` loses to the outlier
-    /// column); 0 for Chui's constant `exp(−1)/√T_init`.
+    /// Outlier entry `exp(−k)/√T` (scaled with the temperature, so an outlier's best
+    /// partner must come closer as `T` falls); 0 for Chui's constant `exp(−1)/√T_init`.
     pub outlier: f64,
     /// Refit the last spline on the mutual best matches only.
     pub polish: bool,
@@ -51,6 +55,11 @@ pub struct Params {
     pub lambda1: f64,
     /// `λ2_init` (affine part towards the identity).
     pub lambda2: f64,
+    /// Majorisation steps of the spline fit weighted by inlier mass, per update (each
+    /// fits `ω ŷ + (1 − ω) f(x)` unweighted; see the module notes).
+    pub inner: usize,
+    /// The polish refit's `λ1` as a fraction of the last annealing one.
+    pub polish_lambda: f64,
 }
 
 impl Default for Params {
@@ -59,13 +68,15 @@ impl Default for Params {
             t_init: None,
             final_ratio: 1e4,
             rate: 0.93,
-            iterations: 3,
+            iterations: 5,
             sinkhorn: 10,
             tolerance: 1e-2,
-            outlier: 0.0,
+            outlier: 2.0,
             polish: true,
-            lambda1: 0.3,
+            lambda1: 1.0,
             lambda2: 0.1,
+            inner: 1,
+            polish_lambda: 1.0,
         }
     }
 }
@@ -204,6 +215,43 @@ pub fn to_input(t: &Tps, ctrl: &[Point], c_in: Point, c_out: Point, s: f64) -> T
     }
 }
 
+/// `exp(−e)` for `e ≥ 0`, branch-free so that a row of kernel entries vectorises: `2^k`
+/// from the exponent bits times a degree-7 Taylor polynomial on `|t| ≤ ln 2 / 2` (relative
+/// error below 10⁻⁸); `e` is clamped to 700, where the value is far below anything that
+/// matters next to the outlier entries.
+#[inline]
+fn exp_neg(e: f64) -> f64 {
+    const MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52: adding it rounds to an integer.
+    let x = -e.min(700.0) * std::f64::consts::LOG2_E;
+    let kb = x + MAGIC;
+    let k = kb - MAGIC;
+    let t = (x - k) * std::f64::consts::LN_2;
+    let mut p = 1.984_126_984_126_984e-4;
+    for c in [
+        1.388_888_888_888_889e-3,
+        8.333_333_333_333_333e-3,
+        4.166_666_666_666_666_4e-2,
+        0.166_666_666_666_666_66,
+        0.5,
+        1.0,
+        1.0,
+    ] {
+        p = p * t + c;
+    }
+    // The low mantissa bits of `kb` hold k (two's complement); 2^k's bits are (k + 1023) << 52.
+    let two_k = f64::from_bits(kb.to_bits().wrapping_add(1023) << 52);
+    p * two_k
+}
+
+/// One row of the kernel: `norm · exp(−|v − y_j|² / T)` for all `j`.
+#[inline]
+fn kernel_row(row: &mut [f64], v: Point, yx: &[f64], yy: &[f64], inv_t: f64, norm: f64) {
+    for ((k, &a), &b) in row.iter_mut().zip(yx).zip(yy) {
+        let (dx, dy) = (v[0] - a, v[1] - b);
+        *k = norm * exp_neg((dx * dx + dy * dy) * inv_t);
+    }
+}
+
 /// Registers the point set `x` (named `x_name` in errors) onto `y` by TPS-RPM.
 pub fn rpm(
     x: &[Point],
@@ -245,116 +293,121 @@ pub fn rpm(
             outlier
         }
     };
-    let cols = m + 1;
-    // Rows 0..n real, row n the outlier row; column m the outlier column.
-    let mut mat = vec![0.0f64; (n + 1) * cols];
-    let mut colsum = vec![0.0f64; cols];
+    // The real block of the correspondence matrix is `r_i K_ij c_j` (Sinkhorn in scaling
+    // form: `K` is filled once per update and each sweep is two passes over it); the outlier
+    // column is `r_i o` and the outlier row `o c_j` (neither is normalised itself).
+    let mut kmat = vec![0.0f64; n * m];
+    let mut r = vec![1.0f64; n];
+    let mut c = vec![1.0f64; m];
+    let mut s = vec![0.0f64; n];
+    let mut col = vec![0.0f64; m];
+    let mut cyx = vec![0.0f64; m];
+    let mut cyy = vec![0.0f64; m];
+    let (yx, yy): (Vec<f64>, Vec<f64>) = ys.iter().map(|p| (p[0], p[1])).unzip();
     let mut v = xs.clone();
     let mut tps = Tps {
         ctrl: xs.clone(),
         ..Tps::identity()
     };
     let mut targets = xs.clone();
+    let mut fitted = xs.clone();
+    let mut weights = vec![1.0f64; n];
     let (mut l1, mut l2) = (0.0, 0.0);
     let mut t = t_init;
     let mut temps = 0;
+    let mut o;
     loop {
         temps += 1;
         let inv_t = 1.0 / t;
         let norm = 1.0 / t.sqrt();
+        o = outlier_at(t);
         for _ in 0..params.iterations {
             cancel::check()?;
             for i in 0..n {
-                let row = &mut mat[i * cols..(i + 1) * cols];
-                for j in 0..m {
-                    let e = d2(v[i], ys[j]) * inv_t;
-                    // exp(−40) is far below the outlier entry at any temperature used.
-                    row[j] = if e < 40.0 { norm * (-e).exp() } else { 0.0 };
-                }
-                row[m] = outlier_at(t);
+                kernel_row(&mut kmat[i * m..(i + 1) * m], v[i], &yx, &yy, inv_t, norm);
             }
-            mat[n * cols..].fill(outlier_at(t));
-            // Sinkhorn, one pass over the matrix per sweep: each row is scaled to sum 1 while
-            // the column sums are gathered, then the columns are scaled while the next sweep's
-            // row sums are gathered.
-            let mut rowsum: Vec<f64> = (0..n)
-                .map(|i| mat[i * cols..(i + 1) * cols].iter().sum())
-                .collect();
+            // Warm start: the column scalings of the last update (the matrix moves little
+            // between updates), so a few sweeps suffice.
+            for i in 0..n {
+                s[i] = dot(&kmat[i * m..(i + 1) * m], &c) + o;
+            }
             for sweep in 0..params.sinkhorn {
-                colsum.fill(0.0);
                 for i in 0..n {
-                    let row = &mut mat[i * cols..(i + 1) * cols];
-                    let r = 1.0 / rowsum[i];
-                    for (a, c) in row.iter_mut().zip(colsum.iter_mut()) {
-                        *a *= r;
-                        *c += *a;
-                    }
+                    r[i] = 1.0 / s[i];
                 }
-                for (a, c) in mat[n * cols..].iter().zip(colsum.iter_mut()) {
-                    *c += *a;
+                col.fill(o);
+                for i in 0..n {
+                    axpy(&mut col, r[i], &kmat[i * m..(i + 1) * m]);
                 }
-                for c in colsum.iter_mut().take(m) {
-                    *c = 1.0 / *c;
+                for j in 0..m {
+                    c[j] = 1.0 / col[j];
                 }
-                colsum[m] = 1.0;
-                let last = sweep + 1 == params.sinkhorn;
                 let mut worst = 0.0f64;
-                for i in 0..=n {
-                    let row = &mut mat[i * cols..(i + 1) * cols];
-                    let mut s = 0.0;
-                    for (a, c) in row.iter_mut().zip(colsum.iter()) {
-                        *a *= *c;
-                        s += *a;
-                    }
-                    if i < n {
-                        rowsum[i] = s;
-                        worst = worst.max((s - 1.0).abs());
-                    }
+                for i in 0..n {
+                    s[i] = dot(&kmat[i * m..(i + 1) * m], &c) + o;
+                    worst = worst.max((r[i] * s[i] - 1.0).abs());
                 }
                 // Balanced enough: further sweeps would not move the targets visibly.
-                if last || worst < params.tolerance {
+                if sweep + 1 == params.sinkhorn || worst < params.tolerance {
                     break;
                 }
             }
+            for j in 0..m {
+                cyx[j] = c[j] * yx[j];
+                cyy[j] = c[j] * yy[j];
+            }
             for i in 0..n {
-                let row = &mat[i * cols..(i + 1) * cols];
-                let mut acc = [row[m] * v[i][0], row[m] * v[i][1]];
-                let mut s = row[m];
-                for j in 0..m {
-                    acc[0] += row[j] * ys[j][0];
-                    acc[1] += row[j] * ys[j][1];
-                    s += row[j];
-                }
-                targets[i] = if s > 0.0 {
-                    [acc[0] / s, acc[1] / s]
+                let row = &kmat[i * m..(i + 1) * m];
+                let inl = s[i] - o;
+                // The row's inlier mass ω and Chui's target, the mass-weighted mean of the
+                // partners.
+                weights[i] = (r[i] * inl).clamp(0.0, 1.0);
+                targets[i] = if inl > 0.0 {
+                    [dot(row, &cyx) / inl, dot(row, &cyy) / inl]
                 } else {
                     v[i]
                 };
             }
             l1 = params.lambda1 * n as f64 * t;
             l2 = params.lambda2 * n as f64 * t;
-            tps = basis.fit(&targets, l1, l2);
-            v = basis.at_controls(&tps);
+            // The fit weighted by inlier mass, by majorisation: each step fits
+            // `ω ŷ + (1 − ω) f(x)` unweighted, so the spline need not follow a point in
+            // proportion to the mass it gives the outlier column.
+            for _ in 0..params.inner.max(1) {
+                for i in 0..n {
+                    let w = weights[i];
+                    fitted[i] = [
+                        w * targets[i][0] + (1.0 - w) * v[i][0],
+                        w * targets[i][1] + (1.0 - w) * v[i][1],
+                    ];
+                }
+                tps = basis.fit(&fitted, l1, l2);
+                v = basis.at_controls(&tps);
+            }
         }
         t *= params.rate;
         if t < t_final {
             break;
         }
     }
-    let matches: Vec<Option<usize>> = (0..n)
-        .map(|i| {
-            let row = &mat[i * cols..(i + 1) * cols];
-            let (best, val) =
-                row[..m]
-                    .iter()
-                    .enumerate()
-                    .fold(
-                        (0, f64::NEG_INFINITY),
-                        |b, (j, &a)| if a > b.1 { (j, a) } else { b },
-                    );
-            (val > row[m]).then_some(best)
-        })
-        .collect();
+    // The targets the last spline was fitted to (densify refits to them).
+    let mut targets = fitted;
+    // The last matrix: row i's entries `r_i K_ij c_j`. A row's match is its largest real
+    // entry if that holds over a third of the row's mass: with the outlier entry of
+    // `Params::outlier`, an exact pair still leaves about half its mass to the outlier
+    // column at the end, so "beats the outlier entry" would reject every pair; a third
+    // accepts pairs closer than about `√T_final` and no point split between two partners.
+    let matches: Vec<Option<usize>> =
+        (0..n)
+            .map(|i| {
+                let row = &kmat[i * m..(i + 1) * m];
+                let (best, val) = row.iter().zip(&c).enumerate().fold(
+                    (0, f64::NEG_INFINITY),
+                    |b, (j, (&k, &cj))| if k * cj > b.1 { (j, k * cj) } else { b },
+                );
+                (r[i] * val > 1.0 / 3.0).then_some(best)
+            })
+            .collect();
     let frame = Frame { cx, cy, scale };
     // Polish: the annealed spline still bends towards the targets of points that ended up
     // outliers (their soft targets pulled at them on the way down). Refit it on the mutual
@@ -362,10 +415,12 @@ pub fn rpm(
     let mut basis = basis;
     let mut ctrl_in: Vec<Point> = x.to_vec();
     if params.polish {
+        // Column j's largest real entry (`r_i K_ij c_j`; the outlier row is left out for the
+        // reason the matches use a third of the mass).
         let best_row = |j: usize| {
-            (0..=n)
+            (0..n)
                 .fold((n, f64::NEG_INFINITY), |b, i| {
-                    let a = mat[i * cols + j];
+                    let a = r[i] * kmat[i * m + j];
                     if a > b.1 {
                         (i, a)
                     } else {
@@ -384,6 +439,7 @@ pub fn rpm(
         let sub: Vec<Point> = pairs.iter().map(|&(i, _)| xs[i]).collect();
         if let Ok(b) = Basis::new(names.0, &sub) {
             targets = pairs.iter().map(|&(_, j)| ys[j]).collect();
+            l1 *= params.polish_lambda;
             tps = b.fit(&targets, l1, l2);
             ctrl_in = pairs.iter().map(|&(i, _)| x[i]).collect();
             basis = b;
@@ -478,27 +534,42 @@ pub(crate) mod tests {
                 m.is_some_and(|j| (y[j][0] - q[0]).abs() + (y[j][1] - q[1]).abs() < 1e-9)
             })
             .count();
-        assert!(right >= 90, "{right} of 100 matches right");
+        // Measured 85: the rest are left unmatched (under a third of their row's mass).
+        assert!(right >= 80, "{right} of 100 matches right");
     }
 
     #[test]
     fn is_robust_to_ten_percent_outliers() {
         let x0 = leaf(100);
         let truth: Vec<Point> = x0.iter().map(|&p| warp(p)).collect();
-        let mut rng = Rng::keyed(7, 0, 0);
-        let mut u = || (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
-        let mut x = x0.clone();
-        let mut y = truth.clone();
-        for _ in 0..10 {
-            x.push([100.0 + 300.0 * u(), 100.0 + 200.0 * u()]);
-            y.push([100.0 + 320.0 * u(), 90.0 + 220.0 * u()]);
+        // Ten random points added to each set (inside the leaf's box), several draws.
+        for seed in 7..13 {
+            let mut rng = Rng::keyed(seed, 0, 0);
+            let mut u = || (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
+            let mut x = x0.clone();
+            let mut y = truth.clone();
+            for _ in 0..10 {
+                x.push([100.0 + 300.0 * u(), 100.0 + 200.0 * u()]);
+                y.push([100.0 + 320.0 * u(), 90.0 + 220.0 * u()]);
+            }
+            let y = shuffled(&y, seed + 100);
+            let r = rpm(&x, &y, &Params::default(), ("x", "y")).unwrap();
+            let e = mean_error(&r, &x0, &truth);
+            assert!(e <= 2.0, "seed {seed}: mean inlier error {e:.3} px");
+            // The added points end as outliers, not as partners that bend the spline.
+            let kept = r.matches[100..].iter().filter(|m| m.is_some()).count();
+            assert!(kept <= 2, "seed {seed}: {kept} of 10 outliers matched");
         }
-        let y = shuffled(&y, 5);
-        let r = rpm(&x, &y, &Params::default(), ("x", "y")).unwrap();
-        let e = mean_error(&r, &x0, &truth);
-        // Short of the 2 px asked for (see docs/pipelines/leaves/registration.md): random
-        // outliers inside the outline let the matching slip along it.
-        assert!(e <= 5.0, "mean inlier error {e:.3} px");
+    }
+
+    #[test]
+    fn fast_exp_agrees_with_the_library() {
+        for k in 0..4000 {
+            let e = f64::from(k) * 0.01;
+            let (a, b) = (exp_neg(e), (-e).exp());
+            assert!((a - b).abs() <= 1e-8 * b, "exp(-{e}) = {b}, got {a}");
+        }
+        assert!(exp_neg(1e6) >= 0.0 && exp_neg(1e6) < 1e-300);
     }
 
     #[test]

@@ -280,38 +280,29 @@ impl Basis {
         let n = self.ctrl.len();
         let m = n - 3;
         debug_assert_eq!(targets.len(), n);
-        // b = Gᵀ Y.
-        let mut b = vec![[0.0; 2]; m];
+        // b = Gᵀ Y, by rows of G (axpy), both coordinates.
+        let (mut bx, mut by) = (vec![0.0; m], vec![0.0; m]);
         for i in 0..n {
             let gi = &self.g[i * m..(i + 1) * m];
-            let y = targets[i];
-            for j in 0..m {
-                b[j][0] += gi[j] * y[0];
-                b[j][1] += gi[j] * y[1];
-            }
+            axpy(&mut bx, targets[i][0], gi);
+            axpy(&mut by, targets[i][1], gi);
         }
+        let mut b: Vec<Point> = bx.iter().zip(&by).map(|(&x, &y)| [x, y]).collect();
         tridiagonal_solve(&self.diag, &self.off, lambda1, &mut b);
+        let (gx, gy): (Vec<f64>, Vec<f64>) = b.iter().map(|p| (p[0], p[1])).unzip();
         // w = G γ.
-        let mut w = vec![[0.0; 2]; n];
-        for i in 0..n {
-            let gi = &self.g[i * m..(i + 1) * m];
-            let mut s = [0.0; 2];
-            for j in 0..m {
-                s[0] += gi[j] * b[j][0];
-                s[1] += gi[j] * b[j][1];
-            }
-            w[i] = s;
-        }
+        let (wx, wy): (Vec<f64>, Vec<f64>) = (0..n)
+            .map(|i| {
+                let gi = &self.g[i * m..(i + 1) * m];
+                (dot(gi, &gx), dot(gi, &gy))
+            })
+            .unzip();
+        let w: Vec<Point> = wx.iter().zip(&wy).map(|(&x, &y)| [x, y]).collect();
         // Q1ᵀ (Y − K w).
         let mut z = [[0.0; 2]; 3];
         for i in 0..n {
             let ki = &self.k[i * n..(i + 1) * n];
-            let mut kw = [0.0; 2];
-            for j in 0..n {
-                kw[0] += ki[j] * w[j][0];
-                kw[1] += ki[j] * w[j][1];
-            }
-            let res = [targets[i][0] - kw[0], targets[i][1] - kw[1]];
+            let res = [targets[i][0] - dot(ki, &wx), targets[i][1] - dot(ki, &wy)];
             for a in 0..3 {
                 let q = self.q1[i * 3 + a];
                 z[a][0] += q * res[0];
@@ -356,21 +347,44 @@ impl Basis {
     #[must_use]
     pub fn at_controls(&self, tps: &Tps) -> Vec<Point> {
         let n = self.ctrl.len();
+        let (wx, wy): (Vec<f64>, Vec<f64>) = tps.w.iter().map(|p| (p[0], p[1])).unzip();
         (0..n)
             .map(|i| {
                 let p = self.ctrl[i];
                 let ki = &self.k[i * n..(i + 1) * n];
-                let mut o = [
-                    tps.d[0][0] + p[0] * tps.d[1][0] + p[1] * tps.d[2][0],
-                    tps.d[0][1] + p[0] * tps.d[1][1] + p[1] * tps.d[2][1],
-                ];
-                for j in 0..n {
-                    o[0] += ki[j] * tps.w[j][0];
-                    o[1] += ki[j] * tps.w[j][1];
-                }
-                o
+                [
+                    tps.d[0][0] + p[0] * tps.d[1][0] + p[1] * tps.d[2][0] + dot(ki, &wx),
+                    tps.d[0][1] + p[0] * tps.d[1][1] + p[1] * tps.d[2][1] + dot(ki, &wy),
+                ]
             })
             .collect()
+    }
+}
+
+/// `Σ a_j b_j` over four interleaved partial sums (a fixed order, so the same on every
+/// machine, and one that lets the compiler use vector registers).
+#[inline]
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0f64; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for l in 0..4 {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    let mut s = (acc[0] + acc[2]) + (acc[1] + acc[3]);
+    for (x, y) in ra.iter().zip(rb) {
+        s += x * y;
+    }
+    s
+}
+
+/// `y += a x`.
+#[inline]
+pub(crate) fn axpy(y: &mut [f64], a: f64, x: &[f64]) {
+    for (p, q) in y.iter_mut().zip(x) {
+        *p += a * q;
     }
 }
 
