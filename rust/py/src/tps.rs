@@ -2,27 +2,12 @@
 
 use numpy::{PyArray1, PyArray2, PyArray3, PyReadonlyArray2, PyReadonlyArray3};
 use phloem_core::error::invalid;
-use phloem_core::tps::{self, Params, Point, Side};
+use phloem_core::tps::{self, Params, Side};
 use pyo3::prelude::*;
 
 use crate::call::run;
-use crate::convert::{array, image};
+use crate::convert::{array, image, points};
 use crate::errors::{not_contiguous, opt_slice, to_py};
-
-fn points(name: &'static str, a: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<Point>> {
-    let (n, two) = a.as_array().dim();
-    if two != 2 {
-        return Err(to_py(invalid(
-            name,
-            format!("expected shape (N, 2), got ({n}, {two})"),
-        )));
-    }
-    Ok(a.as_slice()
-        .map_err(not_contiguous(name))?
-        .chunks_exact(2)
-        .map(|p| [p[0], p[1]])
-        .collect())
-}
 
 fn pairs(v: &[[f32; 2]]) -> Vec<f32> {
     v.iter().flat_map(|p| [p[0], p[1]]).collect()
