@@ -15,6 +15,7 @@ __all__ = [
     "emd",
     "emd_map",
     "grid_maxflow",
+    "guided_quilt",
     "interpolate_field",
     "knn",
     "mvc_combine",
@@ -29,6 +30,8 @@ __all__ = [
     "shape_synthesize_labels",
     "tbn_downsample",
     "tbn_upsample",
+    "tps_register",
+    "tps_sample",
     "vote",
 ]
 
@@ -158,6 +161,37 @@ def emd_map(
     threads: int | None,
 ) -> NDArray[np.float32]: ...
 def emd(hist_a: NDArray[np.float64], hist_b: NDArray[np.float64], ground: NDArray[np.float64]) -> float: ...
+def tps_register(
+    fixed_points: NDArray[np.float64],
+    moving_points: NDArray[np.float64],
+    fixed_mask: NDArray[np.bool_],
+    moving_mask: NDArray[np.bool_],
+    *,
+    rate: float,
+    iterations: int,
+    final_ratio: float,
+    lambda1: float,
+    lambda2: float,
+    step: int,
+    threads: int | None,
+) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.int64], NDArray[np.float64], int, float]: ...
+def tps_sample(
+    image: NDArray[np.float32], field: NDArray[np.float32], *, threads: int | None
+) -> NDArray[np.float32]: ...
+
+# correction
+def guided_quilt(
+    target: NDArray[np.float32],
+    source: NDArray[np.float32],
+    hole: NDArray[np.bool_],
+    field: NDArray[np.float32],
+    *,
+    block: int,
+    rim: int,
+    radius: int,
+    bias: float,
+    alpha_known: bool,
+) -> NDArray[np.int32]: ...
 def default_threads() -> int: ...
 def _after_fork_in_child() -> None: ...
 def grid_maxflow(

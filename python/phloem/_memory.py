@@ -171,6 +171,14 @@ def complete(shape: tuple[int, ...]) -> int:
     return (100 + 40 * _ch(shape)) * _px(shape)
 
 
+def leaves_analyze(size: tuple[int, int], n_exemplars: int, n_layers: int) -> int:
+    """Leaf analysis holds per exemplar, on the canvas, the posed, aligned and peeled RGBA leaf
+    and both fields (64 B per pixel) and per layer its mask, D and RGBA layer (21 B), beside the
+    colour and spatial maps of one induction (12 B per exemplar) and one completion's buffers."""
+    per = 64 + 21 * max(0, n_layers - 1) + 12
+    return per * n_exemplars * _px(size) + complete((*size, 3))
+
+
 def bark(size: tuple[int, int], example: tuple[int, ...], channels: int) -> int:
     """The bark pipeline's peak is its texture-by-numbers stage, with the label maps and the
     sources held beside it."""

@@ -9,11 +9,14 @@ a tiled copy of the exemplar is perfectly coherent), and the shape similarity of
 label maps (Rosenberger et al. 2009, thesis Eq. 3.9), and the angle and thickness histograms of
 branching structures with their L1 distance (Sibbing et al. 2010, Fig. 7; defined in
 :mod:`phloem.branching.histograms` and re-exported here), and the exact earth mover's distance
-between two histograms (the colour measure of Assa & Cohen-Or, Eq. 1).
+between two histograms (the colour measure of Assa & Cohen-Or, Eq. 1), and the layer measures of
+Assa & Cohen-Or's induction (agreement of an induced layer with a reference, the Eq. 4 objective
+as :func:`phloem.leaves.induce` implements it) with a leaf-set diversity measure.
 """
 
 from __future__ import annotations
 
+import numbers
 from typing import Any, Literal
 
 import numpy as np
@@ -35,6 +38,9 @@ __all__ = [
     "histogram_distance",
     "label_agreement",
     "label_histogram_distance",
+    "layer_iou",
+    "layer_objective",
+    "leaf_diversity",
     "patch_coherence",
     "repetition",
     "shape_similarity",
@@ -351,3 +357,160 @@ def emd(hist_a: Any, hist_b: Any, ground: Any, *, normalized: bool = False) -> f
         top = float(g.max()) if g.size else 0.0
         return d / top if top > 0 else 0.0
     return d
+
+
+def _layer_pair(a: Any, b: Any, names: tuple[str, str]) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    arr = np.asarray(a)
+    if arr.ndim != 2:
+        raise ValueError(f"{names[0]}: expected a 2-D mask, got shape {arr.shape}")
+    first = as_mask(arr, names[0], (arr.shape[0], arr.shape[1]))
+    return first, as_mask(b, names[1], (arr.shape[0], arr.shape[1]))
+
+
+def layer_iou(induced: Any, reference: Any) -> float:
+    """Agreement of an induced layer with a reference mask: intersection over union.
+
+    1 when the two masks are equal (two empty masks included), 0 when they share no pixel.
+    Higher is better.
+
+    Parameters
+    ----------
+    induced, reference : (H, W) array_like of bool
+        The layer found (e.g. :attr:`phloem.leaves.Induction.masks`) and the true one.
+
+    Returns
+    -------
+    float
+        In [0, 1].
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> a = np.zeros((4, 4), bool); a[:2] = True
+    >>> b = np.zeros((4, 4), bool); b[1:3] = True
+    >>> round(phloem.metrics.layer_iou(a, b), 3)
+    0.333
+    """
+    a, b = _layer_pair(induced, reference, ("induced", "reference"))
+    union = int((a | b).sum())
+    return float((a & b).sum()) / union if union else 1.0
+
+
+def layer_objective(dissimilarity: Any, layer: Any, delta: float) -> float:
+    """The Eq. 4 objective of Assa & Cohen-Or as :func:`phloem.leaves.induce` implements it.
+
+    The layer a threshold ``delta`` induces, ``L = {x : D(x) < delta}`` (pixels where ``D`` is
+    NaN, off the leaf, are never in it), scored against the user's layer ``C`` by
+    ``|L ∩ C| / (|L ∩ C| + |C − L| + |L − C|)``, the intersection over union. The printed Eq. 4,
+    ``|L ∩ C| / (|C − L| · |L − C|)``, grows with the pixels found and shrinks with the pixels
+    missed and added, but is unbounded (infinite for a perfect cut), while the paper reports
+    maxima of 0.7–0.8: the normalised form with the same three counts is this one
+    (``docs/pipelines/leaves/induction.md``). Higher is better.
+
+    Parameters
+    ----------
+    dissimilarity : (H, W) array_like of float
+        ``D`` on the training leaf (NaN off it).
+    layer : (H, W) array_like of bool
+        The user's layer ``C``.
+    delta : float
+        The threshold.
+
+    Returns
+    -------
+    float
+        In [0, 1].
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> d = np.array([[0.1, 0.2], [0.6, np.nan]], np.float32)
+    >>> c = np.array([[True, True], [False, False]])
+    >>> phloem.metrics.layer_objective(d, c, 0.5), phloem.metrics.layer_objective(d, c, 0.15)
+    (1.0, 0.5)
+    """
+    d = np.asarray(dissimilarity)
+    if d.ndim != 2 or d.dtype == np.bool_ or not np.issubdtype(d.dtype, np.floating):
+        raise ValueError(f"dissimilarity: expected a 2-D float map, got shape {d.shape} of {d.dtype}")
+    c = as_mask(layer, "layer", (d.shape[0], d.shape[1]))
+    if isinstance(delta, bool) or not isinstance(delta, numbers.Real):
+        raise TypeError(f"delta: expected a number, got {delta!r}")
+    if np.isnan(delta):
+        raise ValueError("delta: expected a number, got NaN")
+    with np.errstate(invalid="ignore"):
+        induced = d < delta  # NaN compares False: off the leaf is never in the layer
+    return layer_iou(induced, c)
+
+
+def _centred_alpha(leaf: Any, name: str) -> NDArray[np.bool_]:
+    arr = np.asarray(leaf)
+    if arr.ndim == 3:
+        if arr.shape[2] not in (2, 4):
+            raise ValueError(
+                f"{name}: expected RGBA (H, W, 4), gray+alpha (H, W, 2) or an (H, W) alpha, got {arr.shape}"
+            )
+        alpha = as_image(arr, name)[..., -1]
+    elif arr.ndim == 2:
+        alpha = as_image(arr, name)[..., 0] if arr.dtype != np.bool_ else arr.astype(np.float32)
+    else:
+        raise ValueError(f"{name}: expected RGBA (H, W, 4), gray+alpha (H, W, 2) or an (H, W) alpha, got {arr.shape}")
+    m = alpha > 0.5
+    ys, xs = np.nonzero(m)
+    if len(ys) == 0:
+        raise ValueError(f"{name}: the leaf has no pixels (alpha > 0.5)")
+    return np.asarray(m[ys.min() : ys.max() + 1, xs.min() : xs.max() + 1])
+
+
+def leaf_diversity(leaves: Any) -> float:
+    """How different the shapes of a set of leaves are: mean pairwise ``1 − IoU`` of their
+    alpha masks after centring.
+
+    Each leaf's mask (alpha > 0.5) is translated so that its centroid falls on a common point
+    (rounded to the pixel grid), and every pair is scored by one minus the intersection over
+    union of the two masks; the result is the mean over pairs. 0 when every leaf has the same
+    outline (up to translation), near 1 for outlines that hardly overlap. Only translation is
+    removed: the pipeline's leaves all share the training leaf's orientation and scale, so a
+    rotated or resized copy counts as a different shape. For the texture side (is a new leaf's
+    texture explained by the exemplars) use :func:`patch_coherence`. Higher means more varied.
+
+    Parameters
+    ----------
+    leaves : list of array_like
+        At least two leaves: RGBA ``(H, W, 4)`` (alpha is the last channel), gray + alpha
+        ``(H, W, 2)`` or ``(H, W)`` alpha / bool masks; sizes may differ.
+
+    Returns
+    -------
+    float
+        In [0, 1].
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> a = np.zeros((10, 10), bool); a[2:6, 2:6] = True
+    >>> b = np.zeros((12, 9), bool); b[5:9, 1:5] = True   # the same square elsewhere
+    >>> c = np.zeros((10, 10), bool); c[2:6, 2:4] = True   # half of it
+    >>> phloem.metrics.leaf_diversity([a, b]), phloem.metrics.leaf_diversity([a, c])
+    (0.0, 0.5)
+    """
+    if isinstance(leaves, np.ndarray) or not isinstance(leaves, (list, tuple)):
+        raise TypeError(f"leaves: expected a list of leaves, got {type(leaves).__name__}")
+    if len(leaves) < 2:
+        raise ValueError(f"leaves: expected at least 2 leaves, got {len(leaves)}")
+    masks = [_centred_alpha(leaf, f"leaves[{i}]") for i, leaf in enumerate(leaves)]
+    cy = max(m.shape[0] for m in masks)
+    cx = max(m.shape[1] for m in masks)
+    placed = []
+    for m in masks:
+        ys, xs = np.nonzero(m)
+        # Centroid onto (cy, cx) of a (2cy+1, 2cx+1) canvas: every cropped mask fits.
+        oy, ox = cy - round(float(ys.mean())), cx - round(float(xs.mean()))
+        canvas = np.zeros((2 * cy + 1, 2 * cx + 1), bool)
+        canvas[oy : oy + m.shape[0], ox : ox + m.shape[1]] = m
+        placed.append(canvas)
+    scores = [
+        1.0 - float((placed[i] & placed[j]).sum()) / float((placed[i] | placed[j]).sum())
+        for i in range(len(placed))
+        for j in range(i + 1, len(placed))
+    ]
+    return float(np.mean(scores))

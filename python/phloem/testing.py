@@ -13,6 +13,11 @@ Synthetic branching scenes with a known skeleton
     ``longest_path`` the longest path of a mask's skeleton; ``TRACE_SETTINGS`` the
     ``branching.trace`` arguments that suit the collection's branching examples.
 
+Synthetic leaves with known layers
+    ``layered_leaf`` draws an RGBA leaf with veins, spots and blade at known pixels (its label
+    map is exact), in variants that differ as leaves of one species do; ``scribbles_from`` marks
+    a few short strokes of each layer, as a user would.
+
 Everything here is imported with ``phloem`` already loaded; pytest is imported only by ``shared_file``.
 """
 
@@ -31,10 +36,12 @@ from .branching import Branch, Skeleton
 __all__ = [
     "TRACE_SETTINGS",
     "channel_scene",
+    "layered_leaf",
     "longest_path",
     "meander",
     "river_picture",
     "river_skeleton",
+    "scribbles_from",
     "shared_data",
     "shared_file",
     "shared_path",
@@ -243,3 +250,62 @@ def longest_path(mask: np.ndarray) -> np.ndarray:
     while (p := prev[path[-1]]) is not None:
         path.append(p)
     return np.array(path[::-1], float)
+
+
+#: Colours of :func:`layered_leaf`: veins, spots, blade (RGB in [0, 1]).
+LEAF_COLORS = ((0.72, 0.78, 0.38), (0.45, 0.28, 0.12), (0.16, 0.42, 0.12))
+
+
+def layered_leaf(
+    size: tuple[int, int] = (160, 96), *, variant: int = 0, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """An RGBA leaf with three layers and its label map (1 veins, 2 spots, 3 blade, 0 off the leaf).
+
+    The blade is an ellipse with a petiole; the veins a midrib and four pairs of side veins
+    (3 px wide); the spots five small brown disks; the colours carry a little noise. Each
+    ``variant`` changes the blade's width and length, the side veins' angles and the spots'
+    places, as leaves of one species differ; ``seed`` the noise.
+    """
+    h, w = size
+    rng = np.random.default_rng([variant, 7])
+    noise = np.random.default_rng(seed)
+    labels = np.zeros((h, w), np.uint8)
+    cx, cy = w // 2, int(h * 0.45)
+    ax, ay = int(w * (0.36 + 0.04 * rng.uniform(-1, 1))), int(h * (0.38 + 0.03 * rng.uniform(-1, 1)))
+    cv2.ellipse(labels, (cx, cy), (ax, ay), 0, 0, 360, 3, -1)
+    cv2.line(labels, (cx, cy + ay - 2), (cx, min(h - 3, cy + ay + h // 10)), 1, 3)  # petiole, vein-coloured
+    cv2.line(labels, (cx, cy - ay + 4), (cx, cy + ay - 2), 1, 3)
+    for j in range(4):
+        y = cy - ay // 2 + j * ay // 3
+        ang = math.radians(35 + 8 * rng.uniform(-1, 1))
+        for side in (-1, 1):
+            end = (int(cx + side * ax * 0.8), int(y - ax * 0.8 * math.tan(ang)))
+            cv2.line(labels, (cx, y), end, 1, 3)
+    inside = np.argwhere(labels == 3)
+    for y, x in inside[rng.choice(len(inside), 5, replace=False)]:
+        cv2.circle(labels, (int(x), int(y)), 4, 2, -1)
+    labels[(labels == 2) & (cv2.erode((labels > 0).astype(np.uint8), np.ones((5, 5), np.uint8)) == 0)] = 3
+    img = np.zeros((h, w, 4), np.float32)
+    for k, c in enumerate(LEAF_COLORS, start=1):
+        img[labels == k, :3] = c
+    img[..., :3] += noise.normal(0.0, 0.02, (h, w, 3)).astype(np.float32)
+    img[..., 3] = labels > 0
+    return np.clip(img, 0.0, 1.0), labels.astype(np.int32)
+
+
+def scribbles_from(labels: np.ndarray, *, strokes: int = 6, seed: int = 0) -> np.ndarray:
+    """A few short strokes inside each layer of a label map: short segments of 5 px between
+    random pixels of the layer's interior, labelled as the layer (0 elsewhere)."""
+    rng = np.random.default_rng(seed)
+    out = np.zeros(labels.shape, np.int32)
+    for k in range(1, int(labels.max()) + 1):
+        core = cv2.erode((labels == k).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+        pts = np.argwhere(core if core.any() else labels == k)
+        for y, x in pts[rng.choice(len(pts), min(strokes, len(pts)), replace=False)]:
+            y2, x2 = pts[
+                int(np.argmin(np.abs(pts - (y, x)).sum(axis=1) + 1000 * (np.abs(pts - (y, x)).sum(axis=1) < 4)))
+            ]
+            seg = np.zeros(labels.shape, np.uint8)
+            cv2.line(seg, (int(x), int(y)), (int(x2), int(y2)), 1, 1)
+            out[(seg > 0) & (labels == k)] = k
+    return out

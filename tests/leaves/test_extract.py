@@ -240,3 +240,17 @@ def test_feather_is_the_outer_soft_edge() -> None:
     ring = lambda a: ((a > 0) & (a < 0.5)).sum()  # noqa: E731
     assert ring(hard[..., 3]) < 20  # only stray pixels that hysteresis joined and matting found pale
     assert ring(soft[..., 3]) > 100
+
+
+def test_full_output_gives_each_leaf_its_box_in_the_image() -> None:
+    img, _, _ = _scan([(150, 150), (400, 160)], seed=1)
+    res = extract(img, full_output=True)
+    assert len(res.leaves) == len(res.boxes) == 2
+    for leaf, (y0, y1, x0, x1) in zip(res.leaves, res.boxes):
+        assert leaf.shape[:2] == (y1 - y0, x1 - x0)
+        inside = cv2.erode((leaf[..., 3] == 1.0).astype(np.uint8), np.ones((11, 11), np.uint8)) > 0
+        ys, xs = np.nonzero(inside)
+        assert len(ys) > 1000
+        # the leaf's interior (away from its re-coloured soft edge) is the scan at the box's place
+        assert np.allclose(leaf[ys, xs, :3], img[ys + y0, xs + x0, :3], atol=1e-6)
+    assert [a.shape for a in res.leaves] == [a.shape for a in extract(img)]

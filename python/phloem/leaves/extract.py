@@ -12,7 +12,8 @@ filled and large ones (insect damage, punched holes) kept.
 from __future__ import annotations
 
 import numbers
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Literal, overload
 
 import cv2
 import numpy as np
@@ -22,10 +23,29 @@ from skimage.filters import threshold_otsu
 
 from .._validate import as_image, check_float, check_int
 
-__all__ = ["extract"]
+__all__ = ["ExtractResult", "extract"]
 
 F32 = NDArray[np.float32]
 Box = tuple[int, int, int, int]
+
+
+@dataclass(frozen=True)
+class ExtractResult:
+    """What :func:`extract` found (``full_output=True``).
+
+    Attributes
+    ----------
+    leaves : list of (h, w, 4) ndarray of float32
+        The leaves, as :func:`extract` returns them.
+    boxes : list of (y0, y1, x0, x1)
+        Where each leaf's array lies in the image: rows ``y0:y1`` and columns ``x0:x1``, the
+        margin included (it may reach past the image's edge, where the leaf is transparent).
+        Drawings made on the whole scan (scribbles) are cut to a leaf with it.
+    """
+
+    leaves: list[F32]
+    boxes: list[Box]
+
 
 # Half weight for lightness: shadows differ from the backdrop mostly in lightness, leaves in
 # chroma too (docs/pipelines/leaves/extract.md), so shadows stay background and dark leaves stay.
@@ -145,7 +165,7 @@ def _fill_small_holes(leaf: NDArray[np.bool_], holes: float) -> NDArray[np.bool_
     return np.asarray(leaf | small[lab], dtype=bool)
 
 
-def _from_alpha(img: F32, min_area: float, margin: int) -> list[F32]:
+def _from_alpha(img: F32, min_area: float, margin: int) -> list[tuple[F32, Box]]:
     """Leaves of an image with an alpha channel, split by its alpha components, values kept."""
     alpha = img[..., -1]
     rgba = img if img.shape[2] == 4 else np.concatenate([np.repeat(img[..., :1], 3, axis=2), img[..., 1:]], axis=2)
@@ -160,15 +180,44 @@ def _from_alpha(img: F32, min_area: float, margin: int) -> list[F32]:
         kept = [(k, b) for k, b in kept if areas[k] >= min_area * largest]
     if not kept:
         raise ValueError("image: found no leaf in the alpha channel (nothing at least half opaque)")
-    out = []
+    out: list[tuple[F32, Box]] = []
     for k, b in kept:
         box = _grow(b, margin)
         piece = _crop(rgba, box)
         piece[_crop(labels, box) != k, 3] = 0.0  # other leaves in the box, and the margin beyond the image
-        out.append(np.ascontiguousarray(piece, dtype=np.float32))
+        out.append((np.ascontiguousarray(piece, dtype=np.float32), box))
     return out
 
 
+def _result(found: list[tuple[F32, Box]], full_output: bool) -> list[F32] | ExtractResult:
+    leaves = [leaf for leaf, _ in found]
+    return ExtractResult(leaves, [box for _, box in found]) if full_output else leaves
+
+
+@overload
+def extract(
+    image: Any,
+    *,
+    background: Any = ...,
+    threshold: float | None = ...,
+    min_area: float = ...,
+    holes: float = ...,
+    margin: int = ...,
+    feather: float = ...,
+    full_output: Literal[False] = ...,
+) -> list[F32]: ...
+@overload
+def extract(
+    image: Any,
+    *,
+    background: Any = ...,
+    threshold: float | None = ...,
+    min_area: float = ...,
+    holes: float = ...,
+    margin: int = ...,
+    feather: float = ...,
+    full_output: Literal[True],
+) -> ExtractResult: ...
 def extract(
     image: Any,
     *,
@@ -178,7 +227,8 @@ def extract(
     holes: float = 0.001,
     margin: int = 4,
     feather: float = 1.5,
-) -> list[F32]:
+    full_output: bool = False,
+) -> list[F32] | ExtractResult:
     """Cut the leaves from a plain background into RGBA, one array per leaf.
 
     The background colour is the median CIELAB colour of a strip along the image border (2 % of
@@ -210,6 +260,8 @@ def extract(
     feather : float, optional
         Width in pixels of the soft edge outside each leaf's mask, whose alpha follows the pixel's
         colour from background (0) to the threshold (1); 0 gives a hard edge.
+    full_output : bool, optional
+        Return an :class:`ExtractResult` with each leaf's box in the image as well.
 
     Returns
     -------
@@ -217,7 +269,8 @@ def extract(
         The leaves in reading order: rows of leaves whose vertical extents overlap, top to
         bottom, then left to right within a row. Each is cropped to its bounding box plus
         ``margin``; the colour under zero alpha is that of the nearest leaf pixel (so edges do
-        not fringe with the background when composited or resized).
+        not fringe with the background when composited or resized). With ``full_output``, an
+        :class:`ExtractResult` holding them and their boxes.
 
     Raises
     ------
@@ -256,7 +309,7 @@ def extract(
     feather = check_float(feather, "feather", 0.0)
 
     if channels in (2, 4) and img[..., -1].min() < 1.0:
-        return _from_alpha(img, min_area, margin)
+        return _result(_from_alpha(img, min_area, margin), full_output)
     rgb = img[..., :3] if channels >= 3 else np.repeat(img[..., :1], 3, axis=2)
     rgb = np.ascontiguousarray(np.clip(rgb, 0.0, 1.0))
     h, w = rgb.shape[:2]
@@ -311,7 +364,7 @@ def extract(
     bg_rgb = np.asarray(bg_rgb, np.float32)
     kernel = np.ones((3, 3), np.uint8)
     band = _INTERIOR + 1.5 + feather
-    out = []
+    out: list[tuple[F32, Box]] = []
     for k, b in kept:
         box = _grow(b, margin)
         found = _crop(labels, box) == k
@@ -362,5 +415,5 @@ def extract(
         _, idx = ndimage.distance_transform_edt(alpha <= 0, return_indices=True)
         clear = alpha <= 0
         colour[clear] = colour[idx[0][clear], idx[1][clear]]
-        out.append(np.ascontiguousarray(np.concatenate([colour, alpha[..., None]], axis=2), dtype=np.float32))
-    return out
+        out.append((np.ascontiguousarray(np.concatenate([colour, alpha[..., None]], axis=2), dtype=np.float32), box))
+    return _result(out, full_output)

@@ -6,15 +6,19 @@
 //! `n × n` cells. [`Transport`] solves it exactly by the transportation simplex on a spanning
 //! tree basis: a least-cost starting basis, then primal (MODI) pivots, with Bland's rule once
 //! a run of degenerate pivots suggests cycling. Zero bins and ties are ordinary degenerate
-//! bases here: the tree always has `2n − 1` edges, some carrying no flow.
+//! bases here: the tree always has `2n − 1` edges, some carrying no flow. The tree lives in
+//! flat, fixed-size arrays (parent, parent edge, breadth-first order), so a solve allocates
+//! nothing.
 //!
-//! The map reuses work twice. Window histograms slide along a row (one column in, one out),
-//! and a window whose histogram equals the previous one reuses its value. And since only the
-//! supplies change from one window to the next while the costs stay, the previous optimal
-//! basis stays *dual* feasible: the next window starts from it, recomputes the tree flows
-//! (O(n)) and, where some flow turned negative, restores feasibility by dual simplex pivots
-//! (usually none or one). Every row starts from the same basis, so the result does not depend
-//! on the number of threads.
+//! The map reuses work three ways. Window histograms slide along a row (one column in, one
+//! out). A window's histogram is an integer vector, so its value depends on nothing else: a
+//! small exact cache (histogram → value) per block of rows answers repeats, which flat regions
+//! of a leaf are full of. And since only the supplies change from one window to the next while
+//! the costs stay, the previous optimal basis stays *dual* feasible: the next window starts
+//! from it, recomputes the tree flows (O(n)) and, where some flow turned negative, restores
+//! feasibility by dual simplex pivots (usually none or one). Blocks of rows are fixed (not
+//! per thread) and each starts from the same basis, so the result does not depend on the
+//! number of threads.
 
 use rayon::prelude::*;
 
@@ -22,6 +26,9 @@ use crate::{cancel, error::invalid, Result};
 
 /// The largest number of bins [`Transport`] accepts.
 pub const MAX_BINS: usize = 32;
+
+/// Nodes of the basis tree: rows `0..n`, columns `n..2n`.
+const NODES: usize = 2 * MAX_BINS;
 
 /// Flows and reduced costs this far below zero count as zero: the masses are sums of a few
 /// dozen terms of order 1, so their rounding is far below this.
@@ -31,51 +38,69 @@ const EPS: f64 = 1e-12;
 /// distance; it keeps its last optimal basis so the next solve can start from it.
 #[derive(Clone, Debug)]
 pub struct Transport {
+    /// Rows (supplies) and columns (demands); the square solver of [`Transport::new`] has
+    /// `n = m`, the map's has only the target's non-empty bins as columns.
     n: usize,
+    m: usize,
     cost: Vec<f64>,
     /// Cells in order of increasing cost (ties by index), for the least-cost start.
     order: Vec<usize>,
-    /// Basis cells `i * n + j`, always `2n − 1` of them, and their flows.
+    /// Basis cells `i * m + j`, always `n + m − 1` of them, and their flows.
     basis: Vec<usize>,
     flow: Vec<f64>,
     /// Whether `basis` is an optimal basis of some earlier solve (hence dual feasible).
     warm: bool,
-    // Scratch, kept to avoid allocating per solve.
-    u: Vec<f64>,
-    v: Vec<f64>,
-    adj: Vec<Vec<(usize, usize)>>,
+    /// The basis tree rooted at row 0 (filled by [`Self::rebuild`]): each other node's
+    /// parent and the basis edge to it, the breadth-first order, the depth, and the dual
+    /// potentials (`u_i` at node `i`, `v_j` at node `n + j`, `u_0 = 0`).
+    parent: [u8; NODES],
+    up: [u8; NODES],
+    bfs: [u8; NODES],
+    depth: [u8; NODES],
+    pot: [f64; NODES],
+    /// The node below each basis edge (the one whose parent edge it is).
+    below: [u8; NODES],
 }
 
 impl Transport {
     /// A solver for `n` bins; `ground` is `n × n` row-major, finite and non-negative.
     pub fn new(n: usize, ground: &[f64]) -> Result<Self> {
-        if n == 0 || n > MAX_BINS {
+        Self::rect(n, n, ground)
+    }
+
+    /// A solver for `n` supplies and `m` demands; `ground` is `n × m` row-major.
+    fn rect(n: usize, m: usize, ground: &[f64]) -> Result<Self> {
+        if n == 0 || n > MAX_BINS || m == 0 || m > MAX_BINS {
             return Err(invalid(
                 "n_bins",
                 format!("expected 1 to {MAX_BINS} bins, got {n}"),
             ));
         }
-        if ground.len() != n * n {
+        if ground.len() != n * m {
             return Err(invalid(
                 "ground",
-                format!("expected {n}×{n} = {} values, got {}", n * n, ground.len()),
+                format!("expected {n}×{m} = {} values, got {}", n * m, ground.len()),
             ));
         }
         if ground.iter().any(|d| !d.is_finite() || *d < 0.0) {
             return Err(invalid("ground", "expected finite, non-negative distances"));
         }
-        let mut order: Vec<usize> = (0..n * n).collect();
+        let mut order: Vec<usize> = (0..n * m).collect();
         order.sort_by(|&a, &b| ground[a].total_cmp(&ground[b]).then(a.cmp(&b)));
         Ok(Self {
             n,
+            m,
             cost: ground.to_vec(),
             order,
-            basis: Vec::with_capacity(2 * n),
-            flow: Vec::with_capacity(2 * n),
+            basis: Vec::with_capacity(n + m),
+            flow: Vec::with_capacity(n + m),
             warm: false,
-            u: vec![0.0; n],
-            v: vec![0.0; n],
-            adj: vec![Vec::with_capacity(n); 2 * n],
+            parent: [0; NODES],
+            up: [0; NODES],
+            bfs: [0; NODES],
+            depth: [0; NODES],
+            pot: [0.0; NODES],
+            below: [0; NODES],
         })
     }
 
@@ -100,7 +125,7 @@ impl Transport {
         Ok(self.value())
     }
 
-    /// The optimal flow of the last solve as `(cell, flow)` pairs (`cell = i * n + j`).
+    /// The optimal flow of the last solve as `(cell, flow)` pairs (`cell = i * m + j`).
     #[must_use]
     pub fn plan(&self) -> Vec<(usize, f64)> {
         self.basis
@@ -122,16 +147,18 @@ impl Transport {
     /// gets as much as it can, and exactly one of the two closes (both only at the end), so
     /// the `2n − 1` cells chosen form a spanning tree.
     fn least_cost(&mut self, a: &[f64], b: &[f64]) {
-        let n = self.n;
-        let mut ra = a.to_vec();
-        let mut rb = b.to_vec();
+        let (n, m) = (self.n, self.m);
+        let mut ra = [0.0f64; MAX_BINS];
+        let mut rb = [0.0f64; MAX_BINS];
+        ra[..n].copy_from_slice(a);
+        rb[..m].copy_from_slice(b);
         let mut row_open = [true; MAX_BINS];
         let mut col_open = [true; MAX_BINS];
-        let (mut rows, mut cols) = (n, n);
+        let (mut rows, mut cols) = (n, m);
         self.basis.clear();
         self.flow.clear();
         for &c in &self.order {
-            let (i, j) = (c / n, c % n);
+            let (i, j) = (c / m, c % m);
             if !row_open[i] || !col_open[j] {
                 continue;
             }
@@ -156,160 +183,208 @@ impl Transport {
                 rb[j] = 0.0;
             }
         }
-        debug_assert_eq!(self.basis.len(), 2 * n - 1);
+        debug_assert_eq!(self.basis.len(), n + m - 1);
     }
 
-    /// Rebuilds the tree's adjacency: rows are nodes `0..n`, columns `n..2n`.
-    fn adjacency(&mut self) {
-        let n = self.n;
-        for l in &mut self.adj {
-            l.clear();
+    /// Roots the basis tree at row 0: parents, parent edges, breadth-first order, depths
+    /// and the dual potentials `u_i + v_j = cost_ij` on its edges. `false` if the basis
+    /// does not span all `2n` nodes (only hand-made bases in tests can fail this).
+    fn rebuild(&mut self) -> bool {
+        let (n, m) = (self.n, self.m);
+        // Compressed adjacency: node `p`'s neighbours are `adj[start[p]..start[p + 1]]`.
+        let mut start = [0u8; NODES + 1];
+        for &c in &self.basis {
+            start[c / m + 1] += 1;
+            start[n + c % m + 1] += 1;
         }
+        for p in 0..n + m {
+            start[p + 1] += start[p];
+        }
+        let mut fill = start;
+        let mut adj = [(0u8, 0u8); 2 * NODES];
         for (k, &c) in self.basis.iter().enumerate() {
-            let (i, j) = (c / n, c % n);
-            self.adj[i].push((n + j, k));
-            self.adj[n + j].push((i, k));
+            let (i, j) = (c / m, n + c % m);
+            adj[fill[i] as usize] = (j as u8, k as u8);
+            fill[i] += 1;
+            adj[fill[j] as usize] = (i as u8, k as u8);
+            fill[j] += 1;
         }
-    }
-
-    /// Dual potentials `u_i + v_j = cost_ij` on the tree, `u_0 = 0` (needs [`Self::adjacency`]).
-    fn potentials(&mut self) {
-        let n = self.n;
-        let mut seen = [false; 2 * MAX_BINS];
-        let mut stack = [0usize; 2 * MAX_BINS];
-        let mut top = 1;
-        stack[0] = 0;
+        let mut seen = [false; NODES];
         seen[0] = true;
-        self.u[0] = 0.0;
-        while top > 0 {
-            top -= 1;
-            let p = stack[top];
-            for &(q, k) in &self.adj[p] {
+        self.bfs[0] = 0;
+        self.depth[0] = 0;
+        self.pot[0] = 0.0;
+        let (mut head, mut tail) = (0usize, 1usize);
+        while head < tail {
+            let p = self.bfs[head] as usize;
+            head += 1;
+            for &(q, k) in &adj[start[p] as usize..start[p + 1] as usize] {
+                let q = q as usize;
                 if seen[q] {
                     continue;
                 }
                 seen[q] = true;
-                let c = self.cost[self.basis[k]];
-                if q >= n {
-                    self.v[q - n] = c - self.u[p];
-                } else {
-                    self.u[q] = c - self.v[p - n];
-                }
-                stack[top] = q;
-                top += 1;
+                self.parent[q] = p as u8;
+                self.up[q] = k;
+                self.below[k as usize] = q as u8;
+                self.depth[q] = self.depth[p] + 1;
+                self.pot[q] = self.cost[self.basis[k as usize]] - self.pot[p];
+                self.bfs[tail] = q as u8;
+                tail += 1;
             }
         }
+        tail == n + m
     }
 
-    /// The flows the current tree carries for supplies `a` and demands `b`, by peeling leaves.
+    /// The flows the current tree carries for supplies `a` and demands `b`: leaves first,
+    /// each node's edge to its parent carries the net supply of the node's subtree.
     fn flows(&mut self, a: &[f64], b: &[f64]) {
-        let n = self.n;
-        self.adjacency();
-        let mut rest = [0.0f64; 2 * MAX_BINS];
+        let (n, m) = (self.n, self.m);
+        let mut rest = [0.0f64; NODES];
         rest[..n].copy_from_slice(a);
-        rest[n..2 * n].copy_from_slice(b);
-        let mut degree = [0usize; 2 * MAX_BINS];
-        for (p, l) in self.adj.iter().enumerate().take(2 * n) {
-            degree[p] = l.len();
+        for (r, &d) in rest[n..n + m].iter_mut().zip(b) {
+            *r = -d;
         }
-        let mut done = [false; 2 * MAX_BINS];
-        let mut queue = [0usize; 2 * MAX_BINS];
-        let (mut head, mut tail) = (0, 0);
-        for (p, &d) in degree.iter().enumerate().take(2 * n) {
-            if d == 1 {
-                queue[tail] = p;
-                tail += 1;
-            }
-        }
-        while head < tail {
-            let p = queue[head];
-            head += 1;
-            if degree[p] != 1 {
-                continue;
-            }
-            let Some(&(q, k)) = self.adj[p].iter().find(|&&(_, k)| !done[k]) else {
-                continue;
-            };
-            done[k] = true;
-            let x = rest[p];
-            self.flow[k] = x;
-            rest[q] -= x;
-            degree[p] = 0;
-            degree[q] -= 1;
-            if degree[q] == 1 {
-                queue[tail] = q;
-                tail += 1;
-            }
+        for t in (1..n + m).rev() {
+            let q = self.bfs[t] as usize;
+            let net = rest[q];
+            // A row's subtree sends its surplus to the parent column; a column's subtree
+            // receives its deficit from the parent row.
+            self.flow[self.up[q] as usize] = if q < n { net } else { -net };
+            rest[self.parent[q] as usize] += net;
         }
     }
 
-    /// Dual simplex from the current (dual feasible) tree: while some flow is negative, take
-    /// the most negative out and bring in the cheapest cell that crosses the cut in the
-    /// direction that can carry it. `false` if it gave up (then the caller starts afresh).
+    /// Dual simplex from the current (dual feasible, rebuilt) tree: while some flow is
+    /// negative, take the most negative out and bring in the cheapest cell that crosses the
+    /// cut in the direction that can carry it. `false` if it gave up (then the caller starts
+    /// afresh).
     fn dual(&mut self, a: &[f64], b: &[f64]) -> bool {
-        let n = self.n;
-        for _ in 0..(8 * n) {
-            let Some(k) = (0..self.basis.len())
-                .filter(|&k| self.flow[k] < -EPS)
-                .min_by(|&x, &y| self.flow[x].total_cmp(&self.flow[y]).then(x.cmp(&y)))
-            else {
+        let (n, m) = (self.n, self.m);
+        for _ in 0..(4 * (n + m)) {
+            let mut k = usize::MAX;
+            let mut worst = -EPS;
+            for (e, &x) in self.flow.iter().enumerate() {
+                if x < worst {
+                    worst = x;
+                    k = e;
+                }
+            }
+            if k == usize::MAX {
                 return true;
-            };
-            self.potentials();
-            // The side of the cut that holds the leaving cell's row.
-            let mut side = [false; 2 * MAX_BINS];
-            let (p, _) = (self.basis[k] / n, self.basis[k] % n);
-            let mut stack = [0usize; 2 * MAX_BINS];
-            let mut top = 1;
-            stack[0] = p;
-            side[p] = true;
-            while top > 0 {
-                top -= 1;
-                let x = stack[top];
-                for &(y, e) in &self.adj[x] {
-                    if e != k && !side[y] {
-                        side[y] = true;
-                        stack[top] = y;
-                        top += 1;
+            }
+            // The subtree below the leaving edge is one side of the cut.
+            let mut below = [false; NODES];
+            below[self.below[k] as usize] = true;
+            for t in 1..n + m {
+                let q = self.bfs[t] as usize;
+                below[q] = below[q] || below[self.parent[q] as usize];
+            }
+            // The side holding the leaving cell's row lacks mass: it must receive along a
+            // row outside → column inside.
+            let row_side = below[self.basis[k] / m];
+            let mut cols = [0u8; MAX_BINS];
+            let mut inside = 0;
+            for j in 0..m {
+                if below[n + j] == row_side {
+                    cols[inside] = j as u8;
+                    inside += 1;
+                }
+            }
+            let mut best = f64::INFINITY;
+            let mut enter = usize::MAX;
+            for i in (0..n).filter(|&i| below[i] != row_side) {
+                let row = &self.cost[i * m..(i + 1) * m];
+                let ui = self.pot[i];
+                for &j in &cols[..inside] {
+                    let j = j as usize;
+                    let r = row[j] - ui - self.pot[n + j];
+                    if r < best {
+                        best = r;
+                        enter = i * m + j;
                     }
                 }
             }
-            // The row's side lacks mass: it must receive along a row outside → column inside.
-            let mut best: Option<(f64, usize)> = None;
-            for i in (0..n).filter(|&i| !side[i]) {
-                for j in (0..n).filter(|&j| side[n + j]) {
-                    let c = i * n + j;
-                    let r = self.cost[c] - self.u[i] - self.v[j];
-                    if best.is_none_or(|(br, _)| r < br) {
-                        best = Some((r, c));
-                    }
-                }
-            }
-            let Some((_, c)) = best else {
+            if enter == usize::MAX {
                 return false;
-            };
-            self.basis[k] = c;
+            }
+            self.pivot(k, enter, best, &below);
             self.flows(a, b);
         }
         false
     }
 
+    /// Replaces basis edge `k` by cell `enter` (reduced cost `r`) without rebuilding the
+    /// tree: the subtree `below` edge `k` is re-hung from the entering cell's endpoint inside
+    /// it (the parent links along the path up to the subtree's old top reverse), its
+    /// potentials shift by `±r`, and its nodes move to the end of the breadth-first order
+    /// (so parents still come before children).
+    fn pivot(&mut self, k: usize, enter: usize, r: f64, below: &[bool; NODES]) {
+        let (n, m) = (self.n, self.m);
+        let (i, j) = (enter / m, n + enter % m);
+        let (inner, outer) = if below[i] { (i, j) } else { (j, i) };
+        let top = self.below[k] as usize;
+        self.basis[k] = enter;
+        // Re-hang: walk from `inner` up to `top`, reversing parent links.
+        let mut on_path = [false; NODES];
+        let mut path = [0u8; NODES];
+        let mut len = 0;
+        let (mut x, mut to, mut edge) = (inner, outer, k as u8);
+        let mut d = self.depth[outer] + 1;
+        loop {
+            let (old_parent, old_edge) = (self.parent[x] as usize, self.up[x]);
+            self.parent[x] = to as u8;
+            self.up[x] = edge;
+            self.below[edge as usize] = x as u8;
+            self.depth[x] = d;
+            on_path[x] = true;
+            path[len] = x as u8;
+            len += 1;
+            if x == top {
+                break;
+            }
+            (to, edge, x, d) = (x, old_edge, old_parent, d + 1);
+        }
+        // The inner row's potential rises by r (its column's, if the column is inside).
+        let shift_rows = if inner < n { r } else { -r };
+        // The new order: the rest as it was, then the path from `inner` to `top` (each node's
+        // new parent is the one before it), then the subtree's other nodes in their old order
+        // (their parents did not change and come earlier).
+        let mut others = [0u8; NODES];
+        let (mut kept, mut count) = (0, 0);
+        for t in 0..n + m {
+            let q = self.bfs[t] as usize;
+            if below[q] {
+                self.pot[q] += if q < n { shift_rows } else { -shift_rows };
+                if !on_path[q] {
+                    self.depth[q] = self.depth[self.parent[q] as usize] + 1;
+                    others[count] = q as u8;
+                    count += 1;
+                }
+            } else {
+                self.bfs[kept] = q as u8;
+                kept += 1;
+            }
+        }
+        self.bfs[kept..kept + len].copy_from_slice(&path[..len]);
+        self.bfs[kept + len..kept + len + count].copy_from_slice(&others[..count]);
+    }
+
     /// Primal (MODI) pivots to optimality from a feasible tree.
     fn primal(&mut self) -> Result<()> {
-        let n = self.n;
+        let (n, m) = (self.n, self.m);
         let mut degenerate = 0usize;
-        let limit = 64 * n * n;
+        let limit = 64 * n * m;
         for _ in 0..limit {
-            self.adjacency();
-            self.potentials();
-            let bland = degenerate > 2 * n;
+            self.rebuild();
+            let bland = degenerate > n + m;
             let mut basic = [false; MAX_BINS * MAX_BINS];
             for &c in &self.basis {
                 basic[c] = true;
             }
             let mut enter: Option<(f64, usize)> = None;
-            for c in (0..n * n).filter(|&c| !basic[c]) {
-                let r = self.cost[c] - self.u[c / n] - self.v[c % n];
+            for c in (0..n * m).filter(|&c| !basic[c]) {
+                let r = self.cost[c] - self.pot[c / m] - self.pot[n + c % m];
                 if r < -EPS && enter.is_none_or(|(br, _)| r < br) {
                     enter = Some((r, c));
                     if bland {
@@ -320,54 +395,50 @@ impl Transport {
             let Some((_, c)) = enter else {
                 return Ok(());
             };
-            // The tree path from the entering cell's column back to its row; its cells
-            // alternate −, +, −, … around the cycle the entering cell closes.
-            let (ei, ej) = (c / n, c % n);
-            let mut parent = [(usize::MAX, usize::MAX); 2 * MAX_BINS];
-            let mut stack = [0usize; 2 * MAX_BINS];
-            let mut top = 1;
-            stack[0] = ei;
-            parent[ei] = (ei, usize::MAX);
-            while top > 0 {
-                top -= 1;
-                let x = stack[top];
-                for &(y, e) in &self.adj[x] {
-                    if parent[y].0 == usize::MAX {
-                        parent[y] = (x, e);
-                        stack[top] = y;
-                        top += 1;
-                    }
+            // The tree path from the entering cell's column to its row (up to their common
+            // ancestor from both ends); its cells alternate −, +, −, … around the cycle the
+            // entering cell closes.
+            let (mut x, mut y) = (n + c % m, c / m);
+            let mut from_col = [0u8; NODES];
+            let mut from_row = [0u8; NODES];
+            let (mut nc, mut nr) = (0, 0);
+            while x != y {
+                if self.depth[x] >= self.depth[y] {
+                    from_col[nc] = self.up[x];
+                    nc += 1;
+                    x = self.parent[x] as usize;
+                } else {
+                    from_row[nr] = self.up[y];
+                    nr += 1;
+                    y = self.parent[y] as usize;
                 }
             }
-            let mut path = Vec::with_capacity(2 * n);
-            let mut x = n + ej;
-            while x != ei {
-                let (px, e) = parent[x];
-                path.push(e);
-                x = px;
-            }
-            let mut leave: Option<(f64, usize, usize)> = None;
-            for (pos, &e) in path.iter().enumerate().step_by(2) {
+            let path = from_col[..nc]
+                .iter()
+                .chain(from_row[..nr].iter().rev())
+                .map(|&e| e as usize);
+            let mut leave: Option<(f64, usize)> = None;
+            for e in path.clone().step_by(2) {
                 let f = self.flow[e].max(0.0);
                 let better = match leave {
                     None => true,
                     // Exact ties go to the smaller cell (Bland's rule).
-                    Some((bf, _, be)) => f
+                    Some((bf, be)) => f
                         .total_cmp(&bf)
                         .then(self.basis[e].cmp(&self.basis[be]))
                         .is_lt(),
                 };
                 if better {
-                    leave = Some((f, pos, e));
+                    leave = Some((f, e));
                 }
             }
-            let Some((theta, _, out)) = leave else {
+            let Some((theta, out)) = leave else {
                 return Err(crate::Error::Internal(
                     "emd: a cycle without a − cell".into(),
                 ));
             };
             degenerate = if theta <= EPS { degenerate + 1 } else { 0 };
-            for (pos, &e) in path.iter().enumerate() {
+            for (pos, e) in path.enumerate() {
                 if pos % 2 == 0 {
                     self.flow[e] -= theta;
                 } else {
@@ -426,6 +497,85 @@ pub struct MapInput<'a> {
     pub window: usize,
 }
 
+/// Rows per block of the map: each block runs sequentially (warm starts and the cache carry
+/// along it), blocks in parallel. Fixed, so the result does not depend on the thread count.
+const BLOCK_ROWS: usize = 16;
+
+/// Slots of the per-block histogram cache (a power of two).
+const CACHE_BITS: u32 = 15;
+
+/// An exact cache from window histograms (integer counts) to their value: open addressing
+/// on a linear hash `Σ count_b · R_b` that the sliding window updates in O(1) per pixel.
+/// It is filled to at most half, then only looked up.
+struct Cache {
+    n: usize,
+    keys: Vec<u32>,
+    hashes: Vec<u64>,
+    values: Vec<f32>,
+    used: Vec<bool>,
+    filled: usize,
+}
+
+impl Cache {
+    fn new(n: usize) -> Self {
+        let slots = 1usize << CACHE_BITS;
+        Self {
+            n,
+            keys: vec![0; slots * n],
+            hashes: vec![0; slots],
+            values: vec![0.0; slots],
+            used: vec![false; slots],
+            filled: 0,
+        }
+    }
+
+    fn clear(&mut self) {
+        self.used.fill(false);
+        self.filled = 0;
+    }
+
+    /// The slot holding `counts`, or the empty slot where it would go.
+    fn slot(&self, hash: u64, counts: &[u32]) -> usize {
+        let mask = (1usize << CACHE_BITS) - 1;
+        let mut s = (hash >> (64 - CACHE_BITS)) as usize;
+        while self.used[s]
+            && (self.hashes[s] != hash || self.keys[s * self.n..(s + 1) * self.n] != *counts)
+        {
+            s = (s + 1) & mask;
+        }
+        s
+    }
+
+    fn get(&self, hash: u64, counts: &[u32]) -> Option<f32> {
+        let s = self.slot(hash, counts);
+        self.used[s].then(|| self.values[s])
+    }
+
+    fn put(&mut self, hash: u64, counts: &[u32], value: f32) {
+        if 2 * self.filled >= self.used.len() {
+            return;
+        }
+        let s = self.slot(hash, counts);
+        if !self.used[s] {
+            self.used[s] = true;
+            self.hashes[s] = hash;
+            self.keys[s * self.n..(s + 1) * self.n].copy_from_slice(counts);
+            self.values[s] = value;
+            self.filled += 1;
+        }
+    }
+}
+
+/// The hash multiplier of bin `b` (splitmix64 of `b`), odd so no bin is lost.
+fn multiplier(b: usize) -> u64 {
+    let mut z = (b as u64)
+        .wrapping_add(1)
+        .wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    (z ^ (z >> 31)) | 1
+}
+
 /// The normalised EMD between `target` and the histogram of every pixel's window: the EMD
 /// divided by the largest ground distance, so 0 is a match and 1 the farthest two histograms
 /// can be. Pixels outside the leaf (label −1) get NaN; a window always holds its own centre,
@@ -455,75 +605,132 @@ pub fn emd_map(input: &MapInput<'_>) -> Result<Vec<f32>> {
         ));
     }
     let scale = input.ground.iter().copied().fold(0.0f64, f64::max);
-    // One optimal basis (any supplies) is dual feasible for all: every row starts from it.
-    let mut base = base;
-    base.solve(&target, &target)?;
-    let win = input.window;
-    let before = win / 2;
-    let after = win - before; // exclusive
+    // Bins the target lacks receive nothing in any plan, so their columns are dropped: an
+    // `n × k` problem with the same optimum, smaller the more concentrated the layer is.
+    drop(base);
+    let cols: Vec<usize> = (0..n).filter(|&j| target[j] > 0.0).collect();
+    let demand: Vec<f64> = cols.iter().map(|&j| target[j]).collect();
+    let ground: Vec<f64> = (0..n)
+        .flat_map(|i| cols.iter().map(move |&j| input.ground[i * n + j]))
+        .collect();
+    // One optimal basis (any supplies) is dual feasible for all: every block starts from it.
+    let mut base = Transport::rect(n, cols.len(), &ground)?;
+    base.solve(&target, &demand)?;
+    let mut mult = [0u64; MAX_BINS];
+    for (b, m) in mult.iter_mut().enumerate() {
+        *m = multiplier(b);
+    }
     let mut out = vec![f32::NAN; h * w];
-    out.par_chunks_mut(w.max(1))
+    if w == 0 {
+        return Ok(out);
+    }
+    out.par_chunks_mut(BLOCK_ROWS * w)
         .enumerate()
-        .try_for_each(|(y, row)| -> Result<()> {
-            if cancel::cancelled() {
-                return Ok(());
-            }
-            let y0 = y.saturating_sub(before);
-            let y1 = (y + after).min(h);
-            let mut solver = base.clone();
-            let mut counts = [0u32; MAX_BINS];
-            let mut total = 0u32;
-            let mut last: Option<([u32; MAX_BINS], f32)> = None;
-            let mut supply = vec![0.0f64; n];
-            let column = |x: usize, counts: &mut [u32; MAX_BINS], total: &mut u32, add: bool| {
-                for yy in y0..y1 {
-                    let l = input.labels[yy * w + x];
-                    if l >= 0 {
-                        if add {
-                            counts[l as usize] += 1;
-                            *total += 1;
-                        } else {
-                            counts[l as usize] -= 1;
-                            *total -= 1;
-                        }
-                    }
+        .try_for_each_init(
+            || Cache::new(n),
+            |cache, (block, rows)| -> Result<()> {
+                if cancel::cancelled() {
+                    return Ok(());
                 }
-            };
-            // Columns [x − before, x + after) are in the window of pixel x.
-            for x in 0..after.saturating_sub(1).min(w) {
-                column(x, &mut counts, &mut total, true);
-            }
-            // `x` also indexes the labels and the columns entering and leaving.
-            #[allow(clippy::needless_range_loop)]
-            for x in 0..w {
-                if x + after - 1 < w {
-                    column(x + after - 1, &mut counts, &mut total, true);
+                cache.clear();
+                let mut start = base.clone();
+                for (r, row) in rows.chunks_mut(w).enumerate() {
+                    let y = block * BLOCK_ROWS + r;
+                    start = map_row(input, &demand, scale, &mult, cache, start, y, row)?;
                 }
-                if x > before {
-                    column(x - before - 1, &mut counts, &mut total, false);
-                }
-                if input.labels[y * w + x] < 0 || total == 0 {
-                    continue;
-                }
-                if let Some((c, s)) = last {
-                    if c[..n] == counts[..n] {
-                        row[x] = s;
-                        continue;
-                    }
-                }
-                let t = f64::from(total);
-                for (s, &c) in supply.iter_mut().zip(&counts[..n]) {
-                    *s = f64::from(c) / t;
-                }
-                let d = solver.solve(&supply, &target)?;
-                let s = if scale > 0.0 { (d / scale) as f32 } else { 0.0 };
-                row[x] = s;
-                last = Some((counts, s));
-            }
-            Ok(())
-        })?;
+                Ok(())
+            },
+        )?;
     cancel::check()?;
     Ok(out)
+}
+
+/// One row of [`emd_map`], warm-started from `start`; returns the solver as it was after the
+/// row's first solve, the start of the next row (whose first window is nearly the same).
+#[allow(clippy::too_many_arguments)]
+fn map_row(
+    input: &MapInput<'_>,
+    target: &[f64],
+    scale: f64,
+    mult: &[u64; MAX_BINS],
+    cache: &mut Cache,
+    start: Transport,
+    y: usize,
+    row: &mut [f32],
+) -> Result<Transport> {
+    let (h, w) = input.size;
+    let n = input.n_bins;
+    let before = input.window / 2;
+    let after = input.window - before; // exclusive
+    let y0 = y.saturating_sub(before);
+    let y1 = (y + after).min(h);
+    let mut solver = start.clone();
+    let mut next: Option<Transport> = None;
+    let mut counts = [0u32; MAX_BINS];
+    let mut hash = 0u64;
+    let mut supply = [0.0f64; MAX_BINS];
+    let mut last: Option<(u64, [u32; MAX_BINS], f32)> = None;
+    let column = |x: usize, counts: &mut [u32; MAX_BINS], hash: &mut u64, add: bool| {
+        for yy in y0..y1 {
+            let l = input.labels[yy * w + x];
+            if l >= 0 {
+                let l = l as usize;
+                if add {
+                    counts[l] += 1;
+                    *hash = hash.wrapping_add(mult[l]);
+                } else {
+                    counts[l] -= 1;
+                    *hash = hash.wrapping_sub(mult[l]);
+                }
+            }
+        }
+    };
+    // Columns [x − before, x + after) are in the window of pixel x.
+    for x in 0..after.saturating_sub(1).min(w) {
+        column(x, &mut counts, &mut hash, true);
+    }
+    // `x` also indexes the labels and the columns entering and leaving.
+    #[allow(clippy::needless_range_loop)]
+    for x in 0..w {
+        if x + after - 1 < w {
+            column(x + after - 1, &mut counts, &mut hash, true);
+        }
+        if x > before {
+            column(x - before - 1, &mut counts, &mut hash, false);
+        }
+        if input.labels[y * w + x] < 0 {
+            continue;
+        }
+        let key = &counts[..n];
+        if let Some((lh, c, s)) = &last {
+            if *lh == hash && c[..n] == *key {
+                row[x] = *s;
+                continue;
+            }
+        }
+        let s = if let Some(s) = cache.get(hash, key) {
+            s
+        } else {
+            let t = f64::from(total_of(key));
+            for (s, &c) in supply.iter_mut().zip(key) {
+                *s = f64::from(c) / t;
+            }
+            let d = solver.solve(&supply[..n], target)?;
+            if next.is_none() {
+                next = Some(solver.clone());
+            }
+            let s = if scale > 0.0 { (d / scale) as f32 } else { 0.0 };
+            cache.put(hash, key, s);
+            s
+        };
+        row[x] = s;
+        last = Some((hash, counts, s));
+    }
+    Ok(next.unwrap_or(start))
+}
+
+fn total_of(counts: &[u32]) -> u32 {
+    counts.iter().sum()
 }
 
 #[cfg(test)]
@@ -575,17 +782,18 @@ mod tests {
         for i in 0..n {
             assert!((rs[i] - a[i]).abs() < 1e-9 && (cs[i] - b[i]).abs() < 1e-9);
         }
-        t.adjacency();
-        t.potentials();
+        // Potentials of a freshly rooted tree, not the solver's incrementally kept ones.
+        let mut t = t.clone();
+        t.rebuild();
         for c in 0..n * n {
-            let r = t.cost[c] - t.u[c / n] - t.v[c % n];
+            let r = t.cost[c] - t.pot[c / n] - t.pot[n + c % n];
             assert!(r >= -1e-9, "dual infeasible at {c}: {r}");
         }
         for &(c, x) in &plan {
-            let r = t.cost[c] - t.u[c / n] - t.v[c % n];
+            let r = t.cost[c] - t.pot[c / n] - t.pot[n + c % n];
             assert!(x.abs() < 1e-12 || r.abs() < 1e-9);
         }
-        let dual: f64 = (0..n).map(|i| t.u[i] * a[i] + t.v[i] * b[i]).sum();
+        let dual: f64 = (0..n).map(|i| t.pot[i] * a[i] + t.pot[n + i] * b[i]).sum();
         assert!((dual - d).abs() < 1e-9, "primal {d} vs dual {dual}");
         d
     }
@@ -604,20 +812,8 @@ mod tests {
             let mut t = Transport::new(n, ground).unwrap();
             t.basis = (0..cells).filter(|c| mask & (1 << c) != 0).collect();
             t.flow = vec![0.0; k];
-            t.adjacency();
             // A spanning tree: connected with 2n − 1 edges.
-            let mut seen = vec![false; 2 * n];
-            let mut stack = vec![0];
-            seen[0] = true;
-            while let Some(p) = stack.pop() {
-                for &(q, _) in &t.adj[p] {
-                    if !seen[q] {
-                        seen[q] = true;
-                        stack.push(q);
-                    }
-                }
-            }
-            if seen.iter().any(|s| !s) {
+            if !t.rebuild() {
                 continue;
             }
             t.flows(a, b);
@@ -685,6 +881,14 @@ mod tests {
                 let b = unit("b", &random_hist(&mut rng, n, true), n)
                     .unwrap_or_else(|_| vec![1.0 / n as f64; n]);
                 check_optimal(&mut t, &a, &b); // warm starts after the first
+                let mut fresh = t.clone();
+                fresh.rebuild();
+                assert_eq!(t.parent[..2 * n], fresh.parent[..2 * n]);
+                assert_eq!(t.up[..2 * n], fresh.up[..2 * n]);
+                assert_eq!(t.depth[..2 * n], fresh.depth[..2 * n]);
+                for q in 0..2 * n {
+                    assert!((t.pot[q] - fresh.pot[q]).abs() < 1e-9);
+                }
             }
         }
     }
@@ -791,6 +995,26 @@ mod tests {
                 assert!(g.is_nan() || (-1e-6..=1.0 + 1e-6).contains(g));
             }
         }
+    }
+
+    #[test]
+    fn the_cache_tells_histograms_with_one_hash_apart() {
+        let mut cache = Cache::new(3);
+        cache.put(7, &[1, 2, 3], 0.25);
+        cache.put(7, &[3, 2, 1], 0.5); // the same hash: a collision
+        assert_eq!(cache.get(7, &[1, 2, 3]), Some(0.25));
+        assert_eq!(cache.get(7, &[3, 2, 1]), Some(0.5));
+        assert_eq!(cache.get(7, &[2, 2, 2]), None);
+        assert_eq!(cache.get(8, &[1, 2, 3]), None);
+        // The sliding hash is a function of the histogram alone.
+        let h = |c: &[u32]| {
+            c.iter().enumerate().fold(0u64, |s, (b, &k)| {
+                s.wrapping_add(multiplier(b).wrapping_mul(k.into()))
+            })
+        };
+        assert_ne!(h(&[1, 2, 3]), h(&[3, 2, 1]));
+        cache.clear();
+        assert_eq!(cache.get(7, &[1, 2, 3]), None);
     }
 
     #[test]

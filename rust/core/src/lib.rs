@@ -28,8 +28,13 @@
 //! - [`mvc`]: mean value coordinates for arbitrary planar polygons, inside and outside
 //!   (Hormann & Floater 2006), and the contour-to-contour image warp and multi-source colour
 //!   transfer they define (Argudo et al. 2017, §5.2).
+//! - [`tps`]: thin-plate splines and non-rigid point registration by TPS-RPM (Chui &
+//!   Rangarajan 2003) with dense forward and inverse warps (Assa & Cohen-Or, §3).
+//! - [`correction`]: guided quilting, the start of texture correction after a warp (Assa &
+//!   Cohen-Or §3, after Fang & Hart 2007).
 
 pub mod cancel;
+pub mod correction;
 pub mod distance;
 pub mod emd;
 pub mod error;
@@ -46,6 +51,7 @@ pub mod seams;
 pub mod shapes;
 pub(crate) mod solver;
 pub mod tbn;
+pub mod tps;
 pub mod vote;
 
 pub use error::{Error, Result};

@@ -418,7 +418,7 @@ fn sample<const C: usize>(img: &Image<'_>, x: f32, y: f32, out: &mut [f32]) {
 
 /// [`sample`] with the channel loop unrolled for RGBA, the common case.
 #[inline(always)]
-fn sample_any(img: &Image<'_>, x: f32, y: f32, out: &mut [f32]) {
+pub(crate) fn sample_any(img: &Image<'_>, x: f32, y: f32, out: &mut [f32]) {
     if img.c == 4 {
         sample::<4>(img, x, y, out);
     } else {

@@ -1,7 +1,7 @@
 //! Array conversion shared by the bindings: NumPy arrays in, core types out, and back.
 
 use ndarray::{Array, Dimension, StrideShape};
-use numpy::{Element, IntoPyArray, PyArray, PyReadonlyArray3};
+use numpy::{Element, IntoPyArray, PyArray, PyReadonlyArray2, PyReadonlyArray3};
 use phloem_core::error::invalid;
 use phloem_core::image::Image;
 use phloem_core::patch::NONE;
@@ -13,6 +13,22 @@ use crate::errors::{not_contiguous, to_py};
 pub fn image<'a>(name: &'static str, a: &'a PyReadonlyArray3<'_, f32>) -> PyResult<Image<'a>> {
     let (h, w, c) = a.as_array().dim();
     Image::new(name, a.as_slice().map_err(not_contiguous(name))?, h, w, c).map_err(to_py)
+}
+
+/// An `(N, 2)` float64 array as `(x, y)` points; errors name `name`.
+pub fn points(name: &'static str, a: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<[f64; 2]>> {
+    let (n, two) = a.as_array().dim();
+    if two != 2 {
+        return Err(to_py(invalid(
+            name,
+            format!("expected shape (N, 2), got ({n}, {two})"),
+        )));
+    }
+    Ok(a.as_slice()
+        .map_err(not_contiguous(name))?
+        .chunks_exact(2)
+        .map(|p| [p[0], p[1]])
+        .collect())
 }
 
 /// Flat indices into an image `w` pixels wide as (row, col) pairs, [`NONE`] as `(-1, -1)`.

@@ -12,6 +12,7 @@ use pyo3::prelude::*;
 mod blend;
 mod call;
 mod convert;
+mod correction;
 mod emd;
 mod errors;
 mod patch;
@@ -20,6 +21,7 @@ mod seams;
 mod shapes;
 mod tbn;
 mod threads;
+mod tps;
 mod warp;
 
 #[pymodule(gil_used = false)]
@@ -45,6 +47,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(warp::mvc_combine_py, m)?)?;
     m.add_function(wrap_pyfunction!(emd::emd_map_py, m)?)?;
     m.add_function(wrap_pyfunction!(emd::emd_py, m)?)?;
+    m.add_function(wrap_pyfunction!(tps::tps_register_py, m)?)?;
+    m.add_function(wrap_pyfunction!(tps::tps_sample_py, m)?)?;
+    m.add_function(wrap_pyfunction!(correction::guided_quilt_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::default_threads_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::after_fork_in_child_py, m)?)?;
     Ok(())

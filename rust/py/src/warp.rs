@@ -1,29 +1,13 @@
 //! Bindings of `phloem_core::mvc` for `phloem.warp`.
 
 use numpy::{PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
-use phloem_core::error::invalid;
 use phloem_core::image::Image;
 use phloem_core::mvc::{self, Point};
 use pyo3::prelude::*;
 
 use crate::call::run;
-use crate::convert::{array, image};
-use crate::errors::{not_contiguous, opt_slice, to_py};
-
-fn points(name: &'static str, a: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<Point>> {
-    let (n, two) = a.as_array().dim();
-    if two != 2 {
-        return Err(to_py(invalid(
-            name,
-            format!("expected shape (N, 2), got ({n}, {two})"),
-        )));
-    }
-    Ok(a.as_slice()
-        .map_err(not_contiguous(name))?
-        .chunks_exact(2)
-        .map(|p| [p[0], p[1]])
-        .collect())
-}
+use crate::convert::{array, image, points};
+use crate::errors::{not_contiguous, opt_slice};
 
 fn images<'a>(name: &'static str, a: &'a [PyReadonlyArray3<'_, f32>]) -> PyResult<Vec<Image<'a>>> {
     a.iter().map(|s| image(name, s)).collect()
