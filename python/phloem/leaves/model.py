@@ -167,7 +167,7 @@ class LeafModel:
             "layers": np.stack(self.layers[i]) if n_k else np.zeros((0, h, w, 4), np.float32),
         }
         buf = io.BytesIO()
-        # level 1: a 2 Mpx exemplar holds ~100 MB of float32, and level 6 takes 5x longer for ~10% less
+        # deflate level 1: models are large and level 6 is much slower for little gain (docs/pipelines/leaves/analysis.md)
         with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as z:
             for name, a in arrays.items():
                 with z.open(f"{name}.npy", "w", force_zip64=True) as f:
