@@ -9,6 +9,7 @@ from scipy import ndimage
 from phloem.leaves import LeafModel, blend_fields, random_warp, synthesize
 from phloem.leaves import synthesis as synth
 from phloem.leaves._fields import sample
+from phloem.leaves._rgba import straight
 
 H = W = 96
 SCALES = (1.0, 0.8, 1.2)
@@ -198,7 +199,7 @@ def test_structural_layers_stay_and_stochastic_layers_move() -> None:
         spots = ndimage.binary_dilation(np.any([per[1] for per in model.masks], axis=0), iterations=4)
         moved = []
         for seed in range(6):
-            rgba = synth._straight(
+            rgba = straight(
                 synth._training_frame(model, np.random.default_rng(seed), [2.0, 2.0, 3.0], [lam / 1.5] * 2, 1)
             )
             vein = (np.abs(rgba[..., :3] - VEIN).max(axis=2) < 0.05) & (rgba[..., 3] > 0.5)

@@ -212,6 +212,12 @@ def stage_result(
         tx.notes.append(f"wrote {p} and {side}")
 
 
+def sub_seed(seed: int, i: int) -> int:
+    """The seed of output ``i`` of a run with ``--seed seed`` (recorded in its sidecar, so that
+    output can be remade alone with ``--seed`` set to it)."""
+    return int(np.random.SeedSequence([seed, i]).generate_state(1)[0])
+
+
 def params(args: argparse.Namespace, skip: Sequence[str] = ()) -> dict[str, Any]:
     drop = {"func", "command", "quiet", "force", "threads", "seed", "max_pixels", "max_memory", *skip}
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items() if k not in drop}

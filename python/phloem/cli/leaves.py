@@ -18,16 +18,12 @@ from ._common import (
     run,
     stage_image,
     stage_result,
+    sub_seed,
     transaction,
 )
 
 #: A leaf's source file size ``(H, W)`` and its box ``(y0, y1, x0, x1)`` in it.
 Cut = tuple[tuple[int, ...], tuple[int, int, int, int]]
-
-
-def _sub_seed(seed: int, i: int) -> int:
-    """The seed of new leaf ``i`` of a run with ``--seed seed`` (recorded in its sidecar)."""
-    return int(np.random.SeedSequence([seed, i]).generate_state(1)[0])
 
 
 def _read_leaves(files: list[str], args: argparse.Namespace) -> tuple[list[np.ndarray], list[str], list[Cut]]:
@@ -116,14 +112,14 @@ def _synthesize(model: leaves.LeafModel, args: argparse.Namespace, origin: str) 
         res = []
         # one call per leaf with its own seed (the sidecar's leaf_seed), so any leaf can be remade alone
         for i in range(args.count):
-            res += leaves.synthesize(model, count=1, seed=_sub_seed(args.seed, i), threads=args.threads)
+            res += leaves.synthesize(model, count=1, seed=sub_seed(args.seed, i), threads=args.threads)
             bar(i + 1, args.count)
         return res
 
     new = run("leaves: synthesize", args, make)
     for i, (img, path) in enumerate(zip(new, targets)):
         stage_result(path, img, args, "leaves synthesize", quiet=True,
-                     parameters={**params(args), "model": origin, "leaf_seed": _sub_seed(args.seed, i), "count": 1})  # fmt: skip
+                     parameters={**params(args), "model": origin, "leaf_seed": sub_seed(args.seed, i), "count": 1})  # fmt: skip
     if not args.quiet:
         transaction().notes.append(f"wrote {len(targets)} leaves (and their .json) to {out_dir}")
     return new

@@ -22,6 +22,7 @@ from ._common import (
     run,
     stage_image,
     stage_result,
+    sub_seed,
     transaction,
 )
 
@@ -66,13 +67,13 @@ def _cmd_trees(args: argparse.Namespace) -> None:
             # One vary call per variation, each with its own seed (the sidecar's variation_seed), so any
             # tree can be remade alone; vary(progress=) would draw all from one seed, so the loop draws the bar.
             for i in range(args.n_variations):
-                out += trees.vary(own, lib, n_variations=1, seed=_sub_seed(args.seed, i), n_sources=args.n_sources, colors=colors,
+                out += trees.vary(own, lib, n_variations=1, seed=sub_seed(args.seed, i), n_sources=args.n_sources, colors=colors,
                                   histogram=args.histogram, threads=args.threads, max_memory=args.max_memory)  # fmt: skip
                 bar(i + 1, args.n_variations)
             return out
         res = []
         for i in range(args.n_variations):
-            res.append(trees.variation(lib, n_sources=args.n_sources, seed=_sub_seed(args.seed, i), colors=colors,
+            res.append(trees.variation(lib, n_sources=args.n_sources, seed=sub_seed(args.seed, i), colors=colors,
                                        histogram=args.histogram, threads=args.threads, max_memory=args.max_memory))  # fmt: skip
             bar(i + 1, args.n_variations)
         return res
@@ -83,17 +84,12 @@ def _cmd_trees(args: argparse.Namespace) -> None:
         if like is not None:
             rec["exemplars"] = [str(args.like), *rec["exemplars"]]
         stage_result(path, v.image, args, "trees", quiet=True,
-                     parameters={**params(args), "colors": colors, **rec, "variation_seed": _sub_seed(args.seed, i)})  # fmt: skip
+                     parameters={**params(args), "colors": colors, **rec, "variation_seed": sub_seed(args.seed, i)})  # fmt: skip
     if not args.quiet:
         transaction().notes.append(f"wrote {len(targets)} trees (and their .json) to {out_dir}")
     if args.sheet is not None:
         sheet = run("trees: sheet", args, lambda bar: _tree_sheet(lib, variations, args))
         stage_image(args.sheet, sheet, args)
-
-
-def _sub_seed(seed: int, i: int) -> int:
-    """The seed of variation ``i`` of a run with ``--seed seed`` (recorded in its sidecar)."""
-    return int(np.random.SeedSequence([seed, i]).generate_state(1)[0])
 
 
 def _tree_sheet(lib: trees.Library, variations: Sequence[trees.Variation], args: argparse.Namespace) -> np.ndarray:

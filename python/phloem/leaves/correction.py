@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from .. import _core
 from .._validate import as_image, check_float, check_patch_size, check_seed, check_threads, derive_seed
+from ._rgba import premultiplied
 
 __all__ = ["correct_texture", "distortion"]
 
@@ -104,11 +105,7 @@ def distortion(field: Any, *, tolerance: float = 0.25) -> NDArray[np.bool_]:
 
 def _features(image: F32) -> F32:
     """What patches are compared and voted on: premultiplied colour and alpha for RGBA."""
-    if image.shape[2] != 4:
-        return image
-    out: F32 = image.copy()
-    np.multiply(out[..., :3], image[..., 3:4], out=out[..., :3])
-    return out
+    return premultiplied(image) if image.shape[2] == 4 else image
 
 
 def correct_texture(

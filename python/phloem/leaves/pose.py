@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validate import as_image
+from ._rgba import premultiplied, straight
 
 __all__ = ["CANVAS_MARGIN", "canvas", "pose", "warp_rgba"]
 
@@ -51,11 +52,10 @@ def _similarity(c_from: NDArray[np.float64], c_to: NDArray[np.float64], angle: f
 def warp_rgba(img: F32, m: NDArray[np.float64], size: tuple[int, int]) -> F32:
     """Straight-alpha RGBA resampled by an affine map onto a ``size`` canvas (premultiplied
     colours are interpolated, so transparent pixels do not bleed into the edge)."""
-    pre = np.concatenate([img[..., :3] * img[..., 3:], img[..., 3:]], axis=2)
-    out = cv2.warpAffine(pre, m, (size[1], size[0]), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-    a = out[..., 3:]
-    rgb = np.where(a > 1e-6, out[..., :3] / np.maximum(a, 1e-6), 0.0)
-    return np.ascontiguousarray(np.concatenate([np.clip(rgb, 0, 1), np.clip(a, 0, 1)], axis=2), dtype=np.float32)
+    out = cv2.warpAffine(
+        premultiplied(img), m, (size[1], size[0]), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT
+    )
+    return np.ascontiguousarray(straight(np.asarray(out, np.float32)))
 
 
 def pose(leaf: Any, training: Any) -> tuple[NDArray[np.float64], float]:

@@ -16,7 +16,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import _core
-from .._validate import as_image, check_int, check_seed, check_threads, derive_seed
+from .._validate import as_image, check_int, check_seed, check_threads, derive_seed, restore_ndim
+from ._fields import sample_checked
 
 __all__ = ["Registration", "keypoints", "register"]
 
@@ -144,8 +145,7 @@ def _sample(image: Any, field: NDArray[np.float32], shape: tuple[int, ...], thre
     img = as_image(image, "image")
     if img.shape[:2] != shape:
         raise ValueError(f"image: expected an image of size {tuple(shape)}, got {img.shape[:2]}")
-    out = _core.tps_sample(img, np.ascontiguousarray(field), threads=check_threads(threads))
-    return out[..., 0] if np.ndim(image) == 2 else out
+    return restore_ndim(sample_checked(img, np.ascontiguousarray(field), check_threads(threads)), image)
 
 
 def register(

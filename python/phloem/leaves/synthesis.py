@@ -36,6 +36,7 @@ from .._api import Seed, Size
 from .._progress import Progress
 from .._validate import check_float, check_int, check_seed, check_size, check_threads, derive_seed
 from ._fields import as_field, sample_checked
+from ._rgba import premultiplied, straight
 from .correction import correct_texture
 from .model import LeafModel
 
@@ -273,24 +274,7 @@ def _resize(rgba: F32, factor: float) -> F32:
     h, w = rgba.shape[:2]
     size = (max(round(w * factor), 1), max(round(h * factor), 1))
     mode = cv2.INTER_AREA if factor < 1 else cv2.INTER_LINEAR
-    return _straight(np.asarray(cv2.resize(_premultiplied(rgba), size, interpolation=mode), np.float32))
-
-
-def _premultiplied(rgba: Any) -> F32:
-    x = np.asarray(rgba, dtype=np.float32)
-    out = np.empty(x.shape, np.float32)
-    out[..., :3] = x[..., :3] * x[..., 3:4]
-    out[..., 3] = x[..., 3]
-    return out
-
-
-def _straight(pre: F32) -> F32:
-    a = pre[..., 3:4]
-    out = np.zeros_like(pre)
-    np.divide(pre[..., :3], a, out=out[..., :3], where=a > 1e-6)
-    out[..., :3] = np.clip(out[..., :3], 0.0, 1.0)
-    out[..., 3] = np.clip(pre[..., 3], 0.0, 1.0)
-    return out
+    return straight(np.asarray(cv2.resize(premultiplied(rgba), size, interpolation=mode), np.float32))
 
 
 def _compose(background: F32, layers: list[F32], dissimilarity: list[F32], delta: list[float]) -> F32:
@@ -376,13 +360,13 @@ def _training_frame(
     seeds = rng.integers(0, 2**63, size=n_layers + 1)
     smooth = max(WARP_SMOOTHNESS * min(h, w), 1.0)
     field = random_warp((h, w), bounds[j_bg], smoothness=smooth, seed=int(seeds[0]))
-    bg = sample_checked(_premultiplied(m.background[j_bg]), field, threads)
+    bg = sample_checked(premultiplied(m.background[j_bg]), field, threads)
     layers, diss = [], []
     for k, j in enumerate(j_layers):
         field = random_warp((h, w), (1.0 - structure[k]) * bounds[j], smoothness=smooth, seed=int(seeds[1 + k]))
         # D is NaN off the exemplar's leaf (leaves.induce): there the layer has no weight
         d = np.nan_to_num(np.asarray(m.dissimilarity[j][k], np.float32), nan=_FAR, posinf=_FAR, neginf=0.0)[..., None]
-        warped = sample_checked(np.concatenate([_premultiplied(m.layers[j][k]), d], axis=2), field, threads)
+        warped = sample_checked(np.concatenate([premultiplied(m.layers[j][k]), d], axis=2), field, threads)
         layers.append(np.ascontiguousarray(warped[..., :4]))
         diss.append(np.ascontiguousarray(warped[..., 4]))
     return _compose(bg, layers, diss, [float(d) for d in m.delta])
@@ -456,10 +440,10 @@ def synthesize(
         pre = sample_checked(composition, back, nt)
         box = _box(pre[..., 3] > 0)
         if correct is None:
-            leaf_img = _straight(pre[box])
+            leaf_img = straight(pre[box])
         else:
-            full = _straight(pre)
-            fixed = np.asarray(correct(full, _straight(composition), back, seed=int(seeds[1]), threads=nt), np.float32)
+            full = straight(pre)
+            fixed = np.asarray(correct(full, straight(composition), back, seed=int(seeds[1]), threads=nt), np.float32)
             full[..., :3] = fixed[..., :3]  # the alpha stays the warped one
             leaf_img = full[box]
         if sizes is not None:
