@@ -21,6 +21,7 @@ __all__ = [
     "mvc_combine",
     "mvc_warp",
     "mvc_weights",
+    "nearest_colour",
     "nnf",
     "seam",
     "seamless",
@@ -161,6 +162,13 @@ def emd_map(
     threads: int | None,
 ) -> NDArray[np.float32]: ...
 def emd(hist_a: NDArray[np.float64], hist_b: NDArray[np.float64], ground: NDArray[np.float64]) -> float: ...
+def nearest_colour(
+    points: NDArray[np.float32],
+    centres: NDArray[np.float32],
+    norms: NDArray[np.float32],
+    *,
+    threads: int | None,
+) -> NDArray[np.int32]: ...
 def tps_register(
     fixed_points: NDArray[np.float64],
     moving_points: NDArray[np.float64],

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from phloem import metrics
-from phloem.leaves import color_distance
+from phloem.leaves import color, color_distance
 
 ot = pytest.importorskip("ot")
 
@@ -100,6 +100,50 @@ def test_the_result_is_the_same_for_one_and_two_threads() -> None:
     two = color_distance(image, layer, threads=2, seed=3)
     np.testing.assert_array_equal(one, two)
     assert np.isfinite(one).all()
+
+
+def _nearest_numpy(points: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """The NumPy assignment the Rust one replaced: a running minimum of cc − 2 ⟨p, c⟩ in float32."""
+    c = centres.astype(np.float32)
+    cc = (c**2).sum(1)
+    x, y, z = (np.ascontiguousarray(points[:, d], dtype=np.float32) for d in range(3))
+    best = np.full(len(points), np.inf, np.float32)
+    idx = np.zeros(len(points), np.int32)
+    for k in range(len(c)):
+        d = cc[k] - 2.0 * (x * c[k, 0] + y * c[k, 1] + z * c[k, 2])
+        closer = d < best
+        best[closer] = d[closer]
+        idx[closer] = k
+    return idx
+
+
+def test_palette_assignment_equals_the_numpy_expression_bit_for_bit() -> None:
+    rng = np.random.default_rng(8)
+    centres = rng.uniform([0, -80, -80], [100, 80, 80], (16, 3))
+    centres[9] = centres[4]  # a repeated colour: the first wins
+    # Random colours, the centres themselves and midpoints of pairs (near-ties, where the order
+    # of the float32 operations decides).
+    mid = (centres[:, None] + centres[None]).reshape(-1, 3) / 2
+    points = np.concatenate([rng.uniform([0, -90, -90], [100, 90, 90], (30_000, 3)), centres, mid])
+    points = points.astype(np.float32)
+    want = _nearest_numpy(points, centres)
+    assert 9 not in want
+    for threads in (1, 2):
+        np.testing.assert_array_equal(color._nearest(points, centres, threads), want)
+
+
+def test_lab_of_the_leaf_pixels_equals_converting_the_whole_image() -> None:
+    rng = np.random.default_rng(9)
+    image = rng.random((61, 83, 4)).astype(np.float32)
+    image[:5] = 0.0
+    image[-5:] = 1.0
+    image[5:9] *= 1.4  # out of range: both clip
+    mask = rng.random((61, 83)) < 0.4
+    full = color._lab(image)
+    np.testing.assert_array_equal(color._lab_of(image, mask), full[mask])
+    gray = np.ascontiguousarray(image[..., :2])  # gray + alpha: the gray is repeated
+    full = color._lab(gray)
+    np.testing.assert_array_equal(color._lab_of(gray, mask), full[mask])
 
 
 def test_metrics_emd_agrees_with_pot() -> None:

@@ -42,39 +42,41 @@ def _lab(image: NDArray[np.float32]) -> NDArray[np.float32]:
     return np.asarray(cv2.cvtColor(rgb, cv2.COLOR_RGB2Lab), dtype=np.float32)
 
 
-def _nearest(points: NDArray[Any], centres: NDArray[np.float64]) -> NDArray[np.int32]:
+def _lab_of(image: NDArray[np.float32], where: NDArray[np.bool_]) -> NDArray[np.float32]:
+    """The CIELAB colours of the pixels ``where``, ``(N, 3)``.
+
+    Only those pixels are converted (OpenCV converts each pixel on its own, so this equals
+    converting the whole image and picking them), as one row.
+    """
+    px = image[where]
+    rgb = px[:, :3] if px.shape[1] >= 3 else np.repeat(px[:, :1], 3, axis=1)
+    rgb = np.ascontiguousarray(np.clip(rgb, 0.0, 1.0), dtype=np.float32).reshape(1, -1, 3)
+    return np.asarray(cv2.cvtColor(rgb, cv2.COLOR_RGB2Lab), dtype=np.float32).reshape(-1, 3)
+
+
+def _nearest(points: NDArray[Any], centres: NDArray[np.float64], threads: int | None) -> NDArray[np.int32]:
     """The index of each point's nearest centre (the first on a tie), in float32.
 
-    A running minimum over the (at most 32) centres, each a few passes over contiguous columns:
-    faster than a distance matrix and ``argmin`` along its short axis, and than a BLAS product
-    with an inner dimension of 3 (whose threads spin on a busy machine).
+    The smallest ``|c|² − 2 ⟨p, c⟩`` (``|p|²`` is the same for every centre), computed by the
+    Rust core in the order of the NumPy expression ``cc[k] - 2.0 * (x * c[k, 0] + y * c[k, 1] +
+    z * c[k, 2])``, so the labels equal that expression's bit for bit.
     """
-    out = np.empty(len(points), np.int32)
-    c = centres.astype(np.float32)
-    cc = (c**2).sum(1)
-    for s in range(0, len(points), 1 << 18):
-        p = np.asarray(points[s : s + (1 << 18)], dtype=np.float32)
-        x, y, z = (np.ascontiguousarray(p[:, d]) for d in range(3))
-        best = np.full(len(p), np.inf, np.float32)
-        idx = out[s : s + len(p)]
-        idx[:] = 0
-        for k in range(len(c)):
-            # |p|² is the same for every centre, so it is left out.
-            d = cc[k] - 2.0 * (x * c[k, 0] + y * c[k, 1] + z * c[k, 2])
-            closer = d < best
-            best[closer] = d[closer]
-            idx[closer] = k
-    return out
+    c = np.ascontiguousarray(centres, dtype=np.float32)
+    cc = np.ascontiguousarray((c**2).sum(1), dtype=np.float32)
+    p = np.ascontiguousarray(points, dtype=np.float32)
+    return _core.nearest_colour(p, c, cc, threads=threads)
 
 
-def palette(lab: Any, n_bins: int = 16, *, seed: Seed = 0) -> NDArray[np.float64]:
+def palette(lab: Any, n_bins: int = 16, *, seed: Seed = 0, threads: int | None = None) -> NDArray[np.float64]:
     """Up to ``n_bins`` CIELAB colours that quantise the ``(N, 3)`` colours ``lab``.
 
     k-means (k-means++ start, then Lloyd iterations) on a seeded sample of at most 40 000
     colours; fewer distinct colours than ``n_bins`` give a palette of exactly those colours.
-    Deterministic for a seed.
+    Deterministic for a seed, the same for any number of ``threads`` (default: phloem's pool
+    size).
     """
     n_bins = _check_bins(n_bins)
+    threads = check_threads(threads)
     pts = np.asarray(lab).reshape(-1, 3)
     if len(pts) == 0:
         raise ValueError("lab: expected at least one colour")
@@ -91,8 +93,9 @@ def palette(lab: Any, n_bins: int = 16, *, seed: Seed = 0) -> NDArray[np.float64
         centres.append(pts[rng.choice(len(pts), p=d2 / d2.sum())])
         d2 = np.minimum(d2, ((pts - centres[-1]) ** 2).sum(1))
     c = np.array(centres)
+    pts32 = pts.astype(np.float32)  # what the assignment sees, converted once
     for _ in range(_ITERATIONS):
-        lab_of = _nearest(pts, c)
+        lab_of = _nearest(pts32, c, threads)
         counts = np.bincount(lab_of, minlength=n_bins)
         sums = np.stack([np.bincount(lab_of, pts[:, d], minlength=n_bins) for d in range(3)], axis=1)
         moved = np.where(counts[:, None] > 0, sums / np.maximum(counts, 1)[:, None], c)
@@ -171,17 +174,15 @@ def color_distance(
         raise ValueError("layer_mask: the layer has no pixels")
     if not leaf.any():
         raise ValueError("mask: the leaf has no pixels")
-    lab = _lab(img).reshape(-1, 3)
-    ref_lab = lab if reference is None else _lab(ref).reshape(-1, 3)
-    layer_lab = ref_lab[layer.ravel()]
-    leaf_lab = lab[leaf.ravel()]
+    leaf_lab = _lab_of(img, leaf)
+    layer_lab = _lab_of(ref, layer)
     # The palette covers the leaf and the layer, so the layer's colours have bins of their own
     # even when the leaf shows them rarely.
-    pal = palette(np.concatenate([leaf_lab, layer_lab]), n_bins, seed=seed)
+    pal = palette(np.concatenate([leaf_lab, layer_lab]), n_bins, seed=seed, threads=threads)
     ground = np.sqrt(((pal[:, None, :] - pal[None, :, :]) ** 2).sum(-1))
     labels = np.full(leaf.size, -1, np.int32)
-    labels[leaf.ravel()] = _nearest(leaf_lab, pal)
-    target = np.bincount(_nearest(layer_lab, pal), minlength=len(pal)).astype(np.float64)
+    labels[leaf.ravel()] = _nearest(leaf_lab, pal, threads)
+    target = np.bincount(_nearest(layer_lab, pal, threads), minlength=len(pal)).astype(np.float64)
     return _core.emd_map(
         labels.reshape(leaf.shape),
         np.ascontiguousarray(ground),

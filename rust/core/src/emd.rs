@@ -60,6 +60,8 @@ pub struct Transport {
     pot: [f64; NODES],
     /// The node below each basis edge (the one whose parent edge it is).
     below: [u8; NODES],
+    /// Scratch of [`Self::flows`] (kept here so a call need not zero 512 bytes).
+    rest: [f64; NODES],
 }
 
 impl Transport {
@@ -101,6 +103,7 @@ impl Transport {
             depth: [0; NODES],
             pot: [0.0; NODES],
             below: [0; NODES],
+            rest: [0.0; NODES],
         })
     }
 
@@ -240,7 +243,7 @@ impl Transport {
     /// each node's edge to its parent carries the net supply of the node's subtree.
     fn flows(&mut self, a: &[f64], b: &[f64]) {
         let (n, m) = (self.n, self.m);
-        let mut rest = [0.0f64; NODES];
+        let rest = &mut self.rest;
         rest[..n].copy_from_slice(a);
         for (r, &d) in rest[n..n + m].iter_mut().zip(b) {
             *r = -d;
@@ -478,6 +481,51 @@ pub fn emd(a: &[f64], b: &[f64], ground: &[f64]) -> Result<f64> {
     t.solve(&a, &b)
 }
 
+/// Colours per parallel task of [`nearest`].
+const NEAREST_CHUNK: usize = 1 << 14;
+
+/// The index of each colour's nearest palette colour, the first on a tie: for `points` (`N × 3`,
+/// row-major) and `centres` (`k × 3`) with `norms[c] = |centres[c]|²`, the smallest of
+/// `norms[c] − 2 ⟨p, centres[c]⟩` (|p|² is the same for every centre, so it is left out). In
+/// float32 with the operations in the order NumPy evaluates
+/// `cc[k] - 2.0 * (x * c[k, 0] + y * c[k, 1] + z * c[k, 2])`, so the labels equal that
+/// expression's bit for bit.
+pub fn nearest(points: &[f32], centres: &[f32], norms: &[f32]) -> Result<Vec<i32>> {
+    if points.len() % 3 != 0 {
+        return Err(invalid("points", "expected N × 3 values"));
+    }
+    let k = centres.len() / 3;
+    if centres.len() % 3 != 0 || k == 0 || k > MAX_BINS {
+        return Err(invalid(
+            "centres",
+            format!("expected 1 to {MAX_BINS} colours of 3 values"),
+        ));
+    }
+    if norms.len() != k {
+        return Err(invalid(
+            "norms",
+            format!("expected {k} values, got {}", norms.len()),
+        ));
+    }
+    let mut out = vec![0i32; points.len() / 3];
+    out.par_chunks_mut(NEAREST_CHUNK)
+        .zip(points.par_chunks(3 * NEAREST_CHUNK))
+        .for_each(|(labels, pts)| {
+            for (l, p) in labels.iter_mut().zip(pts.chunks_exact(3)) {
+                let mut best = f32::INFINITY;
+                for (c, (q, &cc)) in centres.chunks_exact(3).zip(norms).enumerate() {
+                    let d = cc - 2.0 * (p[0] * q[0] + p[1] * q[1] + p[2] * q[2]);
+                    if d < best {
+                        best = d;
+                        *l = c as i32;
+                    }
+                }
+            }
+        });
+    cancel::check()?;
+    Ok(out)
+}
+
 /// Inputs of [`emd_map`].
 #[derive(Clone, Copy, Debug)]
 pub struct MapInput<'a> {
@@ -507,6 +555,11 @@ const CACHE_BITS: u32 = 15;
 /// An exact cache from window histograms (integer counts) to their value: open addressing
 /// on a linear hash `Σ count_b · R_b` that the sliding window updates in O(1) per pixel.
 /// It is filled to at most half, then only looked up.
+///
+/// Where windows hardly repeat (a textured or noisy leaf: ~all distinct) a lookup is a cache
+/// miss in a 2 MB table for nothing, so a row whose hit rate is low makes the next row only
+/// sample (every [`SAMPLE`]-th window); a sampled row with hits turns it back on. The choice
+/// depends only on the block's own rows, and the values are exact either way.
 struct Cache {
     n: usize,
     keys: Vec<u32>,
@@ -514,7 +567,13 @@ struct Cache {
     values: Vec<f32>,
     used: Vec<bool>,
     filled: usize,
+    lookups: u32,
+    hits: u32,
+    sampling: bool,
 }
+
+/// While sampling, the cache sees every `SAMPLE`-th window of a row.
+const SAMPLE: usize = 8;
 
 impl Cache {
     fn new(n: usize) -> Self {
@@ -526,12 +585,30 @@ impl Cache {
             values: vec![0.0; slots],
             used: vec![false; slots],
             filled: 0,
+            lookups: 0,
+            hits: 0,
+            sampling: false,
         }
     }
 
     fn clear(&mut self) {
         self.used.fill(false);
         self.filled = 0;
+        self.lookups = 0;
+        self.hits = 0;
+        self.sampling = false;
+    }
+
+    /// Whether the window at column `x` goes through the cache.
+    fn sees(&self, x: usize) -> bool {
+        !self.sampling || x % SAMPLE == 0
+    }
+
+    /// Ends a row: the next one samples unless at least one lookup in eight hit.
+    fn end_row(&mut self) {
+        self.sampling = 8 * self.hits < self.lookups;
+        self.lookups = 0;
+        self.hits = 0;
     }
 
     /// The slot holding `counts`, or the empty slot where it would go.
@@ -546,8 +623,10 @@ impl Cache {
         s
     }
 
-    fn get(&self, hash: u64, counts: &[u32]) -> Option<f32> {
+    fn get(&mut self, hash: u64, counts: &[u32]) -> Option<f32> {
         let s = self.slot(hash, counts);
+        self.lookups += 1;
+        self.hits += u32::from(self.used[s]);
         self.used[s].then(|| self.values[s])
     }
 
@@ -667,36 +746,40 @@ fn map_row(
     let mut solver = start.clone();
     let mut next: Option<Transport> = None;
     let mut counts = [0u32; MAX_BINS];
+    let mut total = 0u32;
     let mut hash = 0u64;
     let mut supply = [0.0f64; MAX_BINS];
     let mut last: Option<(u64, [u32; MAX_BINS], f32)> = None;
-    let column = |x: usize, counts: &mut [u32; MAX_BINS], hash: &mut u64, add: bool| {
-        for yy in y0..y1 {
-            let l = input.labels[yy * w + x];
-            if l >= 0 {
-                let l = l as usize;
-                if add {
-                    counts[l] += 1;
-                    *hash = hash.wrapping_add(mult[l]);
-                } else {
-                    counts[l] -= 1;
-                    *hash = hash.wrapping_sub(mult[l]);
+    let column =
+        |x: usize, counts: &mut [u32; MAX_BINS], total: &mut u32, hash: &mut u64, add: bool| {
+            for yy in y0..y1 {
+                let l = input.labels[yy * w + x];
+                if l >= 0 {
+                    let l = l as usize;
+                    if add {
+                        counts[l] += 1;
+                        *total += 1;
+                        *hash = hash.wrapping_add(mult[l]);
+                    } else {
+                        counts[l] -= 1;
+                        *total -= 1;
+                        *hash = hash.wrapping_sub(mult[l]);
+                    }
                 }
             }
-        }
-    };
+        };
     // Columns [x − before, x + after) are in the window of pixel x.
     for x in 0..after.saturating_sub(1).min(w) {
-        column(x, &mut counts, &mut hash, true);
+        column(x, &mut counts, &mut total, &mut hash, true);
     }
     // `x` also indexes the labels and the columns entering and leaving.
     #[allow(clippy::needless_range_loop)]
     for x in 0..w {
         if x + after - 1 < w {
-            column(x + after - 1, &mut counts, &mut hash, true);
+            column(x + after - 1, &mut counts, &mut total, &mut hash, true);
         }
         if x > before {
-            column(x - before - 1, &mut counts, &mut hash, false);
+            column(x - before - 1, &mut counts, &mut total, &mut hash, false);
         }
         if input.labels[y * w + x] < 0 {
             continue;
@@ -708,29 +791,30 @@ fn map_row(
                 continue;
             }
         }
-        let s = if let Some(s) = cache.get(hash, key) {
+        let sees = cache.sees(x);
+        let s = if let Some(s) = sees.then(|| cache.get(hash, key)).flatten() {
             s
         } else {
-            let t = f64::from(total_of(key));
+            let t = f64::from(total);
             for (s, &c) in supply.iter_mut().zip(key) {
-                *s = f64::from(c) / t;
+                // 0 / t is 0: only the window's colours need a division.
+                *s = if c == 0 { 0.0 } else { f64::from(c) / t };
             }
             let d = solver.solve(&supply[..n], target)?;
             if next.is_none() {
                 next = Some(solver.clone());
             }
             let s = if scale > 0.0 { (d / scale) as f32 } else { 0.0 };
-            cache.put(hash, key, s);
+            if sees {
+                cache.put(hash, key, s);
+            }
             s
         };
         row[x] = s;
         last = Some((hash, counts, s));
     }
+    cache.end_row();
     Ok(next.unwrap_or(start))
-}
-
-fn total_of(counts: &[u32]) -> u32 {
-    counts.iter().sum()
 }
 
 #[cfg(test)]
@@ -1015,6 +1099,67 @@ mod tests {
         assert_ne!(h(&[1, 2, 3]), h(&[3, 2, 1]));
         cache.clear();
         assert_eq!(cache.get(7, &[1, 2, 3]), None);
+    }
+
+    #[test]
+    fn a_row_of_misses_makes_the_next_row_sample_and_a_hit_turns_it_back() {
+        let mut cache = Cache::new(2);
+        assert!((0..16).all(|x| cache.sees(x)));
+        for x in 0..16 {
+            assert_eq!(cache.get(x, &[x as u32, 1]), None);
+            cache.put(x, &[x as u32, 1], 0.5);
+        }
+        cache.end_row(); // 16 misses
+        assert!(cache.sees(0) && cache.sees(SAMPLE) && !cache.sees(1) && !cache.sees(SAMPLE - 1));
+        assert_eq!(cache.get(3, &[3, 1]), Some(0.5));
+        cache.end_row(); // 1 hit in 1 lookup
+        assert!((0..16).all(|x| cache.sees(x)));
+        for misses in [7, 8] {
+            for x in 0..misses {
+                cache.get(100 + x, &[0, 0]);
+            }
+            cache.get(3, &[3, 1]);
+            cache.end_row();
+            // One hit in eight lookups keeps it on; one in nine is too few.
+            assert_eq!(cache.sees(1), misses == 7);
+        }
+        cache.clear();
+        assert!(cache.sees(1));
+    }
+
+    #[test]
+    fn nearest_takes_the_closest_centre_and_the_first_on_a_tie() {
+        let mut rng = Rng::new(6);
+        let mut centres: Vec<f32> = (0..30).map(|_| (rng.f64() * 100.0 - 50.0) as f32).collect();
+        // Centres 10 and 11 repeat 2 and 7: a tie every time one of those is nearest.
+        centres.extend_from_within(6..9);
+        centres.extend_from_within(21..24);
+        let norms: Vec<f32> = centres
+            .chunks_exact(3)
+            .map(|c| c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
+            .collect();
+        let mut points: Vec<f32> = (0..3 * 5000)
+            .map(|_| (rng.f64() * 120.0 - 60.0) as f32)
+            .collect();
+        points.extend_from_slice(&centres[6..9]); // exactly on a repeated centre
+        let labels = nearest(&points, &centres, &norms).unwrap();
+        let d2 = |p: &[f32], c: usize| -> f64 {
+            (0..3)
+                .map(|d| (f64::from(p[d]) - f64::from(centres[3 * c + d])).powi(2))
+                .sum()
+        };
+        for (p, &l) in points.chunks_exact(3).zip(&labels) {
+            let l = l as usize;
+            assert!(l != 10 && l != 11, "a repeated centre took {l}");
+            let best = (0..12).map(|c| d2(p, c)).fold(f64::INFINITY, f64::min);
+            // Up to float32 rounding of |c|² − 2⟨p, c⟩ (terms of order 10⁴).
+            assert!(d2(p, l) <= best + 1e-2, "{} vs {best}", d2(p, l));
+        }
+        assert_eq!(*labels.last().unwrap(), 2);
+        assert!(nearest(&points[..4], &centres, &norms).is_err());
+        assert!(nearest(&points, &centres[..2], &norms).is_err());
+        assert!(nearest(&points, &centres, &norms[..3]).is_err());
+        assert!(nearest(&points, &[], &[]).is_err());
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! Bindings of `phloem_core::emd` for `phloem.leaves.color_distance` and `phloem.metrics.emd`.
 
-use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use phloem_core::emd::{self, MapInput};
 use phloem_core::error::invalid;
 use pyo3::prelude::*;
@@ -61,4 +61,30 @@ pub fn emd_py(
         g,
     )
     .map_err(to_py)
+}
+
+/// The index of each colour's nearest palette colour (`phloem.leaves.color`'s quantisation).
+#[pyfunction]
+#[pyo3(name = "nearest_colour", signature = (points, centres, norms, *, threads))]
+pub fn nearest_colour_py<'py>(
+    py: Python<'py>,
+    points: PyReadonlyArray2<'py, f32>,
+    centres: PyReadonlyArray2<'py, f32>,
+    norms: PyReadonlyArray1<'py, f32>,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyArray1<i32>>> {
+    for (name, a) in [("points", &points), ("centres", &centres)] {
+        let (_, d) = a.as_array().dim();
+        if d != 3 {
+            return Err(to_py(invalid(
+                name,
+                format!("expected 3 values per colour, got {d}"),
+            )));
+        }
+    }
+    let pts = points.as_slice().map_err(not_contiguous("points"))?;
+    let cs = centres.as_slice().map_err(not_contiguous("centres"))?;
+    let nm = norms.as_slice().map_err(not_contiguous("norms"))?;
+    let out = run(py, threads, None, |_| emd::nearest(pts, cs, nm))?;
+    Ok(array(py, out.len(), out))
 }

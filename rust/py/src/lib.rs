@@ -47,6 +47,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(warp::mvc_combine_py, m)?)?;
     m.add_function(wrap_pyfunction!(emd::emd_map_py, m)?)?;
     m.add_function(wrap_pyfunction!(emd::emd_py, m)?)?;
+    m.add_function(wrap_pyfunction!(emd::nearest_colour_py, m)?)?;
     m.add_function(wrap_pyfunction!(tps::tps_register_py, m)?)?;
     m.add_function(wrap_pyfunction!(tps::tps_sample_py, m)?)?;
     m.add_function(wrap_pyfunction!(correction::guided_quilt_py, m)?)?;
