@@ -12,7 +12,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from typing import Any, TypeVar
+from typing import Any, Final, TypeVar
 
 import cv2
 import numpy as np
@@ -38,6 +38,10 @@ T = TypeVar("T")
 #: registration warp's bilinear resampling, is half layer colour and would stay behind as a
 #: ghost outline in the background layer.
 PEEL_RIM = 2
+#: The completion pyramid of a peel. ``"auto"`` also runs the strict pyramid, which only wins on
+#: fine periodic structure out of phase; on leaf blades it never did, so it cost a fifth of
+#: every peel for the same fill (docs/pipelines/leaves/analysis.md).
+PEEL_PYRAMID: Final = "interpolate"
 
 
 def _leaves(leaves: Any) -> list[F32]:
@@ -87,7 +91,9 @@ def _peel(
     if not source.any():
         raise ValueError("scribbles: a layer covers the whole leaf; expected other layers to remain")
     progress = None if check is None else (lambda done, total: check())
-    rgb = complete(image[..., :3], hole, source_mask=source, seed=seed, threads=threads, progress=progress)
+    rgb = complete(
+        image[..., :3], hole, source_mask=source, pyramid=PEEL_PYRAMID, seed=seed, threads=threads, progress=progress
+    )
     return np.ascontiguousarray(np.concatenate([rgb, image[..., 3:]], axis=2), dtype=np.float32)
 
 
