@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import threading
+import time
+
 import cv2
 import numpy as np
 import pytest
 
 from phloem import leaves
+from phloem.leaves import analysis
 from phloem.testing import layered_leaf, scribbles_from
 
 # small leaves and few keypoints keep these fast; epsilon is about the registration error here
@@ -154,3 +160,54 @@ def test_bad_input_is_a_one_line_error(leaf_set, change: str, message: str) -> N
     with pytest.raises((ValueError, TypeError), match=message) as info:
         leaves.analyze(imgs, sc, **kw)
     assert "\n" not in str(info.value)
+
+
+def test_the_stages_side_by_side_make_the_serial_model(leaf_set) -> None:
+    # threads=1 runs every task in turn; 2 and 3 run the exemplars' registrations and peels side by side
+    imgs, _, sc = leaf_set
+    a, b, c = (leaves.analyze(imgs, sc, seed=4, threads=n, **_KW) for n in (1, 2, 3))
+    for m in (b, c):
+        fields = ("aligned", "background", "forward", "inverse", "masks", "layers", "dissimilarity")
+        for name in fields:
+            for x, y in zip(getattr(a, name), getattr(m, name), strict=True):
+                assert np.array_equal(np.asarray(x), np.asarray(y)), name
+        assert a.residual == m.residual and a.lam == m.lam and a.objective == m.objective
+
+
+def test_progress_comes_in_order_from_stages_side_by_side(leaf_set) -> None:
+    imgs, _, sc = leaf_set
+    seen: list[tuple[int, int]] = []
+    leaves.analyze(imgs, sc, threads=3, progress=lambda d, t: seen.append((d, t)), **_KW)
+    # 2 per registered exemplar, 1 for the scribbles, then per peeled layer 1 induction + 3 peels
+    assert seen == [(d, 2 * 2 + 1 + 2 * 4) for d in range(1, 2 * 2 + 1 + 2 * 4 + 1)]
+
+
+def test_ctrl_c_stops_the_peels_running_beside_each_other(leaf_set, monkeypatch) -> None:
+    # Python delivers SIGINT to the main thread only: it must stop the workers' completions at
+    # their next iteration, drop the peel not started, and raise once every worker has ended
+    imgs, _, sc = leaf_set
+    started, stopped, finished = [], [], []
+    running = threading.Event()
+
+    def slow_complete(image, mask, *, progress, **kw):
+        started.append(1)
+        if len(started) == 2:  # both workers are busy: now the user presses Ctrl-C
+            running.set()
+        try:
+            for k in range(2000):  # ~20 s unless stopped
+                time.sleep(0.01)
+                progress(k + 1, 2000)
+        except BaseException:
+            stopped.append(1)
+            raise
+        finished.append(1)
+        return image
+
+    monkeypatch.setattr(analysis, "complete", slow_complete)
+    timer = threading.Thread(target=lambda: running.wait(30) and os.kill(os.getpid(), signal.SIGINT))
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        leaves.analyze(imgs, sc, threads=2, **_KW)
+    timer.join()
+    assert len(started) == 2 and len(stopped) == 2 and not finished  # the third peel never began
+    assert not [th for th in threading.enumerate() if th.name.startswith("phloem-leaves")]

@@ -9,6 +9,7 @@ import pytest
 
 from phloem import _core
 from phloem.leaves import correct_texture, distortion
+from phloem.leaves.correction import _ROUNDS, checked
 
 PERIOD = 8
 
@@ -250,3 +251,20 @@ def test_bad_input_one_line_errors() -> None:
         correct_texture(src, np.zeros_like(src), stretched)
     with pytest.raises(ValueError, match=r"^field: expected a non-empty \(H, W, 2\)"):
         distortion(np.zeros((4, 4)))
+
+
+def test_the_check_runs_between_engine_calls_and_changes_nothing(dots) -> None:  # type: ignore[no-untyped-def]
+    # leaves.analyze stops a correction on a worker thread through this check
+    src, field, warped, out = dots
+    calls: list[int] = []
+    with checked(lambda: calls.append(1)):
+        assert np.array_equal(correct_texture(warped, src, field, seed=0, threads=2), out)
+    assert len(calls) == 1 + 2 * _ROUNDS  # after the quilting, then after each search and each vote
+    correct_texture(warped, src, field, seed=0, threads=2)
+    assert len(calls) == 1 + 2 * _ROUNDS  # only within the block
+
+    def stop() -> None:
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt), checked(stop):
+        correct_texture(warped, src, field, seed=0, threads=2)

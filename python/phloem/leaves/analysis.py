@@ -9,18 +9,20 @@ from the rest of the leaf), so the next layer is induced on what remains (Fig. 7
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Any
+import threading
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
+from typing import Any, Final, TypeVar
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import _memory
+from .. import _core, _memory
 from .._progress import Progress
 from .._validate import as_image, check_float, check_int, check_seed, check_threads, derive_seed
 from ..texture import complete
-from .correction import correct_texture
+from .correction import checked, correct_texture
 from .induction import induce
 from .model import LeafModel
 from .pose import canvas, warp_rgba
@@ -30,11 +32,16 @@ from .scribbles import layers_from_scribbles, read_scribbles
 __all__ = ["analyze"]
 
 F32 = NDArray[np.float32]
+T = TypeVar("T")
 
 #: Pixels around a layer that are peeled with it: its anti-aliased edge, widened by the
 #: registration warp's bilinear resampling, is half layer colour and would stay behind as a
 #: ghost outline in the background layer.
 PEEL_RIM = 2
+#: The completion pyramid of a peel. ``"auto"`` also runs the strict pyramid, which only wins on
+#: fine periodic structure out of phase; on leaf blades it never did, so it cost a fifth of
+#: every peel for the same fill (docs/pipelines/leaves/analysis.md).
+PEEL_PYRAMID: Final = "interpolate"
 
 
 def _leaves(leaves: Any) -> list[F32]:
@@ -70,9 +77,11 @@ def _order(order: Any, n_layers: int) -> list[int]:
     return seq
 
 
-def _peel(image: F32, layer: NDArray[np.bool_], *, seed: int, threads: int | None) -> F32:
+def _peel(
+    image: F32, layer: NDArray[np.bool_], *, seed: int, threads: int | None, check: Callable[[], None] | None = None
+) -> F32:
     """The image with ``layer``'s pixels and a rim of :data:`PEEL_RIM` px completed from the
-    rest of the leaf; alpha unchanged."""
+    rest of the leaf; alpha unchanged. ``check`` runs after every completion iteration."""
     leaf = image[..., 3] > 0.5
     disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * PEEL_RIM + 1, 2 * PEEL_RIM + 1))
     hole = cv2.dilate(layer.astype(np.uint8), disk).astype(bool) & leaf
@@ -81,8 +90,84 @@ def _peel(image: F32, layer: NDArray[np.bool_], *, seed: int, threads: int | Non
     source = leaf & ~hole
     if not source.any():
         raise ValueError("scribbles: a layer covers the whole leaf; expected other layers to remain")
-    rgb = complete(image[..., :3], hole, source_mask=source, seed=seed, threads=threads)
+    progress = None if check is None else (lambda done, total: check())
+    rgb = complete(
+        image[..., :3], hole, source_mask=source, pyramid=PEEL_PYRAMID, seed=seed, threads=threads, progress=progress
+    )
     return np.ascontiguousarray(np.concatenate([rgb, image[..., 3:]], axis=2), dtype=np.float32)
+
+
+def _peeler(image: F32, layer: NDArray[np.bool_], seed: int) -> Task[F32]:
+    def task(threads: int | None, check: Callable[[], None]) -> F32:
+        return _peel(image, layer, seed=seed, threads=threads, check=check)
+
+    return task
+
+
+class _Stopped(Exception):
+    """Raised in a task of :class:`_Stages` once the analysis is being abandoned."""
+
+
+#: A stage task: called with its thread count and a check to call between engine calls.
+Task = Callable[[int | None, Callable[[], None]], T]
+
+
+class _Stages:
+    """Runs the independent per-exemplar calls of a stage side by side.
+
+    The engines release the GIL, but each runs partly serial (NumPy between the Rust calls,
+    the sequential quilting), so ``threads`` cores are better used by tasks side by side, each
+    on ``threads // width`` rayon threads, than by one task at a time on all of them
+    (docs/pipelines/leaves/analysis.md). Every task has its own seed and results come back
+    in submission order, so the model is the one the serial order makes. Python delivers
+    Ctrl-C only to the main thread, which here waits on the tasks: on any exception there the
+    tasks are told to stop (they raise at their next check, between engine calls), those not
+    started are dropped, and the exception is raised once every task has ended.
+    """
+
+    def __init__(self, threads: int | None) -> None:
+        self.threads = threads
+        self.cores = _core.default_threads() if threads is None else threads
+        self.stop = threading.Event()
+
+    def width(self, n_tasks: int) -> int:
+        return max(1, min(self.cores, n_tasks))
+
+    def check(self) -> None:
+        if self.stop.is_set():
+            raise _Stopped
+
+    def run(self, tasks: Sequence[Task[Any]], done: Callable[[int], None]) -> list[Any]:
+        """Results of ``tasks`` in order; ``done(k)`` in the calling thread after task k's."""
+        width = self.width(len(tasks))
+        if width == 1:
+            out = []
+            for k, task in enumerate(tasks):
+                out.append(task(self.threads, self.check))
+                done(k)
+            return out
+        per = self.cores // width
+
+        def start(task: Task[Any]) -> Any:
+            self.check()
+            return task(per, self.check)
+
+        pool = ThreadPoolExecutor(width, thread_name_prefix="phloem-leaves")
+        futures: list[Future[Any]] = []
+        try:
+            futures = [pool.submit(start, task) for task in tasks]
+            out = []
+            for k, fut in enumerate(futures):
+                out.append(fut.result())
+                done(k)
+            return out
+        except BaseException:
+            self.stop.set()
+            for fut in futures:
+                fut.cancel()
+            raise
+        finally:
+            pool.shutdown(wait=True)
 
 
 def analyze(
@@ -136,9 +221,11 @@ def analyze(
     seed : int or numpy.random.Generator, optional
         Seed (default 0); the model is the same for any thread count.
     threads : int, optional
-        Worker threads (default: ``PHLOEM_NUM_THREADS`` or all cores).
+        Worker threads (default: ``PHLOEM_NUM_THREADS`` or all cores); the exemplars'
+        registrations and peels run side by side on them.
     progress : callable, optional
-        ``progress(done, total)`` after every registration, induction and peel.
+        ``progress(done, total)`` after every registration, induction and peel, in that
+        order, from the calling thread.
     max_memory : int, optional
         Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak is over
         this many bytes (default: 75% of the machine's memory).
@@ -183,8 +270,11 @@ def analyze(
     removal = _order(order, n_layers)
 
     mats, scales, size = canvas(imgs, t)
-    _memory.check_size(_memory.leaves_analyze(size, len(imgs), n_layers), max_memory, size, "leaves")
     n = len(imgs)
+    stages = _Stages(th)
+    # Side by side, each of the widest stage's tasks holds one completion's buffers.
+    extra = (stages.width(n) - 1) * _memory.complete((*size, 3))
+    _memory.check_size(_memory.leaves_analyze(size, n, n_layers) + extra, max_memory, size, "leaves")
     total = 2 * (n - 1) + 1 + (n_layers - 1) * (1 + n)
     done = 0
 
@@ -200,26 +290,38 @@ def analyze(
     h, w = labels_in.shape
     scribble_canvas[ty : ty + h, tx : tx + w] = labels_in
 
-    zero = np.zeros((*size, 2), np.float32)
-    forward, inverse, residual, aligned = [], [], [], []
-    for i, leaf in enumerate(placed):
-        if i == t:
-            forward.append(zero)
-            inverse.append(zero)
-            residual.append(0.0)
-            aligned.append(leaf)
-            continue
-        reg = register(leaf, placed[t], points=n_points, seed=derive_seed(s, 1 + i), threads=th)
-        tick()
-        warped = reg.warp(leaf, threads=th)
-        aligned.append(correct_texture(warped, leaf, reg.forward, seed=derive_seed(s, 101 + i), threads=th))
-        tick()
-        forward.append(reg.forward)
-        inverse.append(reg.inverse)
-        residual.append(float(reg.residual))
+    def aligner(i: int) -> Task[tuple[Any, F32]]:
+        def task(threads: int | None, check: Callable[[], None]) -> tuple[Any, F32]:
+            reg = register(placed[i], placed[t], points=n_points, seed=derive_seed(s, 1 + i), threads=threads)
+            check()
+            warped = reg.warp(placed[i], threads=threads)
+            check()
+            with checked(check):
+                return reg, correct_texture(
+                    warped, placed[i], reg.forward, seed=derive_seed(s, 101 + i), threads=threads
+                )
 
-    labels = layers_from_scribbles(placed[t], scribble_canvas, order=removal, seed=derive_seed(s, 201), threads=th)
-    tick()
+        return task
+
+    def expand(threads: int | None, check: Callable[[], None]) -> NDArray[np.int32]:
+        return layers_from_scribbles(
+            placed[t], scribble_canvas, order=removal, seed=derive_seed(s, 201), threads=threads
+        )
+
+    # Registrations (two ticks each: registered, corrected) and the scribbles' layers, which
+    # need only the posed training leaf, side by side; ticks in the serial order.
+    others = [i for i in range(n) if i != t]
+
+    def ticks(k: int) -> None:
+        for _ in range(1 if k == len(others) else 2):
+            tick()
+
+    first = stages.run([*(aligner(i) for i in others), expand], ticks)
+    labels = first[-1]
+    zero = np.zeros((*size, 2), np.float32)
+    forward, inverse, residual, aligned = [zero] * n, [zero] * n, [0.0] * n, list(placed)
+    for i, (reg, corrected) in zip(others, first[:-1]):
+        forward[i], inverse[i], residual[i], aligned[i] = reg.forward, reg.inverse, float(reg.residual), corrected
 
     current = list(aligned)
     masks: list[list[NDArray[np.bool_]]] = [[] for _ in range(n)]
@@ -233,6 +335,7 @@ def analyze(
         lam.append(float(ind.lam))
         delta.append(float(ind.delta))
         objective.append(float(ind.objective))
+        peels: list[Task[F32]] = []
         for i in range(n):
             m = (user if i == t else np.asarray(ind.masks[i], bool)) & (current[i][..., 3] > 0.5)
             masks[i].append(m)
@@ -242,8 +345,8 @@ def analyze(
             layer = current[i].copy()
             layer[..., 3] = np.where(m, current[i][..., 3], 0.0)
             layers[i].append(layer)
-            current[i] = _peel(current[i], m, seed=derive_seed(s, 401 + 31 * k + i), threads=th)
-            tick()
+            peels.append(_peeler(current[i], m, derive_seed(s, 401 + 31 * k + i)))
+        current = stages.run(peels, lambda _: tick())
 
     return LeafModel(
         training=t,

@@ -11,6 +11,9 @@ every other pixel is returned bit for bit. See
 
 from __future__ import annotations
 
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import cv2
@@ -26,10 +29,10 @@ __all__ = ["correct_texture", "distortion"]
 F32 = NDArray[np.float32]
 
 # Search-and-vote rounds after the quilted start, and PatchMatch passes per search: the start is
-# already source texture, so the rounds only mend block seams (more changed nothing measurable,
-# docs/pipelines/leaves/correction.md).
+# already source texture and the search starts from the quilted positions, so the rounds only
+# mend block seams and one pass each does it as well as three (docs/pipelines/leaves/correction.md).
 _ROUNDS = 2
-_SEARCH_ITERATIONS = 3
+_SEARCH_ITERATIONS = 1
 # Side of the rigid source blocks of the quilted start, in patch sides.
 _BLOCK = 1
 # Search radius of a block around the warp's position, in patch sides, and the small cost per
@@ -40,6 +43,28 @@ _BIAS = 1e-4
 _SOURCE_MARGIN = 4
 # Alpha below which a pixel is off the leaf (straight alpha: its colour means nothing).
 _ON_LEAF = 0.5
+
+
+# A check that a caller running a correction on a worker thread installs, called between the
+# engine calls so it can stop the correction there: Python delivers Ctrl-C only to the main
+# thread (phloem.leaves.analysis).
+_checks = threading.local()
+
+
+@contextmanager
+def checked(check: Callable[[], None]) -> Iterator[None]:
+    """Within the block, corrections on this thread call ``check()`` between engine calls."""
+    _checks.check = check
+    try:
+        yield
+    finally:
+        del _checks.check
+
+
+def _check() -> None:
+    check = getattr(_checks, "check", None)
+    if check is not None:
+        check()
 
 
 def _field(field: Any, shape: tuple[int, int]) -> F32:
@@ -224,6 +249,7 @@ def correct_texture(
     # Fang & Hart's start: the hole is re-tiled with unwarped blocks of the source, each found
     # near where the warp says it came from and chosen to agree with what is already there.
     pos = _quilt(np.ascontiguousarray(_features(tgt)), src_feat, hole, f, rgba=rgba, patch_size=p)
+    _check()
     iy, ix = pos[..., 0], pos[..., 1]
     inside = hole & (iy >= 0) & (ix >= 0) & (iy < src.shape[0]) & (ix < src.shape[1])
     cy, cx = np.clip(iy, 0, src.shape[0] - 1), np.clip(ix, 0, src.shape[1] - 1)
@@ -255,7 +281,9 @@ def correct_texture(
             levels=1, exact=False, seed=derive_seed(s, k), weights=None, source_mask=allowed_box,
             target_mask=need_box, init=init, source_knn=None, source_cost=None, threads=nthreads, kdtree=False,
         )  # fmt: skip
+        _check()
         voted, weight = _core.vote(src_box, nnf, patch_size=p, weights=None, threads=nthreads, mean_shift=0)
+        _check()
         _paste(out_box, hole_box, voted, weight)
         init = nnf
     out[ty, tx] = np.where(hole_box[..., None], out_box, out[ty, tx])
