@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from phloem.leaves._holes import fill_holes, interior_holes
 
@@ -48,3 +49,27 @@ def test_fill_is_the_same_for_any_number_of_threads() -> None:
     leaf = _leaf()
     leaf[30:38, 25:33, 3] = 0.0
     assert np.array_equal(fill_holes(leaf, seed=3, threads=1), fill_holes(leaf, seed=3, threads=2))
+
+
+def test_analysis_fills_the_backgrounds_holes_unless_asked_to_keep_them() -> None:
+    import phloem
+
+    def leaf(w: int) -> np.ndarray:
+        img = np.zeros((90, 60, 4), np.float32)
+        cv2.ellipse(img, (30, 45), (w, 40), 0, 0, 360, (0.2, 0.5, 0.1, 1.0), -1)
+        cv2.line(img, (30, 8), (30, 82), (0.6, 0.7, 0.3, 1.0), 2)
+        return img
+
+    bitten = leaf(22)
+    bitten[55:63, 12:20] = 0.0  # an insect hole, away from the midrib
+    scribbles = np.zeros((90, 60), np.int32)
+    scribbles[20:70, 30] = 1
+    scribbles[40:50, 15] = 2
+    filled = phloem.leaves.analyze([leaf(20), bitten], scribbles, points=40, epsilon=8)
+    kept = phloem.leaves.analyze([leaf(20), bitten], scribbles, points=40, epsilon=8, keep_holes=True)
+    assert interior_holes(kept.background[1][..., 3]).sum() > 20  # the hole, as registered
+    assert not interior_holes(filled.background[1][..., 3]).any()
+    for model in (filled, kept):  # everything but the backgrounds is the same
+        assert np.array_equal(model.aligned[1], kept.aligned[1])
+    with pytest.raises(TypeError, match="keep_holes: expected True or False"):
+        phloem.leaves.analyze([leaf(20), bitten], scribbles, points=40, epsilon=8, keep_holes="yes")  # type: ignore[arg-type]

@@ -97,7 +97,8 @@ def _analyze(args: argparse.Namespace, model_dir: Path | None) -> tuple[leaves.L
         "leaves: analyze", args,
         lambda bar: leaves.analyze(imgs, scribbles, training=args.training, order=_order(args.order),
                                    points=args.points, epsilon=args.epsilon, kappa=args.kappa, seed=args.seed,
-                                   threads=args.threads, progress=bar, max_memory=args.max_memory),
+                                   keep_holes=args.keep_holes, threads=args.threads, progress=bar,
+                                   max_memory=args.max_memory),
     )  # fmt: skip
     if model_dir is not None:
         _stage_model(model, model_dir, args, where)
@@ -205,6 +206,9 @@ def _analysis_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--epsilon", type=float, default=40.0,
                    help="spatial falloff of layer induction in pixels, about the largest registration error (default 40, Eq. 3)")  # fmt: skip
     p.add_argument("--kappa", type=float, default=1.5, help="κ of Eq. 5: how strongly layer overlap makes a layer structural (default 1.5)")  # fmt: skip
+    p.add_argument("--keep-holes", action="store_true",
+                   help="keep the exemplars' interior holes (insect damage) in their background layers; by default they "
+                        "are filled, since a hole left there would repeat in every new leaf drawn on that background")  # fmt: skip
 
 
 def _synthesis_options(p: argparse.ArgumentParser) -> None:

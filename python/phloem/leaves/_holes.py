@@ -9,11 +9,13 @@ to keep them.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage  # type: ignore[import-untyped]
 
-from ..texture import complete
+from ..texture.complete import complete
 
 F32 = NDArray[np.float32]
 
@@ -25,9 +27,10 @@ def interior_holes(alpha: NDArray[np.floating]) -> NDArray[np.bool_]:
     return np.asarray(ndimage.binary_fill_holes(leaf) & ~leaf)
 
 
-def fill_holes(image: F32, *, seed: int, threads: int | None) -> F32:
+def fill_holes(image: F32, *, seed: int, threads: int | None, check: Callable[[], None] | None = None) -> F32:
     """The RGBA ``image`` with its interior holes completed from its leaf pixels and made opaque;
-    the image itself (not a copy) when it has none."""
+    the image itself (not a copy) when it has none. ``check`` runs after every completion
+    iteration (the analysis' way to stop a worker)."""
     hole = interior_holes(image[..., 3])
     if not hole.any():
         return image
@@ -36,6 +39,7 @@ def fill_holes(image: F32, *, seed: int, threads: int | None) -> F32:
     # no pale ring stays where the hole was.
     rim = ndimage.binary_dilation(hole, iterations=2) & ~hole & (image[..., 3] < 1.0)
     fill = hole | rim
-    rgb = complete(image[..., :3], fill, source_mask=leaf & ~fill, seed=seed, threads=threads)
+    progress = None if check is None else (lambda done, total: check())
+    rgb = complete(image[..., :3], fill, source_mask=leaf & ~fill, seed=seed, threads=threads, progress=progress)
     alpha = np.where(fill, np.float32(1.0), image[..., 3])
     return np.ascontiguousarray(np.concatenate([rgb, alpha[..., None]], axis=2), dtype=np.float32)

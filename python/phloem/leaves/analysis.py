@@ -22,6 +22,7 @@ from .. import _core, _memory
 from .._progress import Progress
 from .._validate import as_image, check_float, check_int, check_seed, check_threads, derive_seed
 from ..texture import complete
+from ._holes import fill_holes
 from .correction import checked, correct_texture
 from .induction import induce
 from .model import LeafModel
@@ -104,6 +105,13 @@ def _peeler(image: F32, layer: NDArray[np.bool_], seed: int) -> Task[F32]:
     return task
 
 
+def _hole_filler(image: F32, seed: int) -> Task[F32]:
+    def task(threads: int | None, check: Callable[[], None]) -> F32:
+        return fill_holes(image, seed=seed, threads=threads, check=check)
+
+    return task
+
+
 class _Stopped(Exception):
     """Raised in a task of :class:`_Stages` once the analysis is being abandoned."""
 
@@ -181,6 +189,7 @@ def analyze(
     kappa: float = 1.5,
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
+    keep_holes: bool = False,
     progress: Progress = None,
     max_memory: int | None = None,
 ) -> LeafModel:
@@ -198,6 +207,9 @@ def analyze(
        falloff ``epsilon``, δ and λ with ``kappa``), then its pixels are completed from the
        rest of each leaf (:func:`phloem.texture.complete`), so the next layer is induced on
        what remains. On the training leaf the user's layer is kept as it is.
+    5. **Holes** (not in the paper): interior holes of the backgrounds (insect damage) are
+       completed, unless ``keep_holes``; a hole left there would appear, in the same place,
+       in every new leaf built on that background.
 
     Parameters
     ----------
@@ -223,9 +235,11 @@ def analyze(
     threads : int, optional
         Worker threads (default: ``PHLOEM_NUM_THREADS`` or all cores); the exemplars'
         registrations and peels run side by side on them.
+    keep_holes : bool, optional
+        Keep the exemplars' interior holes in their backgrounds (default False: complete them).
     progress : callable, optional
-        ``progress(done, total)`` after every registration, induction and peel, in that
-        order, from the calling thread.
+        ``progress(done, total)`` after every registration, induction, peel and hole fill, in
+        that order, from the calling thread.
     max_memory : int, optional
         Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak is over
         this many bytes (default: 75% of the machine's memory).
@@ -275,7 +289,9 @@ def analyze(
     # Side by side, each of the widest stage's tasks holds one completion's buffers.
     extra = (stages.width(n) - 1) * _memory.complete((*size, 3))
     _memory.check_size(_memory.leaves_analyze(size, n, n_layers) + extra, max_memory, size, "leaves")
-    total = 2 * (n - 1) + 1 + (n_layers - 1) * (1 + n)
+    if not isinstance(keep_holes, (bool, np.bool_)):
+        raise TypeError(f"keep_holes: expected True or False, got {keep_holes!r}")
+    total = 2 * (n - 1) + 1 + (n_layers - 1) * (1 + n) + (0 if keep_holes else n)
     done = 0
 
     def tick() -> None:
@@ -347,6 +363,10 @@ def analyze(
             layers[i].append(layer)
             peels.append(_peeler(current[i], m, derive_seed(s, 401 + 31 * k + i)))
         current = stages.run(peels, lambda _: tick())
+    if not keep_holes:
+        current = stages.run(
+            [_hole_filler(c, derive_seed(s, 501 + i)) for i, c in enumerate(current)], lambda _: tick()
+        )
 
     return LeafModel(
         training=t,
