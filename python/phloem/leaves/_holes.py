@@ -18,6 +18,8 @@ from scipy import ndimage  # type: ignore[import-untyped]
 from ..texture.complete import complete
 
 F32 = NDArray[np.float32]
+#: Width in px of the ring around a hole that is filled with it.
+RIM = 3
 
 
 def interior_holes(alpha: NDArray[np.floating]) -> NDArray[np.bool_]:
@@ -35,10 +37,9 @@ def fill_holes(image: F32, *, seed: int, threads: int | None, check: Callable[[]
     if not hole.any():
         return image
     leaf = image[..., 3] > 0.5
-    # Pixels of the hole's anti-aliased rim are part leaf, part scanner white: filled too, so
-    # no pale ring stays where the hole was.
-    rim = ndimage.binary_dilation(hole, iterations=2) & ~hole & (image[..., 3] < 1.0)
-    fill = hole | rim
+    # The hole's edge on a scan mixes leaf and scanner white over a few pixels, opaque or not:
+    # a ring of RIM px around it is filled too, so no pale outline stays where the hole was.
+    fill = ndimage.binary_dilation(hole, iterations=RIM) & (hole | leaf)
     progress = None if check is None else (lambda done, total: check())
     rgb = complete(image[..., :3], fill, source_mask=leaf & ~fill, seed=seed, threads=threads, progress=progress)
     alpha = np.where(fill, np.float32(1.0), image[..., 3])
