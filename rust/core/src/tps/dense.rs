@@ -242,10 +242,12 @@ pub fn densify(
     let mut refits = 0;
     loop {
         cancel::check()?;
-        let t = r.basis.fit(&r.targets, lambda1, r.lambda2);
+        let mut warped = vec![[0.0; 2]; r.ctrl.len()];
+        let t = r
+            .basis
+            .fit_at_controls(&r.targets, lambda1, r.lambda2, &mut warped);
         let f = to_input(&t, &r.ctrl, fr.cx, fr.cy, fr.scale);
         // The way back: a spline from f(x_i) to x_i, refined by Newton on f itself.
-        let warped: Vec<Point> = r.basis.at_controls(&t);
         let back = Basis::new("moving points", &warped)?;
         let xs: Vec<Point> = r
             .ctrl
