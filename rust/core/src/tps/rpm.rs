@@ -28,7 +28,7 @@
 use crate::cancel;
 use crate::error::{invalid, Result};
 
-use super::spline::{axpy, dot, dot2, Basis, Point, Tps};
+use super::spline::{axpy, dot, Basis, Point, Tps};
 
 /// Parameters of [`rpm`]; [`Params::default`] holds the values phloem uses.
 #[derive(Clone, Debug, PartialEq)]
@@ -363,8 +363,7 @@ pub fn rpm(
                 // partners.
                 weights[i] = (r[i] * inl).clamp(0.0, 1.0);
                 targets[i] = if inl > 0.0 {
-                    let (a, b) = dot2(row, &cyx, &cyy);
-                    [a / inl, b / inl]
+                    [dot(row, &cyx) / inl, dot(row, &cyy) / inl]
                 } else {
                     v[i]
                 };

@@ -309,11 +309,8 @@ impl Basis {
         let (mut bx, mut by) = (vec![0.0; m], vec![0.0; m]);
         for i in 0..n {
             let gi = &self.g[i * m..(i + 1) * m];
-            let (tx, ty) = (targets[i][0], targets[i][1]);
-            for ((x, y), &g) in bx.iter_mut().zip(by.iter_mut()).zip(gi) {
-                *x += tx * g;
-                *y += ty * g;
-            }
+            axpy(&mut bx, targets[i][0], gi);
+            axpy(&mut by, targets[i][1], gi);
         }
         let mut b: Vec<Point> = bx.iter().zip(&by).map(|(&x, &y)| [x, y]).collect();
         tridiagonal_solve(&self.diag, &self.off, lambda1, &mut b);
@@ -322,7 +319,7 @@ impl Basis {
         let (wx, wy): (Vec<f64>, Vec<f64>) = (0..n)
             .map(|i| {
                 let gi = &self.g[i * m..(i + 1) * m];
-                dot2(gi, &gx, &gy)
+                (dot(gi, &gx), dot(gi, &gy))
             })
             .unzip();
         let w: Vec<Point> = wx.iter().zip(&wy).map(|(&x, &y)| [x, y]).collect();
@@ -330,8 +327,7 @@ impl Basis {
         let mut z = [[0.0; 2]; 3];
         for i in 0..n {
             let ki = &self.k[i * n..(i + 1) * n];
-            let (a, b) = dot2(ki, &wx, &wy);
-            kw[i] = [a, b];
+            kw[i] = [dot(ki, &wx), dot(ki, &wy)];
             let res = [targets[i][0] - kw[i][0], targets[i][1] - kw[i][1]];
             for a in 0..3 {
                 let q = self.q1[i * 3 + a];
@@ -408,27 +404,6 @@ pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
         s += x * y;
     }
     s
-}
-
-/// `(a · b, a · c)` in one pass over `a`, each exactly as [`dot`] sums it.
-#[inline]
-pub(crate) fn dot2(a: &[f64], b: &[f64], c: &[f64]) -> (f64, f64) {
-    let (mut p, mut q) = ([0.0f64; 4], [0.0f64; 4]);
-    let (ca, cb, cc) = (a.chunks_exact(4), b.chunks_exact(4), c.chunks_exact(4));
-    let (ra, rb, rc) = (ca.remainder(), cb.remainder(), cc.remainder());
-    for ((x, y), z) in ca.zip(cb).zip(cc) {
-        for l in 0..4 {
-            p[l] += x[l] * y[l];
-            q[l] += x[l] * z[l];
-        }
-    }
-    let mut s = (p[0] + p[2]) + (p[1] + p[3]);
-    let mut t = (q[0] + q[2]) + (q[1] + q[3]);
-    for ((x, y), z) in ra.iter().zip(rb).zip(rc) {
-        s += x * y;
-        t += x * z;
-    }
-    (s, t)
 }
 
 /// `y += a x`.
@@ -658,17 +633,6 @@ mod tests {
         let tight = b.fit(&t, 0.0, 1e9);
         assert!((loose.d[1][0] - 2.0).abs() < 1e-9);
         assert!((tight.d[1][0] - 1.0).abs() < 1e-3, "{:?}", tight.d);
-    }
-
-    #[test]
-    #[allow(clippy::float_cmp)] // the same sums in the same order: equal to the bit
-    fn dot2_sums_like_two_dots() {
-        for n in [3, 8, 97, 100] {
-            let (a, b, c) = (cloud(n, 1), cloud(n, 2), cloud(n, 3));
-            let f = |p: &[Point]| p.iter().map(|q| q[0] / 7.0 + q[1]).collect::<Vec<f64>>();
-            let (a, b, c) = (f(&a), f(&b), f(&c));
-            assert_eq!(dot2(&a, &b, &c), (dot(&a, &b), dot(&a, &c)), "n = {n}");
-        }
     }
 
     #[test]
