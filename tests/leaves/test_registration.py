@@ -6,7 +6,8 @@ import cv2
 import numpy as np
 import pytest
 
-from phloem.leaves import register
+from phloem.leaves import keypoints, register
+from phloem.leaves import registration as reg_module
 
 H, W = 240, 320
 
@@ -95,3 +96,45 @@ def test_bad_input_one_line_errors() -> None:
         register(moving, fixed, points=2)
     with pytest.raises(ValueError, match=r"^moving: expected 4 channels like fixed, got 3"):
         register(moving[..., :3], fixed)
+
+
+def test_keypoints_do_not_depend_on_the_transparent_canvas_around_the_leaf() -> None:
+    # The edge filters run on the box around the leaf; padding, and a faint pixel far away
+    # that makes them run on the whole image, change nothing but the offset.
+    fixed = leaf()
+    big = np.zeros((H + 70, W + 90, 4), np.float32)
+    big[30 : 30 + H, 50 : 50 + W] = fixed
+    faint = big.copy()
+    faint[-1, -1] = (1.0, 1.0, 1.0, 0.2)
+    for seed in (0, 4):
+        p = keypoints(fixed, seed=seed)
+        assert np.array_equal(keypoints(big, seed=seed), p + [50, 30])
+        assert np.array_equal(keypoints(faint, seed=seed), p + [50, 30])
+
+
+def test_edges_on_the_box_around_the_leaf_equal_those_of_the_whole_image() -> None:
+    big = np.zeros((H + 70, W + 90, 4), np.float32)
+    big[30 : 30 + H, 50 : 50 + W] = leaf()
+    faint = big.copy()
+    faint[-1, -1] = (1.0, 1.0, 1.0, 0.2)  # not transparent outside the box: the whole image
+    region = cv2.dilate((big[..., 3] > 0.5).astype(np.uint8), np.ones((3, 3), np.uint8), iterations=2) > 0
+    mag, box = reg_module._edges(big, region)
+    full, whole = reg_module._edges(faint, region)
+    assert mag.size < 0.8 * full.size and full.shape == region.shape
+    assert np.array_equal(mag, full[box]) and full[region].any()
+    assert not full[~region].any() and whole == (slice(0, H + 70), slice(0, W + 90))
+
+
+def test_edges_fall_back_to_the_whole_image_when_the_box_holds_no_transparent_pixel() -> None:
+    # A faint halo that fills the box exactly: the box's grey range would not start at 0.
+    big = np.zeros((H + 70, W + 90, 4), np.float32)
+    big[30 : 30 + H, 50 : 50 + W] = leaf()
+    ys, xs = np.nonzero(big[..., 3] > 0.5)
+    halo = big[ys.min() - 8 : ys.max() + 9, xs.min() - 8 : xs.max() + 9]
+    halo[halo[..., 3] == 0] = (0.5, 0.5, 0.5, 0.4)
+    faint = big.copy()
+    faint[-1, -1] = (1.0, 1.0, 1.0, 0.2)
+    region = cv2.dilate((big[..., 3] > 0.5).astype(np.uint8), np.ones((3, 3), np.uint8), iterations=2) > 0
+    mag = reg_module._edges(big, region)[0]
+    assert mag.shape == region.shape
+    assert np.array_equal(mag, reg_module._edges(faint, region)[0])

@@ -33,13 +33,88 @@ _STEP = 4
 _EDGE_FLOOR = 20.0
 
 
-def _split(img: NDArray[np.float32]) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
-    """Grey image (composited over black when there is alpha) and the leaf mask."""
+def _mask(img: NDArray[np.float32]) -> NDArray[np.bool_]:
+    """The leaf: alpha above one half (everything without alpha)."""
+    if img.shape[2] in (2, 4):
+        return np.ascontiguousarray(img[..., -1] > 0.5)
+    return np.ones(img.shape[:2], bool)
+
+
+def _grey(img: NDArray[np.float32]) -> NDArray[np.float32]:
+    """Grey image, composited over black when there is alpha."""
     if img.shape[2] in (2, 4):
         alpha = np.clip(img[..., -1], 0, 1)
-        grey = img[..., :-1].mean(axis=2) * alpha
-        return grey.astype(np.float32), alpha > 0.5
-    return img.mean(axis=2).astype(np.float32), np.ones(img.shape[:2], bool)
+        g: NDArray[np.float32] = (img[..., :-1].mean(axis=2) * alpha).astype(np.float32)
+    else:
+        g = img.mean(axis=2).astype(np.float32)
+    return g
+
+
+def _box(img: NDArray[np.float32], region: NDArray[np.bool_]) -> tuple[slice, slice]:
+    """The part of the image the edge filters need: all of it, or with alpha the box around
+    ``region`` with a 6 px margin (the bilateral filter reaches 4 px, Sobel 1 more) when
+    everything outside that box is transparent (its grey is 0, and the box holds a 0 too, so
+    the image's range, on which the bilateral filter's colour table depends, is the same)."""
+    h, w = region.shape
+    if img.shape[2] not in (2, 4):
+        return slice(0, h), slice(0, w)
+    rows, cols = np.flatnonzero(region.any(axis=1)), np.flatnonzero(region.any(axis=0))
+    y0, y1 = max(int(rows[0]) - 6, 0), min(int(rows[-1]) + 7, h)
+    x0, x1 = max(int(cols[0]) - 6, 0), min(int(cols[-1]) + 7, w)
+    a = img[..., -1]
+    inside = y1 - y0 < h or x1 - x0 < w
+    clear = not (a[:y0].any() or a[y1:].any() or a[y0:y1, :x0].any() or a[y0:y1, x1:].any())
+    return (slice(y0, y1), slice(x0, x1)) if inside and clear else (slice(0, h), slice(0, w))
+
+
+def _edges(img: NDArray[np.float32], region: NDArray[np.bool_]) -> tuple[NDArray[np.float32], tuple[slice, slice]]:
+    """Sobel magnitude of the bilateral-filtered grey image over :func:`_box`, 0 outside
+    ``region``, and the box."""
+    box = _box(img, region)
+    g8 = np.clip(_grey(img[box]) * 255.0, 0, 255).astype(np.float32)
+    if g8.shape != region.shape and g8.min() > 0:
+        box = (slice(0, region.shape[0]), slice(0, region.shape[1]))
+        g8 = np.clip(_grey(img) * 255.0, 0, 255).astype(np.float32)
+    g = cv2.bilateralFilter(g8, 9, 50.0, 5.0)
+    mag: NDArray[np.float32] = np.hypot(
+        cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)
+    )
+    mag[~region[box]] = 0
+    return mag, box
+
+
+def _keypoints(img: NDArray[np.float32], n: int, rng: np.random.Generator) -> NDArray[np.float64]:
+    mask = _mask(img)
+    if not mask.any():
+        raise ValueError("image: the alpha channel is empty; expected a leaf")
+    region = cv2.dilate(mask.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=2) > 0
+    mag, box = _edges(img, region)
+    inside = region[box]
+    if mag.max() < _EDGE_FLOOR:
+        raise ValueError("image: found no edges (a blank or uniform leaf); expected a leaf with an outline or veins")
+    thr = max(_EDGE_FLOOR, float(np.quantile(mag[inside], 0.9)))
+    ys, xs = np.nonzero(mag >= thr)
+    cand = np.stack([xs + box[1].start, ys + box[0].start], axis=1).astype(np.float64)
+    if len(cand) > 20000:
+        cand = cand[np.sort(rng.choice(len(cand), 20000, replace=False))]
+    if len(cand) < 3:
+        raise ValueError(f"image: found only {len(cand)} edge pixels; expected a leaf with an outline or veins")
+    # Farthest-point sampling; the squared distances of whole pixels are exact in float64,
+    # so any order of the arithmetic gives the same choice.
+    cx, cy = np.ascontiguousarray(cand[:, 0]), np.ascontiguousarray(cand[:, 1])
+    chosen = [int(rng.integers(len(cand)))]
+    dist = (cx - cx[chosen[0]]) ** 2 + (cy - cy[chosen[0]]) ** 2
+    dx, dy = np.empty_like(cx), np.empty_like(cy)
+    for _ in range(min(n, len(cand)) - 1):
+        k = int(np.argmax(dist))
+        chosen.append(k)
+        np.subtract(cx, cx[k], out=dx)
+        np.subtract(cy, cy[k], out=dy)
+        np.multiply(dx, dx, out=dx)
+        np.multiply(dy, dy, out=dy)
+        np.add(dx, dy, out=dx)
+        np.minimum(dist, dx, out=dist)
+    return cand[chosen]
 
 
 def keypoints(image: Any, *, points: int = 100, seed: int | np.random.Generator = 0) -> NDArray[np.float64]:
@@ -67,30 +142,7 @@ def keypoints(image: Any, *, points: int = 100, seed: int | np.random.Generator 
     """
     img = as_image(image, "image")
     n = check_int(points, "points", 3)
-    rng = np.random.default_rng(check_seed(seed))
-    grey, mask = _split(img)
-    if not mask.any():
-        raise ValueError("image: the alpha channel is empty; expected a leaf")
-    g = cv2.bilateralFilter(np.clip(grey * 255.0, 0, 255).astype(np.float32), 9, 50.0, 5.0)
-    mag = np.hypot(cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3))
-    region = cv2.dilate(mask.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=2) > 0
-    mag[~region] = 0
-    if mag.max() < _EDGE_FLOOR:
-        raise ValueError("image: found no edges (a blank or uniform leaf); expected a leaf with an outline or veins")
-    thr = max(_EDGE_FLOOR, float(np.quantile(mag[region], 0.9)))
-    ys, xs = np.nonzero(mag >= thr)
-    cand = np.stack([xs, ys], axis=1).astype(np.float64)
-    if len(cand) > 20000:
-        cand = cand[np.sort(rng.choice(len(cand), 20000, replace=False))]
-    if len(cand) < 3:
-        raise ValueError(f"image: found only {len(cand)} edge pixels; expected a leaf with an outline or veins")
-    chosen = [int(rng.integers(len(cand)))]
-    dist = np.sum((cand - cand[chosen[0]]) ** 2, axis=1)
-    for _ in range(min(n, len(cand)) - 1):
-        k = int(np.argmax(dist))
-        chosen.append(k)
-        dist = np.minimum(dist, np.sum((cand - cand[k]) ** 2, axis=1))
-    return cand[chosen]
+    return _keypoints(img, n, np.random.default_rng(check_seed(seed)))
 
 
 @dataclass(frozen=True)
@@ -201,15 +253,14 @@ def register(
     s = check_seed(seed)
     th = check_threads(threads)
     try:
-        kf = keypoints(fx, points=n, seed=s)
+        kf = _keypoints(fx, n, np.random.default_rng(s))
     except ValueError as e:
         raise ValueError(str(e).replace("image:", "fixed:", 1)) from None
     try:
-        km = keypoints(mv, points=n, seed=derive_seed(s, 1))
+        km = _keypoints(mv, n, np.random.default_rng(derive_seed(s, 1)))
     except ValueError as e:
         raise ValueError(str(e).replace("image:", "moving:", 1)) from None
-    fmask = np.ascontiguousarray(_split(fx)[1])
-    mmask = np.ascontiguousarray(_split(mv)[1])
+    fmask, mmask = _mask(fx), _mask(mv)
     fwd, inv, matches, at, refits, det = _core.tps_register(
         kf,
         km,

@@ -117,21 +117,27 @@ fn interpolate(
 /// The inverse of `f` at `p`: `q` with `f(q) = p`, by Newton steps from `start`.
 #[must_use]
 pub fn invert(f: &Tps, p: Point, start: Point) -> Point {
+    invert_jacobian(f, p, start).0
+}
+
+/// [`invert`] and the Jacobian of `f` at the result when the last Newton step evaluated it
+/// there (it converged), so the fold check need not evaluate it again.
+fn invert_jacobian(f: &Tps, p: Point, start: Point) -> (Point, Option<[[f64; 2]; 2]>) {
     let mut q = start;
     for _ in 0..8 {
         let (fq, j) = f.eval_jacobian(q);
         let r = [fq[0] - p[0], fq[1] - p[1]];
         if r[0].abs() + r[1].abs() < 1e-6 {
-            break;
+            return (q, Some(j));
         }
         let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
         if det.abs() < 1e-12 {
-            break;
+            return (q, Some(j));
         }
         q[0] -= (j[1][1] * r[0] - j[0][1] * r[1]) / det;
         q[1] -= (-j[1][0] * r[0] + j[0][0] * r[1]) / det;
     }
-    q
+    (q, None)
 }
 
 /// Which nodes of an `h × w` grid (row-major over nodes) lie near the set pixels of `mask`:
@@ -236,10 +242,12 @@ pub fn densify(
     let mut refits = 0;
     loop {
         cancel::check()?;
-        let t = r.basis.fit(&r.targets, lambda1, r.lambda2);
+        let mut warped = vec![[0.0; 2]; r.ctrl.len()];
+        let t = r
+            .basis
+            .fit_at_controls(&r.targets, lambda1, r.lambda2, &mut warped);
         let f = to_input(&t, &r.ctrl, fr.cx, fr.cy, fr.scale);
         // The way back: a spline from f(x_i) to x_i, refined by Newton on f itself.
-        let warped: Vec<Point> = r.basis.at_controls(&t);
         let back = Basis::new("moving points", &warped)?;
         let xs: Vec<Point> = r
             .ctrl
@@ -257,7 +265,7 @@ pub fn densify(
         // the inverse field and, at the moving leaf's nodes, the preimages to check.
         let (ysf, xsf, fj) = on_nodes(hf, wf, step, |p| f.eval_jacobian(p));
         cancel::check()?;
-        let (ysm, xsm, inv) = on_nodes(hm, wm, step, |p| invert(&f, p, g.eval(p)));
+        let (ysm, xsm, inv_j) = on_nodes(hm, wm, step, |p| invert_jacobian(&f, p, g.eval(p)));
         cancel::check()?;
         let det_f = fj
             .par_iter()
@@ -265,11 +273,11 @@ pub fn densify(
             .filter(|(_, &on)| on)
             .map(|((_, j), _)| det(j))
             .reduce(|| f64::INFINITY, f64::min);
-        let det_m = inv
+        let det_m = inv_j
             .par_iter()
             .zip(moving_on.par_iter())
             .filter(|(_, &on)| on)
-            .map(|(&q, _)| det(&f.eval_jacobian(q).1))
+            .map(|(&(q, j), _)| det(&j.unwrap_or_else(|| f.eval_jacobian(q).1)))
             .reduce(|| f64::INFINITY, f64::min);
         let det = det_f.min(det_m);
         if det > 0.0 || refits == 8 {
@@ -281,6 +289,7 @@ pub fn densify(
             }
             let fwd: Vec<Point> = fj.iter().map(|(p, _)| *p).collect();
             let forward = interpolate(hf, wf, step, &ysf, &xsf, &fwd);
+            let inv: Vec<Point> = inv_j.iter().map(|(q, _)| *q).collect();
             let inverse = interpolate(hm, wm, step, &ysm, &xsm, &inv);
             r.tps = f.clone();
             return Ok(Dense {
@@ -398,6 +407,29 @@ mod tests {
             }
         }
         assert!(worst < 0.05, "interpolation error {worst} px");
+    }
+
+    #[test]
+    #[allow(clippy::float_cmp)] // the same arithmetic: equal to the bit
+    fn the_inverse_keeps_the_jacobian_at_its_result() {
+        // The fold check uses it in place of a new evaluation: it must be the one at `q`.
+        let d = setup(1);
+        let f = &d.forward_tps;
+        let mut kept = 0;
+        for p in [
+            [300.0, 200.0],
+            [150.0, 260.0],
+            [420.0, 120.0],
+            [10.0, 390.0],
+        ] {
+            let (q, j) = invert_jacobian(f, p, d.inverse_tps.eval(p));
+            assert_eq!(q, invert(f, p, d.inverse_tps.eval(p)));
+            if let Some(j) = j {
+                assert_eq!(j, f.eval_jacobian(q).1);
+                kept += 1;
+            }
+        }
+        assert_eq!(kept, 4);
     }
 
     #[test]

@@ -381,8 +381,7 @@ pub fn rpm(
                         w * targets[i][1] + (1.0 - w) * v[i][1],
                     ];
                 }
-                tps = basis.fit(&fitted, l1, l2);
-                v = basis.at_controls(&tps);
+                tps = basis.fit_at_controls(&fitted, l1, l2, &mut v);
             }
         }
         t *= params.rate;

@@ -277,6 +277,31 @@ impl Basis {
     /// (bending) and `lambda2` (affine part towards the identity), both `≥ 0`.
     #[must_use]
     pub fn fit(&self, targets: &[Point], lambda1: f64, lambda2: f64) -> Tps {
+        let mut kw = vec![[0.0; 2]; self.ctrl.len()];
+        self.solve(targets, lambda1, lambda2, &mut kw)
+    }
+
+    /// [`Basis::fit`], and `f(c_i)` for every control point written to `at` (the same values
+    /// as [`Basis::at_controls`], from the `K w` the fit computes anyway).
+    pub fn fit_at_controls(
+        &self,
+        targets: &[Point],
+        lambda1: f64,
+        lambda2: f64,
+        at: &mut [Point],
+    ) -> Tps {
+        let t = self.solve(targets, lambda1, lambda2, at);
+        for (a, p) in at.iter_mut().zip(&self.ctrl) {
+            *a = [
+                t.d[0][0] + p[0] * t.d[1][0] + p[1] * t.d[2][0] + a[0],
+                t.d[0][1] + p[0] * t.d[1][1] + p[1] * t.d[2][1] + a[1],
+            ];
+        }
+        t
+    }
+
+    /// The fit, with `K w` written to `kw`.
+    fn solve(&self, targets: &[Point], lambda1: f64, lambda2: f64, kw: &mut [Point]) -> Tps {
         let n = self.ctrl.len();
         let m = n - 3;
         debug_assert_eq!(targets.len(), n);
@@ -302,7 +327,8 @@ impl Basis {
         let mut z = [[0.0; 2]; 3];
         for i in 0..n {
             let ki = &self.k[i * n..(i + 1) * n];
-            let res = [targets[i][0] - dot(ki, &wx), targets[i][1] - dot(ki, &wy)];
+            kw[i] = [dot(ki, &wx), dot(ki, &wy)];
+            let res = [targets[i][0] - kw[i][0], targets[i][1] - kw[i][1]];
             for a in 0..3 {
                 let q = self.q1[i * 3 + a];
                 z[a][0] += q * res[0];
@@ -539,6 +565,10 @@ mod tests {
         for (a, q) in at.iter().zip(&t) {
             assert!((a[0] - q[0]).abs() < 1e-7 && (a[1] - q[1]).abs() < 1e-7);
         }
+        // The values the fit leaves behind are those of a separate evaluation, to the bit.
+        let mut at2 = vec![[0.0; 2]; c.len()];
+        let g = b.fit_at_controls(&t, 0.3, 0.1, &mut at2);
+        assert!(g == b.fit(&t, 0.3, 0.1) && at2 == b.at_controls(&g));
     }
 
     #[test]
