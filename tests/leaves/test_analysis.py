@@ -178,8 +178,10 @@ def test_progress_comes_in_order_from_stages_side_by_side(leaf_set) -> None:
     imgs, _, sc = leaf_set
     seen: list[tuple[int, int]] = []
     leaves.analyze(imgs, sc, threads=3, progress=lambda d, t: seen.append((d, t)), **_KW)
-    # 2 per registered exemplar, 1 for the scribbles, then per peeled layer 1 induction + 3 peels
-    assert seen == [(d, 2 * 2 + 1 + 2 * 4) for d in range(1, 2 * 2 + 1 + 2 * 4 + 1)]
+    # 2 per registered exemplar, 1 for the scribbles, per peeled layer 1 induction + 3 peels,
+    # then 1 per leaf for its holes
+    total = 2 * 2 + 1 + 2 * 4 + 3
+    assert seen == [(d, total) for d in range(1, total + 1)]
 
 
 def test_ctrl_c_stops_the_peels_running_beside_each_other(leaf_set, monkeypatch) -> None:
