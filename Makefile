@@ -45,7 +45,7 @@ sheet:  ## contact sheets of the texture, graph-cut, shape, bark and tree jobs (
 	python -m benches.sheets.sheet_branching out/branching_sheet.png
 
 FUZZ_SECONDS ?= 60
-FUZZ_TARGETS ?= skeleton guide trunk_model label_map mask image
+FUZZ_TARGETS ?= skeleton guide trunk_model label_map mask image strokes svg
 FUZZ_OUT ?= out/fuzz
 FUZZ_FLAGS = -max_total_time=$(FUZZ_SECONDS) -timeout=10 -rss_limit_mb=2048 -print_final_stats=1
 

@@ -63,6 +63,30 @@ def temp_file(data: bytes, suffix: str) -> Path:
     return path
 
 
+def json_format(data: bytes, cls: Any) -> Any:
+    """``data`` through ``cls.load`` (as a file) and ``cls.from_json`` (as UTF-8 text), for one of
+    phloem's JSON formats (``_json.JsonFile``): they must agree on whether it is a file of the
+    format, and what loads must survive ``to_json`` → ``from_json`` unchanged. The loaded
+    value, or None."""
+    try:
+        loaded = cls.load(temp_file(data, ".json"))
+    except cls.error:
+        loaded = None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        text = None
+    if text is not None:
+        try:
+            parsed = cls.from_json(text)
+        except cls.error:
+            parsed = None
+        assert (parsed is None) == (loaded is None), "load and from_json disagree"
+    if loaded is not None:
+        assert cls.from_json(loaded.to_json()) == loaded, "to_json/from_json round trip changed the value"
+    return loaded
+
+
 def signature(exc: BaseException) -> str:
     """``Type@file:line`` of the frame that raised ``exc``: what tells one crash from another."""
     tb = exc.__traceback__

@@ -114,9 +114,39 @@ def _trunk_models() -> dict[str, bytes]:
     }
 
 
+def _strokes() -> dict[str, bytes]:
+    good = {"format": "phloem.strokes", "version": 1, "source_shape": [32, 48], "target_size": [40, 40], "pairs": [
+        {"source": [[1, 2], [10, 12], [20, 5]], "target": [[5, 5], [30, 30]], "controls": [[0, 0], [0.4, 0.5], [1, 1]]},
+        {"source": [[10, 12], [15, 30]], "target": [[30, 30], [35, 10]]}]}  # fmt: skip
+    bad_controls = {"source": [[0, 0], [1, 1]], "target": [[0, 0], [2, 2]], "controls": [[0, 0], [0.5, 1], [1, 1]]}
+    return {
+        "two_pairs.json": json.dumps(good).encode(),
+        "no_shapes.json": json.dumps({"pairs": [{"source": [[0, 0], [3, 4]], "target": [[1, 1], [2, 9]]}]}).encode(),
+        "bad_controls.json": json.dumps({"pairs": [bad_controls]}).encode(),
+        "zero_length.json": b'{"pairs": [{"source": [[1, 1], [1, 1]], "target": [[0, 0], [1, 1]]}]}',
+        "nan.json": b'{"pairs": [{"source": [[0, NaN], [1, 1]], "target": [[0, 0], [1, 1]]}]}',
+        "bad_json.json": b'{"pairs": [',
+    }
+
+
+def _svgs() -> dict[str, bytes]:
+    ns = b'xmlns="http://www.w3.org/2000/svg" xmlns:inkscape="http://www.inkscape.org/namespaces/inkscape"'
+    return {
+        "layers.svg": b"<svg " + ns + b' width="20mm" height="10mm" viewBox="0 0 200 100">'
+        b'<g inkscape:label="source" transform="translate(5 5) rotate(30)"><path d="M0 0C10 0 20 10 30 10s20 5 30 0"/>'
+        b'<path d="m5 5 a10 5 30 1 0 20 0z"/></g>'
+        b'<g inkscape:label="target"><polyline points="0,0 10,10 20,0"/><line x1="1" y1="2" x2="3" y2="4"/>'
+        b'<path d="M0 0Q10 20 20 0T40 0H50V9"/></g></svg>',
+        "compact_arc.svg": b"<svg " + ns + b'><path d="M0 0a5 5 0 1110 10l-1-1"/></svg>',
+        "bad_path.svg": b"<svg " + ns + b'><path d="M0 0 C 1"/></svg>',
+        "not_xml.svg": b"<svg",
+    }
+
+
 def main() -> None:
     for target, files in {"image": _images(), "label_map": _labels(), "mask": _masks(),
-                          "skeleton": _skeletons(), "guide": _guides(), "trunk_model": _trunk_models()}.items():  # fmt: skip
+                          "skeleton": _skeletons(), "guide": _guides(), "trunk_model": _trunk_models(),
+                          "strokes": _strokes(), "svg": _svgs()}.items():  # fmt: skip
         d = CORPUS / target
         d.mkdir(parents=True, exist_ok=True)
         for name, data in files.items():

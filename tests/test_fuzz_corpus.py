@@ -25,7 +25,7 @@ def _target(name: str) -> ModuleType:
 
 
 def test_every_target_has_seeds() -> None:
-    assert TARGETS == ["guide", "image", "label_map", "mask", "skeleton", "trunk_model"]
+    assert TARGETS == ["guide", "image", "label_map", "mask", "skeleton", "strokes", "svg", "trunk_model"]
     for t in TARGETS:
         assert len(list((FUZZ / "corpus" / t).iterdir())) >= 3, t
 

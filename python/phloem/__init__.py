@@ -13,6 +13,7 @@ texture   texture synthesis, texture-by-numbers, graph-cut quilting and image co
 shapes    boundary-patch synthesis of binary shapes and label maps (Rosenberger et al. 2009)
 trees     tree billboards: atlas splitting, contours, crown/trunk, pin points (Argudo et al. 2017)
 leaves    new leaves by structural layering: leaf extraction (Assa & Cohen-Or)
+strokes   stroke-based editing of object structure: the stroke model and files (Luo et al.)
 metrics   measures of result quality
 warp      image warps between contours by mean value coordinates (Hormann & Floater 2006)
 cli       the ``phloem`` command
@@ -22,7 +23,23 @@ from __future__ import annotations
 
 import os
 
-from . import _core, bark, blend, branching, data, io, leaves, metrics, patch, seams, shapes, texture, trees, warp
+from . import (
+    _core,
+    bark,
+    blend,
+    branching,
+    data,
+    io,
+    leaves,
+    metrics,
+    patch,
+    seams,
+    shapes,
+    strokes,
+    texture,
+    trees,
+    warp,
+)
 from ._memory import MemoryLimitError
 
 __version__: str = _core.__version__
@@ -45,6 +62,7 @@ __all__ = [
     "patch",
     "seams",
     "shapes",
+    "strokes",
     "texture",
     "trees",
     "warp",

@@ -13,11 +13,11 @@ import math
 import os
 import re
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
-__all__ = ["MAX_BYTES", "MAX_DEPTH", "parse_json", "read_json"]
+__all__ = ["MAX_BYTES", "MAX_DEPTH", "JsonFile", "parse_json", "read_json"]
 
 MAX_BYTES = 256 * 1024 * 1024
 # Our formats nest 4 deep at most; 64 leaves room for others while staying far below the
@@ -127,3 +127,68 @@ def read_json(
     if nul >= 0:
         raise error(f"{name}: {p} is not a JSON file (binary data at byte {nul})")
     return parse_json(text, name, str(p), error=error)
+
+
+_F = TypeVar("_F", bound="JsonFile")
+
+
+class JsonFile:
+    """``from_json``, ``load`` and ``save`` for a class of one of phloem's JSON file formats.
+
+    The class gives ``from_dict`` (raising its ``error`` with a one-line message) and
+    ``to_json``; ``load`` adds the file to every message, ``save`` writes atomically and never
+    over an existing file unless asked (skeletons, stroke sets).
+    """
+
+    error: ClassVar[type[ValueError]] = ValueError
+    #: The file's ``"format"`` and ``"version"``, and what one is called in messages.
+    file_format: ClassVar[str] = ""
+    file_version: ClassVar[int] = 1
+    what: ClassVar[str] = ""
+
+    @classmethod
+    def from_dict(cls: type[_F], data: Any) -> _F:  # pragma: no cover - every format defines it
+        raise NotImplementedError
+
+    def to_dict(self) -> dict[str, Any]:  # pragma: no cover - every format defines it
+        raise NotImplementedError
+
+    def to_json(self) -> str:
+        """The file's contents as a JSON string."""
+        return json.dumps(self.to_dict())
+
+    @classmethod
+    def check_header(cls, data: Any) -> dict[str, Any]:
+        """``data`` if it is an object whose ``format`` and ``version`` (when present) are the class's."""
+        if not isinstance(data, dict):
+            raise cls.error(f"a {cls.what} must be a JSON object, got {type(data).__name__}")
+        for key, want in (("format", cls.file_format), ("version", cls.file_version)):
+            got = data.get(key, want)
+            if got != want or isinstance(got, bool):
+                text = repr(got) if len(repr(got)) <= 40 else repr(got)[:37] + "..."
+                if key == "format":
+                    raise cls.error(f"format must be {want!r}, got {text}")
+                raise cls.error(f"unsupported {cls.what} version {text} (this phloem reads {want})")
+        return data
+
+    @classmethod
+    def from_json(cls: type[_F], text: str) -> _F:
+        """Parse the JSON file format."""
+        if not isinstance(text, str):
+            raise TypeError(f"text: expected a str, got {type(text).__name__}")
+        return cls.from_dict(parse_json(text, "text", "", error=cls.error))
+
+    @classmethod
+    def load(cls: type[_F], path: str | os.PathLike[str]) -> _F:
+        """Read a file of the format; every error is one line that names the file."""
+        data = read_json(path, "path", error=cls.error)
+        try:
+            return cls.from_dict(data)
+        except cls.error as exc:
+            raise cls.error(f"path: {path}: {exc}") from None
+
+    def save(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> None:
+        """Write the file atomically; refuses to overwrite an existing file unless asked."""
+        from ._files import atomic_write
+
+        atomic_write(Path(path), self.to_json().encode("utf-8"), overwrite)

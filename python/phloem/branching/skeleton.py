@@ -23,20 +23,17 @@ The file format is JSON::
 
 from __future__ import annotations
 
-import json
 import math
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from .._api import Size, renamed
-from .._json import parse_json, read_json
+from .._json import JsonFile
 from .._validate import as_image, check_float, check_size
 
 __all__ = ["Branch", "Skeleton", "SkeletonError"]
@@ -285,7 +282,7 @@ def _arc_positions(points: F64, cum: F64, query: F64) -> F64:
 
 
 @dataclass
-class Skeleton:
+class Skeleton(JsonFile):
     """A branching structure: branches with thickness, each child attached to a parent vertex.
 
     Parameters
@@ -306,6 +303,10 @@ class Skeleton:
     True
     """
 
+    error: ClassVar[type[ValueError]] = SkeletonError
+    file_format: ClassVar[str] = FORMAT
+    file_version: ClassVar[int] = VERSION
+    what: ClassVar[str] = "skeleton"
     branches: list[Branch] = field(default_factory=list)
     shape: tuple[int, int] | None = None
 
@@ -515,19 +516,10 @@ class Skeleton:
             ],
         }
 
-    def to_json(self) -> str:
-        """The skeleton as a JSON string."""
-        return json.dumps(self.to_dict())
-
     @classmethod
     def from_dict(cls, data: Any) -> Skeleton:
         """Build a skeleton from the file format's dictionary, with errors that say what is wrong."""
-        if not isinstance(data, dict):
-            raise SkeletonError(f"a skeleton must be a JSON object, got {type(data).__name__}")
-        if data.get("format", FORMAT) != FORMAT:
-            raise SkeletonError(f"format must be {FORMAT!r}, got {data.get('format')!r}")
-        if data.get("version", VERSION) != VERSION:
-            raise SkeletonError(f"unsupported skeleton version {data.get('version')!r} (this phloem reads {VERSION})")
+        data = cls.check_header(data)
         branches = data.get("branches")
         if not isinstance(branches, list) or not branches:
             raise SkeletonError("'branches' must be a non-empty list")
@@ -560,28 +552,6 @@ class Skeleton:
                 raise SkeletonError(f"'shape' must be [H, W] with integers in 1..{MAX_COORD:.0f}, got {_short(shape)}")
             shape = (shape[0], shape[1])
         return cls(out, shape)
-
-    @classmethod
-    def from_json(cls, text: str) -> Skeleton:
-        """Parse the JSON file format."""
-        if not isinstance(text, str):
-            raise TypeError(f"text: expected a str, got {type(text).__name__}")
-        return cls.from_dict(parse_json(text, "text", "", error=SkeletonError))
-
-    @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> Skeleton:
-        """Read a skeleton file; every error is one line that names the file."""
-        data = read_json(path, "path", error=SkeletonError)
-        try:
-            return cls.from_dict(data)
-        except SkeletonError as exc:
-            raise SkeletonError(f"path: {path}: {exc}") from None
-
-    def save(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> None:
-        """Write the skeleton file atomically; refuses to overwrite unless asked."""
-        from .._files import atomic_write
-
-        atomic_write(Path(path), self.to_json().encode("utf-8"), overwrite)
 
 
 def _pt(p: F64) -> tuple[int, int]:
