@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from phloem import leaves
-from phloem.leaves import analysis
+from phloem.leaves import _fill
 from phloem.testing import layered_leaf, scribbles_from
 
 # small leaves and few keypoints keep these fast; epsilon is about the registration error here
@@ -205,7 +205,7 @@ def test_ctrl_c_stops_the_peels_running_beside_each_other(leaf_set, monkeypatch)
         finished.append(1)
         return image
 
-    monkeypatch.setattr(analysis, "complete", slow_complete)
+    monkeypatch.setattr(_fill, "complete", slow_complete)
     timer = threading.Thread(target=lambda: running.wait(30) and os.kill(os.getpid(), signal.SIGINT))
     timer.start()
     with pytest.raises(KeyboardInterrupt):

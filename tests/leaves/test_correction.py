@@ -121,9 +121,8 @@ def test_alpha_is_the_warped_one_even_where_the_source_differs(dots) -> None:  #
 
 def test_search_and_vote_mend_the_quilting_seams(dots) -> None:  # type: ignore[no-untyped-def]
     _src, field, _warped, out = dots
-    # Dot fragments (under half a dot) in the distorted region: the source has 7 of 120 there
-    # (cut by the region's edge); the quilted start alone leaves 33 of 151, the two search-and-
-    # vote rounds 22 of 137.
+    # Dot fragments (under half a dot) in the distorted region: the source has a few there (cut
+    # by the region's edge), the quilted start alone far more; counts in docs/pipelines/leaves/correction.md.
     g = ((out[..., 0] > 0.5) & distortion(field)).astype(np.uint8)
     _, _, stats, _ = cv2.connectedComponentsWithStats(g, connectivity=8)
     areas = stats[1:, 4]

@@ -12,7 +12,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from typing import Any, Final, TypeVar
+from typing import Any, TypeVar
 
 import cv2
 import numpy as np
@@ -21,8 +21,7 @@ from numpy.typing import NDArray
 from .. import _core, _memory
 from .._progress import Progress
 from .._validate import as_image, check_float, check_int, check_seed, check_threads, derive_seed
-from ..texture import complete
-from ._holes import fill_holes
+from ._fill import fill_holes, fill_region
 from .correction import checked, correct_texture
 from .induction import induce
 from .model import LeafModel
@@ -39,10 +38,6 @@ T = TypeVar("T")
 #: registration warp's bilinear resampling, is half layer colour and would stay behind as a
 #: ghost outline in the background layer.
 PEEL_RIM = 2
-#: The completion pyramid of a peel. ``"auto"`` also runs the strict pyramid, which only wins on
-#: fine periodic structure out of phase; on leaf blades it never did, so it cost a fifth of
-#: every peel for the same fill (docs/pipelines/leaves/analysis.md).
-PEEL_PYRAMID: Final = "interpolate"
 
 
 def _leaves(leaves: Any) -> list[F32]:
@@ -88,26 +83,16 @@ def _peel(
     hole = cv2.dilate(layer.astype(np.uint8), disk).astype(bool) & leaf
     if not hole.any():
         return image
-    source = leaf & ~hole
-    if not source.any():
+    if not (leaf & ~hole).any():
         raise ValueError("scribbles: a layer covers the whole leaf; expected other layers to remain")
-    progress = None if check is None else (lambda done, total: check())
-    rgb = complete(
-        image[..., :3], hole, source_mask=source, pyramid=PEEL_PYRAMID, seed=seed, threads=threads, progress=progress
-    )
-    return np.ascontiguousarray(np.concatenate([rgb, image[..., 3:]], axis=2), dtype=np.float32)
+    return fill_region(image, hole, seed=seed, threads=threads, check=check)
 
 
-def _peeler(image: F32, layer: NDArray[np.bool_], seed: int) -> Task[F32]:
+def _on_pool(fill: Callable[..., F32], *args: Any, seed: int) -> Task[F32]:
+    """``fill(*args, seed=seed)`` as a task of :class:`_Stages` (its threads and stop check)."""
+
     def task(threads: int | None, check: Callable[[], None]) -> F32:
-        return _peel(image, layer, seed=seed, threads=threads, check=check)
-
-    return task
-
-
-def _hole_filler(image: F32, seed: int) -> Task[F32]:
-    def task(threads: int | None, check: Callable[[], None]) -> F32:
-        return fill_holes(image, seed=seed, threads=threads, check=check)
+        return fill(*args, seed=seed, threads=threads, check=check)
 
     return task
 
@@ -361,11 +346,11 @@ def analyze(
             layer = current[i].copy()
             layer[..., 3] = np.where(m, current[i][..., 3], 0.0)
             layers[i].append(layer)
-            peels.append(_peeler(current[i], m, derive_seed(s, 401 + 31 * k + i)))
+            peels.append(_on_pool(_peel, current[i], m, seed=derive_seed(s, 401 + 31 * k + i)))
         current = stages.run(peels, lambda _: tick())
     if not keep_holes:
         current = stages.run(
-            [_hole_filler(c, derive_seed(s, 501 + i)) for i, c in enumerate(current)], lambda _: tick()
+            [_on_pool(fill_holes, c, seed=derive_seed(s, 501 + i)) for i, c in enumerate(current)], lambda _: tick()
         )
 
     return LeafModel(

@@ -22,6 +22,7 @@ from scipy import ndimage  # type: ignore[import-untyped]
 from skimage.filters import threshold_otsu
 
 from .._validate import as_image, check_float, check_int
+from ._fill import interior_holes
 
 __all__ = ["ExtractResult", "extract"]
 
@@ -154,8 +155,7 @@ def _fill_small_holes(leaf: NDArray[np.bool_], holes: float) -> NDArray[np.bool_
     area filled: pinholes of the threshold and glints are noise, larger holes show real damage."""
     if holes <= 0:
         return leaf
-    filled = ndimage.binary_fill_holes(leaf)
-    inside = filled & ~leaf
+    inside = interior_holes(leaf)
     if not inside.any():
         return leaf
     lab, n = ndimage.label(inside)

@@ -533,7 +533,7 @@ pub(crate) mod tests {
                 m.is_some_and(|j| (y[j][0] - q[0]).abs() + (y[j][1] - q[1]).abs() < 1e-9)
             })
             .count();
-        // Measured 85: the rest are left unmatched (under a third of their row's mass).
+        // Points whose row keeps under a third of its mass stay unmatched, not mismatched.
         assert!(right >= 80, "{right} of 100 matches right");
     }
 

@@ -1,4 +1,4 @@
-"""Interior holes of a leaf: only enclosed ones are found, and filling them leaves the rest alone."""
+"""Filling regions of a leaf: only enclosed holes are found, and filling them leaves the rest alone."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from phloem.leaves._holes import fill_holes, interior_holes
+from phloem.leaves._fill import fill_holes, interior_holes
 
 
 def _leaf() -> np.ndarray:
@@ -20,7 +20,7 @@ def test_only_enclosed_background_is_a_hole() -> None:
     leaf = _leaf()
     leaf[30:38, 25:33, 3] = 0.0  # an enclosed hole
     leaf[38:42, 0:10, 3] = 0.0  # a bite from the margin (touches the outside)
-    holes = interior_holes(leaf[..., 3])
+    holes = interior_holes(leaf[..., 3] > 0.5)
     assert holes[30:38, 25:33].all()
     assert holes.sum() == 64
     assert not holes[38:42, 0:10].any()
@@ -33,7 +33,7 @@ def test_fill_makes_the_leaf_whole_and_keeps_every_other_pixel() -> None:
     leaf[hole] = (1.0, 1.0, 1.0, 0.0)  # scanner white seen through the hole
     out = fill_holes(leaf, seed=0, threads=1)
     assert (out[..., 3][hole] == 1.0).all()
-    assert not interior_holes(out[..., 3]).any()
+    assert not interior_holes(out[..., 3] > 0.5).any()
     # the fill takes the blade's colours, not the white of the hole
     assert np.abs(out[hole][:, :3] - (0.2, 0.5, 0.1)).max() < 0.1
     far = ~(cv2.dilate(hole.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool))
@@ -67,8 +67,8 @@ def test_analysis_fills_the_backgrounds_holes_unless_asked_to_keep_them() -> Non
     scribbles[40:50, 15] = 2
     filled = phloem.leaves.analyze([leaf(20), bitten], scribbles, points=40, epsilon=8)
     kept = phloem.leaves.analyze([leaf(20), bitten], scribbles, points=40, epsilon=8, keep_holes=True)
-    assert interior_holes(kept.background[1][..., 3]).sum() > 20  # the hole, as registered
-    assert not interior_holes(filled.background[1][..., 3]).any()
+    assert interior_holes(kept.background[1][..., 3] > 0.5).sum() > 20  # the hole, as registered
+    assert not interior_holes(filled.background[1][..., 3] > 0.5).any()
     for model in (filled, kept):  # everything but the backgrounds is the same
         assert np.array_equal(model.aligned[1], kept.aligned[1])
     with pytest.raises(TypeError, match="keep_holes: expected True or False"):
