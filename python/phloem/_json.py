@@ -17,7 +17,7 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
-__all__ = ["MAX_BYTES", "MAX_DEPTH", "JsonFile", "parse_json", "read_json"]
+__all__ = ["MAX_BYTES", "MAX_DEPTH", "JsonFile", "is_number", "parse_json", "read_json", "short_repr"]
 
 MAX_BYTES = 256 * 1024 * 1024
 # Our formats nest 4 deep at most; 64 leaves room for others while staying far below the
@@ -129,6 +129,17 @@ def read_json(
     return parse_json(text, name, str(p), error=error)
 
 
+def short_repr(v: Any) -> str:
+    """``repr(v)``, cut to 40 characters: a file's value as an error message quotes it."""
+    text = repr(v)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def is_number(v: Any) -> bool:
+    """A JSON number (``true`` / ``false`` are not, though Python counts them as ints)."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
 _F = TypeVar("_F", bound="JsonFile")
 
 
@@ -165,7 +176,7 @@ class JsonFile:
         for key, want in (("format", cls.file_format), ("version", cls.file_version)):
             got = data.get(key, want)
             if got != want or isinstance(got, bool):
-                text = repr(got) if len(repr(got)) <= 40 else repr(got)[:37] + "..."
+                text = short_repr(got)
                 if key == "format":
                     raise cls.error(f"format must be {want!r}, got {text}")
                 raise cls.error(f"unsupported {cls.what} version {text} (this phloem reads {want})")

@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._api import Size, renamed
-from .._json import JsonFile
+from .._json import JsonFile, is_number, short_repr
 from .._validate import as_image, check_float, check_size
 
 __all__ = ["Branch", "Skeleton", "SkeletonError"]
@@ -91,34 +91,25 @@ def _as_thickness(thickness: Any, n: int, where: str) -> F64:
     return np.ascontiguousarray(arr)
 
 
-def _is_number(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
 def _json_points(points: Any, where: str) -> Any:
     """The points of a file's branch, type-checked (numpy would read "1" or true as numbers)."""
     if not isinstance(points, list):
         raise SkeletonError(f"{where}.points must be a list of [x, y] pairs, got {type(points).__name__}")
     for j, p in enumerate(points):
-        if not (isinstance(p, list) and len(p) == 2 and _is_number(p[0]) and _is_number(p[1])):
-            raise SkeletonError(f"{where}.points[{j}] must be [x, y] with two numbers, got {_short(p)}")
+        if not (isinstance(p, list) and len(p) == 2 and is_number(p[0]) and is_number(p[1])):
+            raise SkeletonError(f"{where}.points[{j}] must be [x, y] with two numbers, got {short_repr(p)}")
     return points
 
 
 def _json_thickness(thickness: Any, where: str) -> Any:
-    if _is_number(thickness):
+    if is_number(thickness):
         return thickness
     if not isinstance(thickness, list):
         raise SkeletonError(f"{where}.thickness must be a number or a list of numbers, got {type(thickness).__name__}")
     for j, t in enumerate(thickness):
-        if not _is_number(t):
-            raise SkeletonError(f"{where}.thickness[{j}] must be a number, got {_short(t)}")
+        if not is_number(t):
+            raise SkeletonError(f"{where}.thickness[{j}] must be a number, got {short_repr(t)}")
     return thickness
-
-
-def _short(v: Any) -> str:
-    text = repr(v)
-    return text if len(text) <= 40 else text[:37] + "..."
 
 
 @dataclass
@@ -538,7 +529,7 @@ class Skeleton(JsonFile):
                     and all(isinstance(v, int) and not isinstance(v, bool) for v in parent)
                 ):
                     raise SkeletonError(
-                        f"{where}.parent must be null or [branch index, vertex index], got {_short(parent)}"
+                        f"{where}.parent must be null or [branch index, vertex index], got {short_repr(parent)}"
                     )
                 parent = (parent[0], parent[1])
             out.append(Branch(pts, thick, parent))
@@ -549,7 +540,9 @@ class Skeleton(JsonFile):
                 and len(shape) == 2
                 and all(isinstance(v, int) and not isinstance(v, bool) and 0 < v <= MAX_COORD for v in shape)
             ):
-                raise SkeletonError(f"'shape' must be [H, W] with integers in 1..{MAX_COORD:.0f}, got {_short(shape)}")
+                raise SkeletonError(
+                    f"'shape' must be [H, W] with integers in 1..{MAX_COORD:.0f}, got {short_repr(shape)}"
+                )
             shape = (shape[0], shape[1])
         return cls(out, shape)
 

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import _core
+from .._boxes import bounding_box, points_box
 from .._validate import as_image, check_float, check_patch_size, check_seed, check_threads, derive_seed
 from ._rgba import premultiplied
 
@@ -263,8 +264,8 @@ def correct_texture(
     # patches then clip exactly where they would on the whole image) and the source around the
     # quilted positions, where Fang & Hart take texture from; the crops make them cost what the
     # hole costs rather than what the image does.
-    ty, tx = _box(hole, 2 * r, tgt.shape[:2])
-    sy, sx = _box(placed, _SOURCE_MARGIN * p, src.shape[:2], at=(cy[placed], cx[placed]))
+    ty, tx = bounding_box(hole, 2 * r)
+    sy, sx = points_box(cy[placed], cx[placed], src.shape, _SOURCE_MARGIN * p)
     allowed_box = np.ascontiguousarray(allowed[sy, sx])
     if not allowed_box.any():
         sy, sx, allowed_box = slice(0, src.shape[0]), slice(0, src.shape[1]), allowed
@@ -288,22 +289,6 @@ def correct_texture(
         init = nnf
     out[ty, tx] = np.where(hole_box[..., None], out_box, out[ty, tx])
     return _restore(out, warped)
-
-
-def _box(
-    mask: NDArray[np.bool_],
-    margin: int,
-    shape: tuple[int, ...],
-    *,
-    at: tuple[NDArray[np.intp], NDArray[np.intp]] | None = None,
-) -> tuple[slice, slice]:
-    """Bounding box of ``mask`` (or of the points ``at``) grown by ``margin``, inside ``shape``."""
-    ys, xs = np.nonzero(mask) if at is None else at
-    if len(ys) == 0:
-        return slice(0, shape[0]), slice(0, shape[1])
-    y0, y1 = max(int(ys.min()) - margin, 0), min(int(ys.max()) + margin + 1, shape[0])
-    x0, x1 = max(int(xs.min()) - margin, 0), min(int(xs.max()) + margin + 1, shape[1])
-    return slice(y0, y1), slice(x0, x1)
 
 
 def _quilt(

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import _core
+from .._boxes import bounding_box
 from .._validate import as_image, check_int, check_seed, check_threads, derive_seed, restore_ndim
 from ._fields import sample_checked
 
@@ -58,9 +59,8 @@ def _box(img: NDArray[np.float32], region: NDArray[np.bool_]) -> tuple[slice, sl
     h, w = region.shape
     if img.shape[2] not in (2, 4):
         return slice(0, h), slice(0, w)
-    rows, cols = np.flatnonzero(region.any(axis=1)), np.flatnonzero(region.any(axis=0))
-    y0, y1 = max(int(rows[0]) - 6, 0), min(int(rows[-1]) + 7, h)
-    x0, x1 = max(int(cols[0]) - 6, 0), min(int(cols[-1]) + 7, w)
+    ys, xs = bounding_box(region, 6)
+    y0, y1, x0, x1 = ys.start, ys.stop, xs.start, xs.stop
     a = img[..., -1]
     inside = y1 - y0 < h or x1 - x0 < w
     clear = not (a[:y0].any() or a[y1:].any() or a[y0:y1, :x0].any() or a[y0:y1, x1:].any())

@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 from scipy import ndimage  # type: ignore[import-untyped]
 
 from .._api import Seed, Size
+from .._boxes import bounding_box
 from .._progress import Progress
 from .._validate import check_float, check_int, check_seed, check_size, check_threads, derive_seed
 from ._fields import as_field, sample_checked
@@ -283,7 +284,7 @@ def _compose(background: F32, layers: list[F32], dissimilarity: list[F32], delta
     (the total is at least 1), the alpha is the background's. Only the background's bounding
     box is computed: everything else is transparent."""
     out = np.zeros_like(background)
-    box = _box(background[..., 3] > 0)
+    box = bounding_box(background[..., 3] > 0)
     bg = background[box]
     a = bg[..., 3:4]
     colour = np.zeros(bg.shape[:2] + (3,), np.float32)
@@ -327,16 +328,8 @@ def _one_leaf(alpha: NDArray[np.float32]) -> NDArray[np.float32]:
     return np.where(main | rim, alpha, np.float32(0)).astype(np.float32)
 
 
-def _box(mask: NDArray[np.bool_]) -> tuple[slice, slice]:
-    """The bounding box of ``mask`` (the whole array where it is empty)."""
-    rows, cols = np.nonzero(mask.any(axis=1))[0], np.nonzero(mask.any(axis=0))[0]
-    if len(rows) == 0:
-        return slice(None), slice(None)
-    return slice(int(rows[0]), int(rows[-1]) + 1), slice(int(cols[0]), int(cols[-1]) + 1)
-
-
 def _crop(rgba: F32, margin: int) -> F32:
-    inner = rgba[_box(rgba[..., 3] > 0)]
+    inner = rgba[bounding_box(rgba[..., 3] > 0)]
     out = np.zeros((inner.shape[0] + 2 * margin, inner.shape[1] + 2 * margin, 4), np.float32)
     out[margin : margin + inner.shape[0], margin : margin + inner.shape[1]] = inner
     return out
@@ -438,7 +431,7 @@ def synthesize(
         seeds = rng.integers(0, 2**63, size=2)
         back, coefficients = _blend(inverse, int(seeds[0]), max(BLEND_SMOOTHNESS * side, 1.0))
         pre = sample_checked(composition, back, nt)
-        box = _box(pre[..., 3] > 0)
+        box = bounding_box(pre[..., 3] > 0)
         if correct is None:
             leaf_img = straight(pre[box])
         else:

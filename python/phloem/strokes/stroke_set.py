@@ -31,7 +31,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from .._json import JsonFile
+from .._json import JsonFile, is_number, short_repr
 
 __all__ = ["Stroke", "StrokeError", "StrokePair", "StrokeSet"]
 
@@ -49,15 +49,6 @@ MIN_LENGTH = 1e-3
 
 class StrokeError(ValueError):
     """A stroke, stroke set or stroke file that is malformed or does not fit its image."""
-
-
-def _short(v: Any) -> str:
-    text = repr(v)
-    return text if len(text) <= 40 else text[:37] + "..."
-
-
-def _is_number(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
 def _as_points(points: Any, where: str) -> F64:
@@ -246,7 +237,7 @@ def _check_shape(value: Any, where: str) -> tuple[int, int]:
         and len(value) == 2
         and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and 1 <= v <= MAX_COORD for v in value)
     ):
-        raise StrokeError(f"{where}: expected [H, W] with two positive integers, got {_short(value)}")
+        raise StrokeError(f"{where}: expected [H, W] with two positive integers, got {short_repr(value)}")
     return int(value[0]), int(value[1])
 
 
@@ -403,6 +394,6 @@ def _json_pairs(points: Any, where: str) -> Any:
     if len(points) > MAX_POINTS:
         raise StrokeError(f"{where}: at most {MAX_POINTS} points, got {len(points)}")
     for j, p in enumerate(points):
-        if not (isinstance(p, list) and len(p) == 2 and _is_number(p[0]) and _is_number(p[1])):
-            raise StrokeError(f"{where}[{j}] must be a pair of two numbers, got {_short(p)}")
+        if not (isinstance(p, list) and len(p) == 2 and is_number(p[0]) and is_number(p[1])):
+            raise StrokeError(f"{where}[{j}] must be a pair of two numbers, got {short_repr(p)}")
     return points
