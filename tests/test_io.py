@@ -21,6 +21,7 @@ from phloem.io import (
     IMAGE_SUFFIXES,
     ImageReadError,
     RescaledImageWarning,
+    image_size,
     read_image,
     sidecar_path,
     write_image,
@@ -410,3 +411,17 @@ def test_damaged_tiff_pages_print_nothing(tmp_path):
     code = f"import phloem\ntry:\n    phloem.io.read_image({str(p)!r})\nexcept phloem.io.ImageReadError as e:\n    print(e)"
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=CLI_ENV, timeout=60)
     assert "circular.tif" in r.stdout and r.stderr == ""
+
+
+def test_image_size_reads_the_header_as_read_image_would(tmp_path: Path) -> None:
+    img = (np.arange(6 * 10 * 3) % 251).astype(np.uint8).reshape(6, 10, 3)
+    plain = tmp_path / "plain.png"
+    write_image(plain, img.astype(np.float32) / 255)
+    assert image_size(plain) == read_image(plain).shape[:2] == (6, 10)
+    turned = tmp_path / "turned.jpg"
+    exif = Image.Exif()
+    exif[0x0112] = 6  # rotate 90° clockwise: a portrait photo stored landscape
+    Image.fromarray(img).save(turned, exif=exif.tobytes())
+    assert image_size(turned) == read_image(turned).shape[:2] == (10, 6)
+    with pytest.raises(ImageReadError, match="over the limit of 10"):
+        image_size(plain, max_pixels=10)

@@ -36,6 +36,7 @@ __all__ = [
     "IMAGE_SUFFIXES",
     "ImageReadError",
     "RescaledImageWarning",
+    "image_size",
     "read_image",
     "sidecar_path",
     "write_image",
@@ -305,6 +306,29 @@ def _to_unit(img: NDArray[Any], path: Path) -> NDArray[np.float32]:
         out = (out - np.float32(lo)) / np.float32(hi - lo) if hi > lo else np.zeros_like(out)
         np.clip(out, 0.0, 1.0, out=out)  # float32 rounding can leave 1 + eps
     return out
+
+
+def image_size(path: str | os.PathLike[str], *, max_pixels: int = DEFAULT_MAX_PIXELS) -> tuple[int, int]:
+    """``(H, W)`` of the image :func:`read_image` would return, from the file's header alone
+    (EXIF orientation applied, ``max_pixels`` checked), without decoding it.
+
+    Raises
+    ------
+    ImageReadError
+        As :func:`read_image` for a missing, unreadable or too large file.
+
+    Examples
+    --------
+    >>> import phloem, tempfile, os
+    >>> path = os.path.join(tempfile.mkdtemp(), "bark.png")
+    >>> phloem.io.write_image(path, phloem.data.bark()[:100])
+    >>> phloem.io.image_size(path)
+    (100, 256)
+    """
+    if int(max_pixels) < 1:
+        raise ValueError(f"max_pixels: expected a positive pixel count, got {max_pixels}")
+    _, w, h, orientation, _ = _header(Path(path), int(max_pixels))
+    return (w, h) if orientation >= 5 else (h, w)  # orientations 5–8 turn the image a quarter
 
 
 def read_image(path: str | os.PathLike[str], *, max_pixels: int = DEFAULT_MAX_PIXELS) -> NDArray[np.float32]:

@@ -48,7 +48,7 @@ def _scribbles(args: argparse.Namespace, leaf: np.ndarray, cut: Cut) -> Any:
     """The scribbles file as labels of the training leaf: drawn on the leaf as ``phloem leaves
     extract`` writes it, taken as they are; drawn on the whole scan, cut with the leaf's box."""
     (fh, fw), (y0, y1, x0, x1) = cut
-    size = io.read_image(args.scribbles, max_pixels=args.max_pixels).shape[:2]
+    size = io.image_size(args.scribbles, max_pixels=args.max_pixels)
     if size == leaf.shape[:2] or size != (fh, fw):
         return args.scribbles  # leaves.analyze reads it, or says which size it expected
     labels, _ = leaves.read_scribbles(args.scribbles, (fh, fw))
