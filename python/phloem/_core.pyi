@@ -29,6 +29,8 @@ __all__ = [
     "shape_similarity",
     "shape_synthesize",
     "shape_synthesize_labels",
+    "stroke_pair_energies",
+    "stroke_pieces",
     "tbn_downsample",
     "tbn_upsample",
     "tps_register",
@@ -262,3 +264,16 @@ def shape_similarity(
     a: NDArray[np.uint8], b: NDArray[np.uint8], *, patch_size: int, rotations: int, threads: int | None
 ) -> float: ...
 def shape_layer_order(labels: NDArray[np.uint8], *, k: int) -> list[int]: ...
+def stroke_pieces(
+    source: NDArray[np.float32],
+    specs: NDArray[np.float64],
+    *,
+    threads: int | None,
+) -> list[tuple[tuple[int, int], NDArray[np.float32], NDArray[np.bool_], tuple[float, float]]]: ...
+def stroke_pair_energies(
+    source: NDArray[np.float32],
+    specs: NDArray[np.float64],
+    pairs: NDArray[np.int64],
+    *,
+    threads: int | None,
+) -> list[float]: ...

@@ -2,13 +2,26 @@
 
 The stroke model and its files: :class:`Stroke`, :class:`StrokePair`, :class:`StrokeSet`
 (JSON ``phloem.strokes``), strokes from SVG drawings (:func:`read_svg`) and from traced
-skeletons (:func:`strokes_from_skeleton`).
+skeletons (:func:`strokes_from_skeleton`); the object re-drawn along target strokes
+(:func:`edit`).
 """
 
 from __future__ import annotations
 
+from .sampling import Sampling
 from .skeleton import strokes_from_skeleton
 from .stroke_set import Stroke, StrokeError, StrokePair, StrokeSet
 from .svg import read_svg
+from .synthesis import EditResult, edit
 
-__all__ = ["Stroke", "StrokeError", "StrokePair", "StrokeSet", "read_svg", "strokes_from_skeleton"]
+__all__ = [
+    "EditResult",
+    "Sampling",
+    "Stroke",
+    "StrokeError",
+    "StrokePair",
+    "StrokeSet",
+    "edit",
+    "read_svg",
+    "strokes_from_skeleton",
+]

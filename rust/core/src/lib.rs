@@ -30,6 +30,8 @@
 //!   transfer they define (Argudo et al. 2017, §5.2).
 //! - [`tps`]: thin-plate splines and non-rigid point registration by TPS-RPM (Chui &
 //!   Rangarajan 2003) with dense forward and inverse warps (Assa & Cohen-Or, §3).
+//! - [`strokes`]: pieces of an object fetched along strokes and their compositing energy
+//!   (Luo, Lin, Shen & Chen).
 //! - [`correction`]: guided quilting, the start of texture correction after a warp (Assa &
 //!   Cohen-Or §3, after Fang & Hart 2007).
 
@@ -50,6 +52,7 @@ pub mod rng;
 pub mod seams;
 pub mod shapes;
 pub(crate) mod solver;
+pub mod strokes;
 pub mod tbn;
 pub mod tps;
 pub mod vote;

@@ -19,6 +19,7 @@ mod patch;
 mod progress;
 mod seams;
 mod shapes;
+mod strokes;
 mod tbn;
 mod threads;
 mod tps;
@@ -51,6 +52,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(tps::tps_register_py, m)?)?;
     m.add_function(wrap_pyfunction!(tps::tps_sample_py, m)?)?;
     m.add_function(wrap_pyfunction!(correction::guided_quilt_py, m)?)?;
+    m.add_function(wrap_pyfunction!(strokes::stroke_pieces_py, m)?)?;
+    m.add_function(wrap_pyfunction!(strokes::stroke_pair_energies_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::default_threads_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::after_fork_in_child_py, m)?)?;
     Ok(())
