@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from .. import __version__
-from . import bark, branching, demo, leaves, patch, texture, trees
+from . import bark, branching, demo, leaves, patch, strokes, texture, trees
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -19,6 +19,15 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(
         dest="command", metavar="COMMAND", required=True, help="what to make; each has its own --help"
     )
-    for family in (texture, patch, bark, trees, leaves, branching, demo):  # the order of the command list in --help
+    for family in (
+        texture,
+        patch,
+        bark,
+        trees,
+        leaves,
+        strokes,
+        branching,
+        demo,
+    ):  # the order of the command list in --help
         family.add_parsers(sub)
     return ap
