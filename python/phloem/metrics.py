@@ -11,7 +11,9 @@ branching structures with their L1 distance (Sibbing et al. 2010, Fig. 7; define
 :mod:`phloem.branching.histograms` and re-exported here), and the exact earth mover's distance
 between two histograms (the colour measure of Assa & Cohen-Or, Eq. 1), and the layer measures of
 Assa & Cohen-Or's induction (agreement of an induced layer with a reference, the Eq. 4 objective
-as :func:`phloem.leaves.induce` implements it) with a leaf-set diversity measure.
+as :func:`phloem.leaves.induce` implements it) with a leaf-set diversity measure, and the
+stroke measures of Luo et al.'s edits (coverage of the target strokes, width agreement across
+corresponding strokes; defined in :mod:`phloem.strokes.measures`).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from ._api import Seed
 from ._color import check_denoise, denoised_lab, rgb8
 from ._validate import as_image, as_mask, check_patch_size
 from .branching.histograms import angle_histogram, histogram_distance, thickness_histogram
+from .strokes.measures import stroke_coverage, width_agreement
 
 __all__ = [
     "angle_histogram",
@@ -44,7 +47,9 @@ __all__ = [
     "patch_coherence",
     "repetition",
     "shape_similarity",
+    "stroke_coverage",
     "thickness_histogram",
+    "width_agreement",
 ]
 
 

@@ -108,21 +108,6 @@ def stroke_sources(rgba: F32, strokes: list[Stroke]) -> list[StrokeSource]:
     return out
 
 
-def direction(stroke: Stroke, arc: F64, half: float) -> F64:
-    """Unit directions of ``stroke`` at arc lengths ``arc`` (px), each the chord over
-    ``± half`` px of arc (clipped to the stroke), so a polyline's corners and a traced
-    skeleton's pixel steps do not jitter the pieces."""
-    length = stroke.length()
-    lo = np.clip(arc - half, 0.0, length) / length
-    hi = np.clip(arc + half, 0.0, length) / length
-    d = stroke.at(hi) - stroke.at(lo)
-    n = np.hypot(d[..., 0], d[..., 1])
-    fallback = stroke.tangents()[0]
-    good = n > 1e-9
-    out = np.where(good[..., None], d / np.where(good, n, 1.0)[..., None], fallback)
-    return np.asarray(out / np.hypot(out[..., 0], out[..., 1])[..., None], dtype=np.float64)
-
-
 def specs(
     target: Stroke,
     target_arc: F64,
@@ -136,8 +121,10 @@ def specs(
     tl, sl = target.length(), source.length()
     tp = target.at(np.asarray(target_arc) / tl)
     sp = source.at(np.asarray(source_arc) / sl) - np.asarray(part.offset, np.float64)
-    tt = direction(target, np.asarray(target_arc, np.float64), float(np.median(half_length)))
-    st = direction(source, np.asarray(source_arc, np.float64), float(np.median(half_length)))
+    # Directions over the piece's own length, so a piece follows the stroke at its scale.
+    half = float(np.median(half_length))
+    tt = target.directions(np.asarray(target_arc, np.float64) / tl, half=half)
+    st = source.directions(np.asarray(source_arc, np.float64) / sl, half=half)
     reach = np.full(len(tp), REACH_FACTOR * part.half_width + 1.0)
     return np.ascontiguousarray(np.column_stack([tp, tt, sp, st, half_length, reach]), dtype=np.float64)
 

@@ -139,6 +139,18 @@ class Stroke:
         y = np.interp(q, s, self.points[:, 1])
         return np.stack([x, y], axis=-1)
 
+    def directions(self, u: Any, *, half: float = 2.0) -> F64:
+        """Unit directions at arc-length fractions ``u``, shape ``u.shape + (2,)``: each the chord
+        over ``± half`` px of arc (clipped to the stroke), so a polyline's corners and a traced
+        skeleton's pixel steps do not jitter what follows the stroke."""
+        length = self.length()
+        q = np.asarray(u, dtype=np.float64) * length
+        d = self.at(np.clip(q + half, 0.0, length) / length) - self.at(np.clip(q - half, 0.0, length) / length)
+        n = np.hypot(d[..., 0], d[..., 1])
+        good = n > 1e-9
+        out = np.where(good[..., None], d / np.where(good, n, 1.0)[..., None], self.tangents()[0])
+        return np.asarray(out / np.hypot(out[..., 0], out[..., 1])[..., None], dtype=np.float64)
+
     def project(self, point: Any) -> float:
         """The arc-length fraction of the stroke's point nearest ``point`` ``(x, y)``."""
         p = np.asarray(point, dtype=np.float64).reshape(2)
