@@ -48,8 +48,9 @@ pub struct Piece {
     pub rgba: Vec<f32>,
     /// `h × w`: pixels of the piece (inside its rectangle, alpha above zero).
     pub support: Vec<bool>,
-    /// How far the object reaches across the stroke at `p'`, to the left (`−n`) and to the
-    /// right (`+n`) of the source direction, margin included.
+    /// How far the piece reaches across the stroke at `p'`, to the left (`−n`) and to the
+    /// right (`+n`) of the source direction: the object's run across the stroke nearest `p'`,
+    /// margin included (negative when the run lies wholly on the other side).
     pub widths: [f64; 2],
 }
 
@@ -62,22 +63,27 @@ fn alpha_at(img: &Image<'_>, x: f64, y: f64, px: &mut [f32; 4]) -> f32 {
     px[3]
 }
 
-/// How far the object (alpha ≥ ½) reaches from `p` along `dir`, up to `cap`, in
-/// [`MARCH_STEP`]s; 0 when `p` itself is outside it.
-fn reach(img: &Image<'_>, p: [f64; 2], dir: [f64; 2], cap: f64) -> f64 {
+/// The run of the object (alpha ≥ ½) on the line through `p` along `dir`, within `± cap`,
+/// that lies nearest `p` (the one holding `p` when `p` is on the object): its ends as signed
+/// distances along `dir`, in [`MARCH_STEP`]s. `None` when the line misses the object. A
+/// stroke drawn a little off the object's middle, or off a thin part, still finds it.
+fn span(img: &Image<'_>, p: [f64; 2], dir: [f64; 2], cap: f64) -> Option<(f64, f64)> {
     let mut px = [0f32; 4];
-    let mut d = 0.0;
-    while d + MARCH_STEP <= cap {
-        let q = d + MARCH_STEP;
-        if alpha_at(img, p[0] + q * dir[0], p[1] + q * dir[1], &mut px) < 0.5 {
-            break;
-        }
-        d = q;
+    let k = (cap / MARCH_STEP).floor() as i64;
+    let inside = |i: i64, px: &mut [f32; 4]| {
+        let d = i as f64 * MARCH_STEP;
+        alpha_at(img, p[0] + d * dir[0], p[1] + d * dir[1], px) >= 0.5
+    };
+    // The nearest inside step, the nearer side first at equal distance.
+    let start = (0..=k).find_map(|i| [i, -i].into_iter().find(|&j| inside(j, &mut px)))?;
+    let (mut lo, mut hi) = (start, start);
+    while lo > -k && inside(lo - 1, &mut px) {
+        lo -= 1;
     }
-    if d == 0.0 && alpha_at(img, p[0], p[1], &mut px) < 0.5 {
-        return 0.0;
+    while hi < k && inside(hi + 1, &mut px) {
+        hi += 1;
     }
-    d
+    Some((lo as f64 * MARCH_STEP, hi as f64 * MARCH_STEP))
 }
 
 fn check_spec(i: usize, s: &PieceSpec) -> Result<()> {
@@ -110,9 +116,8 @@ fn check_spec(i: usize, s: &PieceSpec) -> Result<()> {
 
 fn fetch_one(src: &Image<'_>, s: &PieceSpec) -> Piece {
     let (ts, ns) = (s.source_tangent, normal(s.source_tangent));
-    let left = reach(src, s.source, [-ns[0], -ns[1]], s.max_half_width);
-    let right = reach(src, s.source, ns, s.max_half_width);
-    let widths = [left + WIDTH_MARGIN, right + WIDTH_MARGIN];
+    let (lo, hi) = span(src, s.source, ns, s.max_half_width).unwrap_or((0.0, 0.0));
+    let widths = [WIDTH_MARGIN - lo, hi + WIDTH_MARGIN];
     let (tt, nt) = (s.target_tangent, normal(s.target_tangent));
     let l = s.half_length;
     // The rectangle's corners in the target frame give the box.
@@ -167,8 +172,8 @@ fn fetch_one(src: &Image<'_>, s: &PieceSpec) -> Piece {
 /// Fetches one piece per spec from the RGBA `source` (alpha: where the object is, already
 /// restricted to the part of it that belongs to the stroke). Each target pixel of the piece's
 /// rectangle (`|a| ≤ half_length` along the target direction, `−w_l ≤ b ≤ w_r` across it,
-/// `w` the object's reach across the source stroke at `p'`, measured on the alpha, plus
-/// [`WIDTH_MARGIN`]) takes the source bilinearly at `p' + a·t' + b·n'`.
+/// `w` the ends of the object's run across the source stroke nearest `p'`, measured on the
+/// alpha, plus [`WIDTH_MARGIN`]) takes the source bilinearly at `p' + a·t' + b·n'`.
 pub fn fetch(source: &Image<'_>, specs: &[PieceSpec]) -> Result<Vec<Piece>> {
     if source.c != 4 {
         return Err(invalid(
@@ -259,6 +264,30 @@ mod tests {
         assert_eq!(at(103, 100), (true, 33.0, 20.0));
         assert_eq!(at(100, 102), (true, 30.0, 18.0));
         assert!(!at(100, 106).0, "source row 14, off the band");
+    }
+
+    #[test]
+    #[allow(clippy::float_cmp)] // the march moves in exact half-pixel steps
+    fn a_source_sample_off_the_object_finds_the_nearest_run() {
+        let d = band();
+        let img = Image::new("s", &d, 40, 60, 4).unwrap();
+        // 8 px above the band (rows 15..25): the run spans 7.5 to 17.5 px along +n (down).
+        let mut s = spec([30.0, 20.0], [1.0, 0.0]);
+        s.source = [30.0, 7.0];
+        s.max_half_width = 20.0;
+        let p = &fetch(&img, &[s]).unwrap()[0];
+        assert_eq!(p.widths, [WIDTH_MARGIN - 7.5, 17.5 + WIDTH_MARGIN]);
+        // Placed at target row 20, the band's rows 15..24 land on target rows 28..37.
+        let rows: Vec<i64> = (0..p.h)
+            .filter(|&r| p.support[r * p.w + p.w / 2])
+            .map(|r| p.y0 + r as i64)
+            .collect();
+        assert_eq!(rows, (28..38).collect::<Vec<_>>());
+        s.max_half_width = 5.0;
+        assert_eq!(
+            fetch(&img, &[s]).unwrap()[0].widths,
+            [WIDTH_MARGIN, WIDTH_MARGIN]
+        );
     }
 
     #[test]
