@@ -94,3 +94,14 @@ def test_nothing_is_overwritten_without_force(files, capsys) -> None:
     assert main(args) == 2
     assert "already exists" in capsys.readouterr().err and (d / "out.png").read_bytes() == b"keep"
     assert main([*args, "--force"]) == 0 and (d / "out.png").read_bytes() != b"keep"
+
+
+def test_edit_pastes_into_a_background(files) -> None:
+    _, _, d = files
+    io.write_image(d / "scene.png", np.full((120, 170, 3), 0.3, np.float32))
+    out = d / "scene_out.png"
+    args = ["strokes", "edit", str(d / "bar.png"), str(d / "strokes.json"), "--background", str(d / "scene.png")]
+    assert main([*args, "--out", str(out), "-q"]) == 0
+    got = io.read_image(out)
+    assert got.shape[:2] == (120, 170) and (got.shape[2] == 3 or np.all(got[..., 3] == 1.0))
+    assert abs(float(got[5, 5, 0]) - 0.3) < 1 / 255 + 1e-6

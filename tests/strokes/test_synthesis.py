@@ -99,17 +99,25 @@ def test_the_programme_on_real_pieces_equals_brute_force_and_never_costs_more_th
     part = _fetch.stroke_sources(img, [pair.source])[0]
     # Few samples, so every monotone, bounded mapping over the candidates can be listed.
     s = _sampling.sample(pair, part, spacing=40.0, stretch=2.0, threads=1)
-    seg = _sampling._segments(pair, 40.0)[0]
+    seg = _sampling._segments(pair, 40.0, 2.0)[0]
+    m, sl = len(seg.target_arc) - 1, pair.source.length()
     lo, hi = seg.step / 2 - 1e-9, seg.step * 2 + 1e-9
+    # Every candidate the programme could be offered, before it drops the unreachable ones.
+    grid = [np.array([0.0])]
+    for i in range(1, m):
+        c = i * seg.step + np.arange(-_sampling.BAND, _sampling.BAND + 1) * seg.step / 2
+        grid.append(c[(c >= 0) & (c <= sl)])
+    grid.append(np.array([sl]))
+    assert all(set(c) <= set(g) for c, g in zip(seg.candidates, grid, strict=True))
     best = math.inf
     rows = [
         _fetch.specs(
             pair.target, np.full(len(c), seg.target_arc[i]), pair.source, c, part, np.full(len(c), seg.half_length)
         )
-        for i, c in enumerate(seg.candidates)
+        for i, c in enumerate(grid)
     ]
-    for choice in itertools.product(*[range(len(c)) for c in seg.candidates]):
-        src = [seg.candidates[i][k] for i, k in enumerate(choice)]
+    for choice in itertools.product(*[range(len(c)) for c in grid]):
+        src = [grid[i][k] for i, k in enumerate(choice)]
         if not all(lo <= b - a <= hi for a, b in itertools.pairwise(src)):
             continue
         spec = np.concatenate([rows[i][k : k + 1] for i, k in enumerate(choice)])
@@ -219,3 +227,35 @@ def test_a_stroke_set_carries_targets_controls_and_size() -> None:
     assert s.target_arc[i] == pytest.approx(20.0) and s.source_arc[i] == pytest.approx(67.5)
     with pytest.raises(ValueError, match="target: expected None"):
         strokes.edit(img, sset, [[[0, 0], [5, 5]]])
+
+
+def test_without_mask_or_alpha_the_object_is_found_on_a_plain_background() -> None:
+    img, mask = _textured_bar()
+    scan = img[..., :3] * img[..., 3:] + 0.95 * (1 - img[..., 3:])  # the bar on white paper
+    line = [[12.0, 30.0], [147.0, 30.0]]
+    r = strokes.edit(scan, [line], [line], full_output=True)
+    assert (r.mask != mask).sum() <= 0.02 * mask.sum()
+    noise = np.random.default_rng(0).random((60, 160, 3))
+    with pytest.raises(ValueError, match="mask: none given, the image has no alpha"):
+        strokes.edit(noise, [line], [line])
+
+
+def test_a_background_takes_the_object_by_poisson_editing() -> None:
+    img, _ = _textured_bar()
+    line = [[12.0, 30.0], [147.0, 30.0]]
+    scene = np.zeros((80, 200, 3), np.float32)
+    scene[:] = [0.2, 0.5, 0.9]
+    moved = [[30.0, 40.0], [165.0, 40.0]]
+    plain = strokes.edit(img, [line], [moved], size=(80, 200))
+    out = strokes.edit(img, [line], [moved], background=scene)
+    assert out.shape == (80, 200, 4) and np.all(out[..., 3] == 1.0)
+    inside = plain[..., 3] >= 0.5
+    assert np.allclose(out[~(plain[..., 3] > 0), :3], scene[~(plain[..., 3] > 0)])
+    # The object's gradients are kept inside, and its border takes the scene's colours.
+    gx = np.diff(out[..., :3], axis=1)[inside[:, 1:] & inside[:, :-1]]
+    gp = np.diff(plain[..., :3], axis=1)[inside[:, 1:] & inside[:, :-1]]
+    assert np.abs(gx - gp).mean() < 0.02
+    rim = inside & ~ndimage.binary_erosion(inside)
+    assert np.abs(out[rim, :3] - scene[rim]).mean() < 0.5 * np.abs(plain[rim, :3] - scene[rim]).mean()
+    with pytest.raises(ValueError, match="background: expected the output size"):
+        strokes.edit(img, [line], [moved], size=(90, 200), background=scene)

@@ -40,12 +40,13 @@ def _cmd_edit(args: argparse.Namespace) -> None:
     img = io.read_image(args.image, max_pixels=args.max_pixels)
     sset = _stroke_set(args)
     mask = _mask(args, img.shape[:2])
+    scene = None if args.background is None else io.read_image(args.background, max_pixels=args.max_pixels)
     res = run(
         "strokes edit",
         args,
         lambda bar: strokes.edit(
             img, sset, size=args.size, mask=mask, spacing=args.spacing, stretch=args.stretch, sampling=args.sampling,
-            threads=args.threads, progress=bar, full_output=True,
+            background=scene, threads=args.threads, progress=bar, full_output=True,
         ),
     )  # fmt: skip
     if args.sheet is not None:
@@ -95,6 +96,8 @@ def add_parsers(sub: Any) -> None:
                    help="most the source may be stretched or squeezed between samples, against the uniform mapping (default 2)")  # fmt: skip
     q.add_argument("--sampling", choices=strokes.synthesis.SAMPLINGS, default="dp",
                    help="dp: the paper's dynamic-programming texture sampling; uniform: arc-length proportional (default dp)")  # fmt: skip
+    q.add_argument("--background", default=None, metavar="IMG",
+                   help="paste the object into this scene by Poisson image editing (sets the output size)")  # fmt: skip
     q.add_argument("--sheet", default=None, metavar="PNG",
                    help="also write a contact sheet: source with strokes, target strokes, pieces and seams, result")  # fmt: skip
     common_options(q)

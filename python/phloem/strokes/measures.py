@@ -101,11 +101,12 @@ def stroke_widths(alpha: Any, stroke: Stroke, u: Any, *, max_width: float | None
 
 
 def width_agreement(image: Any, strokes: Any, source: Any, *, samples: int = 32) -> float:
-    """Mean relative difference between the result's width across each target stroke and the
-    source object's width across the corresponding source stroke, at ``samples`` arc
+    """Median relative difference between the result's width across each target stroke and
+    the source object's width across the corresponding source stroke, at ``samples`` arc
     fractions per pair (spread evenly along the target, mapped to the source through the
-    pair's controls, piecewise linearly). 0 when the widths agree everywhere; lower is better.
-    Samples where the source is not opaque are skipped.
+    pair's controls, piecewise linearly). 0 when the widths agree; lower is better. Samples
+    where the source is not opaque are skipped. The median, because where target strokes
+    meet or cross, the line across one runs along the other and its width means nothing.
 
     Parameters
     ----------
@@ -140,4 +141,4 @@ def width_agreement(image: Any, strokes: Any, source: Any, *, samples: int = 32)
         errors.extend((np.abs(wt[ok] - ws[ok]) / ws[ok]).tolist())
     if not errors:
         raise ValueError("source: no source stroke runs over the opaque object")
-    return float(np.mean(errors))
+    return float(np.median(errors))

@@ -87,29 +87,36 @@ class _Segment:
     half_length: float
 
 
-def _segment(t0: float, t1: float, s0: float, s1: float, spacing: float) -> _Segment:
+def _segment(t0: float, t1: float, s0: float, s1: float, spacing: float, stretch: float) -> _Segment:
     m = max(1, round((t1 - t0) / spacing))
     target = np.linspace(t0, t1, m + 1)
     step = (s1 - s0) / m
+    lo, hi = step / stretch, step * stretch
+    offsets = np.arange(-BAND, BAND + 1)
     cands, uni = [], []
     for i in range(m + 1):
         if i in (0, m):
             cands.append(np.array([s0 if i == 0 else s1]))
             uni.append(0)
             continue
-        u = s0 + i * step
-        c = u + np.arange(-BAND, BAND + 1) * (step / 2)
-        keep = (c >= s0) & (c <= s1)
+        c = s0 + i * step + offsets * (step / 2)
+        # Only positions some path can reach from the first control and still leave the last
+        # one reachable: the others cannot be on a path, so they are not scored.
+        eps = 1e-9 * max(1.0, abs(s1))
+        keep = (c >= max(s0, s0 + i * lo, s1 - (m - i) * hi) - eps) & (
+            c <= min(s1, s0 + i * hi, s1 - (m - i) * lo) + eps
+        )
         cands.append(c[keep])
-        uni.append(int(np.flatnonzero(np.arange(-BAND, BAND + 1)[keep] == 0)[0]))
+        uni.append(int(np.flatnonzero(offsets[keep] == 0)[0]))
     return _Segment(target, cands, uni, step, (t1 - t0) / m)
 
 
-def _segments(pair: StrokePair, spacing: float) -> list[_Segment]:
+def _segments(pair: StrokePair, spacing: float, stretch: float) -> list[_Segment]:
     tl, sl = pair.target.length(), pair.source.length()
     c = pair.controls
     return [
-        _segment(tl * c[k, 1], tl * c[k + 1, 1], sl * c[k, 0], sl * c[k + 1, 0], spacing) for k in range(len(c) - 1)
+        _segment(tl * c[k, 1], tl * c[k + 1, 1], sl * c[k, 0], sl * c[k + 1, 0], spacing, stretch)
+        for k in range(len(c) - 1)
     ]
 
 
@@ -124,7 +131,7 @@ def sample(
 ) -> Sampling:
     """The samples of ``pair`` with their source positions: chosen by the dynamic programme
     (or the uniform mapping if ``uniform``), and both mappings' energies."""
-    segments = _segments(pair, spacing)
+    segments = _segments(pair, spacing, stretch)
     rows, pairs, index = [], [], []
     # Every candidate piece of every segment, numbered; then the allowed transitions.
     n = 0

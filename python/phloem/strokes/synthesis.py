@@ -7,7 +7,9 @@ from typing import Any, Literal, overload
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import ndimage  # type: ignore[import-untyped]
 
+from .. import blend
 from .._progress import Progress
 from .._validate import as_image, as_mask, check_float, check_threads
 from . import fetch as _fetch
@@ -28,7 +30,8 @@ class EditResult:
     Attributes
     ----------
     image : (H, W, 4) ndarray of float32
-        The object re-drawn along the target strokes, on a transparent background.
+        The object re-drawn along the target strokes, on a transparent background (or pasted
+        into ``background``).
     pieces : (H, W) ndarray of int32
         The piece each pixel comes from (numbered along each stroke, stroke after stroke), -1
         where none.
@@ -55,15 +58,15 @@ class EditResult:
 
 
 def _object_alpha(img: F32, mask: Any) -> F32:
-    """The source object's alpha: ``mask`` if given, else the image's own alpha if it is not
-    fully opaque, else the objects :func:`phloem.leaves.extract` finds on a plain background."""
+    """The source object's alpha: ``mask`` if given, else the image's own alpha if it has one,
+    else the objects :func:`phloem.leaves.extract` finds on a plain background."""
     h, w = img.shape[:2]
     if mask is not None:
         m = as_mask(mask, "mask", (h, w))
         if not m.any():
             raise ValueError("mask: is empty; expected the object's pixels set")
         return m.astype(np.float32)
-    if img.shape[2] in (2, 4) and (img[..., -1] < 1).any():
+    if img.shape[2] in (2, 4):
         alpha = np.clip(img[..., -1], 0.0, 1.0)
         if not (alpha > 0).any():
             raise ValueError("image: its alpha is zero everywhere; expected the object opaque")
@@ -72,10 +75,9 @@ def _object_alpha(img: F32, mask: Any) -> F32:
 
     try:
         found = extract(img, full_output=True)
-    except ValueError as exc:
+    except ValueError:
         raise ValueError(
-            f"mask: none given and the image has no alpha; the object could not be told from a plain background "
-            f"({exc}); pass mask="
+            "mask: none given, the image has no alpha, and no object stands out from a plain background; pass mask="
         ) from None
     alpha = np.zeros((h, w), np.float32)
     for leaf, (y0, y1, x0, x1) in zip(found.leaves, found.boxes, strict=True):
@@ -120,6 +122,22 @@ def _size(size: Any) -> tuple[int, int]:
     return int(size[0]), int(size[1])
 
 
+def _into(rgba: F32, scene: F32, *, threads: int | None) -> F32:
+    """``rgba`` pasted into ``scene`` by Poisson image editing over its opaque part, its soft
+    edge blended by alpha; opaque."""
+    alpha = rgba[..., 3:]
+    inside = alpha[..., 0] >= 0.5
+    if not inside.any():
+        return np.ascontiguousarray(np.concatenate([scene, np.ones_like(alpha)], axis=2), dtype=np.float32)
+    # Off the object its colours are undefined: each takes the nearest object colour, so no
+    # gradient is imported across the object's border and the border takes the scene's colour.
+    near = ndimage.distance_transform_edt(~inside, return_distances=False, return_indices=True)
+    src = rgba[..., :3][near[0], near[1]]
+    pasted = blend.seamless(src, scene, inside, (0, 0), threads=threads)
+    rgb = np.clip(alpha * pasted + (1 - alpha) * scene, 0.0, 1.0)
+    return np.ascontiguousarray(np.concatenate([rgb, np.ones_like(alpha)], axis=2), dtype=np.float32)
+
+
 @overload
 def edit(
     image: Any,
@@ -132,6 +150,7 @@ def edit(
     spacing: float | None = ...,
     stretch: float = ...,
     sampling: str = ...,
+    background: Any = ...,
     threads: int | None = ...,
     progress: Progress = ...,
     full_output: Literal[False] = ...,
@@ -148,6 +167,7 @@ def edit(
     spacing: float | None = ...,
     stretch: float = ...,
     sampling: str = ...,
+    background: Any = ...,
     threads: int | None = ...,
     progress: Progress = ...,
     full_output: Literal[True],
@@ -163,6 +183,7 @@ def edit(
     spacing: float | None = None,
     stretch: float = 2.0,
     sampling: str = "dp",
+    background: Any = None,
     threads: int | None = None,
     progress: Progress = None,
     full_output: bool = False,
@@ -191,10 +212,12 @@ def edit(
     target : list of (N, 2) array_like
         One target stroke per source stroke, in the output's pixels.
     size : (H, W), optional
-        The output's size (default: the stroke set's ``target_size``, else the image's).
+        The output's size (default: the background's, else the stroke set's ``target_size``,
+        else the image's).
     mask : (h, w) array_like of bool, optional
-        The object in ``image``. Default: the image's alpha when it is not fully opaque, else
-        the objects found on a plain background as :func:`phloem.leaves.extract` finds them.
+        The object in ``image``. Default: the image's alpha when it has one (fully opaque: the
+        whole image), else the objects found on a plain background as
+        :func:`phloem.leaves.extract` finds them.
     controls : list of (K, 2) array_like, optional
         Per stroke pair, control pairs of arc-length fractions ``(u_source, u_target)`` from
         ``(0, 0)`` to ``(1, 1)`` (default the end points).
@@ -206,6 +229,10 @@ def edit(
         neighbouring samples, relative to the uniform mapping (default 2, at least 1).
     sampling : {"dp", "uniform"}, optional
         ``"dp"`` (the paper's global texture sampling) or the uniform arc-length mapping.
+    background : (H, W[, C]) array_like, optional
+        A scene to put the object in: the object is pasted into it by Poisson image editing
+        (:func:`phloem.blend.seamless`, its gradients kept, its colours matched to the scene at
+        its border) and the result is opaque.
     threads : int, optional
         Worker threads (default: all cores).
     progress : callable, optional
@@ -216,8 +243,8 @@ def edit(
     Returns
     -------
     (H, W, 4) ndarray of float32
-        The new image, RGBA, transparent where no piece reaches; an :class:`EditResult` with
-        ``full_output``.
+        The new image, RGBA, transparent where no piece reaches (opaque over a
+        ``background``); an :class:`EditResult` with ``full_output``.
 
     Raises
     ------
@@ -242,6 +269,12 @@ def edit(
     rgb = _rgb(img)
     alpha = _object_alpha(img, mask)
     shape = (img.shape[0], img.shape[1])
+    scene = None
+    if background is not None:
+        scene = _rgb(as_image(background, "background"))
+        if size is not None and _size(size) != scene.shape[:2]:
+            raise ValueError(f"background: expected the output size {_size(size)}, got {scene.shape[:2]}")
+        size = scene.shape[:2]
     sset = _stroke_set(source, target, controls, shape, size)
     st = check_float(stretch, "stretch", 1.0)
     if sampling not in SAMPLINGS:
@@ -276,12 +309,13 @@ def edit(
     comp = compose(pieces, sset.target_size or shape, threads=th, check=check)
     on = np.concatenate([p.target.at(np.linspace(0, 1, max(2, int(p.target.length())))) for p in sset.pairs])
     comp = keep_on_strokes(comp, on)
+    out = comp.rgba if scene is None else _into(comp.rgba, scene, threads=th)
     if progress is not None:
         progress(total, total)
     if not full_output:
-        return comp.rgba
+        return out
     return EditResult(
-        image=comp.rgba,
+        image=out,
         pieces=comp.labels,
         seams=seam_map(comp.labels),
         stroke_of_piece=np.array(owner, np.int32),
