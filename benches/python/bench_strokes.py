@@ -38,8 +38,10 @@ def workload() -> tuple[np.ndarray, strokes.StrokeSet]:
     source = [[[42, 12], [42, 405]], [[42, 150], [42, 405]], [[42, 250], [42, 405]]]
     t = np.linspace(0, 1, 50)
     main = np.c_[80 + 380 * t, 470 - 380 * t + 90 * np.sin(np.pi * t)]
-    branch_a = np.c_[main[15, 0] + 150 * t, main[15, 1] - 30 - 140 * t + 40 * t**2]
-    branch_b = np.c_[main[30, 0] + 20 - 60 * t, main[30, 1] - 20 - 160 * t]
+    # Two branches growing off the main one, up to the left and up, slightly bent.
+    a, b = main[18], main[32]
+    branch_a = np.c_[a[0] - 110 * t - 20 * t**2, a[1] - 170 * t + 30 * t**2]
+    branch_b = np.c_[b[0] - 30 * t + 15 * t**2, b[1] - 220 * t]
     sset = strokes.StrokeSet.from_lists(source, [main, branch_a, branch_b], target_size=SIZE)
     return img, sset
 

@@ -3,7 +3,8 @@
     python -m benches.sheets.sheet_strokes OUT.png [--only NAME ...]
 
 Each case is a photo of ``../shared/data/strokes`` (the rocket, the horse silhouette, the
-Broadway tower, the coffee table's wood) with source strokes drawn along the object here, a
+Broadway tower, the coffee table's wood), or the embedded bark cut to a tapering branch (the
+speed benchmark's, ``benches/python/bench_strokes.py``), with source strokes drawn along the object here, a
 mask made here from the photo (a colour rule inside a box: the shared photos have no alpha),
 and target strokes that bend, stretch or branch it. One row per case: ``strokes.contact_sheet``
 (source with object and strokes, target strokes, pieces and seams, result, result with strokes).
@@ -100,15 +101,32 @@ CASES = [
          (330, 520)),
     Case("tower", "Broadway_tower_edit.jpg", _tower_mask, [[[617, 75], [617, 540]]] * 2,
          [_wave(40, 660, 200, 60, 1.0), _arc(350, 380, 150, 200, -20)], (440, 700)),
+    Case("branch", "", None, [], [], (512, 512)),  # drawn here: the embedded bark as a branch
     Case("plank", "skimage_coffee.png", _plank_mask, [[[410, 142], [578, 25]]] * 2,
          [_arc(300, 300, 220, 170, 10), [[300, 300], [300, 90]]], (340, 600)),
 ]  # fmt: skip
 
 
+def _branch() -> tuple[np.ndarray, strokes.StrokeSet]:
+    """The benchmark's bark branch and its three targets (``benches/python/bench_strokes.py``)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "python"))
+    from bench_strokes import workload
+
+    return workload()
+
+
 def run(case: Case) -> tuple[np.ndarray, str]:
+    if case.file == "":
+        rgba, sset = _branch()
+        img, mask = rgba[..., :3], rgba[..., 3] > 0.5
+        return _measure(case.name, img, mask, sset)
     img = phloem.io.read_image(SHARED / case.file)[..., :3]
     mask = None if case.mask is None else case.mask(img)
     sset = strokes.StrokeSet.from_lists(case.source, case.target, target_size=case.size)
+    return _measure(case.name, img, mask, sset)
+
+
+def _measure(name: str, img: np.ndarray, mask: np.ndarray | None, sset: strokes.StrokeSet) -> tuple[np.ndarray, str]:
     t0 = time.perf_counter()
     res = strokes.edit(img, sset, mask=mask, full_output=True)
     dt = time.perf_counter() - t0
@@ -119,7 +137,7 @@ def run(case: Case) -> tuple[np.ndarray, str]:
     coh_u = metrics.patch_coherence(uni[..., :3], img, mask=uni[..., 3] > 0.5)
     e, eu = sum(s.energy for s in res.samplings), sum(s.uniform_energy for s in res.samplings)
     line = (
-        f"| {case.name} | {dt:.2f} | {int(res.pieces.max()) + 1} | {e:.3g} / {eu:.3g} | "
+        f"| {name} | {dt:.2f} | {int(res.pieces.max()) + 1} | {e:.3g} / {eu:.3g} | "
         f"{metrics.stroke_coverage(res.image, sset):.3f} | {metrics.width_agreement(res.image, sset, src):.3f} | "
         f"{coh:.4f} / {coh_u:.4f} |"
     )
