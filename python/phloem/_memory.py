@@ -210,3 +210,11 @@ def nnf(source: tuple[int, ...], target: tuple[int, ...], k: int = 1, kdtree: bo
     adds its reduced patch vectors and tree nodes per source pixel."""
     c = _ch(target)
     return (28 + 10 * c + 18 * (k - 1)) * _px(target) + (4 * c + (120 if kdtree else 0)) * _px(source)
+
+
+def strokes_edit(size: tuple[int, int], image: tuple[int, ...]) -> int:
+    """Stroke-based editing: the canvas (RGBA f32), its piece labels and the copies the clean-up
+    and the Poisson pasting make (about 64 B per output pixel); the source's RGBA copy, its
+    distance maps and the strokes' parts (about 64 B per source pixel). Estimated from the
+    buffers, not yet calibrated by benches/memory/measure.py."""
+    return 64 * _px(size) + 64 * _px(image) + 2**24

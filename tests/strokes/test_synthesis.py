@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+import phloem
 from phloem import strokes
 from phloem.strokes import StrokeSet
 from phloem.strokes import compose as _compose
@@ -259,3 +260,13 @@ def test_a_background_takes_the_object_by_poisson_editing() -> None:
     assert np.abs(out[rim, :3] - scene[rim]).mean() < 0.5 * np.abs(plain[rim, :3] - scene[rim]).mean()
     with pytest.raises(ValueError, match="background: expected the output size"):
         strokes.edit(img, [line], [moved], size=(90, 200), background=scene)
+
+
+def test_an_edit_too_big_for_memory_is_refused_before_it_starts() -> None:
+    img, _ = _textured_bar()
+    line = [[12.0, 30.0], [147.0, 30.0]]
+    with pytest.raises(phloem.MemoryLimitError, match=r"size: 100000×100000 .* over the memory limit"):
+        strokes.edit(img, [line], [line], size=(100000, 100000))
+    seen: list[tuple[int, int]] = []
+    strokes.edit(img, [line], [line], progress=lambda d, t: seen.append((d, t)))
+    assert seen[0] == (0, 2) and seen[-1] == (2, 2) and all(a <= b for (a, _), (b, _) in itertools.pairwise(seen))

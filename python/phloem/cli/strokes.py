@@ -46,7 +46,7 @@ def _cmd_edit(args: argparse.Namespace) -> None:
         args,
         lambda bar: strokes.edit(
             img, sset, size=args.size, mask=mask, spacing=args.spacing, stretch=args.stretch, sampling=args.sampling,
-            background=scene, threads=args.threads, progress=bar, full_output=True,
+            background=scene, threads=args.threads, progress=bar, max_memory=args.max_memory, full_output=True,
         ),
     )  # fmt: skip
     if args.sheet is not None:

@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage  # type: ignore[import-untyped]
 
-from .. import blend
+from .. import _memory, blend
 from .._progress import Progress
 from .._validate import as_image, as_mask, check_float, check_threads
 from . import fetch as _fetch
@@ -153,6 +153,7 @@ def edit(
     background: Any = ...,
     threads: int | None = ...,
     progress: Progress = ...,
+    max_memory: int | None = ...,
     full_output: Literal[False] = ...,
 ) -> F32: ...
 @overload
@@ -170,6 +171,7 @@ def edit(
     background: Any = ...,
     threads: int | None = ...,
     progress: Progress = ...,
+    max_memory: int | None = ...,
     full_output: Literal[True],
 ) -> EditResult: ...
 def edit(
@@ -186,6 +188,7 @@ def edit(
     background: Any = None,
     threads: int | None = None,
     progress: Progress = None,
+    max_memory: int | None = None,
     full_output: bool = False,
 ) -> F32 | EditResult:
     """Re-draw the object of ``image`` along new strokes (Luo, Lin, Shen & Chen).
@@ -236,7 +239,10 @@ def edit(
     threads : int, optional
         Worker threads (default: all cores).
     progress : callable, optional
-        ``progress(done, total)`` as the strokes are sampled and the pieces composed.
+        ``progress(done, total)`` as the strokes are sampled and their pieces composed.
+    max_memory : int, optional
+        Refuse (``phloem.MemoryLimitError``) an edit whose estimated peak memory is over this
+        many bytes (default 75 % of the machine's).
     full_output : bool, optional
         Return an :class:`EditResult` with the piece map, seams and correspondences.
 
@@ -276,6 +282,8 @@ def edit(
             raise ValueError(f"background: expected the output size {_size(size)}, got {scene.shape[:2]}")
         size = scene.shape[:2]
     sset = _stroke_set(source, target, controls, shape, size)
+    out_size = sset.target_size or shape
+    _memory.check_size(_memory.strokes_edit(out_size, img.shape), max_memory, out_size)
     st = check_float(stretch, "stretch", 1.0)
     if sampling not in SAMPLINGS:
         raise ValueError(f"sampling: expected one of {SAMPLINGS}, got {sampling!r}")
@@ -289,9 +297,10 @@ def edit(
 
     samplings: list[Sampling] = []
     n_pairs = len(sset.pairs)
+    # Progress: each pair once sampled, then once composed.
     for i, (pair, part) in enumerate(zip(sset.pairs, parts, strict=True)):
         if progress is not None:
-            progress(i, n_pairs + 1)
+            progress(i, 2 * n_pairs)
         samplings.append(sample(pair, part, spacing=h, stretch=st, uniform=sampling == "uniform", threads=th))
     pieces: list[_fetch.Piece] = []
     owner: list[int] = []
@@ -300,18 +309,17 @@ def edit(
         got = _fetch.fetch(part, rows, threads=th)
         pieces.extend(got)
         owner.extend([i] * len(got))
-    total = n_pairs + len(pieces)
 
     def check(k: int) -> None:
         if progress is not None:
-            progress(n_pairs + k, total)
+            progress(n_pairs + owner[k], 2 * n_pairs)
 
-    comp = compose(pieces, sset.target_size or shape, threads=th, check=check)
+    comp = compose(pieces, out_size, threads=th, check=check)
     on = np.concatenate([p.target.at(np.linspace(0, 1, max(2, int(p.target.length())))) for p in sset.pairs])
     comp = keep_on_strokes(comp, on)
     out = comp.rgba if scene is None else _into(comp.rgba, scene, threads=th)
     if progress is not None:
-        progress(total, total)
+        progress(2 * n_pairs, 2 * n_pairs)
     if not full_output:
         return out
     return EditResult(
