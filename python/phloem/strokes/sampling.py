@@ -132,6 +132,13 @@ def sample(
     """The samples of ``pair`` with their source positions: chosen by the dynamic programme
     (or the uniform mapping if ``uniform``), and both mappings' energies."""
     segments = _segments(pair, spacing, stretch)
+    if uniform:
+        # Only the uniform path is scored: its own energy is all the result reports.
+        segments = [
+            _Segment(g.target_arc, [c[u : u + 1] for c, u in zip(g.candidates, g.uniform, strict=True)],
+                     [0] * len(g.candidates), g.step, g.half_length)
+            for g in segments
+        ]  # fmt: skip
     rows, pairs, index = [], [], []
     # Every candidate piece of every segment, numbered; then the allowed transitions.
     n = 0
@@ -171,7 +178,7 @@ def sample(
     for s, (seg, tab) in enumerate(zip(segments, tables, strict=True)):
         path_uniform = seg.uniform
         e_uniform = float(sum(tab[i][path_uniform[i], path_uniform[i + 1]] for i in range(len(tab))))
-        path, e_path = (list(path_uniform), e_uniform) if uniform else best_path(tab)
+        path, e_path = best_path(tab)
         total += e_path
         uniform_total += e_uniform
         first = 0 if s == 0 else 1  # a control's sample is shared with the segment before
