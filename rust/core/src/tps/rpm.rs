@@ -785,8 +785,7 @@ pub(crate) mod tests {
         );
     }
 
-    /// The loop compiled for AVX2 gives the portable loop's state to the bit (it would not
-    /// with fused multiply-adds).
+    /// The loop compiled for AVX2 gives the portable loop's state to the bit.
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn the_avx2_loop_equals_the_portable_one() {

@@ -239,32 +239,15 @@ impl Basis {
             .flat_map(|i| (3..n).map(move |j| (i, j)))
             .map(|(i, j)| q[i * n + j])
             .collect();
-        // S = Q2ᵀ K Q2 (m × m).
-        let mut kq = vec![0.0; n * m];
-        for i in 0..n {
-            for l in 0..n {
-                let kil = k[i * n + l];
-                if kil != 0.0 {
-                    let row = &g[l * m..(l + 1) * m];
-                    let out = &mut kq[i * m..(i + 1) * m];
-                    for j in 0..m {
-                        out[j] += kil * row[j];
-                    }
-                }
-            }
+        // S = Q2ᵀ K Q2 (m × m): the trailing block of P2 P1 P0 K P0 P1 P2.
+        let mut pkp = k.clone();
+        let mut p = vec![0.0; n];
+        for (c, v) in vs.iter().enumerate() {
+            reflect(&mut pkp, n, v, c, &mut p);
         }
-        let mut s = vec![0.0; m * m];
-        for l in 0..n {
-            let gl = &g[l * m..(l + 1) * m];
-            let kl = &kq[l * m..(l + 1) * m];
-            for i in 0..m {
-                let gi = gl[i];
-                let out = &mut s[i * m..(i + 1) * m];
-                for j in 0..m {
-                    out[j] += gi * kl[j];
-                }
-            }
-        }
+        let mut s: Vec<f64> = (3..n)
+            .flat_map(|i| pkp[i * n + 3..(i + 1) * n].iter().copied())
+            .collect();
         let (diag, off) = tridiagonalise(&mut s, m, &mut g, n);
         // A = (Q1ᵀ K) G.
         let mut qk = vec![0.0; 3 * n];
@@ -580,6 +563,26 @@ where
     }
 }
 
+/// `S ← P S P` for the symmetric row-major `m × m` matrix `s` and `P = I − 2 v vᵀ` (`|v| = 1`,
+/// zero before `from`), on the block `from..m` only: the rest is what the callers drop or
+/// already zero. `p` is scratch, `m` long.
+fn reflect(s: &mut [f64], m: usize, v: &[f64], from: usize, p: &mut [f64]) {
+    // p = 2 S v, q = p − (vᵀp) v, S −= v qᵀ + q vᵀ.
+    let v = &v[from..m];
+    for i in from..m {
+        p[i] = 2.0 * dot(&s[i * m + from..(i + 1) * m], v);
+    }
+    let p = &mut p[from..m];
+    let vp = dot(v, p);
+    axpy(p, -vp, v);
+    for (i, (&vi, &pi)) in v.iter().zip(p.iter()).enumerate() {
+        let row = &mut s[(from + i) * m + from..(from + i + 1) * m];
+        for ((x, &vj), &pj) in row.iter_mut().zip(v).zip(p.iter()) {
+            *x -= vi * pj + pi * vj;
+        }
+    }
+}
+
 /// Householder tridiagonalisation of the symmetric row-major `m × m` matrix `s`
 /// (overwritten): returns the diagonal and sub-diagonal of `Θ = Hᵀ S H` and replaces the
 /// `rows × m` matrix `g` by `g H`.
@@ -611,27 +614,12 @@ fn tridiagonalise(s: &mut [f64], m: usize, g: &mut [f64], rows: usize) -> (Vec<f
         for i in k + 1..m {
             v[i] /= vn;
         }
-        // S ← P S P on the trailing block: p = 2 S v, q = p − (vᵀp) v, S −= v qᵀ + q vᵀ.
-        for i in k..m {
-            let row = &s[i * m..(i + 1) * m];
-            p[i] = 2.0 * (k + 1..m).map(|j| row[j] * v[j]).sum::<f64>();
-        }
-        let vp: f64 = (k + 1..m).map(|i| v[i] * p[i]).sum();
-        for i in k..m {
-            p[i] -= vp * v[i];
-        }
-        for i in k..m {
-            for j in k..m {
-                s[i * m + j] -= v[i] * p[j] + p[i] * v[j];
-            }
-        }
+        reflect(s, m, &v, k, &mut p);
         // G ← G P.
         for r in 0..rows {
             let row = &mut g[r * m..(r + 1) * m];
-            let t = 2.0 * (k + 1..m).map(|j| row[j] * v[j]).sum::<f64>();
-            for j in k + 1..m {
-                row[j] -= t * v[j];
-            }
+            let t = 2.0 * dot(&row[k + 1..], &v[k + 1..]);
+            axpy(&mut row[k + 1..], -t, &v[k + 1..]);
         }
     }
     let diag = (0..m).map(|i| s[i * m + i]).collect();
