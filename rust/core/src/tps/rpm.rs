@@ -356,7 +356,8 @@ impl Soft {
     fn update(
         &mut self,
         v: &[Point],
-        (t, o): (f64, f64),
+        t: f64,
+        o: f64,
         params: &Params,
         weights: &mut [f64],
         targets: &mut [Point],
@@ -525,13 +526,8 @@ impl<'a> Anneal<'a> {
             };
             for _ in 0..updates {
                 cancel::check()?;
-                self.soft.update(
-                    &self.v,
-                    (t, o),
-                    params,
-                    &mut self.weights,
-                    &mut self.targets,
-                );
+                self.soft
+                    .update(&self.v, t, o, params, &mut self.weights, &mut self.targets);
                 self.l1 = params.lambda1 * n * t;
                 self.l2 = params.lambda2 * n * t;
                 // The fit weighted by inlier mass, by majorisation: each step fits
