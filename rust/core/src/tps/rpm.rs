@@ -23,12 +23,21 @@
 //!   lets a point that is almost all outlier pull the spline anywhere);
 //! - `λ1 = λ1_init · n · T` and `λ2 = λ2_init · n · T` (the scaling of Chui's code, which
 //!   makes the values independent of the number of points);
-//! - `iterations` such updates per temperature, then `T ← rate · T`, until `T < T_final`.
+//! - `iterations` such updates per temperature (one while `T > coarse`), then `T ← rate · T`,
+//!   until `T < T_final`.
+//!
+//! The kernel and its balancing are `f32` (twice the vector lanes; the balance is needed to
+//! 10⁻² only), the spline `f64`; the loop is compiled for AVX2 as well and chosen at run time.
+
+// The loop's helpers must be inlined into its AVX2 copy to be compiled for AVX2.
+#![allow(clippy::inline_always)]
+
+use std::ops::{Add, Mul, Neg, Sub};
 
 use crate::cancel;
 use crate::error::{invalid, Result};
 
-use super::spline::{axpy, dot, Basis, Point, Tps};
+use super::spline::{axpy, dot_lanes, Basis, Point, Refit, Tps};
 
 /// Parameters of [`rpm`]; [`Params::default`] holds the values phloem uses.
 #[derive(Clone, Debug, PartialEq)]
@@ -42,6 +51,9 @@ pub struct Params {
     pub rate: f64,
     /// Correspondence/spline updates per temperature.
     pub iterations: usize,
+    /// Temperatures above this (normalised units) get one update: the correspondences are
+    /// still coarse there and follow the temperature without extra updates.
+    pub coarse: f64,
     /// Sinkhorn sweeps per update, at most.
     pub sinkhorn: usize,
     /// Sinkhorn stops early once every real row sums to 1 within this.
@@ -69,6 +81,7 @@ impl Default for Params {
             final_ratio: 1e4,
             rate: 0.93,
             iterations: 5,
+            coarse: 0.25,
             sinkhorn: 10,
             tolerance: 1e-2,
             outlier: 2.0,
@@ -106,7 +119,11 @@ impl Params {
         if self.iterations == 0 {
             return Err(invalid("iterations", "expected at least 1"));
         }
-        for (name, v) in [("lambda1", self.lambda1), ("lambda2", self.lambda2)] {
+        for (name, v) in [
+            ("lambda1", self.lambda1),
+            ("lambda2", self.lambda2),
+            ("coarse", self.coarse),
+        ] {
             if !(v >= 0.0 && v.is_finite()) {
                 return Err(invalid(
                     name,
@@ -215,19 +232,35 @@ pub fn to_input(t: &Tps, ctrl: &[Point], c_in: Point, c_out: Point, s: f64) -> T
     }
 }
 
-/// `exp(−e)` for `e ≥ 0`, branch-free so that a row of kernel entries vectorises: `2^k`
-/// from the exponent bits times a degree-7 Taylor polynomial on `|t| ≤ ln 2 / 2` (relative
-/// error below 10⁻⁸); `e` is clamped to 700, where the value is far below anything that
-/// matters next to the outlier entries.
-#[inline]
-fn exp_neg(e: f64) -> f64 {
-    const MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52: adding it rounds to an integer.
-    let x = -e.min(700.0) * std::f64::consts::LOG2_E;
-    let kb = x + MAGIC;
-    let k = kb - MAGIC;
-    let t = (x - k) * std::f64::consts::LN_2;
-    let mut p = 1.984_126_984_126_984e-4;
-    for c in [
+/// What [`exp_neg`] needs of a float type.
+trait Real:
+    'static
+    + Copy
+    + PartialOrd
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Neg<Output = Self>
+{
+    /// `1.5 · 2^p` for `p` mantissa bits: adding it rounds to an integer.
+    const ROUND: Self;
+    const LOG2_E: Self;
+    const LN_2: Self;
+    /// Taylor coefficients of `e^t`, highest degree first.
+    const TAYLOR: &'static [Self];
+    /// Larger `e` give `exp(−CLAMP)`.
+    const CLAMP: Self;
+    /// `2^k` from `kb = k + ROUND`: the low mantissa bits of `kb` hold `k` (two's
+    /// complement), and `2^k`'s bits are `(k + bias) << p`.
+    fn two_pow(kb: Self) -> Self;
+}
+
+impl Real for f64 {
+    const ROUND: f64 = 6_755_399_441_055_744.0;
+    const LOG2_E: f64 = std::f64::consts::LOG2_E;
+    const LN_2: f64 = std::f64::consts::LN_2;
+    const TAYLOR: &'static [f64] = &[
+        1.984_126_984_126_984e-4,
         1.388_888_888_888_889e-3,
         8.333_333_333_333_333e-3,
         4.166_666_666_666_666_4e-2,
@@ -235,20 +268,290 @@ fn exp_neg(e: f64) -> f64 {
         0.5,
         1.0,
         1.0,
-    ] {
-        p = p * t + c;
+    ];
+    // Far below anything that matters next to the outlier entries.
+    const CLAMP: f64 = 700.0;
+    fn two_pow(kb: f64) -> f64 {
+        f64::from_bits(kb.to_bits().wrapping_add(1023) << 52)
     }
-    // The low mantissa bits of `kb` hold k (two's complement); 2^k's bits are (k + 1023) << 52.
-    let two_k = f64::from_bits(kb.to_bits().wrapping_add(1023) << 52);
-    p * two_k
 }
 
-/// One row of the kernel: `norm · exp(−|v − y_j|² / T)` for all `j`.
+impl Real for f32 {
+    const ROUND: f32 = 12_582_912.0;
+    const LOG2_E: f32 = std::f32::consts::LOG2_E;
+    const LN_2: f32 = std::f32::consts::LN_2;
+    const TAYLOR: &'static [f32] = &[
+        1.0 / 720.0,
+        1.0 / 120.0,
+        1.0 / 24.0,
+        1.0 / 6.0,
+        0.5,
+        1.0,
+        1.0,
+    ];
+    // Far below the outlier entry at `f32` precision, and far enough above the smallest
+    // normal number that the balancing products never become subnormal (slow).
+    const CLAMP: f32 = 60.0;
+    fn two_pow(kb: f32) -> f32 {
+        f32::from_bits(kb.to_bits().wrapping_add(127) << 23)
+    }
+}
+
+/// `exp(−e)` for `e ≥ 0`, branch-free so that a row of kernel entries vectorises: `2^k`
+/// from the exponent bits times a Taylor polynomial on `|t| ≤ ln 2 / 2` (degree 7 in `f64`,
+/// relative error below 10⁻⁸; degree 6 in `f32`); `e` is clamped to `F::CLAMP`.
 #[inline]
-fn kernel_row(row: &mut [f64], v: Point, yx: &[f64], yy: &[f64], inv_t: f64, norm: f64) {
-    for ((k, &a), &b) in row.iter_mut().zip(yx).zip(yy) {
-        let (dx, dy) = (v[0] - a, v[1] - b);
-        *k = norm * exp_neg((dx * dx + dy * dy) * inv_t);
+fn exp_neg<F: Real>(e: F) -> F {
+    let x = -(if e < F::CLAMP { e } else { F::CLAMP }) * F::LOG2_E;
+    let kb = x + F::ROUND;
+    let k = kb - F::ROUND;
+    let t = (x - k) * F::LN_2;
+    let mut p = F::TAYLOR[0];
+    for &c in &F::TAYLOR[1..] {
+        p = p * t + c;
+    }
+    p * F::two_pow(kb)
+}
+
+/// `Σ a_j b_j` in `f32`, eight lanes (one AVX2 register).
+#[inline]
+fn dot(a: &[f32], b: &[f32]) -> f32 {
+    dot_lanes::<f32, 8>(a, b)
+}
+
+/// The soft correspondences: the real block of the matrix is `r_i K_ij c_j` (Sinkhorn in
+/// scaling form: `K` is filled once per update and each sweep is two passes over it); the
+/// outlier column is `r_i o` and the outlier row `o c_j` (neither is normalised itself).
+struct Soft {
+    m: usize,
+    k: Vec<f32>,
+    r: Vec<f32>,
+    c: Vec<f32>,
+    /// `Σ_j K_ij c_j`: row `i`'s real mass is `r_i` times it.
+    inl: Vec<f32>,
+    col: Vec<f32>,
+    /// The second set's coordinates, and times `c`.
+    y: [Vec<f32>; 2],
+    cy: [Vec<f32>; 2],
+}
+
+impl Soft {
+    fn new(n: usize, ys: &[Point]) -> Self {
+        let m = ys.len();
+        Self {
+            m,
+            k: vec![0.0; n * m],
+            r: vec![1.0; n],
+            c: vec![1.0; m],
+            inl: vec![0.0; n],
+            col: vec![0.0; m],
+            y: [0, 1].map(|a| ys.iter().map(|p| p[a] as f32).collect()),
+            cy: [vec![0.0; m], vec![0.0; m]],
+        }
+    }
+
+    /// One update at temperature `t` with outlier entry `o`, the first set at `v`: the
+    /// kernel, balanced, then each point's inlier mass `ω_i` and target `ŷ_i`.
+    #[inline(always)]
+    fn update(
+        &mut self,
+        v: &[Point],
+        t: f64,
+        o: f64,
+        params: &Params,
+        weights: &mut [f64],
+        targets: &mut [Point],
+    ) {
+        let m = self.m;
+        let (inv_t, norm, o) = ((1.0 / t) as f32, (1.0 / t.sqrt()) as f32, o as f32);
+        let [yx, yy] = &self.y;
+        for (row, p) in self.k.chunks_exact_mut(m).zip(v) {
+            let p = [p[0] as f32, p[1] as f32];
+            for ((k, &a), &b) in row.iter_mut().zip(yx).zip(yy) {
+                let (dx, dy) = (p[0] - a, p[1] - b);
+                *k = norm * exp_neg((dx * dx + dy * dy) * inv_t);
+            }
+        }
+        // Warm start: the column scalings of the last update (the matrix moves little
+        // between updates), so a few sweeps suffice.
+        for (s, row) in self.inl.iter_mut().zip(self.k.chunks_exact(m)) {
+            *s = dot(row, &self.c);
+        }
+        for sweep in 0..params.sinkhorn {
+            for (r, s) in self.r.iter_mut().zip(&self.inl) {
+                *r = 1.0 / (s + o);
+            }
+            self.col.fill(o);
+            for (row, &r) in self.k.chunks_exact(m).zip(&self.r) {
+                axpy(&mut self.col, r, row);
+            }
+            for (c, col) in self.c.iter_mut().zip(&self.col) {
+                *c = 1.0 / col;
+            }
+            let mut worst = 0.0f32;
+            for ((s, row), r) in self.inl.iter_mut().zip(self.k.chunks_exact(m)).zip(&self.r) {
+                *s = dot(row, &self.c);
+                worst = worst.max((r * (*s + o) - 1.0).abs());
+            }
+            // Balanced enough: further sweeps would not move the targets visibly.
+            if sweep + 1 == params.sinkhorn || f64::from(worst) < params.tolerance {
+                break;
+            }
+        }
+        for (cy, y) in self.cy.iter_mut().zip(&self.y) {
+            for ((cy, c), y) in cy.iter_mut().zip(&self.c).zip(y) {
+                *cy = c * y;
+            }
+        }
+        for (i, row) in self.k.chunks_exact(m).enumerate() {
+            let inl = self.inl[i];
+            // The row's inlier mass ω and Chui's target, the mass-weighted mean of the
+            // partners.
+            weights[i] = f64::from(self.r[i] * inl).clamp(0.0, 1.0);
+            targets[i] = if inl > 0.0 {
+                [
+                    f64::from(dot(row, &self.cy[0]) / inl),
+                    f64::from(dot(row, &self.cy[1]) / inl),
+                ]
+            } else {
+                v[i]
+            };
+        }
+    }
+
+    /// Row `i`'s largest real entry `r_i K_ij c_j`: `(j, value)`.
+    fn best_column(&self, i: usize) -> (usize, f32) {
+        let row = &self.k[i * self.m..(i + 1) * self.m];
+        let (j, v) =
+            row.iter()
+                .zip(&self.c)
+                .enumerate()
+                .fold((0, f32::NEG_INFINITY), |b, (j, (&k, &c))| {
+                    if k * c > b.1 {
+                        (j, k * c)
+                    } else {
+                        b
+                    }
+                });
+        (j, self.r[i] * v)
+    }
+
+    /// Column `j`'s largest real entry: its row (the column scaling `c_j` is common to all).
+    fn best_row(&self, j: usize) -> usize {
+        (0..self.r.len())
+            .fold((self.r.len(), f32::NEG_INFINITY), |b, i| {
+                let a = self.r[i] * self.k[i * self.m + j];
+                if a > b.1 {
+                    (i, a)
+                } else {
+                    b
+                }
+            })
+            .0
+    }
+}
+
+/// The annealing loop and its state.
+struct Anneal<'a> {
+    basis: &'a Basis,
+    params: &'a Params,
+    t_init: f64,
+    t_final: f64,
+    soft: Soft,
+    /// `f(x_i)`.
+    v: Vec<Point>,
+    /// The targets of the last fit.
+    fitted: Vec<Point>,
+    weights: Vec<f64>,
+    targets: Vec<Point>,
+    refit: Refit,
+    l1: f64,
+    l2: f64,
+    temps: usize,
+}
+
+impl<'a> Anneal<'a> {
+    fn new(basis: &'a Basis, params: &'a Params, xs: &[Point], ys: &[Point], t_init: f64) -> Self {
+        Self {
+            basis,
+            params,
+            t_init,
+            t_final: t_init / params.final_ratio,
+            soft: Soft::new(xs.len(), ys),
+            v: xs.to_vec(),
+            fitted: xs.to_vec(),
+            weights: vec![1.0; xs.len()],
+            targets: xs.to_vec(),
+            refit: basis.refit_state(),
+            l1: 0.0,
+            l2: 0.0,
+            temps: 0,
+        }
+    }
+
+    /// The whole loop, compiled for the baseline and for AVX2 and chosen at run time. No
+    /// fused multiply-adds are used, so both give bit-identical results.
+    fn run(&mut self) -> Result<()> {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2, checked just above.
+            return unsafe { self.run_avx2() };
+        }
+        self.run_any()
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn run_avx2(&mut self) -> Result<()> {
+        self.run_any()
+    }
+
+    #[inline(always)]
+    fn run_any(&mut self) -> Result<()> {
+        let params = self.params;
+        let n = self.v.len() as f64;
+        let k = params.outlier;
+        let mut t = self.t_init;
+        loop {
+            self.temps += 1;
+            let o = if k > 0.0 {
+                (-k).exp() / t.sqrt()
+            } else {
+                (-1.0f64).exp() / self.t_init.sqrt()
+            };
+            let updates = if t > params.coarse {
+                1
+            } else {
+                params.iterations
+            };
+            for _ in 0..updates {
+                cancel::check()?;
+                self.soft
+                    .update(&self.v, t, o, params, &mut self.weights, &mut self.targets);
+                self.l1 = params.lambda1 * n * t;
+                self.l2 = params.lambda2 * n * t;
+                // The fit weighted by inlier mass, by majorisation: each step fits
+                // `ω ŷ + (1 − ω) f(x)` unweighted, so the spline need not follow a point in
+                // proportion to the mass it gives the outlier column.
+                for _ in 0..params.inner.max(1) {
+                    for (((f, &w), y), v) in self
+                        .fitted
+                        .iter_mut()
+                        .zip(&self.weights)
+                        .zip(&self.targets)
+                        .zip(&self.v)
+                    {
+                        *f = [w * y[0] + (1.0 - w) * v[0], w * y[1] + (1.0 - w) * v[1]];
+                    }
+                    self.basis
+                        .refit(&self.fitted, self.l1, self.l2, &mut self.refit, &mut self.v);
+                }
+            }
+            t *= params.rate;
+            if t < self.t_final {
+                return Ok(());
+            }
+        }
     }
 }
 
@@ -276,137 +579,38 @@ pub fn rpm(
         .map(|p| [(p[0] - cy[0]) / scale, (p[1] - cy[1]) / scale])
         .collect();
     let basis = Basis::new(names.0, &xs)?;
-    let (n, m) = (xs.len(), ys.len());
+    let n = xs.len();
     let d2 = |a: Point, b: Point| (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2);
     let t_init = params.t_init.unwrap_or_else(|| {
         xs.iter()
             .flat_map(|a| ys.iter().map(move |b| d2(*a, *b)))
             .fold(0.0, f64::max)
     });
-    let t_final = t_init / params.final_ratio;
-    let outlier = (-1.0f64).exp() / t_init.sqrt();
-    let k = params.outlier;
-    let outlier_at = |t: f64| {
-        if k > 0.0 {
-            (-k).exp() / t.sqrt()
-        } else {
-            outlier
-        }
-    };
-    // The real block of the correspondence matrix is `r_i K_ij c_j` (Sinkhorn in scaling
-    // form: `K` is filled once per update and each sweep is two passes over it); the outlier
-    // column is `r_i o` and the outlier row `o c_j` (neither is normalised itself).
-    let mut kmat = vec![0.0f64; n * m];
-    let mut r = vec![1.0f64; n];
-    let mut c = vec![1.0f64; m];
-    let mut s = vec![0.0f64; n];
-    let mut col = vec![0.0f64; m];
-    let mut cyx = vec![0.0f64; m];
-    let mut cyy = vec![0.0f64; m];
-    let (yx, yy): (Vec<f64>, Vec<f64>) = ys.iter().map(|p| (p[0], p[1])).unzip();
-    let mut v = xs.clone();
-    let mut tps = Tps {
-        ctrl: xs.clone(),
-        ..Tps::identity()
-    };
-    let mut targets = xs.clone();
-    let mut fitted = xs.clone();
-    let mut weights = vec![1.0f64; n];
-    let (mut l1, mut l2) = (0.0, 0.0);
-    let mut t = t_init;
-    let mut temps = 0;
-    let mut o;
-    loop {
-        temps += 1;
-        let inv_t = 1.0 / t;
-        let norm = 1.0 / t.sqrt();
-        o = outlier_at(t);
-        for _ in 0..params.iterations {
-            cancel::check()?;
-            for i in 0..n {
-                kernel_row(&mut kmat[i * m..(i + 1) * m], v[i], &yx, &yy, inv_t, norm);
-            }
-            // Warm start: the column scalings of the last update (the matrix moves little
-            // between updates), so a few sweeps suffice.
-            for i in 0..n {
-                s[i] = dot(&kmat[i * m..(i + 1) * m], &c) + o;
-            }
-            for sweep in 0..params.sinkhorn {
-                for i in 0..n {
-                    r[i] = 1.0 / s[i];
-                }
-                col.fill(o);
-                for i in 0..n {
-                    axpy(&mut col, r[i], &kmat[i * m..(i + 1) * m]);
-                }
-                for j in 0..m {
-                    c[j] = 1.0 / col[j];
-                }
-                let mut worst = 0.0f64;
-                for i in 0..n {
-                    s[i] = dot(&kmat[i * m..(i + 1) * m], &c) + o;
-                    worst = worst.max((r[i] * s[i] - 1.0).abs());
-                }
-                // Balanced enough: further sweeps would not move the targets visibly.
-                if sweep + 1 == params.sinkhorn || worst < params.tolerance {
-                    break;
-                }
-            }
-            for j in 0..m {
-                cyx[j] = c[j] * yx[j];
-                cyy[j] = c[j] * yy[j];
-            }
-            for i in 0..n {
-                let row = &kmat[i * m..(i + 1) * m];
-                let inl = s[i] - o;
-                // The row's inlier mass ω and Chui's target, the mass-weighted mean of the
-                // partners.
-                weights[i] = (r[i] * inl).clamp(0.0, 1.0);
-                targets[i] = if inl > 0.0 {
-                    [dot(row, &cyx) / inl, dot(row, &cyy) / inl]
-                } else {
-                    v[i]
-                };
-            }
-            l1 = params.lambda1 * n as f64 * t;
-            l2 = params.lambda2 * n as f64 * t;
-            // The fit weighted by inlier mass, by majorisation: each step fits
-            // `ω ŷ + (1 − ω) f(x)` unweighted, so the spline need not follow a point in
-            // proportion to the mass it gives the outlier column.
-            for _ in 0..params.inner.max(1) {
-                for i in 0..n {
-                    let w = weights[i];
-                    fitted[i] = [
-                        w * targets[i][0] + (1.0 - w) * v[i][0],
-                        w * targets[i][1] + (1.0 - w) * v[i][1],
-                    ];
-                }
-                tps = basis.fit_at_controls(&fitted, l1, l2, &mut v);
-            }
-        }
-        t *= params.rate;
-        if t < t_final {
-            break;
-        }
-    }
+    let mut run = Anneal::new(&basis, params, &xs, &ys, t_init);
+    run.run()?;
+    let Anneal {
+        soft,
+        fitted,
+        refit,
+        mut l1,
+        l2,
+        temps,
+        ..
+    } = run;
+    let mut tps = basis.spline(&refit);
     // The targets the last spline was fitted to (densify refits to them).
     let mut targets = fitted;
-    // The last matrix: row i's entries `r_i K_ij c_j`. A row's match is its largest real
-    // entry if that holds over a third of the row's mass: with the outlier entry of
-    // `Params::outlier`, an exact pair still leaves about half its mass to the outlier
-    // column at the end, so "beats the outlier entry" would reject every pair; a third
-    // accepts pairs closer than about `√T_final` and no point split between two partners.
-    let matches: Vec<Option<usize>> =
-        (0..n)
-            .map(|i| {
-                let row = &kmat[i * m..(i + 1) * m];
-                let (best, val) = row.iter().zip(&c).enumerate().fold(
-                    (0, f64::NEG_INFINITY),
-                    |b, (j, (&k, &cj))| if k * cj > b.1 { (j, k * cj) } else { b },
-                );
-                (r[i] * val > 1.0 / 3.0).then_some(best)
-            })
-            .collect();
+    // The last matrix: a row's match is its largest real entry if that holds over a third
+    // of the row's mass: with the outlier entry of `Params::outlier`, an exact pair still
+    // leaves about half its mass to the outlier column at the end, so "beats the outlier
+    // entry" would reject every pair; a third accepts pairs closer than about `√T_final` and
+    // no point split between two partners.
+    let matches: Vec<Option<usize>> = (0..n)
+        .map(|i| {
+            let (j, v) = soft.best_column(i);
+            (v > 1.0 / 3.0).then_some(j)
+        })
+        .collect();
     let frame = Frame { cx, cy, scale };
     // Polish: the annealed spline still bends towards the targets of points that ended up
     // outliers (their soft targets pulled at them on the way down). Refit it on the mutual
@@ -414,25 +618,13 @@ pub fn rpm(
     let mut basis = basis;
     let mut ctrl_in: Vec<Point> = x.to_vec();
     if params.polish {
-        // Column j's largest real entry (`r_i K_ij c_j`; the outlier row is left out for the
-        // reason the matches use a third of the mass).
-        let best_row = |j: usize| {
-            (0..n)
-                .fold((n, f64::NEG_INFINITY), |b, i| {
-                    let a = r[i] * kmat[i * m + j];
-                    if a > b.1 {
-                        (i, a)
-                    } else {
-                        b
-                    }
-                })
-                .0
-        };
+        // Mutual best: the column's largest real entry is in the row (the outlier row is
+        // left out for the reason the matches use a third of the mass).
         let pairs: Vec<(usize, usize)> = matches
             .iter()
             .enumerate()
             .filter_map(|(i, m): (usize, &Option<usize>)| {
-                m.filter(|&j| best_row(j) == i).map(|j| (i, j))
+                m.filter(|&j| soft.best_row(j) == i).map(|j| (i, j))
             })
             .collect();
         let sub: Vec<Point> = pairs.iter().map(|&(i, _)| xs[i]).collect();
@@ -569,6 +761,49 @@ pub(crate) mod tests {
             assert!((a - b).abs() <= 1e-8 * b, "exp(-{e}) = {b}, got {a}");
         }
         assert!(exp_neg(1e6) >= 0.0 && exp_neg(1e6) < 1e-300);
+    }
+
+    #[test]
+    fn fast_exp_in_f32_agrees_with_the_library() {
+        let mut worst = 0.0f64;
+        for k in 0..6000 {
+            let e = k as f32 * 0.01;
+            let (a, b) = (f64::from(exp_neg(e)), (-f64::from(e)).exp());
+            // Rounding `log2 e` and `e · log2 e` to `f32` costs up to `e · 2⁻²⁴` relative
+            // each; the rest is the polynomial.
+            let bound = 2e-7 + f64::from(e) * 2f64.powi(-23);
+            worst = worst.max((a - b).abs() / b / bound);
+        }
+        assert!(worst <= 1.0, "error {worst:.2} times the bound");
+        // Clamped, and still a normal number.
+        assert!(
+            exp_neg(1e6f32).is_normal() && exp_neg(1e6f32).to_bits() == exp_neg(60.0f32).to_bits()
+        );
+    }
+
+    /// The loop compiled for AVX2 gives the portable loop's state to the bit.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn the_avx2_loop_equals_the_portable_one() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let x: Vec<Point> = leaf(60)
+            .iter()
+            .map(|p| [p[0] / 100.0 - 2.5, p[1] / 100.0 - 2.0])
+            .collect();
+        let y: Vec<Point> = x
+            .iter()
+            .map(|&p| [p[0] * 1.1 + 0.05 * p[1], p[1] * 0.9 + 0.1 * p[0] * p[0]])
+            .collect();
+        let basis = Basis::new("x", &x).unwrap();
+        let params = Params::default();
+        let mut a = Anneal::new(&basis, &params, &x, &y, 4.0);
+        let mut b = Anneal::new(&basis, &params, &x, &y, 4.0);
+        a.run_any().unwrap();
+        // SAFETY: the CPU supports AVX2, checked above.
+        unsafe { b.run_avx2() }.unwrap();
+        assert!(a.temps > 100 && a.v == b.v && a.soft.k == b.soft.k && a.soft.c == b.soft.c);
     }
 
     #[test]

@@ -10,10 +10,15 @@
 //! TPS-RPM refits the same control points to new targets hundreds of times with a new `λ1`
 //! each temperature, so [`Basis`] does the `O(n³)` work once: it tridiagonalises
 //! `Q2ᵀ K Q2 = H Θ Hᵀ` by Householder reflections and keeps `G = Q2 H`; a fit is then
-//! `w = G (Θ + λ1 I)⁻¹ Gᵀ Y`, `O(n²)` with a tridiagonal solve.
+//! `w = G (Θ + λ1 I)⁻¹ Gᵀ Y`, `O(n²)` with a tridiagonal solve. [`Basis::refit`] gives the
+//! values at the control points without `w` or `K`: `K G = G Θ + Q1 A` with `A = Q1ᵀ K G`.
 
+// The loop's helpers must be inlined into its AVX2 copy to be compiled for AVX2.
+#![allow(clippy::inline_always)]
 // Dense kernels index several arrays in lockstep.
 #![allow(clippy::needless_range_loop)]
+
+use std::ops::{Add, Mul};
 
 use crate::error::{invalid, Result};
 
@@ -44,6 +49,17 @@ pub struct Basis {
     /// Diagonal and sub-diagonal of `Θ`.
     diag: Vec<f64>,
     off: Vec<f64>,
+    /// `A = Q1ᵀ K G`, row-major `3 × (n − 3)`.
+    a: Vec<f64>,
+}
+
+/// A fit kept as `γ` (the kernel weights are `w = G γ`) and the affine part, with the
+/// scratch of [`Basis::refit`].
+pub struct Refit {
+    gamma: Vec<Point>,
+    lanes: [Vec<f64>; 2],
+    thomas: Vec<f64>,
+    d: [Point; 3],
 }
 
 /// A fitted spline.
@@ -223,33 +239,37 @@ impl Basis {
             .flat_map(|i| (3..n).map(move |j| (i, j)))
             .map(|(i, j)| q[i * n + j])
             .collect();
-        // S = Q2ᵀ K Q2 (m × m).
-        let mut kq = vec![0.0; n * m];
-        for i in 0..n {
-            for l in 0..n {
-                let kil = k[i * n + l];
-                if kil != 0.0 {
-                    let row = &g[l * m..(l + 1) * m];
-                    let out = &mut kq[i * m..(i + 1) * m];
-                    for j in 0..m {
-                        out[j] += kil * row[j];
-                    }
-                }
-            }
+        // S = Q2ᵀ K Q2 (m × m): the trailing block of P2 P1 P0 K P0 P1 P2.
+        let mut pkp = k.clone();
+        let mut p = vec![0.0; n];
+        for (c, v) in vs.iter().enumerate() {
+            reflect(&mut pkp, n, v, c, &mut p);
         }
-        let mut s = vec![0.0; m * m];
-        for l in 0..n {
-            let gl = &g[l * m..(l + 1) * m];
-            let kl = &kq[l * m..(l + 1) * m];
-            for i in 0..m {
-                let gi = gl[i];
-                let out = &mut s[i * m..(i + 1) * m];
-                for j in 0..m {
-                    out[j] += gi * kl[j];
-                }
-            }
-        }
+        let mut s: Vec<f64> = (3..n)
+            .flat_map(|i| pkp[i * n + 3..(i + 1) * n].iter().copied())
+            .collect();
         let (diag, off) = tridiagonalise(&mut s, m, &mut g, n);
+        // A = (Q1ᵀ K) G.
+        let mut qk = vec![0.0; 3 * n];
+        for i in 0..n {
+            for l in 0..3 {
+                axpy(
+                    &mut qk[l * n..(l + 1) * n],
+                    q1[i * 3 + l],
+                    &k[i * n..(i + 1) * n],
+                );
+            }
+        }
+        let mut a = vec![0.0; 3 * m];
+        for i in 0..n {
+            for l in 0..3 {
+                axpy(
+                    &mut a[l * m..(l + 1) * m],
+                    qk[l * n + i],
+                    &g[i * m..(i + 1) * m],
+                );
+            }
+        }
         Ok(Self {
             ctrl: ctrl.to_vec(),
             k,
@@ -258,6 +278,7 @@ impl Basis {
             g,
             diag,
             off,
+            a,
         })
     }
 
@@ -313,7 +334,7 @@ impl Basis {
             axpy(&mut by, targets[i][1], gi);
         }
         let mut b: Vec<Point> = bx.iter().zip(&by).map(|(&x, &y)| [x, y]).collect();
-        tridiagonal_solve(&self.diag, &self.off, lambda1, &mut b);
+        tridiagonal_solve(&self.diag, &self.off, lambda1, &mut b, &mut vec![0.0; m]);
         let (gx, gy): (Vec<f64>, Vec<f64>) = b.iter().map(|p| (p[0], p[1])).unzip();
         // w = G γ.
         let (wx, wy): (Vec<f64>, Vec<f64>) = (0..n)
@@ -335,6 +356,16 @@ impl Basis {
                 z[a][1] += q * res[1];
             }
         }
+        let d = self.affine(&z, lambda2);
+        Tps {
+            ctrl: self.ctrl.clone(),
+            w,
+            d,
+        }
+    }
+
+    /// The affine part from `z = Q1ᵀ (Y − K w)`.
+    fn affine(&self, z: &[[f64; 2]; 3], lambda2: f64) -> [Point; 3] {
         let r = &self.r;
         // RᵀR + λ2 I and the right-hand side Rᵀ z − RᵀR I32.
         let mut rtr = [[0.0; 3]; 3];
@@ -357,15 +388,114 @@ impl Basis {
             a[i][i] += lambda2;
         }
         let x = solve3(a, rhs);
-        let d = [
+        [
             [x[0][0] + ident[0][0], x[0][1] + ident[0][1]],
             [x[1][0] + ident[1][0], x[1][1] + ident[1][1]],
             [x[2][0] + ident[2][0], x[2][1] + ident[2][1]],
-        ];
+        ]
+    }
+
+    /// An empty [`Refit`] for this basis.
+    #[must_use]
+    pub fn refit_state(&self) -> Refit {
+        let m = self.ctrl.len() - 3;
+        Refit {
+            gamma: vec![[0.0; 2]; m],
+            lanes: [vec![0.0; m], vec![0.0; m]],
+            thomas: vec![0.0; m],
+            d: Tps::identity().d,
+        }
+    }
+
+    /// The fit of [`Basis::fit`], kept in `state`, with `f(c_i)` written to `at`: two passes
+    /// over `G` and none over `K` (`K w = G Θ γ + Q1 A γ`), for loops that need only the
+    /// values at the control points until the end ([`Basis::spline`]). Equal to
+    /// [`Basis::fit_at_controls`] up to rounding.
+    #[inline(always)]
+    pub fn refit(
+        &self,
+        targets: &[Point],
+        lambda1: f64,
+        lambda2: f64,
+        state: &mut Refit,
+        at: &mut [Point],
+    ) {
+        let n = self.ctrl.len();
+        let m = n - 3;
+        debug_assert_eq!(targets.len(), n);
+        let [bx, by] = &mut state.lanes;
+        bx.fill(0.0);
+        by.fill(0.0);
+        for i in 0..n {
+            let gi = &self.g[i * m..(i + 1) * m];
+            axpy(bx, targets[i][0], gi);
+            axpy(by, targets[i][1], gi);
+        }
+        let gamma = &mut state.gamma;
+        for (g, (&x, &y)) in gamma.iter_mut().zip(bx.iter().zip(by.iter())) {
+            *g = [x, y];
+        }
+        tridiagonal_solve(&self.diag, &self.off, lambda1, gamma, &mut state.thomas);
+        // Θ γ into the lanes, and A γ = Q1ᵀ K w.
+        for i in 0..m {
+            let mut tg = [self.diag[i] * gamma[i][0], self.diag[i] * gamma[i][1]];
+            if i > 0 {
+                tg[0] += self.off[i - 1] * gamma[i - 1][0];
+                tg[1] += self.off[i - 1] * gamma[i - 1][1];
+            }
+            if i + 1 < m {
+                tg[0] += self.off[i] * gamma[i + 1][0];
+                tg[1] += self.off[i] * gamma[i + 1][1];
+            }
+            bx[i] = tg[0];
+            by[i] = tg[1];
+        }
+        let mut ag = [[0.0; 2]; 3];
+        for l in 0..3 {
+            for (a, g) in self.a[l * m..(l + 1) * m].iter().zip(gamma.iter()) {
+                ag[l][0] += a * g[0];
+                ag[l][1] += a * g[1];
+            }
+        }
+        // z = Q1ᵀ Y − A γ.
+        let mut z = ag.map(|p| [-p[0], -p[1]]);
+        for i in 0..n {
+            for l in 0..3 {
+                let q = self.q1[i * 3 + l];
+                z[l][0] += q * targets[i][0];
+                z[l][1] += q * targets[i][1];
+            }
+        }
+        let d = self.affine(&z, lambda2);
+        state.d = d;
+        for i in 0..n {
+            let gi = &self.g[i * m..(i + 1) * m];
+            let (p, q) = (self.ctrl[i], &self.q1[i * 3..i * 3 + 3]);
+            let kw = [dot(gi, bx), dot(gi, by)];
+            for c in 0..2 {
+                at[i][c] = d[0][c]
+                    + p[0] * d[1][c]
+                    + p[1] * d[2][c]
+                    + (kw[c] + q[0] * ag[0][c] + q[1] * ag[1][c] + q[2] * ag[2][c]);
+            }
+        }
+    }
+
+    /// The spline of the last [`Basis::refit`] into `state`.
+    #[must_use]
+    pub fn spline(&self, state: &Refit) -> Tps {
+        let m = self.ctrl.len() - 3;
+        let (gx, gy): (Vec<f64>, Vec<f64>) = state.gamma.iter().map(|p| (p[0], p[1])).unzip();
+        let w = (0..self.ctrl.len())
+            .map(|i| {
+                let gi = &self.g[i * m..(i + 1) * m];
+                [dot(gi, &gx), dot(gi, &gy)]
+            })
+            .collect();
         Tps {
             ctrl: self.ctrl.clone(),
             w,
-            d,
+            d: state.d,
         }
     }
 
@@ -387,30 +517,69 @@ impl Basis {
     }
 }
 
-/// `Σ a_j b_j` over four interleaved partial sums (a fixed order, so the same on every
-/// machine, and one that lets the compiler use vector registers).
+/// `Σ a_j b_j` over four interleaved partial sums.
 #[inline]
 pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let mut acc = [0.0f64; 4];
-    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    dot_lanes::<f64, 4>(a, b)
+}
+
+/// `Σ a_j b_j` over `L` (a power of 2) interleaved partial sums, added pairwise: a fixed
+/// order, so the same on every machine, and one that lets the compiler use vector registers.
+#[inline]
+pub(crate) fn dot_lanes<F, const L: usize>(a: &[F], b: &[F]) -> F
+where
+    F: Copy + Default + Add<Output = F> + Mul<Output = F>,
+{
+    let mut acc = [F::default(); L];
+    let (ca, cb) = (a.chunks_exact(L), b.chunks_exact(L));
     let (ra, rb) = (ca.remainder(), cb.remainder());
     for (x, y) in ca.zip(cb) {
-        for l in 0..4 {
-            acc[l] += x[l] * y[l];
+        for l in 0..L {
+            acc[l] = acc[l] + x[l] * y[l];
         }
     }
-    let mut s = (acc[0] + acc[2]) + (acc[1] + acc[3]);
-    for (x, y) in ra.iter().zip(rb) {
-        s += x * y;
+    let mut w = L;
+    while w > 1 {
+        w /= 2;
+        for l in 0..w {
+            acc[l] = acc[l] + acc[l + w];
+        }
+    }
+    let mut s = acc[0];
+    for (&x, &y) in ra.iter().zip(rb) {
+        s = s + x * y;
     }
     s
 }
 
 /// `y += a x`.
 #[inline]
-pub(crate) fn axpy(y: &mut [f64], a: f64, x: &[f64]) {
-    for (p, q) in y.iter_mut().zip(x) {
-        *p += a * q;
+pub(crate) fn axpy<F>(y: &mut [F], a: F, x: &[F])
+where
+    F: Copy + Add<Output = F> + Mul<Output = F>,
+{
+    for (p, &q) in y.iter_mut().zip(x) {
+        *p = *p + a * q;
+    }
+}
+
+/// `S ← P S P` for the symmetric row-major `m × m` matrix `s` and `P = I − 2 v vᵀ` (`|v| = 1`,
+/// zero before `from`), on the block `from..m` only: the rest is what the callers drop or
+/// already zero. `p` is scratch, `m` long.
+fn reflect(s: &mut [f64], m: usize, v: &[f64], from: usize, p: &mut [f64]) {
+    // p = 2 S v, q = p − (vᵀp) v, S −= v qᵀ + q vᵀ.
+    let v = &v[from..m];
+    for i in from..m {
+        p[i] = 2.0 * dot(&s[i * m + from..(i + 1) * m], v);
+    }
+    let p = &mut p[from..m];
+    let vp = dot(v, p);
+    axpy(p, -vp, v);
+    for (i, (&vi, &pi)) in v.iter().zip(p.iter()).enumerate() {
+        let row = &mut s[(from + i) * m + from..(from + i + 1) * m];
+        for ((x, &vj), &pj) in row.iter_mut().zip(v).zip(p.iter()) {
+            *x -= vi * pj + pi * vj;
+        }
     }
 }
 
@@ -445,27 +614,12 @@ fn tridiagonalise(s: &mut [f64], m: usize, g: &mut [f64], rows: usize) -> (Vec<f
         for i in k + 1..m {
             v[i] /= vn;
         }
-        // S ← P S P on the trailing block: p = 2 S v, q = p − (vᵀp) v, S −= v qᵀ + q vᵀ.
-        for i in k..m {
-            let row = &s[i * m..(i + 1) * m];
-            p[i] = 2.0 * (k + 1..m).map(|j| row[j] * v[j]).sum::<f64>();
-        }
-        let vp: f64 = (k + 1..m).map(|i| v[i] * p[i]).sum();
-        for i in k..m {
-            p[i] -= vp * v[i];
-        }
-        for i in k..m {
-            for j in k..m {
-                s[i * m + j] -= v[i] * p[j] + p[i] * v[j];
-            }
-        }
+        reflect(s, m, &v, k, &mut p);
         // G ← G P.
         for r in 0..rows {
             let row = &mut g[r * m..(r + 1) * m];
-            let t = 2.0 * (k + 1..m).map(|j| row[j] * v[j]).sum::<f64>();
-            for j in k + 1..m {
-                row[j] -= t * v[j];
-            }
+            let t = 2.0 * dot(&row[k + 1..], &v[k + 1..]);
+            axpy(&mut row[k + 1..], -t, &v[k + 1..]);
         }
     }
     let diag = (0..m).map(|i| s[i * m + i]).collect();
@@ -476,13 +630,12 @@ fn tridiagonalise(s: &mut [f64], m: usize, g: &mut [f64], rows: usize) -> (Vec<f
 }
 
 /// Solves `(Θ + λ I) x = b` in place for the symmetric tridiagonal `Θ` (Thomas algorithm;
-/// `Θ + λ I` is positive definite, so no pivoting is needed).
-fn tridiagonal_solve(diag: &[f64], off: &[f64], lambda: f64, b: &mut [[f64; 2]]) {
+/// `Θ + λ I` is positive definite, so no pivoting is needed); `c` is scratch, `m` long.
+fn tridiagonal_solve(diag: &[f64], off: &[f64], lambda: f64, b: &mut [[f64; 2]], c: &mut [f64]) {
     let m = diag.len();
     if m == 0 {
         return;
     }
-    let mut c = vec![0.0; m];
     let mut piv = diag[0] + lambda;
     c[0] = if m > 1 { off[0] / piv } else { 0.0 };
     b[0] = [b[0][0] / piv, b[0][1] / piv];
@@ -569,6 +722,25 @@ mod tests {
         let mut at2 = vec![[0.0; 2]; c.len()];
         let g = b.fit_at_controls(&t, 0.3, 0.1, &mut at2);
         assert!(g == b.fit(&t, 0.3, 0.1) && at2 == b.at_controls(&g));
+    }
+
+    /// The refit without `K` gives the fit's values and spline up to rounding.
+    #[test]
+    fn refit_agrees_with_the_fit() {
+        let c = cloud(40, 13);
+        let t = cloud(40, 14);
+        let b = Basis::new("points", &c).unwrap();
+        let mut state = b.refit_state();
+        let mut at = vec![[0.0; 2]; c.len()];
+        let close = |p: &Point, q: &Point| (p[0] - q[0]).abs().max((p[1] - q[1]).abs()) < 1e-8;
+        for (l1, l2) in [(0.0, 0.0), (0.3, 0.1), (50.0, 2.0)] {
+            b.refit(&t, l1, l2, &mut state, &mut at);
+            let f = b.fit(&t, l1, l2);
+            let g = b.spline(&state);
+            assert!(at.iter().zip(&b.at_controls(&f)).all(|(p, q)| close(p, q)));
+            assert!(g.w.iter().zip(&f.w).all(|(p, q)| close(p, q)));
+            assert!(g.d.iter().zip(&f.d).all(|(p, q)| close(p, q)));
+        }
     }
 
     #[test]
