@@ -104,7 +104,9 @@ def source_branch() -> tuple[F32, NDArray[np.float64]]:
     shade = 0.45 + 0.55 * np.sqrt(1.0 - s**2)
     img[2:-2, x0 : x0 + strip.shape[1], :3] = strip[2:-2] * shade[None, :, None]
     img[2:-2, x0 : x0 + strip.shape[1], 3] = 1.0
-    centre = np.array([[x0 + HALF_WIDTH, h - 6.0], [x0 + HALF_WIDTH, 6.0]])
+    # Pixel centres sit at integer coordinates, so columns x0 .. x0 + 47 are centred on x0 + 23.5.
+    mid = x0 + HALF_WIDTH - 0.5
+    centre = np.array([[mid, h - 6.0], [mid, 6.0]])
     return img, centre
 
 
