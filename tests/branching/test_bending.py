@@ -88,3 +88,33 @@ def test_bad_input_errors() -> None:
         BendingModel.fit(tiny, h=H, k=0)
     with pytest.raises(TypeError, match="^skeleton:"):
         BendingModel.fit([[0, 0], [1, 1]])  # type: ignore[arg-type]
+
+
+def test_course_deviation_of_a_line_and_a_regular_polygon():
+    from phloem.branching.bending import course_deviation
+
+    line = np.stack([np.arange(20.0), np.full(20, 5.0)], axis=1)
+    assert np.allclose(course_deviation(line, np.arange(1, 20), 8), 0.0)
+    # a regular polygon turning by beta at every vertex (counter-clockwise on screen): the last
+    # edge's heading is (N - 1) / 2 turns ahead of the chord over the last N edges
+    beta, n = 0.05, 10
+    heads = beta * np.arange(40)
+    pts = np.vstack([[0.0, 0.0], np.cumsum(np.stack([np.cos(heads), -np.sin(heads)], axis=1), axis=0)])
+    got = course_deviation(pts, np.arange(n, 41), n)
+    assert np.allclose(got, (n - 1) / 2 * beta, atol=1e-9)
+    # fewer edges than N behind the tip: the chord starts at the first vertex
+    assert np.isclose(course_deviation(pts, np.array([3]), n)[0], beta)
+
+
+def test_course_off_is_the_paper_model():
+    rng = np.random.default_rng(0)
+    b = Branch.from_angles([10, 100], 0.0, rng.normal(0, 0.3, 60), np.full(62, 2.0), 2.0)
+    on = BendingModel.fit(Skeleton([b]), h=2.0)
+    off = BendingModel.fit(Skeleton([b]), h=2.0, course=0)
+    assert on.course == 8 * on.m and off.course == 0
+    a, r = on.cand_hist_alpha[5], on.cand_hist_r[5] * 2.0
+    z = np.zeros(on.bins)
+    assert np.array_equal(off.log_quality(a, r, z, z, 0.3), off.log_quality(a, r, z, z))
+    assert not np.array_equal(on.log_quality(a, r, z, z, 0.3), on.log_quality(a, r, z, z))
+    with pytest.raises(ValueError, match="^course:"):
+        BendingModel.fit(Skeleton([b]), h=2.0, course=-1)

@@ -22,6 +22,7 @@ from phloem.branching import (
     synthetic_skeleton,
     thickness_histogram,
 )
+from phloem.branching._forest import input_trees
 from phloem.testing import shared_file
 
 H = 2.0
@@ -225,12 +226,14 @@ def test_guided_growth_follows_the_path(models: tuple[BendingModel, FurcationMod
 
     def spread(guide) -> float:
         vals = []
-        for seed in range(3):
+        # the median over seeds: a stem that turns out of the valley before the guide's look-up
+        # reaches it is lost in any model, and one such seed should not decide the test
+        for seed in range(6):
             out = grow(
                 bend, size=(300, 300), seed=seed, start=(10, 150, 0.7), guide=guide, branch_length=250, guide_width=12
             )
             vals.append(np.abs(out.branches[0].points[:, 1] - 150.0).mean())
-        return float(np.mean(vals))
+        return float(np.median(vals))
 
     assert spread(line) < 0.5 * spread(None)
     # a map works like the polyline, and so does a painted path mask
@@ -410,3 +413,71 @@ def test_bad_input_errors(models: tuple[BendingModel, FurcationModel]) -> None:
         extend(Skeleton([Branch([[0, 0], [5, 0]], 1.0)], (10, 10)), 3, bend)
     with pytest.raises(ValueError, match="^size:"):
         extend(Skeleton([Branch([[0, 0], [5, 0]], 1.0)]), 0, bend)
+
+
+def _median_turn(sk: Skeleton, edges: int) -> float:
+    turns = []
+    for b in sk.branches:
+        d = np.diff(b.points, axis=0)
+        th = np.unwrap(np.arctan2(-d[:, 1], d[:, 0]))
+        if len(th) > edges:
+            turns.append(np.abs(th[edges:] - th[:-edges]))
+    return float(np.median(np.concatenate(turns)))
+
+
+def test_course_keeps_the_input_course():
+    # Headings that jitter around a fixed direction: the turns are anti-correlated over far
+    # more than k + 1 elements, which a Markov history alone cannot hold (the heading drifts).
+    rng = np.random.default_rng(0)
+    brs = [
+        Branch.from_angles([10, 40 + 60 * j], 0.0, np.diff(0.3 * rng.standard_normal(299)), np.full(300, 2.0), 2.0)
+        for j in range(4)
+    ]
+    src = Skeleton(brs)
+    want = _median_turn(src, 40)
+
+    def turn(course: int | None) -> float:
+        m = BendingModel.fit(src, h=2.0, course=course)
+        grown = [
+            grow(m, size=(700, 700), seed=s, start=(20, 350, 0.0), branch_length=560, colonize=False) for s in range(4)
+        ]
+        return float(np.median([_median_turn(g, 40) for g in grown]))
+
+    with_course, markov_only = turn(None), turn(0)
+    assert markov_only > 1.25 * want
+    assert abs(with_course - want) < 0.5 * abs(markov_only - want)
+
+
+def test_connected_input_grows_one_connected_tree():
+    # one tree in, one tree out, about as long (the old growth started leftover trees instead)
+    src = synthetic_skeleton(1)
+    bend, fur = BendingModel.fit(src, h=2.0), FurcationModel.fit(src, h=2.0)
+    for seed in range(4):
+        out = grow(bend, fur, size=src.shape, seed=seed, max_length="input")
+        assert sum(b.parent is None for b in out.branches) == 1
+        assert out.total_length() > 0.8 * bend.source.total_length()
+    # twice the area: two trees
+    H, W = src.shape
+    big = grow(bend, fur, size=(2 * H, W), seed=0, max_length="input")
+    assert sum(b.parent is None for b in big.branches) <= 2
+
+
+def test_forest_output_keeps_the_input_tree_sizes():
+    # one large tree and six small ones: the largest output tree holds about the same share
+    big = synthetic_skeleton(2, length=260.0)
+    small = [
+        Skeleton([Branch.from_angles([2, 5], 0.0, np.zeros(18), np.full(20, 2.0), 2.0)], (20, 60)) for _ in range(6)
+    ]
+    src = Skeleton.stack([big, *small])
+    bend, fur = BendingModel.fit(src, h=2.0), FurcationModel.fit(src, h=2.0)
+    lengths = [t.length for t in input_trees(bend.source)]
+    want = max(lengths) / sum(lengths)
+    assert src.shape is not None
+    for seed in range(3):
+        out = grow(bend, fur, size=src.shape, seed=seed, max_length="input")
+        tree: list[int] = []
+        size: dict[int, float] = {}
+        for i, b in enumerate(out.branches):
+            tree.append(i if b.parent is None else tree[b.parent[0]])
+            size[tree[i]] = size.get(tree[i], 0.0) + b.length()
+        assert abs(max(size.values()) / sum(size.values()) - want) < 0.15

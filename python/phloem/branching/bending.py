@@ -11,7 +11,10 @@ pseudo-elements distributed like the input (default ``bins * m``), so that the f
 extensions are not matched against the histograms of the ``k + 1`` copied stem elements alone
 (which thins a thick stem to the input's commonest thickness at once); the paper's ``n_t / m``
 weighting is kept. Angles are compared in radians, thicknesses in units of the resampling step
-``h`` (so that the distance is scale-free, §2 "Contributions").
+``h`` (so that the distance is scale-free, §2 "Contributions"). Each history also holds the
+branch's deviation from its course over the last ``course`` edges (default ``8 m``), matched
+like the angles: the paper's ``k + 1`` elements cannot hold a course at the scale of the
+structure, and long branches drifted and curled (``docs/pipelines/branching.md``).
 """
 
 from __future__ import annotations
@@ -24,7 +27,27 @@ from .._validate import check_float, check_int
 from ._elements import F64, I64, _bin, _check_k, _check_skeleton, _dist, _elements, _generations, _range
 from .skeleton import Skeleton
 
-__all__ = ["BendingModel", "default_h"]
+__all__ = ["BendingModel", "course_deviation", "default_h"]
+
+
+def course_deviation(points: F64, tips: I64, edges: int) -> F64:
+    """Heading at each tip vertex minus the direction of the chord over its last ``edges`` edges.
+
+    ``tips`` index vertices of the polyline ``points``; the heading is that of the edge ending
+    at the tip, the chord runs from ``edges`` vertices back (or the first vertex) to the tip.
+    Radians, counter-clockwise on screen, in ``[-π, π)``; 0 where the chord is a single edge.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    t = np.asarray(tips, dtype=np.int64)
+    last = p[t] - p[t - 1]
+    chord = p[t] - p[np.maximum(t - max(edges, 1), 0)]
+    head = np.arctan2(-last[:, 1], last[:, 0])
+    course = np.arctan2(-chord[:, 1], chord[:, 0])
+    return _angle(head - course)
+
+
+def _angle(a: F64) -> F64:
+    return np.asarray((a + np.pi) % (2 * np.pi) - np.pi, dtype=np.float64)
 
 
 def default_h(skeleton: Skeleton) -> float:
@@ -112,6 +135,9 @@ class BendingModel:
     inc_r: F64 = field(repr=False)
     cand_where: I64 = field(repr=False)  # (C, 2) source branch, first history element
     warm_start: float = 0.0
+    # (C,) heading minus the course over the last ``course`` edges at the end of each history
+    cand_course: F64 = field(default_factory=lambda: np.zeros(0), repr=False)
+    course: int = 0
 
     @classmethod
     def fit(
@@ -126,6 +152,7 @@ class BendingModel:
         omega_g: float = 50.0,
         feature_size: float | None = None,
         warm_start: float | None = None,
+        course: int | None = None,
     ) -> BendingModel:
         """Learn the bending model from an example skeleton.
 
@@ -156,6 +183,13 @@ class BendingModel:
             the input's most common thickness at once. The pseudo-elements keep the histograms
             near the input's until the structure has a distribution of its own; from then on
             the paper's ``n_t / m`` weighting applies unchanged.
+        course : int, optional
+            Edges over which a branch's course is measured (default ``8 m``; 0 switches it
+            off). Beyond the paper: each history also holds the branch's heading minus the
+            direction of the chord over its last ``course`` edges, matched like the angles, so
+            that a branch keeps the input's course at the scale of the structure and not only
+            over the ``k + 1`` elements of the Markov history (which let long branches drift
+            and curl).
 
         Returns
         -------
@@ -187,6 +221,7 @@ class BendingModel:
         bins = check_int(bins, "bins", 1)
         omega_g = check_float(omega_g, "omega_g", 0.0)
         warm = float(bins * m) if warm_start is None else check_float(warm_start, "warm_start", 0.0)
+        n_course = 8 * m if course is None else check_int(course, "course", 0)
         src = skeleton.resample(h)
         elems = [_elements(b) for b in src.branches]
         all_a = np.concatenate([a for a, _ in elems])
@@ -201,11 +236,14 @@ class BendingModel:
         ra, rr = _range(all_a), _range(all_r)
         hist_a = np.bincount(_bin(all_a, *ra, bins), minlength=bins) / all_a.size
         hist_r = np.bincount(_bin(all_r, *rr, bins), minlength=bins) / all_r.size
-        ha, hr, na, nr, where = [], [], [], [], []
+        ha, hr, na, nr, where, dev = [], [], [], [], [], []
         for bi, (a, r) in enumerate(elems):
             n = len(a) - need + 1
             if n <= 0:
                 continue
+            # the tip after history i is vertex i + k + 2, reached along edge i + k + 1
+            tips = np.arange(n) + k + 2
+            dev.append(course_deviation(src.branches[bi].points, tips, n_course))
             idx = np.arange(n)[:, None]
             ha.append(a[idx + np.arange(k + 1)])
             hr.append(r[idx + np.arange(k + 1)] / h)
@@ -242,9 +280,11 @@ class BendingModel:
             inc_r=inc_r,
             cand_where=np.vstack(where).astype(np.int64),
             warm_start=warm,
+            cand_course=np.concatenate(dev),
+            course=n_course,
         )
 
-    def log_quality(self, alpha: F64, r: F64, counts_alpha: F64, counts_r: F64) -> F64:
+    def log_quality(self, alpha: F64, r: F64, counts_alpha: F64, counts_r: F64, deviation: float | None = None) -> F64:
         """``log Q*_i`` of every candidate for a branch history (vectorised over candidates).
 
         Parameters
@@ -254,6 +294,9 @@ class BendingModel:
             histories are matched against the last ``L`` elements of each candidate.
         counts_alpha, counts_r : ndarray, shape (bins,)
             Histogram counts of the whole structure synthesised so far (``n_t`` elements).
+        deviation : float, optional
+            The branch's heading minus its course (see ``course`` in :meth:`fit`); matched
+            against the candidates' when given and the model has a course.
 
         Returns
         -------
@@ -265,6 +308,8 @@ class BendingModel:
             raise ValueError(f"alpha, r: expected 1 .. {self.k + 1} history elements each, got {len(alpha)}, {len(r)}")
         q = np.log(_dist(self.cand_hist_alpha[:, -L:], alpha[None, :]))
         q += np.log(_dist(self.cand_hist_r[:, -L:], (r / self.h)[None, :]))
+        if deviation is not None and self.course > 0:
+            q += np.log(1.0 / (np.abs(_angle(self.cand_course - deviation)) + 1.0) + 1.0)
         n_t = float(counts_alpha.sum())
         if self.omega_g > 0 and n_t > 0:
             delta = self._delta(self.hist_alpha, counts_alpha, self.inc_alpha, n_t)

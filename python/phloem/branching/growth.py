@@ -10,9 +10,13 @@ branch of an existing skeleton (§6, interactive use).
 
 Beyond the paper's text:
 
-* **Forests.** Traced inputs are forests of many small trees; ``grow(..., roots=N)`` or
-  ``max_length="input"`` start further root trees (copied input stems, placed where the
-  density is lowest) until the input's length, scaled by the image areas, is reached.
+* **Trees from templates.** Traced inputs are forests; each output tree copies the topology
+  statistics of one input tree (branch lengths and numbers of children per generation), so
+  that a connected input gives a connected output and a forest a forest of the same tree
+  sizes; ``max_length="input"`` grows about as much structure as the input.
+* **Course.** The bending model also matches each branch's heading against its course over
+  ``8 m`` edges (:class:`.BendingModel`, ``course``), so branches keep a course at the scale
+  of the structure.
 * **Density map.** ``d(p, B)`` is OpenCV's labelled distance transform of the drawn
   polyline in the ``3ρ`` window of each update minus the thickness at the nearest branch
   point; candidates whose average directions agree to within a quarter pixel at the end of
@@ -38,7 +42,8 @@ from .._api import Seed, Size, renamed
 from .._progress import Progress
 from .._validate import check_float, check_int, check_seed
 from ._elements import F64, I64, _bin, _check_skeleton, _direction, _elements, _tangent, _wrap
-from .bending import BendingModel
+from ._forest import InputTree, input_trees
+from .bending import BendingModel, course_deviation
 from .furcation import FurcationModel
 from .skeleton import Branch, Skeleton
 
@@ -47,6 +52,10 @@ __all__ = ["extend", "grow"]
 #: ``1/ε`` of §4.4: the largest factor by which an empty region can raise a candidate's quality.
 INV_EPS = 1e3
 _EPS = 1.0 / INV_EPS
+#: Further vertices of the parent tried for a child that cannot start where it was picked.
+_CHILD_RETRIES = 3
+#: Extra furcations tried on a tree that its template's topology left short of the template's length.
+_TOP_UPS = 64
 
 
 @dataclass
@@ -329,7 +338,10 @@ class _Grower:
         if L == 0:
             # no history yet (should not happen: branches start with copied elements)
             return False
-        q = m.log_quality(np.asarray(br.alpha[-L:]), np.asarray(br.r[-L:]), w.counts_alpha, w.counts_r)
+        dev = None
+        if m.course > 0:
+            dev = float(course_deviation(np.asarray(br.points), np.array([len(br.points) - 1]), m.course)[0])
+        q = m.log_quality(np.asarray(br.alpha[-L:]), np.asarray(br.r[-L:]), w.counts_alpha, w.counts_r, dev)
         tip = br.points[-1]
         c, s = math.cos(br.heading), math.sin(br.heading)
         rx, ry = self.rel_ext[..., 0], self.rel_ext[..., 1]
@@ -516,26 +528,37 @@ def _default_start(bending: BendingModel, shape: tuple[int, int], root: int) -> 
     return float((0.05 + 0.9 * fx) * (W - 1)), float((0.05 + 0.9 * fy) * (H - 1))
 
 
-@dataclass
-class _RootInfo:
-    """The input's root branches that can serve as stems, and how likely each is drawn."""
+def _top_up(
+    out: list[Branch],
+    first: int,
+    tree: InputTree,
+    furcation: FurcationModel,
+    tried: dict[int, list[int]],
+    rng: np.random.Generator,
+    generations: int | None,
+    min_spacing: int | None,
+) -> tuple[int, int, int] | None:
+    """A further furcation ``(branch, vertex, child generation)`` on the tree ``out[first:]``.
 
-    roots: list[int]
-    tree_p: F64  # ∝ the total length of the root's tree (for the first, or only, tree)
-
-
-def _roots(bending: BendingModel) -> _RootInfo:
-    src = bending.source
-    tree: list[int] = []
-    for i, b in enumerate(src.branches):
-        tree.append(i if b.parent is None else tree[b.parent[0]])
-    size = np.zeros(len(src.branches))
-    for i, b in enumerate(src.branches):
-        size[tree[i]] += b.length()
-    roots = [i for i, b in enumerate(src.branches) if b.parent is None and len(b) >= 3]
-    p = size[roots] if roots else np.zeros(0)
-    p = p / p.sum() if p.sum() > 0 else np.full(len(roots), 1.0 / max(len(roots), 1))
-    return _RootInfo(roots, np.asarray(p, dtype=np.float64))
+    The parent is drawn in proportion to its length among the tree's branches whose children's
+    generation the template has; the vertex is the furcation model's best free one.
+    """
+    gens: list[int] = []
+    for b in out[first:]:
+        gens.append(0 if b.parent is None or b.parent[0] < first else gens[b.parent[0] - first] + 1)
+    ok = [
+        i
+        for i, g in enumerate(gens)
+        if tree.branches.get(g + 1) and (generations is None or g + 1 < generations) and len(out[first + i]) >= 3
+    ]
+    if not ok:
+        return None
+    w = np.array([out[first + i].length() for i in ok])
+    i = ok[int(rng.choice(len(ok), p=w / w.sum()))]
+    pi = first + i
+    kids = [b.parent[1] for b in out[first:] if b.parent is not None and b.parent[0] == pi]
+    picked = furcation.pick(out[pi], 1, existing=tried.get(pi, []) + kids, min_spacing=min_spacing)
+    return (pi, picked[0], gens[i] + 1) if picked else None
 
 
 def _input_length(bending: BendingModel, shape: tuple[int, int]) -> float:
@@ -553,22 +576,20 @@ def _place_root(
     world: _World,
     grower: _Grower,
     bending: BendingModel,
-    info: _RootInfo,
+    root: int,
     shape: tuple[int, int],
     rng: np.random.Generator,
     index: int,
     tries: int = 24,
-) -> tuple[_Growing, int] | None:
-    """Start a further root tree where the structure is sparse.
+) -> _Growing | None:
+    """Start a further root tree, copying the input root branch ``root``, where the structure is sparse.
 
-    Each try copies a uniformly drawn input root (its first elements and heading, so the
-    output's roots follow the input's); the first half of the tries start near that root's
-    own (scaled) position, jittered by ``2ρ`` (roots at the image border stay there), the
-    other half anywhere in the image. The start with the least density along its first
-    ``3 m h`` wins, preferring a start near an input root when one is practically empty.
+    Each try copies the root's first elements and heading (so the output's roots follow the
+    input's); the first half of the tries start near the root's own (scaled) position,
+    jittered by ``2ρ`` (roots at the image border stay there), the other half anywhere in the
+    image. The start with the least density along its first ``3 m h`` wins, preferring a start
+    near the input root when one is practically empty.
     """
-    if not info.roots:
-        return None
     H, W = shape
     h, rho = bending.h, world.rho
     xs = np.zeros(tries)
@@ -576,7 +597,7 @@ def _place_root(
     js = np.zeros(tries, np.int64)
     heads = np.zeros(tries)
     for t in range(tries):
-        j = info.roots[int(rng.integers(len(info.roots)))]
+        j = root
         x, y = _default_start(bending, shape, j)
         if t < tries // 2:
             x = float(np.clip(x + rng.normal(0.0, 2.0 * rho), 0.0, W - 1))
@@ -598,7 +619,7 @@ def _place_root(
         heading, a0, r0, t0 = bending.start_elements(j)
         br = _new_branch(world, grower, np.array([xs[t], ys[t]]), heading, t0, a0, r0, None, 0, index, partial=True)
         if br is not None:
-            return br, j
+            return br
     return None
 
 
@@ -610,7 +631,7 @@ def grow(
     size: Size,
     start: Any = None,
     seed: Seed = 0,
-    generations: int = 3,
+    generations: int | None = None,
     max_length: float | str | None = None,
     roots: int | None = None,
     max_density: float | None = None,
@@ -626,20 +647,22 @@ def grow(
 ) -> Skeleton:
     """Synthesise a new branching structure (§4): a main branch, then furcations, recursively.
 
-    The main branch starts with the first ``k + 1`` elements of an input root branch and is
-    extended by the bending model ``m`` elements at a time up to that root's length; each
-    finished branch gets ``d`` furcations from the furcation model (``d`` drawn from the
-    input's numbers of children per branch of the same generation), whose children are grown
-    the same way, breadth first.
+    Every output tree copies one input tree as its template (largest first, see
+    ``_forest``): the main branch starts with the first ``k + 1`` elements of the template's
+    root branch and is extended by the bending model ``m`` elements at a time up to that
+    root's length; each finished branch gets as many furcations from the furcation model as a
+    branch of the template of the same generation has, drawn together with that branch's
+    length, whose children are grown the same way, breadth first. A child that cannot start
+    at its vertex (crossing, border) tries the parent's next-best vertices; a tree left short
+    of its template's length gets further furcations on its own branches.
 
-    Traced inputs are often forests of many small trees. With ``roots`` above 1, or with
-    ``max_length="input"`` (about as much structure as the input), further root trees follow
-    once a tree is finished: each copies the stem of a uniformly drawn input root (so the
-    output's roots follow the input's), placed where the density along its first ``3 m h`` is
-    lowest among 24 tries, half near input roots' own (scaled) positions (jittered by ``2ρ``;
-    preferred when practically empty, so border roots stay at the border) and half anywhere
-    in the image, until ``roots`` trees exist, the length or density limit is reached,
-    or eight starts in a row fail.
+    With ``roots`` above 1, or with ``max_length="input"`` (about as much structure as the
+    input), further root trees follow once a tree is finished: one per input tree (a single
+    connected input stays one tree per input area), each copying its template's root stem,
+    placed where the density along its first ``3 m h`` is lowest among 24 tries, half near
+    the root's own (scaled) position (jittered by ``2ρ``; preferred when practically empty,
+    so border roots stay at the border) and half anywhere in the image, until ``roots`` trees
+    exist, the length or density limit is reached, or eight starts in a row fail.
 
     Parameters
     ----------
@@ -656,8 +679,9 @@ def grow(
         to ``size``; the heading defaults to the guide's or the input root's.
     seed : int or numpy.random.Generator
         Seed; the same seed gives the same structure.
-    generations : int
-        Stop criterion: maximum branch generations (1 = main branch only).
+    generations : int, optional
+        Stop criterion: maximum branch generations (1 = main branch only). Default: as deep
+        as each tree's template.
     max_length : float or "input", optional
         Stop criterion: maximum total branch length in pixels. ``"input"``: the input's total
         length scaled by the ratio of the image areas (the input's ``shape``, else its bounding
@@ -724,7 +748,7 @@ def grow(
     _memory.check_size(_memory.grow(shape, colonize=bool(colonize), guide=guide is not None), max_memory, shape)
     st = _check_start(start)
     rng = np.random.default_rng(check_seed(seed))
-    generations = check_int(generations, "generations", 1)
+    generations = None if generations is None else check_int(generations, "generations", 1)
     input_sized = isinstance(max_length, str)
     if input_sized and max_length != "input":
         raise ValueError(f"max_length: expected a length in pixels, 'input' or None, got {max_length!r}")
@@ -746,33 +770,46 @@ def grow(
     grower = _Grower(world, bending)
 
     H, W = shape
-    info = _roots(bending)
+    forest = input_trees(bending.source)
     if n_roots is None:
-        n_roots = 1 if not input_sized else 1_000_000
+        # A connected input stays connected: one tree per input area (a tree cut short by the room
+        # it finds is topped up, see ``_top_up``). A forest takes as many trees as the length needs.
+        area_ratio = limit / max(bending.source.total_length(), 1e-9)
+        n_roots = 1 if not input_sized else (max(1, math.ceil(area_ratio - 1e-9)) if len(forest) == 1 else 1_000_000)
     out: list[Branch] = []
-    queue: list[tuple[int, int, int]] = []  # (parent branch, vertex, generation) in creation order
+    # (parent branch, vertex, generation, planned length, planned children) in creation order
+    queue: list[tuple[int, int, int, float, int]] = []
     qpos = 0
     stop = False
     trees = 0
+    turn = 0  # trees attempted: the template of the next one
+    tried: dict[int, list[int]] = {}  # furcation vertices used or tried on each branch
     failures = 0
 
-    def target(gen: int) -> float:
-        if blen is not None:
-            return blen
-        g = max(x for x in bending.lengths if x <= gen) if any(x <= gen for x in bending.lengths) else 0
-        return float(rng.choice(bending.lengths[g]))
+    def plan(length: float, kids: int) -> tuple[float, int]:
+        """The target length and number of children of a branch: the options, else the template's."""
+        return (length if blen is None else blen), (kids if d_fixed is None else d_fixed)
+
+    def template_branch(tree: InputTree | None, gen: int) -> tuple[float, int]:
+        drawn = None if tree is None else tree.draw(gen, rng)
+        if drawn is None:
+            # a template without this generation (only with ``children`` or ``branch_length`` set)
+            g = max((x for x in bending.lengths if x <= gen), default=0)
+            counts = furcation.counts if furcation is not None else {}
+            pool = counts.get(gen) or [c for v in counts.values() for c in v] or [0]
+            drawn = float(rng.choice(bending.lengths[g])), int(rng.choice(pool))
+        return plan(*drawn)
 
     while not stop and trees < n_roots and world.total_length < limit:
+        # each tree copies one input tree, largest first, then again from the largest
+        tree = forest[turn % len(forest)] if forest else None
+        if turn == 0 and forest and (st is not None or gline is not None):
+            # at a given start any input tree can serve (uniform draw), as a user placing a
+            # structure expects variety across seeds, not the same stem
+            tree = forest[int(rng.integers(len(forest)))]
+        turn += 1
+        root = 0 if tree is None else tree.root
         if trees == 0:
-            # the first tree copies the stem of an input root: at a given start any root (uniform
-            # draw); otherwise one drawn by the size of its tree, placed at its own (scaled) start,
-            # so that a short root of a big input does not make a tiny output
-            if not info.roots:
-                root = 0
-            elif st is not None or gline is not None:
-                root = int(rng.choice(info.roots))
-            else:
-                root = info.roots[int(rng.choice(len(info.roots), p=info.tree_p))]
             heading, a0, r0, t0 = bending.start_elements(root)
             if st is not None:
                 x, y = st[0], st[1]
@@ -792,17 +829,16 @@ def grow(
                 raise ValueError(
                     f"start: the first edge from ({x:g}, {y:g}) with heading {heading:.2f} leaves the image"
                 )
-            goal = float(bending.source.branches[root].length()) if blen is None else blen
         else:
-            placed = _place_root(world, grower, bending, info, shape, rng, len(out))
-            if placed is None:
+            current = _place_root(world, grower, bending, root, shape, rng, len(out))
+            if current is None:
                 failures += 1
                 if failures >= 8:
                     break
                 continue
-            current, root = placed
-            goal = float(bending.source.branches[root].length()) if blen is None else blen
+        goal, d = plan(float(bending.source.branches[root].length()), 0 if tree is None else tree.branches[0][0][1])
         trees += 1
+        first_branch, start_length, top_ups = len(out), world.total_length, 0
         stalled: bool | None = None  # did the tree's main branch stop short without a single step?
         while current is not None:
             while not stop and current.length() * h < goal:
@@ -817,22 +853,35 @@ def grow(
             branch = _finish(grower, current)
             out.append(branch)
             stop = stop or world.total_length >= limit
-            if not stop and furcation is not None and current.generation + 1 < generations and len(branch) >= 3:
-                if d_fixed is not None:
-                    d = d_fixed
-                else:
-                    pool = furcation.counts.get(current.generation) or [c for v in furcation.counts.values() for c in v]
-                    d = int(rng.choice(pool))
+            gen = current.generation + 1
+            if (
+                not stop
+                and furcation is not None
+                and d > 0
+                and (generations is None or gen < generations)
+                and len(branch) >= 3
+            ):
                 for v in furcation.pick(branch, d, min_spacing=min_spacing):
-                    queue.append((len(out) - 1, v, current.generation + 1))
+                    queue.append((len(out) - 1, v, gen, *template_branch(tree, gen)))
             if progress is not None:
                 progress(len(out), len(out) + len(queue) - qpos)
             current = None
+            retries = 0
+            if qpos == len(queue) and tree is not None and furcation is not None and top_ups < _TOP_UPS:
+                # Blocked children leave the tree short of its template: more furcations on the
+                # tree's own branches, rather than a new tree, keep the input's connectivity.
+                short = tree.length - (world.total_length - start_length)
+                if not stop and short > 0.05 * tree.length:
+                    top_ups += 1
+                    extra = _top_up(out, first_branch, tree, furcation, tried, rng, generations, min_spacing)
+                    if extra is not None:
+                        pi, v, gen = extra
+                        queue.append((pi, v, gen, *template_branch(tree, gen)))
             while not stop and current is None and qpos < len(queue):
-                pi, v, gen = queue[qpos]
-                qpos += 1
+                pi, v, gen, goal, d = queue[qpos]
                 assert furcation is not None
                 pb = out[pi]
+                tried.setdefault(pi, []).append(v)
                 for j in furcation.child_start(pb, v, rng)[: max(furcation.c, 4)]:
                     hd = _tangent(pb, v) + float(furcation.offsets[j])
                     current = _new_branch(
@@ -850,7 +899,15 @@ def grow(
                     )
                     if current is not None:
                         break
-            goal = 0.0 if current is None else target(current.generation)
+                if current is None and retries < _CHILD_RETRIES:
+                    # blocked here (crossing, border): the same child from the parent's next-best vertex
+                    alt = furcation.pick(pb, 1, existing=tried[pi], min_spacing=min_spacing)
+                    if alt:
+                        queue[qpos] = (pi, alt[0], gen, goal, d)
+                        retries += 1
+                        continue
+                qpos += 1
+                retries = 0
         # a tree whose stem could not grow beyond its copied start counts as a failed placement
         failures = failures + 1 if stalled else 0
         if failures >= 8:

@@ -97,7 +97,7 @@ def synthesize(
     order: int = 3,
     m: int | None = None,
     n_best: int = 2,
-    generations: int = 3,
+    generations: int | None = None,
     max_length: float | str | None = "input",
     colonize: bool = True,
     guide: Any = None,

@@ -166,7 +166,12 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
         help="candidates to draw from (the paper's c): 1 follows the input exactly, more gives more variety (paper: 2)",
     )
     deprecated_alias(g, "--c", "--n-best", dest="n_best", type=positive)
-    g.add_argument("--generations", type=positive, default=3, help="branch generations to grow (default 3)")
+    g.add_argument(
+        "--generations",
+        type=positive,
+        default=None,
+        help="maximum branch generations to grow (default: as deep as the input's trees)",
+    )
     g.add_argument("--max-length", type=_length, default=None, metavar="PX|input",
                    help="stop at this total branch length in pixels, or 'input' for about as much structure as the example "
                         "(root trees are added until then; default: one tree for grow, 'input' for run)")  # fmt: skip

@@ -1,0 +1,52 @@
+"""The input's trees as templates for the trees that :func:`~phloem.branching.grow` makes.
+
+A traced input is a forest: one tree per connected structure. Each output tree copies the
+topology statistics of one input tree (its root branch, and per generation the lengths of its
+branches together with their numbers of children), so that a large connected input gives a
+large connected output and a forest of fragments a forest. Trees are used largest first, each
+once, then again from the largest: an output of the input's size repeats the input's tree
+sizes, and the largest trees get the most room.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ._elements import _generations
+from .skeleton import Skeleton
+
+
+@dataclass
+class InputTree:
+    """One tree of the (resampled) input skeleton."""
+
+    root: int  # index of its root branch in the skeleton
+    length: float  # total length in pixels
+    # per generation: (length in pixels, number of children) of each of its branches
+    branches: dict[int, list[tuple[float, int]]] = field(default_factory=dict)
+
+    def draw(self, generation: int, rng: np.random.Generator) -> tuple[float, int] | None:
+        """A branch of this tree at ``generation`` (length, children), or None if it has none."""
+        pool = self.branches.get(generation)
+        if not pool:
+            return None
+        return pool[int(rng.integers(len(pool)))]
+
+
+def input_trees(skeleton: Skeleton, *, min_vertices: int = 3) -> list[InputTree]:
+    """The trees of ``skeleton`` whose root branch has ``min_vertices`` or more, largest first."""
+    gens = _generations(skeleton)
+    kids = skeleton.children()
+    tree: list[int] = []
+    for i, b in enumerate(skeleton.branches):
+        tree.append(i if b.parent is None else tree[b.parent[0]])
+    trees: dict[int, InputTree] = {}
+    for i, b in enumerate(skeleton.branches):
+        t = trees.setdefault(tree[i], InputTree(tree[i], 0.0))
+        t.length += b.length()
+        t.branches.setdefault(gens[i], []).append((b.length(), len(kids[i])))
+    kept = [t for t in trees.values() if len(skeleton.branches[t.root]) >= min_vertices]
+    # stable for equal lengths, so the order (and the output) depends on the input only
+    return sorted(kept, key=lambda t: (-t.length, t.root))
