@@ -42,6 +42,7 @@ from phloem.branching import (
     BendingModel,
     Branch,
     Skeleton,
+    SynthesisResult,
     angle_histogram,
     histogram_distance,
     synthesize,
@@ -132,6 +133,18 @@ def _hist_distances(bend: BendingModel, out: Skeleton) -> tuple[float, float, fl
     return da, spread_a, dr, spread_r
 
 
+def run(
+    img: np.ndarray, seed: int, *, trace_options: dict[str, Any] | None = None, threads: int | None = None
+) -> tuple[SynthesisResult | None, float, str]:
+    """``synthesize`` with the defaults (and ``trace_options``): the result, its time and any error."""
+    t0 = time.perf_counter()
+    try:
+        res = synthesize(img, seed=seed, trace_options=trace_options, threads=threads)
+    except Exception as e:  # a failure is a result too
+        return None, math.nan, f"synthesize: {type(e).__name__}: {e}"
+    return res, time.perf_counter() - t0, ""
+
+
 def evaluate(
     name: str,
     img: np.ndarray,
@@ -142,15 +155,24 @@ def evaluate(
     threads: int | None = None,
 ) -> Result:
     """Synthesise from ``img`` with the defaults (and ``trace_options``) and measure the output."""
-    r = Result(name, seed, tuple(img.shape), mask)
-    t0 = time.perf_counter()
-    try:
-        res = synthesize(img, seed=seed, trace_options=trace_options, threads=threads)
-    except Exception as e:  # a failure is a result too
-        r.error = f"synthesize: {type(e).__name__}: {e}"
-        r.passed = {"ok": False}
-        return r
-    r.seconds = time.perf_counter() - t0
+    res, seconds, error = run(img, seed, trace_options=trace_options, threads=threads)
+    if res is None:
+        return Result(name, seed, tuple(img.shape), mask, error=error, passed={"ok": False})
+    return measure(name, img, mask, seed, res, seconds, trace_options=trace_options)
+
+
+def measure(
+    name: str,
+    img: np.ndarray,
+    mask: bool,
+    seed: int,
+    res: SynthesisResult,
+    seconds: float,
+    *,
+    trace_options: dict[str, Any] | None = None,
+) -> Result:
+    """The measures of one synthesis from ``img`` (traced with ``trace_options``)."""
+    r = Result(name, seed, tuple(img.shape), mask, seconds=seconds)
     src, tgt = res.source, res.target
     try:
         agree = skeleton_agreement(tgt, trace(res.image, **(trace_options or {})))
