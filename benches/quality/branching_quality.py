@@ -8,7 +8,9 @@ For every image of ``--inputs`` (default: ``branching`` of the real-image collec
 seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.measures`:
 
 - re-trace F1 (with precision and recall) of the target skeleton against ``trace`` of the output
-  with the input's trace settings (the defaults, or ``TRACE_SETTINGS`` with ``--tuned-trace``);
+  with the input's trace settings (the defaults, or ``TRACE_SETTINGS`` with ``--tuned-trace``),
+  ``kind="auto"`` resolved on the input (``resolve_trace_options``: a mask output with a few grey
+  pixels would otherwise be traced as a photo);
 - largest-tree share of the input's and the output's skeletons;
 - drift: L1 distance of the heading-change histograms over 60 px (and both medians);
 - two-level fraction of the output (two-level inputs only);
@@ -49,6 +51,7 @@ from phloem.branching import (
     thickness_histogram,
     trace,
 )
+from phloem.branching.measures import resolve_trace_options
 from phloem.metrics import (
     drift,
     largest_tree_share,
@@ -175,7 +178,7 @@ def measure(
     r = Result(name, seed, tuple(img.shape), mask, seconds=seconds)
     src, tgt = res.source, res.target
     try:
-        agree = skeleton_agreement(tgt, trace(res.image, **(trace_options or {})))
+        agree = skeleton_agreement(tgt, trace(res.image, **resolve_trace_options(img, trace_options)))
         r.f1, r.precision, r.recall = agree.f1, agree.precision, agree.recall
     except ValueError as e:
         if not str(e).startswith("image: nothing to trace"):

@@ -3,6 +3,7 @@ against analytic references and brute force."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -14,6 +15,7 @@ from phloem.branching.measures import (
     heading_changes,
     largest_tree_share,
     median_heading_change,
+    resolve_trace_options,
     retrace_agreement,
     skeleton_agreement,
     two_level_fraction,
@@ -170,6 +172,23 @@ def test_retrace_of_an_exact_drawing_agrees_and_of_a_shifted_or_blank_one_does_n
     assert retrace_agreement(photo, target, trace_options={"kind": "dark", "sigmas": (2.0, 3.0)}) > 0.8
 
 
+def test_retrace_resolves_auto_on_the_input_like_trace_does() -> None:
+    main = Branch([[20, 100], [120, 90], [220, 110], [280, 100]], 3.0)
+    target = Skeleton([main, Branch([[120, 90], [160, 40], [200, 20]], 2.0, parent=(0, 1))], (160, 300))
+    mask = target.mask().astype(np.float32)
+    assert resolve_trace_options(mask) == {"kind": "mask"}
+    photo = cv2.GaussianBlur(mask, (0, 0), 1.5)  # no longer two-valued
+    assert resolve_trace_options(0.8 - 0.6 * photo)["kind"] == "dark"
+    assert resolve_trace_options(0.2 + 0.6 * photo)["kind"] == "bright"
+    assert resolve_trace_options(mask, {"kind": "bright", "min_area": 5}) == {"kind": "bright", "min_area": 5}
+    # a mask output with a few grey pixels is traced as the mask input was
+    out = mask.copy()
+    out[np.nonzero(mask)[0][::50], np.nonzero(mask)[1][::50]] = 0.9
+    out[5:8, 5:8] = 0.1
+    assert retrace_agreement(out, target, like=mask) > 0.95
+    assert resolve_trace_options(out)["kind"] != "mask"
+
+
 # -- two-level fraction -----------------------------------------------------------------------
 
 
@@ -220,6 +239,8 @@ def test_bad_input_errors() -> None:
         retrace_agreement(img, sk, trace_options=["mask"])  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="^kind:"):
         retrace_agreement(img, sk, trace_options={"kind": "nope"})
+    with pytest.raises(TypeError, match="^trace_options:"):
+        resolve_trace_options(img, "mask")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="^skeleton: the skeleton has no branches"):
         largest_tree_share(empty)
     with pytest.raises(ValueError, match="^skeleton: the branches have no length"):

@@ -18,7 +18,7 @@ from .._validate import as_image, check_float, check_int
 from ._elements import F64, _check_skeleton
 from .histograms import histogram_distance
 from .skeleton import Branch, Skeleton
-from .trace import trace
+from .trace import _gray, _polarity, _sigmas, trace
 
 __all__ = [
     "Agreement",
@@ -27,6 +27,7 @@ __all__ = [
     "heading_changes",
     "largest_tree_share",
     "median_heading_change",
+    "resolve_trace_options",
     "retrace_agreement",
     "skeleton_agreement",
     "two_level_fraction",
@@ -117,15 +118,48 @@ def skeleton_agreement(reference: Skeleton, candidate: Skeleton, *, tolerance: f
     return Agreement(precision, recall, f1, tol)
 
 
+def resolve_trace_options(image: Any, trace_options: dict[str, Any] | None = None) -> dict[str, Any]:
+    """``trace_options`` with ``kind="auto"`` (or no kind) replaced by the kind :func:`trace` picks on ``image``.
+
+    ``"mask"`` for an image of at most two values, else the stronger ridge polarity. Trace an
+    output with the input's resolved options to trace it as the input was traced: an output
+    with a few grey pixels is no longer two-valued, and ``"auto"`` would trace it as a photo.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> img = np.zeros((20, 20), np.float32); img[8:12] = 1
+    >>> resolve_trace_options(img), resolve_trace_options(img, {"kind": "dark", "sigmas": 2.0})
+    ({'kind': 'mask'}, {'kind': 'dark', 'sigmas': 2.0})
+    >>> resolve_trace_options(img + np.linspace(0, 0.1, 20, dtype=np.float32))
+    {'kind': 'bright'}
+    """
+    if trace_options is not None and not isinstance(trace_options, dict):
+        raise TypeError(f"trace_options: expected a dict of trace() arguments, got {type(trace_options).__name__}")
+    opts = dict(trace_options or {})
+    if opts.get("kind", "auto") == "auto":
+        gray = _gray(image, opts.get("channel"))
+        sig = _sigmas(opts.get("sigmas", (1.0, 2.0, 3.0)))
+        opts["kind"] = "mask" if np.unique(gray).size <= 2 else _polarity(gray, sig)
+    return opts
+
+
 def retrace_agreement(
-    image: Any, target: Skeleton, *, trace_options: dict[str, Any] | None = None, tolerance: float | None = None
+    image: Any,
+    target: Skeleton,
+    *,
+    trace_options: dict[str, Any] | None = None,
+    like: Any = None,
+    tolerance: float | None = None,
 ) -> float:
     """Does ``image`` show ``target``? F1 of ``target`` against the skeleton traced from ``image``.
 
     The image is traced by :func:`phloem.branching.trace` with ``trace_options`` (pass the ones
-    the input was traced with) and compared by :func:`skeleton_agreement` (which gives precision
-    and recall too). An image where nothing is traced scores 0. 1 when the structure the image
-    shows is the one it was asked to show, near 0 when it shows something else. Higher is better.
+    the input was traced with, and the input as ``like`` so that ``kind="auto"`` is resolved on
+    the input, :func:`resolve_trace_options`) and compared by :func:`skeleton_agreement` (which
+    gives precision and recall too). An image where nothing is traced scores 0. 1 when the
+    structure the image shows is the one it was asked to show, near 0 when it shows something
+    else. Higher is better.
 
     Parameters
     ----------
@@ -135,6 +169,8 @@ def retrace_agreement(
         The skeleton it should show, e.g. :attr:`SynthesisResult.target`.
     trace_options : dict, optional
         Keyword arguments of :func:`phloem.branching.trace`.
+    like : (P, Q[, C]) array_like, optional
+        The input image: trace ``image`` with the kind ``trace`` picks on it.
     tolerance : float, optional
         See :func:`skeleton_agreement`.
 
@@ -152,10 +188,11 @@ def retrace_agreement(
     1.0
     """
     target = _check_skeleton(target, "target")
-    if trace_options is not None and not isinstance(trace_options, dict):
-        raise TypeError(f"trace_options: expected a dict of trace() arguments, got {type(trace_options).__name__}")
+    opts = resolve_trace_options(like, trace_options) if like is not None else trace_options
+    if opts is not None and not isinstance(opts, dict):
+        raise TypeError(f"trace_options: expected a dict of trace() arguments, got {type(opts).__name__}")
     try:
-        traced = trace(image, **(trace_options or {}))
+        traced = trace(image, **(opts or {}))
     except ValueError as e:
         if not str(e).startswith("image: nothing to trace"):
             raise
