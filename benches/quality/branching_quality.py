@@ -42,7 +42,6 @@ import numpy as np
 import phloem
 from phloem.branching import (
     BendingModel,
-    Branch,
     Skeleton,
     SynthesisResult,
     angle_histogram,
@@ -59,7 +58,7 @@ from phloem.metrics import (
     skeleton_agreement,
     two_level_fraction,
 )
-from phloem.testing import TRACE_SETTINGS, shared_path
+from phloem.testing import TRACE_SETTINGS, input_halves, shared_path
 
 SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
 F1_MIN, SHARE_TOL, DRIFT_MAX, TWO_LEVEL_MIN = 0.8, 0.15, 0.25, 0.98
@@ -108,25 +107,10 @@ def load(path: Path, max_side: int = 0) -> tuple[np.ndarray, bool]:
     return np.ascontiguousarray(img, dtype=np.float32), mask
 
 
-def halves(bend: BendingModel) -> list[Skeleton]:
-    """The input (resampled) split in two, as the growth tests split it: alternate trees, or
-    alternate branches for fewer than 4 trees."""
-    sk = bend.source
-    tree: list[int] = []
-    for i, b in enumerate(sk.branches):
-        tree.append(i if b.parent is None else tree[b.parent[0]])
-    rank = {r: j for j, r in enumerate(sorted(set(tree)))}
-    key = [rank[t] for t in tree] if len(rank) >= 4 else list(range(len(tree)))
-    return [
-        Skeleton([Branch(b.points, b.thickness) for i, b in enumerate(sk.branches) if key[i] % 2 == j and len(b) >= 3])
-        for j in (0, 1)
-    ]
-
-
 def _hist_distances(bend: BendingModel, out: Skeleton) -> tuple[float, float, float, float]:
     ra, rr = bend.range_alpha, bend.range_r
     try:
-        a, b = halves(bend)
+        a, b = input_halves(bend.source)
         spread_a = histogram_distance(angle_histogram(a, range=ra)[0], angle_histogram(b, range=ra)[0])
         spread_r = histogram_distance(thickness_histogram(a, range=rr)[0], thickness_histogram(b, range=rr)[0])
     except ValueError:  # an input too small to split
