@@ -13,7 +13,9 @@ between two histograms (the colour measure of Assa & Cohen-Or, Eq. 1), and the l
 Assa & Cohen-Or's induction (agreement of an induced layer with a reference, the Eq. 4 objective
 as :func:`phloem.leaves.induce` implements it) with a leaf-set diversity measure, and the
 stroke measures of Luo et al.'s edits (coverage of the target strokes, width agreement across
-corresponding strokes; defined in :mod:`phloem.strokes.measures`).
+corresponding strokes; defined in :mod:`phloem.strokes.measures`), and the measures of whether a
+synthesised branching structure looks like its input's kind (re-trace agreement, largest-tree
+share, heading-change drift, two-level fraction; defined in :mod:`phloem.branching.measures`).
 """
 
 from __future__ import annotations
@@ -31,24 +33,44 @@ from ._api import Seed
 from ._color import check_denoise, denoised_lab, rgb8
 from ._validate import as_image, as_mask, check_patch_size
 from .branching.histograms import angle_histogram, histogram_distance, thickness_histogram
+from .branching.measures import (
+    Agreement,
+    drift,
+    heading_change_histogram,
+    heading_changes,
+    largest_tree_share,
+    median_heading_change,
+    retrace_agreement,
+    skeleton_agreement,
+    two_level_fraction,
+)
 from .strokes.measures import stroke_coverage, width_agreement
 
 __all__ = [
+    "Agreement",
     "angle_histogram",
     "chord_length",
     "coherence_map",
+    "drift",
     "emd",
+    "heading_change_histogram",
+    "heading_changes",
     "histogram_distance",
     "label_agreement",
     "label_histogram_distance",
+    "largest_tree_share",
     "layer_iou",
     "layer_objective",
     "leaf_diversity",
+    "median_heading_change",
     "patch_coherence",
     "repetition",
+    "retrace_agreement",
     "shape_similarity",
+    "skeleton_agreement",
     "stroke_coverage",
     "thickness_histogram",
+    "two_level_fraction",
     "width_agreement",
 ]
 

@@ -10,7 +10,8 @@ Synthetic branching scenes with a known skeleton
     ``meander``, ``river_skeleton`` and ``river_picture`` draw a river-like picture along a
     skeleton (so the skeleton is exact, which no hand tracing of a photo gives);
     ``wavy_branch`` and ``channel_scene`` a small grey picture with a dark channel;
-    ``longest_path`` the longest path of a mask's skeleton; ``TRACE_SETTINGS`` the
+    ``longest_path`` the longest path of a mask's skeleton; ``input_halves`` a skeleton split in
+    two, whose histogram distance is the spread the growth is judged by; ``TRACE_SETTINGS`` the
     ``branching.trace`` arguments that suit the collection's branching examples.
 
 Synthetic leaves with known layers
@@ -36,6 +37,7 @@ from .branching import Branch, Skeleton
 __all__ = [
     "TRACE_SETTINGS",
     "channel_scene",
+    "input_halves",
     "layered_leaf",
     "longest_path",
     "meander",
@@ -250,6 +252,24 @@ def longest_path(mask: np.ndarray) -> np.ndarray:
     while (p := prev[path[-1]]) is not None:
         path.append(p)
     return np.array(path[::-1], float)
+
+
+def input_halves(skeleton: Skeleton) -> list[Skeleton]:
+    """A skeleton (e.g. a bending model's resampled ``source``) split in two: alternate trees, or
+    alternate branches for fewer than 4 trees; branches under 3 vertices (no angle) are left out.
+    The histogram distance between the halves is the sampling spread an output's distance to the
+    input is measured against."""
+    tree: list[int] = []
+    for i, b in enumerate(skeleton.branches):
+        tree.append(i if b.parent is None else tree[b.parent[0]])
+    rank = {r: j for j, r in enumerate(sorted(set(tree)))}
+    key = [rank[t] for t in tree] if len(rank) >= 4 else list(range(len(tree)))
+    return [
+        Skeleton(
+            [Branch(b.points, b.thickness) for i, b in enumerate(skeleton.branches) if key[i] % 2 == j and len(b) >= 3]
+        )
+        for j in (0, 1)
+    ]
 
 
 #: Colours of :func:`layered_leaf`: veins, spots, blade (RGB in [0, 1]).

@@ -23,7 +23,7 @@ from phloem.branching import (
     thickness_histogram,
 )
 from phloem.branching._forest import input_trees
-from phloem.testing import shared_file
+from phloem.testing import input_halves, shared_file
 
 H = 2.0
 
@@ -328,20 +328,6 @@ def test_river_delta_statistics_carry_over():
     assert histogram_distance(thickness_histogram(out, range=rr)[0], bend.hist_r) < 1.5 * spread_r
 
 
-def input_halves(bend: BendingModel) -> list[Skeleton]:
-    """The input (resampled) split in two: alternate trees, or alternate branches for fewer than 4 trees."""
-    sk = bend.source
-    tree: list[int] = []
-    for i, b in enumerate(sk.branches):
-        tree.append(i if b.parent is None else tree[b.parent[0]])
-    rank = {r: j for j, r in enumerate(sorted(set(tree)))}
-    key = [rank[t] for t in tree] if len(rank) >= 4 else list(range(len(tree)))
-    return [
-        Skeleton([Branch(b.points, b.thickness) for i, b in enumerate(sk.branches) if key[i] % 2 == j and len(b) >= 3])
-        for j in (0, 1)
-    ]
-
-
 def check_input_sized(src: Skeleton, shape: tuple[int, int]) -> None:
     """Grow an input-sized structure from a traced skeleton and compare it with the input.
 
@@ -355,7 +341,7 @@ def check_input_sized(src: Skeleton, shape: tuple[int, int]) -> None:
     """
     bend, fur = BendingModel.fit(src), FurcationModel.fit(src)
     ra, rr = bend.range_alpha, bend.range_r
-    halves = input_halves(bend)
+    halves = input_halves(bend.source)
     spread_a = histogram_distance(*(angle_histogram(x, range=ra)[0] for x in halves))
     spread_r = histogram_distance(*(thickness_histogram(x, range=rr)[0] for x in halves))
     out = grow(bend, fur, size=shape, seed=0, max_length="input")

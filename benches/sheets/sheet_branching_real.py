@@ -1,0 +1,86 @@
+"""Contact sheet of ``phloem.branching.synthesize`` with its defaults on real inputs (issue 19).
+
+    PYTHONPATH=python python -m benches.sheets.sheet_branching_real --out OUT.png [--inputs DIR] [--seed 0]
+        [--max-side N] [--tuned-trace]
+
+One row per image of ``--inputs`` (default: ``branching`` of the real-image collection):
+input | input with its traced skeleton | grown skeleton | output image | output with its own
+re-traced skeleton. Skeletons are drawn as sheet_branching_trace draws them (roots red,
+children yellow, deeper cyan, the traced radii as a green outline). The captions carry the
+measures of benches/quality/branching_quality.py: largest-tree share of input and output,
+median heading change over 60 px and the drift L1, re-trace F1, two-level fraction (masks).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from benches.quality.branching_quality import inputs, load, measure, run
+from phloem.branching import trace
+from phloem.branching.measures import resolve_trace_options
+from phloem.testing import TRACE_SETTINGS, shared_path
+
+from ._sheet import TILE, _fit, _label, write_sheet
+from .sheet_branching_trace import overlay
+
+
+def _show(img: np.ndarray) -> np.ndarray:
+    """Gray or colour in [0, 1] for display: a low-contrast field (an elevation model) is stretched."""
+    lo, hi = float(img.min()), float(img.max())
+    return (img - lo) / (hi - lo) if hi - lo < 0.25 and hi > lo else np.clip(img, 0, 1)
+
+
+def row(path: Path, seed: int, max_side: int, tuned: bool) -> list[np.ndarray]:
+    img, mask = load(path, max_side)
+    opts = TRACE_SETTINGS.get(path.name) if tuned else None
+    name = path.stem[:22]
+    res, seconds, error = run(img, seed, trace_options=opts, threads=2)
+    if res is None:
+        print(f"{path.name}: {error}")
+        blank = np.ones((TILE, TILE, 3), np.float32)
+        return [_label(_fit(_show(img), interpolation=cv2.INTER_AREA), f"{name}: {error[:30]}")] + [blank] * 4
+    r = measure(path.name, img, mask, seed, res, seconds, trace_options=opts)
+    w = max(1, round(max(img.shape[:2]) / TILE))
+    try:
+        retraced = overlay(_show(res.image), trace(res.image, **resolve_trace_options(img, opts)), w)
+    except ValueError:  # nothing to trace
+        retraced = _show(res.image)
+    two = "" if r.two_level is None else f", 2-level {100 * r.two_level:.1f}%"
+    print(f"{path.name}: F1 {r.f1:.2f}, share {r.share_in:.2f}->{r.share_out:.2f}, drift {r.drift:.2f}{two}")
+    return [
+        _label(_fit(_show(img), interpolation=cv2.INTER_AREA), f"{name} seed {seed}, {seconds:.0f} s"),
+        _label(_fit(overlay(_show(img), res.source, w), interpolation=cv2.INTER_AREA),
+               f"traced: tree {r.share_in:.2f}, turn {r.heading_in:.2f} rad"),
+        _label(_fit(overlay(np.zeros(img.shape[:2], np.float32), res.target, w), interpolation=cv2.INTER_AREA),
+               f"grown: tree {r.share_out:.2f}, turn {r.heading_out:.2f}, drift {r.drift:.2f}"),
+        _label(_fit(_show(res.image), interpolation=cv2.INTER_AREA), f"output{two}"),
+        _label(_fit(retraced, interpolation=cv2.INTER_AREA),
+               f"re-traced: F1 {r.f1:.2f} (P {r.precision:.2f} R {r.recall:.2f})"),
+    ]  # fmt: skip
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", default="out/branching_real_sheet.png")
+    ap.add_argument("--inputs", type=Path, default=None, help="folder of images (default: shared branching set)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--max-side", type=int, default=0, help="scale inputs down to this long side first (0: no)")
+    ap.add_argument("--tuned-trace", action="store_true", help="trace with phloem.testing.TRACE_SETTINGS")
+    args = ap.parse_args(argv)
+    folder = args.inputs if args.inputs is not None else shared_path("branching")
+    paths = inputs(folder) if folder.is_dir() else []
+    if not paths:
+        print(f"no images in {folder}", file=sys.stderr)
+        return 1
+    write_sheet([row(p, args.seed, args.max_side, args.tuned_trace) for p in paths], args.out)
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

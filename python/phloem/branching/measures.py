@@ -1,0 +1,429 @@
+"""Measures that say whether a synthesised branching structure looks like its input's kind of
+structure, beyond the angle and thickness histograms that it matches by construction (issue 19):
+does the rendered image show the skeleton it was asked to show (re-trace agreement), does the
+structure hold together (largest-tree share), do branches keep a course at the scale of the
+structure (heading change over a fixed arc and its histogram distance, "drift"), and does a
+mask stay a mask (two-level fraction). Re-exported by :mod:`phloem.metrics`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .._validate import as_image, check_float, check_int
+from ._elements import F64, _check_skeleton
+from .histograms import histogram_distance
+from .skeleton import Branch, Skeleton
+from .trace import _gray, _polarity, _sigmas, trace
+
+__all__ = [
+    "Agreement",
+    "drift",
+    "heading_change_histogram",
+    "heading_changes",
+    "largest_tree_share",
+    "median_heading_change",
+    "resolve_trace_options",
+    "retrace_agreement",
+    "skeleton_agreement",
+    "two_level_fraction",
+]
+
+#: Default arc over which heading change is measured, px (the figure issue 19 quotes).
+ARC = 60.0
+
+
+@dataclass(frozen=True)
+class Agreement:
+    """How well two skeletons cover each other (see :func:`skeleton_agreement`).
+
+    Attributes
+    ----------
+    precision : float
+        Fraction of the candidate's points within ``tolerance`` of the reference.
+    recall : float
+        Fraction of the reference's points within ``tolerance`` of the candidate.
+    f1 : float
+        Their harmonic mean (0 when both are 0).
+    tolerance : float
+        The matching distance used, px.
+    """
+
+    precision: float
+    recall: float
+    f1: float
+    tolerance: float
+
+
+def _dense(branch: Branch, spacing: float) -> tuple[F64, F64, F64]:
+    """Points, thicknesses and arc positions along ``branch`` at most ``spacing`` px apart (ends included)."""
+    seg = np.linalg.norm(np.diff(branch.points, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    n = max(2, math.ceil(cum[-1] / spacing) + 1)
+    s = np.linspace(0.0, float(cum[-1]), n)
+    pts = np.stack([np.interp(s, cum, branch.points[:, 0]), np.interp(s, cum, branch.points[:, 1])], axis=1)
+    return pts, np.interp(s, cum, branch.thickness), s
+
+
+def _sample(skeleton: Skeleton) -> tuple[F64, F64]:
+    parts = [_dense(b, 1.0) for b in skeleton.branches]
+    return np.concatenate([p for p, _, _ in parts]), np.concatenate([t for _, t, _ in parts])
+
+
+def skeleton_agreement(reference: Skeleton, candidate: Skeleton, *, tolerance: float | None = None) -> Agreement:
+    """Precision, recall and F1 of ``candidate``'s centre lines against ``reference``'s.
+
+    Both skeletons are sampled along every branch at 1 px spacing; a point matches if a point of
+    the other skeleton lies within ``tolerance``. Recall is the fraction of reference points
+    matched, precision that of candidate points.
+
+    Parameters
+    ----------
+    reference, candidate : Skeleton
+        E.g. the target skeleton of a synthesis and the skeleton traced from its image.
+    tolerance : float, optional
+        Matching distance in px (default ``max(3, 1.5 × median radius)`` of the reference, the
+        median over its arc length): a traced centre line of a thick branch may sit anywhere
+        across its middle.
+
+    Returns
+    -------
+    Agreement
+
+    Examples
+    --------
+    >>> from phloem.branching import Branch, Skeleton
+    >>> ref = Skeleton([Branch([[0, 10], [100, 10]], 2.0)])
+    >>> half = Skeleton([Branch([[0, 11], [50, 11]], 2.0)])
+    >>> a = skeleton_agreement(ref, half)
+    >>> a.precision, round(a.recall, 2), a.tolerance
+    (1.0, 0.52, 3.0)
+    """
+    _check_skeleton(reference, "reference")
+    _check_skeleton(candidate, "candidate")
+    ref, thick = _sample(reference)
+    cand, _ = _sample(candidate)
+    tol = max(3.0, 1.5 * float(np.median(thick))) if tolerance is None else check_float(tolerance, "tolerance", 0.0)
+    from scipy.spatial import cKDTree  # type: ignore[import-untyped]
+
+    # The bound is exclusive; "within" includes the tolerance itself.
+    bound = tol * (1 + 1e-9) + 1e-12
+    precision = float(np.mean(cKDTree(ref).query(cand, distance_upper_bound=bound)[0] <= tol))
+    recall = float(np.mean(cKDTree(cand).query(ref, distance_upper_bound=bound)[0] <= tol))
+    f1 = 2 * precision * recall / (precision + recall) if precision + recall > 0 else 0.0
+    return Agreement(precision, recall, f1, tol)
+
+
+def resolve_trace_options(image: Any, trace_options: dict[str, Any] | None = None) -> dict[str, Any]:
+    """``trace_options`` with ``kind="auto"`` (or no kind) replaced by the kind :func:`trace` picks on ``image``.
+
+    ``"mask"`` for an image of at most two values, else the stronger ridge polarity. Trace an
+    output with the input's resolved options to trace it as the input was traced: an output
+    with a few grey pixels is no longer two-valued, and ``"auto"`` would trace it as a photo.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> img = np.zeros((20, 20), np.float32); img[8:12] = 1
+    >>> resolve_trace_options(img), resolve_trace_options(img, {"kind": "dark", "sigmas": 2.0})
+    ({'kind': 'mask'}, {'kind': 'dark', 'sigmas': 2.0})
+    >>> resolve_trace_options(img + np.linspace(0, 0.1, 20, dtype=np.float32))
+    {'kind': 'bright'}
+    """
+    if trace_options is not None and not isinstance(trace_options, dict):
+        raise TypeError(f"trace_options: expected a dict of trace() arguments, got {type(trace_options).__name__}")
+    opts = dict(trace_options or {})
+    if opts.get("kind", "auto") == "auto":
+        gray = _gray(image, opts.get("channel"))
+        sig = _sigmas(opts.get("sigmas", (1.0, 2.0, 3.0)))
+        opts["kind"] = "mask" if np.unique(gray).size <= 2 else _polarity(gray, sig)
+    return opts
+
+
+def retrace_agreement(
+    image: Any,
+    target: Skeleton,
+    *,
+    trace_options: dict[str, Any] | None = None,
+    like: Any = None,
+    tolerance: float | None = None,
+) -> float:
+    """Does ``image`` show ``target``? F1 of ``target`` against the skeleton traced from ``image``.
+
+    The image is traced by :func:`phloem.branching.trace` with ``trace_options`` (pass the ones
+    the input was traced with, and the input as ``like`` so that ``kind="auto"`` is resolved on
+    the input, :func:`resolve_trace_options`) and compared by :func:`skeleton_agreement` (which
+    gives precision and recall too). An image where nothing is traced scores 0. 1 when the
+    structure the image shows is the one it was asked to show, near 0 when it shows something
+    else. Higher is better.
+
+    Parameters
+    ----------
+    image : (H, W[, C]) array_like
+        A rendered image, e.g. :attr:`SynthesisResult.image`.
+    target : Skeleton
+        The skeleton it should show, e.g. :attr:`SynthesisResult.target`.
+    trace_options : dict, optional
+        Keyword arguments of :func:`phloem.branching.trace`.
+    like : (P, Q[, C]) array_like, optional
+        The input image: trace ``image`` with the kind ``trace`` picks on it.
+    tolerance : float, optional
+        See :func:`skeleton_agreement`.
+
+    Returns
+    -------
+    float
+        In [0, 1].
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phloem.branching import Branch, Skeleton
+    >>> sk = Skeleton([Branch([[10, 30], [110, 30]], 4.0)], (60, 120))
+    >>> round(retrace_agreement(sk.mask().astype(np.float32), sk, trace_options={"kind": "mask"}), 2)
+    1.0
+    """
+    target = _check_skeleton(target, "target")
+    opts = resolve_trace_options(like, trace_options) if like is not None else trace_options
+    if opts is not None and not isinstance(opts, dict):
+        raise TypeError(f"trace_options: expected a dict of trace() arguments, got {type(opts).__name__}")
+    try:
+        traced = trace(image, **(opts or {}))
+    except ValueError as e:
+        if not str(e).startswith("image: nothing to trace"):
+            raise
+        return 0.0
+    return skeleton_agreement(target, traced, tolerance=tolerance).f1
+
+
+def largest_tree_share(skeleton: Skeleton) -> float:
+    """Share of the total branch length that lies in the largest connected tree.
+
+    Trees are given by the branches' ``parent`` links (a branch whose parent is ``None`` starts
+    a new tree), not by where branches happen to cross in the image. 1 for a single tree;
+    ``1 / n`` for ``n`` equally long separate pieces.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+
+    Returns
+    -------
+    float
+        In (0, 1].
+
+    Examples
+    --------
+    >>> from phloem.branching import Branch, Skeleton
+    >>> sk = Skeleton([Branch([[0, 0], [30, 0]], 1.0), Branch([[15, 0], [15, 10]], 1.0, parent=(0, 1)),
+    ...                Branch([[0, 20], [10, 20]], 1.0)])
+    >>> largest_tree_share(sk)
+    0.8
+    """
+    _check_skeleton(skeleton)
+    root: list[int] = []
+    for i, b in enumerate(skeleton.branches):
+        root.append(i if b.parent is None else root[b.parent[0]])
+    lengths = np.bincount(root, weights=[b.length() for b in skeleton.branches])
+    total = float(lengths.sum())
+    if total <= 0:
+        raise ValueError("skeleton: the branches have no length")
+    return float(lengths.max()) / total
+
+
+def _check_arc(arc: Any) -> float:
+    return check_float(arc, "arc", 0.0, inclusive=False)
+
+
+def heading_changes(skeleton: Skeleton, *, arc: float = ARC) -> F64:
+    """Absolute change of heading over ``arc`` px of branch, at every px along every branch.
+
+    At arc position ``s`` the heading is the direction of the chord from ``s - w/2`` to
+    ``s + w/2`` with ``w = arc / 6`` (a tangent that pixel-level noise of a traced centre line
+    does not swing; on a circle the chord is parallel to the tangent at its middle, so the
+    measure is exact there); the value is ``|θ(s + arc) - θ(s)|``, wrapped to ``[0, π]``, for
+    every ``s`` (1 px apart) where both chords lie on the branch. Branches shorter than
+    ``7 arc / 6`` give no values. A straight branch gives 0, a circular arc of radius ``R``
+    gives ``arc / R`` (up to π).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    arc : float, optional
+        Arc length in px (default 60, the scale issue 19 reports; compare an output with its
+        input at the same image scale, or pass a multiple of the median thickness to compare
+        structures of different scales).
+
+    Returns
+    -------
+    ndarray of float64
+        Radians; empty when no branch is long enough.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phloem.branching import Branch, Skeleton
+    >>> t = np.linspace(0, np.pi, 400)
+    >>> circle = Skeleton([Branch(np.c_[100 + 50 * np.cos(t), 100 - 50 * np.sin(t)], 1.0)])
+    >>> bool(np.allclose(heading_changes(circle, arc=30), 30 / 50, atol=1e-3))
+    True
+    """
+    _check_skeleton(skeleton)
+    a = _check_arc(arc)
+    half = a / 12
+    out = []
+    for b in skeleton.branches:
+        pts, _, s = _dense(b, 1.0)
+        total = float(s[-1])
+        if total < a + 2 * half:
+            continue
+        start = np.arange(half, total - a - half + 1e-9, 1.0)
+
+        def heading(at: F64, pts: F64 = pts, s: F64 = s) -> F64:
+            x0, y0 = np.interp(at - half, s, pts[:, 0]), np.interp(at - half, s, pts[:, 1])
+            x1, y1 = np.interp(at + half, s, pts[:, 0]), np.interp(at + half, s, pts[:, 1])
+            return np.arctan2(y1 - y0, x1 - x0)
+
+        turn = heading(start + a) - heading(start)
+        out.append(np.abs(np.pi - (np.pi - turn) % (2 * np.pi)))
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def _changes_or_raise(skeleton: Skeleton, arc: float, name: str) -> F64:
+    values = heading_changes(_check_skeleton(skeleton, name), arc=arc)
+    if values.size == 0:
+        raise ValueError(
+            f"{name}: no branch is at least {7 * _check_arc(arc) / 6:g} px long (arc={arc:g} and its tangents)"
+        )
+    return values
+
+
+def median_heading_change(skeleton: Skeleton, *, arc: float = ARC) -> float:
+    """The median of :func:`heading_changes`, in radians: how much branches turn over ``arc`` px.
+
+    Examples
+    --------
+    >>> from phloem.branching import Branch, Skeleton
+    >>> median_heading_change(Skeleton([Branch([[0, 0], [200, 0]], 1.0)]))
+    0.0
+    """
+    return float(np.median(_changes_or_raise(skeleton, arc, "skeleton")))
+
+
+def heading_change_histogram(skeleton: Skeleton, *, arc: float = ARC, bins: int = 16) -> tuple[F64, F64]:
+    """Normalised histogram of :func:`heading_changes` over ``[0, π]``.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    arc : float, optional
+        See :func:`heading_changes`.
+    bins : int, optional
+        Number of bins (default 16, as the angle histograms).
+
+    Returns
+    -------
+    hist : ndarray of float64, shape (bins,)
+        Fractions summing to 1.
+    edges : ndarray of float64, shape (bins + 1,)
+
+    Examples
+    --------
+    >>> from phloem.branching import Branch, Skeleton
+    >>> hist, edges = heading_change_histogram(Skeleton([Branch([[0, 0], [200, 0]], 1.0)]), bins=4)
+    >>> hist.tolist(), round(float(edges[1]), 4)
+    ([1.0, 0.0, 0.0, 0.0], 0.7854)
+    """
+    return _histogram(skeleton, arc, bins, "skeleton")
+
+
+def _histogram(skeleton: Skeleton, arc: float, bins: int, name: str) -> tuple[F64, F64]:
+    values = _changes_or_raise(skeleton, arc, name)
+    n = check_int(bins, "bins", 1)
+    counts = np.bincount(np.minimum((values / np.pi * n).astype(np.int64), n - 1), minlength=n).astype(np.float64)
+    return counts / counts.sum(), np.linspace(0.0, np.pi, n + 1)
+
+
+def drift(reference: Skeleton, candidate: Skeleton, *, arc: float = ARC, bins: int = 16) -> float:
+    """L1 distance of the heading-change histograms (:func:`heading_change_histogram`) of two skeletons.
+
+    0 when the candidate's branches turn over ``arc`` px exactly as the reference's do, 2 when
+    the two histograms share no bin. A candidate whose branches wander and curl where the
+    reference's keep a course has its mass in higher bins. Lower is better.
+
+    Parameters
+    ----------
+    reference, candidate : Skeleton
+        E.g. the input's skeleton and the synthesised one.
+    arc, bins : optional
+        See :func:`heading_change_histogram`.
+
+    Returns
+    -------
+    float
+        In [0, 2].
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phloem.branching import Branch, Skeleton
+    >>> line = Skeleton([Branch([[0, 0], [200, 0]], 1.0)])
+    >>> t = np.linspace(0, np.pi, 400)
+    >>> circle = Skeleton([Branch(np.c_[100 + 50 * np.cos(t), 100 - 50 * np.sin(t)], 1.0)])
+    >>> drift(line, line), drift(line, circle)
+    (0.0, 2.0)
+    """
+    a = _histogram(reference, arc, bins, "reference")[0]
+    b = _histogram(candidate, arc, bins, "candidate")[0]
+    return histogram_distance(a, b)
+
+
+def two_level_fraction(image: Any, reference: Any, *, tolerance: float = 0.05) -> float:
+    """Fraction of ``image``'s pixels at one of the two values of a two-level ``reference`` (a mask).
+
+    Values are measured in the reference's range scaled to [0, 1] (its lower value 0, its upper
+    1); a pixel counts if every channel is within ``tolerance`` of the same level. 1 when the
+    output is a mask of the same two values; grey ramps and blurred edges lower it. Higher is
+    better.
+
+    Parameters
+    ----------
+    image : (H, W[, C]) array_like
+        The output, with the reference's channel count (any size).
+    reference : (P, Q[, C]) array_like
+        The input; at most two distinct values.
+    tolerance : float, optional
+        Distance to a level that still counts, in the normalised range (default 0.05).
+
+    Returns
+    -------
+    float
+        In [0, 1].
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> mask = np.zeros((10, 10), np.float32); mask[:, :5] = 1
+    >>> out = mask.copy(); out[:, 4:6] = 0.5
+    >>> two_level_fraction(out, mask)
+    0.8
+    """
+    img = as_image(image, "image")
+    ref = as_image(
+        np.asarray(reference, dtype=np.float32) if np.asarray(reference).dtype == np.bool_ else reference, "reference"
+    )
+    if img.shape[2] != ref.shape[2]:
+        raise ValueError(f"image: expected {ref.shape[2]} channels like reference, got {img.shape[2]}")
+    tol = check_float(tolerance, "tolerance", 0.0)
+    levels = np.unique(ref.reshape(-1, ref.shape[2]), axis=0)
+    if len(levels) != 2:
+        raise ValueError(f"reference: expected a two-level image (a mask), got {len(levels)} distinct values")
+    lo, hi = levels[0].astype(np.float64), levels[1].astype(np.float64)
+    span = np.where(hi != lo, np.abs(hi - lo), 1.0)
+    d_lo = (np.abs(img - lo) / span).max(axis=2)
+    d_hi = (np.abs(img - hi) / span).max(axis=2)
+    return float(np.mean(np.minimum(d_lo, d_hi) <= tol))

@@ -1,0 +1,271 @@
+"""The measures of issue 19 (re-trace agreement, largest-tree share, drift, two-level fraction)
+against analytic references and brute force."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+import phloem
+from phloem.branching import Branch, Skeleton, trace
+from phloem.branching.measures import (
+    drift,
+    heading_change_histogram,
+    heading_changes,
+    largest_tree_share,
+    median_heading_change,
+    resolve_trace_options,
+    retrace_agreement,
+    skeleton_agreement,
+    two_level_fraction,
+)
+
+
+def arc_branch(radius: float, angle: float, centre=(150.0, 150.0), n: int = 2000, thickness: float = 1.0) -> Branch:
+    t = np.linspace(0.0, angle, n)
+    return Branch(np.c_[centre[0] + radius * np.cos(t), centre[1] - radius * np.sin(t)], thickness)
+
+
+def test_metrics_reexports_the_measures() -> None:
+    for name in ("retrace_agreement", "skeleton_agreement", "largest_tree_share", "drift", "two_level_fraction"):
+        assert getattr(phloem.metrics, name) is getattr(phloem.branching.measures, name)
+        assert name in phloem.metrics.__all__
+
+
+# -- heading change and drift -----------------------------------------------------------------
+
+
+def test_a_straight_branch_does_not_turn_whatever_its_direction_and_vertex_count() -> None:
+    rng = np.random.default_rng(0)
+    for angle in (0.0, 0.3, 2.0, -2.7):
+        d = np.array([np.cos(angle), np.sin(angle)])
+        s = np.sort(np.r_[0.0, rng.uniform(0, 200, 30), 200.0])  # irregular vertex spacing
+        sk = Skeleton([Branch(np.array([10.0, 10.0]) + 250 + s[:, None] * d, 1.0)])
+        values = heading_changes(sk, arc=60)
+        assert values.size == 200 - 70 + 1  # one per px where both 10-px tangent chords fit
+        assert np.abs(values).max() < 1e-9
+        assert median_heading_change(sk) == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize(("radius", "arc"), [(50.0, 30.0), (80.0, 60.0), (120.0, 60.0), (40.0, 20.0)])
+def test_a_circular_arc_turns_by_arc_over_radius(radius: float, arc: float) -> None:
+    sk = Skeleton([arc_branch(radius, 3.0)])
+    values = heading_changes(sk, arc=arc)
+    assert values.size > 0
+    np.testing.assert_allclose(values, arc / radius, atol=2e-3)
+
+
+def test_heading_change_wraps_to_at_most_pi() -> None:
+    # 100 px on a circle of radius 20 turns by 5 rad, which is 2π - 5 the other way round.
+    sk = Skeleton([arc_branch(20.0, 1.9 * np.pi, n=3000)])
+    np.testing.assert_allclose(heading_changes(sk, arc=100), 2 * np.pi - 5, atol=5e-3)
+
+
+def test_heading_change_of_a_traced_circle_is_near_arc_over_radius() -> None:
+    """Pixel staircase of a traced centre line must not swing the measure."""
+    radius = 70.0
+    mask = Skeleton([arc_branch(radius, 1.5 * np.pi, centre=(100.0, 100.0), thickness=3.0)], (200, 200)).mask()
+    traced = trace(mask.astype(np.float32), kind="mask")
+    assert median_heading_change(traced, arc=60) == pytest.approx(60 / radius, abs=0.05)
+    # 10-px tangent chords: std 0.027 rad here; single-pixel tangents scatter by 0.075
+    assert heading_changes(traced, arc=60).std() < 0.045
+
+
+def test_short_branches_give_no_values() -> None:
+    sk = Skeleton([Branch([[0, 0], [69, 0]], 1.0), Branch([[0, 5], [30, 5]], 1.0)])
+    assert heading_changes(sk, arc=60).size == 0
+    assert heading_changes(sk, arc=10).size > 0
+    with pytest.raises(ValueError, match=r"^skeleton: no branch is at least 70 px long"):
+        median_heading_change(sk, arc=60)
+    with pytest.raises(ValueError, match=r"^candidate: no branch"):
+        drift(Skeleton([Branch([[0, 0], [200, 0]], 1.0)]), sk)
+
+
+def test_histogram_bins_the_heading_changes_over_0_to_pi() -> None:
+    sk = Skeleton([arc_branch(30.0, 4.0), Branch([[0, 0], [100, 5], [180, 60], [200, 190]], 1.0)])
+    values = heading_changes(sk, arc=45)
+    hist, edges = heading_change_histogram(sk, arc=45, bins=8)
+    expected = np.histogram(values, bins=8, range=(0.0, np.pi))[0]
+    np.testing.assert_allclose(hist, expected / expected.sum())
+    np.testing.assert_allclose(edges, np.linspace(0, np.pi, 9))
+
+
+def test_drift_is_zero_for_the_same_bending_and_large_for_curls() -> None:
+    line = Skeleton([Branch([[0, 0], [300, 0]], 1.0)])
+    gentle = Skeleton([arc_branch(400.0, 0.7)])  # 0.15 rad over 60 px: the first bin of 16
+    curl = Skeleton([arc_branch(40.0, 4.0)])  # 1.5 rad over 60 px
+    assert drift(line, line) == 0.0
+    assert drift(line, gentle) == 0.0
+    assert drift(line, curl) == pytest.approx(2.0)
+    assert drift(curl, line) == drift(line, curl)
+    mixed = Skeleton([*line.branches, *curl.branches])
+    d = drift(line, mixed)
+    assert 0.0 < d < 2.0
+
+
+# -- largest-tree share -----------------------------------------------------------------------
+
+
+def test_largest_tree_share_of_known_trees() -> None:
+    a = Branch([[0, 0], [30, 0]], 1.0)
+    b = Branch([[10, 0], [10, 20]], 1.0, parent=(0, 0))
+    c = Branch([[10, 20], [20, 20]], 1.0, parent=(1, 1))  # a grandchild: still tree 0
+    d = Branch([[0, 50], [40, 50]], 1.0)
+    assert largest_tree_share(Skeleton([a, b, c])) == 1.0
+    assert largest_tree_share(Skeleton([a, b, c, d])) == pytest.approx(60 / 100)
+    assert largest_tree_share(Skeleton([a, d, Branch([[0, 60], [40, 60]], 1.0, parent=(1, 0))])) == pytest.approx(
+        80 / 110
+    )
+    pieces = Skeleton([Branch([[0, 5 * i], [10, 5 * i]], 1.0) for i in range(4)])
+    assert largest_tree_share(pieces) == pytest.approx(0.25)
+
+
+# -- agreement --------------------------------------------------------------------------------
+
+
+def brute_agreement(ref: Skeleton, cand: Skeleton, tol: float) -> tuple[float, float]:
+    def dense(sk: Skeleton) -> np.ndarray:
+        out = []
+        for b in sk.branches:
+            for p, q in zip(b.points[:-1], b.points[1:]):
+                n = int(np.ceil(np.linalg.norm(q - p) / 0.25)) + 1
+                out.append(p + np.linspace(0, 1, n)[:, None] * (q - p))
+        return np.concatenate(out)
+
+    r, c = dense(ref), dense(cand)
+    d = np.linalg.norm(r[:, None] - c[None], axis=2)
+    return float(np.mean(d.min(axis=0) <= tol)), float(np.mean(d.min(axis=1) <= tol))
+
+
+def test_skeleton_agreement_matches_brute_force() -> None:
+    rng = np.random.default_rng(3)
+    for _ in range(4):
+        ref = Skeleton([Branch(np.cumsum(rng.uniform(-8, 12, (6, 2)), axis=0) + 50, 2.0)])
+        cand = Skeleton([Branch(ref.branches[0].points[:4] + rng.normal(0, 2, (4, 2)), 2.0)])
+        got = skeleton_agreement(ref, cand)
+        p, r = brute_agreement(ref, cand, 3.0)
+        # 1-px sampling against 0.25-px sampling: a few points near the tolerance edge differ
+        assert got.precision == pytest.approx(p, abs=0.05) and got.recall == pytest.approx(r, abs=0.05)
+        assert got.f1 == pytest.approx(2 * got.precision * got.recall / (got.precision + got.recall))
+
+
+def test_agreement_tolerance_follows_the_reference_radius() -> None:
+    ref = Skeleton([Branch([[0, 50], [200, 50]], [6.0, 6.0])])
+    assert skeleton_agreement(ref, ref).tolerance == 9.0
+    near = Skeleton([Branch([[0, 58], [200, 58]], 1.0)])
+    assert skeleton_agreement(ref, near).f1 == 1.0
+    assert skeleton_agreement(near, ref).f1 == 0.0  # the other way round the tolerance is 3 px
+    assert skeleton_agreement(near, ref, tolerance=8.0).f1 == 1.0
+
+
+def test_retrace_of_an_exact_drawing_agrees_and_of_a_shifted_or_blank_one_does_not() -> None:
+    main = Branch([[20, 100], [120, 90], [220, 110], [280, 100]], 5.0)
+    child = Branch([[120, 90], [160, 40], [200, 20]], 3.0, parent=(0, 1))
+    target = Skeleton([main, child], (160, 300))
+    drawn = target.mask().astype(np.float32)
+    assert retrace_agreement(drawn, target, trace_options={"kind": "mask"}) > 0.95
+    shifted = np.zeros_like(drawn)
+    shifted[40:] = drawn[:-40]
+    assert retrace_agreement(shifted, target, trace_options={"kind": "mask"}) < 0.15
+    assert retrace_agreement(np.zeros_like(drawn), target, trace_options={"kind": "mask"}) == 0.0
+    # a dark structure on a light photo-like background, traced with the ridge filter
+    photo = 0.8 - 0.6 * drawn
+    assert retrace_agreement(photo, target, trace_options={"kind": "dark", "sigmas": (2.0, 3.0)}) > 0.8
+
+
+def test_retrace_resolves_auto_on_the_input_like_trace_does() -> None:
+    main = Branch([[20, 100], [120, 90], [220, 110], [280, 100]], 3.0)
+    target = Skeleton([main, Branch([[120, 90], [160, 40], [200, 20]], 2.0, parent=(0, 1))], (160, 300))
+    mask = target.mask().astype(np.float32)
+    assert resolve_trace_options(mask) == {"kind": "mask"}
+    photo = cv2.GaussianBlur(mask, (0, 0), 1.5)  # no longer two-valued
+    assert resolve_trace_options(0.8 - 0.6 * photo)["kind"] == "dark"
+    assert resolve_trace_options(0.2 + 0.6 * photo)["kind"] == "bright"
+    assert resolve_trace_options(mask, {"kind": "bright", "min_area": 5}) == {"kind": "bright", "min_area": 5}
+    # a mask output with a few grey pixels is traced as the mask input was
+    out = mask.copy()
+    out[np.nonzero(mask)[0][::50], np.nonzero(mask)[1][::50]] = 0.9
+    out[5:8, 5:8] = 0.1
+    assert retrace_agreement(out, target, like=mask) > 0.95
+    assert resolve_trace_options(out)["kind"] != "mask"
+
+
+# -- two-level fraction -----------------------------------------------------------------------
+
+
+def test_two_level_fraction_of_a_constructed_image() -> None:
+    ref = np.zeros((20, 20), np.float32)
+    ref[:, 10:] = 1.0
+    out = ref.copy()
+    out[0, :4] = 0.04  # still the lower level
+    out[1, :4] = 0.06  # off it
+    out[2, 10:14] = 0.96  # still the upper level
+    out[3, :5] = 0.5  # grey ramp
+    assert two_level_fraction(out, ref) == pytest.approx(1 - 9 / 400)
+    assert two_level_fraction(out, ref, tolerance=0.0) == pytest.approx(1 - 17 / 400)
+    # levels in the reference's own range: a 0.2 / 0.6 mask scales distances by 1 / 0.4
+    ref2 = 0.2 + 0.4 * ref
+    out2 = 0.2 + 0.4 * out
+    assert two_level_fraction(out2, ref2) == pytest.approx(two_level_fraction(out, ref), abs=1e-9)
+    # uint8 and bool references, output of another size
+    assert two_level_fraction(out[:5], (ref * 255).astype(np.uint8)) == pytest.approx(1 - 9 / 100)
+    assert two_level_fraction(ref, ref > 0.5) == 1.0
+
+
+def test_two_level_fraction_of_colour_masks_needs_every_channel_at_one_level() -> None:
+    ref = np.zeros((4, 4, 3), np.float32)
+    ref[2:] = [1.0, 0.5, 0.0]
+    out = ref.copy()
+    out[0, 0] = [0.0, 0.0, 0.3]  # one channel off
+    out[3, 3] = [1.0, 0.52, 0.0]  # within 0.05 of 0.5 / 0.5 span
+    assert two_level_fraction(out, ref) == pytest.approx(15 / 16)
+
+
+# -- bad input --------------------------------------------------------------------------------
+
+
+def test_bad_input_errors() -> None:
+    sk = Skeleton([Branch([[0, 0], [200, 0]], 1.0)])
+    empty = Skeleton([])
+    img = sk.mask((10, 210)).astype(np.float32)
+    with pytest.raises(TypeError, match="^reference: expected a phloem.branching.Skeleton"):
+        skeleton_agreement(np.zeros((3, 2)), sk)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="^candidate: the skeleton has no branches"):
+        skeleton_agreement(sk, empty)
+    with pytest.raises(ValueError, match="^tolerance:"):
+        skeleton_agreement(sk, sk, tolerance=-1.0)
+    with pytest.raises(TypeError, match="^target:"):
+        retrace_agreement(img, "skeleton")  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="^trace_options:"):
+        retrace_agreement(img, sk, trace_options=["mask"])  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="^kind:"):
+        retrace_agreement(img, sk, trace_options={"kind": "nope"})
+    with pytest.raises(TypeError, match="^trace_options:"):
+        resolve_trace_options(img, "mask")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="^skeleton: the skeleton has no branches"):
+        largest_tree_share(empty)
+    with pytest.raises(ValueError, match="^skeleton: the branches have no length"):
+        largest_tree_share(Skeleton([Branch([[1, 1], [1, 1]], 1.0)]))
+    with pytest.raises(TypeError, match="^skeleton:"):
+        heading_changes([[0, 0], [1, 1]])  # type: ignore[arg-type]
+    for arc in (0.0, -5.0, float("nan")):
+        with pytest.raises(ValueError, match="^arc:"):
+            heading_changes(sk, arc=arc)
+    with pytest.raises(TypeError, match="^arc:"):
+        drift(sk, sk, arc="60")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="^bins:"):
+        heading_change_histogram(sk, bins=0)
+    with pytest.raises(ValueError, match="^reference: the skeleton has no branches"):
+        drift(empty, sk)
+    ref = np.zeros((4, 4), np.float32)
+    with pytest.raises(ValueError, match="^reference: expected a two-level image .* got 1 distinct"):
+        two_level_fraction(ref, ref)
+    with pytest.raises(ValueError, match="^reference: expected a two-level image .* got 3 distinct"):
+        two_level_fraction(ref, np.array([[0, 0.5, 1.0]], np.float32))
+    with pytest.raises(ValueError, match="^image: expected 1 channels"):
+        two_level_fraction(np.zeros((4, 4, 3)), np.eye(4))
+    with pytest.raises(ValueError, match="^tolerance:"):
+        two_level_fraction(np.eye(4), np.eye(4), tolerance=-0.1)
+    with pytest.raises(TypeError, match="^image:"):
+        two_level_fraction(np.eye(4, dtype=np.int64), np.eye(4))
