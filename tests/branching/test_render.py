@@ -106,6 +106,18 @@ def test_match_borders_default_is_off_for_masks_only() -> None:
     assert np.array_equal(masks[0], masks[1])
 
 
+def test_a_mask_renders_as_a_mask() -> None:
+    # issue 19: bilinear warps, Poisson pastes and the completion's votes gave grey ramps
+    _, sk = channel_scene()
+    tgt = Skeleton([wavy_branch((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
+    for lo, hi in ((0.0, 1.0), (0.2, 0.6)):
+        mask = np.where(sk.mask(), hi, lo).astype(np.float32)
+        out = render(mask, sk, tgt, seed=2)
+        assert set(np.unique(out).tolist()) <= {np.float32(lo), np.float32(hi)}
+        # the structure is there, as wide as the target's (thickness 4 to 3: about 2 r = 7 px)
+        assert 4 <= (out[:, 90] == np.float32(hi)).sum() <= 12
+
+
 def test_in_order_waits_only_for_overlapping_fragments() -> None:
     import threading
 

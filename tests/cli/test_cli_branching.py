@@ -148,3 +148,18 @@ def test_old_k_and_c_flags_warn_and_give_the_same_skeleton(tmp_path, capsys):
         else:
             assert err == ""
     assert Skeleton.load(outs["old"]) == Skeleton.load(outs["new"])
+
+
+def test_branching_valid_flag(tmp_path, capsys):
+    _dark_river_png(tmp_path / "river.png")
+    io.write_image(tmp_path / "small.png", np.ones((10, 10), np.float32))
+    base = ["branching", "run", str(tmp_path / "river.png"), "--kind", "dark", "--sigmas", "2", "3", "-q"]
+    assert main([*base, "--out", str(tmp_path / "a.png"), "--valid", str(tmp_path / "small.png")]) == 2
+    assert "--valid: " in capsys.readouterr().err and not list(tmp_path.glob("a.*"))
+    # a mask of the right size is used and recorded in the sidecar, so the run can be replayed
+    half = np.ones((120, 160), np.float32)
+    half[:, :80] = 0.0
+    io.write_image(tmp_path / "half.png", half)
+    assert main([*base, "--out", str(tmp_path / "b.png"), "--valid", str(tmp_path / "half.png")]) == 0
+    assert main([*base, "--out", str(tmp_path / "c.png"), "--valid", "none"]) == 0
+    assert json.loads((tmp_path / "b.png.json").read_text())["parameters"]["valid"].endswith("half.png")

@@ -5,7 +5,7 @@ example image with its skeleton, grow new skeletons with the same character, and
 image from fragments of the input. One module per stage, named after what it holds:
 ``skeleton`` and ``trace`` (§3, §4.1), ``histograms``, ``bending`` (§4.2), ``furcation`` (§4.3),
 ``growth`` (§4.4, §4.5), ``fragments`` (§5.1), ``render`` (§5.2, §5.3), ``gaps`` (§5.4),
-``rectify`` (Fig. 8), ``pipeline`` (all of it); see ``docs/pipelines/branching.md``.
+``rectify`` (Fig. 8), ``frame`` (a photo's frame), ``pipeline`` (all of it); see ``docs/pipelines/branching.md``.
 
 References
 ----------
@@ -18,6 +18,7 @@ from __future__ import annotations
 from .bending import BendingModel, default_h
 from .figures import histogram_figure
 from .fragments import Fragment, fragments, rigid_align
+from .frame import valid_region
 from .furcation import FurcationModel
 from .growth import extend, grow
 from .histograms import angle_histogram, histogram_distance, thickness_histogram
@@ -54,4 +55,5 @@ __all__ = [
     "thickness_histogram",
     "trace",
     "unrectify",
+    "valid_region",
 ]

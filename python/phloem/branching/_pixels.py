@@ -67,3 +67,8 @@ def _rot(theta: float) -> F64:
 
 def _pt(p: F64) -> tuple[int, int]:
     return round(p[0] * 16), round(p[1] * 16)
+
+
+def two_level(img: F32, lo: F32, hi: F32) -> bool:
+    """Whether ``img`` is a mask: at least 95 % of its pixels at their channels' minimum or maximum."""
+    return bool(float(((img == lo) | (img == hi)).all(axis=2).mean()) >= 0.95)

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from .. import texture
 from ..blend import seamless
-from ._pixels import F32, _by_channels, _clip_channels, _paste, _pt
+from ._pixels import F32, _by_channels, _clip_channels, _paste, _pt, two_level
 from .fragments import MIN_RADIUS
 from .skeleton import Skeleton
 
@@ -206,8 +206,8 @@ def fill_gaps(
     canvas = _complete_background(
         canvas, ~filled, image, allowed, patch_size=patch_size, iterations=iterations, seed=seed, threads=threads
     )
-    if match_borders is None:  # a mask: (nearly) every pixel at its minimum or maximum
-        match_borders = float(((image == lo) | (image == hi)).all(axis=2).mean()) < 0.95
+    if match_borders is None:  # a mask has no lighting to match
+        match_borders = not two_level(image, lo, hi)
     if photometric and match_borders:
         canvas = _match_borders(canvas, ~filled, lo, hi, radius=radius, threads=threads)
     return canvas

@@ -11,8 +11,9 @@ from numpy.typing import NDArray
 from .. import _memory
 from .._api import Seed, Size, renamed
 from .._progress import Progress
-from .._validate import as_image, check_size
+from .._validate import as_image, as_mask, check_size
 from .bending import BendingModel
+from .frame import valid_region
 from .furcation import FurcationModel
 from .growth import grow
 from .render import RenderResult, render
@@ -101,6 +102,7 @@ def synthesize(
     max_length: float | str | None = "input",
     colonize: bool = True,
     guide: Any = None,
+    valid: Any = "auto",
     render_options: dict[str, Any] | None = None,
     threads: int | None = None,
     progress: Progress = None,
@@ -132,6 +134,11 @@ def synthesize(
         Model parameters, as in :func:`fit_models` (``k`` and ``c`` before, deprecated).
     generations, max_length, colonize, guide : optional
         See :func:`grow`.
+    valid : (H, W) array_like of bool, "auto" or None, optional
+        Where ``image`` shows content: structure is traced there only (when ``skeleton`` is
+        not given), fragments are taken from inside it and the gaps completed from it.
+        ``"auto"`` (default): :func:`valid_region`, everything but a flat frame touching the
+        border (a fundus photo's black disc frame, constant padding); None: everywhere.
     render_options : dict, optional
         Keyword arguments for :func:`render`.
     threads : int, optional
@@ -165,8 +172,15 @@ def synthesize(
         if progress is not None:
             progress(i, steps)
 
+    if isinstance(valid, str):
+        if valid != "auto":
+            raise ValueError(f"valid: expected a boolean (H, W) mask, 'auto' or None, got {valid!r}")
+        ok: NDArray[np.bool_] | None = valid_region(img)
+        ok = None if ok is not None and ok.all() else ok
+    else:
+        ok = None if valid is None else as_mask(valid, "valid", img.shape[:2])
     if skeleton is None:
-        source = trace(img, **(trace_options or {}))
+        source = trace(img, **({"valid": ok} | (trace_options or {})))
     elif isinstance(skeleton, Skeleton):
         source = skeleton
         if source.shape is not None and source.shape != img.shape[:2]:
@@ -193,7 +207,7 @@ def synthesize(
         threads=threads,
         full_output=True,
         max_memory=max_memory,
-        **(render_options or {}),
+        **({"valid": ok} | (render_options or {})),
     )
     tick(4)
     return SynthesisResult(res.image, source, target, bending, furcation, res)

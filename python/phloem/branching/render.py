@@ -38,7 +38,7 @@ import heapq
 import math
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal, overload
 
 import cv2
@@ -51,7 +51,7 @@ from .._progress import Progress
 from .._validate import as_image, as_mask, check_float, check_int, check_patch_size, check_seed, check_threads
 from ..blend import interpolate_field, seamless
 from ..seams import seam
-from ._pixels import F32, F64, _by_channels, _check_skeleton, _clip_channels, _paste, _pt, _rot
+from ._pixels import F32, F64, _by_channels, _check_skeleton, _clip_channels, _paste, _pt, _rot, two_level
 from .fragments import DEFAULT_SAMPLES, Fragment, FragmentLibrary, check_params, cover, foreign_fragments
 from .gaps import fill_gaps
 from .skeleton import Skeleton
@@ -292,6 +292,11 @@ def render(
     opts = _Options(c_n, w_s, w_c, k, deform, photometric, seams, n_eval=max(4 * c_n, 8))
 
     ok = None if valid is None else as_mask(valid, "valid", (H0, W0))
+    lo, hi = _channel_range(img)
+    # A mask stays a mask: no gradient-domain paste (its ramps are grey), levels snapped at the end.
+    mask_like = two_level(img, lo, hi)
+    if mask_like:
+        opts = replace(opts, photometric=False)
     sources, targets, lib = _cover_both(src_sk, tgt_sk, ok, lam_f, rf, k, mirror=mirror, keep=max(3, c_n))
     painter = _Painter(img, tgt_sk, targets, lib, opts, draws=rng.random(len(targets)))
     _in_order(painter.boxes, painter.paint, workers=t if t is not None else _core.default_threads(), progress=progress)
@@ -302,8 +307,11 @@ def render(
         canvas = fill_gaps(
             canvas, painter.filled, img, src_sk, valid=ok, radius_factor=rf,
             radius=float(np.median([g.radius for g in targets])), lo=painter.lo, hi=painter.hi,
-            match_borders=match_borders, photometric=photometric, patch_size=p, iterations=c_iters, seed=s, threads=t,
+            match_borders=match_borders, photometric=photometric and not mask_like, patch_size=p, iterations=c_iters,
+            seed=s, threads=t,
         )  # fmt: skip
+    if mask_like:
+        canvas = np.where(canvas >= 0.5 * (lo + hi), hi, lo).astype(np.float32)
     if progress is not None:
         progress(len(targets) + 1, len(targets) + 1)
     if flat:

@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validate import as_image, check_float, check_int
+from .._validate import as_image, as_mask, check_float, check_int
 from .skeleton import Branch, Skeleton
 
 __all__ = ["estimate_thickness", "trace"]
@@ -439,6 +439,7 @@ def trace(
     channel: int | None = None,
     gap: float | None = None,
     thickness: Thickness = "auto",
+    valid: Any = None,
 ) -> Skeleton:
     """Trace the skeleton of a branching structure in an image (beyond [1]_, its future work).
 
@@ -504,6 +505,11 @@ def trace(
         photos, 0 (off) for masks.
     thickness : {"auto", "mask", "gradient"}
         Where the radii come from, see 7.
+    valid : (H, W) array_like of bool, optional
+        Where the image shows content (default everywhere; see :func:`valid_region`): only
+        structure inside it is traced, and for photos none within the ridge filter's reach
+        (``3 max(sigmas) + 1`` px) of its border, whose edge (a fundus photo's rim) would
+        read as a ridge.
 
     Returns
     -------
@@ -564,6 +570,7 @@ def trace(
             math.isfinite(rx) and math.isfinite(ry) and -0.5 <= rx <= shape[1] - 0.5 and -0.5 <= ry <= shape[0] - 0.5
         ):
             raise ValueError(f"root: ({rx}, {ry}) is outside the {shape[1]}x{shape[0]} image")
+    ok = None if valid is None else as_mask(valid, "valid", shape)
     lo, hi = float(gray.min()), float(gray.max())
     if hi - lo <= 1e-12:
         raise ValueError(f"image: nothing to trace, the image is constant ({lo})")
@@ -579,10 +586,16 @@ def trace(
         mask = gray > (0.5 * (lo + hi) if threshold is None else threshold)
     else:
         resp = _ridge_response(gray, sig, kind)
+        if ok is not None:
+            reach = 2 * math.ceil(3 * max(sig)) + 3
+            inner = cv2.erode(ok.astype(np.uint8), np.ones((reach, reach), np.uint8), borderType=cv2.BORDER_REPLICATE)
+            resp = np.where(inner.astype(bool), resp, 0.0)
         t = _otsu(resp) if threshold is None else threshold
         mask = _hysteresis(resp, 0.5 * t, t)
         # A ridge mask is ragged: close tiny gaps and round it so the skeleton has fewer spurs.
         mask = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)).astype(bool)
+    if ok is not None:
+        mask &= ok
     mask = _drop_small(mask, min_area)
     if not mask.any():
         raise ValueError("image: nothing to trace, no foreground left (check kind, threshold, min_area)")

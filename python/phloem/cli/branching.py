@@ -135,10 +135,29 @@ def _render_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--fragment-map", metavar="PNG", default=None, help="also write the map of which fragment painted each pixel"
     )
+    g.add_argument(
+        "--valid",
+        metavar="PNG|auto|none",
+        default="auto",
+        help="where the example shows content: a mask image (white = content, same size as IN), 'auto' "
+        "(default: all but a flat frame touching the border, such as a fundus photo's black frame) or 'none'",
+    )
 
 
 def _render_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     return {"omega_s": args.omega_s, "omega_c": args.omega_c, "complete": not args.no_complete}
+
+
+def _valid(args: argparse.Namespace, img: np.ndarray) -> Any:
+    """``--valid`` as ``synthesize``'s ``valid=``: a mask, "auto" or None."""
+    if args.valid in ("auto", "none"):
+        return None if args.valid == "none" else "auto"
+    mask = io.read_image(args.valid, max_pixels=args.max_pixels)
+    if mask.shape[:2] != img.shape[:2]:
+        raise ValueError(
+            f"--valid: {args.valid} is {mask.shape[1]}x{mask.shape[0]}, but IN is {img.shape[1]}x{img.shape[0]}"
+        )
+    return (mask if mask.ndim == 2 else mask[..., :3].mean(axis=2)) > 0.5
 
 
 def _fragment_map(labels: np.ndarray) -> np.ndarray:
@@ -216,10 +235,13 @@ def _cmd_branching_render(args: argparse.Namespace) -> None:
     target = branching.Skeleton.load(args.target)
     if target.shape is None:
         raise ValueError(f"target: {args.target} has no shape; the new image's size comes from it")
+    valid = _valid(args, img)
+    if isinstance(valid, str):
+        valid = branching.valid_region(img)
     res = run(
         "branching render", args,
         lambda bar: branching.render(img, source, target, seed=args.seed, threads=args.threads, progress=bar,
-                                     full_output=True, max_memory=args.max_memory, **_render_kwargs(args)),
+                                     full_output=True, max_memory=args.max_memory, valid=valid, **_render_kwargs(args)),
     )  # fmt: skip
     save(args, "branching render", res.image)
     if args.fragment_map:
@@ -240,13 +262,14 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
     _check_json_target(files["skeleton"], args)
     img = io.read_image(args.input, max_pixels=args.max_pixels)
     source = None if args.skeleton is None else branching.Skeleton.load(args.skeleton)
+    valid = _valid(args, img)
     res = run(
         "branching run", args,
         lambda bar: branching.synthesize(
             img, source, size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, order=args.order,
             m=args.m, n_best=args.n_best, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize,
-            guide=_guide(args.guide, args), render_options=_render_kwargs(args), threads=args.threads, progress=bar,
-            max_memory=args.max_memory,
+            guide=_guide(args.guide, args), valid=valid, render_options=_render_kwargs(args),
+            threads=args.threads, progress=bar, max_memory=args.max_memory,
         ),
     )  # fmt: skip
     written = {role: str(p) for role, p in files.items()}

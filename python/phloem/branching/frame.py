@@ -1,0 +1,98 @@
+"""Where a photo shows its subject: everything but a flat frame around it.
+
+Fundus photos sit in a black disc frame, scans and crops are padded with a constant colour.
+The frame's rim is a strong edge that tracing takes for structure, and its colour is what gap
+completion would copy; :func:`valid_region` finds it so that ``trace`` and ``render`` can
+leave it out (their ``valid=``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from .._validate import as_image, check_float
+from ._pixels import two_level
+
+__all__ = ["valid_region"]
+
+
+def valid_region(image: Any, *, tolerance: float = 0.01, min_share: float = 0.01, margin: int = 2) -> NDArray[np.bool_]:
+    """The pixels of ``image`` that are not part of a flat frame touching its border.
+
+    A frame is a region connected to the image border that is flat (no pixel differs
+    from a 4-neighbour in it by more than ``tolerance``, relative to the image's value range),
+    less its pixels farther than ``2 tolerance`` from its median colour, which must vary by at
+    most ``tolerance / 2`` (standard deviation) and at least
+    ``min_share`` of the image. It is widened by ``margin`` pixels, for the rim's blur. A
+    two-level image (a mask) has no frame: its background is content.
+
+    Parameters
+    ----------
+    image : (H, W[, C]) array_like
+        The photo; integer images are scaled to [0, 1].
+    tolerance : float, optional
+        Largest step between neighbouring frame pixels, as a share of the image's value range
+        (default 0.01, about 2.5 8-bit levels on a full-range photo).
+    min_share : float, optional
+        Smallest frame, as a share of the image (default 0.01).
+    margin : int, optional
+        Pixels added around the frame (default 2).
+
+    Returns
+    -------
+    (H, W) ndarray of bool
+        True where the image shows content.
+
+    Examples
+    --------
+    >>> img = np.zeros((100, 100), np.float32)
+    >>> yy, xx = np.mgrid[:100, :100]
+    >>> disc = (yy - 50) ** 2 + (xx - 50) ** 2 < 45**2
+    >>> img[disc] = 0.5 + 0.2 * np.sin(xx[disc] / 3.0)
+    >>> ok = valid_region(img)
+    >>> bool(ok[50, 50]), bool(ok[0, 0]), bool(abs(ok.mean() - disc.mean()) < 0.05)
+    (True, False, True)
+    """
+    img = as_image(image, "image")
+    tol = check_float(tolerance, "tolerance", 0.0)
+    share = check_float(min_share, "min_share", 0.0)
+    if isinstance(margin, bool) or not isinstance(margin, int) or margin < 0:
+        raise ValueError(f"margin: expected a non-negative integer, got {margin!r}")
+    H, W, _ = img.shape
+    lo = img.reshape(-1, img.shape[2]).min(axis=0)
+    hi = img.reshape(-1, img.shape[2]).max(axis=0)
+    if two_level(img, lo, hi):
+        return np.ones((H, W), bool)
+    # tolerances relative to the image's own range (a 16-bit elevation model spans 1 % of it)
+    tol *= float((hi - lo).max())
+    # flat: every 4-neighbour within the tolerance
+    step = np.zeros((H, W), np.float32)
+    dy = np.abs(np.diff(img, axis=0)).max(axis=2)
+    dx = np.abs(np.diff(img, axis=1)).max(axis=2)
+    step[:-1] = np.maximum(step[:-1], dy)
+    step[1:] = np.maximum(step[1:], dy)
+    step[:, :-1] = np.maximum(step[:, :-1], dx)
+    step[:, 1:] = np.maximum(step[:, 1:], dx)
+    flat = (step <= tol).astype(np.uint8)
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(flat, connectivity=4)
+    border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    frame = np.zeros((H, W), bool)
+    for lab in border:
+        if lab == 0 or stats[lab, cv2.CC_STAT_AREA] < share * H * W:
+            continue
+        region = labels == lab
+        # a frame is one colour (give or take the noise), not a smooth plateau that happens to
+        # be flat step by step: the pixels near its median value, if they vary by little
+        vals = img[region]
+        near = (np.abs(vals - np.median(vals, axis=0)) <= 2 * tol).all(axis=1)
+        if near.sum() >= share * H * W and float(vals[near].std(axis=0).max()) <= 0.5 * tol:
+            part = np.zeros((H, W), bool)
+            part[region] = near
+            frame |= part
+    if margin and frame.any():
+        frame = cv2.dilate(frame.astype(np.uint8), np.ones((2 * margin + 1, 2 * margin + 1), np.uint8)).astype(bool)
+    return np.asarray(~frame)

@@ -1,0 +1,74 @@
+"""The frame of a photo (``valid_region``) and what trace and synthesize do with it (issue 19)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from phloem.branching import synthesize, trace, valid_region
+
+
+def _fundus(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A lit disc with dark vessels in a black frame, like a fundus photo, and the disc."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[:160, :160]
+    disc = (yy - 80) ** 2 + (xx - 80) ** 2 < 70**2
+    img = 0.6 + 0.03 * cv2.GaussianBlur(rng.normal(size=(160, 160)).astype(np.float32), (0, 0), 1.5) / 0.1
+    cv2.line(img, (30, 80), (130, 70), 0.25, 3)
+    cv2.line(img, (80, 75), (100, 130), 0.25, 2)
+    cv2.circle(img, (80, 80), 66, 0.3, 2)  # the darker halo along a fundus photo's rim
+    img = np.where(disc, img, 0.0).astype(np.float32)
+    return np.repeat(img[..., None], 3, axis=2), disc
+
+
+def test_a_black_frame_is_found_and_nothing_else() -> None:
+    img, disc = _fundus()
+    ok = valid_region(img)
+    assert ok[80, 80] and not ok[0, 0] and not ok[159, 159]
+    assert (ok & ~disc).sum() == 0  # the frame and its margin are out
+    assert (disc & ~ok).sum() < 0.05 * disc.sum()  # the disc, less a rim of 2 px, is in
+    # no frame: a mask's background, a smooth 16-bit field, a textured photo
+    mask = disc.astype(np.float32)
+    assert valid_region(mask).all()
+    smooth = cv2.GaussianBlur(np.random.default_rng(1).normal(size=(100, 120)), (0, 0), 12.0)
+    field = (1000 + 300 * smooth / np.abs(smooth).max()).astype(np.uint16)  # an elevation model
+    assert valid_region(field).all()
+    noise = np.random.default_rng(0).random((80, 80)).astype(np.float32)
+    assert valid_region(noise).all()
+    # constant padding on one side only
+    padded = np.pad(noise, ((0, 0), (0, 20)), constant_values=1.0)
+    ok = valid_region(padded)
+    assert ok[:, :78].all() and not ok[:, 82:].any()
+
+
+def test_trace_leaves_the_frame_rim_alone() -> None:
+    img, disc = _fundus()
+    ring = disc & ~cv2.erode(disc.astype(np.uint8), np.ones((15, 15), np.uint8)).astype(bool)
+
+    def on_rim(sk) -> int:
+        pts = np.concatenate([b.points for b in sk.branches])
+        return int(ring[np.rint(pts[:, 1]).astype(int), np.rint(pts[:, 0]).astype(int)].sum())
+
+    plain = trace(img, kind="dark", sigmas=(1.5, 2.5))
+    framed = trace(img, kind="dark", sigmas=(1.5, 2.5), valid=valid_region(img))
+    assert on_rim(plain) > 20  # the rim reads as a dark ridge
+    assert on_rim(framed) == 0
+    # the vessels are still there: most of their length
+    assert framed.total_length() > 0.7 * (100 + 58)
+    with pytest.raises(ValueError, match="^valid:"):
+        trace(img, valid=np.ones((10, 10), bool))
+
+
+def test_synthesize_keeps_the_frame_out_of_the_output() -> None:
+    img, _ = _fundus()
+    opts = {"kind": "dark", "sigmas": (1.5, 2.5)}
+
+    def black(valid) -> float:
+        return float((synthesize(img, seed=0, trace_options=opts, valid=valid).image.max(axis=2) < 0.1).mean())
+
+    # without it the gaps copy the black frame; with it they are completed from the disc
+    assert black(None) > 0.001
+    assert black("auto") < 0.2 * black(None)
+    with pytest.raises(ValueError, match="^valid:"):
+        synthesize(img, valid="frame")
