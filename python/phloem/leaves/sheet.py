@@ -5,10 +5,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from .._sheet import PAPER, caption, fit_tile
 from .._validate import as_image, check_int
 from .model import LeafModel
 
@@ -17,24 +17,10 @@ __all__ = ["contact_sheet"]
 F32 = NDArray[np.float32]
 
 #: Grey the leaves are composited over, and the overlay colours of layers 1, 2, ... (RGB).
-_PAPER = 0.85
 _LAYER_COLORS = np.array(
     [[0.95, 0.15, 0.1], [0.1, 0.45, 1.0], [1.0, 0.8, 0.0], [0.8, 0.1, 0.9], [0.0, 0.9, 0.9], [1.0, 0.5, 0.0]],
     np.float32,
 )
-
-
-def _tile(rgba: F32, tile: int) -> F32:
-    """An RGBA image over the paper grey, fitted into a tile × tile square."""
-    h, w = rgba.shape[:2]
-    k = tile / max(h, w)
-    small = cv2.resize(rgba, (max(1, round(w * k)), max(1, round(h * k))), interpolation=cv2.INTER_AREA)
-    a = small[..., 3:4]
-    rgb = small[..., :3] * a + _PAPER * (1 - a)
-    out = np.full((tile, tile, 3), _PAPER, np.float32)
-    y0, x0 = (tile - rgb.shape[0]) // 2, (tile - rgb.shape[1]) // 2
-    out[y0 : y0 + rgb.shape[0], x0 : x0 + rgb.shape[1]] = rgb
-    return out
 
 
 def _overlay(model: LeafModel, i: int) -> F32:
@@ -44,13 +30,6 @@ def _overlay(model: LeafModel, i: int) -> F32:
         c = _LAYER_COLORS[k % len(_LAYER_COLORS)]
         img[m, :3] = 0.35 * img[m, :3] + 0.65 * c
     return img
-
-
-def _label(row: F32, text: str) -> F32:
-    u8 = np.ascontiguousarray((np.clip(row, 0, 1) * 255).astype(np.uint8))
-    cv2.putText(u8, text, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (40, 40, 40), 1, cv2.LINE_AA)
-    out: F32 = np.asarray(u8, np.float32) / np.float32(255.0)
-    return out
 
 
 def contact_sheet(model: LeafModel, new_leaves: Sequence[Any] = (), *, tile: int = 200) -> F32:
@@ -68,10 +47,10 @@ def contact_sheet(model: LeafModel, new_leaves: Sequence[Any] = (), *, tile: int
     width = per_row * t
 
     def row(images: Sequence[F32], title: str) -> F32:
-        r = np.full((t, width, 3), _PAPER, np.float32)
+        r = np.full((t, width, 3), PAPER, np.float32)
         for j, img in enumerate(images[:per_row]):
-            r[:, j * t : (j + 1) * t] = _tile(img, t)
-        return _label(r, title)
+            r[:, j * t : (j + 1) * t] = fit_tile(img, t)
+        return caption(r, title)
 
     rows = [
         row(model.leaves, f"exemplars (training: {model.training})"),

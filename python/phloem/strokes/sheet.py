@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from .._sheet import PAPER, caption, fit_tile
 from .._validate import as_image, check_int
 from .stroke_set import StrokeSet
 from .synthesis import EditResult
@@ -17,7 +18,6 @@ from .synthesis import EditResult
 __all__ = ["contact_sheet", "draw"]
 
 F32 = NDArray[np.float32]
-_PAPER = 0.85
 #: Stroke colours, cycled (RGB).
 _COLORS = np.array(
     [[0.95, 0.15, 0.1], [0.1, 0.45, 1.0], [1.0, 0.8, 0.0], [0.8, 0.1, 0.9], [0.0, 0.9, 0.9], [1.0, 0.5, 0.0]],
@@ -31,7 +31,7 @@ def _rgb(image: Any) -> F32:
     rgb = np.repeat(img[..., :1], 3, axis=2) if c in (1, 2) else img[..., :3]
     if c in (2, 4):
         a = img[..., -1:]
-        rgb = rgb * a + _PAPER * (1 - a)
+        rgb = rgb * a + PAPER * (1 - a)
     return np.ascontiguousarray(rgb, dtype=np.float32)
 
 
@@ -72,26 +72,9 @@ def _pieces(result: EditResult) -> F32:
     lab = result.pieces
     rng = np.random.default_rng(0)
     colours = rng.uniform(0.25, 1.0, size=(int(lab.max()) + 2, 3)).astype(np.float32)
-    out = np.where((lab >= 0)[..., None], colours[np.maximum(lab, 0)], np.float32(_PAPER))
+    out = np.where((lab >= 0)[..., None], colours[np.maximum(lab, 0)], np.float32(PAPER))
     out[result.seams] = 0.0
     return np.asarray(out, np.float32)
-
-
-def _fit(img: F32, tile: int) -> F32:
-    h, w = img.shape[:2]
-    k = tile / max(h, w)
-    small = cv2.resize(img, (max(1, round(w * k)), max(1, round(h * k))), interpolation=cv2.INTER_AREA)
-    out = np.full((tile, tile, 3), _PAPER, np.float32)
-    y0, x0 = (tile - small.shape[0]) // 2, (tile - small.shape[1]) // 2
-    out[y0 : y0 + small.shape[0], x0 : x0 + small.shape[1]] = small
-    return out
-
-
-def _title(tile: F32, text: str) -> F32:
-    u8 = np.ascontiguousarray((np.clip(tile, 0, 1) * 255).astype(np.uint8))
-    cv2.putText(u8, text, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (20, 20, 20), 1, cv2.LINE_AA)
-    titled: F32 = np.asarray(u8, np.float32) / np.float32(255.0)
-    return titled
 
 
 def contact_sheet(image: Any, strokes: StrokeSet, result: EditResult, *, tile: int = 320) -> F32:
@@ -105,7 +88,7 @@ def contact_sheet(image: Any, strokes: StrokeSet, result: EditResult, *, tile: i
     """
     t = check_int(tile, "tile", 64)
     src = _rgb(image)
-    src = np.where(result.mask[..., None], src, 0.35 * src + 0.65 * np.float32(_PAPER))
+    src = np.where(result.mask[..., None], src, 0.35 * src + 0.65 * np.float32(PAPER))
     size = result.image.shape[:2]
     blank = np.full((*size, 3), 0.95, np.float32)
     out = _rgb(result.image)
@@ -116,4 +99,4 @@ def contact_sheet(image: Any, strokes: StrokeSet, result: EditResult, *, tile: i
         (out, "result"),
         (draw(out, strokes, side="target"), "result with target strokes"),
     ]
-    return np.concatenate([_title(_fit(img, t), text) for img, text in tiles], axis=1)
+    return np.concatenate([caption(fit_tile(img, t), text) for img, text in tiles], axis=1)
