@@ -28,7 +28,7 @@ from .._validate import (
     derive_seed,
     restore_ndim,
 )
-from ._pyramid import upsample_field
+from ._pyramid import upsample_at
 
 __all__ = ["complete"]
 
@@ -72,6 +72,22 @@ def _with_gradients(img: NDArray[np.float32], weight: float) -> NDArray[np.float
     gy[1:-1] = (0.5 * weight) * (img[2:] - img[:-2])
     gx[:, 1:-1] = (0.5 * weight) * (img[:, 2:] - img[:, :-2])
     return np.ascontiguousarray(np.concatenate([img, gy, gx], axis=2), dtype=np.float32)
+
+
+def _refresh_gradients(
+    feat: NDArray[np.float32], img: NDArray[np.float32], at: tuple[NDArray[np.intp], ...], weight: float
+) -> None:
+    """Recomputes ``feat = _with_gradients(img, weight)`` in place at the pixels ``at`` (rows,
+    columns) only, with the same arithmetic, so the values are those of a full recomputation."""
+    ys, xs = at
+    h, w, c = img.shape
+    feat[ys, xs, :c] = img[ys, xs]
+    iy = (ys >= 1) & (ys <= h - 2)
+    y, x = ys[iy], xs[iy]
+    feat[y, x, c : 2 * c] = (0.5 * weight) * (img[y + 1, x] - img[y - 1, x])
+    ix = (xs >= 1) & (xs <= w - 2)
+    y, x = ys[ix], xs[ix]
+    feat[y, x, 2 * c :] = (0.5 * weight) * (img[y, x + 1] - img[y, x - 1])
 
 
 def _fill_inward(img: NDArray[np.float32], hole: NDArray[np.bool_]) -> NDArray[np.float32]:
@@ -228,11 +244,14 @@ class _Filler:
             cur[hole_l] = self.base
             return cur, None
         cur = orig.copy()
-        up = upsample_field(field, hole_l.shape, orig.shape[:2], self.p // 2)
-        up[~need] = -1
-        bad = ~smask[np.maximum(up[..., 0], 0), np.maximum(up[..., 1], 0)] & need
-        up[bad] = -1
-        voted, wsum = _core.vote(orig, up, patch_size=self.p, weights=None, threads=self.threads, mean_shift=0)
+        up = upsample_at(field, need, orig.shape[:2], self.p // 2)
+        ys, xs = np.nonzero(need)
+        at = up[ys, xs]
+        bad = ~smask[np.maximum(at[:, 0], 0), np.maximum(at[:, 1], 0)]
+        up[ys[bad], xs[bad]] = -1
+        voted, wsum = _core.vote(
+            orig, up, patch_size=self.p, weights=None, threads=self.threads, mean_shift=0, pixels=hole_l
+        )
         fill = hole_l & (wsum > 0)
         cur[fill] = voted[fill]
         rest = hole_l & ~fill
@@ -257,8 +276,18 @@ class _Filler:
         depth = cv2.distanceTransform(hole_l.astype(np.uint8), cv2.DIST_L2, 3)
         log_conf = -math.log(WEXLER_GAMMA) * depth[need]
         field = init
+        # A vote changes only hole pixels, and a gradient sees one pixel either side: after the
+        # first iteration the features are refreshed on the hole's one-pixel dilation alone.
+        feat: NDArray[np.float32] | None = None
+        band: tuple[NDArray[np.intp], ...] | None = None
         for it in range(n_iters):
-            feat = self.features(cur)
+            if feat is None:
+                feat = self.features(cur)
+            elif self.gw > 0:
+                if band is None:
+                    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+                    band = np.nonzero(cv2.dilate(hole_l.astype(np.uint8), cross))
+                _refresh_gradients(feat, cur, band, self.gw)
             field, dist, _ = _core.nnf(
                 feat, feat, patch_size=self.p, iterations=n_search, levels=1, exact=False,
                 seed=derive_seed(self.seed, lv * 64 + it + 1), weights=None, source_mask=smask, target_mask=need,
@@ -270,7 +299,7 @@ class _Filler:
             wvote[need] = np.exp(np.maximum(log_conf - d / (2.0 * sigma2), _LOG_WEIGHT_FLOOR))
             shift = mean_shift if it == n_iters - 1 else 0
             voted, wsum = _core.vote(
-                cur, field, patch_size=self.p, weights=wvote, threads=self.threads, mean_shift=shift
+                cur, field, patch_size=self.p, weights=wvote, threads=self.threads, mean_shift=shift, pixels=hole_l
             )
             fill = hole_l & (wsum > 0)
             cur[fill] = voted[fill]
