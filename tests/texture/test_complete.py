@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import itertools
 
 import cv2
@@ -13,6 +14,8 @@ from phloem.metrics import coherence_map
 from phloem.texture import complete
 from phloem.texture._pyramid import upsample_at, upsample_field
 from phloem.texture.complete import _hole_pyramid, _refresh_gradients, _with_gradients
+
+complete_module = importlib.import_module("phloem.texture.complete")
 
 
 @pytest.fixture(scope="module")
@@ -230,3 +233,41 @@ def test_masked_vote_equals_full_vote_on_its_pixels(bark):
     assert not part[~at].any() and not wpart[~at].any()
     with pytest.raises(ValueError, match="pixels"):
         _core.vote(img, field, pixels=at[1:], **kw)
+
+
+def _small_scene(bark):
+    # A textured patch in the top-left corner of a flat canvas: the hole and the sources fill
+    # a third of the image, so completion runs on their box.
+    canvas = np.full((150, 150, 3), 0.5, np.float32)
+    canvas[:80, :70] = bark[:80, :70, :3]
+    hole = np.zeros((150, 150), bool)
+    hole[30:44, 25:40] = True
+    sources = np.zeros_like(hole)
+    sources[:80, :70] = True
+    return canvas, hole, sources & ~hole
+
+
+def test_completion_on_the_sources_box_is_the_completion_of_the_box(bark):
+    canvas, hole, sources = _small_scene(bark)
+    out = complete(canvas, hole, source_mask=sources, seed=2)
+    box = np.s_[: 80 + 14, : 70 + 14]  # the box of hole and sources, two patches wider
+    alone = complete(canvas[box], hole[box], source_mask=sources[box], seed=2)
+    np.testing.assert_array_equal(out[box], alone)
+    np.testing.assert_array_equal(out[~hole], canvas[~hole])
+
+
+def test_cropped_completion_keeps_the_held_out_error(bark, monkeypatch):
+    # Hidden known patches are filled as well with the crop as without it (within the spread
+    # between seeds), which is the crop's only effect: other random draws.
+    canvas, hole, sources = _small_scene(bark)
+    hide = np.zeros_like(hole)
+    hide[8:20, 45:57] = hide[55:67, 10:22] = True
+    errors = {}
+    for frac in (0.75, 0.0):
+        monkeypatch.setattr(complete_module, "_CROP_MAX_FRACTION", frac)
+        errs = []
+        for seed in range(3):
+            out = complete(canvas, hole | hide, source_mask=sources & ~hide, seed=seed)
+            errs.append(float(np.abs(out[hide] - canvas[hide]).mean()))
+        errors[frac] = float(np.mean(errs))
+    assert errors[0.75] <= 1.25 * errors[0.0], errors
