@@ -392,7 +392,9 @@ def complete(
         ``source_mask``; known pixels outside it still guide the matching as the hole's
         surroundings, but the coarsest level starts from the sources' median colour rather
         than from the rim. To fill a hole from another image, place both in one frame and pass
-        the other image's region.
+        the other image's region. When the box of the hole and the sources is at most 3/4 of
+        the image, only that box (two patches wider) is worked on: the same fill quality from
+        other random draws, in time that follows the box.
     patch_size : int, optional
         Patch side, odd (default 7).
     levels : int, optional
