@@ -111,6 +111,7 @@ def vote(
     weights: NDArray[np.float32] | None,
     threads: int | None,
     mean_shift: int,
+    pixels: NDArray[np.bool_] | None,
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]: ...
 def seamless(
     src: NDArray[np.float32],

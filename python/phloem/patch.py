@@ -358,5 +358,5 @@ def vote(
             raise ValueError(f"weights: expected shape {f.shape[:2]} like the field, got {w.shape}")
     return _core.vote(
         src, f, patch_size=check_patch_size(patch_size), weights=w, threads=check_threads(threads),
-        mean_shift=check_int(mean_shift, "mean_shift", 0),
+        mean_shift=check_int(mean_shift, "mean_shift", 0), pixels=None,
     )  # fmt: skip

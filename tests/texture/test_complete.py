@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+import importlib
 import itertools
 
+import cv2
 import numpy as np
 import pytest
 
+from phloem import _core
 from phloem.metrics import coherence_map
 from phloem.texture import complete
-from phloem.texture.complete import _hole_pyramid
+from phloem.texture._pyramid import upsample_at, upsample_field
+from phloem.texture.complete import _hole_pyramid, _refresh_gradients, _with_gradients
+
+complete_module = importlib.import_module("phloem.texture.complete")
 
 
 @pytest.fixture(scope="module")
@@ -178,3 +184,90 @@ def test_strict_pyramid_does_not_grow_spurs_off_a_bright_rim():
         for pyr in ("strict", "interpolate")
     }
     assert white["strict"] == 0 and white["interpolate"] > 0, white
+
+
+def _scattered_hole(shape, seed):
+    rng = np.random.default_rng(seed)
+    hole = np.zeros(shape, bool)
+    for _ in range(6):
+        y, x = rng.integers(0, shape[0] - 4), rng.integers(0, shape[1] - 4)
+        hole[y : y + rng.integers(1, 9), x : x + rng.integers(1, 9)] = True
+    hole[0, 3] = hole[-1, -1] = True  # the border, where gradients are zero
+    return hole
+
+
+def test_upsample_at_equals_full_upsample_on_its_pixels():
+    rng = np.random.default_rng(1)
+    coarse = np.stack([rng.integers(3, 20, (12, 17)), rng.integers(3, 30, (12, 17))], -1).astype(np.int32)
+    coarse[rng.random((12, 17)) < 0.2] = -1
+    at = _scattered_hole((25, 35), 2)  # odd sides: the last row and column clamp to the parent
+    full = upsample_field(coarse, at.shape, (24, 34), 3)
+    part = upsample_at(coarse, at, (24, 34), 3)
+    np.testing.assert_array_equal(part[at], full[at])
+    assert (part[~at] == -1).all()
+
+
+def test_gradient_refresh_equals_full_features_on_the_band():
+    rng = np.random.default_rng(3)
+    img = rng.random((30, 41, 3), dtype=np.float32)
+    feat = _with_gradients(img, 0.7)
+    hole = _scattered_hole(img.shape[:2], 4)
+    img[hole] = rng.random((int(hole.sum()), 3), dtype=np.float32)
+    band = np.nonzero(cv2.dilate(hole.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))))
+    _refresh_gradients(feat, img, band, 0.7)
+    np.testing.assert_array_equal(feat, _with_gradients(img, 0.7))
+
+
+def test_masked_vote_equals_full_vote_on_its_pixels(bark):
+    img = bark[:40, :50, :3].copy()
+    rng = np.random.default_rng(5)
+    field = np.stack([rng.integers(3, 37, (40, 50)), rng.integers(3, 47, (40, 50))], -1).astype(np.int32)
+    field[rng.random((40, 50)) < 0.3] = -1
+    weights = rng.random((40, 50), dtype=np.float32)
+    at = _scattered_hole((40, 50), 6)
+    kw = dict(patch_size=7, weights=weights, threads=2, mean_shift=3)
+    full, wfull = _core.vote(img, field, pixels=None, **kw)
+    part, wpart = _core.vote(img, field, pixels=at, **kw)
+    np.testing.assert_array_equal(part[at], full[at])
+    np.testing.assert_array_equal(wpart[at], wfull[at])
+    assert not part[~at].any() and not wpart[~at].any()
+    with pytest.raises(ValueError, match="pixels"):
+        _core.vote(img, field, pixels=at[1:], **kw)
+
+
+def _small_scene(bark):
+    # A textured patch in the top-left corner of a flat canvas: the hole and the sources fill
+    # a third of the image, so completion runs on their box.
+    canvas = np.full((150, 150, 3), 0.5, np.float32)
+    canvas[:80, :70] = bark[:80, :70, :3]
+    hole = np.zeros((150, 150), bool)
+    hole[30:44, 25:40] = True
+    sources = np.zeros_like(hole)
+    sources[:80, :70] = True
+    return canvas, hole, sources & ~hole
+
+
+def test_completion_on_the_sources_box_is_the_completion_of_the_box(bark):
+    canvas, hole, sources = _small_scene(bark)
+    out = complete(canvas, hole, source_mask=sources, seed=2)
+    box = np.s_[: 80 + 14, : 70 + 14]  # the box of hole and sources, two patches wider
+    alone = complete(canvas[box], hole[box], source_mask=sources[box], seed=2)
+    np.testing.assert_array_equal(out[box], alone)
+    np.testing.assert_array_equal(out[~hole], canvas[~hole])
+
+
+def test_cropped_completion_keeps_the_held_out_error(bark, monkeypatch):
+    # Hidden known patches are filled as well with the crop as without it (within the spread
+    # between seeds), which is the crop's only effect: other random draws.
+    canvas, hole, sources = _small_scene(bark)
+    hide = np.zeros_like(hole)
+    hide[8:20, 45:57] = hide[55:67, 10:22] = True
+    errors = {}
+    for frac in (0.75, 0.0):
+        monkeypatch.setattr(complete_module, "_CROP_MAX_FRACTION", frac)
+        errs = []
+        for seed in range(3):
+            out = complete(canvas, hole | hide, source_mask=sources & ~hide, seed=seed)
+            errs.append(float(np.abs(out[hide] - canvas[hide]).mean()))
+        errors[frac] = float(np.mean(errs))
+    assert errors[0.75] <= 1.25 * errors[0.0], errors

@@ -283,7 +283,9 @@ def correct_texture(
             target_mask=need_box, init=init, source_knn=None, source_cost=None, threads=nthreads, kdtree=False,
         )  # fmt: skip
         _check()
-        voted, weight = _core.vote(src_box, nnf, patch_size=p, weights=None, threads=nthreads, mean_shift=0)
+        voted, weight = _core.vote(
+            src_box, nnf, patch_size=p, weights=None, threads=nthreads, mean_shift=0, pixels=None
+        )
         _check()
         _paste(out_box, hole_box, voted, weight)
         init = nnf

@@ -29,3 +29,21 @@ def upsample_field(
     up[..., 1] = np.clip(2 * parent[..., 1] + (xs - 2 * px)[None, :], r, src_shape[1] - 1 - r)
     up[parent[..., 0] < 0] = -1
     return up
+
+
+def upsample_at(
+    field: NDArray[np.int32], at: NDArray[np.bool_], src_shape: tuple[int, int], r: int
+) -> NDArray[np.int32]:
+    """:func:`upsample_field` to ``at.shape`` computed only where ``at`` is true, ``-1``
+    elsewhere: completion needs the field at its hole's patches only, so this costs the
+    hole, not the image."""
+    ys, xs = np.nonzero(at)
+    py = np.minimum(ys // 2, field.shape[0] - 1)
+    px = np.minimum(xs // 2, field.shape[1] - 1)
+    parent = field[py, px]
+    up = np.full((*at.shape, 2), -1, dtype=np.int32)
+    keep = parent[:, 0] >= 0
+    ys, xs, py, px, parent = ys[keep], xs[keep], py[keep], px[keep], parent[keep]
+    up[ys, xs, 0] = np.clip(2 * parent[:, 0] + (ys - 2 * py), r, src_shape[0] - 1 - r)
+    up[ys, xs, 1] = np.clip(2 * parent[:, 1] + (xs - 2 * px), r, src_shape[1] - 1 - r)
+    return up

@@ -202,7 +202,7 @@ def synthesize(
             field = _block_field(shape, ex_l.shape[:2], p, np.random.default_rng(s))
         else:
             field = upsample_field(field, shape, ex_l.shape[:2], r)
-        out, _ = _core.vote(ex_l, field, patch_size=p, weights=None, threads=t, mean_shift=0)
+        out, _ = _core.vote(ex_l, field, patch_size=p, weights=None, threads=t, mean_shift=0, pixels=None)
         last = 0.0
         for it in range(iters):
             cost = _occurrence_cost(field, ex_l.shape[:2], p, lam, last) if lam > 0 and it else None
@@ -212,7 +212,9 @@ def synthesize(
                 source_knn=None, source_cost=cost, threads=t, kdtree=False,
             )  # fmt: skip
             last = float(np.median(dist))
-            out, _ = _core.vote(ex_l, field, patch_size=p, weights=_robust_weights(dist), threads=t, mean_shift=0)
+            out, _ = _core.vote(
+                ex_l, field, patch_size=p, weights=_robust_weights(dist), threads=t, mean_shift=0, pixels=None
+            )
             done += 1
             if progress is not None:
                 progress(done, total)

@@ -56,7 +56,7 @@ pub fn vote(
     weights: Option<&[f32]>,
     patch_size: usize,
 ) -> Result<Voted> {
-    vote_mode(source, idx, h, w, weights, patch_size, 0)
+    vote_mode(source, idx, h, w, weights, patch_size, 0, None)
 }
 
 /// [`vote`], then `mean_shift` steps of weighted mean-shift from the weighted mean towards the
@@ -65,6 +65,11 @@ pub fn vote(
 /// `w · exp(−|v − m|² / s²)`, with `s²` the weighted mean of `|v − m|²` around the current
 /// estimate `m` (a Gaussian kernel whose bandwidth follows the votes' own spread; votes that
 /// agree stay put). `mean_shift = 0` is [`vote`] exactly. Weights as in [`vote`].
+///
+/// With `pixels` (`h × w`), only the pixels where it is true are computed, the others get
+/// value and weight 0; each computed pixel is bit-identical to the full vote's, so a caller
+/// that keeps only a region (completion keeps its hole) pays for that region, not the image.
+#[allow(clippy::too_many_arguments)]
 pub fn vote_mode(
     source: &Image<'_>,
     idx: &[u32],
@@ -73,6 +78,7 @@ pub fn vote_mode(
     weights: Option<&[f32]>,
     patch_size: usize,
     mean_shift: usize,
+    pixels: Option<&[bool]>,
 ) -> Result<Voted> {
     if patch_size == 0 || patch_size % 2 == 0 {
         return Err(invalid(
@@ -103,6 +109,14 @@ pub fn vote_mode(
             ));
         }
     }
+    if let Some(m) = pixels {
+        if m.len() != h * w {
+            return Err(invalid(
+                "pixels",
+                format!("expected {h}×{w} values like the field, got {}", m.len()),
+            ));
+        }
+    }
     let r = patch_size / 2;
     let (c, sw) = (source.c, source.w);
     let mut image = vec![0f32; h * w * c];
@@ -115,7 +129,14 @@ pub fn vote_mode(
             let mut acc = vec![0f32; c];
             // This pixel's votes: `c` values then the weight, per covering patch.
             let mut votes: Vec<f32> = Vec::new();
+            let wanted = pixels.map(|m| &m[y * w..(y + 1) * w]);
+            if wanted.is_some_and(|m| !m.contains(&true)) {
+                return;
+            }
             for x in 0..w {
+                if wanted.is_some_and(|m| !m[x]) {
+                    continue;
+                }
                 votes.clear();
                 acc.fill(0.0);
                 let mut total = 0f32;
@@ -248,11 +269,50 @@ mod tests {
         let src: Vec<f32> = (0..27).map(|i| if i % 9 < 5 { 0.0 } else { 1.0 }).collect();
         let img = Image::new("source", &src, 3, 9, 1).unwrap();
         let idx = [10u32, 16];
-        let mean = vote_mode(&img, &idx, 1, 2, Some(&[3.0, 1.0]), 3, 0).unwrap();
+        let mean = vote_mode(&img, &idx, 1, 2, Some(&[3.0, 1.0]), 3, 0, None).unwrap();
         assert!((mean.image[0] - 0.25).abs() < 1e-6);
-        let shifted = vote_mode(&img, &idx, 1, 2, Some(&[3.0, 1.0]), 3, 3).unwrap();
+        let shifted = vote_mode(&img, &idx, 1, 2, Some(&[3.0, 1.0]), 3, 3, None).unwrap();
         assert!(shifted.image[0] < 0.05, "{}", shifted.image[0]);
         assert_eq!(shifted.weight, mean.weight);
+    }
+
+    #[test]
+    fn masked_vote_equals_full_vote_on_its_pixels() {
+        let (h, w, c, p) = (23, 31, 3, 5);
+        let src: Vec<f32> = (0..h * w * c).map(|i| (i as f32 * 0.61).sin()).collect();
+        let img = Image::new("source", &src, h, w, c).unwrap();
+        let mut rng = crate::rng::Rng::keyed(7, 0, 0);
+        let idx: Vec<u32> = (0..h * w)
+            .map(|_| {
+                if rng.below(5) == 0 {
+                    return NONE;
+                }
+                let y = 2 + rng.below((h - 4) as u64) as usize;
+                let x = 2 + rng.below((w - 4) as u64) as usize;
+                (y * w + x) as u32
+            })
+            .collect();
+        let wts: Vec<f32> = (0..h * w).map(|i| (i % 7) as f32 * 0.3).collect();
+        let pixels: Vec<bool> = (0..h * w).map(|i| (i * 37) % 11 < 3).collect();
+        for shift in [0, 3] {
+            let full = vote_mode(&img, &idx, h, w, Some(&wts), p, shift, None).unwrap();
+            let part = vote_mode(&img, &idx, h, w, Some(&wts), p, shift, Some(&pixels)).unwrap();
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            for (i, &at) in pixels.iter().enumerate() {
+                let (pv, fv) = (
+                    &part.image[i * c..(i + 1) * c],
+                    &full.image[i * c..(i + 1) * c],
+                );
+                if at {
+                    assert_eq!(part.weight[i].to_bits(), full.weight[i].to_bits());
+                    assert_eq!(bits(pv), bits(fv));
+                } else {
+                    assert_eq!(part.weight[i].to_bits(), 0);
+                    assert!(pv.iter().all(|v| v.to_bits() == 0));
+                }
+            }
+        }
+        assert!(vote_mode(&img, &idx, h, w, None, p, 0, Some(&pixels[1..])).is_err());
     }
 
     #[test]

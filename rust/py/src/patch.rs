@@ -155,7 +155,7 @@ pub fn coherence_candidates_py<'py>(
 type VoteOut<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray2<f32>>);
 
 #[pyfunction]
-#[pyo3(name = "vote", signature = (source, field, *, patch_size, weights, threads, mean_shift))]
+#[pyo3(name = "vote", signature = (source, field, *, patch_size, weights, threads, mean_shift, pixels))]
 pub fn vote_py<'py>(
     py: Python<'py>,
     source: PyReadonlyArray3<'py, f32>,
@@ -164,6 +164,7 @@ pub fn vote_py<'py>(
     weights: Option<PyReadonlyArray2<'py, f32>>,
     threads: Option<usize>,
     mean_shift: usize,
+    pixels: Option<PyReadonlyArray2<'py, bool>>,
 ) -> PyResult<VoteOut<'py>> {
     let src = image("source", &source)?;
     let (h, w, two) = field.as_array().dim();
@@ -181,8 +182,9 @@ pub fn vote_py<'py>(
     )
     .map_err(to_py)?;
     let wts = opt_slice("weights", weights.as_ref())?;
+    let at = opt_slice("pixels", pixels.as_ref())?;
     let v = run(py, threads, None, |_| {
-        vote::vote_mode(&src, &idx, h, w, wts, patch_size, mean_shift)
+        vote::vote_mode(&src, &idx, h, w, wts, patch_size, mean_shift, at)
     })?;
     Ok((
         array(py, (h, w, src.c), v.image),

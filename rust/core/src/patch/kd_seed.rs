@@ -73,7 +73,7 @@ impl Level<'_> {
                                 px.copy_from_slice(&pca.mean[m0..m0 + c]);
                             } else {
                                 let t0 = (ty as usize * tw + tx as usize) * c;
-                                px.copy_from_slice(&self.tgt[t0..t0 + c]);
+                                px.copy_from_slice(&self.tgt()[t0..t0 + c]);
                             }
                         }
                     }

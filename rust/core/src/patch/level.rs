@@ -46,8 +46,9 @@ pub(super) struct Level<'a> {
     pub(super) src: Vec<f32>,
     pub(super) sh: usize,
     pub(super) sw: usize,
-    /// Target values, followed by [`PAD`] zeros.
-    pub(super) tgt: Vec<f32>,
+    /// Target values, followed by [`PAD`] zeros; `None` when the target is the source
+    /// (self-matching, as completion does), which then is neither copied nor halved twice.
+    tgt: Option<Vec<f32>>,
     pub(super) th: usize,
     pub(super) tw: usize,
     pub(super) c: usize,
@@ -70,7 +71,7 @@ impl Level<'_> {
     pub(super) fn new<'b>(
         src: Cow<'b, [f32]>,
         (sh, sw): (usize, usize),
-        tgt: Cow<'b, [f32]>,
+        tgt: Option<Cow<'b, [f32]>>,
         (th, tw): (usize, usize),
         c: usize,
         r: usize,
@@ -99,7 +100,7 @@ impl Level<'_> {
             src: pad(src),
             sh,
             sw,
-            tgt: pad(tgt),
+            tgt: tgt.map(pad),
             th,
             tw,
             c,
@@ -111,6 +112,12 @@ impl Level<'_> {
             cost: None,
             masked: source_mask.is_some(),
         }
+    }
+
+    /// Target values, followed by [`PAD`] zeros.
+    #[inline(always)]
+    pub(super) fn tgt(&self) -> &[f32] {
+        self.tgt.as_deref().unwrap_or(&self.src)
     }
 
     #[inline]
@@ -143,7 +150,7 @@ impl Level<'_> {
         for k in 0..rows {
             let t0 = ((ty - dy0 + k) * self.tw + tx - dx0) * self.c;
             let s0 = ((sy - dy0 + k) * self.sw + sx - dx0) * self.c;
-            K::add_row(&mut acc, &self.tgt[t0..t0 + len], &self.src[s0..s0 + len]);
+            K::add_row(&mut acc, &self.tgt()[t0..t0 + len], &self.src[s0..s0 + len]);
             // Early termination, checked every other row: the check is a horizontal sum and an
             // unpredictable branch, both worth amortising.
             if k % 2 == 1 && k + 1 < rows {
@@ -173,7 +180,7 @@ impl Level<'_> {
             return base;
         }
         K::patch::<NC>(
-            &self.tgt,
+            self.tgt(),
             (((ty - r) * self.tw + tx - r) * c, self.tw * c),
             &self.src,
             (((sy - r) * self.sw + sx - r) * c, self.sw * c),
@@ -306,7 +313,13 @@ impl Level<'_> {
         source_mask: Option<&[bool]>,
     ) -> (Level<'static>, Option<Vec<bool>>) {
         let (src, sh, sw) = half(&self.src, self.sh, self.sw, self.c);
-        let (tgt, th, tw) = half(&self.tgt, self.th, self.tw, self.c);
+        let (tgt, th, tw) = match &self.tgt {
+            Some(t) => {
+                let (t, th, tw) = half(t, self.th, self.tw, self.c);
+                (Some(Cow::Owned(t)), th, tw)
+            }
+            None => (None, sh, sw),
+        };
         let smask = source_mask.map(|m| half_mask(m, self.sh, self.sw, true));
         let need = self
             .need
@@ -315,7 +328,7 @@ impl Level<'_> {
         let lvl = Level::new(
             Cow::Owned(src),
             (sh, sw),
-            Cow::Owned(tgt),
+            tgt,
             (th, tw),
             self.c,
             self.r,

@@ -224,8 +224,12 @@ fn validate<'a>(input: &NnfInput<'a>, params: &NnfParams) -> Result<Level<'a>> {
             "expected at least 1 pyramid level, got 0",
         ));
     }
+    // Matching an image against itself (same buffer and shape) keeps one prescaled copy.
+    let same = std::ptr::eq(s.data, t.data) && (s.h, s.w) == (t.h, t.w);
     s.check_finite("source")?;
-    t.check_finite("target")?;
+    if !same {
+        t.check_finite("target")?;
+    }
     if let Some(m) = input.source_mask {
         if m.len() != s.h * s.w {
             return Err(invalid(
@@ -259,11 +263,15 @@ fn validate<'a>(input: &NnfInput<'a>, params: &NnfParams) -> Result<Level<'a>> {
         }
     }
     let src = prescale(&s, input.weights)?;
-    let tgt = prescale(&t, input.weights)?;
+    let tgt = if same {
+        None
+    } else {
+        Some(Cow::Owned(prescale(&t, input.weights)?))
+    };
     let level = Level::new(
         Cow::Owned(src),
         (s.h, s.w),
-        Cow::Owned(tgt),
+        tgt,
         (t.h, t.w),
         s.c,
         p / 2,
@@ -538,6 +546,40 @@ mod tests {
             Image::new("target", tgt, th, tw, 3).unwrap(),
         );
         nnf(&input, params).unwrap()
+    }
+
+    #[test]
+    fn self_matching_on_one_buffer_equals_matching_a_copy() {
+        // Completion's call: the image against itself, a hole to match, the rest as sources,
+        // over two pyramid levels and several stripes (the rows read across stripe borders).
+        let (h, w) = (70, 45);
+        let img = texture(h, w, 3, 5);
+        let copy = img.clone();
+        let need: Vec<bool> = (0..h * w).map(|i| (20..50).contains(&(i / w))).collect();
+        let source: Vec<bool> = need.iter().map(|v| !v).collect();
+        for levels in [1, 2] {
+            let params = NnfParams {
+                patch_size: 5,
+                iterations: 3,
+                levels,
+                seed: 9,
+                method: Method::PatchMatch,
+            };
+            let fields = [&img, &copy].map(|t| {
+                let input = NnfInput {
+                    source_mask: Some(&source),
+                    target_mask: Some(&need),
+                    ..NnfInput::new(
+                        Image::new("source", &img, h, w, 3).unwrap(),
+                        Image::new("target", t, h, w, 3).unwrap(),
+                    )
+                };
+                nnf(&input, &params).unwrap()
+            });
+            assert_eq!(fields[0].idx, fields[1].idx);
+            let bits = |f: &Nnf| f.dist.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&fields[0]), bits(&fields[1]));
+        }
     }
 
     #[test]

@@ -13,12 +13,13 @@ use crate::distance::Avx2;
 use crate::distance::{avx2_enabled, Kernel, Portable};
 use crate::rng::Rng;
 
-use super::level::{pack, unpack, Cell, Level};
+use super::level::{pack, unpack, Cell, Level, EMPTY};
 use super::{NONE, STRIPE_ROWS};
 
 /// What one pass over the stripes shares.
 struct Pass<'p> {
-    /// The field before this iteration, read across stripe borders.
+    /// Per stripe, the row of the field before this iteration that the stripe reads across
+    /// its border: the one above it on forward scans, the one below on reverse scans.
     prev: &'p [Cell],
     seed: u64,
     level: usize,
@@ -28,9 +29,22 @@ struct Pass<'p> {
 impl Level<'_> {
     /// One PatchMatch iteration (propagation + random search) over the whole target.
     pub(super) fn iterate(&self, cells: &mut [Cell], seed: u64, level: usize, it: usize) -> u64 {
-        let prev = cells.to_vec();
-        let evals = AtomicU64::new(0);
         let tw = self.tw;
+        // Only the rows next to a stripe are read from the previous field, so only they are
+        // kept (a sixteenth of the field).
+        let reverse = it % 2 == 1;
+        let mut prev = vec![EMPTY; self.th.div_ceil(STRIPE_ROWS) * tw];
+        for (stripe, row) in prev.chunks_exact_mut(tw).enumerate() {
+            let y = if reverse {
+                (stripe + 1) * STRIPE_ROWS
+            } else {
+                (stripe * STRIPE_ROWS).wrapping_sub(1)
+            };
+            if y < self.th {
+                row.copy_from_slice(&cells[y * tw..(y + 1) * tw]);
+            }
+        }
+        let evals = AtomicU64::new(0);
         #[cfg(target_arch = "x86_64")]
         let fast = avx2_enabled();
         cells
@@ -155,7 +169,7 @@ impl Level<'_> {
                 let n = if nly >= 0 && nly < rows as i64 {
                     chunk[nly as usize * tw + x].idx
                 } else if ny >= 0 && ny < self.th as i64 {
-                    pass.prev[ny as usize * tw + x].idx
+                    pass.prev[stripe * tw + x].idx
                 } else {
                     NONE
                 };
