@@ -118,6 +118,22 @@ def test_a_mask_renders_as_a_mask() -> None:
         assert 4 <= (out[:, 90] == np.float32(hi)).sum() <= 12
 
 
+def test_fragments_leaving_the_image_are_not_pasted() -> None:
+    # the channel starts 8 px from the left border: its first disks reach beyond the image,
+    # whose reflected border would be pasted (at a target branch end: a blob)
+    img, sk = channel_scene()
+    H, W = img.shape[:2]
+    tgt = Skeleton([wavy_branch((40, 30), 0.2, 120, (4.0, 3.0), phase=2.0)], (80, 180))
+    res = render(img, sk, tgt, seed=0, full_output=True)
+    clipped = {
+        i
+        for i, f in enumerate(res.sources)
+        if min(f.center[0], f.center[1]) - f.radius < -1 or f.center[0] + f.radius > W or f.center[1] + f.radius > H
+    }
+    assert clipped, "the scene should have fragments at the border"
+    assert not clipped & set(res.choice.tolist())
+
+
 def test_in_order_waits_only_for_overlapping_fragments() -> None:
     import threading
 

@@ -360,6 +360,12 @@ def _cover_both(
     return sources, targets, lib
 
 
+def _leaves_image(f: Fragment, shape: tuple[int, int]) -> bool:
+    """Whether the disk of ``f`` reaches more than a pixel beyond the image's border."""
+    (x, y), r = f.center, f.radius
+    return bool(x - r < -1.0 or y - r < -1.0 or x + r > shape[1] or y + r > shape[0])
+
+
 def _channel_range(img: F32) -> tuple[F32, F32]:
     """Per-channel minimum and maximum (reducing over rows first, which is much faster)."""
     H0, C = img.shape[0], img.shape[2]
@@ -399,6 +405,7 @@ class _Painter:
         self.choice = np.zeros(len(targets), np.int64)
         self.mirrored = np.zeros(len(targets), bool)
         self.lo, self.hi = _channel_range(image)
+        self.clipped = np.array([_leaves_image(f, image.shape[:2]) for f in lib.frs], bool)
         self.crops: list[tuple[slice, slice, NDArray[np.bool_], int, int]] = []
         self.boxes = np.zeros((len(targets), 4), np.int64)
         for j, g in enumerate(targets):
@@ -431,6 +438,12 @@ class _Painter:
         """The library entry and rotation for fragment ``j``: one of the ``c`` best by ``S + ω_C C``."""
         g, lib, o = self.targets[j], self.lib, self.opts
         idx, S, theta = lib.shape_distance(g, o.omega_s)
+        if not _leaves_image(g, self.filled.shape):
+            # A source disk that leaves its image carries the reflected border; inside the
+            # output (at a branch end: a blob) only when nothing else is left.
+            out = self.clipped[lib.frag[idx]]
+            if not out.all():
+                S = np.where(out, np.inf, S)
         order = np.argsort(S, kind="stable")[: o.n_eval]
         obj = S[order].copy()
         if o.omega_c > 0 and over.any():
