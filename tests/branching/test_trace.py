@@ -354,3 +354,22 @@ def test_images_thinner_than_three_pixels_are_refused_in_one_line(size):
     img = np.random.default_rng(0).random(size).astype(np.float32)
     with pytest.raises(ValueError, match=r"^image: nothing to trace in a \d+x\d+ image; it needs at least 3x3 pixels$"):
         trace(img, kind="dark")
+
+
+def test_a_lake_is_not_traced_as_a_branch() -> None:
+    import cv2
+
+    mask = np.zeros((200, 300), np.uint8)
+    cv2.line(mask, (10, 100), (180, 100), 1, thickness=7)  # a channel ...
+    cv2.line(mask, (90, 100), (90, 190), 1, thickness=5)  # ... with a tributary
+    cv2.circle(mask, (230, 100), 60, 1, -1)  # ... flowing into a lake
+    lake = np.zeros_like(mask)
+    cv2.circle(lake, (230, 100), 20, 1, -1)  # its middle, where the radius is 40-60 px
+    for blob, inside in ((None, True), (8.0, False)):
+        sk = trace(mask, kind="mask", blob=blob)
+        pts = np.concatenate([b.points for b in sk.branches])
+        hit = lake[np.rint(pts[:, 1]).astype(int), np.rint(pts[:, 0]).astype(int)].any()
+        assert bool(hit) is inside
+        assert sk.total_length() > 150  # the channels stay
+    with pytest.raises(ValueError, match="^blob:"):
+        trace(mask, kind="mask", blob=0.5)

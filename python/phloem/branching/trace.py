@@ -440,6 +440,7 @@ def trace(
     gap: float | None = None,
     thickness: Thickness = "auto",
     valid: Any = None,
+    blob: float | None = 8.0,
 ) -> Skeleton:
     """Trace the skeleton of a branching structure in an image (beyond [1]_, its future work).
 
@@ -510,6 +511,11 @@ def trace(
         structure inside it is traced, and for photos none within the ridge filter's reach
         (``3 max(sigmas) + 1`` px) of its border, whose edge (a fundus photo's rim) would
         read as a ridge.
+    blob : float or None, optional
+        Skeleton pixels whose radius is over ``blob`` times the median radius are dropped
+        (default 8; None keeps them): they lie in a lake or the sea a river mask opens into,
+        a region, not a channel, whose skeleton would be traced as branches hundreds of pixels
+        thick.
 
     Returns
     -------
@@ -561,6 +567,8 @@ def trace(
         threshold = check_float(threshold, "threshold", -math.inf)
     if gap is not None:
         gap = check_float(gap, "gap", 0.0)
+    if blob is not None:
+        blob = check_float(blob, "blob", 1.0)
     if root is not None:
         try:
             rx, ry = (float(v) for v in root)
@@ -603,6 +611,8 @@ def trace(
     dist = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     radius = np.maximum(dist - 0.5, 0.5).astype(np.float32)
     skel = np.asarray(skeletonize(mask), dtype=np.bool_)  # type: ignore[no-untyped-call]
+    if blob is not None and skel.any():
+        skel &= radius <= blob * float(np.median(radius[skel]))
     if gap > 0:
         skel = _bridge(skel, gap)
     xs, ys, r, tree = _pixel_forest(skel, radius)
