@@ -118,3 +118,14 @@ def test_course_off_is_the_paper_model():
     assert not np.array_equal(on.log_quality(a, r, z, z, 0.3), on.log_quality(a, r, z, z))
     with pytest.raises(ValueError, match="^course:"):
         BendingModel.fit(Skeleton([b]), h=2.0, course=-1)
+
+
+def test_course_is_an_option_of_the_pipeline():
+    from phloem.branching import fit_models, synthesize, synthetic_skeleton
+
+    src = synthetic_skeleton(0)
+    assert fit_models(src, h=2.0)[0].course == 8 * 4
+    assert fit_models(src, h=2.0, course=0)[0].course == 0
+    img = np.where(src.mask(), 0.1, 0.8).astype(np.float32)
+    res = synthesize(img, src, course=12, seed=0, render_options={"complete": False})
+    assert res.bending.course == 12

@@ -163,3 +163,19 @@ def test_branching_valid_flag(tmp_path, capsys):
     assert main([*base, "--out", str(tmp_path / "b.png"), "--valid", str(tmp_path / "half.png")]) == 0
     assert main([*base, "--out", str(tmp_path / "c.png"), "--valid", "none"]) == 0
     assert json.loads((tmp_path / "b.png.json").read_text())["parameters"]["valid"].endswith("half.png")
+
+
+def test_branching_course_flag_reaches_the_model(tmp_path):
+    from phloem.branching import Skeleton
+
+    _dark_river_png(tmp_path / "river.png")
+    skel = tmp_path / "river.json"
+    assert main(["branching", "trace", str(tmp_path / "river.png"), "--kind", "dark", "--out", str(skel), "-q"]) == 0
+    outs = {}
+    for course in ("0", "32"):
+        outs[course] = tmp_path / f"grown{course}.json"
+        assert (
+            main(["branching", "grow", str(skel), "--out", str(outs[course]), "--seed", "1", "--course", course, "-q"])
+            == 0
+        )
+    assert Skeleton.load(outs["0"]) != Skeleton.load(outs["32"])

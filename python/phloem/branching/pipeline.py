@@ -52,7 +52,13 @@ class SynthesisResult:
 
 @renamed(k="order", c="n_best")
 def fit_models(
-    skeleton: Skeleton, *, h: float | None = None, order: int = 3, m: int | None = None, n_best: int = 2
+    skeleton: Skeleton,
+    *,
+    h: float | None = None,
+    order: int = 3,
+    m: int | None = None,
+    n_best: int = 2,
+    course: int | None = None,
 ) -> tuple[BendingModel, FurcationModel | None]:
     """The bending model (§4.2) and, if the skeleton branches at all, the furcation model (§4.3).
 
@@ -72,6 +78,9 @@ def fit_models(
     n_best : int, optional
         Candidates to draw from, the paper's ``c`` (default 2; 1 follows the input exactly).
         ``c`` before (deprecated).
+    course : int, optional
+        Edges over which the bending model matches a branch's course (default ``8 m``; 0: the
+        paper's model; see :meth:`BendingModel.fit`).
 
     Examples
     --------
@@ -80,7 +89,7 @@ def fit_models(
     >>> bend.h, fur is not None
     (2.0, True)
     """
-    bending = BendingModel.fit(skeleton, h=h, k=order, m=m, c=n_best)
+    bending = BendingModel.fit(skeleton, h=h, k=order, m=m, c=n_best, course=course)
     has_children = any(b.parent is not None for b in skeleton.branches)
     furcation = FurcationModel.fit(skeleton, h=bending.h, k=order, c=n_best) if has_children else None
     return bending, furcation
@@ -98,6 +107,7 @@ def synthesize(
     order: int = 3,
     m: int | None = None,
     n_best: int = 2,
+    course: int | None = None,
     generations: int | None = None,
     max_length: float | str | None = "input",
     colonize: bool = True,
@@ -130,7 +140,7 @@ def synthesize(
         Seed of the growth and of the fragment choices.
     trace_options : dict, optional
         Keyword arguments for :func:`trace` (e.g. ``{"kind": "dark", "sigmas": (1.5, 3, 5)}``).
-    h, order, m, n_best : optional
+    h, order, m, n_best, course : optional
         Model parameters, as in :func:`fit_models` (``k`` and ``c`` before, deprecated).
     generations, max_length, colonize, guide : optional
         See :func:`grow`.
@@ -191,7 +201,7 @@ def synthesize(
     else:
         raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
     tick(1)
-    bending, furcation = fit_models(source, h=h, order=order, m=m, n_best=n_best)
+    bending, furcation = fit_models(source, h=h, order=order, m=m, n_best=n_best, course=course)
     tick(2)
     target = grow(
         bending, furcation, size=shape, seed=seed, generations=generations, max_length=max_length,

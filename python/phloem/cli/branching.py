@@ -186,6 +186,13 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
     )
     deprecated_alias(g, "--c", "--n-best", dest="n_best", type=positive)
     g.add_argument(
+        "--course",
+        type=int,
+        default=None,
+        metavar="EDGES",
+        help="edges over which a branch keeps its course (default 8 m; 0: the paper's Markov model alone)",
+    )
+    g.add_argument(
         "--generations",
         type=positive,
         default=None,
@@ -218,7 +225,9 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     shape = args.size or source.shape
     if shape is None:
         raise ValueError("size: the skeleton file has no shape; pass --size WxH")
-    bend, fur = branching.fit_models(source, h=args.h, order=args.order, m=args.m, n_best=args.n_best)
+    bend, fur = branching.fit_models(
+        source, h=args.h, order=args.order, m=args.m, n_best=args.n_best, course=args.course
+    )
     new = run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
     _write_skeleton(out, new, args, "branching grow", h=bend.h, branches=len(new.branches))
     if args.preview is not None:
@@ -267,7 +276,7 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
         "branching run", args,
         lambda bar: branching.synthesize(
             img, source, size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, order=args.order,
-            m=args.m, n_best=args.n_best, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize,
+            m=args.m, n_best=args.n_best, course=args.course, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize,
             guide=_guide(args.guide, args), valid=valid, render_options=_render_kwargs(args),
             threads=args.threads, progress=bar, max_memory=args.max_memory,
         ),
