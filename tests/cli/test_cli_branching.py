@@ -179,3 +179,24 @@ def test_branching_course_flag_reaches_the_model(tmp_path):
             == 0
         )
     assert Skeleton.load(outs["0"]) != Skeleton.load(outs["32"])
+
+
+def test_branching_trace_leaves_a_photo_frame_out(tmp_path):
+    import cv2
+
+    from phloem.branching import Skeleton
+
+    yy, xx = np.mgrid[:160, :160]
+    disc = (yy - 80) ** 2 + (xx - 80) ** 2 < 70**2
+    img = np.full((160, 160), 0.6, np.float32)
+    cv2.line(img, (30, 80), (130, 70), 0.25, 3)
+    cv2.circle(img, (80, 80), 66, 0.3, 2)  # a dark halo along the rim, as on a fundus photo
+    io.write_image(tmp_path / "fundus.png", np.where(disc, img, 0.0).astype(np.float32))
+    lengths = {}
+    for valid in ("auto", "none"):
+        out = tmp_path / f"{valid}.json"
+        args = ["branching", "trace", str(tmp_path / "fundus.png"), "--kind", "dark", "--sigmas", "1.5", "2.5"]
+        assert main([*args, "--valid", valid, "--out", str(out), "-q"]) == 0
+        lengths[valid] = Skeleton.load(out).total_length()
+    # the halo (about 400 px around) is traced only without the frame detection
+    assert lengths["none"] > lengths["auto"] + 200

@@ -72,7 +72,8 @@ def _cmd_branching_trace(args: argparse.Namespace) -> None:
     if args.overlay is not None:
         check_writable(Path(args.overlay), args)
     img = io.read_image(args.input, max_pixels=args.max_pixels)
-    sk = run("branching trace", args, lambda bar: branching.trace(img, **_trace_kwargs(args)))
+    valid = _valid(args, img)
+    sk = run("branching trace", args, lambda bar: branching.trace(img, valid=valid, **_trace_kwargs(args)))
     _write_skeleton(
         out, sk, args, "branching trace", branches=len(sk.branches), total_length=round(sk.total_length(), 1)
     )
@@ -135,6 +136,14 @@ def _render_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--fragment-map", metavar="PNG", default=None, help="also write the map of which fragment painted each pixel"
     )
+    _valid_option(g)
+
+
+def _render_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    return {"omega_s": args.omega_s, "omega_c": args.omega_c, "complete": not args.no_complete}
+
+
+def _valid_option(g: Any) -> None:
     g.add_argument(
         "--valid",
         metavar="PNG|auto|none",
@@ -144,14 +153,13 @@ def _render_options(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _render_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    return {"omega_s": args.omega_s, "omega_c": args.omega_c, "complete": not args.no_complete}
-
-
 def _valid(args: argparse.Namespace, img: np.ndarray) -> Any:
-    """``--valid`` as ``synthesize``'s ``valid=``: a mask, "auto" or None."""
-    if args.valid in ("auto", "none"):
-        return None if args.valid == "none" else "auto"
+    """``--valid`` as a mask of where ``img`` shows content, or None for everywhere."""
+    if args.valid == "none":
+        return None
+    if args.valid == "auto":
+        ok = branching.valid_region(img)
+        return None if ok.all() else ok
     mask = io.read_image(args.valid, max_pixels=args.max_pixels)
     if mask.shape[:2] != img.shape[:2]:
         raise ValueError(
@@ -245,8 +253,6 @@ def _cmd_branching_render(args: argparse.Namespace) -> None:
     if target.shape is None:
         raise ValueError(f"target: {args.target} has no shape; the new image's size comes from it")
     valid = _valid(args, img)
-    if isinstance(valid, str):
-        valid = branching.valid_region(img)
     res = run(
         "branching render", args,
         lambda bar: branching.render(img, source, target, seed=args.seed, threads=args.threads, progress=bar,
@@ -303,6 +309,7 @@ def add_parsers(sub: Any) -> None:
     q.add_argument("--out", required=True, metavar="SKEL.json", help="skeleton file to write")
     q.add_argument("--overlay", metavar="PNG", default=None, help="also draw the traced skeleton over IN into PNG")
     _trace_options(q)
+    _valid_option(q)
     common_options(q)
     q.set_defaults(func=_cmd_branching_trace)
     q = bsub.add_parser("grow", help="learn an example skeleton's bending and branching and grow a new one",
