@@ -442,6 +442,13 @@ def test_connected_input_grows_one_connected_tree():
         out = grow(bend, fur, size=src.shape, seed=seed, max_length="input")
         assert sum(b.parent is None for b in out.branches) == 1
         assert out.total_length() > 0.8 * bend.source.total_length()
+    # a speck beside it (a traced mask's stray blob) does not make it a forest: no leftover trees
+    speck = Skeleton([Branch.from_angles([2, 5], 0.0, np.zeros(8), np.full(10, 2.0), 2.0)], (20, 60))
+    specked = Skeleton.stack([src, speck])
+    b2, f2 = BendingModel.fit(specked, h=2.0), FurcationModel.fit(specked, h=2.0)
+    for seed in range(3):
+        out = grow(b2, f2, size=specked.shape, seed=seed, max_length="input")
+        assert sum(b.parent is None for b in out.branches) <= 2
     # twice the area: two trees
     H, W = src.shape
     big = grow(bend, fur, size=(2 * H, W), seed=0, max_length="input")

@@ -657,8 +657,9 @@ def grow(
     of its template's length gets further furcations on its own branches.
 
     With ``roots`` above 1, or with ``max_length="input"`` (about as much structure as the
-    input), further root trees follow once a tree is finished: one per input tree (a single
-    connected input stays one tree per input area), each copying its template's root stem,
+    input), further root trees follow once a tree is finished: one per input tree (an input
+    whose largest tree holds 90 % of its length gets its trees once per input area, so it stays
+    connected), each copying its template's root stem,
     placed where the density along its first ``3 m h`` is lowest among 24 tries, half near
     the root's own (scaled) position (jittered by ``2ρ``; preferred when practically empty,
     so border roots stay at the border) and half anywhere in the image, until ``roots`` trees
@@ -772,10 +773,14 @@ def grow(
     H, W = shape
     forest = input_trees(bending.source)
     if n_roots is None:
-        # A connected input stays connected: one tree per input area (a tree cut short by the room
-        # it finds is topped up, see ``_top_up``). A forest takes as many trees as the length needs.
+        # A connected input (its largest tree holds 90 % of the length) stays connected: its
+        # trees once per input area, a tree cut short by the room it finds topped up (see
+        # ``_top_up``). A forest takes as many trees as the length needs.
         area_ratio = limit / max(bending.source.total_length(), 1e-9)
-        n_roots = 1 if not input_sized else (max(1, math.ceil(area_ratio - 1e-9)) if len(forest) == 1 else 1_000_000)
+        dominant = bool(forest) and forest[0].length >= 0.9 * sum(t.length for t in forest)
+        n_roots = (
+            1 if not input_sized else (max(1, math.ceil(len(forest) * area_ratio - 1e-9)) if dominant else 1_000_000)
+        )
     out: list[Branch] = []
     # (parent branch, vertex, generation, planned length, planned children) in creation order
     queue: list[tuple[int, int, int, float, int]] = []
