@@ -14,11 +14,11 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_image, check_float, check_int
+from .._validate import as_image, check_float
 from ._elements import F64, _check_skeleton
-from .histograms import histogram_distance
+from .histograms import _hist, histogram_distance
 from .skeleton import Branch, Skeleton
-from .trace import _gray, _polarity, _sigmas, trace
+from .trace import DEFAULT_SIGMAS, _gray, _resolve_kind, _sigmas, trace
 
 __all__ = [
     "Agreement",
@@ -139,8 +139,7 @@ def resolve_trace_options(image: Any, trace_options: dict[str, Any] | None = Non
     opts = dict(trace_options or {})
     if opts.get("kind", "auto") == "auto":
         gray = _gray(image, opts.get("channel"))
-        sig = _sigmas(opts.get("sigmas", (1.0, 2.0, 3.0)))
-        opts["kind"] = "mask" if np.unique(gray).size <= 2 else _polarity(gray, sig)
+        opts["kind"] = _resolve_kind(gray, _sigmas(opts.get("sigmas", DEFAULT_SIGMAS)))
     return opts
 
 
@@ -342,10 +341,7 @@ def heading_change_histogram(skeleton: Skeleton, *, arc: float = ARC, bins: int 
 
 
 def _histogram(skeleton: Skeleton, arc: float, bins: int, name: str) -> tuple[F64, F64]:
-    values = _changes_or_raise(skeleton, arc, name)
-    n = check_int(bins, "bins", 1)
-    counts = np.bincount(np.minimum((values / np.pi * n).astype(np.int64), n - 1), minlength=n).astype(np.float64)
-    return counts / counts.sum(), np.linspace(0.0, np.pi, n + 1)
+    return _hist(_changes_or_raise(skeleton, arc, name), bins, (0.0, math.pi), name)
 
 
 def drift(reference: Skeleton, candidate: Skeleton, *, arc: float = ARC, bins: int = 16) -> float:

@@ -55,6 +55,10 @@ def _gray(image: Any, channel: int | None) -> F32:
     return np.ascontiguousarray(img[:, :, 0])
 
 
+#: Scales (px) of the ridge filter when none are given.
+DEFAULT_SIGMAS = (1.0, 2.0, 3.0)
+
+
 def _sigmas(sigmas: Any) -> tuple[float, ...]:
     if isinstance(sigmas, numbers.Real):
         sigmas = (sigmas,)
@@ -424,11 +428,17 @@ def _smooth_path(pts: F64, sigma: float) -> F64:
     return np.asarray(sm, dtype=np.float64)
 
 
+def _resolve_kind(gray: F32, sigmas: tuple[float, ...]) -> str:
+    """What ``kind="auto"`` means for a gray image: a two-valued image is a mask, otherwise the
+    polarity with the stronger ridge response at ``sigmas``."""
+    return "mask" if np.unique(gray).size <= 2 else _polarity(gray, sigmas)
+
+
 def trace(
     image: Any,
     *,
     kind: Kind = "auto",
-    sigmas: float | Sequence[float] = (1.0, 2.0, 3.0),
+    sigmas: float | Sequence[float] = DEFAULT_SIGMAS,
     threshold: float | None = None,
     min_area: int = 30,
     min_length: float = 8.0,
@@ -587,7 +597,7 @@ def trace(
         raise ValueError(f"image: nothing to trace in a {shape[1]}x{shape[0]} image; it needs at least 3x3 pixels")
 
     if kind == "auto":
-        kind = "mask" if np.unique(gray).size <= 2 else _polarity(gray, sig)  # type: ignore[assignment]
+        kind = _resolve_kind(gray, sig)  # type: ignore[assignment]
     if gap is None:
         gap = 0.0 if kind == "mask" else 2.0 * max(sig) + 3.0
     if kind == "mask":
