@@ -340,7 +340,8 @@ class _Grower:
             return False
         dev = None
         if m.course > 0:
-            dev = float(course_deviation(np.asarray(br.points), np.array([len(br.points) - 1]), m.course)[0])
+            tail = np.asarray(br.points[-(m.course + 1) :])  # the chord needs no more than the last course edges
+            dev = float(course_deviation(tail, np.array([len(tail) - 1]), m.course)[0])
         q = m.log_quality(np.asarray(br.alpha[-L:]), np.asarray(br.r[-L:]), w.counts_alpha, w.counts_r, dev)
         tip = br.points[-1]
         c, s = math.cos(br.heading), math.sin(br.heading)
