@@ -6,7 +6,9 @@ piece by the minimum cut of :func:`phloem.seams.seam` with Luo's cost: ``min(d(x
 G(x, y)``, ``d`` the fourth power of the colour difference and ``G`` the summed gradient
 magnitudes, with the data term of 10000 tying overlap pixels on the border of one side to that
 side. Pieces of different strokes that meet at a junction are cut against each other the same
-way. A pixel only ever takes a piece that covers it.
+way, except that a piece leaving another stroke's object takes that object's rim where it leaves
+it (:data:`RIM`): a branch grows out of its parent's silhouette instead of passing behind it.
+A pixel only ever takes a piece that covers it.
 """
 
 from __future__ import annotations
@@ -22,6 +24,15 @@ from .. import seams
 from .fetch import Piece
 
 F32 = NDArray[np.float32]
+
+#: The outer part of another stroke's object, as a fraction of that piece's half width, that a
+#: piece leaving it must take: the parent's silhouette (its edge, its shading) stops where the
+#: branch leaves it. The paper composes branches by the plain cut, which follows that edge,
+#: since a strong edge makes a cheap seam (docs/pipelines/strokes/editing.md).
+RIM = 0.35
+#: Deeper than this fraction of its half width, another stroke's object keeps its pixels against
+#: a piece leaving it: the seam between a branch and its parent falls just inside the parent.
+CORE = 0.65
 
 
 @dataclass(frozen=True)
@@ -48,14 +59,22 @@ def compose(
     size: tuple[int, int],
     *,
     threads: int | None,
+    owner: list[int] | None = None,
+    ends: NDArray[np.float64] | None = None,
     check: Callable[[int], None] | None = None,
 ) -> Composite:
-    """Compose ``pieces`` (in order) onto a transparent ``size`` = (H, W) canvas; ``check(k)``
+    """Compose ``pieces`` (in order) onto a transparent ``size`` = (H, W) canvas.
+
+    ``owner[k]`` is piece ``k``'s stroke (default: all one stroke) and ``ends[s]`` the (2, 2)
+    ``(x, y)`` end points of stroke ``s`` on the canvas (default: no junctions); ``check(k)``
     runs before piece ``k`` (progress, cancellation)."""
+    owners = np.zeros(len(pieces), np.int64) if owner is None else np.asarray(owner, np.int64)
+    half = np.array([0.5 * (p.widths[0] + p.widths[1]) for p in pieces])
     h, w = size
     rgba = np.zeros((h, w, 4), np.float32)
     labels = np.full((h, w), -1, np.int32)
     energy = 0.0
+    depths: dict[int, F32] = {}  # a branching stroke's depth inside its own pieces' union
     for k, p in enumerate(pieces):
         if check is not None:
             check(k)
@@ -81,6 +100,15 @@ def compose(
         a_mask = lab >= 0
         region = a_mask & b_mask
         if region.any():
+            seeds = None
+            if ends is not None:
+                at = _junctions(labels, owners, k, ends[owners[k]]) - (cx0, cy0)
+                if len(at):
+                    s = int(owners[k])
+                    if s not in depths:
+                        depths[s] = _footprint_depth([q for q, o in zip(pieces, owners, strict=True) if o == s], size)
+                    own = depths[s][cy0:cy1, cx0:cx1]
+                    seeds = _leaving(lab, b_mask, own, owners, half, k, at)
             cut = seams.seam(
                 view[..., :3],
                 b[..., :3],
@@ -88,6 +116,7 @@ def compose(
                 cost="luo",
                 a_mask=a_mask,
                 b_mask=b_mask,
+                seeds=seeds,
                 threads=threads,
                 full_output=True,
             )
@@ -98,6 +127,80 @@ def compose(
         view[take] = b[take]
         lab[take] = k
     return Composite(rgba, labels, energy)
+
+
+def _junctions(
+    labels: NDArray[np.int32], owners: NDArray[np.int64], k: int, ends: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """The end points of piece ``k``'s stroke that lie on another stroke's object on the
+    canvas so far: where that stroke branches off (or runs into) another one."""
+    h, w = labels.shape
+    out = []
+    for x, y in ends:
+        xi, yi = round(x), round(y)
+        if 0 <= yi < h and 0 <= xi < w and labels[yi, xi] >= 0 and owners[labels[yi, xi]] != owners[k]:
+            out.append((x, y))
+    return np.array(out, np.float64).reshape(-1, 2)
+
+
+def _footprint_depth(pieces: list[Piece], size: tuple[int, int]) -> F32:
+    """The distance (px) from every pixel to the edge of the union of ``pieces`` on the canvas:
+    how deep inside its own object a stroke's pixel lies, whatever piece ends are there."""
+    h, w = size
+    union = np.zeros((h, w), bool)
+    for p in pieces:
+        x0, y0 = p.offset
+        ph, pw = p.support.shape
+        ya, yb, xa, xb = max(0, y0), min(h, y0 + ph), max(0, x0), min(w, x0 + pw)
+        if ya < yb and xa < xb:
+            union[ya:yb, xa:xb] |= p.support[ya - y0 : yb - y0, xa - x0 : xb - x0]
+    depth = np.zeros((h, w), np.float32)
+    rows, cols = np.nonzero(union)
+    if len(rows):
+        # The union's box with a ring of one pixel: the canvas's edge stays inside, as on the canvas.
+        box = (slice(max(0, rows.min() - 1), rows.max() + 2), slice(max(0, cols.min() - 1), cols.max() + 2))
+        depth[box] = ndimage.distance_transform_edt(union[box])
+    return depth
+
+
+def _leaving(
+    lab: NDArray[np.int32],
+    b_mask: NDArray[np.bool_],
+    own: F32,
+    owners: NDArray[np.int64],
+    half: NDArray[np.float64],
+    k: int,
+    at: NDArray[np.float64],
+) -> NDArray[np.uint8] | None:
+    """Seeds for :func:`seams.seam` where piece ``k`` leaves another stroke's object (the
+    parent) near a junction ``at`` ((n, 2) ``(x, y)`` in the box): 2 (take the piece) on the
+    parent's rim, within :data:`RIM` of its half width of the parent's edge, inside the piece's
+    own stroke's object (``own``: depth in it) by as much, and connected to where the piece alone lies; 1 (keep the parent) deeper than
+    :data:`CORE`. Only within two parent half widths of a junction: strokes that merely cross
+    are cut as the paper cuts them. None where nothing is seeded."""
+    if len(at) == 0:
+        return None
+    a_mask = lab >= 0
+    parent = a_mask & (owners[np.maximum(lab, 0)] != owners[k])
+    other = parent & b_mask
+    if not other.any():
+        return None
+    reach = half[np.maximum(lab, 0)]
+    yy, xx = np.mgrid[: lab.shape[0], : lab.shape[1]]
+    near = np.zeros(lab.shape, bool)
+    for x, y in at:
+        near |= (xx - x) ** 2 + (yy - y) ** 2 <= (2 * reach) ** 2
+    other &= near
+    depth = ndimage.distance_transform_edt(parent)
+    rim = other & (depth <= RIM * reach) & (own > RIM * half[k])
+    alone = b_mask & ~a_mask
+    parts, _ = ndimage.label(rim | alone, structure=np.ones((3, 3), bool))
+    found = np.unique(parts[alone])
+    take = rim & np.isin(parts, found[found > 0])
+    if not take.any():
+        return None
+    keep = other & (depth > CORE * reach)
+    return np.where(take, 2, np.where(keep, 1, 0)).astype(np.uint8)
 
 
 def keep_on_strokes(comp: Composite, points: NDArray[np.float64]) -> Composite:

@@ -16,6 +16,7 @@ from . import fetch as _fetch
 from .compose import compose, keep_on_strokes, seam_map
 from .sampling import Sampling, sample
 from .stroke_set import StrokeError, StrokeSet
+from .tone import match_seams
 
 __all__ = ["EditResult", "edit"]
 
@@ -314,10 +315,16 @@ def edit(
         if progress is not None:
             progress(n_pairs + owner[k], 2 * n_pairs)
 
-    comp = compose(pieces, out_size, threads=th, check=check)
+    ends = np.array([[p.target.points[0], p.target.points[-1]] for p in sset.pairs], np.float64)
+    comp = compose(pieces, out_size, threads=th, owner=owner, ends=ends, check=check)
     on = np.concatenate([p.target.at(np.linspace(0, 1, max(2, int(p.target.length())))) for p in sset.pairs])
     comp = keep_on_strokes(comp, on)
-    out = comp.rgba if scene is None else _into(comp.rgba, scene, threads=th)
+    owned = np.array(owner, np.int64)
+    stroke_of = np.where(comp.labels >= 0, owned[np.maximum(comp.labels, 0)], -1)
+    piece_half = np.array([0.5 * sum(p.widths) for p in pieces])
+    halves = np.array([np.median(piece_half[owned == i]) if (owned == i).any() else 0.0 for i in range(n_pairs)])
+    rgba = match_seams(comp.rgba, stroke_of, halves, ends, threads=th)
+    out = rgba if scene is None else _into(rgba, scene, threads=th)
     if progress is not None:
         progress(2 * n_pairs, 2 * n_pairs)
     if not full_output:
