@@ -51,6 +51,7 @@ fn specs() -> Vec<PieceSpec> {
                 source_tangent: [0.0, 1.0],
                 half_length: STEP,
                 max_half_width: 60.0,
+                target_half_width: 0.0,
             });
         }
     }

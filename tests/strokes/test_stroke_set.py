@@ -144,6 +144,10 @@ def _doc(**over: object) -> dict[str, object]:
         (_doc(pairs=[{"source": [[0, 0], [True, 1]], "target": [[0, 0], [1, 1]]}]), r"pairs\[0\]\.source\[1\]"),
         (_doc(pairs=[{"source": [[0, 0], [1, 1]], "target": [[0, 0], [1, 1]], "controls": [[0, 0], [1, 0.5]]}]), r"pairs\[0\]\.controls"),
         (_doc(pairs=[{"source": [[0, 0], [1, 1]], "target": [[0, 0], [99, 1]]}]), r"pairs\[0\]\.target\[1\].*outside"),
+        (_doc(pairs=[{"source": [[0, 0], [1, 1]], "target": [[0, 0], [1, 1]], "width": 0}]), r"pairs\[0\]\.width: widths must be positive"),
+        (_doc(pairs=[{"source": [[0, 0], [1, 1]], "target": [[0, 0], [1, 1]], "width": "wide"}]), r"pairs\[0\]\.width must be a list"),
+        (_doc(pairs=[{"source": [[0, 0], [1, 1]], "target": [[0, 0], [1, 1]], "width": [[0.5, 4], [0.2, 6]]}]), r"pairs\[0\]\.width: arc-length fractions u must increase"),
+        (_doc(pairs=[{"source": [[0, 0], [1, 1]], "target": [[0, 0], [1, 1]], "width": [[0, 4], [1.5, 6]]}]), r"pairs\[0\]\.width: arc-length fractions u must lie in \[0, 1\]"),
         (_doc(target_size=[64]), r"target_size: expected \[H, W\]"),
         (_doc(target_size=[64, 0]), r"target_size"),
     ],
@@ -179,3 +183,22 @@ def test_save_and_load_and_no_silent_overwrite(tmp_path: Path) -> None:
     with pytest.raises(FileExistsError):
         s.save(path)
     s.save(path, overwrite=True)
+
+
+def test_a_pairs_width_is_a_number_or_pairs_interpolated_along_the_target_and_round_trips() -> None:
+    line, target = [[0, 0], [10, 0]], [[0, 0], [0, 40]]
+    const = StrokeSet.from_lists([line], [target], widths=[12])
+    assert const.pairs[0].width_at([0.0, 0.3, 1.0]).tolist() == [12.0, 12.0, 12.0]
+    taper = StrokeSet.from_lists([line], [target], widths=[[[0.25, 20], [0.75, 10]]])
+    assert taper.pairs[0].width_at([0.0, 0.5, 1.0]).tolist() == [20.0, 15.0, 10.0]
+    plain = StrokeSet.from_lists([line], [target])
+    assert plain.pairs[0].width is None and plain.pairs[0].width_at(0.5) is None
+    assert "width" not in plain.to_dict()["pairs"][0]
+    for s in (const, taper):
+        assert StrokeSet.from_json(s.to_json()) == s
+    assert const != plain and const != taper
+    assert taper.pairs[0].with_controls([((5, 0), (0, 10))]).width is taper.pairs[0].width
+    with pytest.raises(StrokeError, match=r"widths: expected one entry per stroke pair \(1\), got 2"):
+        StrokeSet.from_lists([line], [target], widths=[1, 2])
+    with pytest.raises(StrokeError, match=r"pairs\[0\]\.width: expected a width in px"):
+        StrokeSet.from_lists([line], [target], widths=[True])

@@ -112,9 +112,7 @@ def test_the_programme_on_real_pieces_equals_brute_force_and_never_costs_more_th
     assert all(set(c) <= set(g) for c, g in zip(seg.candidates, grid, strict=True))
     best = math.inf
     rows = [
-        _fetch.specs(
-            pair.target, np.full(len(c), seg.target_arc[i]), pair.source, c, part, np.full(len(c), seg.half_length)
-        )
+        _fetch.specs(pair, np.full(len(c), seg.target_arc[i]), c, part, np.full(len(c), seg.half_length))
         for i, c in enumerate(grid)
     ]
     for choice in itertools.product(*[range(len(c)) for c in grid]):
@@ -270,3 +268,23 @@ def test_an_edit_too_big_for_memory_is_refused_before_it_starts() -> None:
     seen: list[tuple[int, int]] = []
     strokes.edit(img, [line], [line], progress=lambda d, t: seen.append((d, t)))
     assert seen[0] == (0, 2) and seen[-1] == (2, 2) and all(a <= b for (a, _), (b, _) in itertools.pairwise(seen))
+
+
+def test_a_wanted_width_scales_the_object_and_its_texture() -> None:
+    # A bar 21 px across (rows 20..40) whose colour changes across it only, row by row.
+    rows = np.random.default_rng(3).random((60, 1, 3)).astype(np.float32)
+    img = np.zeros((60, 160, 4), np.float32)
+    img[20:41, 10:150, :3] = np.broadcast_to(rows[20:41], (21, 140, 3))
+    img[20:41, 10:150, 3] = 1.0
+    line, wide = [[12.0, 30.0], [147.0, 30.0]], [[12.0, 60.0], [147.0, 60.0]]
+    out = strokes.edit(img, [line], [wide], widths=[42], size=(120, 160))
+    # Twice as wide across the stroke: about rows 60 ± 21 instead of ± 10.5.
+    opaque = np.nonzero((out[:, 40:120, 3] > 0.5).all(axis=1))[0]
+    assert 38 <= opaque.min() <= 40 and 80 <= opaque.max() <= 82
+    # Scaled about the stroke: target row 60 + 2 d shows source row 30 + d.
+    for d in range(-9, 10):
+        assert np.abs(out[60 + 2 * d, 40:120, :3] - rows[30 + d, 0]).max() < 1e-4, d
+    sset = StrokeSet.from_lists([line], [wide], widths=[42], target_size=(120, 160))
+    assert np.array_equal(strokes.edit(img, sset), out)
+    with pytest.raises(ValueError, match="expected None when source is a StrokeSet"):
+        strokes.edit(img, sset, widths=[10])

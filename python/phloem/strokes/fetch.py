@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from scipy import ndimage  # type: ignore[import-untyped]
 
 from .. import _core
-from .stroke_set import Stroke
+from .stroke_set import Stroke, StrokePair
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
@@ -109,15 +109,16 @@ def stroke_sources(rgba: F32, strokes: list[Stroke]) -> list[StrokeSource]:
 
 
 def specs(
-    target: Stroke,
+    pair: StrokePair,
     target_arc: F64,
-    source: Stroke,
     source_arc: F64,
     part: StrokeSource,
     half_length: F64,
 ) -> F64:
     """The engine's piece rows (``_core.stroke_pieces``) for target samples at ``target_arc``
-    taking their pieces at ``source_arc`` (px along each stroke), in ``part``'s frame."""
+    taking their pieces at ``source_arc`` (px along each stroke), in ``part``'s frame; with
+    the pair's wanted width, if it has one, as the pieces' target half width."""
+    target, source = pair.target, pair.source
     tl, sl = target.length(), source.length()
     tp = target.at(np.asarray(target_arc) / tl)
     sp = source.at(np.asarray(source_arc) / sl) - np.asarray(part.offset, np.float64)
@@ -126,7 +127,9 @@ def specs(
     tt = target.directions(np.asarray(target_arc, np.float64) / tl, half=half)
     st = source.directions(np.asarray(source_arc, np.float64) / sl, half=half)
     reach = np.full(len(tp), REACH_FACTOR * part.half_width + 1.0)
-    return np.ascontiguousarray(np.column_stack([tp, tt, sp, st, half_length, reach]), dtype=np.float64)
+    width = pair.width_at(np.asarray(target_arc, np.float64) / tl)
+    wanted = np.zeros(len(tp)) if width is None else 0.5 * width
+    return np.ascontiguousarray(np.column_stack([tp, tt, sp, st, half_length, reach, wanted]), dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -166,10 +169,11 @@ def pair_energies(part: StrokeSource, rows: F64, pairs: NDArray[np.int64], *, th
     )
 
 
-def default_spacing(parts: list[StrokeSource]) -> float:
+def default_spacing(parts: list[StrokeSource], wanted: list[float | None] | None = None) -> float:
     """The sample spacing when none is given: the median over strokes of the object's half
-    width along them, within :data:`SPACING_RANGE` (a piece is then about as long as the
-    object is wide)."""
-    widths = [p.half_width for p in parts if p.half_width > 0]
+    width along them (``wanted[i]``, the half width asked of stroke ``i``'s target, where not
+    None), within :data:`SPACING_RANGE` (a piece is then about as long as the object is wide)."""
+    asked = wanted if wanted is not None else [None] * len(parts)
+    widths = [p.half_width if w is None else w for p, w in zip(parts, asked, strict=True) if p.half_width > 0]
     h = float(np.median(widths)) if widths else SPACING_RANGE[0]
     return float(np.clip(h, *SPACING_RANGE))

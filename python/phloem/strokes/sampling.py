@@ -146,7 +146,7 @@ def sample(
         idx = []
         for i, c in enumerate(seg.candidates):
             t = np.full(len(c), seg.target_arc[i])
-            rows.append(_fetch.specs(pair.target, t, pair.source, c, part, np.full(len(c), seg.half_length)))
+            rows.append(_fetch.specs(pair, t, c, part, np.full(len(c), seg.half_length)))
             idx.append(np.arange(n, n + len(c)))
             n += len(c)
         index.append(idx)

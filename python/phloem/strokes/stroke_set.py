@@ -17,9 +17,16 @@ The file format is JSON::
      "target_size": [H, W],                # optional: the output image
      "pairs": [
         {"source": [[x, y], ...], "target": [[x, y], ...],
-         "controls": [[0, 0], [0.4, 0.55], [1, 1]]},      # optional; default the end points
+         "controls": [[0, 0], [0.4, 0.55], [1, 1]],       # optional; default the end points
+         "width": 24},                                     # optional: see below
         ...
      ]}
+
+A pair's optional ``width`` is the object's width wanted along the target stroke, in output px:
+a number, or ``[[u, width], ...]`` at arc-length fractions ``u`` of the target stroke
+(increasing; linear in between, constant beyond the first and last). Without it the object
+keeps its width in the photo (the paper); with it each piece is scaled by the ratio of the
+wanted width to the object's width across the source stroke there.
 """
 
 from __future__ import annotations
@@ -191,6 +198,34 @@ def _as_controls(controls: Any, where: str) -> F64:
     return np.ascontiguousarray(arr)
 
 
+def _as_width(width: Any, where: str) -> F64 | None:
+    """A pair's target width: None, a number, or (K, 2) ``(u, width)`` pairs; as (K, 2) pairs."""
+    if width is None:
+        return None
+    if isinstance(width, (bool, np.bool_)):
+        raise StrokeError(f"{where}: expected a width in px or (K, 2) pairs (u, width), got {width!r}")
+    if np.ndim(width) == 0:
+        try:
+            arr = np.full((2, 2), float(width))
+        except (TypeError, ValueError, OverflowError):
+            raise StrokeError(f"{where}: expected a width in px or (K, 2) pairs (u, width)") from None
+        arr[:, 0] = (0.0, 1.0)
+    else:
+        try:
+            arr = np.asarray(width, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            raise StrokeError(f"{where}: expected a width in px or (K, 2) pairs (u, width)") from None
+        if arr.ndim != 2 or arr.shape[1] != 2 or not 1 <= len(arr) <= MAX_POINTS:
+            raise StrokeError(f"{where}: expected a width in px or (K, 2) pairs (u, width), got shape {arr.shape}")
+        if not ((arr[:, 0] >= 0) & (arr[:, 0] <= 1)).all():
+            raise StrokeError(f"{where}: arc-length fractions u must lie in [0, 1] (and not be NaN)")
+        if not (np.diff(arr[:, 0]) > 0).all():
+            raise StrokeError(f"{where}: arc-length fractions u must increase")
+    if not ((arr[:, 1] > 0) & (arr[:, 1] <= MAX_COORD)).all():
+        raise StrokeError(f"{where}: widths must be positive px (at most {MAX_COORD:.0f}), got {arr[:, 1].tolist()}")
+    return np.ascontiguousarray(arr)
+
+
 @dataclass(frozen=True, eq=False)
 class StrokePair:
     """A source stroke, the target stroke it is re-drawn along, and their control pairs.
@@ -202,16 +237,22 @@ class StrokePair:
     controls : (K, 2) array_like, optional
         Arc-length fractions ``(u_source, u_target)``, from ``(0, 0)`` to ``(1, 1)``, increasing
         in both; default the end points only.
+    width : float or (K, 2) array_like, optional
+        The object's width wanted along the target stroke, in output px: one number, or
+        ``(u, width)`` pairs at increasing arc-length fractions ``u`` of the target (linear in
+        between, constant beyond). Default None: the object's own width in the photo.
     """
 
     source: Stroke
     target: Stroke
     controls: F64
+    width: F64 | None
 
-    def __init__(self, source: Any, target: Any, controls: Any = None) -> None:
+    def __init__(self, source: Any, target: Any, controls: Any = None, width: Any = None) -> None:
         object.__setattr__(self, "source", _stroke(source, "source"))
         object.__setattr__(self, "target", _stroke(target, "target"))
         object.__setattr__(self, "controls", _as_controls(controls, "controls"))
+        object.__setattr__(self, "width", _as_width(width, "width"))
 
     def __eq__(self, other: object) -> bool:
         return (
@@ -219,10 +260,19 @@ class StrokePair:
             and self.source == other.source
             and self.target == other.target
             and np.array_equal(self.controls, other.controls)
+            and _same_width(self.width, other.width)
         )
 
     def __hash__(self) -> int:
-        return hash((self.source, self.target, self.controls.tobytes()))
+        return hash(
+            (self.source, self.target, self.controls.tobytes(), None if self.width is None else self.width.tobytes())
+        )
+
+    def width_at(self, u: Any) -> F64 | None:
+        """The wanted width (px) at arc-length fractions ``u`` of the target, or None."""
+        if self.width is None:
+            return None
+        return np.interp(np.asarray(u, np.float64), self.width[:, 0], self.width[:, 1])
 
     def with_controls(self, points: Sequence[tuple[Any, Any]]) -> StrokePair:
         """This pair with control pairs pinned at point pairs ``[((xs, ys), (xt, yt)), ...]``:
@@ -230,7 +280,11 @@ class StrokePair:
         along the source stroke."""
         uv = [(self.source.project(p), self.target.project(q)) for p, q in points]
         uv.sort()
-        return StrokePair(self.source, self.target, [(0.0, 0.0), *uv, (1.0, 1.0)])
+        return StrokePair(self.source, self.target, [(0.0, 0.0), *uv, (1.0, 1.0)], self.width)
+
+
+def _same_width(a: F64 | None, b: F64 | None) -> bool:
+    return (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
 
 
 def _stroke(value: Any, where: str) -> Stroke:
@@ -309,11 +363,14 @@ class StrokeSet(JsonFile):
         target: Sequence[Any],
         *,
         controls: Sequence[Any] | None = None,
+        widths: Sequence[Any] | None = None,
         source_shape: tuple[int, int] | None = None,
         target_size: tuple[int, int] | None = None,
     ) -> StrokeSet:
         """Pair ``source[i]`` with ``target[i]`` (lists of strokes or (N, 2) arrays of (x, y)),
-        with ``controls[i]`` as their control pairs (default the end points).
+        with ``controls[i]`` as their control pairs (default the end points) and ``widths[i]``
+        as the object's width wanted along the target (see :class:`StrokePair`; default the
+        object's own).
 
         Examples
         --------
@@ -337,12 +394,15 @@ class StrokeSet(JsonFile):
             raise StrokeError(
                 f"target: expected one target stroke per source stroke ({len(source)}), got {len(target)}"
             )
-        if controls is not None and len(controls) != len(source):
-            raise StrokeError(f"controls: expected one entry per stroke pair ({len(source)}), got {len(controls)}")
+        for name, per in (("controls", controls), ("widths", widths)):
+            if per is not None and len(per) != len(source):
+                raise StrokeError(f"{name}: expected one entry per stroke pair ({len(source)}), got {len(per)}")
         pairs = []
         for i, (s, t) in enumerate(zip(source, target, strict=True)):
             try:
-                pairs.append(StrokePair(s, t, None if controls is None else controls[i]))
+                pairs.append(
+                    StrokePair(s, t, None if controls is None else controls[i], None if widths is None else widths[i])
+                )
             except StrokeError as exc:
                 raise StrokeError(_at_pair(exc, i)) from None
         return cls(tuple(pairs), source_shape, target_size)
@@ -361,10 +421,16 @@ class StrokeSet(JsonFile):
             out["source_shape"] = list(self.source_shape)
         if self.target_size is not None:
             out["target_size"] = list(self.target_size)
-        out["pairs"] = [
-            {"source": p.source.points.tolist(), "target": p.target.points.tolist(), "controls": p.controls.tolist()}
-            for p in self.pairs
-        ]
+        out["pairs"] = []
+        for p in self.pairs:
+            pair: dict[str, Any] = {
+                "source": p.source.points.tolist(),
+                "target": p.target.points.tolist(),
+                "controls": p.controls.tolist(),
+            }
+            if p.width is not None:
+                pair["width"] = p.width.tolist()
+            out["pairs"].append(pair)
         return out
 
     @classmethod
@@ -382,8 +448,11 @@ class StrokeSet(JsonFile):
             src = _json_pairs(p["source"], f"{where}.source")
             tgt = _json_pairs(p["target"], f"{where}.target")
             ctl = None if p.get("controls") is None else _json_pairs(p["controls"], f"{where}.controls")
+            wid = p.get("width")
+            if wid is not None and not is_number(wid):
+                wid = _json_pairs(wid, f"{where}.width")
             try:
-                out.append(StrokePair(src, tgt, ctl))
+                out.append(StrokePair(src, tgt, ctl, wid))
             except StrokeError as exc:
                 raise StrokeError(_at_pair(exc, i)) from None
         shape = None if data.get("source_shape") is None else _check_shape(data["source_shape"], "source_shape")
@@ -394,7 +463,7 @@ class StrokeSet(JsonFile):
 def _at_pair(exc: StrokeError, i: int) -> str:
     """``exc``'s message with the pair it concerns named first."""
     msg = str(exc)
-    if msg.startswith(("source", "target", "controls")):
+    if msg.startswith(("source", "target", "controls", "width")):
         return f"pairs[{i}].{msg}"
     return f"pairs[{i}]: {msg}"
 

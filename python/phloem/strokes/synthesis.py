@@ -99,10 +99,12 @@ def _rgb(img: F32) -> F32:
     raise ValueError(f"image: expected 1 to 4 channels (gray, gray + alpha, RGB, RGBA), got {c}")
 
 
-def _stroke_set(source: Any, target: Any, controls: Any, shape: tuple[int, int], size: Any) -> StrokeSet:
+def _stroke_set(source: Any, target: Any, controls: Any, widths: Any, shape: tuple[int, int], size: Any) -> StrokeSet:
     if isinstance(source, StrokeSet):
-        if target is not None or controls is not None:
-            raise ValueError("target: expected None when source is a StrokeSet (it holds the targets and controls)")
+        if target is not None or controls is not None or widths is not None:
+            raise ValueError(
+                "target: expected None when source is a StrokeSet (it holds the targets, controls and widths)"
+            )
         sset = source
         if size is None and sset.target_size is not None:
             size = sset.target_size
@@ -111,7 +113,7 @@ def _stroke_set(source: Any, target: Any, controls: Any, shape: tuple[int, int],
     elif target is None:
         raise ValueError("target: expected the target strokes (or pass a StrokeSet as source)")
     else:
-        sset = StrokeSet.from_lists(source, target, controls=controls)
+        sset = StrokeSet.from_lists(source, target, controls=controls, widths=widths)
     return StrokeSet(sset.pairs, source_shape=shape, target_size=shape if size is None else _size(size))
 
 
@@ -148,6 +150,7 @@ def edit(
     size: Any = ...,
     mask: Any = ...,
     controls: Any = ...,
+    widths: Any = ...,
     spacing: float | None = ...,
     stretch: float = ...,
     sampling: str = ...,
@@ -166,6 +169,7 @@ def edit(
     size: Any = ...,
     mask: Any = ...,
     controls: Any = ...,
+    widths: Any = ...,
     spacing: float | None = ...,
     stretch: float = ...,
     sampling: str = ...,
@@ -183,6 +187,7 @@ def edit(
     size: Any = None,
     mask: Any = None,
     controls: Any = None,
+    widths: Any = None,
     spacing: float | None = None,
     stretch: float = 2.0,
     sampling: str = "dp",
@@ -225,6 +230,12 @@ def edit(
     controls : list of (K, 2) array_like, optional
         Per stroke pair, control pairs of arc-length fractions ``(u_source, u_target)`` from
         ``(0, 0)`` to ``(1, 1)`` (default the end points).
+    widths : list, optional
+        Per stroke pair, the object's width wanted along the target stroke in output px: None
+        (the object's own width, the paper's default), a number, or ``(u, width)`` pairs at
+        arc-length fractions of the target. Each piece is then scaled, texture and all, by the
+        ratio of the wanted width to the object's width across the source stroke there
+        (within 1/8 to 8). A :class:`StrokeSet`'s pairs carry their own ``width``.
     spacing : float, optional
         Distance in px between samples along a target stroke, half a piece's length (default:
         the object's median half width along the source strokes, within 4–64).
@@ -282,7 +293,7 @@ def edit(
         if size is not None and _size(size) != scene.shape[:2]:
             raise ValueError(f"background: expected the output size {_size(size)}, got {scene.shape[:2]}")
         size = scene.shape[:2]
-    sset = _stroke_set(source, target, controls, shape, size)
+    sset = _stroke_set(source, target, controls, widths, shape, size)
     out_size = sset.target_size or shape
     _memory.check_size(_memory.strokes_edit(out_size, img.shape), max_memory, out_size)
     st = check_float(stretch, "stretch", 1.0)
@@ -294,7 +305,8 @@ def edit(
     for i, part in enumerate(parts):
         if part.half_width == 0:
             raise StrokeError(f"pairs[{i}].source: the stroke does not run over the object (mask)")
-    h = _fetch.default_spacing(parts) if spacing is None else check_float(spacing, "spacing", 1.0)
+    wanted = [None if p.width is None else 0.5 * float(np.median(p.width[:, 1])) for p in sset.pairs]
+    h = _fetch.default_spacing(parts, wanted) if spacing is None else check_float(spacing, "spacing", 1.0)
 
     samplings: list[Sampling] = []
     n_pairs = len(sset.pairs)
@@ -306,7 +318,7 @@ def edit(
     pieces: list[_fetch.Piece] = []
     owner: list[int] = []
     for i, (pair, part, smp) in enumerate(zip(sset.pairs, parts, samplings, strict=True)):
-        rows = _fetch.specs(pair.target, smp.target_arc, pair.source, smp.source_arc, part, smp.half_length)
+        rows = _fetch.specs(pair, smp.target_arc, smp.source_arc, part, smp.half_length)
         got = _fetch.fetch(part, rows, threads=th)
         pieces.extend(got)
         owner.extend([i] * len(got))

@@ -10,8 +10,8 @@ use crate::convert::{array, image};
 use crate::errors::{not_contiguous, to_py};
 
 /// Columns of a spec row: target x, y, target tangent x, y, source x, y, source tangent x, y,
-/// half length, most half width.
-const SPEC_COLUMNS: usize = 10;
+/// half length, most half width, target half width (0: the source's).
+const SPEC_COLUMNS: usize = 11;
 
 fn specs(a: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<PieceSpec>> {
     let (n, k) = a.as_array().dim();
@@ -31,6 +31,7 @@ fn specs(a: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<PieceSpec>> {
             source_tangent: [r[6], r[7]],
             half_length: r[8],
             max_half_width: r[9],
+            target_half_width: r[10],
         })
         .collect())
 }

@@ -14,6 +14,9 @@ pub const WIDTH_MARGIN: f64 = 2.0;
 const MARCH_STEP: f64 = 0.5;
 /// Alpha above which a sampled pixel belongs to a piece.
 const SUPPORT_ALPHA: f32 = 1.0 / 512.0;
+/// Bounds of the scale a target width may ask of a piece: beyond them a piece is mostly
+/// interpolated (enlarged) or aliased (shrunk) texture.
+pub const SCALE_RANGE: (f64, f64) = (0.125, 8.0);
 
 /// Where one piece goes and where it comes from. Points are `(x, y)` pixel positions, the
 /// tangents unit vectors.
@@ -31,6 +34,10 @@ pub struct PieceSpec {
     pub half_length: f64,
     /// The most the piece reaches across the stroke on either side.
     pub max_half_width: f64,
+    /// The object's half width wanted at `p`, in target px: the piece is scaled (texture and
+    /// all) by its ratio to the object's half width across the source stroke at `p'`, within
+    /// [`SCALE_RANGE`]. 0 keeps the source's scale (the paper).
+    pub target_half_width: f64,
 }
 
 /// A fetched piece: an axis-aligned box of the target frame holding the piece's RGBA values.
@@ -93,7 +100,7 @@ fn check_spec(i: usize, s: &PieceSpec) -> Result<()> {
         .chain(&s.target_tangent)
         .chain(&s.source)
         .chain(&s.source_tangent)
-        .chain([&s.half_length, &s.max_half_width])
+        .chain([&s.half_length, &s.max_half_width, &s.target_half_width])
         .all(|v| v.is_finite());
     let unit = |t: [f64; 2]| ((t[0] * t[0] + t[1] * t[1]).sqrt() - 1.0).abs() < 1e-6;
     if !finite || !unit(s.target_tangent) || !unit(s.source_tangent) {
@@ -102,12 +109,12 @@ fn check_spec(i: usize, s: &PieceSpec) -> Result<()> {
             format!("piece {i}: expected finite points and unit tangents"),
         ));
     }
-    if s.half_length <= 0.0 || s.max_half_width < 0.0 {
+    if s.half_length <= 0.0 || s.max_half_width < 0.0 || s.target_half_width < 0.0 {
         return Err(invalid(
             "pieces",
             format!(
-                "piece {i}: expected a positive half length and a non-negative width, got {} and {}",
-                s.half_length, s.max_half_width
+                "piece {i}: expected a positive half length and non-negative widths, got {}, {} and {}",
+                s.half_length, s.max_half_width, s.target_half_width
             ),
         ));
     }
@@ -117,7 +124,12 @@ fn check_spec(i: usize, s: &PieceSpec) -> Result<()> {
 fn fetch_one(src: &Image<'_>, s: &PieceSpec) -> Piece {
     let (ts, ns) = (s.source_tangent, normal(s.source_tangent));
     let (lo, hi) = span(src, s.source, ns, s.max_half_width).unwrap_or((0.0, 0.0));
-    let widths = [WIDTH_MARGIN - lo, hi + WIDTH_MARGIN];
+    let scale = if s.target_half_width > 0.0 && hi > lo {
+        (2.0 * s.target_half_width / (hi - lo)).clamp(SCALE_RANGE.0, SCALE_RANGE.1)
+    } else {
+        1.0
+    };
+    let widths = [WIDTH_MARGIN - lo * scale, hi * scale + WIDTH_MARGIN];
     let (tt, nt) = (s.target_tangent, normal(s.target_tangent));
     let l = s.half_length;
     // The rectangle's corners in the target frame give the box.
@@ -146,6 +158,7 @@ fn fetch_one(src: &Image<'_>, s: &PieceSpec) -> Piece {
             if a.abs() > l || b < -widths[0] || b > widths[1] {
                 continue;
             }
+            let (a, b) = (a / scale, b / scale);
             let x = s.source[0] + a * ts[0] + b * ns[0];
             let y = s.source[1] + a * ts[1] + b * ns[1];
             let i = r * w + c;
@@ -173,7 +186,8 @@ fn fetch_one(src: &Image<'_>, s: &PieceSpec) -> Piece {
 /// restricted to the part of it that belongs to the stroke). Each target pixel of the piece's
 /// rectangle (`|a| ≤ half_length` along the target direction, `−w_l ≤ b ≤ w_r` across it,
 /// `w` the ends of the object's run across the source stroke nearest `p'`, measured on the
-/// alpha, plus [`WIDTH_MARGIN`]) takes the source bilinearly at `p' + a·t' + b·n'`.
+/// alpha, times the scale, plus [`WIDTH_MARGIN`]) takes the source bilinearly at
+/// `p' + (a·t' + b·n') / scale`, the scale 1 unless the spec asks for a target half width.
 pub fn fetch(source: &Image<'_>, specs: &[PieceSpec]) -> Result<Vec<Piece>> {
     if source.c != 4 {
         return Err(invalid(
@@ -225,6 +239,7 @@ mod tests {
             source_tangent: [1.0, 0.0],
             half_length: 6.0,
             max_half_width: 15.0,
+            target_half_width: 0.0,
         }
     }
 
@@ -291,6 +306,31 @@ mod tests {
     }
 
     #[test]
+    #[allow(clippy::float_cmp)] // scale 2 maps target pixels to exact half-pixel source steps
+    fn a_target_half_width_scales_the_piece() {
+        let d = band();
+        let img = Image::new("s", &d, 40, 60, 4).unwrap();
+        // The band's run across the stroke at row 20 is 10 px (−5.5 to 4.5): half width 10
+        // asks for scale 2.
+        let mut s = spec([30.0, 20.0], [1.0, 0.0]);
+        s.target_half_width = 10.0;
+        let p = &fetch(&img, &[s]).unwrap()[0];
+        assert_eq!(p.widths, [11.0 + WIDTH_MARGIN, 9.0 + WIDTH_MARGIN]);
+        let at = |y: i64, x: i64| {
+            let i = ((y - p.y0) as usize) * p.w + (x - p.x0) as usize;
+            (p.support[i], p.rgba[i * 4], p.rgba[i * 4 + 1])
+        };
+        // Target (x, y) takes source (30 + (x − 30) / 2, 20 + (y − 20) / 2).
+        assert_eq!(at(24, 34), (true, 32.0, 22.0));
+        assert_eq!(at(12, 30), (true, 30.0, 16.0));
+        assert!(!at(8, 30).0, "source row 14, off the band");
+        // An absurd width is bounded by the scale range.
+        s.target_half_width = 1e6;
+        let q = &fetch(&img, &[s]).unwrap()[0];
+        assert_eq!(q.widths[1], 4.5 * SCALE_RANGE.1 + WIDTH_MARGIN);
+    }
+
+    #[test]
     fn bad_specs_are_errors() {
         let d = band();
         let img = Image::new("s", &d, 40, 60, 4).unwrap();
@@ -299,6 +339,9 @@ mod tests {
         assert!(fetch(&img, &[s]).is_err());
         let mut s = spec([0.0, 0.0], [1.0, 0.0]);
         s.half_length = 0.0;
+        assert!(fetch(&img, &[s]).is_err());
+        let mut s = spec([0.0, 0.0], [1.0, 0.0]);
+        s.target_half_width = -1.0;
         assert!(fetch(&img, &[s]).is_err());
     }
 }
