@@ -52,6 +52,7 @@ fn specs() -> Vec<PieceSpec> {
                 half_length: STEP,
                 max_half_width: 60.0,
                 target_half_width: 0.0,
+                target_half_width_slope: 0.0,
             });
         }
     }

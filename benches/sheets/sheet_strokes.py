@@ -4,7 +4,8 @@
 
 Each case is a photo of ``../shared/data/strokes`` (the rocket, the horse silhouette, the
 Broadway tower, the coffee table's wood), or the embedded bark cut to a tapering branch (the
-speed benchmark's, ``benches/python/bench_strokes.py``), with source strokes drawn along the object here, a
+speed benchmark's, ``benches/python/bench_strokes.py``; once more with its side branches given
+tapering target widths), with source strokes drawn along the object here, a
 mask made here from the photo (a colour rule inside a box: the shared photos have no alpha),
 and target strokes that bend, stretch or branch it. One row per case: ``strokes.contact_sheet``
 (source with object and strokes, target strokes, pieces and seams, result, result with strokes).
@@ -102,6 +103,7 @@ CASES = [
     Case("tower", "Broadway_tower_edit.jpg", _tower_mask, [[[617, 75], [617, 540]]] * 2,
          [_wave(40, 660, 200, 60, 1.0), _arc(350, 380, 150, 200, -20)], (440, 700)),
     Case("branch", "", None, [], [], (512, 512)),  # drawn here: the embedded bark as a branch
+    Case("tapered", "", None, [], [], (512, 512)),  # the same, side branches tapering (widths=)
     Case("plank", "skimage_coffee.png", _plank_mask, [[[410, 142], [578, 25]]] * 2,
          [_arc(300, 300, 220, 170, 10), [[300, 300], [300, 90]]], (340, 600)),
 ]  # fmt: skip
@@ -118,6 +120,11 @@ def _branch() -> tuple[np.ndarray, strokes.StrokeSet]:
 def run(case: Case) -> tuple[np.ndarray, str]:
     if case.file == "":
         rgba, sset = _branch()
+        if case.name == "tapered":
+            # The side branches taper from 36 px at the main branch to 10 px at their tips.
+            taper = [None, [[0, 36], [1, 10]], [[0, 36], [1, 10]]]
+            pairs = tuple(strokes.StrokePair(p.source, p.target, p.controls, w) for p, w in zip(sset.pairs, taper))
+            sset = strokes.StrokeSet(pairs, sset.source_shape, sset.target_size)
         img, mask = rgba[..., :3], rgba[..., 3] > 0.5
         return _measure(case.name, img, mask, sset)
     img = phloem.io.read_image(SHARED / case.file)[..., :3]

@@ -288,3 +288,15 @@ def test_a_wanted_width_scales_the_object_and_its_texture() -> None:
     assert np.array_equal(strokes.edit(img, sset), out)
     with pytest.raises(ValueError, match="expected None when source is a StrokeSet"):
         strokes.edit(img, sset, widths=[10])
+
+
+def test_a_tapering_width_gives_a_smooth_outline_that_follows_it() -> None:
+    img, _ = _textured_bar()  # 21 px across
+    line, target = [[12.0, 30.0], [147.0, 30.0]], [[10.0, 60.0], [290.0, 60.0]]
+    out = strokes.edit(img, [line], [target], widths=[[[0, 40], [1, 10]]], size=(120, 300))
+    across = (out[..., 3] > 0.5).sum(axis=0).astype(float)[20:281]
+    wanted = 40 - 30 * (np.arange(20, 281) - 10) / 280
+    # Within 2 px of the wanted width (and its 2 x 2 px margin) everywhere: no column left
+    # open where a piece scaled down reads past the object's end, and no step over 2 px a side.
+    assert np.abs(across - wanted).max() <= 4.5, np.abs(across - wanted).max()
+    assert np.abs(np.diff(across)).max() <= 4

@@ -33,6 +33,9 @@ RIM = 0.35
 #: Deeper than this fraction of its half width, another stroke's object keeps its pixels against
 #: a piece leaving it: the seam between a branch and its parent falls just inside the parent.
 CORE = 0.65
+#: Deeper than this fraction of its piece's half width inside the object, a piece's opaque
+#: pixel never gives way to another piece's transparent one.
+SOLID = 0.35
 
 
 @dataclass(frozen=True)
@@ -109,6 +112,7 @@ def compose(
                         depths[s] = _footprint_depth([q for q, o in zip(pieces, owners, strict=True) if o == s], size)
                     own = depths[s][cy0:cy1, cx0:cx1]
                     seeds = _leaving(lab, b_mask, own, owners, half, k, at)
+            seeds = _opaque_wins(view[..., 3], b[..., 3], region, half[np.maximum(lab, 0)], half[k], seeds)
             cut = seams.seam(
                 view[..., :3],
                 b[..., :3],
@@ -127,6 +131,33 @@ def compose(
         view[take] = b[take]
         lab[take] = k
     return Composite(rgba, labels, energy)
+
+
+def _opaque_wins(
+    a_alpha: F32,
+    b_alpha: F32,
+    region: NDArray[np.bool_],
+    a_half: NDArray[np.float64],
+    b_half: float,
+    seeds: NDArray[np.uint8] | None,
+) -> NDArray[np.uint8] | None:
+    """``seeds`` with overlap pixels deep inside one side's object (alpha ≥ ½, more than
+    :data:`SOLID` of its piece's half width from its edge) where the other side is not the
+    object tied to that side: a piece that reaches past the object (beyond its end, or scaled
+    down so that it reads past it) never cuts a hole into another piece's object. Near the
+    edges the plain cut still decides which piece's outline shows."""
+    a_in, b_in = a_alpha >= 0.5, b_alpha >= 0.5
+    only_a, only_b = region & a_in & ~b_in, region & b_in & ~a_in
+    if not only_a.any() and not only_b.any():
+        return seeds
+    only_a &= ndimage.distance_transform_edt(a_in) > SOLID * a_half
+    only_b &= ndimage.distance_transform_edt(b_in) > SOLID * b_half
+    if not only_a.any() and not only_b.any():
+        return seeds
+    out = np.zeros(region.shape, np.uint8) if seeds is None else seeds.copy()
+    out[only_a & (out == 0)] = 1
+    out[only_b & (out == 0)] = 2
+    return out
 
 
 def _junctions(

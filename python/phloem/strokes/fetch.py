@@ -127,9 +127,20 @@ def specs(
     tt = target.directions(np.asarray(target_arc, np.float64) / tl, half=half)
     st = source.directions(np.asarray(source_arc, np.float64) / sl, half=half)
     reach = np.full(len(tp), REACH_FACTOR * part.half_width + 1.0)
-    width = pair.width_at(np.asarray(target_arc, np.float64) / tl)
-    wanted = np.zeros(len(tp)) if width is None else 0.5 * width
-    return np.ascontiguousarray(np.column_stack([tp, tt, sp, st, half_length, reach, wanted]), dtype=np.float64)
+    u = np.asarray(target_arc, np.float64) / tl
+    width = pair.width_at(u)
+    wanted, slope = np.zeros(len(tp)), np.zeros(len(tp))
+    if width is not None and pair.width is not None:
+        wanted = 0.5 * width
+        # The half width's change per px of target arc: the profile's segment at each sample.
+        knots = pair.width[:, 0]
+        seg = np.clip(np.searchsorted(knots, u, side="right") - 1, 0, max(0, len(knots) - 2))
+        if len(knots) > 1:
+            inside = (u >= knots[0]) & (u < knots[-1])
+            rate = np.diff(pair.width[:, 1]) / np.diff(knots)
+            slope = np.where(inside, 0.5 * rate[seg] / tl, 0.0)
+    rows = [tp, tt, sp, st, half_length, reach, wanted, slope]
+    return np.ascontiguousarray(np.column_stack(rows), dtype=np.float64)
 
 
 @dataclass(frozen=True)

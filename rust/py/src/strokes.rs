@@ -10,8 +10,9 @@ use crate::convert::{array, image};
 use crate::errors::{not_contiguous, to_py};
 
 /// Columns of a spec row: target x, y, target tangent x, y, source x, y, source tangent x, y,
-/// half length, most half width, target half width (0: the source's).
-const SPEC_COLUMNS: usize = 11;
+/// half length, most half width, target half width (0: the source's) and its slope along the
+/// stroke.
+const SPEC_COLUMNS: usize = 12;
 
 fn specs(a: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<PieceSpec>> {
     let (n, k) = a.as_array().dim();
@@ -32,6 +33,7 @@ fn specs(a: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<PieceSpec>> {
             half_length: r[8],
             max_half_width: r[9],
             target_half_width: r[10],
+            target_half_width_slope: r[11],
         })
         .collect())
 }

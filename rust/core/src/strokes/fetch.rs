@@ -38,6 +38,10 @@ pub struct PieceSpec {
     /// all) by its ratio to the object's half width across the source stroke at `p'`, within
     /// [`SCALE_RANGE`]. 0 keeps the source's scale (the paper).
     pub target_half_width: f64,
+    /// How the wanted half width changes per target px along the stroke at `p`: the piece's
+    /// sides follow it (a tapering branch gets a smooth outline, not steps). Read only with a
+    /// target half width.
+    pub target_half_width_slope: f64,
 }
 
 /// A fetched piece: an axis-aligned box of the target frame holding the piece's RGBA values.
@@ -100,7 +104,12 @@ fn check_spec(i: usize, s: &PieceSpec) -> Result<()> {
         .chain(&s.target_tangent)
         .chain(&s.source)
         .chain(&s.source_tangent)
-        .chain([&s.half_length, &s.max_half_width, &s.target_half_width])
+        .chain([
+            &s.half_length,
+            &s.max_half_width,
+            &s.target_half_width,
+            &s.target_half_width_slope,
+        ])
         .all(|v| v.is_finite());
     let unit = |t: [f64; 2]| ((t[0] * t[0] + t[1] * t[1]).sqrt() - 1.0).abs() < 1e-6;
     if !finite || !unit(s.target_tangent) || !unit(s.source_tangent) {
@@ -155,7 +164,14 @@ fn fetch_one(src: &Image<'_>, s: &PieceSpec) -> Piece {
             let dx = (x0 + c as i64) as f64 - s.target[0];
             let dy = (y0 + r as i64) as f64 - s.target[1];
             let (a, b) = (dx * tt[0] + dy * tt[1], dx * nt[0] + dy * nt[1]);
-            if a.abs() > l || b < -widths[0] || b > widths[1] {
+            // With a wanted width the sides follow its change along the stroke.
+            let side = if s.target_half_width > 0.0 {
+                ((s.target_half_width + s.target_half_width_slope * a) / s.target_half_width)
+                    .max(0.0)
+            } else {
+                1.0
+            };
+            if a.abs() > l || b < -widths[0] * side || b > widths[1] * side {
                 continue;
             }
             let (a, b) = (a / scale, b / scale);
@@ -240,6 +256,7 @@ mod tests {
             half_length: 6.0,
             max_half_width: 15.0,
             target_half_width: 0.0,
+            target_half_width_slope: 0.0,
         }
     }
 
@@ -324,6 +341,21 @@ mod tests {
         assert_eq!(at(24, 34), (true, 32.0, 22.0));
         assert_eq!(at(12, 30), (true, 30.0, 16.0));
         assert!(!at(8, 30).0, "source row 14, off the band");
+        // A width shrinking by 1 px per px along +x: the lower side (11 px at the sample)
+        // closes in with it, 11 × (10 − a) / 10 px at a, until the band's own edge (row 29).
+        s.target_half_width_slope = -1.0;
+        let t = &fetch(&img, &[s]).unwrap()[0];
+        let edge = |x: i64| {
+            (0..t.h)
+                .filter(|&r| t.support[r * t.w + (x - t.x0) as usize])
+                .map(|r| t.y0 + r as i64)
+                .max()
+        };
+        assert_eq!(
+            [edge(24), edge(30), edge(33), edge(36)],
+            [Some(29), Some(29), Some(27), Some(24)]
+        );
+        s.target_half_width_slope = 0.0;
         // An absurd width is bounded by the scale range.
         s.target_half_width = 1e6;
         let q = &fetch(&img, &[s]).unwrap()[0];
