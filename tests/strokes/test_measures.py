@@ -56,6 +56,17 @@ def test_an_edit_covers_its_strokes_with_the_object_width() -> None:
     assert metrics.width_agreement(empty, sset, img) == pytest.approx(1.0)
 
 
+def test_width_agreement_reads_a_wanted_width_where_a_pair_has_one() -> None:
+    src = np.zeros((40, 60))
+    src[15:25, 5:55] = 1  # 10 px wide
+    out = np.zeros((60, 40))
+    out[5:55, 15:35] = 1  # 20 px wide, upright
+    line, upright = [[[5, 20], [54, 20]]], [[[25, 5], [25, 54]]]
+    assert metrics.width_agreement(out, StrokeSet.from_lists(line, upright), src) == pytest.approx(1.0)
+    assert metrics.width_agreement(out, StrokeSet.from_lists(line, upright, widths=[20]), src) == pytest.approx(0.0)
+    assert metrics.width_agreement(out, StrokeSet.from_lists(line, upright, widths=[25]), src) == pytest.approx(0.2)
+
+
 def test_measures_name_bad_arguments() -> None:
     sset = StrokeSet.from_lists([[[0, 0], [9, 0]]], [[[0, 0], [9, 0]]])
     with pytest.raises(TypeError, match="strokes: expected a phloem.strokes.StrokeSet"):

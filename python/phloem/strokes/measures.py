@@ -102,10 +102,11 @@ def stroke_widths(alpha: Any, stroke: Stroke, u: Any, *, max_width: float | None
 
 def width_agreement(image: Any, strokes: Any, source: Any, *, samples: int = 32) -> float:
     """Median relative difference between the result's width across each target stroke and
-    the source object's width across the corresponding source stroke, at ``samples`` arc
-    fractions per pair (spread evenly along the target, mapped to the source through the
-    pair's controls, piecewise linearly). 0 when the widths agree; lower is better. Samples
-    where the source is not opaque are skipped. The median, because where target strokes
+    the width it should have: the source object's width across the corresponding source
+    stroke, at ``samples`` arc fractions per pair (spread evenly along the target, mapped to
+    the source through the pair's controls, piecewise linearly), or the pair's wanted
+    ``width`` where it has one. 0 when the widths agree; lower is better. Samples where the
+    source is not opaque are skipped. The median, because where target strokes
     meet or cross, the line across one runs along the other and its width means nothing.
 
     Parameters
@@ -136,6 +137,9 @@ def width_agreement(image: Any, strokes: Any, source: Any, *, samples: int = 32)
         ut = (np.arange(n) + 0.5) / n
         us = np.interp(ut, p.controls[:, 1], p.controls[:, 0])
         ws = stroke_widths(src_a, p.source, us)
+        wanted = p.width_at(ut)
+        if wanted is not None:
+            ws = np.where(ws > 0, wanted, 0.0)
         wt = stroke_widths(out_a, p.target, ut)
         ok = ws > 0
         errors.extend((np.abs(wt[ok] - ws[ok]) / ws[ok]).tolist())
