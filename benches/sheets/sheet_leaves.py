@@ -7,7 +7,7 @@ The training leaf is the one the committed scribbles were drawn on
 other exemplars are leaves of the other scans of the same species. The sheet is
 ``leaves.contact_sheet``: exemplars as posed, aligned, induced layers, peeled backgrounds, new
 leaves. Printed: λ, δ and the Eq. 4 objective per layer, registration residuals, and for each
-new leaf its largest alpha IoU with any exemplar (after posing it on that exemplar) and its patch
+new leaf its alpha IoU with every exemplar (after posing it on that exemplar) and its patch
 coherence against the exemplars beside each exemplar's own against the others.
 Needs ../shared/data (exits with a message when it is absent).
 """
@@ -94,7 +94,7 @@ def main() -> None:
     print("exemplar coherence against the others:", " ".join(f"{c:.4f}" for c in own), f"(mean {np.mean(own):.4f})")
     for i, leaf in enumerate(new):
         ious = [alpha_iou(leaf, e) for e in exemplars]
-        print(f"new {i}: max alpha IoU {max(ious):.3f} (exemplar {int(np.argmax(ious))}), "
+        print(f"new {i}: alpha IoU with exemplars {' '.join(f'{v:.3f}' for v in ious)} (max {max(ious):.3f}), "
               f"coherence {coherence(leaf, exemplars):.4f}, area {int((leaf[..., 3] > 0.5).sum())} px")  # fmt: skip
     areas = [int((e[..., 3] > 0.5).sum()) for e in exemplars]
     print("exemplar areas px:", areas)

@@ -133,6 +133,8 @@ def test_saved_models_synthesize_as_the_original(tmp_path, model: leaves.LeafMod
         ("size", "scribbles"),
         ("nolayer", "scribbles"),
         ("order", "order: expected a permutation"),
+        ("order_short", "order: expected a permutation"),
+        ("order_long", "order: expected a permutation"),
         ("training", "training: expected an index below"),
         ("array", "leaves: expected a list"),
     ],
@@ -153,6 +155,10 @@ def test_bad_input_is_a_one_line_error(leaf_set, change: str, message: str) -> N
         sc = np.zeros_like(sc)
     elif change == "order":
         kw["order"] = [1, 1, 3]
+    elif change == "order_short":  # fewer layers than the scribbles have
+        kw["order"] = [2, 1]
+    elif change == "order_long":  # a layer the scribbles do not have
+        kw["order"] = [1, 2, 3, 4]
     elif change == "training":
         kw["training"] = 5
     elif change == "array":

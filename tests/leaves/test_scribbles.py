@@ -90,6 +90,43 @@ def test_smoothness_holds_a_noisy_leaf_together() -> None:
         assert _iou(got == k, truth == k) >= 0.8, k
 
 
+def _thin_vein_and_blotches() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A leaf whose 3 px veins are a darker shade of the blade, with broad blotches of exactly the
+    veins' colour (as relief bands or shadows share a vein's colour); strokes on two veins and on
+    the blade, none on a blotch. Returns the leaf, the strokes, the veins and the blotches."""
+    h, w = 160, 240
+    yy, xx = np.mgrid[:h, :w]
+    alpha = ((xx - w / 2) / (0.45 * w)) ** 2 + ((yy - h / 2) / (0.42 * h)) ** 2 <= 1
+    line, blot = np.zeros((h, w), np.uint8), np.zeros((h, w), np.uint8)
+    cv2.line(line, (int(0.08 * w), h // 2), (int(0.92 * w), h // 2), 1, 3)
+    for x0 in np.linspace(0.25 * w, 0.75 * w, 3):
+        cv2.line(line, (int(x0), h // 2), (int(x0 + 0.1 * w), int(h // 2 - 0.3 * h)), 1, 3)
+    for y, x in [(0.72, 0.3), (0.7, 0.6), (0.3, 0.45)]:
+        cv2.ellipse(blot, (int(x * w), int(y * h)), (18, 7), 20, 0, 360, 1, -1)
+    img = np.zeros((h, w, 4), np.float32)
+    img[..., :3] = (0.20, 0.40, 0.14)
+    img[(blot > 0) | (line > 0), :3] = (0.15, 0.30, 0.10)
+    img[..., :3] = np.clip(img[..., :3] + np.random.default_rng(0).normal(0, 0.02, (h, w, 3)), 0, 1)
+    img[..., 3] = alpha
+    strokes = np.zeros((h, w), np.int32)
+    strokes[h // 2, 30:60] = strokes[h // 2, 150:180] = 1
+    strokes[40, 60:80] = strokes[120, 100:120] = strokes[100, 180:195] = strokes[60, 150:170] = 2
+    return img, strokes, alpha & (line > 0), alpha & (blot > 0)
+
+
+def test_thin_layer_is_its_lines_not_its_colour(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A layer scribbled on thin lines takes the lines and leaves broad areas of their colour to
+    the blade (the line feature beside colour); by colour alone it takes the blotches too."""
+    img, strokes, veins, blotches = _thin_vein_and_blotches()
+    got = layers_from_scribbles(img, strokes) == 1
+    assert _iou(got, veins) >= 0.9
+    assert (got & blotches).sum() <= 0.05 * blotches.sum()
+    monkeypatch.setattr("phloem.leaves.scribbles._LINE_WEIGHT", 0.0)
+    by_colour = layers_from_scribbles(img, strokes) == 1
+    assert (by_colour & blotches).sum() >= 0.5 * blotches.sum()
+    assert _iou(by_colour, veins) < 0.7
+
+
 def test_same_result_for_any_thread_count() -> None:
     img, truth = _leaf(200, 300, noise=0.15)  # over 2^13 pixels: the cuts split across threads
     scribbles = _strokes(truth)
@@ -247,7 +284,8 @@ def test_layers_from_scribbles_errors() -> None:
 
 def test_committed_scribbles_on_the_training_scan() -> None:
     """tests/data/leaves/leafarea_A300-1_scribbles.png fits leaf 0 of its scan and expands to
-    thin veins, small spots and a large blade."""
+    thin veins (under 10 % of the leaf: the pale relief bands beside them made 12–17 %), small
+    spots and a large blade."""
     path = shared_file("leaves", "leafarea_A300-1.jpeg")  # skips without the shared data
     leaf = phloem.leaves.extract(phloem.io.read_image(path))[0]
     scribbles = DATA / "leafarea_A300-1_scribbles.png"
@@ -255,4 +293,4 @@ def test_committed_scribbles_on_the_training_scan() -> None:
     got = layers_from_scribbles(leaf, scribbles)
     on = leaf[..., 3] > 0.5
     share = [float((got == k).sum() / on.sum()) for k in (1, 2, 3)]
-    assert 0.02 < share[0] < 0.15 and 0.01 < share[1] < 0.1 and share[2] > 0.75, share
+    assert 0.02 < share[0] < 0.10 and 0.01 < share[1] < 0.1 and share[2] > 0.75, share

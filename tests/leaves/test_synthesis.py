@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -310,10 +311,33 @@ def test_only_the_largest_leaf_is_kept() -> None:
     assert np.array_equal(synth._one_leaf(alpha), out)
 
 
+SIDE = 640
+
+
+def _patch_distance(leaf: np.ndarray, others: list[np.ndarray]) -> float:
+    """Patch coherence of ``leaf``'s inner pixels against ``others`` laid side by side, all
+    premultiplied and shrunk to a ``SIDE`` px longest side (the contact sheet uses 320 px, at which
+    the test below would not see colour noise)."""
+    import phloem
+
+    def small(x: np.ndarray) -> np.ndarray:
+        k = SIDE / max(x.shape[:2])
+        y = cv2.resize(x, None, fx=k, fy=k, interpolation=cv2.INTER_AREA)
+        return np.concatenate([y[..., :3] * y[..., 3:], y[..., 3:]], axis=2)
+
+    parts = [small(o) for o in others]
+    h = max(p.shape[0] for p in parts)
+    strip = np.concatenate([np.pad(p, ((0, h - p.shape[0]), (0, 4), (0, 0))) for p in parts], axis=1)
+    q = small(leaf)
+    inner = cv2.erode((q[..., 3] > 0.99).astype(np.uint8), np.ones((7, 7), np.uint8)) > 0
+    return phloem.metrics.patch_coherence(q[..., :3], strip[..., :3], mask=inner)
+
+
 def test_real_scans_give_new_single_leaves() -> None:
     """The four leaves of one ``leafarea`` scan, registered by TPS-RPM, the background layer only
     (no induction here): Eq. 7 with real inverse fields gives single leaves in the exemplars'
-    area range that are not copies of any."""
+    area range that are not copies of any, and whose patches are as near the exemplars' as the
+    exemplars' are to each other's (issue 17's coherence check)."""
     import phloem
     from phloem.leaves import extract, register
     from phloem.testing import shared_file
@@ -348,7 +372,10 @@ def test_real_scans_give_new_single_leaves() -> None:
         objective=[],
     )
     areas = [int((p[..., 3] > 0.5).sum()) for p in placed]
+    own = [_patch_distance(e, placed[:i] + placed[i + 1 :]) for i, e in enumerate(placed)]
     for leaf in synthesize(model, count=4, seed=0, threads=2):
+        # New leaves are made of the exemplars' patches (figures in docs/pipelines/leaves.md).
+        assert _patch_distance(leaf, placed) <= max(own)
         solid = leaf[..., 3] > 0.5
         assert ndimage.label(solid)[1] == 1
         assert min(areas) <= solid.sum() <= max(areas)

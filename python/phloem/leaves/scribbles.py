@@ -4,9 +4,12 @@ by a lazy-snapping style graph cut after Li, Sun, Tang & Shum, *Lazy Snapping*, 
 A few strokes per layer (veins, spots, blade) are expanded to a label for every leaf pixel.
 The leaf is over-segmented by a watershed of its CIELAB gradient and every pixel takes its
 region's mean colour (the regions follow colour edges, so a vein a few pixels wide stays
-apart from the blade, while scan noise is averaged away). Each layer's scribbled colours are
-clustered by k-means; a pixel's data cost for a layer is its distance to that layer's nearest
-cluster against the distance to the other side's (Lazy Snapping's ``E1``), and neighbouring
+apart from the blade, while scan noise is averaged away) and its region's mean thin-line
+response (dark and bright ridges 2–6 px wide, beside colour: a vein and the pale relief band
+beside it share a colour but not a shape). Each layer's scribbled colours are clustered by
+k-means and each cluster takes the mean line response of its pixels; a pixel's data cost for
+a layer is its distance to that layer's nearest cluster against the distance to the other
+side's (Lazy Snapping's ``E1``), and neighbouring
 pixels pay ``λ / (1 + ‖ΔC‖² / σ²)`` for taking different sides (``E2``: cheap across colour
 edges, dear inside a region). Layers are cut one at a time in removal order, each against all
 later ones together, by :func:`phloem.seams.grid_maxflow`; what a cut takes is no longer in
@@ -28,6 +31,7 @@ from skimage.segmentation import watershed
 
 from .._api import Seed
 from .._validate import as_image, check_seed, check_threads, derive_seed
+from ..branching.trace import _ridge_response
 from ..seams import grid_maxflow
 from .color import _lab, palette
 
@@ -45,6 +49,12 @@ _CLUSTERS = 32
 # 1 keeps 2–3 px veins (whose two long borders each pay λ/(1 + ‖ΔC‖²/σ²) per pixel, small
 # across a colour edge) while ignoring speckle of a few pixels; see docs/pipelines/leaves/scribbles.md.
 _SMOOTHNESS = 1.0
+# Ridge-filter scales (px) of the thin-line feature: veins 2–6 px wide, not the broader relief
+# bands beside them.
+_LINE_SIGMAS = (1.0, 1.5, 2.0)
+# Weight of the line response (scale-normalised curvature of CIELAB L*, in L* units) against
+# colour in the data term; docs/pipelines/leaves/scribbles.md has the measured range.
+_LINE_WEIGHT = 6.0
 
 
 def _check_shape(shape: Any) -> tuple[int, int]:
@@ -204,6 +214,20 @@ def _regions(lab: NDArray[np.float32], leaf: NDArray[np.bool_]) -> I32:
     return np.asarray(watershed(np.sqrt(grad), mask=leaf, connectivity=1), np.int32)  # type: ignore[no-untyped-call]
 
 
+def _line_features(lightness: NDArray[np.float32], leaf: NDArray[np.bool_]) -> NDArray[np.float32]:
+    """Dark- and bright-line strength of every pixel, ``(h, w, 2)``, 0 off the leaf.
+
+    The ridge filter of :mod:`phloem.branching.trace` (curvature across the line less twice the
+    gradient, so the flanks of a broad band or a step do not respond) on CIELAB L*, max over
+    ``_LINE_SIGMAS``, weighted by ``_LINE_WEIGHT``.
+    """
+    strength = np.stack([_ridge_response(lightness, _LINE_SIGMAS, p) for p in ("dark", "bright")], axis=-1)
+    # The filter answers on a line's centre pixels only; spread that over the line's width (3 px)
+    # so that the regions of a 3–5 px vein all carry it.
+    spread = cv2.dilate(np.maximum(strength, 0.0), np.ones((3, 3), np.uint8))
+    return np.where(leaf[..., None], spread * np.float32(_LINE_WEIGHT), 0.0).astype(np.float32)
+
+
 def _nearest_distance(colours: NDArray[np.float64], centres: NDArray[np.float64]) -> NDArray[np.float64]:
     """Distance of each colour to its nearest centre (|a - b|² = |a|² - 2a·b + |b|², one product)."""
     d2 = (centres**2).sum(1)[None, :] - 2.0 * (colours @ centres.T)
@@ -267,20 +291,28 @@ def layers_from_scribbles(
     lab = _lab(np.ascontiguousarray(img[box]))
     regions = _regions(lab, sub_leaf)
     count = np.bincount(regions.ravel())
-    means = (
+    per_pixel = np.concatenate([lab, _line_features(np.ascontiguousarray(lab[..., 0]), sub_leaf)], axis=-1)
+    # Per region: mean L*, a*, b* and mean dark- and bright-line strength.
+    features = (
         np.stack(
-            [np.bincount(regions.ravel(), weights=lab[..., c].ravel(), minlength=len(count)) for c in range(3)], axis=1
+            [np.bincount(regions.ravel(), weights=per_pixel[..., c].ravel(), minlength=len(count)) for c in range(5)],
+            axis=1,
         )
         / np.maximum(count, 1)[:, None]
     )
-    colour = means.astype(np.float32)[regions]  # (h, w, 3): each pixel its region's mean colour
+    colour = features[:, :3].astype(np.float32)[regions]  # (h, w, 3): each pixel its region's mean colour
 
-    # Distance of every region's colour to each layer's nearest colour cluster.
+    # Distance of every region's features to each layer's nearest cluster: k-means on the
+    # scribbled colours, each cluster then given the mean line response of its pixels.
     # Seeded by place in the removal order, so relabelling the strokes changes nothing.
     dist = np.empty((n, len(count)))
     for place, k in enumerate(removal):
-        centres = palette(colour[sub_marks == k], _CLUSTERS, seed=derive_seed(rng_seed, place))
-        dist[k - 1] = _nearest_distance(means, centres)
+        marked = features[regions[sub_marks == k]]
+        centres = palette(marked[:, :3], _CLUSTERS, seed=derive_seed(rng_seed, place))
+        near = np.argmin((centres**2).sum(1)[None, :] - 2.0 * (marked[:, :3] @ centres.T), axis=1)
+        size = np.maximum(np.bincount(near, minlength=len(centres)), 1)
+        line_centres = np.stack([np.bincount(near, marked[:, 3 + c], len(centres)) / size for c in range(2)], axis=1)
+        dist[k - 1] = _nearest_distance(features, np.concatenate([centres, line_centres], axis=1))
 
     # E2 weights of the east and south neighbour pairs; σ² is the mean squared colour step
     # across region borders, so the weights do not depend on the image's contrast.
