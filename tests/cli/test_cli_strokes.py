@@ -55,6 +55,23 @@ def test_edit_reads_svg_layers_and_a_mask(files, tmp_path) -> None:
     assert got.shape == (60, 160, 4) and got[50, 80, 3] == 1.0 and got[20, 80, 3] == 0.0
 
 
+def test_edit_takes_target_widths_from_the_svg_when_asked(files) -> None:
+    _, _, d = files
+    svg = d / "wide.svg"
+    svg.write_text(
+        '<svg xmlns="http://www.w3.org/2000/svg" width="160" height="100">'
+        '<g id="source"><path d="M12 30 L147 30"/></g>'
+        '<g id="target" style="stroke-width:42"><path d="M20 50 L150 50"/></g></svg>'
+    )
+    heights = []
+    for extra in ([], ["--svg-widths"]):
+        out = d / f"w{len(extra)}.png"
+        assert main(["strokes", "edit", str(d / "bar.png"), str(svg), "--size", "160x100", "--out", str(out), *extra, "-q"]) == 0  # fmt: skip
+        heights.append(int((io.read_image(out)[:, 60:100, 3] > 0.5).all(axis=1).sum()))
+    assert 18 <= heights[0] <= 23 and 38 <= heights[1] <= 44  # the bar's 21 px, then the drawn 42
+    assert main(["strokes", "edit", str(d / "bar.png"), str(d / "strokes.json"), "--out", str(d / "j.png"), "--svg-widths", "-q"]) == 2  # fmt: skip
+
+
 def test_draw_marks_the_strokes(files) -> None:
     _, _, d = files
     for side in ("source", "target"):

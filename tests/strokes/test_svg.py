@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from phloem.branching import trace
-from phloem.strokes import Stroke, StrokeError, read_svg, strokes_from_skeleton
+from phloem.strokes import Stroke, StrokeError, read_svg, read_svg_widths, strokes_from_skeleton
 
 NS = 'xmlns="http://www.w3.org/2000/svg" xmlns:inkscape="http://www.inkscape.org/namespaces/inkscape"'
 
@@ -166,3 +166,22 @@ def test_strokes_from_a_traced_skeleton_meet_at_the_junctions() -> None:
         strokes_from_skeleton(skel, min_length=1e6)
     with pytest.raises(TypeError, match="skeleton: expected a phloem.branching.Skeleton"):
         strokes_from_skeleton([[0, 0], [1, 1]])
+
+
+def test_stroke_widths_are_inherited_and_scaled_like_the_strokes(tmp_path: Path) -> None:
+    body = (
+        '<g stroke-width="3"><path d="M0 0 L10 0"/>'  # inherited from the group
+        '<path d="M0 5 L10 5" style="fill:none;stroke-width:7px"/>'  # style, in px
+        '<path d="M0 9 L10 9" stroke-width="1mm"/>'  # a unit
+        '<g transform="scale(2, 8)"><path d="M0 1 L5 1"/></g></g>'  # the mean scale: 4
+        '<path d="M0 20 L10 20"/>'  # none set
+        '<path d="M0 30 L10 30" stroke-width="0"/>'
+    )
+    svg = _svg(tmp_path, body, 'width="40" height="80" viewBox="0 0 20 40"')  # user units x 2
+    got = read_svg_widths(svg)
+    assert len(got) == len(read_svg(svg)) == 6
+    assert got[0] == pytest.approx(6.0) and got[1] == pytest.approx(14.0)
+    assert got[2] == pytest.approx(2 * 96 / 25.4) and got[3] == pytest.approx(3 * 4 * 2)
+    assert got[4] is None and got[5] is None
+    with pytest.raises(StrokeError, match="stroke-width: expected a length"):
+        read_svg_widths(_svg(tmp_path, '<path d="M0 0 L9 9" stroke-width="wide"/>'))

@@ -12,12 +12,15 @@ from .. import io, strokes
 from ._common import common_options, parse_size, preflight, run, save, stage_image
 
 
-def _stroke_set(args: argparse.Namespace) -> strokes.StrokeSet:
+def _stroke_set(args: argparse.Namespace, *, svg_widths: bool = False) -> strokes.StrokeSet:
     path = Path(args.strokes)
     if path.suffix.lower() == ".svg":
         src = strokes.read_svg(path, layer=args.source_layer)
         tgt = strokes.read_svg(path, layer=args.target_layer)
-        return strokes.StrokeSet.from_lists(src, tgt)
+        widths = strokes.read_svg_widths(path, layer=args.target_layer) if svg_widths else None
+        return strokes.StrokeSet.from_lists(src, tgt, widths=widths)
+    if svg_widths:
+        raise ValueError(f"--svg-widths: expected an SVG stroke drawing, got {path.name}")
     return strokes.StrokeSet.load(path)
 
 
@@ -38,7 +41,7 @@ def _cmd_edit(args: argparse.Namespace) -> None:
     extra = [] if args.sheet is None else [Path(args.sheet)]
     preflight(args, extra)
     img = io.read_image(args.image, max_pixels=args.max_pixels)
-    sset = _stroke_set(args)
+    sset = _stroke_set(args, svg_widths=args.svg_widths)
     mask = _mask(args, img.shape[:2])
     scene = None if args.background is None else io.read_image(args.background, max_pixels=args.max_pixels)
     res = run(
@@ -96,6 +99,9 @@ def add_parsers(sub: Any) -> None:
                    help="most the source may be stretched or squeezed between samples, against the uniform mapping (default 2)")  # fmt: skip
     q.add_argument("--sampling", choices=strokes.synthesis.SAMPLINGS, default="dp",
                    help="dp: the paper's dynamic-programming texture sampling; uniform: arc-length proportional (default dp)")  # fmt: skip
+    q.add_argument("--svg-widths", action="store_true",
+                   help="SVG only: make the object as wide along each target stroke as that stroke is drawn "
+                        "(its stroke-width); default: as wide as in the photo")  # fmt: skip
     q.add_argument("--background", default=None, metavar="IMG",
                    help="paste the object into this scene by Poisson image editing (sets the output size)")  # fmt: skip
     q.add_argument("--sheet", default=None, metavar="PNG",

@@ -12,7 +12,7 @@ from .sampling import Sampling
 from .sheet import contact_sheet, draw
 from .skeleton import strokes_from_skeleton
 from .stroke_set import Stroke, StrokeError, StrokePair, StrokeSet
-from .svg import read_svg
+from .svg import read_svg, read_svg_widths
 from .synthesis import EditResult, edit
 
 __all__ = [
@@ -26,5 +26,6 @@ __all__ = [
     "draw",
     "edit",
     "read_svg",
+    "read_svg_widths",
     "strokes_from_skeleton",
 ]

@@ -8,7 +8,9 @@ are flattened to points about 1 px apart. A *layer* is a group whose Inkscape la
 ``data-name`` or ``id`` names it (case-insensitive); draw the source strokes in a layer
 ``source`` over the photo and the target strokes in a layer ``target``.
 Content of ``<defs>``, ``<clipPath>``, ``<mask>``, ``<marker>``, ``<pattern>`` and ``<symbol>``
-is not drawn and is skipped, as is ``<use>``.
+is not drawn and is skipped, as is ``<use>``. :func:`read_svg_widths` reads each stroke's drawn
+width (``stroke-width``, as an attribute or in ``style``, inherited from the groups above it,
+scaled by its transform), for the target widths of :func:`phloem.strokes.edit`.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from numpy.typing import NDArray
 
 from .stroke_set import MAX_POINTS, Stroke, StrokeError
 
-__all__ = ["read_svg"]
+__all__ = ["read_svg", "read_svg_widths"]
 
 F64 = NDArray[np.float64]
 #: Largest SVG file read (a drawing of strokes is kilobytes).
@@ -41,6 +43,7 @@ _FLAG_AT = re.compile(r"[\s,]*([01])")
 _CMD_AT = re.compile(r"[\s,]*([MmLlHhVvCcSsQqTtAaZz])")
 _END = re.compile(r"[\s,]*\Z")
 _TRANSFORM = re.compile(r"\s*(matrix|translate|scale|rotate|skewX|skewY)\s*\(([^)]*)\)\s*,?")
+_STYLE_WIDTH = re.compile(r"(?:^|;)\s*stroke-width\s*:\s*([^;]*)")
 _ARGS = {"M": 2, "L": 2, "H": 1, "V": 1, "C": 6, "S": 4, "Q": 4, "T": 2, "A": 7, "Z": 0}
 
 
@@ -298,21 +301,37 @@ def _label(el: ET.Element) -> str | None:
     return None
 
 
-def _walk(el: ET.Element, m: F64, in_layer: bool, layer: str | None, where: str) -> Iterator[tuple[F64, str]]:
+def _stroke_width(el: ET.Element, inherited: float | None, where: str) -> float | None:
+    """The element's ``stroke-width`` in its user units (``style`` before the attribute, as CSS
+    has it), else the inherited one; None where no element above sets one."""
+    style = _attr(el, "style")
+    m = _STYLE_WIDTH.search(style) if style else None
+    text = m.group(1) if m else _attr(el, "stroke-width")
+    if text is None or text.strip() in ("", "inherit"):
+        return inherited
+    return _length(text, f"{where}: stroke-width", positive=False)
+
+
+def _walk(
+    el: ET.Element, m: F64, in_layer: bool, layer: str | None, where: str, width: float | None = None
+) -> Iterator[tuple[F64, float | None, str]]:
     for child in el:
         name = _local(child.tag)
         if name in _SKIP:
             continue
         cm = m @ _transform(_attr(child, "transform"), f"{where}: transform")
         inside = in_layer or layer is None or (name in ("g", "svg") and _label(child) == layer)
+        w = _stroke_width(child, width, f"{where}: <{name}>")
         if name in ("g", "svg", "a", "switch"):
-            yield from _walk(child, cm, inside, layer, where)
+            yield from _walk(child, cm, inside, layer, where, w)
         elif inside:
             ident = _attr(child, "id")
             place = f"{where}: <{name}{' id=' + repr(ident) if ident else ''}>"
+            # A stroke's width scales with the mean scale of its transform.
+            px = None if w is None or w <= 0 else w * math.sqrt(abs(np.linalg.det(cm[:2, :2])))
             for pts in _element_points(child, name, place):
                 xy = np.c_[pts, np.ones(len(pts))] @ cm.T
-                yield xy[:, :2], place
+                yield xy[:, :2], px, place
 
 
 def read_svg(svg: str | os.PathLike[str], *, layer: str | None = None) -> list[Stroke]:
@@ -336,6 +355,33 @@ def read_svg(svg: str | os.PathLike[str], *, layer: str | None = None) -> list[S
     StrokeError
         An unreadable or malformed file, a layer that is absent or holds no stroke.
     """
+    return [s for s, _ in _read(svg, layer)]
+
+
+def read_svg_widths(svg: str | os.PathLike[str], *, layer: str | None = None) -> list[float | None]:
+    """The drawn width in pixels of each stroke :func:`read_svg` returns, in the same order.
+
+    ``stroke-width`` from the element's ``style`` or attribute, else from the nearest group
+    above it that sets one, times the mean scale of the element's transform (and the
+    ``viewBox``); None where nothing sets a width or it is 0. Draw the target strokes as
+    thick as the object should be, and pass these as ``widths=`` to :func:`phloem.strokes.edit`
+    (``phloem strokes edit --svg-widths``).
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> from phloem.strokes import read_svg_widths
+    >>> svg = pathlib.Path(tempfile.mkdtemp()) / "t.svg"
+    >>> _ = svg.write_text('<svg xmlns="http://www.w3.org/2000/svg"><g style="stroke-width:4">'
+    ...                    '<path d="M0 0 L10 0"/><path d="M0 5 L10 5" stroke-width="9"/>'
+    ...                    '<path d="M0 9 L5 9" transform="scale(2)"/></g></svg>')
+    >>> read_svg_widths(svg)
+    [4.0, 9.0, 8.0]
+    """
+    return [w for _, w in _read(svg, layer)]
+
+
+def _read(svg: str | os.PathLike[str], layer: str | None) -> list[tuple[Stroke, float | None]]:
     p = Path(svg)
     try:
         size = p.stat().st_size
@@ -359,9 +405,9 @@ def read_svg(svg: str | os.PathLike[str], *, layer: str | None = None) -> list[S
         msg = str(exc)
         raise StrokeError(msg if msg.startswith("svg: ") else f"svg: {p}: {msg}") from None
     out = []
-    for pts, place in found:
+    for pts, width, place in found:
         try:
-            out.append(Stroke(pts))
+            out.append((Stroke(pts), width))
         except StrokeError as exc:
             if "zero length" in str(exc):
                 continue
