@@ -33,7 +33,7 @@ from skimage.morphology import skeletonize
 
 from benches.sheets.sheet_leaves import DEFAULT, SCRIBBLES, SHARED, _leaf
 from phloem import leaves
-from phloem.branching.trace import _ridge_response
+from phloem._ridges import ridge_response
 from phloem.leaves.color import _lab
 
 
@@ -44,7 +44,7 @@ def main_veins(rgba: np.ndarray) -> np.ndarray:
     inner = ndimage.distance_transform_edt(leaf) > 8
     out = np.zeros(leaf.shape, bool)
     for polarity in ("dark", "bright"):
-        r = _ridge_response(lightness, (1.0, 1.5, 2.0), polarity)
+        r = ridge_response(lightness, (1.0, 1.5, 2.0), polarity)
         skel = skeletonize((r > np.percentile(r[leaf], 96)) & inner)
         lab, _ = ndimage.label(skel, np.ones((3, 3)))
         keep = np.bincount(lab.ravel()) >= 50

@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from .._ridges import ridge_polarity, ridge_response
 from .._validate import as_image, as_mask, check_float, check_int
 from .skeleton import Branch, Skeleton
 
@@ -187,56 +188,6 @@ def _peak(g: F64, step: float) -> F64:
     pos[inner] += np.clip(off, -0.5, 0.5)
     pos[best <= 1e-9] = np.nan
     return np.asarray(pos * step, np.float64)
-
-
-# -- ridge filtering -------------------------------------------------------------------------
-
-
-# Weight of the gradient subtracted from the ridge curvature. Beside a step edge of height A,
-# at distance u*sigma, the scale-normalised curvature is u*phi(u)*A and the gradient phi(u)*A
-# (phi: the standard normal density): with weight 2 a step leaves at most 0.009*A, while at a
-# ridge centre the gradient is zero and nothing is lost.
-_EDGE = 2.0
-
-
-def _hessian_eigs(gray: F32, sigma: float) -> tuple[F32, F32, F32]:
-    """Scale-normalised Hessian eigenvalues ``l1 <= l2`` and gradient magnitude at ``sigma``."""
-    g = cv2.GaussianBlur(gray, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
-    gy, gx = np.gradient(g)
-    gyy, gyx = np.gradient(gy)
-    gxx = np.gradient(gx, axis=1)
-    s2 = np.float32(sigma * sigma)
-    hxx, hyy, hxy = gxx * s2, gyy * s2, 0.5 * (gyx + np.gradient(gy, axis=1)) * s2
-    half = 0.5 * (hxx + hyy)
-    root = np.sqrt(0.25 * (hxx - hyy) ** 2 + hxy**2)
-    grad = np.sqrt(gx * gx + gy * gy) * np.float32(sigma)
-    return (half - root).astype(np.float32), (half + root).astype(np.float32), grad.astype(np.float32)
-
-
-def _ridge_response(gray: F32, sigmas: tuple[float, ...], polarity: str) -> F32:
-    """Multi-scale ridge strength: the cross-ridge curvature minus the gradient, max over scales.
-
-    For a bright ridge the curvature across it is the most negative Hessian eigenvalue ``l1``;
-    for a dark one the most positive ``l2``. Subtracting twice the scale-normalised gradient
-    magnitude (``_EDGE``) suppresses the side lobes that a Hessian filter finds beside step edges
-    (the rim of a retina photo, the border of a lit region): at a ridge centre the gradient
-    vanishes, beside an edge it outweighs the curvature.
-    """
-    out = np.zeros_like(gray)
-    for s in sigmas:
-        l1, l2, grad = _hessian_eigs(gray, s)
-        curv = -l1 if polarity == "bright" else l2
-        np.maximum(out, curv - _EDGE * grad, out=out)
-    return out
-
-
-def _polarity(gray: F32, sigmas: tuple[float, ...]) -> str:
-    """``"bright"`` or ``"dark"``: which kind of ridge is stronger in the image."""
-    s = sigmas[len(sigmas) // 2]
-    l1, l2, grad = _hessian_eigs(gray, s)
-    bright = np.maximum(-l1 - _EDGE * grad, 0)
-    dark = np.maximum(l2 - _EDGE * grad, 0)
-    return "bright" if float(np.percentile(bright, 99)) > float(np.percentile(dark, 99)) else "dark"
 
 
 def _otsu(values: F32) -> float:
@@ -431,7 +382,7 @@ def _smooth_path(pts: F64, sigma: float) -> F64:
 def _resolve_kind(gray: F32, sigmas: tuple[float, ...]) -> str:
     """What ``kind="auto"`` means for a gray image: a two-valued image is a mask, otherwise the
     polarity with the stronger ridge response at ``sigmas``."""
-    return "mask" if np.unique(gray).size <= 2 else _polarity(gray, sigmas)
+    return "mask" if np.unique(gray).size <= 2 else ridge_polarity(gray, sigmas)
 
 
 def trace(
@@ -603,7 +554,7 @@ def trace(
     if kind == "mask":
         mask = gray > (0.5 * (lo + hi) if threshold is None else threshold)
     else:
-        resp = _ridge_response(gray, sig, kind)
+        resp = ridge_response(gray, sig, kind)
         if ok is not None:
             reach = 2 * math.ceil(3 * max(sig)) + 3
             inner = cv2.erode(ok.astype(np.uint8), np.ones((reach, reach), np.uint8), borderType=cv2.BORDER_REPLICATE)

@@ -30,8 +30,8 @@ from numpy.typing import NDArray
 from skimage.segmentation import watershed
 
 from .._api import Seed
+from .._ridges import ridge_response
 from .._validate import as_image, check_seed, check_threads, derive_seed
-from ..branching.trace import _ridge_response
 from ..seams import grid_maxflow
 from .color import _lab, palette
 
@@ -217,11 +217,11 @@ def _regions(lab: NDArray[np.float32], leaf: NDArray[np.bool_]) -> I32:
 def _line_features(lightness: NDArray[np.float32], leaf: NDArray[np.bool_]) -> NDArray[np.float32]:
     """Dark- and bright-line strength of every pixel, ``(h, w, 2)``, 0 off the leaf.
 
-    The ridge filter of :mod:`phloem.branching.trace` (curvature across the line less twice the
+    The ridge filter the branching trace uses (``phloem._ridges``: curvature across the line less twice the
     gradient, so the flanks of a broad band or a step do not respond) on CIELAB L*, max over
     ``_LINE_SIGMAS``, weighted by ``_LINE_WEIGHT``.
     """
-    strength = np.stack([_ridge_response(lightness, _LINE_SIGMAS, p) for p in ("dark", "bright")], axis=-1)
+    strength = np.stack([ridge_response(lightness, _LINE_SIGMAS, p) for p in ("dark", "bright")], axis=-1)
     # The filter answers on a line's centre pixels only; spread that over the line's width (3 px)
     # so that the regions of a 3–5 px vein all carry it.
     spread = cv2.dilate(np.maximum(strength, 0.0), np.ones((3, 3), np.uint8))
