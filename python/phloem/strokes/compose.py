@@ -5,9 +5,15 @@ new piece overlaps what is already there, every overlap pixel is given to the ca
 piece by the minimum cut of :func:`phloem.seams.seam` with Luo's cost: ``min(d(x), d(y)) /
 G(x, y)``, ``d`` the fourth power of the colour difference and ``G`` the summed gradient
 magnitudes, with the data term of 10000 tying overlap pixels on the border of one side to that
-side. Pieces of different strokes that meet at a junction are cut against each other the same
-way, except that a piece leaving another stroke's object takes that object's rim where it leaves
-it (:data:`RIM`): a branch grows out of its parent's silhouette instead of passing behind it.
+side. Pieces of different strokes that meet are cut against each other the same way, with two
+constraints the paper does not state (docs/pipelines/strokes/editing.md says why):
+
+- at a junction (a stroke's end on another stroke's object), the branch takes its parent's rim
+  where it leaves it (:data:`RIM`) and leaves the parent's core to it (:data:`CORE`): a branch
+  grows out of its parent's silhouette instead of passing behind it;
+- everywhere, a pixel deep inside one side's object (:data:`SOLID`) does not go to a side that
+  is transparent there: a piece reaching past the object's end cuts no hole.
+
 A pixel only ever takes a piece that covers it.
 """
 
@@ -204,11 +210,13 @@ def _leaving(
     at: NDArray[np.float64],
 ) -> NDArray[np.uint8] | None:
     """Seeds for :func:`seams.seam` where piece ``k`` leaves another stroke's object (the
-    parent) near a junction ``at`` ((n, 2) ``(x, y)`` in the box): 2 (take the piece) on the
-    parent's rim, within :data:`RIM` of its half width of the parent's edge, inside the piece's
-    own stroke's object (``own``: depth in it) by as much, and connected to where the piece alone lies; 1 (keep the parent) deeper than
-    :data:`CORE`. Only within two parent half widths of a junction: strokes that merely cross
-    are cut as the paper cuts them. None where nothing is seeded."""
+    parent) near a junction ``at`` ((n, 2) ``(x, y)`` in the box).
+
+    2 (take the piece) on the parent's rim: within :data:`RIM` of the parent's half width of
+    its edge, as deep inside the piece's own stroke's object (``own``), and connected to where
+    the piece alone lies; 1 (keep the parent) deeper than :data:`CORE`. Only within two parent
+    half widths of a junction: strokes that merely cross are cut as the paper cuts them. None
+    where nothing is seeded."""
     if len(at) == 0:
         return None
     a_mask = lab >= 0
