@@ -156,8 +156,10 @@ def _opaque_wins(
     only_a, only_b = region & a_in & ~b_in, region & b_in & ~a_in
     if not only_a.any() and not only_b.any():
         return seeds
-    only_a &= ndimage.distance_transform_edt(a_in) > SOLID * a_half
-    only_b &= ndimage.distance_transform_edt(b_in) > SOLID * b_half
+    if only_a.any():
+        only_a &= ndimage.distance_transform_edt(a_in) > SOLID * a_half
+    if only_b.any():
+        only_b &= ndimage.distance_transform_edt(b_in) > SOLID * b_half
     if not only_a.any() and not only_b.any():
         return seeds
     out = np.zeros(region.shape, np.uint8) if seeds is None else seeds.copy()

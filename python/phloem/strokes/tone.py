@@ -79,7 +79,8 @@ def match_seams(
         ey, ex = np.nonzero(end)
         points = np.concatenate([np.c_[sy, sx], np.c_[ey, ex]]).astype(np.int64)
         values = np.concatenate([diff[sy, sx], np.zeros((len(ey), 3), np.float32)])
-        field = blend.interpolate_field(band, points, values, tol=1e-6, threads=threads)
+        # A colour correction needs no more than 1e-4 of its size: far below one 8-bit level.
+        field = blend.interpolate_field(band, points, values, tol=1e-4, threads=threads)
         view[..., :3][band] = np.clip(view[..., :3][band] + field[band], 0.0, 1.0)
     return out
 
