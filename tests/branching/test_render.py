@@ -96,14 +96,49 @@ def test_fragments_reaching_outside_valid_are_not_used() -> None:
         render(img, sk, tgt, valid=np.zeros(img.shape[:2], bool))
 
 
-def test_match_borders_default_is_off_for_masks_only() -> None:
+def test_paste_structure_default_is_off_for_masks_only() -> None:
     img, sk = channel_scene()
     tgt = Skeleton([wavy_branch((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
-    grey = [render(img, sk, tgt, seed=2, match_borders=m) for m in (None, True, False)]
+    grey = [render(img, sk, tgt, seed=2, paste_structure=m) for m in (None, True, False)]
     assert np.array_equal(grey[0], grey[1]) and not np.array_equal(grey[0], grey[2])
+    # match_borders follows: off under the structure paste, on without it
+    assert np.array_equal(grey[0], render(img, sk, tgt, seed=2, match_borders=False))
+    assert np.array_equal(grey[2], render(img, sk, tgt, seed=2, paste_structure=False, match_borders=True))
     mask = np.where(sk.mask(), 1.0, 0.0).astype(np.float32)
-    masks = [render(mask, sk, tgt, seed=2, match_borders=m) for m in (None, False)]
+    masks = [
+        render(mask, sk, tgt, seed=2, paste_structure=m, match_borders=b) for m, b in ((None, None), (False, False))
+    ]
     assert np.array_equal(masks[0], masks[1])
+    with pytest.raises(ValueError, match="^paste_structure"):
+        render(img, sk, tgt, paste_structure=True, complete=False)
+
+
+def _steps(out: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Absolute 4-neighbour differences across the structure's border and between gap pixels."""
+    f = labels >= 0
+    d = (np.abs(np.diff(out, axis=1)), np.abs(np.diff(out, axis=0)))
+    border = np.concatenate([d[0][f[:, 1:] != f[:, :-1]], d[1][f[1:] != f[:-1]]])
+    gap = np.concatenate([d[0][~f[:, 1:] & ~f[:, :-1]], d[1][~f[1:] & ~f[:-1]]])
+    return border, gap
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_paste_structure_leaves_no_disk_rims_under_uneven_light(seed: int) -> None:
+    # issue 19: the input is lit from one side (a ramp of half its range), so fragments from
+    # its two ends differ in level by up to 0.5; pasted into the completed gaps as a whole,
+    # their rims are no steeper than the gaps themselves, and the channel stays dark.
+    img, sk = channel_scene()
+    lit = np.clip(img + np.linspace(-0.25, 0.25, img.shape[1], dtype=np.float32)[None, :], 0, 1)
+    tgt = Skeleton([wavy_branch((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
+    core = tgt.mask()
+    res = {ps: render(lit, sk, tgt, seed=seed, paste_structure=ps, full_output=True) for ps in (True, False)}
+    border, gap = _steps(res[True].image, res[True].labels)
+    assert float(border.mean()) < 1.2 * float(gap.mean()), (border.mean(), gap.mean())
+    assert float(np.percentile(border, 99)) < 0.15
+    assert float(np.median(res[True].image[core])) < 0.25
+    # the same without it: the rims show (the test sees the difference)
+    border, gap = _steps(res[False].image, res[False].labels)
+    assert float(border.mean()) > 2.5 * float(gap.mean())
 
 
 def test_a_mask_renders_as_a_mask() -> None:

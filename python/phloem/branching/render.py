@@ -18,6 +18,10 @@ paints the target structure with disk-shaped fragments of the input:
    Before a sub-branch starts, the disk of its furcation fragment is deleted from the output
    and repainted by a furcation fragment (Fig. 6).
 4. The gaps between the branches are completed (§5.4, :mod:`.gaps`).
+5. The whole structure is pasted into the completed gaps in the gradient domain
+   (``paste_structure``, not two-level inputs): each fragment keeps its own gradients, with
+   none between fragments or towards the gaps, so fragments from differently lit or high
+   parts of the input meet each other and the background without a disk-shaped step.
 
 Beyond the paper (each needed for clean junctions, see the tests):
 
@@ -28,8 +32,11 @@ Beyond the paper (each needed for clean junctions, see the tests):
   to the furcation fragments: pasted along a plain target branch they left stubs;
 - furcation fragments are also offered mirrored (``mirror=True``), since with rotations only
   a target sub-branch on the other side of its parent may have no match;
-- the completed gaps are pasted in the gradient domain against the structure
-  (``match_borders``), as §5.3 does for the fragments.
+- the structure is pasted into the completed gaps as a whole (``paste_structure``, step 5):
+  §5.3's per-fragment paste keeps each fragment's level where it borders the unpainted gaps,
+  so on a terrain or an unevenly lit photo every disk showed; without the structure paste the
+  completed gaps are instead pasted against the structure (``match_borders``), which leaves
+  large steps alone.
 """
 
 from __future__ import annotations
@@ -108,6 +115,7 @@ def render(
     mirror: bool = ...,
     complete: bool = ...,
     match_borders: bool | None = ...,
+    paste_structure: bool | None = ...,
     valid: Any = ...,
     patch_size: int = ...,
     completion_iterations: int = ...,
@@ -135,6 +143,7 @@ def render(
     mirror: bool = ...,
     complete: bool = ...,
     match_borders: bool | None = ...,
+    paste_structure: bool | None = ...,
     valid: Any = ...,
     patch_size: int = ...,
     completion_iterations: int = ...,
@@ -164,6 +173,7 @@ def render(
     mirror: bool = True,
     complete: bool = True,
     match_borders: bool | None = None,
+    paste_structure: bool | None = None,
     valid: Any = None,
     patch_size: int = 7,
     completion_iterations: int = 4,
@@ -221,8 +231,17 @@ def render(
         structure without a colour step (only the smooth part of the step, made of small
         steps: a branch cut off at a disk's edge is left alone). Without it every fragment
         disk of an unevenly lit photo or a terrain shows as a lighter or darker circle.
-        Default (None): on, except for two-level images such as masks, which have no
-        lighting to match. Needs ``photometric``.
+        Default (None): on where ``paste_structure`` is off, except for two-level images
+        such as masks, which have no lighting to match. Needs ``photometric``.
+    paste_structure : bool, optional
+        After the gap completion, paste the whole painted structure into the completed gaps
+        in the gradient domain: one Poisson solve over every fragment pixel whose guidance is
+        each fragment's own gradients, zero between two fragments and at the structure's
+        border, with the completed gaps as boundary values. Fragments from differently lit
+        parts of a photo or from different heights of a terrain then meet each other and the
+        background without steps: no disks show, and the structure keeps its own relief.
+        Default (None): on, except for two-level images (a mask has no ramps to blend and stays
+        two-level). Needs ``photometric`` and ``complete``.
     valid : (H, W) array_like of bool, optional
         Where ``image`` shows real content (default everywhere), e.g. the photo inside the
         frame of :func:`rectify` or a fundus photo's disc: only fragments that lie wholly
@@ -297,6 +316,11 @@ def render(
     mask_like = two_level(img, lo, hi)
     if mask_like:
         opts = replace(opts, photometric=False)
+    whole = photometric and not mask_like and complete if paste_structure is None else bool(paste_structure)
+    if whole and not (photometric and complete):
+        raise ValueError(
+            "paste_structure: needs photometric=True and complete=True (it pastes into the completed gaps)"
+        )
     sources, targets, lib = _cover_both(src_sk, tgt_sk, ok, lam_f, rf, k, mirror=mirror, keep=max(3, c_n))
     painter = _Painter(img, tgt_sk, targets, lib, opts, draws=rng.random(len(targets)))
     _in_order(painter.boxes, painter.paint, workers=t if t is not None else _core.default_threads(), progress=progress)
@@ -307,9 +331,11 @@ def render(
         canvas = fill_gaps(
             canvas, painter.filled, img, src_sk, valid=ok, radius_factor=rf,
             radius=float(np.median([g.radius for g in targets])), lo=painter.lo, hi=painter.hi,
-            match_borders=match_borders, photometric=photometric and not mask_like, patch_size=p, iterations=c_iters,
-            seed=s, threads=t,
+            match_borders=match_borders if match_borders is not None else not whole, photometric=photometric and not mask_like,
+            patch_size=p, iterations=c_iters, seed=s, threads=t,
         )  # fmt: skip
+        if whole:
+            canvas = _paste_structure(canvas, painter.filled, painter.labels, painter.lo, painter.hi, threads=t)
     if mask_like:
         canvas = np.where(canvas >= 0.5 * (lo + hi), hi, lo).astype(np.float32)
     if progress is not None:
@@ -554,6 +580,26 @@ class _Painter:
         # the output within the input's range. (Basic slices: views of canvas.)
         res = _clip_channels(res.reshape(*dst.shape), self.lo, self.hi)
         _paste(self.canvas[ys, xs][bx], res, new[bx])
+
+
+def _paste_structure(
+    canvas: F32, filled: NDArray[np.bool_], labels: NDArray[np.int32], lo: F32, hi: F32, *, threads: int | None
+) -> F32:
+    """Gradient-domain paste of the whole structure into the completed gaps (``paste_structure``).
+
+    A custom guidance field on the Poisson engine (:func:`phloem.blend.seamless` with
+    ``labels``): each fragment's gradients inside it, none across fragments or towards the
+    gaps, so every level difference between fragments and against the background is spread
+    over the fragments instead of showing as a step at a disk's rim.
+    """
+    if not filled.any():
+        return canvas
+    lab = np.where(filled, labels, -1).astype(np.int32)
+    # tol 1e-4 as for the gaps: the levels move by up to the image's range, far above that.
+    out = seamless(canvas, canvas, filled, (0, 0), labels=lab, tol=1e-4, threads=threads)
+    res: F32 = canvas.copy()
+    _paste(res, _clip_channels(out.reshape(canvas.shape), lo, hi), filled)
+    return res
 
 
 def _disk(shape: tuple[int, int], c: F64, r: float) -> tuple[slice, slice, NDArray[np.bool_], int, int]:
