@@ -8,7 +8,7 @@ import pytest
 
 import phloem
 from phloem.branching import Branch, Skeleton, render
-from phloem.branching.render import _displacement, _in_order
+from phloem.branching.render import _displacement, _drop_foreign, _in_order
 from phloem.testing import channel_scene, longest_path, shared_file, wavy_branch
 
 
@@ -151,6 +151,42 @@ def test_a_mask_renders_as_a_mask() -> None:
         assert set(np.unique(out).tolist()) <= {np.float32(lo), np.float32(hi)}
         # the structure is there, as wide as the target's (thickness 4 to 3: about 2 r = 7 px)
         assert 4 <= (out[:, 90] == np.float32(hi)).sum() <= 12
+
+
+def test_a_mask_output_holds_no_pieces_the_target_does_not_touch() -> None:
+    # issue 19: a second channel runs 11 px beside the main one, within the fragments' reach
+    # (3 x thickness): their disks carry pieces of it, which used to stand as islands.
+    _, sk = channel_scene()
+    main = sk.branches[0]
+    side = np.zeros(sk.shape, np.uint8)
+    cv2.polylines(side, [np.round(main.points[60:150] + [0, 11]).astype(np.int32)], False, 1, thickness=3)
+    mask = np.where(sk.mask() | (side > 0), 1.0, 0.0).astype(np.float32)
+    tgt = Skeleton([wavy_branch((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
+    touch = tgt.mask()
+    islands = 0
+    for seed in range(3):
+        res = render(mask, sk, tgt, seed=seed, full_output=True)
+        n, comp = cv2.connectedComponents((res.image > 0.5).astype(np.uint8), connectivity=8)
+        assert set(np.unique(comp[touch & (res.image > 0.5)]).tolist()) == set(range(1, n))
+        # the painted structure before the snap did hold pieces apart from the target's
+        n0, comp0 = cv2.connectedComponents((res.structure > 0.5).astype(np.uint8), connectivity=8)
+        islands += n0 - 1 - len(set(np.unique(comp0[touch & (res.structure > 0.5)]).tolist()))
+    assert islands > 0
+
+
+def test_drop_foreign_keeps_touched_pieces_of_either_polarity() -> None:
+    tgt = Skeleton([Branch([[5, 20], [35, 20]], 2.0)], (40, 60))
+    for struct, bg in ((1.0, 0.0), (0.1, 0.9)):
+        canvas = np.full((40, 60, 1), bg, np.float32)
+        canvas[17:24, 2:40] = struct  # along the target, and running past its end
+        canvas[30:34, 45:55] = struct  # an island
+        canvas[2:5, 2:5] = struct  # another
+        source = Skeleton([Branch([[5, 20], [35, 20]], 2.0)], (40, 60))
+        lo, hi = np.float32([min(struct, bg)]), np.float32([max(struct, bg)])
+        out = _drop_foreign(canvas, canvas, source, tgt, lo, hi)
+        want = np.full_like(canvas, bg)
+        want[17:24, 2:40] = struct
+        assert np.array_equal(out, want)
 
 
 def test_fragments_leaving_the_image_are_not_pasted() -> None:

@@ -30,6 +30,8 @@ Beyond the paper (each needed for clean junctions, see the tests):
   their colours (a colour seam cut the sub-branch off, the Poisson boundary faded it out);
 - source branch fragments that hold part of another branch (a sub-branch's start) are left
   to the furcation fragments: pasted along a plain target branch they left stubs;
+- a two-level output keeps only the pieces of structure that the target touches: fragment
+  disks carry pieces of neighbouring channels, which stood as islands;
 - furcation fragments are also offered mirrored (``mirror=True``), since with rotations only
   a target sub-branch on the other side of its parent may have no match;
 - the structure is pasted into the completed gaps as a whole (``paste_structure``, step 5):
@@ -337,7 +339,9 @@ def render(
         if whole:
             canvas = _paste_structure(canvas, painter.filled, painter.labels, painter.lo, painter.hi, threads=t)
     if mask_like:
-        canvas = np.where(canvas >= 0.5 * (lo + hi), hi, lo).astype(np.float32)
+        canvas = _drop_foreign(
+            np.where(canvas >= 0.5 * (lo + hi), hi, lo).astype(np.float32), img, src_sk, tgt_sk, lo, hi
+        )
     if progress is not None:
         progress(len(targets) + 1, len(targets) + 1)
     if flat:
@@ -600,6 +604,28 @@ def _paste_structure(
     res: F32 = canvas.copy()
     _paste(res, _clip_channels(out.reshape(canvas.shape), lo, hi), filled)
     return res
+
+
+def _drop_foreign(canvas: F32, image: F32, source: Skeleton, target: Skeleton, lo: F32, hi: F32) -> F32:
+    """A ``canvas`` snapped to the two levels ``lo``, ``hi`` of ``image``, with the pieces of structure that the target structure does not
+    touch set to the background level.
+
+    A fragment disk holds whatever lay around its source branch: on a braided river or a delta
+    mask, pieces of neighbouring channels and of a cut coastline, pasted as separate islands.
+    The structure's level is the one the source structure mostly has in ``image``; a piece is
+    a connected component (8-neighbours) of that level, kept if it meets the target's own
+    mask (every edge drawn with its thickness).
+    """
+    mid = 0.5 * (lo + hi)
+    up = float((image[source.mask()] >= mid).all(axis=-1).mean()) >= 0.5
+    fg = (canvas >= mid).all(axis=-1) if up else (canvas < mid).all(axis=-1)
+    n, comp = cv2.connectedComponents(fg.astype(np.uint8), connectivity=8)
+    keep = np.zeros(n, bool)
+    keep[np.unique(comp[target.mask() & fg])] = True
+    drop = fg & ~keep[comp]
+    out: F32 = canvas.copy()
+    out[drop] = lo if up else hi
+    return out
 
 
 def _disk(shape: tuple[int, int], c: F64, r: float) -> tuple[slice, slice, NDArray[np.bool_], int, int]:
