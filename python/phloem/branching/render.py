@@ -618,7 +618,7 @@ def _drop_foreign(canvas: F32, image: F32, source: Skeleton, target: Skeleton, l
     """
     mid = 0.5 * (lo + hi)
     up = float((image[source.mask()] >= mid).all(axis=-1).mean()) >= 0.5
-    fg = (canvas >= mid).all(axis=-1) if up else (canvas < mid).all(axis=-1)
+    fg: NDArray[np.bool_] = np.asarray((canvas >= mid if up else canvas < mid).all(axis=-1))
     n, comp = cv2.connectedComponents(fg.astype(np.uint8), connectivity=8)
     keep = np.zeros(n, bool)
     keep[np.unique(comp[target.mask() & fg])] = True
