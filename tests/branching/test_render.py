@@ -79,6 +79,19 @@ def test_concurrent_painting_equals_painting_in_order() -> None:
         assert np.array_equal(r.choice, runs[0].choice) and np.array_equal(r.labels, runs[0].labels)
 
 
+@pytest.mark.parametrize("n_best", [1, 2])
+def test_fragment_choice_does_not_depend_on_the_input_contrast(n_best: int) -> None:
+    # issue 19: the colour term is measured in units of the input's range; on a terrain that
+    # spans 1 % of [0, 1] it used to be 10^4 times weaker, so the choice was by shape alone.
+    img, sk = channel_scene()
+    tgt = Skeleton([wavy_branch((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
+    kw = {"seed": 1, "n_best": n_best, "complete": False, "full_output": True}
+    full = render(img, sk, tgt, **kw)
+    faint = render(0.01 * img + 0.3, sk, tgt, **kw)
+    assert np.array_equal(full.choice, faint.choice)
+    assert not np.array_equal(full.choice, render(img, sk, tgt, omega_c=0.0, **kw).choice)  # C matters here
+
+
 def test_fragments_reaching_outside_valid_are_not_used() -> None:
     # The right third of the input is "frame" (value 5, outside `valid`); the source branch
     # runs through it. No pixel of it may reach the output, and a `valid` that leaves no

@@ -187,9 +187,10 @@ def render(
     """Synthesise an image of ``target_skeleton`` from fragments of ``image`` (§5).
 
     See the module docstring for the steps. The colour term is
-    ``C = k r² · mean_overlap ‖colour difference‖²`` (colours in [0, 1]): the paper's sum over
-    the overlap, rescaled so that it grows with the fragment like ``S`` does and a default
-    ``ω_C = 1`` balances the two on images of ordinary contrast. ``C`` is evaluated for the
+    ``C = k r² · mean_overlap ‖colour difference‖² / s²`` with ``s²`` the input's squared range
+    averaged over its channels: the paper's sum over the overlap, rescaled so that it grows
+    with the fragment like ``S`` does and a default ``ω_C = 1`` balances the two whatever the
+    input's contrast (an image spanning [0, 1] has ``s = 1``). ``C`` is evaluated for the
     ``max(4c, 8)`` fragments of smallest ``S`` only.
 
     Parameters
@@ -435,6 +436,10 @@ class _Painter:
         self.choice = np.zeros(len(targets), np.int64)
         self.mirrored = np.zeros(len(targets), bool)
         self.lo, self.hi = _channel_range(image)
+        # Colour differences in units of the input's range (C's weight is set for a full one):
+        # on a terrain spanning 1 % of [0, 1] the colour term would otherwise be off.
+        span2 = float(np.mean((self.hi - self.lo).astype(np.float64) ** 2))
+        self.contrast = 1.0 / span2 if span2 > 0 else 1.0
         self.clipped = np.array([_leaves_image(f, image.shape[:2]) for f in lib.frs], bool)
         self.crops: list[tuple[slice, slice, NDArray[np.bool_], int, int]] = []
         self.boxes = np.zeros((len(targets), 4), np.int64)
@@ -506,8 +511,9 @@ class _Painter:
         mx = maps[:, 0, 0, None] * rx + maps[:, 0, 1, None] * ry + centres[:, 0, None]
         my = maps[:, 1, 0, None] * rx + maps[:, 1, 1, None] * ry + centres[:, 1, None]
         vals = _sample(self.image, mx.astype(np.float32), my.astype(np.float32))
-        diff = (vals - painted[None]).reshape(len(ents), -1)  # (channel sums over a trailing
-        return np.asarray(o.omega_c * o.k * g.radius**2 * np.einsum("ij,ij->i", diff, diff) / len(oy))  # axis: slow)
+        diff = (vals - painted[None]).reshape(len(ents), -1)
+        w = o.omega_c * o.k * g.radius**2 * self.contrast
+        return np.asarray(w * np.einsum("ij,ij->i", diff, diff) / len(oy))  # (channel sums over a trailing axis: slow)
 
     def _warp(self, j: int, e: int, theta: float) -> F32:
         """Library entry ``e`` rotated by ``theta`` and deformed onto fragment ``j``'s crop (§5.3)."""
