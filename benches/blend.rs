@@ -39,6 +39,7 @@ fn poisson(c: &mut Criterion) {
             mask: &mask,
             offset: ((512 - n / 2) as i64, (512 - n / 2) as i64),
             fixed: None,
+            labels: None,
         };
         let params = BlendParams::default();
         let b = seamless(&input, &params).unwrap();

@@ -21,8 +21,9 @@ def _disk(n: int, r: float, cy: float | None = None, cx: float | None = None) ->
     return (yy - cy) ** 2 + (xx - cx) ** 2 < r * r
 
 
-def poisson_system(src, dst, mask, offset, mode="normal", fixed=None):
-    """Pérez Eq. 7 as the docstring of seamless states it, built pixel by pixel with scipy.
+def poisson_system(src, dst, mask, offset, mode="normal", fixed=None, labels=None):
+    """Pérez Eq. 7 as the docstring of seamless states it, built pixel by pixel with scipy
+    (with ``labels``: no source gradient between pixels of different labels).
 
     Returns A, b (n × C), and the (row, col) destination pixels of the unknowns.
     """
@@ -45,6 +46,9 @@ def poisson_system(src, dst, mask, offset, mode="normal", fixed=None):
     def g(yy, xx):  # source with its edge replicated, in destination coordinates
         return src[np.clip(yy - oy, 0, h - 1), np.clip(xx - ox, 0, w - 1)]
 
+    def lab(yy, xx):  # the labels, read like the source
+        return 0 if labels is None else labels[np.clip(yy - oy, 0, h - 1), np.clip(xx - ox, 0, w - 1)]
+
     uy, ux = np.nonzero(kind == 2)
     n = len(uy)
     index = -np.ones((H, W), int)
@@ -59,6 +63,7 @@ def poisson_system(src, dst, mask, offset, mode="normal", fixed=None):
         qy, qx = qy[ok], qx[ok]
         diag[p] += 1
         gs = g(uy[p], ux[p]) - g(qy, qx)
+        gs = np.where(np.asarray(lab(uy[p], ux[p]) == lab(qy, qx))[..., None], gs, 0.0)
         if mode == "mixed":
             ds = dst[uy[p], ux[p]] - dst[qy, qx]
             v = np.where(np.abs(ds) > np.abs(gs), ds, gs)
@@ -194,6 +199,35 @@ def test_fixed_pixels_keep_the_source_exactly(scene):
     # Without the constraint the colours drift towards dst there.
     free = seamless(src, dst, mask, off)
     assert np.abs(free[fy + off[0], fx + off[1]] - src[fy, fx]).max() > 1e-2
+
+
+@pytest.mark.parametrize("mode", ["normal", "mixed"])
+def test_labels_cut_the_guidance_between_labels(scene, mode):
+    # Three labels in stripes, a fourth around the region: the system with the source gradient
+    # zeroed across labels, assembled independently, is what the engine solves.
+    src, dst = scene
+    mask = _disk(90, 40)
+    labels = np.where(mask, np.arange(90)[None, :] // 30, -1).astype(np.int32)
+    out = seamless(src, dst, mask, (30, 40), mode=mode, labels=labels, tol=1e-8)
+    assert relative_residual(out, src, dst, mask, (30, 40), mode=mode, labels=labels) < 1e-6
+    # and it is not the plain paste
+    assert np.abs(out - seamless(src, dst, mask, (30, 40), mode=mode, tol=1e-8)).max() > 1e-2
+    # one label everywhere is the plain paste, bit for bit
+    one = seamless(src, dst, mask, (30, 40), mode=mode, labels=np.zeros((90, 90), np.int32))
+    assert np.array_equal(one, seamless(src, dst, mask, (30, 40), mode=mode))
+
+
+def test_labels_spread_the_level_steps_between_pieces():
+    # Two flat pieces at different levels, labelled apart and apart from the rest: the guidance
+    # is zero everywhere, so the paste takes the destination's level (a harmonic, here flat).
+    src = np.zeros((40, 40), np.float32)
+    src[:, 20:] = 0.8
+    labels = (np.arange(40)[None, :] >= 20).astype(np.int32) * np.ones((40, 1), np.int32) + 1
+    mask = np.zeros((40, 40), bool)
+    mask[5:35, 5:35] = True
+    labels[~mask] = 0
+    out = seamless(src, np.full((40, 40), 0.3, np.float32), mask, (0, 0), labels=labels, tol=1e-8)
+    assert np.abs(out - 0.3).max() < 1e-5
 
 
 def test_mixed_mode_takes_the_stronger_gradient(water):
@@ -402,6 +436,10 @@ def test_seamless_errors_name_the_argument(scene):
         seamless(src, dst, mask, (0, 0), tol=0.0)
     with pytest.raises(ValueError, match="^threads"):
         seamless(src, dst, mask, (0, 0), threads=0)
+    with pytest.raises(ValueError, match="^labels"):
+        seamless(src, dst, mask, (0, 0), labels=np.zeros((89, 90), np.int32))
+    with pytest.raises(TypeError, match="^labels"):
+        seamless(src, dst, mask, (0, 0), labels=np.zeros((90, 90), np.float32))
 
 
 def test_seamless_warns_when_it_stops_early(scene):

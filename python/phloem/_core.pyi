@@ -124,6 +124,7 @@ def seamless(
     max_iterations: int,
     fixed: NDArray[np.bool_] | None,
     threads: int | None,
+    labels: NDArray[np.int32] | None = None,
 ) -> tuple[NDArray[np.float32], int, float]: ...
 def interpolate_field(
     region: NDArray[np.bool_],

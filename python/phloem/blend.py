@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from . import _core
 from ._api import old_flag, renamed
-from ._validate import as_image, as_mask, check_int, check_threads, restore_ndim
+from ._validate import as_image, as_labels, as_mask, check_int, check_threads, restore_ndim
 
 __all__ = ["FieldResult", "SeamlessResult", "interpolate_field", "seamless"]
 
@@ -97,6 +97,7 @@ def seamless(
     *,
     mode: Literal["normal", "mixed"] = ...,
     fixed: Any = ...,
+    labels: Any = ...,
     tol: float = ...,
     max_iterations: int = ...,
     threads: int | None = ...,
@@ -111,6 +112,7 @@ def seamless(
     *,
     mode: Literal["normal", "mixed"] = ...,
     fixed: Any = ...,
+    labels: Any = ...,
     tol: float = ...,
     max_iterations: int = ...,
     threads: int | None = ...,
@@ -127,6 +129,7 @@ def seamless(
     *,
     mode: Literal["normal", "mixed"] = "normal",
     fixed: Any = None,
+    labels: Any = None,
     tol: float = 1e-6,
     max_iterations: int = 200,
     threads: int | None = None,
@@ -140,7 +143,8 @@ def seamless(
     4-neighbours of ``p`` inside ``dst`` and
 
     - ``v_pq = g_p − g_q`` with ``g`` the source (``mode="normal"``), or the one of the source
-      and destination differences with the larger magnitude (``mode="mixed"``, Eq. 13);
+      and destination differences with the larger magnitude (``mode="mixed"``, Eq. 13); with
+      ``labels``, the source difference is 0 between pixels of different labels;
     - ``f*_q`` is the destination value outside Ω (Dirichlet), and the source value at
       ``fixed`` pixels (the constraint of Sibbing et al. 2010, §5.3: the fragment keeps its
       colours where it has no neighbour);
@@ -165,6 +169,13 @@ def seamless(
         Guidance field (default ``"normal"``).
     fixed : (m, n) array_like of bool, optional
         Pixels of ``mask`` that keep their ``src`` values exactly.
+    labels : (m, n) array_like of int, optional
+        Guidance labels (default: none, one label): the guidance keeps the source's gradient
+        between two neighbours of the same label and is zero between different labels, also
+        across the border of the region (label the pixels outside it apart). Pasting several
+        pieces at once, e.g. fragments labelled by origin, this spreads their level
+        differences smoothly instead of keeping them as steps, and lets the region's border
+        take the destination's values.
     tol : float, optional
         Stop when ``‖b − A f‖ / ‖b‖ ≤ tol`` in every channel (default 1e-6).
     max_iterations : int, optional
@@ -207,6 +218,9 @@ def seamless(
         raise ValueError(f"dst: expected {s.shape[2]} channels like src, got {d.shape[2]}")
     m = as_mask(mask, "mask", s.shape[:2])
     fx = None if fixed is None else as_mask(fixed, "fixed", s.shape[:2])
+    lab = None if labels is None else as_labels(labels, "labels")
+    if lab is not None and lab.shape != s.shape[:2]:
+        raise ValueError(f"labels: expected shape {s.shape[:2]} like src, got {lab.shape}")
     if mode not in ("normal", "mixed"):
         raise ValueError(f"mode: expected 'normal' or 'mixed', got {mode!r}")
     t = _tol(tol)
@@ -220,6 +234,7 @@ def seamless(
         max_iterations=check_int(max_iterations, "max_iterations", 1),
         fixed=fx,
         threads=check_threads(threads),
+        labels=lab,
     )
     _converged(residual, t)
     image = restore_ndim(out, dst)

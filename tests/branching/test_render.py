@@ -8,7 +8,7 @@ import pytest
 
 import phloem
 from phloem.branching import Branch, Skeleton, render
-from phloem.branching.render import _displacement, _in_order
+from phloem.branching.render import _displacement, _drop_foreign, _in_order
 from phloem.testing import channel_scene, longest_path, shared_file, wavy_branch
 
 
@@ -79,6 +79,19 @@ def test_concurrent_painting_equals_painting_in_order() -> None:
         assert np.array_equal(r.choice, runs[0].choice) and np.array_equal(r.labels, runs[0].labels)
 
 
+@pytest.mark.parametrize("n_best", [1, 2])
+def test_fragment_choice_does_not_depend_on_the_input_contrast(n_best: int) -> None:
+    # issue 19: the colour term is measured in units of the input's range; on a terrain that
+    # spans 1 % of [0, 1] it used to be 10^4 times weaker, so the choice was by shape alone.
+    img, sk = channel_scene()
+    tgt = Skeleton([wavy_branch((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
+    kw = {"seed": 1, "n_best": n_best, "complete": False, "full_output": True}
+    full = render(img, sk, tgt, **kw)
+    faint = render(0.01 * img + 0.3, sk, tgt, **kw)
+    assert np.array_equal(full.choice, faint.choice)
+    assert not np.array_equal(full.choice, render(img, sk, tgt, omega_c=0.0, **kw).choice)  # C matters here
+
+
 def test_fragments_reaching_outside_valid_are_not_used() -> None:
     # The right third of the input is "frame" (value 5, outside `valid`); the source branch
     # runs through it. No pixel of it may reach the output, and a `valid` that leaves no
@@ -96,14 +109,49 @@ def test_fragments_reaching_outside_valid_are_not_used() -> None:
         render(img, sk, tgt, valid=np.zeros(img.shape[:2], bool))
 
 
-def test_match_borders_default_is_off_for_masks_only() -> None:
+def test_paste_structure_default_is_off_for_masks_only() -> None:
     img, sk = channel_scene()
     tgt = Skeleton([wavy_branch((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
-    grey = [render(img, sk, tgt, seed=2, match_borders=m) for m in (None, True, False)]
+    grey = [render(img, sk, tgt, seed=2, paste_structure=m) for m in (None, True, False)]
     assert np.array_equal(grey[0], grey[1]) and not np.array_equal(grey[0], grey[2])
+    # match_borders follows: off under the structure paste, on without it
+    assert np.array_equal(grey[0], render(img, sk, tgt, seed=2, match_borders=False))
+    assert np.array_equal(grey[2], render(img, sk, tgt, seed=2, paste_structure=False, match_borders=True))
     mask = np.where(sk.mask(), 1.0, 0.0).astype(np.float32)
-    masks = [render(mask, sk, tgt, seed=2, match_borders=m) for m in (None, False)]
+    masks = [
+        render(mask, sk, tgt, seed=2, paste_structure=m, match_borders=b) for m, b in ((None, None), (False, False))
+    ]
     assert np.array_equal(masks[0], masks[1])
+    with pytest.raises(ValueError, match="^paste_structure"):
+        render(img, sk, tgt, paste_structure=True, complete=False)
+
+
+def _steps(out: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Absolute 4-neighbour differences across the structure's border and between gap pixels."""
+    f = labels >= 0
+    d = (np.abs(np.diff(out, axis=1)), np.abs(np.diff(out, axis=0)))
+    border = np.concatenate([d[0][f[:, 1:] != f[:, :-1]], d[1][f[1:] != f[:-1]]])
+    gap = np.concatenate([d[0][~f[:, 1:] & ~f[:, :-1]], d[1][~f[1:] & ~f[:-1]]])
+    return border, gap
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_paste_structure_leaves_no_disk_rims_under_uneven_light(seed: int) -> None:
+    # issue 19: the input is lit from one side (a ramp of half its range), so fragments from
+    # its two ends differ in level by up to 0.5; pasted into the completed gaps as a whole,
+    # their rims are no steeper than the gaps themselves, and the channel stays dark.
+    img, sk = channel_scene()
+    lit = np.clip(img + np.linspace(-0.25, 0.25, img.shape[1], dtype=np.float32)[None, :], 0, 1)
+    tgt = Skeleton([wavy_branch((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
+    core = tgt.mask()
+    res = {ps: render(lit, sk, tgt, seed=seed, paste_structure=ps, full_output=True) for ps in (True, False)}
+    border, gap = _steps(res[True].image, res[True].labels)
+    assert float(border.mean()) < 1.2 * float(gap.mean()), (border.mean(), gap.mean())
+    assert float(np.percentile(border, 99)) < 0.15
+    assert float(np.median(res[True].image[core])) < 0.25
+    # the same without it: the rims show (the test sees the difference)
+    border, gap = _steps(res[False].image, res[False].labels)
+    assert float(border.mean()) > 2.5 * float(gap.mean())
 
 
 def test_a_mask_renders_as_a_mask() -> None:
@@ -116,6 +164,42 @@ def test_a_mask_renders_as_a_mask() -> None:
         assert set(np.unique(out).tolist()) <= {np.float32(lo), np.float32(hi)}
         # the structure is there, as wide as the target's (thickness 4 to 3: about 2 r = 7 px)
         assert 4 <= (out[:, 90] == np.float32(hi)).sum() <= 12
+
+
+def test_a_mask_output_holds_no_pieces_the_target_does_not_touch() -> None:
+    # issue 19: a second channel runs 11 px beside the main one, within the fragments' reach
+    # (3 x thickness): their disks carry pieces of it, which used to stand as islands.
+    _, sk = channel_scene()
+    main = sk.branches[0]
+    side = np.zeros(sk.shape, np.uint8)
+    cv2.polylines(side, [np.round(main.points[60:150] + [0, 11]).astype(np.int32)], False, 1, thickness=3)
+    mask = np.where(sk.mask() | (side > 0), 1.0, 0.0).astype(np.float32)
+    tgt = Skeleton([wavy_branch((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
+    touch = tgt.mask()
+    islands = 0
+    for seed in range(3):
+        res = render(mask, sk, tgt, seed=seed, full_output=True)
+        n, comp = cv2.connectedComponents((res.image > 0.5).astype(np.uint8), connectivity=8)
+        assert set(np.unique(comp[touch & (res.image > 0.5)]).tolist()) == set(range(1, n))
+        # the painted structure before the snap did hold pieces apart from the target's
+        n0, comp0 = cv2.connectedComponents((res.structure > 0.5).astype(np.uint8), connectivity=8)
+        islands += n0 - 1 - len(set(np.unique(comp0[touch & (res.structure > 0.5)]).tolist()))
+    assert islands > 0
+
+
+def test_drop_foreign_keeps_touched_pieces_of_either_polarity() -> None:
+    tgt = Skeleton([Branch([[5, 20], [35, 20]], 2.0)], (40, 60))
+    for struct, bg in ((1.0, 0.0), (0.1, 0.9)):
+        canvas = np.full((40, 60, 1), bg, np.float32)
+        canvas[17:24, 2:40] = struct  # along the target, and running past its end
+        canvas[30:34, 45:55] = struct  # an island
+        canvas[2:5, 2:5] = struct  # another
+        source = Skeleton([Branch([[5, 20], [35, 20]], 2.0)], (40, 60))
+        lo, hi = np.float32([min(struct, bg)]), np.float32([max(struct, bg)])
+        out = _drop_foreign(canvas, canvas, source, tgt, lo, hi)
+        want = np.full_like(canvas, bg)
+        want[17:24, 2:40] = struct
+        assert np.array_equal(out, want)
 
 
 def test_fragments_leaving_the_image_are_not_pasted() -> None:

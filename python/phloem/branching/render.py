@@ -18,6 +18,10 @@ paints the target structure with disk-shaped fragments of the input:
    Before a sub-branch starts, the disk of its furcation fragment is deleted from the output
    and repainted by a furcation fragment (Fig. 6).
 4. The gaps between the branches are completed (§5.4, :mod:`.gaps`).
+5. The whole structure is pasted into the completed gaps in the gradient domain
+   (``paste_structure``, not two-level inputs): each fragment keeps its own gradients, with
+   none between fragments or towards the gaps, so fragments from differently lit or high
+   parts of the input meet each other and the background without a disk-shaped step.
 
 Beyond the paper (each needed for clean junctions, see the tests):
 
@@ -26,10 +30,15 @@ Beyond the paper (each needed for clean junctions, see the tests):
   their colours (a colour seam cut the sub-branch off, the Poisson boundary faded it out);
 - source branch fragments that hold part of another branch (a sub-branch's start) are left
   to the furcation fragments: pasted along a plain target branch they left stubs;
+- a two-level output keeps only the pieces of structure that the target touches: fragment
+  disks carry pieces of neighbouring channels, which stood as islands;
 - furcation fragments are also offered mirrored (``mirror=True``), since with rotations only
   a target sub-branch on the other side of its parent may have no match;
-- the completed gaps are pasted in the gradient domain against the structure
-  (``match_borders``), as §5.3 does for the fragments.
+- the structure is pasted into the completed gaps as a whole (``paste_structure``, step 5):
+  §5.3's per-fragment paste keeps each fragment's level where it borders the unpainted gaps,
+  so on a terrain or an unevenly lit photo every disk showed; without the structure paste the
+  completed gaps are instead pasted against the structure (``match_borders``), which leaves
+  large steps alone.
 """
 
 from __future__ import annotations
@@ -108,6 +117,7 @@ def render(
     mirror: bool = ...,
     complete: bool = ...,
     match_borders: bool | None = ...,
+    paste_structure: bool | None = ...,
     valid: Any = ...,
     patch_size: int = ...,
     completion_iterations: int = ...,
@@ -135,6 +145,7 @@ def render(
     mirror: bool = ...,
     complete: bool = ...,
     match_borders: bool | None = ...,
+    paste_structure: bool | None = ...,
     valid: Any = ...,
     patch_size: int = ...,
     completion_iterations: int = ...,
@@ -164,6 +175,7 @@ def render(
     mirror: bool = True,
     complete: bool = True,
     match_borders: bool | None = None,
+    paste_structure: bool | None = None,
     valid: Any = None,
     patch_size: int = 7,
     completion_iterations: int = 4,
@@ -175,9 +187,10 @@ def render(
     """Synthesise an image of ``target_skeleton`` from fragments of ``image`` (§5).
 
     See the module docstring for the steps. The colour term is
-    ``C = k r² · mean_overlap ‖colour difference‖²`` (colours in [0, 1]): the paper's sum over
-    the overlap, rescaled so that it grows with the fragment like ``S`` does and a default
-    ``ω_C = 1`` balances the two on images of ordinary contrast. ``C`` is evaluated for the
+    ``C = k r² · mean_overlap ‖colour difference‖² / s²`` with ``s²`` the input's squared range
+    averaged over its channels: the paper's sum over the overlap, rescaled so that it grows
+    with the fragment like ``S`` does and a default ``ω_C = 1`` balances the two whatever the
+    input's contrast (an image spanning [0, 1] has ``s = 1``). ``C`` is evaluated for the
     ``max(4c, 8)`` fragments of smallest ``S`` only.
 
     Parameters
@@ -221,8 +234,17 @@ def render(
         structure without a colour step (only the smooth part of the step, made of small
         steps: a branch cut off at a disk's edge is left alone). Without it every fragment
         disk of an unevenly lit photo or a terrain shows as a lighter or darker circle.
-        Default (None): on, except for two-level images such as masks, which have no
-        lighting to match. Needs ``photometric``.
+        Default (None): on where ``paste_structure`` is off, except for two-level images
+        such as masks, which have no lighting to match. Needs ``photometric``.
+    paste_structure : bool, optional
+        After the gap completion, paste the whole painted structure into the completed gaps
+        in the gradient domain: one Poisson solve over every fragment pixel whose guidance is
+        each fragment's own gradients, zero between two fragments and at the structure's
+        border, with the completed gaps as boundary values. Fragments from differently lit
+        parts of a photo or from different heights of a terrain then meet each other and the
+        background without steps: no disks show, and the structure keeps its own relief.
+        Default (None): on, except for two-level images (a mask has no ramps to blend and stays
+        two-level). Needs ``photometric`` and ``complete``.
     valid : (H, W) array_like of bool, optional
         Where ``image`` shows real content (default everywhere), e.g. the photo inside the
         frame of :func:`rectify` or a fundus photo's disc: only fragments that lie wholly
@@ -297,6 +319,11 @@ def render(
     mask_like = two_level(img, lo, hi)
     if mask_like:
         opts = replace(opts, photometric=False)
+    whole = photometric and not mask_like and complete if paste_structure is None else bool(paste_structure)
+    if whole and not (photometric and complete):
+        raise ValueError(
+            "paste_structure: needs photometric=True and complete=True (it pastes into the completed gaps)"
+        )
     sources, targets, lib = _cover_both(src_sk, tgt_sk, ok, lam_f, rf, k, mirror=mirror, keep=max(3, c_n))
     painter = _Painter(img, tgt_sk, targets, lib, opts, draws=rng.random(len(targets)))
     _in_order(painter.boxes, painter.paint, workers=t if t is not None else _core.default_threads(), progress=progress)
@@ -307,11 +334,15 @@ def render(
         canvas = fill_gaps(
             canvas, painter.filled, img, src_sk, valid=ok, radius_factor=rf,
             radius=float(np.median([g.radius for g in targets])), lo=painter.lo, hi=painter.hi,
-            match_borders=match_borders, photometric=photometric and not mask_like, patch_size=p, iterations=c_iters,
-            seed=s, threads=t,
+            match_borders=match_borders if match_borders is not None else not whole, photometric=photometric and not mask_like,
+            patch_size=p, iterations=c_iters, seed=s, threads=t,
         )  # fmt: skip
+        if whole:
+            canvas = _paste_structure(canvas, painter.filled, painter.labels, painter.lo, painter.hi, threads=t)
     if mask_like:
-        canvas = np.where(canvas >= 0.5 * (lo + hi), hi, lo).astype(np.float32)
+        canvas = _drop_foreign(
+            np.where(canvas >= 0.5 * (lo + hi), hi, lo).astype(np.float32), img, src_sk, tgt_sk, lo, hi
+        )
     if progress is not None:
         progress(len(targets) + 1, len(targets) + 1)
     if flat:
@@ -405,6 +436,10 @@ class _Painter:
         self.choice = np.zeros(len(targets), np.int64)
         self.mirrored = np.zeros(len(targets), bool)
         self.lo, self.hi = _channel_range(image)
+        # Colour differences in units of the input's range (C's weight is set for a full one):
+        # on a terrain spanning 1 % of [0, 1] the colour term would otherwise be off.
+        span2 = float(np.mean((self.hi - self.lo).astype(np.float64) ** 2))
+        self.contrast = 1.0 / span2 if span2 > 0 else 1.0
         self.clipped = np.array([_leaves_image(f, image.shape[:2]) for f in lib.frs], bool)
         self.crops: list[tuple[slice, slice, NDArray[np.bool_], int, int]] = []
         self.boxes = np.zeros((len(targets), 4), np.int64)
@@ -476,8 +511,9 @@ class _Painter:
         mx = maps[:, 0, 0, None] * rx + maps[:, 0, 1, None] * ry + centres[:, 0, None]
         my = maps[:, 1, 0, None] * rx + maps[:, 1, 1, None] * ry + centres[:, 1, None]
         vals = _sample(self.image, mx.astype(np.float32), my.astype(np.float32))
-        diff = (vals - painted[None]).reshape(len(ents), -1)  # (channel sums over a trailing
-        return np.asarray(o.omega_c * o.k * g.radius**2 * np.einsum("ij,ij->i", diff, diff) / len(oy))  # axis: slow)
+        diff = (vals - painted[None]).reshape(len(ents), -1)
+        w = o.omega_c * o.k * g.radius**2 * self.contrast
+        return np.asarray(w * np.einsum("ij,ij->i", diff, diff) / len(oy))  # (channel sums over a trailing axis: slow)
 
     def _warp(self, j: int, e: int, theta: float) -> F32:
         """Library entry ``e`` rotated by ``theta`` and deformed onto fragment ``j``'s crop (§5.3)."""
@@ -554,6 +590,48 @@ class _Painter:
         # the output within the input's range. (Basic slices: views of canvas.)
         res = _clip_channels(res.reshape(*dst.shape), self.lo, self.hi)
         _paste(self.canvas[ys, xs][bx], res, new[bx])
+
+
+def _paste_structure(
+    canvas: F32, filled: NDArray[np.bool_], labels: NDArray[np.int32], lo: F32, hi: F32, *, threads: int | None
+) -> F32:
+    """Gradient-domain paste of the whole structure into the completed gaps (``paste_structure``).
+
+    A custom guidance field on the Poisson engine (:func:`phloem.blend.seamless` with
+    ``labels``): each fragment's gradients inside it, none across fragments or towards the
+    gaps, so every level difference between fragments and against the background is spread
+    over the fragments instead of showing as a step at a disk's rim.
+    """
+    if not filled.any():
+        return canvas
+    lab = np.where(filled, labels, -1).astype(np.int32)
+    # tol 1e-4 as for the gaps: the levels move by up to the image's range, far above that.
+    out = seamless(canvas, canvas, filled, (0, 0), labels=lab, tol=1e-4, threads=threads)
+    res: F32 = canvas.copy()
+    _paste(res, _clip_channels(out.reshape(canvas.shape), lo, hi), filled)
+    return res
+
+
+def _drop_foreign(canvas: F32, image: F32, source: Skeleton, target: Skeleton, lo: F32, hi: F32) -> F32:
+    """A ``canvas`` snapped to the two levels ``lo``, ``hi`` of ``image``, with the pieces of structure that the target structure does not
+    touch set to the background level.
+
+    A fragment disk holds whatever lay around its source branch: on a braided river or a delta
+    mask, pieces of neighbouring channels and of a cut coastline, pasted as separate islands.
+    The structure's level is the one the source structure mostly has in ``image``; a piece is
+    a connected component (8-neighbours) of that level, kept if it meets the target's own
+    mask (every edge drawn with its thickness).
+    """
+    mid = 0.5 * (lo + hi)
+    up = float((image[source.mask()] >= mid).all(axis=-1).mean()) >= 0.5
+    fg: NDArray[np.bool_] = np.asarray((canvas >= mid if up else canvas < mid).all(axis=-1))
+    n, comp = cv2.connectedComponents(fg.astype(np.uint8), connectivity=8)
+    keep = np.zeros(n, bool)
+    keep[np.unique(comp[target.mask() & fg])] = True
+    drop = fg & ~keep[comp]
+    out: F32 = canvas.copy()
+    out[drop] = lo if up else hi
+    return out
 
 
 def _disk(shape: tuple[int, int], c: F64, r: float) -> tuple[slice, slice, NDArray[np.bool_], int, int]:

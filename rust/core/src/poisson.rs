@@ -12,7 +12,10 @@
 //!   `f*_p − f*_q` with the larger magnitude (mixed gradients, Eq. 13), per channel;
 //! - `f*_q` the destination value where `q` is outside Ω (Dirichlet), the source value where
 //!   `q` is a `fixed` pixel (Dirichlet, the §5.3 constraint);
-//! - neighbours outside the destination dropped from `N_p` (Neumann: zero normal derivative).
+//! - neighbours outside the destination dropped from `N_p` (Neumann: zero normal derivative);
+//! - with guidance `labels`, `v_pq = 0` where `p` and `q` carry different labels (a custom
+//!   guidance field: the source's own gradients inside each label, none across; pasting
+//!   several fragments at once, their level differences are spread out instead of kept).
 //!
 //! Source values are read with the source's edge replicated, so a gradient across the
 //! source's border is zero.
@@ -86,6 +89,10 @@ pub struct BlendInput<'a> {
     pub offset: (i64, i64),
     /// Optional `h × w` pixels of the mask that keep their source values.
     pub fixed: Option<&'a [bool]>,
+    /// Optional `h × w` guidance labels in source coordinates (read with the source's edge
+    /// replicated): the source gradient between two 4-neighbours counts only where their
+    /// labels are equal, and is zero across labels.
+    pub labels: Option<&'a [i32]>,
 }
 
 /// Output of [`seamless`].
@@ -315,6 +322,8 @@ struct Values<const L: usize> {
     /// Destination (0 outside it). Normal cloning reads it only at Dirichlet destination
     /// cells, so only those are filled then.
     d: Vec<[f32; L]>,
+    /// Guidance labels on the grid (empty without labels).
+    lab: Vec<i32>,
 }
 
 impl<const L: usize> Values<L> {
@@ -354,7 +363,24 @@ impl<const L: usize> Values<L> {
                 }
             }
         });
-        Self { g, d }
+        let lab = input.labels.map_or_else(Vec::new, |l| {
+            let mut lab = vec![0i32; h * w];
+            rows_mut(&mut lab, w, |gy, row| {
+                let sy = (gy as i64 + grid.y0 - oy).clamp(0, s.h as i64 - 1) as usize;
+                for (gx, v) in row.iter_mut().enumerate() {
+                    let sx = (gx as i64 + grid.x0 - ox).clamp(0, s.w as i64 - 1) as usize;
+                    *v = l[sy * s.w + sx];
+                }
+            });
+            lab
+        });
+        Self { g, d, lab }
+    }
+
+    /// Whether the guidance between grid cells `p` and `q` is cut (different labels).
+    #[inline]
+    fn cut(&self, p: usize, q: usize) -> bool {
+        !self.lab.is_empty() && self.lab[p] != self.lab[q]
     }
 
     /// Right-hand side of the row of unknown `p` for the cell kinds `kind`, as `(b_f, b_h)`:
@@ -369,8 +395,11 @@ impl<const L: usize> Values<L> {
                 continue;
             }
             let (gq, fq) = (self.g[q], self.d[q]);
+            let cut = self.cut(p, q);
             for c in 0..L {
-                let gs = f64::from(gp[c]) - f64::from(gq[c]);
+                // `g_p − g_q` is what the unknown `h = f − g` carries; the guidance may differ.
+                let gd = f64::from(gp[c]) - f64::from(gq[c]);
+                let gs = if cut { 0.0 } else { gd };
                 let v = match mode {
                     Mode::Normal => gs,
                     Mode::Mixed => {
@@ -383,7 +412,7 @@ impl<const L: usize> Values<L> {
                     }
                 };
                 bf[c] += v;
-                bh[c] += v - gs;
+                bh[c] += v - gd;
                 if kq != UNK {
                     let val = if kq == FIX { gq[c] } else { fq[c] };
                     bf[c] += f64::from(val);
@@ -404,29 +433,9 @@ pub fn seamless(input: &BlendInput<'_>, params: &BlendParams) -> Result<Blended>
             format!("expected {} channels like src, got {}", src.c, dst.c),
         ));
     }
-    if input.mask.len() != src.h * src.w {
-        return Err(invalid(
-            "mask",
-            format!(
-                "expected {}×{} values like src, got {}",
-                src.h,
-                src.w,
-                input.mask.len()
-            ),
-        ));
-    }
+    like_src("mask", input.mask.len(), src)?;
     if let Some(f) = input.fixed {
-        if f.len() != src.h * src.w {
-            return Err(invalid(
-                "fixed",
-                format!(
-                    "expected {}×{} values like src, got {}",
-                    src.h,
-                    src.w,
-                    f.len()
-                ),
-            ));
-        }
+        like_src("fixed", f.len(), src)?;
         if let Some(i) = (0..f.len()).find(|&i| f[i] && !input.mask[i]) {
             return Err(invalid(
                 "fixed",
@@ -437,6 +446,9 @@ pub fn seamless(input: &BlendInput<'_>, params: &BlendParams) -> Result<Blended>
                 ),
             ));
         }
+    }
+    if let Some(l) = input.labels {
+        like_src("labels", l.len(), src)?;
     }
     if !(params.tol.is_finite() && params.tol > 0.0) {
         return Err(invalid(
@@ -487,6 +499,17 @@ pub fn seamless(input: &BlendInput<'_>, params: &BlendParams) -> Result<Blended>
         residual,
         unknowns: mg.levels[0].n,
     })
+}
+
+/// Fails (naming `name`) unless `len` is one value per pixel of `src`.
+fn like_src(name: &'static str, len: usize, src: &Image<'_>) -> Result<()> {
+    if len == src.h * src.w {
+        return Ok(());
+    }
+    Err(invalid(
+        name,
+        format!("expected {}×{} values like src, got {len}", src.h, src.w),
+    ))
 }
 
 /// A copy of `img`'s values, failing (naming `name`) at the first non-finite one.
@@ -554,6 +577,8 @@ fn solve_group<const L: usize>(
                 && kind[p - 1] == UNK
                 && kind[p + 1] == UNK
                 && kind[p + w] == UNK
+                && !(vals.cut(p, p - w) || vals.cut(p, p - 1) || vals.cut(p, p + 1))
+                && !vals.cut(p, p + w)
             {
                 // All neighbours unknown: b_h is 0 and b_f the Laplacian of g (the sums of
                 // `Values::rhs`, in its order).
@@ -771,6 +796,7 @@ mod tests {
             mask,
             offset: off,
             fixed: None,
+            labels: None,
         };
         seamless(
             &input,
@@ -846,6 +872,121 @@ mod tests {
         assert!(b.residual < 1e-6);
     }
 
+    /// The user's system solved by Gauss–Seidel, straight from its definition: for every mask
+    /// pixel `p`, `Σ_q (f_p − f_q) = Σ_q v_pq` over the 4-neighbours `q` inside `dst`, with
+    /// `v_pq = g_p − g_q` between equal labels and 0 across, `f_q = dst` outside the mask.
+    fn brute_force(g: &[f32], d: &[f32], n: usize, mask: &[bool], lab: &[i32]) -> Vec<f64> {
+        let mut f: Vec<f64> = d.iter().map(|&v| f64::from(v)).collect();
+        for _ in 0..20_000 {
+            for p in 0..n * n {
+                if !mask[p] {
+                    continue;
+                }
+                let (y, x) = (p / n, p % n);
+                let (mut deg, mut sum) = (0.0, 0.0);
+                for (qy, qx) in [
+                    (y.wrapping_sub(1), x),
+                    (y + 1, x),
+                    (y, x.wrapping_sub(1)),
+                    (y, x + 1),
+                ] {
+                    if qy >= n || qx >= n {
+                        continue;
+                    }
+                    let q = qy * n + qx;
+                    deg += 1.0;
+                    let v = if lab[p] == lab[q] {
+                        f64::from(g[p]) - f64::from(g[q])
+                    } else {
+                        0.0
+                    };
+                    sum += f[q] + v;
+                }
+                f[p] = sum / deg;
+            }
+        }
+        f
+    }
+
+    #[test]
+    fn labels_cut_the_guidance_as_the_brute_force_solve_does() {
+        let n = 16;
+        let src = img(n, n, 1, |y, x, _| ((y * 7 + x * 13) % 17) as f32 / 17.0);
+        let dst = img(n, n, 1, |y, x, _| 0.2 + 0.01 * (y + 2 * x) as f32);
+        // Three labels in blocks, one of them also outside the mask; the mask touches the
+        // border on the left (Neumann there).
+        let lab: Vec<i32> = (0..n * n)
+            .map(|i| i32::from(i / n >= 8) + i32::from(i % n >= 10))
+            .collect();
+        let mask: Vec<bool> = (0..n * n)
+            .map(|i| (1..n - 2).contains(&(i / n)) && i % n < n - 3)
+            .collect();
+        let input = BlendInput {
+            src: Image::new("src", &src, n, n, 1).unwrap(),
+            dst: Image::new("dst", &dst, n, n, 1).unwrap(),
+            mask: &mask,
+            offset: (0, 0),
+            fixed: None,
+            labels: Some(&lab),
+        };
+        let params = BlendParams {
+            tol: 1e-10,
+            ..BlendParams::default()
+        };
+        let b = seamless(&input, &params).unwrap();
+        let want = brute_force(&src, &dst, n, &mask, &lab);
+        for (p, (o, e)) in b.image.iter().zip(&want).enumerate() {
+            assert!((f64::from(*o) - e).abs() < 1e-5, "pixel {p}: {o} vs {e}");
+        }
+        // Without labels the same solve keeps every source gradient: a different image.
+        let plain = seamless(
+            &BlendInput {
+                labels: None,
+                ..input
+            },
+            &params,
+        )
+        .unwrap();
+        assert!(plain
+            .image
+            .iter()
+            .zip(&b.image)
+            .any(|(a, c)| (a - c).abs() > 0.01));
+    }
+
+    #[test]
+    fn a_step_between_labels_is_removed() {
+        // Two flat halves with a step between them, pasted into a flat destination: with the
+        // halves labelled apart the guidance is zero everywhere and the paste is flat.
+        let n = 12;
+        let src = img(
+            n,
+            n,
+            2,
+            |_, x, c| if x < 6 { 0.1 } else { 0.9 + 0.01 * c as f32 },
+        );
+        let dst = vec![0.4f32; n * n * 2];
+        let lab: Vec<i32> = (0..n * n).map(|i| i32::from(i % n >= 6)).collect();
+        let mask: Vec<bool> = (0..n * n)
+            .map(|i| (2..n - 2).contains(&(i / n)) && (2..n - 2).contains(&(i % n)))
+            .collect();
+        let b = seamless(
+            &BlendInput {
+                src: Image::new("src", &src, n, n, 2).unwrap(),
+                dst: Image::new("dst", &dst, n, n, 2).unwrap(),
+                mask: &mask,
+                offset: (0, 0),
+                fixed: None,
+                labels: Some(&lab),
+            },
+            &BlendParams::default(),
+        )
+        .unwrap();
+        for v in &b.image {
+            assert!((v - 0.4).abs() < 1e-5, "{v}");
+        }
+    }
+
     #[test]
     fn errors_name_the_argument() {
         let src = vec![0.0f32; 16];
@@ -857,6 +998,7 @@ mod tests {
             mask: &mask,
             offset: (100, 0),
             fixed: None,
+            labels: None,
         };
         let e = seamless(&input, &BlendParams::default()).unwrap_err();
         assert!(e.to_string().starts_with("mask:"), "{e}");
@@ -885,5 +1027,16 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().starts_with("fixed:"), "{e}");
+        let short = vec![0i32; 15];
+        let e = seamless(
+            &BlendInput {
+                labels: Some(&short),
+                offset: (0, 0),
+                ..input
+            },
+            &BlendParams::default(),
+        )
+        .unwrap_err();
+        assert!(e.to_string().starts_with("labels:"), "{e}");
     }
 }

@@ -12,7 +12,7 @@ use crate::errors::{not_contiguous, opt_slice, to_py};
 type Out<'py> = (Bound<'py, PyArray3<f32>>, usize, f64);
 
 #[pyfunction]
-#[pyo3(name = "seamless", signature = (src, dst, mask, offset, *, mixed, tol, max_iterations, fixed, threads))]
+#[pyo3(name = "seamless", signature = (src, dst, mask, offset, *, mixed, tol, max_iterations, fixed, threads, labels=None))]
 pub fn seamless_py<'py>(
     py: Python<'py>,
     src: PyReadonlyArray3<'py, f32>,
@@ -24,6 +24,7 @@ pub fn seamless_py<'py>(
     max_iterations: usize,
     fixed: Option<PyReadonlyArray2<'py, bool>>,
     threads: Option<usize>,
+    labels: Option<PyReadonlyArray2<'py, i32>>,
 ) -> PyResult<Out<'py>> {
     let input = BlendInput {
         src: image("src", &src)?,
@@ -31,6 +32,7 @@ pub fn seamless_py<'py>(
         mask: mask.as_slice().map_err(not_contiguous("mask"))?,
         offset,
         fixed: opt_slice("fixed", fixed.as_ref())?,
+        labels: opt_slice("labels", labels.as_ref())?,
     };
     let params = BlendParams {
         mode: if mixed { Mode::Mixed } else { Mode::Normal },
