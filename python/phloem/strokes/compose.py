@@ -22,6 +22,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage  # type: ignore[import-untyped]
@@ -139,6 +140,14 @@ def compose(
     return Composite(rgba, labels, energy)
 
 
+def _depth(inside: NDArray[np.bool_]) -> F32:
+    """Exact Euclidean distance (px) from every pixel to the nearest pixel not ``inside``;
+    very large where the box holds none (the object goes on beyond it). OpenCV's transform,
+    3× faster than SciPy's here, which also puts a phantom edge before the first corner of a
+    box that is all inside."""
+    return np.asarray(cv2.distanceTransform(inside.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE))
+
+
 def _opaque_wins(
     a_alpha: F32,
     b_alpha: F32,
@@ -157,9 +166,9 @@ def _opaque_wins(
     if not only_a.any() and not only_b.any():
         return seeds
     if only_a.any():
-        only_a &= ndimage.distance_transform_edt(a_in) > SOLID * a_half
+        only_a &= _depth(a_in) > SOLID * a_half
     if only_b.any():
-        only_b &= ndimage.distance_transform_edt(b_in) > SOLID * b_half
+        only_b &= _depth(b_in) > SOLID * b_half
     if not only_a.any() and not only_b.any():
         return seeds
     out = np.zeros(region.shape, np.uint8) if seeds is None else seeds.copy()
@@ -198,7 +207,7 @@ def _footprint_depth(pieces: list[Piece], size: tuple[int, int]) -> F32:
     if len(rows):
         # The union's box with a ring of one pixel: the canvas's edge stays inside, as on the canvas.
         box = (slice(max(0, rows.min() - 1), rows.max() + 2), slice(max(0, cols.min() - 1), cols.max() + 2))
-        depth[box] = ndimage.distance_transform_edt(union[box])
+        depth[box] = _depth(union[box])
     return depth
 
 
@@ -232,7 +241,7 @@ def _leaving(
     for x, y in at:
         near |= (xx - x) ** 2 + (yy - y) ** 2 <= (2 * reach) ** 2
     other &= near
-    depth = ndimage.distance_transform_edt(parent)
+    depth = _depth(parent)
     rim = other & (depth <= RIM * reach) & (own > RIM * half[k])
     alone = b_mask & ~a_mask
     parts, _ = ndimage.label(rim | alone, structure=np.ones((3, 3), bool))
