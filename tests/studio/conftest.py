@@ -7,12 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-import phloem
-
-pytest.importorskip("fastapi", reason="the studio extra (fastapi) is not installed")
 from fastapi.testclient import TestClient
 
+import phloem
 from phloem.studio import Project, create_app
 
 TOKEN = "test-token"

@@ -9,6 +9,7 @@ draws strokes and paints label maps on canvases, saves them as the same files th
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import sys
 import webbrowser
@@ -80,4 +81,6 @@ def serve(
     if open_browser:
         webbrowser.open(url)
     server = uvicorn.Server(uvicorn.Config(app, log_level="warning"))
-    server.run(sockets=[sock])
+    with contextlib.suppress(KeyboardInterrupt):  # uvicorn shuts down cleanly, then re-raises the Ctrl-C
+        server.run(sockets=[sock])
+    print("phloem studio: stopped", file=out)

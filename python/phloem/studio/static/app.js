@@ -112,11 +112,11 @@ for (const b of document.querySelectorAll("#tabs button")) {
   };
 }
 
-// Pointer position in the canvas's own pixels (it may be shown scaled).
+// Pointer position in the canvas's own pixels (it may be shown scaled; its border is not drawn on).
 function canvasPoint(canvas, ev) {
   const r = canvas.getBoundingClientRect();
-  const x = ((ev.clientX - r.left) * canvas.width) / r.width;
-  const y = ((ev.clientY - r.top) * canvas.height) / r.height;
+  const x = ((ev.clientX - r.left - canvas.clientLeft) * canvas.width) / canvas.clientWidth;
+  const y = ((ev.clientY - r.top - canvas.clientTop) * canvas.height) / canvas.clientHeight;
   return [Math.min(Math.max(x, 0), canvas.width - 1), Math.min(Math.max(y, 0), canvas.height - 1)];
 }
 
