@@ -135,6 +135,21 @@ def _wait_message(browser: Any, element_id: str, text: str) -> str:
     return str(WebDriverWait(browser, 60).until(ready))
 
 
+def _run_and_show(browser: Any, button: str, ws: str, shot: str) -> str:
+    """Click ``button``, wait for the job's result to show in the workspace ``ws``, save a screenshot;
+    the page's message (it names the result file)."""
+    browser.find_element(By.ID, button).click()
+    message = _wait_message(browser, f"{ws}-msg", "sidecar")
+    WebDriverWait(browser, 30).until(
+        lambda d: d.execute_script(
+            f"const i = document.getElementById('{ws}-result'); return i.complete && i.naturalWidth"
+        )
+    )
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    browser.save_screenshot(str(SHOTS / shot))
+    return message
+
+
 def test_draw_a_source_and_a_target_stroke_and_render(studio: tuple[str, Path], browser: Any) -> None:
     url, root = studio
     _open(browser, url)
@@ -151,13 +166,7 @@ def test_draw_a_source_and_a_target_stroke_and_render(studio: tuple[str, Path], 
     field = browser.find_element(By.ID, "s-file")
     field.clear()
     field.send_keys("drawn.json")
-    browser.find_element(By.ID, "s-render").click()
-    message = _wait_message(browser, "s-msg", "sidecar")
-    WebDriverWait(browser, 30).until(
-        lambda d: d.execute_script("const i = document.getElementById('s-result'); return i.complete && i.naturalWidth")
-    )
-    SHOTS.mkdir(parents=True, exist_ok=True)
-    browser.save_screenshot(str(SHOTS / "studio_strokes.png"))
+    message = _run_and_show(browser, "s-render", "s", "studio_strokes.png")
 
     # The stroke file is the CLI's: one pair, along the mouse paths, in the photo's pixels.
     sset = StrokeSet.load(root / "drawn.json")
@@ -198,13 +207,7 @@ def test_make_a_label_map_paint_it_and_make_a_texture(studio: tuple[str, Path], 
     for el in size:
         el.clear()
         el.send_keys("64")
-    browser.find_element(By.ID, "b-texture").click()
-    message = _wait_message(browser, "b-msg", "sidecar")
-    WebDriverWait(browser, 30).until(
-        lambda d: d.execute_script("const i = document.getElementById('b-result'); return i.complete && i.naturalWidth")
-    )
-    SHOTS.mkdir(parents=True, exist_ok=True)
-    browser.save_screenshot(str(SHOTS / "studio_bark.png"))
+    message = _run_and_show(browser, "b-texture", "b", "studio_bark.png")
 
     after = bark.decode_labels(io.read_image(root / "photos" / "bark_labels_in.png"))
     assert (after[10:86, 44:53] == 0).all() and (before[10:86, 44:53] == 1).any()  # the stroke painted
