@@ -27,7 +27,7 @@ from pydantic import BaseModel, Field
 
 from .. import __version__, _memory, bark, io, strokes
 from .._progress import Progress
-from .files import IMAGE_SUFFIXES, JSON_SUFFIXES, PathError, Project
+from .files import IMAGE_SUFFIXES, JSON_SUFFIXES, PathError, Project, name_pattern
 from .jobs import JobManager
 
 __all__ = ["TOKEN_HEADER", "create_app"]
@@ -38,6 +38,15 @@ WORKSPACES = ("strokes", "bark")
 _BODY_SLACK = 64 * 1024
 _MAX_SIDE = 8192
 _STATIC = ("app.js", "style.css")
+PNG_SUFFIX = frozenset({".png"})
+
+
+def _name(description: str, suffixes: frozenset[str]) -> Any:
+    """A ``path`` query parameter: its pattern is in the API description (clients and fuzzers
+    see what a name looks like) but checked by :meth:`Project.resolve`, whose 400 names the
+    problem more clearly than a pattern mismatch would."""
+    return Query(description=description, json_schema_extra={"pattern": name_pattern(suffixes)})
+
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]
@@ -288,7 +297,9 @@ def create_app(
         return project.files()
 
     @app.get("/api/file", response_class=FileResponse)
-    def file(path: Annotated[str, Query(description="project name of an image or JSON file")]) -> FileResponse:
+    def file(
+        path: Annotated[str, _name("project name of an image or JSON file", IMAGE_SUFFIXES | JSON_SUFFIXES)],
+    ) -> FileResponse:
         """The bytes of one project file."""
         p = guarded(lambda: project.existing(path, suffixes=IMAGE_SUFFIXES | JSON_SUFFIXES))
         return FileResponse(p, headers={"Cache-Control": "no-store"})
@@ -296,7 +307,7 @@ def create_app(
     @app.post("/api/upload", response_model=Saved)
     async def upload(
         file: Annotated[UploadFile, File(description="an image (PNG, JPEG, TIFF, WebP)")],
-        path: Annotated[str, Query(description="project name to save it as")],
+        path: Annotated[str, _name("project name to save it as", IMAGE_SUFFIXES)],
         overwrite: bool = False,
     ) -> Saved:
         """Save an uploaded image in the project after phloem's image checks and limits."""
@@ -317,13 +328,13 @@ def create_app(
 
     # -- strokes ---------------------------------------------------------------------------
     @app.get("/api/strokes")
-    def get_strokes(path: Annotated[str, Query(description="project name of a phloem.strokes JSON file")]) -> Any:
+    def get_strokes(path: Annotated[str, _name("project name of a phloem.strokes JSON file", JSON_SUFFIXES)]) -> Any:
         """A stroke set file, checked by :class:`phloem.strokes.StrokeSet`."""
         return guarded(lambda: strokes.StrokeSet.load(project.existing(path, suffixes=JSON_SUFFIXES)).to_dict())
 
     @app.put("/api/strokes", response_model=Saved)
     def put_strokes(
-        path: Annotated[str, Query(description="project name of the JSON file to write")],
+        path: Annotated[str, _name("project name of the JSON file to write", JSON_SUFFIXES)],
         body: Annotated[dict[str, Any], Body(description="a phloem.strokes document")],
         overwrite: bool = False,
     ) -> Saved:
@@ -340,7 +351,7 @@ def create_app(
 
     # -- label maps ------------------------------------------------------------------------
     @app.get("/api/labels", response_model=LabelMap)
-    def get_labels(path: Annotated[str, Query(description="project name of a label map PNG")]) -> LabelMap:
+    def get_labels(path: Annotated[str, _name("project name of a label map PNG", PNG_SUFFIX)]) -> LabelMap:
         """A label map PNG (grey levels or flat colours) as labels ``0 … n-1``."""
 
         def load() -> LabelMap:
@@ -357,14 +368,14 @@ def create_app(
 
     @app.put("/api/labels", response_model=Saved)
     def put_labels(
-        path: Annotated[str, Query(description="project name of the PNG to write")],
+        path: Annotated[str, _name("project name of the PNG to write", PNG_SUFFIX)],
         body: LabelMap,
         overwrite: bool = False,
     ) -> Saved:
         """Write a painted label map as the CLI's label-map PNG (:func:`phloem.bark.encode_labels`)."""
 
         def save() -> Saved:
-            project.resolve(path, suffixes=frozenset({".png"}))
+            project.resolve(path, suffixes=PNG_SUFFIX)
             if body.width * body.height > project.max_pixels:
                 raise ValueError(f"width: {body.width}×{body.height} is over the pixel limit of {project.max_pixels}")
             try:

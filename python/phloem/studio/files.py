@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import _files, _memory, io
 
-__all__ = ["IMAGE_SUFFIXES", "JSON_SUFFIXES", "PathError", "Project"]
+__all__ = ["IMAGE_SUFFIXES", "JSON_SUFFIXES", "PathError", "Project", "name_pattern"]
 
 IMAGE_SUFFIXES = frozenset(io.IMAGE_SUFFIXES)
 JSON_SUFFIXES = frozenset({".json"})
@@ -22,6 +22,17 @@ JSON_SUFFIXES = frozenset({".json"})
 # separators, no characters a shell or a URL would need quoted.
 _PART = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,127}")
 _MAX_PARTS = 8
+
+
+def name_pattern(suffixes: frozenset[str]) -> str:
+    """The regular expression of a project name ending in one of ``suffixes``, for the API's
+    description (the check itself is :meth:`Project.resolve`, which also follows links and takes
+    the suffixes in any case; the pattern stays in the ECMA subset JSON Schema uses)."""
+    part = _PART.pattern
+    ends = "|".join(sorted(s[1:] for s in suffixes))
+    return rf"^(?:{part}/){{0,{_MAX_PARTS - 1}}}{part}\.(?:{ends})$"
+
+
 # A decoded image holds at most 4 float32 channels per pixel while it is checked and converted.
 _BYTES_PER_PIXEL = 4 * 4 * 2
 
