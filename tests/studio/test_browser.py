@@ -52,8 +52,8 @@ def _photo() -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def studio(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path]]:
-    """A real uvicorn server on a free loopback port, in a thread; its URL and project folder."""
+def studio(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path, Any]]:
+    """A real uvicorn server on a free loopback port, in a thread; its URL, project folder and app."""
     import socket
 
     import uvicorn
@@ -66,11 +66,12 @@ def studio(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path
     io.write_image(root / "photos" / "bark.png", phloem.data.bark()[:96, :96, :3])
     sock = socket.socket()
     sock.bind(("127.0.0.1", 0))
-    server = uvicorn.Server(uvicorn.Config(create_app(Project(root), token=TOKEN, threads=1), log_level="warning"))
+    app = create_app(Project(root), token=TOKEN, threads=1)
+    server = uvicorn.Server(uvicorn.Config(app, log_level="warning"))
     thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
     thread.start()
     try:
-        yield f"http://127.0.0.1:{sock.getsockname()[1]}", root
+        yield f"http://127.0.0.1:{sock.getsockname()[1]}", root, app
     finally:
         server.should_exit = True
         thread.join(30)
@@ -120,6 +121,12 @@ def _drag(browser: Any, canvas: Any, points: list[tuple[float, float]]) -> None:
     chain.release().perform()
 
 
+def _type(browser: Any, element_id: str, text: str) -> None:
+    field = browser.find_element(By.ID, element_id)
+    field.clear()
+    field.send_keys(text)
+
+
 def _line(a: tuple[float, float], b: tuple[float, float], n: int = 12) -> list[tuple[float, float]]:
     return [(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t) for t in np.linspace(0, 1, n)]
 
@@ -150,8 +157,8 @@ def _run_and_show(browser: Any, button: str, ws: str, shot: str) -> str:
     return message
 
 
-def test_draw_a_source_and_a_target_stroke_and_render(studio: tuple[str, Path], browser: Any) -> None:
-    url, root = studio
+def test_draw_a_source_and_a_target_stroke_and_render(studio: tuple[str, Path, Any], browser: Any) -> None:
+    url, root, _ = studio
     _open(browser, url)
     Select(browser.find_element(By.ID, "s-image")).select_by_value("photos/bar.png")
     WebDriverWait(browser, 30).until(
@@ -163,9 +170,7 @@ def test_draw_a_source_and_a_target_stroke_and_render(studio: tuple[str, Path], 
     bend = _line((30, 70), (120, 20), 8) + _line((120, 20), (210, 60), 8)[1:]
     _drag(browser, target, bend)
     assert browser.find_element(By.ID, "s-nsrc").text == "1" and browser.find_element(By.ID, "s-ntgt").text == "1"
-    field = browser.find_element(By.ID, "s-file")
-    field.clear()
-    field.send_keys("drawn.json")
+    _type(browser, "s-file", "drawn.json")
     message = _run_and_show(browser, "s-render", "s", "studio_strokes.png")
 
     # The stroke file is the CLI's: one pair, along the mouse paths, in the photo's pixels.
@@ -187,14 +192,12 @@ def test_draw_a_source_and_a_target_stroke_and_render(studio: tuple[str, Path], 
     assert side["command"] == "studio strokes-edit" and side["parameters"]["strokes"] == "drawn.json"
 
 
-def test_make_a_label_map_paint_it_and_make_a_texture(studio: tuple[str, Path], browser: Any) -> None:
-    url, root = studio
+def test_make_a_label_map_paint_it_and_make_a_texture(studio: tuple[str, Path, Any], browser: Any) -> None:
+    url, root, _ = studio
     _open(browser, url)
     browser.find_element(By.CSS_SELECTOR, '#tabs button[data-ws="bark"]').click()
     Select(browser.find_element(By.ID, "b-image")).select_by_value("photos/bark.png")
-    n = browser.find_element(By.ID, "b-n")
-    n.clear()
-    n.send_keys("2")
+    _type(browser, "b-n", "2")
     browser.find_element(By.ID, "b-labels").click()
     _wait_message(browser, "b-msg", "paint it")
     before = bark.decode_labels(io.read_image(root / "photos" / "bark_labels_in.png"))
@@ -203,10 +206,8 @@ def test_make_a_label_map_paint_it_and_make_a_texture(studio: tuple[str, Path], 
     browser.execute_script("document.getElementById('b-brush').value = 20")
     canvas = browser.find_element(By.ID, "b-canvas")
     _drag(browser, canvas, _line((48, 5), (48, 90), 10))
-    size = browser.find_element(By.ID, "b-tw"), browser.find_element(By.ID, "b-th")
-    for el in size:
-        el.clear()
-        el.send_keys("64")
+    _type(browser, "b-tw", "64")
+    _type(browser, "b-th", "64")
     message = _run_and_show(browser, "b-texture", "b", "studio_bark.png")
 
     after = bark.decode_labels(io.read_image(root / "photos" / "bark_labels_in.png"))
@@ -216,3 +217,41 @@ def test_make_a_label_map_paint_it_and_make_a_texture(studio: tuple[str, Path], 
     assert io.read_image(root / out).shape == (64, 64, 3)
     side = json.loads((root / f"{out}.json").read_text())
     assert side["parameters"]["labels_in"] == "photos/bark_labels_in.png"
+
+
+def _loop_until_cancelled(progress: Any) -> list[str]:
+    while True:  # holds the one worker until it is cancelled: its progress call then raises
+        progress(0, 1)
+        threading.Event().wait(0.005)
+
+
+def test_cancel_a_job_from_the_page(studio: tuple[str, Path, Any], browser: Any) -> None:
+    """The page's Cancel button stops its job: queued behind a job that holds the one worker,
+    so it is still waiting when the button is pressed, whatever the machine's speed."""
+    url, root, app = studio
+    StrokeSet.from_lists(
+        [[[20, 45], [220, 45]]], [[[20, 20], [220, 70]]], source_shape=(H, W), target_size=(H, W)
+    ).save(root / "cancel.json")
+    blocker = app.state.jobs.submit("block", {}, _loop_until_cancelled)
+    results = set((root / "results").glob("*")) if (root / "results").exists() else set()
+    try:
+        _open(browser, url)
+        Select(browser.find_element(By.ID, "s-image")).select_by_value("photos/bar.png")
+        _type(browser, "s-file", "cancel.json")
+        browser.find_element(By.ID, "s-load").click()
+        _wait_message(browser, "s-msg", "1 stroke pairs")
+        browser.find_element(By.ID, "s-render").click()
+        cancel = browser.find_element(By.ID, "s-cancel")
+        WebDriverWait(browser, 30).until(lambda d: cancel.is_enabled())
+        cancel.click()
+        message = _wait_message(browser, "s-msg", "cancelled")
+        assert message == "strokes-edit cancelled: cancelled before it started"
+        WebDriverWait(browser, 30).until(lambda d: not cancel.is_enabled())
+    finally:
+        app.state.jobs.cancel(blocker.id)
+    assert app.state.jobs.wait(blocker.id, timeout=30).state == "cancelled"
+    job = next(
+        j for j in app.state.jobs.jobs() if j.kind == "strokes-edit" and j.parameters["strokes"] == "cancel.json"
+    )
+    assert job.state == "cancelled" and job.outputs == []
+    assert (set((root / "results").glob("*")) if (root / "results").exists() else set()) == results
