@@ -114,6 +114,15 @@ def test_symbolic_links_out_of_the_project_are_refused(client, project):
     assert "photos/alias.png" not in {f["path"] for f in client.get("/api/files").json()}
 
 
+def test_the_scratch_folder_may_not_lead_out_of_the_project(client, project):
+    outside = project.root.parent / "outside"
+    outside.mkdir()
+    os.symlink(outside, project.root / ".phloem-studio")
+    r = client.post("/api/upload", params={"path": "x.png"}, files={"file": ("x.png", png_bytes(bar_photo()))})
+    assert r.status_code == 400 and "plain folder" in r.json()["detail"]
+    assert not list(outside.iterdir()) and not (project.root / "x.png").exists()
+
+
 def test_a_suffix_the_endpoint_does_not_serve_is_refused(client, project):
     (project.root / "notes.txt").write_text("x")
     r = client.get("/api/file", params={"path": "notes.txt"})

@@ -155,6 +155,8 @@ class Project:
         if len(data) > self.max_upload_bytes:
             raise ValueError(f"{name_of}: {len(data)} bytes, over the upload limit of {self.max_upload_bytes}")
         scratch = self.root / ".phloem-studio"
+        if scratch.is_symlink() or (scratch.exists() and not scratch.is_dir()):  # it would take the bytes elsewhere
+            raise PathError(f"{name_of}: {scratch} must be a plain folder of the studio's temporaries")
         scratch.mkdir(exist_ok=True)
         fd, tmp = tempfile.mkstemp(suffix=suffix, dir=scratch)
         try:
