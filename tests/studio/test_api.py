@@ -51,6 +51,10 @@ def test_a_post_without_the_token_changes_nothing(client, project):
 def test_the_page_carries_the_token_and_its_scripts(client):
     r = client.get("/")
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
+    assert (
+        r.headers["referrer-policy"] == "no-referrer"
+        and "frame-ancestors 'none'" in r.headers["content-security-policy"]
+    )
     assert f'content="{TOKEN}"' in r.text and f"static/app.js?token={TOKEN}" in r.text and "{{" not in r.text
     assert "EventSource" in client.get("/static/app.js").text
     assert client.get("/static/style.css").headers["content-type"].startswith("text/css")

@@ -90,7 +90,12 @@ def browser() -> Iterator[Any]:
         "--window-size=1400,800",
     ):
         opts.add_argument(flag)
-    driver = webdriver.Chrome(options=opts, service=webdriver.ChromeService(executable_path=DRIVER))
+    from selenium.common.exceptions import SessionNotCreatedException
+
+    try:
+        driver = webdriver.Chrome(options=opts, service=webdriver.ChromeService(executable_path=DRIVER))
+    except SessionNotCreatedException as e:  # e.g. a chromium that is a stub for a snap, or a driver of another version
+        pytest.skip(f"chromium did not start under chromedriver: {e.msg}")
     driver.set_page_load_timeout(30)
     try:
         yield driver
@@ -101,6 +106,8 @@ def browser() -> Iterator[Any]:
 def _open(browser: Any, url: str) -> None:
     browser.get(f"{url}/?token={TOKEN}")
     WebDriverWait(browser, 30).until(lambda d: d.execute_script("return document.body.dataset.ready") == "1")
+    errors = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+    assert not errors, errors  # e.g. a script or image the page's security policy blocked
 
 
 def _drag(browser: Any, canvas: Any, points: list[tuple[float, float]]) -> None:

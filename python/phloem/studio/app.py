@@ -39,6 +39,14 @@ _BODY_SLACK = 64 * 1024
 _MAX_SIDE = 8192
 _STATIC = ("app.js", "style.css")
 PNG_SUFFIX = frozenset({".png"})
+# The page's URL holds the token: no referrer carries it away, no other site frames the page, and
+# the page runs only its own scripts.
+_PAGE_HEADERS = {
+    "Cache-Control": "no-store",
+    "Referrer-Policy": "no-referrer",
+    "X-Content-Type-Options": "nosniff",
+    "Content-Security-Policy": "default-src 'self'; img-src 'self' blob: data:; frame-ancestors 'none'",
+}
 
 
 def _name(description: str, suffixes: frozenset[str]) -> Any:
@@ -269,7 +277,7 @@ def create_app(
     # -- page ------------------------------------------------------------------------------
     @app.get("/", response_class=HTMLResponse, include_in_schema=False)
     def page() -> HTMLResponse:
-        return HTMLResponse(_page(token), headers={"Cache-Control": "no-store"})
+        return HTMLResponse(_page(token), headers=_PAGE_HEADERS)
 
     @app.get("/static/{name}", include_in_schema=False)
     def static(name: str) -> Response:
