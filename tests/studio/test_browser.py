@@ -164,10 +164,18 @@ def _run_and_show(browser: Any, button: str, ws: str, shot: str) -> str:
     return message
 
 
-def test_draw_a_source_and_a_target_stroke_and_render(studio: tuple[str, Path, Any], browser: Any) -> None:
+def test_draw_a_source_and_a_target_stroke_and_render(
+    studio: tuple[str, Path, Any], browser: Any, tmp_path: Path
+) -> None:
     url, root, _ = studio
     _open(browser, url)
-    Select(browser.find_element(By.ID, "s-image")).select_by_value("photos/bar.png")
+    # Upload the photo through the page's file picker: saved under photos/, its name made safe.
+    picked = tmp_path / "my bar.png"
+    io.write_image(picked, _photo())
+    browser.find_element(By.ID, "s-upload").send_keys(str(picked))
+    _wait_message(browser, "s-msg", "saved photos/my_bar.png (240×90)")
+    assert (root / "photos" / "my_bar.png").read_bytes() == picked.read_bytes()
+    assert Select(browser.find_element(By.ID, "s-image")).first_selected_option.text == "photos/my_bar.png"
     WebDriverWait(browser, 30).until(
         lambda d: d.execute_script("return document.getElementById('s-source').width") == W
     )
@@ -197,6 +205,7 @@ def test_draw_a_source_and_a_target_stroke_and_render(studio: tuple[str, Path, A
     assert not alpha[85:, :10].any() and not alpha[:8, 200:].any()  # corners away from the stroke stay empty
     side = json.loads((root / f"{out}.json").read_text())
     assert side["command"] == "studio strokes-edit" and side["parameters"]["strokes"] == "drawn.json"
+    assert side["parameters"]["image"] == "photos/my_bar.png"
 
 
 def test_make_a_label_map_paint_it_and_make_a_texture(studio: tuple[str, Path, Any], browser: Any) -> None:
