@@ -137,9 +137,15 @@ function drawStrokes(canvas, strokes, background) {
     pts.forEach(([x, y], j) => (j ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
     ctx.stroke();
     if (pts.length) {
-      ctx.fillStyle = ctx.strokeStyle;
-      ctx.font = `${Math.max(12, canvas.width / 30)}px sans-serif`;
-      ctx.fillText(String(i + 1), pts[0][0] + 4, pts[0][1] - 4);
+      // the number in the stroke's colour on a white outline, readable on any photo
+      const color = ctx.strokeStyle;
+      ctx.font = `bold ${Math.max(12, canvas.width / 30)}px sans-serif`;
+      ctx.lineWidth = 3;
+      ctx.strokeStyle = "#fff";
+      ctx.strokeText(String(i + 1), pts[0][0] + 4, pts[0][1] - 6);
+      ctx.fillStyle = color;
+      ctx.fillText(String(i + 1), pts[0][0] + 4, pts[0][1] - 6);
+      ctx.lineWidth = Math.max(2, canvas.width / 200);
     }
   });
 }
