@@ -355,3 +355,22 @@ def test_project_must_be_a_folder(tmp_path: Path):
 
     with pytest.raises(ValueError, match="project: .* is not a folder"):
         Project(tmp_path / "none")
+
+
+def test_jobs_and_uploads_are_held_to_the_project_s_memory_limit(project):
+    from fastapi.testclient import TestClient
+
+    from phloem.studio import Project, create_app
+
+    small = Project(project.root, max_memory=2**20)  # 1 MiB: the 96² photo decodes, a 2048² texture does not
+    with TestClient(create_app(small, token=TOKEN), headers={"X-Phloem-Token": TOKEN}) as c:
+        r = c.post(
+            "/api/jobs",
+            json={"kind": "bark-texture", "image": "photos/bark.png", "size": [2048, 2048], "out": "big.png"},
+        )
+        end = _finish(c, r.json()["id"])
+        assert end["state"] == "failed" and "size: 2048×2048" in end["message"] and "memory limit" in end["message"]
+        assert not (project.root / "big.png").exists()
+        big = png_bytes(np.zeros((300, 300), np.float32))  # 90 000 px: under the pixel limit, over 1 MiB decoded
+        r = c.post("/api/upload", params={"path": "big.png"}, files={"file": ("big.png", big)})
+        assert r.status_code == 413 and "memory limit" in r.json()["detail"]
