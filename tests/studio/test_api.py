@@ -67,6 +67,7 @@ def test_openapi_describes_every_endpoint_and_the_job_kinds(client):
             "/api/jobs/{job_id}", "/api/jobs/{job_id}/cancel", "/api/jobs/{job_id}/events"} <= set(doc["paths"])  # fmt: skip
     kinds = {"StrokesEditJob", "BarkLabelsJob", "BarkTextureJob"}
     assert kinds <= set(doc["components"]["schemas"])
+    assert client.get("/docs").status_code == 404 and client.get("/redoc").status_code == 404  # CDN pages: off
 
 
 def test_info_and_file_list(client, project):

@@ -237,6 +237,10 @@ def create_app(
         description="The interactive tools of phloem's papers over its files. Every request needs the "
         f"session token: header `{TOKEN_HEADER}` or query `token`.",
         lifespan=lifespan,
+        # Swagger UI and ReDoc load their scripts from a CDN and fetch the document without the
+        # token: neither works here, so only the document itself is served.
+        docs_url=None,
+        redoc_url=None,
     )
     app.state.token = token
     app.state.project = project
