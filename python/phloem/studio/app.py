@@ -25,7 +25,7 @@ from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from numpy.typing import NDArray
 from pydantic import BaseModel, Field
 
-from .. import __version__, _memory, bark, io, strokes
+from .. import __version__, _files, _memory, bark, io, strokes
 from .._progress import Progress
 from .files import IMAGE_SUFFIXES, JSON_SUFFIXES, PathError, Project, name_pattern
 from .jobs import JobManager
@@ -400,9 +400,7 @@ def create_app(
             if int(lab.max()) >= body.n_labels:
                 raise ValueError(f"data: label {int(lab.max())} is not below n_labels = {body.n_labels}")
             img = bark.encode_labels(lab.astype(np.int32))
-            from .._files import encode
-
-            project.write_bytes(path, encode(Path(path), img, 8), overwrite=overwrite)
+            project.write_bytes(path, _files.encode(Path(path), img, 8), overwrite=overwrite)
             return Saved(path=path, width=body.width, height=body.height)
 
         result: Saved = guarded(save)
