@@ -1,0 +1,273 @@
+"""End to end in a real headless browser: Debian's chromium driven by Selenium through Debian's
+chromium-driver (no browser download). Opens the page, draws strokes and paints a label map with
+mouse events, renders, and checks the files on disk. Skips when chromium or its driver is absent.
+
+Screenshots go to ``$PHLOEM_SCREENSHOTS`` (default ``out/screenshots``, which git ignores).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import phloem
+from phloem import bark, io
+from phloem.strokes import StrokeSet
+
+from .conftest import TOKEN
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+DRIVER = shutil.which("chromedriver")
+if CHROMIUM is None or DRIVER is None:
+    pytest.skip("Debian's chromium and chromium-driver are not installed (apt-get install chromium chromium-driver)",
+                allow_module_level=True)  # fmt: skip
+webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed")
+from selenium.webdriver.common.by import By  # noqa: E402
+from selenium.webdriver.support.ui import Select, WebDriverWait  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+SHOTS = Path(os.environ.get("PHLOEM_SCREENSHOTS", ROOT / "out" / "screenshots"))
+W, H = 240, 90  # the object photo; the page shows it scaled up to 256 px wide
+
+
+def _photo() -> np.ndarray:
+    """An RGBA bar along y = 45 (rows 30..60, columns 15..225): stripes across it, random grain."""
+    rng = np.random.default_rng(1)
+    img = np.zeros((H, W, 4), np.float32)
+    xx = np.arange(15, 226)
+    stripes = 0.5 + 0.4 * np.sin(xx / 6.0)
+    img[30:61, 15:226, 0] = stripes
+    img[30:61, 15:226, 1] = 0.35 + 0.2 * rng.random((31, 211))
+    img[30:61, 15:226, 2] = 0.2
+    img[30:61, 15:226, 3] = 1
+    return img
+
+
+@pytest.fixture(scope="module")
+def studio(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path, Any]]:
+    """A real uvicorn server on a free loopback port, in a thread; its URL, project folder and app."""
+    import socket
+
+    import uvicorn
+
+    from phloem.studio import Project, create_app
+
+    root = tmp_path_factory.mktemp("studio") / "project"
+    (root / "photos").mkdir(parents=True)
+    io.write_image(root / "photos" / "bar.png", _photo())
+    io.write_image(root / "photos" / "bark.png", phloem.data.bark()[:96, :96, :3])
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    app = create_app(Project(root), token=TOKEN, threads=1)
+    server = uvicorn.Server(uvicorn.Config(app, log_level="warning"))
+    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{sock.getsockname()[1]}", root, app
+    finally:
+        server.should_exit = True
+        thread.join(30)
+        sock.close()
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = CHROMIUM
+    for flag in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--window-size=1400,800",
+    ):
+        opts.add_argument(flag)
+    from selenium.common.exceptions import SessionNotCreatedException
+
+    try:
+        driver = webdriver.Chrome(options=opts, service=webdriver.ChromeService(executable_path=DRIVER))
+    except SessionNotCreatedException as e:  # e.g. a chromium that is a stub for a snap, or a driver of another version
+        pytest.skip(f"chromium did not start under chromedriver: {e.msg}")
+    driver.set_page_load_timeout(30)
+    try:
+        yield driver
+    finally:
+        driver.quit()
+
+
+def _open(browser: Any, url: str) -> None:
+    browser.get(f"{url}/?token={TOKEN}")
+    WebDriverWait(browser, 30).until(lambda d: d.execute_script("return document.body.dataset.ready") == "1")
+    errors = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+    assert not errors, errors  # e.g. a script or image the page's security policy blocked
+
+
+def _drag(browser: Any, canvas: Any, points: list[tuple[float, float]]) -> None:
+    """Press, move through ``points`` (canvas pixels) and release, as a mouse does."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    # Selenium offsets are from the element's centre, in CSS px; the canvas may be shown scaled.
+    width, height, css_w, css_h = browser.execute_script(
+        "const c = arguments[0]; return [c.width, c.height, c.clientWidth, c.clientHeight];", canvas
+    )
+
+    def offset(p: tuple[float, float]) -> tuple[int, int]:
+        return round((p[0] + 0.5) * css_w / width - css_w / 2), round((p[1] + 0.5) * css_h / height - css_h / 2)
+
+    chain = ActionChains(browser, duration=10).move_to_element_with_offset(canvas, *offset(points[0])).click_and_hold()
+    for p in points[1:]:
+        chain = chain.move_to_element_with_offset(canvas, *offset(p))
+    chain.release().perform()
+
+
+def _type(browser: Any, element_id: str, text: str) -> None:
+    field = browser.find_element(By.ID, element_id)
+    field.clear()
+    field.send_keys(text)
+
+
+def _line(a: tuple[float, float], b: tuple[float, float], n: int = 12) -> list[tuple[float, float]]:
+    return [(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t) for t in np.linspace(0, 1, n)]
+
+
+def _wait_message(browser: Any, element_id: str, text: str) -> str:
+    def ready(d: Any) -> str | bool:
+        el = d.find_element(By.ID, element_id)
+        shown = str(el.text)
+        if "error" in (el.get_attribute("class") or "") or "failed" in shown:
+            raise AssertionError(f"the page says: {shown}")
+        return shown if text in shown else False
+
+    return str(WebDriverWait(browser, 60).until(ready))
+
+
+def _run_and_show(browser: Any, button: str, ws: str, shot: str) -> str:
+    """Click ``button``, wait for the job's result to show in the workspace ``ws``, save a screenshot;
+    the page's message (it names the result file)."""
+    browser.find_element(By.ID, button).click()
+    message = _wait_message(browser, f"{ws}-msg", "sidecar")
+    WebDriverWait(browser, 30).until(
+        lambda d: d.execute_script(
+            f"const i = document.getElementById('{ws}-result'); return i.complete && i.naturalWidth"
+        )
+    )
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    browser.save_screenshot(str(SHOTS / shot))
+    return message
+
+
+def test_draw_a_source_and_a_target_stroke_and_render(
+    studio: tuple[str, Path, Any], browser: Any, tmp_path: Path
+) -> None:
+    url, root, _ = studio
+    _open(browser, url)
+    # Upload the photo through the page's file picker: saved under photos/, its name made safe.
+    picked = tmp_path / "my bar.png"
+    io.write_image(picked, _photo())
+    browser.find_element(By.ID, "s-upload").send_keys(str(picked))
+    _wait_message(browser, "s-msg", "saved photos/my_bar.png (240×90)")
+    assert (root / "photos" / "my_bar.png").read_bytes() == picked.read_bytes()
+    assert Select(browser.find_element(By.ID, "s-image")).first_selected_option.text == "photos/my_bar.png"
+    WebDriverWait(browser, 30).until(
+        lambda d: d.execute_script("return document.getElementById('s-source').width") == W
+    )
+    source = browser.find_element(By.ID, "s-source")
+    target = browser.find_element(By.ID, "s-target")
+    _drag(browser, source, _line((20, 45), (220, 45)))
+    bend = _line((30, 70), (120, 20), 8) + _line((120, 20), (210, 60), 8)[1:]
+    _drag(browser, target, bend)
+    assert browser.find_element(By.ID, "s-nsrc").text == "1" and browser.find_element(By.ID, "s-ntgt").text == "1"
+    _type(browser, "s-file", "drawn.json")
+    message = _run_and_show(browser, "s-render", "s", "studio_strokes.png")
+
+    # The stroke file is the CLI's: one pair, along the mouse paths, in the photo's pixels.
+    sset = StrokeSet.load(root / "drawn.json")
+    assert len(sset.pairs) == 1 and sset.source_shape == (H, W) and sset.target_size == (H, W)
+    src, tgt = sset.pairs[0].source.points, sset.pairs[0].target.points
+    assert np.abs(src[:, 1] - 45).max() <= 1.5 and src[0, 0] <= 22 and src[-1, 0] >= 218
+    assert np.hypot(*(tgt[0] - (30, 70))) <= 2 and np.hypot(*(tgt[-1] - (210, 60))) <= 2
+    assert np.hypot(*(tgt - (120, 20)).T).min() <= 2  # through the bend
+    # The result: the bar re-drawn along the bent target stroke, with its sidecar.
+    out = message.split("wrote ")[1].split(" and")[0]
+    img = io.read_image(root / out)
+    assert img.shape == (H, W, 4)
+    alpha = img[..., 3] > 0.5
+    on_stroke = [alpha[round(y), round(x)] for x, y in tgt]
+    assert np.mean(on_stroke) >= 0.9
+    assert not alpha[85:, :10].any() and not alpha[:8, 200:].any()  # corners away from the stroke stay empty
+    side = json.loads((root / f"{out}.json").read_text())
+    assert side["command"] == "studio strokes-edit" and side["parameters"]["strokes"] == "drawn.json"
+    assert side["parameters"]["image"] == "photos/my_bar.png"
+
+
+def test_make_a_label_map_paint_it_and_make_a_texture(studio: tuple[str, Path, Any], browser: Any) -> None:
+    url, root, _ = studio
+    _open(browser, url)
+    browser.find_element(By.CSS_SELECTOR, '#tabs button[data-ws="bark"]').click()
+    Select(browser.find_element(By.ID, "b-image")).select_by_value("photos/bark.png")
+    _type(browser, "b-n", "2")
+    browser.find_element(By.ID, "b-labels").click()
+    _wait_message(browser, "b-msg", "paint it")
+    before = bark.decode_labels(io.read_image(root / "photos" / "bark_labels_in.png"))
+    # Label 0 (the dark furrows) with a 20 px brush, a stripe down the middle of the map.
+    browser.find_elements(By.CSS_SELECTOR, "#b-palette button")[0].click()
+    browser.execute_script("document.getElementById('b-brush').value = 20")
+    canvas = browser.find_element(By.ID, "b-canvas")
+    _drag(browser, canvas, _line((48, 5), (48, 90), 10))
+    _type(browser, "b-tw", "64")
+    _type(browser, "b-th", "64")
+    message = _run_and_show(browser, "b-texture", "b", "studio_bark.png")
+
+    after = bark.decode_labels(io.read_image(root / "photos" / "bark_labels_in.png"))
+    assert (after[10:86, 44:53] == 0).all() and (before[10:86, 44:53] == 1).any()  # the stroke painted
+    assert np.array_equal(after[:, :30], before[:, :30]) and np.array_equal(after[:, 66:], before[:, 66:])
+    out = message.split("wrote ")[1].split(" and")[0]
+    assert io.read_image(root / out).shape == (64, 64, 3)
+    side = json.loads((root / f"{out}.json").read_text())
+    assert side["parameters"]["labels_in"] == "photos/bark_labels_in.png"
+
+
+def _loop_until_cancelled(progress: Any) -> list[str]:
+    while True:  # holds the one worker until it is cancelled: its progress call then raises
+        progress(0, 1)
+        threading.Event().wait(0.005)
+
+
+def test_cancel_a_job_from_the_page(studio: tuple[str, Path, Any], browser: Any) -> None:
+    """The page's Cancel button stops its job: queued behind a job that holds the one worker,
+    so it is still waiting when the button is pressed, whatever the machine's speed."""
+    url, root, app = studio
+    StrokeSet.from_lists(
+        [[[20, 45], [220, 45]]], [[[20, 20], [220, 70]]], source_shape=(H, W), target_size=(H, W)
+    ).save(root / "cancel.json")
+    blocker = app.state.jobs.submit("block", {}, _loop_until_cancelled)
+    results = set((root / "results").glob("*")) if (root / "results").exists() else set()
+    try:
+        _open(browser, url)
+        Select(browser.find_element(By.ID, "s-image")).select_by_value("photos/bar.png")
+        _type(browser, "s-file", "cancel.json")
+        browser.find_element(By.ID, "s-load").click()
+        _wait_message(browser, "s-msg", "1 stroke pairs")
+        browser.find_element(By.ID, "s-render").click()
+        cancel = browser.find_element(By.ID, "s-cancel")
+        WebDriverWait(browser, 30).until(lambda d: cancel.is_enabled())
+        cancel.click()
+        message = _wait_message(browser, "s-msg", "cancelled")
+        assert message == "strokes-edit cancelled: cancelled before it started"
+        WebDriverWait(browser, 30).until(lambda d: not cancel.is_enabled())
+    finally:
+        app.state.jobs.cancel(blocker.id)
+    assert app.state.jobs.wait(blocker.id, timeout=30).state == "cancelled"
+    job = next(
+        j for j in app.state.jobs.jobs() if j.kind == "strokes-edit" and j.parameters["strokes"] == "cancel.json"
+    )
+    assert job.state == "cancelled" and job.outputs == []
+    assert (set((root / "results").glob("*")) if (root / "results").exists() else set()) == results
