@@ -613,8 +613,8 @@ def _paste_structure(
 
 
 def _drop_foreign(canvas: F32, image: F32, source: Skeleton, target: Skeleton, lo: F32, hi: F32) -> F32:
-    """A ``canvas`` snapped to the two levels ``lo``, ``hi`` of ``image``, with the pieces of structure that the target structure does not
-    touch set to the background level.
+    """A ``canvas`` snapped to the two levels ``lo``, ``hi`` of ``image``, with the pieces of
+    structure that the target structure does not touch set to the background level.
 
     A fragment disk holds whatever lay around its source branch: on a braided river or a delta
     mask, pieces of neighbouring channels and of a cut coastline, pasted as separate islands.
