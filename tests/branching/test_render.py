@@ -187,19 +187,23 @@ def test_a_mask_output_holds_no_pieces_the_target_does_not_touch() -> None:
     assert islands > 0
 
 
-def test_drop_foreign_keeps_touched_pieces_of_either_polarity() -> None:
+def test_drop_foreign_keeps_the_targets_channel_of_either_polarity() -> None:
     tgt = Skeleton([Branch([[5, 20], [35, 20]], 2.0)], (40, 60))
     for struct, bg in ((1.0, 0.0), (0.1, 0.9)):
         canvas = np.full((40, 60, 1), bg, np.float32)
-        canvas[17:24, 2:40] = struct  # along the target, and running past its end
+        canvas[17:24, 2:50] = struct  # along the target, and running 15 px past its end
+        canvas[17:24, 20:22] = bg  # a break between two fragments
         canvas[30:34, 45:55] = struct  # an island
         canvas[2:5, 2:5] = struct  # another
         source = Skeleton([Branch([[5, 20], [35, 20]], 2.0)], (40, 60))
         lo, hi = np.float32([min(struct, bg)]), np.float32([max(struct, bg)])
-        out = _drop_foreign(canvas, canvas, source, tgt, lo, hi)
-        want = np.full_like(canvas, bg)
-        want[17:24, 2:40] = struct
-        assert np.array_equal(out, want)
+        out = _drop_foreign(canvas, canvas, source, tgt, lo, hi)[..., 0]
+        assert set(np.unique(out).tolist()) == {np.float32(struct), np.float32(bg)}
+        assert (out[30:34, 45:55] == bg).all() and (out[2:5, 2:5] == bg).all()  # islands dropped
+        assert (out[17:24, 42:50] == bg).all()  # beyond 1.25 radii + 1 px of the target's end
+        assert (out[17:24, 8:18] == struct).all()  # the channel's banks within the band stay
+        assert (out[19:22, 20:22] == struct).all()  # the break is closed by the target's tube
+        assert (out[:15] == bg).all() and (out[26:30] == bg).all()
 
 
 def test_fragments_leaving_the_image_are_not_pasted() -> None:

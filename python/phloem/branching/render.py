@@ -63,7 +63,7 @@ from ..seams import seam
 from ._pixels import F32, F64, _by_channels, _check_skeleton, _clip_channels, _paste, _pt, _rot, two_level
 from .fragments import DEFAULT_SAMPLES, Fragment, FragmentLibrary, check_params, cover, foreign_fragments
 from .gaps import fill_gaps
-from .skeleton import Skeleton
+from .skeleton import MAX_THICKNESS, Branch, Skeleton
 
 __all__ = ["RenderResult", "render"]
 
@@ -613,25 +613,47 @@ def _paste_structure(
 
 
 def _drop_foreign(canvas: F32, image: F32, source: Skeleton, target: Skeleton, lo: F32, hi: F32) -> F32:
-    """A ``canvas`` snapped to the two levels ``lo``, ``hi`` of ``image``, with the pieces of
-    structure that the target structure does not touch set to the background level.
+    """A ``canvas`` snapped to the two levels ``lo``, ``hi`` of ``image``, holding the target
+    structure's channels and nothing else.
 
     A fragment disk holds whatever lay around its source branch: on a braided river or a delta
-    mask, pieces of neighbouring channels and of a cut coastline, pasted as separate islands.
-    The structure's level is the one the source structure mostly has in ``image``; a piece is
-    a connected component (8-neighbours) of that level, kept if it meets the target's own
-    mask (every edge drawn with its thickness).
+    mask, pieces of neighbouring channels and of a cut coastline. The structure's level is the
+    one the source structure mostly has in ``image``. Structure farther from the target than
+    ``BAND`` of its radius (plus a pixel) is background; the target's tube at ``CORE`` of its
+    radius is structure, so that a channel never breaks where two fragments meet; and a
+    connected piece (8-neighbours) that does not meet the target's own mask is dropped.
     """
     mid = 0.5 * (lo + hi)
     up = float((image[source.mask()] >= mid).all(axis=-1).mean()) >= 0.5
+    fore, back = (hi, lo) if up else (lo, hi)
+    out: F32 = canvas.copy()
     fg: NDArray[np.bool_] = np.asarray((canvas >= mid if up else canvas < mid).all(axis=-1))
+    fg &= _tube(target, _BAND, 1.0)
+    fg |= _tube(target, _CORE, 0.0)
     n, comp = cv2.connectedComponents(fg.astype(np.uint8), connectivity=8)
     keep = np.zeros(n, bool)
     keep[np.unique(comp[target.mask() & fg])] = True
-    drop = fg & ~keep[comp]
-    out: F32 = canvas.copy()
-    out[drop] = lo if up else hi
+    fg &= keep[comp]
+    out[fg] = fore
+    out[~fg] = back
     return out
+
+
+# Structure beyond 1.25 target radii (+1 px) is a neighbour's; the tube at 0.8 radii is the
+# target's own (docs/pipelines/branching/quality.md: re-trace F1 on the river masks).
+_BAND, _CORE = 1.25, 0.8
+
+
+def _tube(skeleton: Skeleton, factor: float, add: float) -> NDArray[np.bool_]:
+    """``skeleton``'s mask with every radius ``r`` drawn as ``factor * r + add``."""
+    wide = Skeleton(
+        [
+            Branch(b.points, np.minimum(b.thickness * factor + add, MAX_THICKNESS), parent=b.parent)
+            for b in skeleton.branches
+        ],
+        skeleton.shape,
+    )
+    return wide.mask()
 
 
 def _disk(shape: tuple[int, int], c: F64, r: float) -> tuple[slice, slice, NDArray[np.bool_], int, int]:
