@@ -468,9 +468,9 @@ def file_digest(path: str | os.PathLike[str]) -> str:
 
     Examples
     --------
-    >>> import tempfile, os
-    >>> path = os.path.join(tempfile.mkdtemp(), "a.txt")
-    >>> _ = open(path, "w").write("abc")
+    >>> import tempfile, pathlib
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "a.txt"
+    >>> _ = path.write_text("abc")
     >>> file_digest(path)[:16]
     'ba7816bf8f01cfea'
     """

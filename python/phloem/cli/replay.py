@@ -7,7 +7,9 @@ import argparse
 import contextlib
 import io as _pyio
 import os
+import sys
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -145,7 +147,7 @@ def command_line(
     return argv + (["--force"] if overwrite else []) + (["-q"] if quiet else [])
 
 
-def _check_inputs(meta: dict[str, Any], allow_changed: bool, path: Any) -> None:
+def _check_inputs(meta: dict[str, Any], allow_changed: bool, path: Any, warn: Callable[[str], None]) -> None:
     from .. import __version__
 
     for rec in meta.get("inputs") or []:
@@ -158,12 +160,16 @@ def _check_inputs(meta: dict[str, Any], allow_changed: bool, path: Any) -> None:
                 "pass --allow-changed-inputs to replay on it anyway"
             )
     if "inputs" not in meta:
-        warnings.warn(f"{path} is a layout-1 sidecar without input hashes; the inputs are not checked", stacklevel=3)
+        warn(f"{path} is a layout-1 sidecar without input hashes; the inputs are not checked")
     recorded = meta.get("phloem_version")
     if recorded != __version__:
-        warnings.warn(
-            f"{path} was written by phloem {recorded}, this is phloem {__version__}; the bytes may differ", stacklevel=3
+        warn(
+            f"{path} was written by phloem {recorded or '(unknown)'}, this is phloem {__version__}; the bytes may differ"
         )
+
+
+def _python_warning(message: str) -> None:
+    warnings.warn(message, UserWarning, stacklevel=5)  # at the caller of phloem.replay
 
 
 def prepare(
@@ -174,9 +180,11 @@ def prepare(
     allow_changed_inputs: bool = False,
     quiet: bool = True,
     expect: str | None = None,
+    warn: Callable[[str], None] = _python_warning,
 ) -> argparse.Namespace:
     """The parsed arguments of a sidecar's command, inputs checked; ``expect`` is the command
-    ``--from-json`` was given to (``phloem branching --from-json S``), or None."""
+    ``--from-json`` was given to (``phloem branching --from-json S``), or None; ``warn`` gets the
+    lines about another phloem version or unchecked inputs."""
     from .parser import build_parser
 
     meta = read_sidecar(sidecar)
@@ -184,14 +192,15 @@ def prepare(
     if expect and command.split()[: len(expect.split())] != expect.split():
         raise ValueError(f"--from-json: {sidecar} records 'phloem {command}', not 'phloem {expect}'")
     argv = command_line(meta, out=out, overwrite=overwrite, quiet=quiet, path=sidecar)
-    _check_inputs(meta, allow_changed_inputs, sidecar)
     err = _pyio.StringIO()
     try:
         with contextlib.redirect_stderr(err):
-            return build_parser().parse_args(argv)
+            args = build_parser().parse_args(argv)
     except SystemExit:
         why = err.getvalue().strip().splitlines()[-1:] or ["unreadable parameters"]
         raise _fail(sidecar, f"its parameters do not make a valid 'phloem {command}' ({why[0]})") from None
+    _check_inputs(meta, allow_changed_inputs, sidecar, warn)
+    return args
 
 
 def replay(
@@ -230,14 +239,14 @@ def replay(
 
     Examples
     --------
-    >>> import os, tempfile, phloem
+    >>> import os, pathlib, tempfile, phloem
     >>> from phloem.cli import main
     >>> d = tempfile.mkdtemp(); ex = os.path.join(d, "ex.png"); q = os.path.join(d, "q.png")
     >>> phloem.io.write_image(ex, phloem.data.bark()[:48, :48])
     >>> main(["quilt", ex, "--size", "64", "--out", q, "-q"])
     0
     >>> again = phloem.replay(q + ".json", out=os.path.join(d, "again", "q.png"))
-    >>> open(again, "rb").read() == open(q, "rb").read()
+    >>> again.read_bytes() == pathlib.Path(q).read_bytes()
     True
     """
     args = prepare(sidecar, out=out, overwrite=overwrite, allow_changed_inputs=allow_changed_inputs)
@@ -250,7 +259,7 @@ def replay(
 
 def _cmd_replay(args: argparse.Namespace) -> None:
     inner = prepare(args.sidecar, out=args.out, overwrite=args.force, allow_changed_inputs=args.allow_changed_inputs,
-                    quiet=args.quiet, expect=args.expect)  # fmt: skip
+                    quiet=args.quiet, expect=args.expect, warn=lambda m: print(f"phloem replay: warning: {m}", file=sys.stderr))  # fmt: skip
     transaction().make_folders = True  # --out may name a new folder
     inner.func(inner)
 
