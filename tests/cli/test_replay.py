@@ -4,6 +4,7 @@ are refused in one line."""
 
 from __future__ import annotations
 
+import argparse
 import hashlib
 import json
 from pathlib import Path
@@ -14,7 +15,7 @@ import pytest
 
 import phloem
 from phloem import io
-from phloem.cli import main
+from phloem.cli import build_parser, main
 from phloem.strokes import StrokeSet
 from phloem.testing import layered_leaf, scribbles_from
 
@@ -149,6 +150,15 @@ def _first_run(name: str, inputs: Path, out: Path) -> list[str]:
     return argv
 
 
+def _options(command: str) -> set[str]:
+    """The options of a sub-command a sidecar records: all but machine, terminal and seed ones."""
+    p = build_parser()
+    for word in command.split():
+        p = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction)).choices[word]
+    machine = {"help", "seed", "threads", "max_pixels", "max_memory", "quiet", "force", "from_json"}
+    return {a.dest for a in p._actions if a.help != argparse.SUPPRESS and a.dest not in machine}
+
+
 def _files(folder: Path) -> dict[str, bytes]:
     return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
@@ -168,6 +178,7 @@ def test_replay_writes_the_same_bytes(name: str, inputs: Path, tmp_path: Path) -
     _, side, main_out = CASES[name]
     meta = json.loads((tmp_path / "a" / side).read_text())
     assert meta["command"] == name and meta["sidecar_version"] == io.SIDECAR_VERSION
+    assert set(meta["parameters"]) == _options(name)  # every option, and nothing that is not one
     assert main(["replay", str(tmp_path / "a" / side), "--out", str(tmp_path / "b" / main_out), "-q"]) == 0
     _assert_same_bytes(tmp_path / "a", tmp_path / "b")
 
