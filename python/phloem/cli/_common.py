@@ -271,6 +271,12 @@ def sub_seed(seed: int, i: int) -> int:
     return int(np.random.SeedSequence([seed, i]).generate_state(1)[0])
 
 
+#: What a sidecar's ``parameters`` leave out: argparse's own entries, and the options about this
+#: machine or the terminal, or recorded apart (seed, threads).
+NOT_PARAMETERS = ("help", "func", "command", "action", "quiet", "force", "threads", "seed", "max_pixels", "max_memory",
+                  "from_json")  # fmt: skip
+
+
 def params(args: argparse.Namespace, skip: Sequence[str] = ()) -> dict[str, Any]:
     """Every option of the command with the value it ran with: what ``phloem replay`` passes back.
 
@@ -278,8 +284,7 @@ def params(args: argparse.Namespace, skip: Sequence[str] = ()) -> dict[str, Any]
     the seed, which the sidecar holds apart, are left out. A command that resolves a default
     (``--levels`` from the exemplar, ``--kind auto``) sets the resolved value on ``args`` first.
     """
-    drop = {"func", "command", "action", "quiet", "force", "threads", "seed", "max_pixels", "max_memory", "from_json",
-            *skip}  # fmt: skip
+    drop = {*NOT_PARAMETERS, *skip}
     return {
         k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items() if k not in drop and k[:1] != "_"
     }

@@ -14,12 +14,9 @@ from pathlib import Path
 from typing import Any
 
 from .. import _json, io
-from ._common import OUTPUT_ARGUMENTS, outputs, parse_size, parse_square_size, transaction
+from ._common import NOT_PARAMETERS, OUTPUT_ARGUMENTS, outputs, parse_size, parse_square_size, transaction
 
 __all__ = ["command_line", "read_sidecar", "replay"]
-
-# Options that are no parameter of the run (machine, terminal, sidecar) and that replay sets itself.
-_NOT_REPLAYED = {"help", "seed", "threads", "max_pixels", "max_memory", "quiet", "force", "from_json"}
 
 
 def _fail(path: Any, what: str) -> ValueError:
@@ -112,7 +109,7 @@ def command_line(
     >>> command_line({"command": "quilt", "seed": 3, "threads": 2, "parameters": {"input": "ex.png",
     ...     "size": [48, 64], "out": "q.png", "block": 24, "overlap": 6, "randomness": 0.01, "cost": "kwatra",
     ...     "bit_depth": 8}}, out="again/q.png")
-    ['quilt', 'ex.png', '--size', '64x48', '--out', 'again/q.png', '--block', '24', '--overlap', '6', '--randomness', '0.01', '--cost', 'kwatra', '--bit-depth', '8', '--seed', '3', '--threads', '2']
+    ['quilt', 'ex.png', '--size=64x48', '--out=again/q.png', '--block=24', '--overlap=6', '--randomness=0.01', '--cost=kwatra', '--bit-depth=8', '--seed', '3', '--threads', '2']
     """
     from .parser import build_parser
 
@@ -122,7 +119,7 @@ def command_line(
     argv = command.split()
     for action in p._actions:
         dest = action.dest
-        if dest in _NOT_REPLAYED or action.help == argparse.SUPPRESS or dest not in params:
+        if dest in NOT_PARAMETERS or action.help == argparse.SUPPRESS or dest not in params:
             continue
         value = params[dest]
         if not action.option_strings:  # a positional
@@ -138,6 +135,8 @@ def command_line(
         elif value is None:
             if action.default is not None:  # None is an option's "off", spelled none (--stand-in-weight none)
                 argv += [flag, "none"]
+        elif action.nargs in (None, "?"):
+            argv.append(f"{flag}={_words(action, value)[0]}")  # one word, even one that starts with '-'
         else:
             argv += [flag, *_words(action, value)]
     if meta.get("seed") is not None:
