@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import struct
@@ -83,6 +84,25 @@ def test_write_result_writes_sidecar_and_checks_both_first(tmp_path):
     with pytest.raises(FileExistsError):
         write_result(p2, np.zeros((4, 4), np.float32), command="t", parameters={}, seed=0)
     assert not p2.exists()  # refused before anything was written
+
+
+def test_write_result_records_threads_input_hashes_and_details(tmp_path):
+    src = tmp_path / "in.png"
+    write_image(src, np.ones((4, 4), np.float32))
+    folder = tmp_path / "lib"
+    folder.mkdir()
+    (folder / "a.txt").write_text("a")
+    side = write_result(tmp_path / "o.png", np.zeros((4, 4), np.float32), command="t", parameters={}, seed=None,
+                        threads=3, inputs=[src, folder], details={"found": 1})  # fmt: skip
+    meta = json.loads(side.read_text())
+    assert meta["sidecar_version"] == phloem.io.SIDECAR_VERSION and meta["threads"] == 3
+    assert meta["details"] == {"found": 1} and meta["output"] == "o.png"
+    assert meta["inputs"][0] == {"path": str(src), "sha256": hashlib.sha256(src.read_bytes()).hexdigest()}
+    before = meta["inputs"][1]["sha256"]
+    (folder / "b.txt").write_text("")  # a file added to a folder input changes its digest
+    assert phloem.io.file_digest(folder) != before
+    (folder / "b.txt").unlink()
+    assert phloem.io.file_digest(folder) == before
 
 
 @pytest.mark.parametrize(

@@ -17,6 +17,8 @@ strokes   stroke-based editing of object structure: the stroke model and files (
 metrics   measures of result quality
 warp      image warps between contours by mean value coordinates (Hormann & Floater 2006)
 cli       the ``phloem`` command
+
+replay(sidecar) re-runs the command a result's sidecar records, to the same bytes.
 """
 
 from __future__ import annotations
@@ -49,6 +51,8 @@ __version__: str = _core.__version__
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_core._after_fork_in_child)
 
+from .cli.replay import replay
+
 __all__ = [
     "MemoryLimitError",
     "__version__",
@@ -60,6 +64,7 @@ __all__ = [
     "leaves",
     "metrics",
     "patch",
+    "replay",
     "seams",
     "shapes",
     "strokes",

@@ -12,6 +12,7 @@ file unless asked.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import logging
 import os
@@ -19,7 +20,7 @@ import re
 import struct
 import threading
 import warnings
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import IO, Any
 
@@ -34,8 +35,11 @@ from ._files import Transaction, encode
 __all__ = [
     "DEFAULT_MAX_PIXELS",
     "IMAGE_SUFFIXES",
+    "SIDECAR_VERSION",
     "ImageReadError",
     "RescaledImageWarning",
+    "file_digest",
+    "find_sidecar",
     "image_size",
     "read_image",
     "sidecar_path",
@@ -424,21 +428,88 @@ def write_image(
         tx.commit()
 
 
+#: Version of the sidecar layout (``docs/replay.md``). Sidecars without the field are version 1:
+#: the same keys less ``threads``, ``inputs`` and ``details``, with details mixed into ``parameters``.
+SIDECAR_VERSION = 2
+
+
 def sidecar_path(path: str | os.PathLike[str]) -> Path:
-    """The JSON sidecar of an output file: ``out.png`` → ``out.png.json``."""
+    """The JSON sidecar of an output file or folder: ``out.png`` → ``out.png.json``, a JSON output
+    ``skel.json`` → ``skel.sidecar.json`` (not ``skel.json.json``), a folder ``model`` → ``model.json``.
+
+    The one rule every writer of sidecars follows; :func:`find_sidecar` also finds the older name
+    of a JSON output's sidecar.
+
+    Examples
+    --------
+    >>> from phloem.io import sidecar_path
+    >>> sidecar_path("out/bark.png").name, sidecar_path("river.json").name, sidecar_path("model").name
+    ('bark.png.json', 'river.sidecar.json', 'model.json')
+    """
     p = Path(path)
+    if p.suffix.lower() == ".json":
+        return p.with_name(p.name[: -len(p.suffix)] + ".sidecar.json")
     return p.with_name(p.name + ".json")
 
 
-def _sidecar(path: Path, command: str, parameters: Mapping[str, Any], seed: int | None, default: Any = None) -> bytes:
-    """The bytes of ``path``'s sidecar: parameters, seed and phloem version."""
-    from . import __version__
+def find_sidecar(path: str | os.PathLike[str]) -> Path | None:
+    """The existing sidecar of an output: :func:`sidecar_path`, else the ``X.json.json`` name that
+    JSON outputs had before sidecar version 2; None when there is neither."""
+    p = Path(path)
+    for side in (sidecar_path(p), p.with_name(p.name + ".json")):
+        if side != p and side.is_file():
+            return side
+    return None
+
+
+def file_digest(path: str | os.PathLike[str]) -> str:
+    """SHA-256 (hex) of a file's bytes, or of a folder: every file under it by its relative path,
+    in sorted order, so a renamed, added, removed or edited file changes it.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "a.txt"
+    >>> _ = path.write_text("abc")
+    >>> file_digest(path)[:16]
+    'ba7816bf8f01cfea'
+    """
+    p = Path(path)
+    if p.is_dir():
+        h = hashlib.sha256()
+        for f in sorted(q for q in p.rglob("*") if q.is_file()):
+            h.update(f"{f.relative_to(p).as_posix()}\0{file_digest(f)}\n".encode())
+        return h.hexdigest()
+    h = hashlib.sha256()
+    with open(p, "rb") as fp:
+        for block in iter(lambda: fp.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _sidecar(
+    path: Path,
+    command: str,
+    parameters: Mapping[str, Any],
+    seed: int | None,
+    default: Any = None,
+    *,
+    threads: int | None = None,
+    inputs: Mapping[str, str] | None = None,
+    details: Mapping[str, Any] | None = None,
+) -> bytes:
+    """The bytes of ``path``'s sidecar (layout :data:`SIDECAR_VERSION`, ``docs/replay.md``)."""
+    from . import __version__, _core
 
     meta = {
+        "sidecar_version": SIDECAR_VERSION,
         "phloem_version": __version__,
         "command": command,
         "seed": seed,
+        "threads": _core.default_threads() if threads is None else int(threads),
         "parameters": {k: (str(v) if isinstance(v, os.PathLike) else v) for k, v in parameters.items()},
+        "inputs": [{"path": f, "sha256": digest} for f, digest in (inputs or {}).items()],
+        "details": dict(details or {}),
         "output": path.name,
     }
     return (json.dumps(meta, indent=2, sort_keys=True, default=default) + "\n").encode()
@@ -453,8 +524,13 @@ def write_result(
     seed: int | None,
     overwrite: bool = False,
     bit_depth: int | None = None,
+    threads: int | None = None,
+    inputs: Sequence[str | os.PathLike[str]] = (),
+    details: Mapping[str, Any] | None = None,
 ) -> Path:
-    """Write an output image and its sidecar (parameters, seed, phloem version).
+    """Write an output image and its sidecar (``docs/replay.md``): the command, its parameters,
+    the seed, the thread count (None: the default pool's), the SHA-256 of each of ``inputs``,
+    ``details`` of the result and the phloem version.
 
     Both targets are checked before either is written, and both take their names together, so
     a refused overwrite or a failed write (a full disk) leaves neither behind. Returns the
@@ -463,10 +539,11 @@ def write_result(
     p = Path(path)
     side = sidecar_path(p)
     data = encode(p, image, bit_depth)
+    digests = {str(f): file_digest(f) for f in inputs}
     with Transaction(overwrite) as tx:
         tx.reserve(p)
         tx.reserve(side)
         tx.stage(p, data)
-        tx.stage(side, _sidecar(p, command, parameters, seed))
+        tx.stage(side, _sidecar(p, command, parameters, seed, threads=threads, inputs=digests, details=details))
         tx.commit()
     return side

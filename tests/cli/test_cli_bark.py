@@ -26,7 +26,7 @@ def test_bark_writes_texture_maps_preview_and_sidecar(tmp_path, exemplar_png):
     assert io.read_image(prev).shape[0] == 40
     meta = json.loads(io.sidecar_path(out).read_text())
     assert meta["command"] == "bark" and meta["seed"] == 3 and meta["parameters"]["n_labels"] == 2
-    assert set(meta["parameters"]["files"]) == {"labels_in", "labels_out", "height", "cylinder"}
+    assert set(meta["details"]["files"]) == {"labels_in", "labels_out", "height", "cylinder"}
     # everything exists now: a second run refuses before computing, and leaves the files alone
     before = out.stat().st_mtime_ns
     assert main(args) == 2

@@ -30,7 +30,7 @@ def test_branching_trace_and_grow_write_skeletons_with_sidecars(tmp_path, capsys
                  "--overlay", str(tmp_path / "overlay.png"), "-q"]) == 0  # fmt: skip
     sk = Skeleton.load(skel)
     assert sk.shape == (160, 200) and len(sk.branches) >= 3
-    assert json.loads((tmp_path / "river.json.json").read_text())["command"] == "branching trace"
+    assert json.loads((tmp_path / "river.sidecar.json").read_text())["command"] == "branching trace"
     assert io.read_image(tmp_path / "overlay.png").shape == (160, 200, 3)
     new = tmp_path / "new.json"
     args = [
@@ -48,7 +48,7 @@ def test_branching_trace_and_grow_write_skeletons_with_sidecars(tmp_path, capsys
     assert main(args) == 0
     grown = Skeleton.load(new)
     assert grown.shape == (160, 200) and len(grown.branches) >= 1
-    assert json.loads((tmp_path / "new.json.json").read_text())["seed"] == 5
+    assert json.loads((tmp_path / "new.sidecar.json").read_text())["seed"] == 5
     # Same seed, same skeleton; no silent overwrite.
     assert main(["branching", "grow", str(skel), "--out", str(tmp_path / "again.json"), "--seed", "5", "-q"]) == 0
     assert Skeleton.load(tmp_path / "again.json") == grown

@@ -42,15 +42,17 @@ def test_run_writes_leaves_sidecars_model_and_sheet(tmp_path, files) -> None:
     img = io.read_image(out / "leaf_0001.png")
     assert img.shape[2] == 4 and img[..., 3].max() == 1.0 and img[0, 0, 3] == 0.0
     meta = json.loads((out / "leaf_0001.png.json").read_text())
-    assert meta["command"] == "leaves synthesize" and meta["seed"] == 3 and "leaf_seed" in meta["parameters"]
+    assert meta["command"] == "leaves run" and meta["seed"] == 3 and "leaf_seed" in meta["details"]
     assert sorted(p.name for p in model.iterdir()) == ["exemplar_000.npz", "exemplar_001.npz", "model.json"]
     side = json.loads((tmp_path / "model.json").read_text())
-    assert side["command"] == "leaves analyze" and len(side["leaves"]) == 2 and len(side["lam"]) == 2
+    assert (
+        side["command"] == "leaves analyze" and len(side["details"]["leaves"]) == 2 and len(side["details"]["lam"]) == 2
+    )
     assert io.read_image(sheet).shape[0] >= 5 * 200
 
     # a new leaf is remade alone from its sidecar's seed, by synthesize on the saved model
     again = tmp_path / "again"
-    seed = str(meta["parameters"]["leaf_seed"])
+    seed = str(meta["details"]["leaf_seed"])
     assert main(["leaves", "synthesize", str(model), "--count", "1", "--out-dir", str(again), "--seed", "0", "-q"]) == 0
     assert main(["leaves", "synthesize", str(model), "--count", "1", "--out-dir", str(again), "--prefix", "x", "-q",
                  "--seed", seed]) == 0  # fmt: skip

@@ -32,7 +32,7 @@ def test_trees_writes_variations_sidecars_and_sheet(tmp_path, capsys):
     assert files == [f"tree_{i:04d}.png{s}" for i in range(3) for s in ("", ".json")]
     meta = json.loads((out / "tree_0001.png.json").read_text())
     assert meta["seed"] == 4 and meta["parameters"]["n_sources"] == 2
-    assert len(meta["parameters"]["exemplars"]) == 2 and set(meta["parameters"]["exemplars"]) <= {
+    assert len(meta["details"]["exemplars"]) == 2 and set(meta["details"]["exemplars"]) <= {
         "t0.png",
         "t1.png",
         "t2.png",
@@ -43,7 +43,7 @@ def test_trees_writes_variations_sidecars_and_sheet(tmp_path, capsys):
     from phloem import trees
 
     library = trees.Library.load(lib, size=128)
-    v = trees.variation(library, seed=meta["parameters"]["variation_seed"])
+    v = trees.variation(library, seed=meta["details"]["variation_seed"])
     assert np.abs(v.image - img).max() <= 1 / 255 + 1e-6
     assert io.read_image(sheet).shape[2] == 3
     # No silent overwrite, and nothing half-written on refusal.
@@ -73,8 +73,8 @@ def test_trees_writes_variations_sidecars_and_sheet(tmp_path, capsys):
         == 0
     )
     meta = json.loads((tmp_path / "like" / "tree_0000.png.json").read_text())
-    assert meta["parameters"]["exemplars"][0] == str(like) and meta["parameters"]["colors"] == "contour"
-    assert 0.6 <= meta["parameters"]["weights"][0] <= 0.9
+    assert meta["details"]["exemplars"][0] == str(like) and meta["parameters"]["colors"] == "contour"
+    assert 0.6 <= meta["details"]["weights"][0] <= 0.9
 
 
 def test_trees_bad_library_is_a_clean_error(tmp_path, capsys):

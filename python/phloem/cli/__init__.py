@@ -1,7 +1,8 @@
 """The ``phloem`` command: one sub-command per capability.
 
-Every sub-command that writes an image also writes ``OUT.json`` beside it with the parameters,
-the seed and the phloem version, refuses to replace existing files unless ``--force`` is given,
+Every sub-command that writes an image also writes a sidecar beside it (``OUT.png.json``;
+``docs/replay.md``) with every parameter as it ran, the seed, the thread count, the inputs' hashes
+and the phloem version, which ``phloem replay`` re-runs to the same bytes; each refuses to replace existing files unless ``--force`` is given,
 and checks all of that before the (possibly long) computation starts. Flags spell the Python
 parameters they set (``docs/conventions.md``).
 """
@@ -78,10 +79,30 @@ def _message(e: BaseException) -> str:
     return str(e)
 
 
+def _from_json(argv: list[str]) -> list[str]:
+    """``phloem COMMAND [ACTION] --from-json SIDECAR [options]`` as ``phloem replay SIDECAR
+    [options]``, checked against COMMAND; any other arguments are left as they are."""
+    at = next((i for i, a in enumerate(argv) if a == "--from-json" or a.startswith("--from-json=")), None)
+    if at is None or argv[:1] == ["replay"]:
+        return argv
+    first = next((i for i, a in enumerate(argv) if a.startswith("-")), len(argv))
+    words = argv[:first]
+    rest = argv[first:]
+    at -= first
+    if rest[at] == "--from-json":
+        if at + 1 >= len(rest):
+            return argv  # argparse says "expected one argument"
+        sidecar, rest = rest[at + 1], rest[:at] + rest[at + 2 :]
+    else:
+        sidecar, rest = rest[at].split("=", 1)[1], rest[:at] + rest[at + 1 :]
+    return ["replay", sidecar, "--expect", " ".join(words), *rest]
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``phloem`` command; returns the exit status."""
     ap = build_parser()
-    args = ap.parse_args(join_negative_values(sys.argv[1:] if argv is None else argv))
+    argv = _from_json(list(sys.argv[1:] if argv is None else argv))
+    args = ap.parse_args(join_negative_values(argv))
     name = f"{args.command} {args.action}" if getattr(args, "action", None) else args.command
 
     def one_line(message: Warning | str, *_: object, **__: object) -> None:

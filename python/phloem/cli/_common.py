@@ -107,7 +107,14 @@ def common_options(p: argparse.ArgumentParser, *, writes: bool = True) -> None:
     )
     g.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     if writes:
-        g.add_argument("--force", action="store_true", help="replace OUT and OUT.json if they exist")
+        g.add_argument("--force", action="store_true", help="replace OUT and its sidecar if they exist")
+        g.add_argument(
+            "--from-json",
+            metavar="SIDECAR",
+            default=None,
+            help="re-run the command a sidecar records, to the same bytes (as 'phloem replay SIDECAR'; "
+            "takes --out, --force and --allow-changed-inputs, and no other option)",
+        )
         g.add_argument(
             "--bit-depth",
             type=int,
@@ -199,7 +206,7 @@ def stage_result(
     image: Any,
     args: argparse.Namespace,
     command: str,
-    parameters: dict[str, Any],
+    details: dict[str, Any] | None = None,
     quiet: bool = False,
 ) -> None:
     """An image and its sidecar, staged together (see :func:`phloem.io.write_result`)."""
@@ -207,9 +214,55 @@ def stage_result(
     side = io.sidecar_path(p)
     tx = transaction()
     tx.stage(p, _files.encode(p, image, args.bit_depth))
-    tx.stage(side, io._sidecar(p, command, parameters, args.seed))
+    tx.stage(side, sidecar(p, args, command, details))
     if not (quiet or args.quiet):
         tx.notes.append(f"wrote {p} and {side}")
+
+
+#: ``dest``s of the arguments that name files or folders a command reads: their SHA-256 goes
+#: into the sidecar, and ``phloem replay`` refuses to run on changed ones.
+INPUT_ARGUMENTS = ("input", "image", "mask", "strokes", "skeleton", "target", "library", "like", "trunk_model",
+                   "height_map", "labels_in", "labels_out", "valid", "guide", "background", "leaves", "scribbles",
+                   "model")  # fmt: skip
+#: ``dest``s of the arguments that name outputs (``out`` or ``out_dir`` is the main one).
+OUTPUT_ARGUMENTS = ("out", "out_dir", "sheet", "cylinder_preview", "fragment_map", "overlay", "preview", "histograms",
+                    "model_out")  # fmt: skip
+_KEYWORDS = ("auto", "none")  # values of file arguments that name no file (--valid auto)
+
+
+def input_files(args: argparse.Namespace) -> list[str]:
+    """The files and folders the command reads, as given, in argument order."""
+    found: list[str] = []
+    for dest in INPUT_ARGUMENTS:
+        value = getattr(args, dest, None)
+        for v in value if isinstance(value, list) else [value]:
+            if isinstance(v, str) and v not in _KEYWORDS and v not in found and Path(v).exists():
+                found.append(v)
+    return found
+
+
+def threads_used(args: argparse.Namespace) -> int:
+    """The worker thread count of the run: ``--threads``, else the default pool's."""
+    from .. import _core
+
+    return int(args.threads) if getattr(args, "threads", None) is not None else _core.default_threads()
+
+
+def sidecar(
+    path: Path,
+    args: argparse.Namespace,
+    command: str,
+    details: dict[str, Any] | None = None,
+    parameters: dict[str, Any] | None = None,
+) -> bytes:
+    """The sidecar of output ``path``: ``params(args)`` (or ``parameters``), the seed, the thread
+    count, the inputs' hashes and ``details`` (what the run found; ``docs/replay.md``)."""
+    if getattr(args, "_input_digests", None) is None:  # once per run, not once per output
+        args._input_digests = {f: io.file_digest(f) for f in input_files(args)}
+    return io._sidecar(
+        path, command, params(args) if parameters is None else parameters, getattr(args, "seed", None), str,
+        threads=threads_used(args), inputs=args._input_digests, details=details,
+    )  # fmt: skip
 
 
 def sub_seed(seed: int, i: int) -> int:
@@ -218,9 +271,23 @@ def sub_seed(seed: int, i: int) -> int:
     return int(np.random.SeedSequence([seed, i]).generate_state(1)[0])
 
 
+#: What a sidecar's ``parameters`` leave out: argparse's own entries, and the options about this
+#: machine or the terminal, or recorded apart (seed, threads).
+NOT_PARAMETERS = ("help", "func", "command", "action", "quiet", "force", "threads", "seed", "max_pixels", "max_memory",
+                  "from_json")  # fmt: skip
+
+
 def params(args: argparse.Namespace, skip: Sequence[str] = ()) -> dict[str, Any]:
-    drop = {"func", "command", "quiet", "force", "threads", "seed", "max_pixels", "max_memory", *skip}
-    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items() if k not in drop}
+    """Every option of the command with the value it ran with: what ``phloem replay`` passes back.
+
+    Options about this machine or the terminal (threads, memory and pixel limits, the bar) and
+    the seed, which the sidecar holds apart, are left out. A command that resolves a default
+    (``--levels`` from the exemplar, ``--kind auto``) sets the resolved value on ``args`` first.
+    """
+    drop = {*NOT_PARAMETERS, *skip}
+    return {
+        k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items() if k not in drop and k[:1] != "_"
+    }
 
 
 def run(label: str, args: argparse.Namespace, work: Callable[[Any], T]) -> T:
@@ -235,5 +302,6 @@ def run(label: str, args: argparse.Namespace, work: Callable[[Any], T]) -> T:
     return out
 
 
-def save(args: argparse.Namespace, command: str, image: np.ndarray, **extra: Any) -> None:
-    stage_result(args.out, image, args, command, {**params(args), **extra})
+def save(args: argparse.Namespace, command: str, image: np.ndarray, **details: Any) -> None:
+    """OUT and its sidecar; ``details`` are what the run found (recorded, not replayed)."""
+    stage_result(args.out, image, args, command, details)

@@ -3,23 +3,23 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .. import __version__, _json, branching, io
+from .. import _json, branching, io
+from ..branching.measures import resolve_trace_options
 from ._common import (
     check_writable,
     common_options,
     deprecated_alias,
-    params,
     parse_size,
     positive,
     preflight,
     run,
     save,
+    sidecar,
     stage,
     stage_image,
     transaction,
@@ -50,13 +50,21 @@ def _trace_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     return {"kind": args.kind, "sigmas": tuple(args.sigmas), "channel": args.channel, "min_length": args.min_length}
 
 
-def _write_skeleton(path: Path, sk: branching.Skeleton, args: argparse.Namespace, command: str, **extra: Any) -> None:
+def _write_skeleton(path: Path, sk: branching.Skeleton, args: argparse.Namespace, command: str, **details: Any) -> None:
     """A skeleton file and its sidecar, staged together."""
     side = io.sidecar_path(path)
     stage(path, sk.to_json().encode("utf-8"), args, note=f"wrote {path} and {side}")
-    meta = {"phloem_version": __version__, "command": command, "seed": getattr(args, "seed", None),
-            "parameters": {**params(args), **extra}, "output": path.name}  # fmt: skip
-    transaction().stage(side, (json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n").encode())
+    transaction().stage(side, sidecar(path, args, command, details))
+
+
+def _resolve_kind(args: argparse.Namespace, img: np.ndarray) -> None:
+    """``--kind auto`` recorded as the kind it traced with."""
+    args.kind = resolve_trace_options(img, _trace_kwargs(args))["kind"]
+
+
+def _resolve_models(args: argparse.Namespace, bend: Any) -> None:
+    """The defaults of the bending model (``--h``, ``--m``, ``--course``) recorded as fitted."""
+    args.h, args.m, args.course = bend.h, bend.m, bend.course
 
 
 def _check_json_target(path: Path, args: argparse.Namespace) -> None:
@@ -74,6 +82,7 @@ def _cmd_branching_trace(args: argparse.Namespace) -> None:
     img = io.read_image(args.input, max_pixels=args.max_pixels)
     valid = _valid(args, img)
     sk = run("branching trace", args, lambda bar: branching.trace(img, valid=valid, **_trace_kwargs(args)))
+    _resolve_kind(args, img)
     _write_skeleton(
         out, sk, args, "branching trace", branches=len(sk.branches), total_length=round(sk.total_length(), 1)
     )
@@ -237,7 +246,9 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
         source, h=args.h, order=args.order, m=args.m, n_best=args.n_best, course=args.course
     )
     new = run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
-    _write_skeleton(out, new, args, "branching grow", h=bend.h, branches=len(new.branches))
+    _resolve_models(args, bend)
+    args.size = shape
+    _write_skeleton(out, new, args, "branching grow", branches=len(new.branches))
     if args.preview is not None:
         stage_image(args.preview, new.draw(size=shape, color=(1.0, 1.0, 1.0), width=2), args)
     if args.histograms is not None:
@@ -288,9 +299,13 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
         ),
     )  # fmt: skip
     written = {role: str(p) for role, p in files.items()}
-    save(args, "branching run", res.image, h=res.bending.h, files=written,
+    if source is None:
+        _resolve_kind(args, img)
+    _resolve_models(args, res.bending)
+    args.size = res.image.shape[:2]
+    save(args, "branching run", res.image, files=written,
           source_branches=len(res.source.branches), target_branches=len(res.target.branches))  # fmt: skip
-    _write_skeleton(files["skeleton"], res.target, args, "branching run", h=res.bending.h)
+    _write_skeleton(files["skeleton"], res.target, args, "branching run")
     stage_image(files["histograms"], branching.histogram_figure(res.source, res.target, h=res.bending.h), args)
     if "fragments" in files:
         stage_image(files["fragments"], _fragment_map(res.render.labels), args)

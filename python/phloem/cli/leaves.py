@@ -3,19 +3,19 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .. import __version__, io, leaves
+from .. import io, leaves
 from ._common import (
     check_writable,
     common_options,
     params,
     positive,
     run,
+    sidecar,
     stage_image,
     stage_result,
     sub_seed,
@@ -79,10 +79,12 @@ def _stage_model(model: leaves.LeafModel, folder: Path, args: argparse.Namespace
     for name, data in model.files().items():
         transaction().stage(folder / name, data)
     side = io.sidecar_path(folder)
-    meta = {"phloem_version": __version__, "command": "leaves analyze", "seed": args.seed, "leaves": where,
-            "parameters": params(args, skip=("out_dir", "count", "prefix", "sheet")), "output": folder.name,
-            "lam": model.lam, "delta": model.delta, "objective": model.objective, "residual": model.residual}  # fmt: skip
-    transaction().stage(side, (json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n").encode())
+    # A model written by 'leaves run' is recorded as the 'leaves analyze' run that writes it alone.
+    parameters = {**params(args, skip=("out_dir", "count", "prefix", "sheet", "model_out")), "out": str(folder),
+                  "sheet": getattr(args, "sheet", None) if args.action == "analyze" else None}  # fmt: skip
+    details = {"leaves": where, "lam": model.lam, "delta": model.delta, "objective": model.objective,
+               "residual": model.residual}  # fmt: skip
+    transaction().stage(side, sidecar(folder, args, "leaves analyze", details, parameters))
     if not args.quiet:
         transaction().notes.append(f"wrote the model {folder} and {side}")
 
@@ -106,6 +108,7 @@ def _analyze(args: argparse.Namespace, model_dir: Path | None) -> tuple[leaves.L
 
 
 def _synthesize(model: leaves.LeafModel, args: argparse.Namespace, origin: str) -> list[np.ndarray]:
+    """New leaves with their sidecars (command: the one that ran, synthesize or run)."""
     out_dir = Path(args.out_dir)
     targets = [out_dir / f"{args.prefix}{i:04d}.png" for i in range(args.count)]
 
@@ -119,8 +122,8 @@ def _synthesize(model: leaves.LeafModel, args: argparse.Namespace, origin: str) 
 
     new = run("leaves: synthesize", args, make)
     for i, (img, path) in enumerate(zip(new, targets)):
-        stage_result(path, img, args, "leaves synthesize", quiet=True,
-                     parameters={**params(args), "model": origin, "leaf_seed": sub_seed(args.seed, i), "count": 1})  # fmt: skip
+        stage_result(path, img, args, f"leaves {args.action}", {"model": origin, "leaf_seed": sub_seed(args.seed, i)},
+                     quiet=True)  # fmt: skip
     if not args.quiet:
         transaction().notes.append(f"wrote {len(targets)} leaves (and their .json) to {out_dir}")
     return new
@@ -149,9 +152,7 @@ def _cmd_leaves_extract(args: argparse.Namespace) -> None:
         f, j = origin.rsplit("#", 1)
         path = out_dir / f"{Path(f).stem}_{int(j)}.png"
         check_writable(path, args)
-        stage_result(
-            path, img, args, "leaves extract", quiet=True, parameters={**params(args), "source": origin, "index": k}
-        )
+        stage_result(path, img, args, "leaves extract", {"source": origin, "index": k}, quiet=True)
     if not args.quiet:
         transaction().notes.append(f"wrote {len(imgs)} leaves (and their .json) to {out_dir}")
 

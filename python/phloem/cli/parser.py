@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from .. import __version__
-from . import bark, branching, demo, leaves, patch, strokes, studio, texture, trees
+from . import bark, branching, demo, leaves, patch, replay, strokes, studio, texture, trees
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -28,6 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
         strokes,
         branching,
         demo,
+        replay,
         studio,
     ):  # the order of the command list in --help
         family.add_parsers(sub)

@@ -54,6 +54,7 @@ def _cmd_edit(args: argparse.Namespace) -> None:
     )  # fmt: skip
     if args.sheet is not None:
         stage_image(args.sheet, strokes.contact_sheet(img, sset, res), args, bit_depth=8)
+    args.size = res.image.shape[:2]  # recorded resolved: the background's, target_size or IMAGE's
     save(args, "strokes edit", res.image)
 
 
@@ -63,7 +64,7 @@ def _cmd_draw(args: argparse.Namespace) -> None:
     if args.side == "source":
         img = io.read_image(args.image, max_pixels=args.max_pixels)
     else:
-        h, w = args.size or sset.target_size or io.image_size(args.image)
+        h, w = args.size = args.size or sset.target_size or io.image_size(args.image)
         img = np.full((h, w, 3), 0.92, np.float32)
     save(args, "strokes draw", strokes.draw(img, sset, side=args.side))
 

@@ -9,28 +9,46 @@ from typing import Any
 import numpy as np
 
 from .. import io, texture
+from ..texture.synthesis import _auto_levels
 from ._common import common_options, parse_size, positive, preflight, run, save
 
 
-def _from_exemplar(args: argparse.Namespace, command: str, job: Callable[[Any, Any], Any]) -> None:
-    """One exemplar file in, one texture file out: ``job(exemplar, bar)`` makes the texture."""
+def _from_exemplar(
+    args: argparse.Namespace, command: str, job: Callable[[Any, Any], Any], resolve: Callable[[Any], None]
+) -> None:
+    """One exemplar file in, one texture file out: ``job(exemplar, bar)`` makes the texture;
+    ``resolve(exemplar)`` then sets the defaults it used on ``args``, for the sidecar."""
     preflight(args)
     ex = io.read_image(args.input, max_pixels=args.max_pixels)
-    save(args, command, run(command, args, lambda bar: job(ex, bar)))
+    out = run(command, args, lambda bar: job(ex, bar))
+    resolve(ex)
+    save(args, command, out)
 
 
 def _cmd_synthesize(args: argparse.Namespace) -> None:
+    def resolve(ex: Any) -> None:
+        if args.levels is None:
+            args.levels = _auto_levels(min(ex.shape[:2]), args.patch_size)
+
     _from_exemplar(args, "synthesize", lambda ex, bar: texture.synthesize(
         ex, args.size, patch_size=args.patch_size, levels=args.levels, iterations=args.iterations, seed=args.seed,
         threads=args.threads, progress=bar, max_memory=args.max_memory,
-    ))  # fmt: skip
+    ), resolve)  # fmt: skip
 
 
 def _cmd_quilt(args: argparse.Namespace) -> None:
+    def resolve(ex: Any) -> None:
+        # texture.quilt's defaults; the replay tests pass them back and compare bytes, so a change
+        # there that is not made here fails them
+        if args.block is None:
+            args.block = max(2, min(64, min(ex.shape[:2]) // 2))
+        if args.overlap is None:
+            args.overlap = max(1, args.block // 4)
+
     _from_exemplar(args, "quilt", lambda ex, bar: texture.quilt(
         ex, args.size, block=args.block, overlap=args.overlap, randomness=args.randomness, cost=args.cost,
         seed=args.seed, threads=args.threads, progress=bar, max_memory=args.max_memory,
-    ))  # fmt: skip
+    ), resolve)  # fmt: skip
 
 
 def hole_from_mask(m: np.ndarray, name: str, *, alpha: bool, invert: bool) -> np.ndarray:

@@ -16,7 +16,6 @@ from ._common import (
     check_writable,
     common_options,
     deprecated_alias,
-    params,
     parse_square_size,
     positive,
     run,
@@ -58,7 +57,7 @@ def _cmd_trees(args: argparse.Namespace) -> None:
     if not args.quiet:
         print(f"library: {len(lib)} trees", file=sys.stderr)
 
-    colors = args.colors or ("contour" if like is not None else "random")
+    colors = args.colors = args.colors or ("contour" if like is not None else "random")  # recorded resolved
 
     def make(bar: Any) -> list[trees.Variation]:
         if like is not None:
@@ -83,8 +82,7 @@ def _cmd_trees(args: argparse.Namespace) -> None:
         rec = v.describe(lib)
         if like is not None:
             rec["exemplars"] = [str(args.like), *rec["exemplars"]]
-        stage_result(path, v.image, args, "trees", quiet=True,
-                     parameters={**params(args), "colors": colors, **rec, "variation_seed": sub_seed(args.seed, i)})  # fmt: skip
+        stage_result(path, v.image, args, "trees", {**rec, "variation_seed": sub_seed(args.seed, i)}, quiet=True)
     if not args.quiet:
         transaction().notes.append(f"wrote {len(targets)} trees (and their .json) to {out_dir}")
     if args.sheet is not None:
