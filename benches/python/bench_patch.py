@@ -43,15 +43,28 @@ def test_kdtree_512(benchmark, pair):
     assert field.shape == (512, 512, 2)
 
 
-def test_synthesize_512_from_256(benchmark):
+@pytest.mark.parametrize("tileable", [False, True])
+def test_synthesize_512_from_256(benchmark, tileable):
+    # tileable=True: the same job on a torus (wrapped search and votes); the row pair is its cost.
     ex = np.ascontiguousarray(phloem.data.bark()[..., :3])
-    out = benchmark.pedantic(phloem.texture.synthesize, args=(ex, (512, 512)), kwargs={"threads": 2}, rounds=3)
+    kwargs = {"threads": 2, "tileable": tileable}
+    out = benchmark.pedantic(phloem.texture.synthesize, args=(ex, (512, 512)), kwargs=kwargs, rounds=3)
     assert out.shape == (512, 512, 3)
 
 
-def test_complete_96_hole_in_512(benchmark, pair):
+@pytest.mark.parametrize("tileable", [False, True])
+def test_quilt_512_from_256(benchmark, tileable):
+    ex = np.ascontiguousarray(phloem.data.bark()[..., :3])
+    kwargs = {"threads": 2, "tileable": tileable}
+    out = benchmark.pedantic(phloem.texture.quilt, args=(ex, (512, 512)), kwargs=kwargs, rounds=3)
+    assert out.shape == (512, 512, 3)
+
+
+@pytest.mark.parametrize("tileable", [False, True])
+def test_complete_96_hole_in_512(benchmark, pair, tileable):
     img = pair[0]
     hole = np.zeros((512, 512), bool)
     hole[208:304, 208:304] = True
-    out = benchmark.pedantic(phloem.texture.complete, args=(img, hole), kwargs={"threads": 2}, rounds=3)
+    kwargs = {"threads": 2, "tileable": tileable}
+    out = benchmark.pedantic(phloem.texture.complete, args=(img, hole), kwargs=kwargs, rounds=3)
     assert np.array_equal(out[~hole], img[~hole])

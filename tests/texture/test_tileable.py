@@ -93,20 +93,22 @@ def _band(shape, rows, cols):
     return m
 
 
-def test_complete_tileable_fills_a_hole_across_the_border_seamlessly(tile):
-    # A band of 16 columns centred on the left/right wrap, over rows 24…71.
-    rows, cols = np.arange(24, 72), np.r_[88:96, 0:8]
+@pytest.mark.parametrize("seed", [0, 3])
+def test_complete_tileable_fills_a_hole_across_the_border_seamlessly(tile, seed):
+    # A band of 24 columns centred on the left/right wrap, over rows 24…71. Measured (seeds
+    # 0–3): 0.88–1.03 with the wrap, 1.57–2.24 without (docs/engines/completion.md).
+    rows, cols = np.arange(24, 72), np.r_[84:96, 0:12]
     hole = _band(tile.shape[:2], rows, cols)
-    wrapped = complete(tile, hole, tileable=True, seed=0)
-    plain = complete(tile, hole, seed=0)
+    wrapped = complete(tile, hole, tileable=True, seed=seed)
+    plain = complete(tile, hole, seed=seed)
     np.testing.assert_array_equal(wrapped[~hole], tile[~hole])
 
-    def seam(img):  # column wrap over the hole's rows vs the interior columns there
+    def seam(img):  # column wrap over the hole's rows vs the median interior column there
         d = np.abs(np.roll(img[rows], -1, 1) - img[rows]).mean(axis=(0, 2))
-        return d[-1] / d[:-1].mean()
+        return d[-1] / np.median(d[:-1])
 
     assert seam(wrapped) <= WRAP_BOUND, seam(wrapped)
-    assert seam(plain) > seam(wrapped) + 0.5, (seam(plain), seam(wrapped))
+    assert seam(plain) >= WRAP_BOUND, seam(plain)
 
 
 def test_complete_tileable_takes_context_from_the_opposite_side(tile):
