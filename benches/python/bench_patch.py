@@ -44,19 +44,13 @@ def test_kdtree_512(benchmark, pair):
 
 
 @pytest.mark.parametrize("tileable", [False, True])
-def test_synthesize_512_from_256(benchmark, tileable):
-    # tileable=True: the same job on a torus (wrapped search and votes); the row pair is its cost.
+@pytest.mark.parametrize("job", ["synthesize", "quilt"])
+def test_texture_512_from_256(benchmark, job, tileable):
+    # tileable=True: the same job on a torus (wrapped search and votes, or blocks wrapping onto
+    # the first ones); the row pair is its cost.
     ex = np.ascontiguousarray(phloem.data.bark()[..., :3])
     kwargs = {"threads": 2, "tileable": tileable}
-    out = benchmark.pedantic(phloem.texture.synthesize, args=(ex, (512, 512)), kwargs=kwargs, rounds=3)
-    assert out.shape == (512, 512, 3)
-
-
-@pytest.mark.parametrize("tileable", [False, True])
-def test_quilt_512_from_256(benchmark, tileable):
-    ex = np.ascontiguousarray(phloem.data.bark()[..., :3])
-    kwargs = {"threads": 2, "tileable": tileable}
-    out = benchmark.pedantic(phloem.texture.quilt, args=(ex, (512, 512)), kwargs=kwargs, rounds=3)
+    out = benchmark.pedantic(getattr(phloem.texture, job), args=(ex, (512, 512)), kwargs=kwargs, rounds=3)
     assert out.shape == (512, 512, 3)
 
 
