@@ -55,7 +55,7 @@ def _no_rust_env(venv: Path) -> dict[str, str]:
 def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
     given = os.environ.get("PHLOEM_WHEEL")
     if given:
-        path = Path(given)
+        path = Path(given).resolve()  # pip runs in a temporary folder
         if not path.is_file():
             pytest.fail(f"PHLOEM_WHEEL: {given} is not a file")
         return path
