@@ -9,6 +9,10 @@ install:  ## build and install phloem with the test extras
 dev:  ## build the extension in release mode into the current environment (maturin develop)
 	maturin develop --release
 
+DIST ?= dist
+wheel:  ## build the abi3 wheel for this platform into dist/ (PyPI-compatible manylinux tag, embedded data inside)
+	maturin build --release --compatibility pypi --auditwheel check --out $(DIST)
+
 test: install  ## every test: Rust unit tests and pytest (what CI runs)
 	cargo test --release -p phloem-core && pytest
 
@@ -63,4 +67,4 @@ fuzz-merge:  ## minimise the new inputs of make fuzz (out/fuzz/corpus) into fuzz
 	  python fuzz/fuzz_$$t.py -merge=1 fuzz/corpus/$$t $(FUZZ_OUT)/corpus/$$t 2>&1 | grep -v '^INFO: Instrumenting' | tail -1; \
 	done
 
-.PHONY: help install dev test lint bench peers sheet fuzz fuzz-merge
+.PHONY: help install dev wheel test lint bench peers sheet fuzz fuzz-merge

@@ -43,15 +43,22 @@ def test_kdtree_512(benchmark, pair):
     assert field.shape == (512, 512, 2)
 
 
-def test_synthesize_512_from_256(benchmark):
+@pytest.mark.parametrize("tileable", [False, True])
+@pytest.mark.parametrize("job", ["synthesize", "quilt"])
+def test_texture_512_from_256(benchmark, job, tileable):
+    # tileable=True: the same job on a torus (wrapped search and votes, or blocks wrapping onto
+    # the first ones); the row pair is its cost.
     ex = np.ascontiguousarray(phloem.data.bark()[..., :3])
-    out = benchmark.pedantic(phloem.texture.synthesize, args=(ex, (512, 512)), kwargs={"threads": 2}, rounds=3)
+    kwargs = {"threads": 2, "tileable": tileable}
+    out = benchmark.pedantic(getattr(phloem.texture, job), args=(ex, (512, 512)), kwargs=kwargs, rounds=3)
     assert out.shape == (512, 512, 3)
 
 
-def test_complete_96_hole_in_512(benchmark, pair):
+@pytest.mark.parametrize("tileable", [False, True])
+def test_complete_96_hole_in_512(benchmark, pair, tileable):
     img = pair[0]
     hole = np.zeros((512, 512), bool)
     hole[208:304, 208:304] = True
-    out = benchmark.pedantic(phloem.texture.complete, args=(img, hole), kwargs={"threads": 2}, rounds=3)
+    kwargs = {"threads": 2, "tileable": tileable}
+    out = benchmark.pedantic(phloem.texture.complete, args=(img, hole), kwargs=kwargs, rounds=3)
     assert np.array_equal(out[~hole], img[~hole])

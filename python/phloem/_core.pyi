@@ -55,6 +55,7 @@ def nnf(
     source_cost: NDArray[np.float32] | None,
     threads: int | None,
     kdtree: bool,
+    tileable: bool = False,
 ) -> tuple[NDArray[np.int32], NDArray[np.float32], int]: ...
 def knn(
     exemplar: NDArray[np.float32],
@@ -112,6 +113,7 @@ def vote(
     threads: int | None,
     mean_shift: int,
     pixels: NDArray[np.bool_] | None,
+    tileable: bool = False,
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]: ...
 def seamless(
     src: NDArray[np.float32],

@@ -5,7 +5,9 @@ output have the colours of the same label in the exemplar), label agreement (wou
 exemplar's own colour model put each output pixel in the label it was asked for), patch coherence to an exemplar (how well every patch of an output is explained by some
 patch of the exemplar — the quantity texture optimisation minimises, Kwatra et al. 2005, Eq. 1),
 repetition (how strongly an output repeats itself at a distance, which coherence cannot see:
-a tiled copy of the exemplar is perfectly coherent), and the shape similarity of binary shapes and
+a tiled copy of the exemplar is perfectly coherent), the seam at the wrap of a tileable texture
+(how much more neighbouring pixels differ across its borders, where copies meet, than inside),
+and the shape similarity of binary shapes and
 label maps (Rosenberger et al. 2009, thesis Eq. 3.9), and the angle and thickness histograms of
 branching structures with their L1 distance (Sibbing et al. 2010, Fig. 7; defined in
 :mod:`phloem.branching.histograms` and re-exported here), and the exact earth mover's distance
@@ -72,6 +74,7 @@ __all__ = [
     "thickness_histogram",
     "two_level_fraction",
     "width_agreement",
+    "wrap_seam",
 ]
 
 
@@ -198,6 +201,46 @@ def repetition(image: Any, *, min_shift: int = 16) -> float:
     valid = far & (n > 0.25 * h * w)
     corr = ac[valid] / np.sqrt(np.maximum(e1[valid] * e2[valid], 1e-24))
     return float(corr.max()) if corr.size else 0.0
+
+
+def wrap_seam(image: Any) -> float:
+    """How visible the seam is where copies of ``image`` placed side by side meet.
+
+    The mean absolute difference between the last and the first row (and column), i.e. across
+    the lines where a 2×2 tiling of the image joins, divided by the mean difference between
+    neighbouring rows (columns) inside the image; the mean of the two axes. About 1 for a
+    texture that tiles (the wrap is an ordinary line of it), well above 1 for one that does
+    not: a photo's opposite borders are unrelated.
+
+    Parameters
+    ----------
+    image : (M, N[, C]) array_like
+        The texture, at least 3×3 pixels.
+
+    Returns
+    -------
+    float
+        The ratio, ≥ 0 (``inf`` for a constant image with a step at the wrap).
+
+    Examples
+    --------
+    >>> import numpy as np, phloem
+    >>> noise = np.random.default_rng(0).random((64, 64))
+    >>> round(phloem.metrics.wrap_seam(noise), 2)  # noise tiles: its wrap is like any line
+    0.92
+    >>> round(phloem.metrics.wrap_seam(noise + np.linspace(0, 1, 64)), 2)  # a ramp does not
+    2.08
+    """
+    img = as_image(image, "image").astype(np.float64)
+    if min(img.shape[:2]) < 3:
+        raise ValueError(f"image: expected at least 3×3 pixels, got {img.shape[0]}×{img.shape[1]}")
+    ratios = []
+    for axis in (0, 1):
+        # Line i vs line i + 1, the last entry across the wrap.
+        d = np.abs(np.roll(img, -1, axis) - img).mean(axis=(1 - axis, 2))
+        inside = float(d[:-1].mean())
+        ratios.append(float(d[-1]) / inside if inside > 0 else (0.0 if d[-1] == 0 else np.inf))
+    return float(np.mean(ratios))
 
 
 def _label_maps(

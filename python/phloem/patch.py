@@ -46,6 +46,7 @@ def nnf(
     init: Any = None,
     levels: int = 1,
     enrich: int | NDArray[np.int32] = 0,
+    tileable: bool = False,
     seed: Seed = 0,
     threads: int | None = None,
     max_memory: int | None = None,
@@ -90,6 +91,10 @@ def nnf(
         Plain PatchMatch (0, the default) converges fast where target and source share
         coherent structure; enrichment is what reaches near-exact fields between unrelated
         images. Used at full resolution only.
+    tileable : bool, optional
+        The target is a torus (a tileable texture): a target patch near an edge continues on
+        the opposite side instead of being clipped, and matches propagate across the wrap
+        (default False). Source patches still lie wholly inside the source.
     seed : int or numpy.random.Generator, optional
         Seed of every random choice (default 0). The same seed gives the same field for any
         number of threads.
@@ -168,6 +173,7 @@ def nnf(
         source_cost=None,
         threads=check_threads(threads),
         kdtree=method == "kdtree",
+        tileable=bool(tileable),
     )
     return field, dist
 
@@ -315,6 +321,7 @@ def vote(
     patch_size: int = 7,
     weights: Any = None,
     mean_shift: int = 0,
+    tileable: bool = False,
     threads: int | None = None,
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """Weighted average of the source patches a field places over each target pixel.
@@ -337,6 +344,9 @@ def vote(
         votes (Wexler et al. 2007, §3.2), so that disagreeing votes pick a side instead of
         blurring; the Gaussian kernel's bandwidth is the votes' own spread around the
         current estimate. 0 (default): the weighted mean.
+    tileable : bool, optional
+        The image is a torus: a patch centred near an edge also votes on the opposite side
+        (default False), as :func:`nnf` matches with ``tileable=True``.
 
     Returns
     -------
@@ -358,5 +368,5 @@ def vote(
             raise ValueError(f"weights: expected shape {f.shape[:2]} like the field, got {w.shape}")
     return _core.vote(
         src, f, patch_size=check_patch_size(patch_size), weights=w, threads=check_threads(threads),
-        mean_shift=check_int(mean_shift, "mean_shift", 0), pixels=None,
+        mean_shift=check_int(mean_shift, "mean_shift", 0), pixels=None, tileable=bool(tileable),
     )  # fmt: skip

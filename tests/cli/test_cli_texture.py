@@ -86,3 +86,34 @@ def test_errors_are_clean_and_write_nothing(tmp_path, exemplar_png, capsys, args
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
     assert not (tmp_path / "o.png").exists() and not (tmp_path / "o.bmp").exists()
+
+
+@pytest.mark.parametrize("command", ["synthesize", "quilt"])
+def test_tileable_flag_makes_the_output_tile(tmp_path, bark, command):
+    ex = tmp_path / "ex.png"
+    io.write_image(ex, bark[:96, :96])
+    out = tmp_path / "t.png"
+    extra = ["--block", "24"] if command == "quilt" else []
+    assert main([command, str(ex), "--size", "72x64", "--out", str(out), "--tileable", "-q", *extra]) == 0
+    from phloem.metrics import wrap_seam
+
+    assert wrap_seam(io.read_image(out)) <= 1.5
+    assert json.loads(io.sidecar_path(out).read_text())["parameters"]["tileable"] is True
+
+
+def test_complete_tileable_flag(tmp_path, bark):
+    img, mask, out = tmp_path / "img.png", tmp_path / "mask.png", tmp_path / "out.png"
+    io.write_image(img, bark[:64, :64])
+    m = np.zeros((64, 64), np.float32)
+    m[20:40, :6] = m[20:40, -6:] = 1.0  # across the left/right border
+    io.write_image(mask, m)
+    assert main(["complete", str(img), str(mask), "--out", str(out), "--tileable", "-q"]) == 0
+    assert io.read_image(out).shape == (64, 64, 3)
+
+
+def test_quilt_tileable_too_small_is_a_clean_error(tmp_path, exemplar_png, capsys):
+    out = tmp_path / "q.png"
+    assert main(["quilt", str(exemplar_png), "--size", "20x20", "--block", "24", "--tileable", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "size: a tileable quilt needs" in err and "Traceback" not in err
+    assert not out.exists()

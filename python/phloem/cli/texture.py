@@ -31,8 +31,8 @@ def _cmd_synthesize(args: argparse.Namespace) -> None:
             args.levels = _auto_levels(min(ex.shape[:2]), args.patch_size)
 
     _from_exemplar(args, "synthesize", lambda ex, bar: texture.synthesize(
-        ex, args.size, patch_size=args.patch_size, levels=args.levels, iterations=args.iterations, seed=args.seed,
-        threads=args.threads, progress=bar, max_memory=args.max_memory,
+        ex, args.size, patch_size=args.patch_size, levels=args.levels, iterations=args.iterations,
+        tileable=args.tileable, seed=args.seed, threads=args.threads, progress=bar, max_memory=args.max_memory,
     ), resolve)  # fmt: skip
 
 
@@ -47,7 +47,7 @@ def _cmd_quilt(args: argparse.Namespace) -> None:
 
     _from_exemplar(args, "quilt", lambda ex, bar: texture.quilt(
         ex, args.size, block=args.block, overlap=args.overlap, randomness=args.randomness, cost=args.cost,
-        seed=args.seed, threads=args.threads, progress=bar, max_memory=args.max_memory,
+        tileable=args.tileable, seed=args.seed, threads=args.threads, progress=bar, max_memory=args.max_memory,
     ), resolve)  # fmt: skip
 
 
@@ -86,6 +86,7 @@ def _cmd_complete(args: argparse.Namespace) -> None:
             patch_size=args.patch_size,
             levels=args.levels,
             iterations=args.iterations,
+            tileable=args.tileable,
             seed=args.seed,
             threads=args.threads,
             max_memory=args.max_memory,
@@ -114,6 +115,8 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--patch-size", type=int, default=7, help="patch side, odd (default 7)")
     p.add_argument("--levels", type=positive, default=None, help="pyramid levels (default: from the exemplar size)")
     p.add_argument("--iterations", type=positive, default=4, help="search-and-vote iterations per level (default 4)")
+    p.add_argument("--tileable", action="store_true",
+                   help="make OUT tile: synthesise on a torus, so copies of OUT placed side by side show no seam")  # fmt: skip
     common_options(p)
     p.set_defaults(func=_cmd_synthesize)
 
@@ -134,6 +137,9 @@ def add_parsers(sub: Any) -> None:
                    help="Kwatra's k: 0 always takes the best-matching block, larger values pick worse matches more often (default 0.01)")  # fmt: skip
     p.add_argument("--cost", choices=("kwatra", "gradient", "luo"), default="kwatra",
                    help="seam cost: colour difference, gradient-normalised colour difference, or Luo et al.'s d^4/G (default kwatra)")  # fmt: skip
+    p.add_argument("--tileable", action="store_true",
+                   help="make OUT tile: the last blocks of each row and column overlap the first ones across the "
+                        "wrap and are cut into them along seams (needs sides of at least block + 2)")  # fmt: skip
     common_options(p)
     p.set_defaults(func=_cmd_quilt)
 
@@ -157,5 +163,8 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--levels", type=positive, default=None, help="pyramid levels (default: from the hole size)")
     p.add_argument("--iterations", type=positive, default=None,
                    help="search-and-vote iterations per level (default: 1 + 2 x level, coarsest level highest)")  # fmt: skip
+    p.add_argument("--tileable", action="store_true",
+                   help="IN is a tile: its opposite borders touch, so the hole may cross them, is filled from the "
+                        "context on the other side, and the result still tiles")  # fmt: skip
     common_options(p)
     p.set_defaults(func=_cmd_complete)

@@ -32,11 +32,12 @@ def upsample_field(
 
 
 def upsample_at(
-    field: NDArray[np.int32], at: NDArray[np.bool_], src_shape: tuple[int, int], r: int
+    field: NDArray[np.int32], at: NDArray[np.bool_], src_shape: tuple[int, int], r: int, *, wrap: bool = False
 ) -> NDArray[np.int32]:
     """:func:`upsample_field` to ``at.shape`` computed only where ``at`` is true, ``-1``
     elsewhere: completion needs the field at its hole's patches only, so this costs the
-    hole, not the image."""
+    hole, not the image. With ``wrap`` the source is a torus whose every pixel is a centre:
+    positions wrap around instead of being clamped."""
     ys, xs = np.nonzero(at)
     py = np.minimum(ys // 2, field.shape[0] - 1)
     px = np.minimum(xs // 2, field.shape[1] - 1)
@@ -44,6 +45,10 @@ def upsample_at(
     up = np.full((*at.shape, 2), -1, dtype=np.int32)
     keep = parent[:, 0] >= 0
     ys, xs, py, px, parent = ys[keep], xs[keep], py[keep], px[keep], parent[keep]
-    up[ys, xs, 0] = np.clip(2 * parent[:, 0] + (ys - 2 * py), r, src_shape[0] - 1 - r)
-    up[ys, xs, 1] = np.clip(2 * parent[:, 1] + (xs - 2 * px), r, src_shape[1] - 1 - r)
+    cy, cx = 2 * parent[:, 0] + (ys - 2 * py), 2 * parent[:, 1] + (xs - 2 * px)
+    if wrap:
+        up[ys, xs, 0], up[ys, xs, 1] = cy % src_shape[0], cx % src_shape[1]
+    else:
+        up[ys, xs, 0] = np.clip(cy, r, src_shape[0] - 1 - r)
+        up[ys, xs, 1] = np.clip(cx, r, src_shape[1] - 1 - r)
     return up

@@ -52,21 +52,39 @@ COMPLETION_GRADIENT_WEIGHT = 1.0
 COMPLETION_MEAN_SHIFT = 3
 
 
-def _patch_masks(hole: NDArray[np.bool_], p: int) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+def _patch_masks(hole: NDArray[np.bool_], p: int, wrap: bool = False) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
     """For completion with ``p × p`` patches: the target pixels whose patch touches the hole
-    (they need a match) and the source centres whose patch is wholly known and inside."""
-    need = cv2.dilate(hole.astype(np.uint8), np.ones((p, p), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0)
-    source = ~need.astype(bool)
+    (they need a match) and the source centres whose patch is wholly known and inside (with
+    ``wrap``, on the torus: patches continue across the border, every pixel may be a centre)."""
     r = p // 2
+    kernel = np.ones((p, p), np.uint8)
+    if wrap:
+        grown = cv2.dilate(np.pad(hole.astype(np.uint8), r, mode="wrap"), kernel, borderType=cv2.BORDER_CONSTANT)
+        need = grown[r : r + hole.shape[0], r : r + hole.shape[1]].astype(bool)
+        return need, ~need
+    need = cv2.dilate(hole.astype(np.uint8), kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    source = ~need.astype(bool)
     if r:
         source[:r, :] = source[-r:, :] = False
         source[:, :r] = source[:, -r:] = False
     return need.astype(bool), source
 
 
-def _with_gradients(img: NDArray[np.float32], weight: float) -> NDArray[np.float32]:
+def _wrap_pad(img: NDArray[Any], r: int) -> NDArray[Any]:
+    """``img`` grown by ``r`` pixels of the opposite side on every border: the torus as a
+    plain image whose ``r``-inner centres are each torus pixel once (at ``+ r``)."""
+    pad = ((r, r), (r, r)) + ((0, 0),) * (img.ndim - 2)
+    return np.ascontiguousarray(np.pad(img, pad, mode="wrap"))
+
+
+def _with_gradients(img: NDArray[np.float32], weight: float, wrap: bool = False) -> NDArray[np.float32]:
     """``img`` with ``weight`` times its central-difference y and x gradients appended as
-    channels (C → 3C; zero on the image border), the features completion matches on."""
+    channels (C → 3C; zero on the image border, or across it with ``wrap``), the features
+    completion matches on."""
+    if wrap:
+        gy = (0.5 * weight) * (np.roll(img, -1, 0) - np.roll(img, 1, 0))
+        gx = (0.5 * weight) * (np.roll(img, -1, 1) - np.roll(img, 1, 1))
+        return np.ascontiguousarray(np.concatenate([img, gy, gx], axis=2), dtype=np.float32)
     gy = np.zeros_like(img)
     gx = np.zeros_like(img)
     gy[1:-1] = (0.5 * weight) * (img[2:] - img[:-2])
@@ -75,13 +93,22 @@ def _with_gradients(img: NDArray[np.float32], weight: float) -> NDArray[np.float
 
 
 def _refresh_gradients(
-    feat: NDArray[np.float32], img: NDArray[np.float32], at: tuple[NDArray[np.intp], ...], weight: float
+    feat: NDArray[np.float32],
+    img: NDArray[np.float32],
+    at: tuple[NDArray[np.intp], ...],
+    weight: float,
+    wrap: bool = False,
 ) -> None:
-    """Recomputes ``feat = _with_gradients(img, weight)`` in place at the pixels ``at`` (rows,
-    columns) only, with the same arithmetic, so the values are those of a full recomputation."""
+    """Recomputes ``feat = _with_gradients(img, weight, wrap)`` in place at the pixels ``at``
+    (rows, columns) only, with the same arithmetic, so the values are those of a full
+    recomputation."""
     ys, xs = at
     h, w, c = img.shape
     feat[ys, xs, :c] = img[ys, xs]
+    if wrap:
+        feat[ys, xs, c : 2 * c] = (0.5 * weight) * (img[(ys + 1) % h, xs] - img[(ys - 1) % h, xs])
+        feat[ys, xs, 2 * c :] = (0.5 * weight) * (img[ys, (xs + 1) % w] - img[ys, (xs - 1) % w])
+        return
     iy = (ys >= 1) & (ys <= h - 2)
     y, x = ys[iy], xs[iy]
     feat[y, x, c : 2 * c] = (0.5 * weight) * (img[y + 1, x] - img[y - 1, x])
@@ -90,31 +117,37 @@ def _refresh_gradients(
     feat[y, x, 2 * c :] = (0.5 * weight) * (img[y, x + 1] - img[y, x - 1])
 
 
-def _fill_inward(img: NDArray[np.float32], hole: NDArray[np.bool_]) -> NDArray[np.float32]:
+def _box3(x: NDArray[np.float32], wrap: bool) -> NDArray[np.float32]:
+    """3×3 sums of a 2-D array, zero outside it or (``wrap``) around the torus."""
+    if wrap:  # OpenCV's filters do not wrap
+        rows = x + np.roll(x, 1, 0) + np.roll(x, -1, 0)
+        return np.asarray(rows + np.roll(rows, 1, 1) + np.roll(rows, -1, 1), np.float32)
+    return np.asarray(cv2.filter2D(x, -1, np.ones((3, 3), np.float32), borderType=cv2.BORDER_CONSTANT), np.float32)
+
+
+def _fill_inward(img: NDArray[np.float32], hole: NDArray[np.bool_], wrap: bool = False) -> NDArray[np.float32]:
     """Onion-peel start for the coarsest level: each ring of the hole takes the mean of its
-    already known 8-neighbours."""
+    already known 8-neighbours (around the torus with ``wrap``)."""
     img = img.copy()
     ys, xs = np.nonzero(hole)
     if ys.size == 0:
         return img
-    # Only the hole's box and a one-pixel ring take part, so rings cost their box, not the image.
-    box = (slice(max(0, ys.min() - 1), ys.max() + 2), slice(max(0, xs.min() - 1), xs.max() + 2))
+    # Only the hole's box and a one-pixel ring take part, so rings cost their box, not the
+    # image; on a torus the hole may cross the border, and the whole (coarsest) image does.
+    box = (
+        (slice(None), slice(None))
+        if wrap
+        else (slice(max(0, ys.min() - 1), ys.max() + 2), slice(max(0, xs.min() - 1), xs.max() + 2))
+    )
     sub, remaining = img[box], hole[box].copy()
     known = (~remaining).astype(np.float32)
     sub[remaining] = 0.0
-    kernel = np.ones((3, 3), np.float32)
     while remaining.any():
-        cnt = cv2.filter2D(known, -1, kernel, borderType=cv2.BORDER_CONSTANT)
+        cnt = _box3(known, wrap)
         ring = remaining & (cnt > 0)
         if not ring.any():
             break
-        acc = np.stack(
-            [
-                cv2.filter2D(np.ascontiguousarray(sub[..., c]) * known, -1, kernel, borderType=cv2.BORDER_CONSTANT)
-                for c in range(sub.shape[2])
-            ],
-            axis=-1,
-        )
+        acc = np.stack([_box3(np.ascontiguousarray(sub[..., c]) * known, wrap) for c in range(sub.shape[2])], axis=-1)
         sub[ring] = acc[ring] / cnt[ring][:, None]
         known[ring] = 1.0
         remaining &= ~ring
@@ -160,6 +193,7 @@ def _hole_pyramid(
     *,
     allowed: NDArray[np.bool_] | None = None,
     strict_from: int | None = None,
+    wrap: bool = False,
 ) -> list[_Level]:
     """Coarse-to-fine levels for :func:`complete`, finest first: (image, hole, pixels needing a
     match, usable source centres).
@@ -172,12 +206,13 @@ def _hole_pyramid(
     its whole kernel is (:data:`_STRICT_KNOWN_WEIGHT`). Source centres need a wholly known
     patch of ``allowed`` pixels (a coarse pixel is allowed when every fine pixel under its
     kernel is). Levels are added until the hole vanishes, the image gets narrower than a patch,
-    or no usable source patch is left (or ``max_levels`` is reached).
+    or no usable source patch is left (or ``max_levels`` is reached). With ``wrap`` the image
+    is a torus: the kernel and the patches continue across its borders.
     """
     forbid = None if allowed is None else ~allowed
-    need, source = _patch_masks(hole if forbid is None else hole | forbid, p)
+    need, source = _patch_masks(hole if forbid is None else hole | forbid, p, wrap)
     if forbid is not None:
-        need = _patch_masks(hole, p)[0]
+        need = _patch_masks(hole, p, wrap)[0]
     levels = [(img, hole, need, source)]
     k = (~hole).astype(np.float32)
     v = img * k[..., None]
@@ -185,7 +220,11 @@ def _hole_pyramid(
     a = (2, 2)  # the anchor: output x sums input x − 2 … x + 3
 
     def down(x: NDArray[np.float32]) -> NDArray[np.float32]:
-        y = cv2.sepFilter2D(x, -1, _HOLE_KERNEL, _HOLE_KERNEL, anchor=a, borderType=cv2.BORDER_CONSTANT)
+        if wrap:  # the kernel reads x − 2 … x + 3: three pixels of the opposite side suffice
+            y = cv2.sepFilter2D(_wrap_pad(x, 3), -1, _HOLE_KERNEL, _HOLE_KERNEL, anchor=a)
+            y = y[3 : 3 + x.shape[0], 3 : 3 + x.shape[1]]
+        else:
+            y = cv2.sepFilter2D(x, -1, _HOLE_KERNEL, _HOLE_KERNEL, anchor=a, borderType=cv2.BORDER_CONSTANT)
         return np.ascontiguousarray(y.reshape(x.shape[0], x.shape[1], -1)[::2, ::2])
 
     while max_levels is None or len(levels) < max_levels:
@@ -194,10 +233,10 @@ def _hole_pyramid(
         hole_l = k < (_STRICT_KNOWN_WEIGHT if strict else _KNOWN_WEIGHT)
         if not hole_l.any() or min(k.shape) < p:
             break
-        need_l, source_l = _patch_masks(hole_l, p)
+        need_l, source_l = _patch_masks(hole_l, p, wrap)
         if f is not None:
             f = (down(f)[..., 0] >= _KNOWN_WEIGHT).astype(np.float32)
-            source_l = _patch_masks(hole_l | (f > 0), p)[1]
+            source_l = _patch_masks(hole_l | (f > 0), p, wrap)[1]
         if not source_l.any():
             break
         values = np.ascontiguousarray(v / np.maximum(k, _KNOWN_WEIGHT)[..., None], dtype=np.float32)
@@ -230,13 +269,57 @@ class _Filler:
         gradient_weight: float,
         progress: Progress,
         base: NDArray[np.float32] | None,
+        wrap: bool = False,
     ) -> None:
         self.p, self.seed, self.threads, self.gw = p, seed, threads, gradient_weight
         self.progress, self.done, self.total = progress, 0, 0
-        self.base = base
+        self.base, self.wrap = base, wrap
 
     def features(self, img: NDArray[np.float32]) -> NDArray[np.float32]:
-        return _with_gradients(img, self.gw) if self.gw > 0 else img
+        return _with_gradients(img, self.gw, self.wrap) if self.gw > 0 else img
+
+    def nnf(
+        self,
+        feat: NDArray[np.float32],
+        smask: NDArray[np.bool_],
+        need: NDArray[np.bool_],
+        init: NDArray[np.int32] | None,
+        seed: int,
+        iterations: int,
+    ) -> tuple[NDArray[np.int32], NDArray[np.float32]]:
+        """The hole's patches matched to the source centres. On a torus the target wraps in the
+        engine and the source is the image grown by its opposite sides, so source patches
+        cross the border too; fields stay in image coordinates either way."""
+        src, sm, ini, r = feat, smask, init, (self.p // 2 if self.wrap else 0)
+        if self.wrap:
+            src, sm = _wrap_pad(feat, r), _wrap_pad(smask, r)
+            ini = None if init is None else np.where(init >= 0, init + r, init).astype(np.int32)
+        field, dist, _ = _core.nnf(
+            src, feat, patch_size=self.p, iterations=iterations, levels=1, exact=False, seed=seed, weights=None,
+            source_mask=sm, target_mask=need, init=ini, source_knn=None, source_cost=None, threads=self.threads,
+            kdtree=False, tileable=self.wrap,
+        )  # fmt: skip
+        if self.wrap:
+            field = np.where(field >= 0, field - r, field).astype(np.int32)
+        return field, dist
+
+    def vote(
+        self,
+        cur: NDArray[np.float32],
+        field: NDArray[np.int32],
+        weights: NDArray[np.float32] | None,
+        mean_shift: int,
+        pixels: NDArray[np.bool_],
+    ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        """:func:`phloem.patch.vote` of ``field`` at ``pixels``, around the torus with ``wrap``."""
+        src, f = cur, field
+        if self.wrap:
+            r = self.p // 2
+            src, f = _wrap_pad(cur, r), np.where(field >= 0, field + r, field).astype(np.int32)
+        return _core.vote(
+            src, f, patch_size=self.p, weights=weights, threads=self.threads, mean_shift=mean_shift, pixels=pixels,
+            tileable=self.wrap,
+        )  # fmt: skip
 
     def start(
         self, level: _Level, field: NDArray[np.int32] | None
@@ -247,24 +330,22 @@ class _Filler:
         orig, hole_l, need, smask = level
         if field is None:
             if self.base is None:
-                return _fill_inward(orig, hole_l), None
+                return _fill_inward(orig, hole_l, self.wrap), None
             cur = orig.copy()
             cur[hole_l] = self.base
             return cur, None
         cur = orig.copy()
-        up = upsample_at(field, need, orig.shape[:2], self.p // 2)
+        up = upsample_at(field, need, orig.shape[:2], self.p // 2, wrap=self.wrap)
         ys, xs = np.nonzero(need)
         at = up[ys, xs]
         bad = ~smask[np.maximum(at[:, 0], 0), np.maximum(at[:, 1], 0)]
         up[ys[bad], xs[bad]] = -1
-        voted, wsum = _core.vote(
-            orig, up, patch_size=self.p, weights=None, threads=self.threads, mean_shift=0, pixels=hole_l
-        )
+        voted, wsum = self.vote(orig, up, None, 0, hole_l)
         fill = hole_l & (wsum > 0)
         cur[fill] = voted[fill]
         rest = hole_l & ~fill
         if rest.any():
-            cur = _fill_inward(cur, rest)
+            cur = _fill_inward(cur, rest, self.wrap)
         return cur, up
 
     def iterate(
@@ -281,7 +362,12 @@ class _Filler:
         _, hole_l, need, smask = level
         # Wexler's confidence γ^−d as a log: the vote weights are formed in the log domain and
         # floored, so deep inside a large hole they cannot underflow float32.
-        depth = cv2.distanceTransform(hole_l.astype(np.uint8), cv2.DIST_L2, 3)
+        if self.wrap:  # distances around the torus: half of it on every side covers them all
+            mh, mw = hole_l.shape[0] // 2 + 1, hole_l.shape[1] // 2 + 1
+            grown = np.pad(hole_l.astype(np.uint8), ((mh, mh), (mw, mw)), mode="wrap")
+            depth = cv2.distanceTransform(grown, cv2.DIST_L2, 3)[mh:-mh, mw:-mw]
+        else:
+            depth = cv2.distanceTransform(hole_l.astype(np.uint8), cv2.DIST_L2, 3)
         log_conf = -math.log(WEXLER_GAMMA) * depth[need]
         field = init
         # A vote changes only hole pixels, and a gradient sees one pixel either side: after the
@@ -294,21 +380,18 @@ class _Filler:
             elif self.gw > 0:
                 if band is None:
                     cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
-                    band = np.nonzero(cv2.dilate(hole_l.astype(np.uint8), cross))
-                _refresh_gradients(feat, cur, band, self.gw)
-            field, dist, _ = _core.nnf(
-                feat, feat, patch_size=self.p, iterations=n_search, levels=1, exact=False,
-                seed=derive_seed(self.seed, lv * 64 + it + 1), weights=None, source_mask=smask, target_mask=need,
-                init=field, source_knn=None, source_cost=None, threads=self.threads, kdtree=False,
-            )  # fmt: skip
+                    h8 = hole_l.astype(np.uint8)
+                    band = np.nonzero(
+                        cv2.dilate(_wrap_pad(h8, 1), cross)[1:-1, 1:-1] if self.wrap else cv2.dilate(h8, cross)
+                    )
+                _refresh_gradients(feat, cur, band, self.gw, self.wrap)
+            field, dist = self.nnf(feat, smask, need, field, derive_seed(self.seed, lv * 64 + it + 1), n_search)
             d = dist[need]
             sigma2 = max(float(np.percentile(d, WEXLER_SIGMA_PERCENTILE)), 1e-8)
             wvote = np.zeros(dist.shape, np.float32)
             wvote[need] = np.exp(np.maximum(log_conf - d / (2.0 * sigma2), _LOG_WEIGHT_FLOOR))
             shift = mean_shift if it == n_iters - 1 else 0
-            voted, wsum = _core.vote(
-                cur, field, patch_size=self.p, weights=wvote, threads=self.threads, mean_shift=shift, pixels=hole_l
-            )
+            voted, wsum = self.vote(cur, field, wvote, shift, hole_l)
             fill = hole_l & (wsum > 0)
             cur[fill] = voted[fill]
             self.done += 1
@@ -334,11 +417,7 @@ class _Filler:
         objective), searched from ``init``."""
         _, _, need, smask = level
         feat = self.features(cur)
-        _, dist, _ = _core.nnf(
-            feat, feat, patch_size=self.p, iterations=3, levels=1, exact=False,
-            seed=derive_seed(self.seed, lv * 64 + 63), weights=None, source_mask=smask, target_mask=need, init=init,
-            source_knn=None, source_cost=None, threads=self.threads, kdtree=False,
-        )  # fmt: skip
+        _, dist = self.nnf(feat, smask, need, init, derive_seed(self.seed, lv * 64 + 63), 3)
         return float(dist[need].mean())
 
 
@@ -353,6 +432,7 @@ def complete(
     search_iterations: int | Sequence[int] | None = None,
     pyramid: Pyramid = "auto",
     gradient_weight: float = COMPLETION_GRADIENT_WEIGHT,
+    tileable: bool = False,
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
     progress: Progress = None,
@@ -418,6 +498,12 @@ def complete(
     gradient_weight : float, optional
         Weight of the gradients in the patch distance (default
         :data:`COMPLETION_GRADIENT_WEIGHT`; 0: values only, faster).
+    tileable : bool, optional
+        Treat the image as a tile (default False): it is a torus whose opposite borders
+        touch, so the hole may cross a border and continues on the other side, its context
+        there is the opposite side, and source patches may straddle the borders too. The fill
+        then tiles with the rest. (Fill a cross over the middle of a texture rolled by half
+        its size to make it tileable.)
     seed : int or numpy.random.Generator, optional
         Seed (default 0); identical output for any thread count.
     threads : int, optional
@@ -463,7 +549,8 @@ def complete(
     t = check_threads(threads)
     max_levels = None if levels is None else check_int(levels, "levels", 1)
 
-    if allowed is not None:
+    wrap = bool(tileable)
+    if allowed is not None and not wrap:  # a box would cut the torus open
         ys, xs = np.nonzero(hole | allowed)
         m = _CROP_MARGIN * p
         y0, y1 = max(0, int(ys.min()) - m), min(img.shape[0], int(ys.max()) + 1 + m)
@@ -477,7 +564,9 @@ def complete(
                 progress=progress, max_memory=max_memory,
             )  # fmt: skip
             return restore_ndim(out, image)
-    main = _hole_pyramid(img, hole, p, max_levels, allowed=allowed, strict_from=1 if pyramid == "strict" else None)
+    main = _hole_pyramid(
+        img, hole, p, max_levels, allowed=allowed, strict_from=1 if pyramid == "strict" else None, wrap=wrap
+    )
     if not main[0][3].any():  # the full-resolution level's usable source centres
         where = "the known region" if allowed is None else "the known pixels in source_mask"
         raise ValueError(f"mask: {where} holds no complete {p}×{p} patch to copy from")
@@ -485,7 +574,7 @@ def complete(
     if pyramid == "auto" and len(main) > _STRICT_FROM:
         # No deeper than the interpolating pyramid: the strict hole never vanishes, and its
         # extra levels would cost most of the time.
-        alt = _hole_pyramid(img, hole, p, len(main), allowed=allowed, strict_from=_STRICT_FROM)
+        alt = _hole_pyramid(img, hole, p, len(main), allowed=allowed, strict_from=_STRICT_FROM, wrap=wrap)
         if len(alt) <= _STRICT_FROM:
             alt = None
     n = max(len(main), len(alt) if alt is not None else 0)
@@ -494,7 +583,7 @@ def complete(
     # With restricted sources the hole's rim need not look like what fills it (a branch beside a
     # gap), so the coarsest level starts from the sources' median colour instead of the rim's.
     base = None if allowed is None else np.median(img[allowed & ~hole], axis=0).astype(np.float32)
-    filler = _Filler(p, s, t, gw, progress, base)
+    filler = _Filler(p, s, t, gw, progress, base, wrap)
     # The alternative only has to show whether its fill is far better: one iteration less a level.
     alt_iters = [max(1, n - 1) for n in iters]
     filler.total = sum(iters[: len(main)]) + (sum(alt_iters[_STRICT_FROM : len(alt)]) if alt is not None else 0)

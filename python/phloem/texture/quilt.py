@@ -58,6 +58,7 @@ def quilt(
     overlap: int | None = ...,
     randomness: float = ...,
     cost: Literal["kwatra", "gradient", "luo"] = ...,
+    tileable: bool = ...,
     max_pixels: int = ...,
     max_memory: int | None = ...,
     seed: Seed = ...,
@@ -74,6 +75,7 @@ def quilt(
     overlap: int | None = ...,
     randomness: float = ...,
     cost: Literal["kwatra", "gradient", "luo"] = ...,
+    tileable: bool = ...,
     max_pixels: int = ...,
     max_memory: int | None = ...,
     seed: Seed = ...,
@@ -92,6 +94,7 @@ def quilt(
     overlap: int | None = None,
     randomness: float = 0.01,
     cost: Literal["kwatra", "gradient", "luo"] = "kwatra",
+    tileable: bool = False,
     max_pixels: int = 2**28,
     max_memory: int | None = None,
     seed: Seed = 0,
@@ -126,6 +129,11 @@ def quilt(
         matches more often (the paper used 0.001 to 1; default 0.01).
     cost : {"kwatra", "gradient", "luo"}, optional
         Seam cost (see :func:`phloem.seams.seam`; default the colour difference).
+    tileable : bool, optional
+        Make the output tile (default False): blocks are placed on a torus, so the last block
+        of every row and column overlaps the first ones across the wrap, is matched against
+        them and cut into them along a seam like any other overlap. Needs sides of at least
+        ``block + 2`` pixels.
     max_pixels : int, optional
         Refuse outputs larger than this many pixels (default 2**28).
     seed : int or numpy.random.Generator, optional
@@ -184,8 +192,17 @@ def quilt(
     t = check_threads(threads)
 
     step = b - ov
-    ny, nx = max(1, math.ceil((h - ov) / step)), max(1, math.ceil((w - ov) / step))
-    hc, wc = ny * step + ov, nx * step + ov
+    wrap = bool(tileable)
+    if wrap:
+        if min(h, w) < b + 2:
+            raise ValueError(f"size: a tileable quilt needs at least block + 2 = {b + 2} pixels a side, got {w}×{h}")
+        # On the torus the canvas is the output; the last block of a row or column overlaps
+        # the first by at least `ov` (less than a block) across the wrap.
+        ny, nx = math.ceil(h / step), math.ceil(w / step)
+        hc, wc = h, w
+    else:
+        ny, nx = max(1, math.ceil((h - ov) / step)), max(1, math.ceil((w - ov) / step))
+        hc, wc = ny * step + ov, nx * step + ov
     canvas = np.zeros((hc, wc, nc), np.float32)
     filled = np.zeros((hc, wc), bool)
     src = np.full((hc, wc, 2), -1, np.int32)
@@ -193,12 +210,22 @@ def quilt(
     rows, cols = np.mgrid[0:b, 0:b].astype(np.int32)
     for n, (i, j) in enumerate((i, j) for i in range(ny) for j in range(nx)):
         y, x = i * step, j * step
-        old = filled[y : y + b, x : x + b]
+        # The block with a one-pixel ring around it, as row and column indices: clipped to the
+        # canvas, or wrapped around the torus.
+        if wrap:
+            ys, xs = np.arange(y - 1, y + b + 1) % hc, np.arange(x - 1, x + b + 1) % wc
+        else:
+            ys, xs = np.arange(max(y - 1, 0), min(y + b + 1, hc)), np.arange(max(x - 1, 0), min(x + b + 1, wc))
+        win = np.ix_(ys, xs)
+        oy, ox = int(wrap or y > 0), int(wrap or x > 0)
+        blk = (slice(oy, oy + b), slice(ox, ox + b))
+        c_win, f_win, s_win = canvas[win], filled[win], src[win]
+        old = f_win[blk]
         first = not old.any()
         if first:
             ty, tx = int(rng.integers(eh - b + 1)), int(rng.integers(ew - b + 1))
         else:
-            c = _masked_ssd(ex, canvas[y : y + b, x : x + b], old) / float(old.sum())
+            c = _masked_ssd(ex, np.ascontiguousarray(c_win[blk]), old) / float(old.sum())
             if k == 0:
                 flat = int(np.argmin(c))
             else:
@@ -210,17 +237,16 @@ def quilt(
         if not first:
             # The seam is cut in a window one pixel wider than the block, so the region pixels
             # that border old-only or new-only pixels are tied to that side.
-            y0, x0, y1, x1 = max(y - 1, 0), max(x - 1, 0), min(y + b + 1, hc), min(x + b + 1, wc)
-            foot = np.zeros((y1 - y0, x1 - x0), bool)
-            foot[y - y0 : y - y0 + b, x - x0 : x - x0 + b] = True
-            new = np.zeros((y1 - y0, x1 - x0, nc), np.float32)
+            foot = np.zeros(f_win.shape, bool)
+            foot[blk] = True
+            new = np.zeros(c_win.shape, np.float32)
             new[foot] = piece.reshape(-1, nc)
-            have = filled[y0:y1, x0:x1]
-            take_b = seams.seam(canvas[y0:y1, x0:x1], new, have & foot, cost=cost, a_mask=have, b_mask=foot, threads=t)
-            take = take_b[y - y0 : y - y0 + b, x - x0 : x - x0 + b]
-        canvas[y : y + b, x : x + b][take] = piece[take]
-        src[y : y + b, x : x + b][take] = np.stack([rows + ty, cols + tx], axis=-1)[take]
-        filled[y : y + b, x : x + b] = True
+            take_b = seams.seam(c_win, new, f_win & foot, cost=cost, a_mask=f_win, b_mask=foot, threads=t)
+            take = take_b[blk]
+        c_win[blk][take] = piece[take]
+        s_win[blk][take] = np.stack([rows + ty, cols + tx], axis=-1)[take]
+        f_win[blk] = True
+        canvas[win], src[win], filled[win] = c_win, s_win, f_win
         if progress is not None:
             progress(n + 1, ny * nx)
     out = restore_ndim(np.ascontiguousarray(canvas[:h, :w]), exemplar)

@@ -96,6 +96,7 @@ def synthesize(
     search_iterations: int = 2,
     diversity: float = 1.0,
     weights: Any = None,
+    tileable: bool = False,
     max_pixels: int = 2**28,
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
@@ -130,6 +131,11 @@ def synthesize(
         patches. 0 gives plain texture optimisation (default 1).
     weights : (C,) array_like, optional
         Per-channel weights of the patch distance.
+    tileable : bool, optional
+        Make the output tile (default False): it is synthesised on a torus, where the
+        patches of the search and the votes that cross an edge continue on the opposite
+        side, so copies of it placed side by side show no seam. The exemplar itself need
+        not tile.
     max_pixels : int, optional
         Refuse outputs larger than this many pixels (default 2**28, about 16k × 16k), so a
         typo in ``size`` fails at once instead of exhausting memory.
@@ -180,6 +186,7 @@ def synthesize(
     if wts is not None and wts.shape != (ex.shape[2],):
         raise ValueError(f"weights: expected {ex.shape[2]} per-channel weights, got shape {np.shape(weights)}")
     r = p // 2
+    wrap = bool(tileable)
 
     # Pyramid, coarsest last; stop where the exemplar no longer holds a patch.
     pyramid: list[tuple[NDArray[np.float32], tuple[int, int]]] = []
@@ -202,19 +209,22 @@ def synthesize(
             field = _block_field(shape, ex_l.shape[:2], p, np.random.default_rng(s))
         else:
             field = upsample_field(field, shape, ex_l.shape[:2], r)
-        out, _ = _core.vote(ex_l, field, patch_size=p, weights=None, threads=t, mean_shift=0, pixels=None)
+        out, _ = _core.vote(
+            ex_l, field, patch_size=p, weights=None, threads=t, mean_shift=0, pixels=None, tileable=wrap
+        )
         last = 0.0
         for it in range(iters):
             cost = _occurrence_cost(field, ex_l.shape[:2], p, lam, last) if lam > 0 and it else None
             field, dist, _ = _core.nnf(
                 ex_l, out, patch_size=p, iterations=s_iters, levels=1, exact=False,
                 seed=derive_seed(s, lv * 64 + it + 1), weights=wts, source_mask=None, target_mask=None, init=field,
-                source_knn=None, source_cost=cost, threads=t, kdtree=False,
+                source_knn=None, source_cost=cost, threads=t, kdtree=False, tileable=wrap,
             )  # fmt: skip
             last = float(np.median(dist))
             out, _ = _core.vote(
-                ex_l, field, patch_size=p, weights=_robust_weights(dist), threads=t, mean_shift=0, pixels=None
-            )
+                ex_l, field, patch_size=p, weights=_robust_weights(dist), threads=t, mean_shift=0, pixels=None,
+                tileable=wrap,
+            )  # fmt: skip
             done += 1
             if progress is not None:
                 progress(done, total)

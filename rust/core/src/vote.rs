@@ -56,7 +56,7 @@ pub fn vote(
     weights: Option<&[f32]>,
     patch_size: usize,
 ) -> Result<Voted> {
-    vote_mode(source, idx, h, w, weights, patch_size, 0, None)
+    vote_mode(source, idx, h, w, weights, patch_size, 0, None, false)
 }
 
 /// [`vote`], then `mean_shift` steps of weighted mean-shift from the weighted mean towards the
@@ -69,6 +69,9 @@ pub fn vote(
 /// With `pixels` (`h × w`), only the pixels where it is true are computed, the others get
 /// value and weight 0; each computed pixel is bit-identical to the full vote's, so a caller
 /// that keeps only a region (completion keeps its hole) pays for that region, not the image.
+///
+/// With `tileable`, the output is a torus: a patch centred near an edge also votes on the
+/// opposite side, so the votes agree across the wrap and the result tiles.
 #[allow(clippy::too_many_arguments)]
 pub fn vote_mode(
     source: &Image<'_>,
@@ -79,6 +82,7 @@ pub fn vote_mode(
     patch_size: usize,
     mean_shift: usize,
     pixels: Option<&[bool]>,
+    tileable: bool,
 ) -> Result<Voted> {
     if patch_size == 0 || patch_size % 2 == 0 {
         return Err(invalid(
@@ -140,9 +144,18 @@ pub fn vote_mode(
                 votes.clear();
                 acc.fill(0.0);
                 let mut total = 0f32;
-                for cy in y.saturating_sub(r)..=(y + r).min(h - 1) {
-                    for cx in x.saturating_sub(r)..=(x + r).min(w - 1) {
-                        let ci = cy * w + cx;
+                // Centres in unwrapped coordinates, in the same order with or without the
+                // wrap, so a plain vote's sums are unchanged.
+                let (ri, yi, xi) = (r as i64, y as i64, x as i64);
+                for cy in yi - ri..=yi + ri {
+                    let Some(wy) = wrap_or_skip(cy, h, tileable) else {
+                        continue;
+                    };
+                    for cx in xi - ri..=xi + ri {
+                        let Some(wx) = wrap_or_skip(cx, w, tileable) else {
+                            continue;
+                        };
+                        let ci = wy * w + wx;
                         let s = idx[ci];
                         if s == NONE {
                             continue;
@@ -152,7 +165,11 @@ pub fn vote_mode(
                             continue;
                         }
                         // Source pixel at the same offset from the source centre.
-                        let (sy, sx) = (s as usize / sw + y - cy, s as usize % sw + x - cx);
+                        let (sy, sx) = (
+                            (s as usize / sw) as i64 + yi - cy,
+                            (s as usize % sw) as i64 + xi - cx,
+                        );
+                        let (sy, sx) = (sy as usize, sx as usize);
                         let px = &source.data[(sy * sw + sx) * c..][..c];
                         for (a, v) in acc.iter_mut().zip(px) {
                             *a += wt * v;
@@ -176,6 +193,19 @@ pub fn vote_mode(
             }
         });
     Ok(Voted { image, weight })
+}
+
+/// Coordinate `v` of an axis of length `n`: wrapped around on a torus, `None` outside
+/// otherwise.
+#[inline]
+pub(crate) fn wrap_or_skip(v: i64, n: usize, wrap: bool) -> Option<usize> {
+    if wrap {
+        Some(v.rem_euclid(n as i64) as usize)
+    } else if v < 0 || v >= n as i64 {
+        None
+    } else {
+        Some(v as usize)
+    }
 }
 
 /// Moves `m` (the weighted mean of `votes`, `m.len()` values then a weight per vote) by
@@ -269,9 +299,9 @@ mod tests {
         let src: Vec<f32> = (0..27).map(|i| if i % 9 < 5 { 0.0 } else { 1.0 }).collect();
         let img = Image::new("source", &src, 3, 9, 1).unwrap();
         let idx = [10u32, 16];
-        let mean = vote_mode(&img, &idx, 1, 2, Some(&[3.0, 1.0]), 3, 0, None).unwrap();
+        let mean = vote_mode(&img, &idx, 1, 2, Some(&[3.0, 1.0]), 3, 0, None, false).unwrap();
         assert!((mean.image[0] - 0.25).abs() < 1e-6);
-        let shifted = vote_mode(&img, &idx, 1, 2, Some(&[3.0, 1.0]), 3, 3, None).unwrap();
+        let shifted = vote_mode(&img, &idx, 1, 2, Some(&[3.0, 1.0]), 3, 3, None, false).unwrap();
         assert!(shifted.image[0] < 0.05, "{}", shifted.image[0]);
         assert_eq!(shifted.weight, mean.weight);
     }
@@ -295,8 +325,9 @@ mod tests {
         let wts: Vec<f32> = (0..h * w).map(|i| (i % 7) as f32 * 0.3).collect();
         let pixels: Vec<bool> = (0..h * w).map(|i| (i * 37) % 11 < 3).collect();
         for shift in [0, 3] {
-            let full = vote_mode(&img, &idx, h, w, Some(&wts), p, shift, None).unwrap();
-            let part = vote_mode(&img, &idx, h, w, Some(&wts), p, shift, Some(&pixels)).unwrap();
+            let full = vote_mode(&img, &idx, h, w, Some(&wts), p, shift, None, false).unwrap();
+            let part =
+                vote_mode(&img, &idx, h, w, Some(&wts), p, shift, Some(&pixels), false).unwrap();
             let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
             for (i, &at) in pixels.iter().enumerate() {
                 let (pv, fv) = (
@@ -312,7 +343,68 @@ mod tests {
                 }
             }
         }
-        assert!(vote_mode(&img, &idx, h, w, None, p, 0, Some(&pixels[1..])).is_err());
+        assert!(vote_mode(&img, &idx, h, w, None, p, 0, Some(&pixels[1..]), false).is_err());
+    }
+
+    #[test]
+    fn wrap_or_skip_wraps_only_on_a_torus() {
+        assert_eq!(wrap_or_skip(-1, 5, true), Some(4));
+        assert_eq!(wrap_or_skip(5, 5, true), Some(0));
+        assert_eq!(wrap_or_skip(-7, 5, true), Some(3));
+        assert_eq!(wrap_or_skip(-1, 5, false), None);
+        assert_eq!(wrap_or_skip(5, 5, false), None);
+        assert_eq!(wrap_or_skip(4, 5, false), Some(4));
+    }
+
+    #[test]
+    fn tileable_vote_wraps_and_commutes_with_rolling() {
+        let (h, w, c, p) = (9, 11, 2, 5);
+        let (sh, sw) = (14, 16);
+        let src: Vec<f32> = (0..sh * sw * c).map(|i| (i as f32 * 0.43).sin()).collect();
+        let img = Image::new("source", &src, sh, sw, c).unwrap();
+        // One patch, centred on the corner pixel: on a torus it covers all four corners.
+        let mut idx = vec![NONE; h * w];
+        idx[0] = (5 * sw + 6) as u32;
+        let v = vote_mode(&img, &idx, h, w, None, p, 0, None, true).unwrap();
+        let covered = |y: usize, x: usize| v.weight[y * w + x] > 0.0;
+        assert!(covered(0, 0) && covered(h - 1, w - 1) && covered(h - 2, 1) && covered(2, w - 2));
+        assert!(!covered(3, 0) && !covered(0, 3) && !covered(h - 3, w - 3));
+        // Pixel (h − 1, w − 2) is offset (−1, −2) from the centre: source (4, 4).
+        let (y, x) = (h - 1, w - 2);
+        assert_eq!(
+            &v.image[(y * w + x) * c..][..c],
+            &src[(4 * sw + 4) * c..][..c]
+        );
+        // A dense random field: rolling the field rolls the vote, bit for bit.
+        let mut rng = crate::rng::Rng::keyed(3, 0, 0);
+        let idx: Vec<u32> = (0..h * w)
+            .map(|_| {
+                let y = 2 + rng.below((sh - 4) as u64) as usize;
+                let x = 2 + rng.below((sw - 4) as u64) as usize;
+                (y * sw + x) as u32
+            })
+            .collect();
+        let wts: Vec<f32> = (0..h * w).map(|i| 0.5 + (i % 5) as f32).collect();
+        let (dy, dx) = (4, 7);
+        let roll = |v: &[u32]| -> Vec<u32> {
+            (0..h * w)
+                .map(|i| v[((i / w + h - dy) % h) * w + (i % w + w - dx) % w])
+                .collect()
+        };
+        let rolled_w: Vec<f32> = (0..h * w)
+            .map(|i| wts[((i / w + h - dy) % h) * w + (i % w + w - dx) % w])
+            .collect();
+        let a = vote_mode(&img, &idx, h, w, Some(&wts), p, 2, None, true).unwrap();
+        let b = vote_mode(&img, &roll(&idx), h, w, Some(&rolled_w), p, 2, None, true).unwrap();
+        for i in 0..h * w {
+            let j = ((i / w + dy) % h) * w + (i % w + dx) % w;
+            assert_eq!(a.weight[i].to_bits(), b.weight[j].to_bits());
+            for k in 0..c {
+                assert_eq!(a.image[i * c + k].to_bits(), b.image[j * c + k].to_bits());
+            }
+        }
+        // Every pixel of a torus is covered by p² patches.
+        assert!(a.weight.iter().all(|t| *t > 0.0));
     }
 
     #[test]

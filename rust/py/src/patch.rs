@@ -18,7 +18,7 @@ fn indices(name: &'static str, a: &[i32], shape: (usize, usize)) -> PyResult<Vec
 type NnfOut<'py> = (Bound<'py, PyArray3<i32>>, Bound<'py, PyArray2<f32>>, u64);
 
 #[pyfunction]
-#[pyo3(name = "nnf", signature = (source, target, *, patch_size, iterations, levels, exact, seed, weights, source_mask, target_mask, init, source_knn, source_cost, threads, kdtree))]
+#[pyo3(name = "nnf", signature = (source, target, *, patch_size, iterations, levels, exact, seed, weights, source_mask, target_mask, init, source_knn, source_cost, threads, kdtree, tileable=false))]
 pub fn nnf_py<'py>(
     py: Python<'py>,
     source: PyReadonlyArray3<'py, f32>,
@@ -36,6 +36,7 @@ pub fn nnf_py<'py>(
     source_cost: Option<PyReadonlyArray2<'py, f32>>,
     threads: Option<usize>,
     kdtree: bool,
+    tileable: bool,
 ) -> PyResult<NnfOut<'py>> {
     let (sh, sw) = (source.as_array().dim().0, source.as_array().dim().1);
     let table = match &source_knn {
@@ -59,6 +60,7 @@ pub fn nnf_py<'py>(
         init: opt_slice("init", init.as_ref())?,
         source_knn: table.as_ref().map(|(t, k)| (t.as_slice(), *k)),
         source_cost: opt_slice("source_cost", source_cost.as_ref())?,
+        tileable,
     };
     let method = if exact {
         Method::Exact
@@ -155,7 +157,7 @@ pub fn coherence_candidates_py<'py>(
 type VoteOut<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray2<f32>>);
 
 #[pyfunction]
-#[pyo3(name = "vote", signature = (source, field, *, patch_size, weights, threads, mean_shift, pixels))]
+#[pyo3(name = "vote", signature = (source, field, *, patch_size, weights, threads, mean_shift, pixels, tileable=false))]
 pub fn vote_py<'py>(
     py: Python<'py>,
     source: PyReadonlyArray3<'py, f32>,
@@ -165,6 +167,7 @@ pub fn vote_py<'py>(
     threads: Option<usize>,
     mean_shift: usize,
     pixels: Option<PyReadonlyArray2<'py, bool>>,
+    tileable: bool,
 ) -> PyResult<VoteOut<'py>> {
     let src = image("source", &source)?;
     let (h, w, two) = field.as_array().dim();
@@ -184,7 +187,7 @@ pub fn vote_py<'py>(
     let wts = opt_slice("weights", weights.as_ref())?;
     let at = opt_slice("pixels", pixels.as_ref())?;
     let v = run(py, threads, None, |_| {
-        vote::vote_mode(&src, &idx, h, w, wts, patch_size, mean_shift, at)
+        vote::vote_mode(&src, &idx, h, w, wts, patch_size, mean_shift, at, tileable)
     })?;
     Ok((
         array(py, (h, w, src.c), v.image),

@@ -68,12 +68,11 @@ impl Level<'_> {
                         let ty = (y + k) as i64 - r as i64;
                         for (j, px) in o.chunks_exact_mut(c).enumerate() {
                             let tx = (x + j) as i64 - r as i64;
-                            if ty < 0 || tx < 0 || ty >= self.th as i64 || tx >= tw as i64 {
+                            if let Some(t) = self.target_pixel(ty, tx) {
+                                px.copy_from_slice(t);
+                            } else {
                                 let m0 = (k * p + j) * c;
                                 px.copy_from_slice(&pca.mean[m0..m0 + c]);
-                            } else {
-                                let t0 = (ty as usize * tw + tx as usize) * c;
-                                px.copy_from_slice(&self.tgt()[t0..t0 + c]);
                             }
                         }
                     }

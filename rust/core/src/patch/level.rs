@@ -11,6 +11,7 @@ use rayon::prelude::*;
 #[cfg(target_arch = "x86_64")]
 use crate::distance::Avx2;
 use crate::distance::{avx2_enabled, Kernel, Portable, PAD};
+use crate::image::wrap_pad;
 use crate::rng::Rng;
 
 use super::NONE;
@@ -48,9 +49,17 @@ pub(super) struct Level<'a> {
     pub(super) sw: usize,
     /// Target values, followed by [`PAD`] zeros; `None` when the target is the source
     /// (self-matching, as completion does), which then is neither copied nor halved twice.
+    /// A tileable target is stored wrapped by `r` pixels on every side (`tgt_off = r`).
     tgt: Option<Vec<f32>>,
     pub(super) th: usize,
     pub(super) tw: usize,
+    /// The target is a torus: patches near an edge continue on the opposite side, so every
+    /// target patch is whole (never clipped) and propagation crosses the wrap.
+    pub(super) tileable: bool,
+    /// Pixels of padding before the target's first row and column in `tgt` (0 or `r`).
+    tgt_off: usize,
+    /// Row length of `tgt` in pixels (`tw + 2 * tgt_off`).
+    tgt_stride: usize,
     pub(super) c: usize,
     pub(super) r: usize,
     /// Per source pixel: may be a patch centre (mask and border both allow it).
@@ -77,6 +86,7 @@ impl Level<'_> {
         r: usize,
         source_mask: Option<&[bool]>,
         need: Option<Cow<'b, [bool]>>,
+        tileable: bool,
     ) -> Level<'b> {
         let mut allowed = vec![false; sh * sw];
         let mut allowed_list = Vec::new();
@@ -96,13 +106,24 @@ impl Level<'_> {
             v.extend_from_slice(&[0.0; PAD]);
             v
         };
+        // A torus target gets its own copy grown by the wrap, even when it is the source.
+        let tgt_off = if tileable { r } else { 0 };
+        let tgt = if tileable {
+            let t = tgt.as_deref().unwrap_or(&src[..sh * sw * c]);
+            Some(pad(Cow::Owned(wrap_pad(t, th, tw, c, r))))
+        } else {
+            tgt.map(pad)
+        };
         Level {
             src: pad(src),
             sh,
             sw,
-            tgt: tgt.map(pad),
+            tgt,
             th,
             tw,
+            tileable,
+            tgt_off,
+            tgt_stride: tw + 2 * tgt_off,
             c,
             r,
             allowed,
@@ -118,6 +139,30 @@ impl Level<'_> {
     #[inline(always)]
     pub(super) fn tgt(&self) -> &[f32] {
         self.tgt.as_deref().unwrap_or(&self.src)
+    }
+
+    /// Whether the target patch at `(y, x)` is whole: inside the target, or anywhere on a
+    /// torus.
+    #[inline(always)]
+    pub(super) fn interior(&self, y: usize, x: usize) -> bool {
+        let r = self.r;
+        self.tileable || (y >= r && x >= r && y + r < self.th && x + r < self.tw)
+    }
+
+    /// The `c` values of target pixel `(y, x)`, wrapped around a tileable target.
+    #[inline]
+    pub(super) fn target_pixel(&self, y: i64, x: i64) -> Option<&[f32]> {
+        let (h, w) = (self.th as i64, self.tw as i64);
+        let (y, x) = if self.tileable {
+            (y.rem_euclid(h), x.rem_euclid(w))
+        } else if y < 0 || x < 0 || y >= h || x >= w {
+            return None;
+        } else {
+            (y, x)
+        };
+        let o = y as usize + self.tgt_off;
+        let t0 = (o * self.tgt_stride + x as usize + self.tgt_off) * self.c;
+        Some(&self.tgt()[t0..t0 + self.c])
     }
 
     #[inline]
@@ -136,10 +181,18 @@ impl Level<'_> {
     pub(super) fn dist_with<K: Kernel>(&self, ty: usize, tx: usize, s: u32, cutoff: f32) -> f32 {
         let (sy, sx) = unpack(s);
         let r = self.r;
-        let dy0 = ty.min(r);
-        let dy1 = (self.th - 1 - ty).min(r);
-        let dx0 = tx.min(r);
-        let dx1 = (self.tw - 1 - tx).min(r);
+        // A tileable target's padded copy holds every patch whole.
+        let (dy0, dy1, dx0, dx1) = if self.tileable {
+            (r, r, r, r)
+        } else {
+            (
+                ty.min(r),
+                (self.th - 1 - ty).min(r),
+                tx.min(r),
+                (self.tw - 1 - tx).min(r),
+            )
+        };
+        let (o, stride) = (self.tgt_off, self.tgt_stride);
         let len = (dx0 + dx1 + 1) * self.c;
         let base = self.cost.map_or(0.0, |c| c[sy * self.sw + sx]);
         if base >= cutoff {
@@ -148,7 +201,7 @@ impl Level<'_> {
         let mut acc = K::zero();
         let rows = dy0 + dy1 + 1;
         for k in 0..rows {
-            let t0 = ((ty - dy0 + k) * self.tw + tx - dx0) * self.c;
+            let t0 = ((ty + o - dy0 + k) * stride + tx + o - dx0) * self.c;
             let s0 = ((sy - dy0 + k) * self.sw + sx - dx0) * self.c;
             K::add_row(&mut acc, &self.tgt()[t0..t0 + len], &self.src[s0..s0 + len]);
             // Early termination, checked every other row: the check is a horizontal sum and an
@@ -179,9 +232,10 @@ impl Level<'_> {
         if base >= cutoff {
             return base;
         }
+        let (o, stride) = (self.tgt_off, self.tgt_stride);
         K::patch::<NC>(
             self.tgt(),
-            (((ty - r) * self.tw + tx - r) * c, self.tw * c),
+            (((ty + o - r) * stride + tx + o - r) * c, stride * c),
             &self.src,
             (((sy - r) * self.sw + sx - r) * c, self.sw * c),
             (2 * r + 1, (2 * r + 1) * c),
@@ -286,13 +340,11 @@ impl Level<'_> {
     /// The distances of target row `y`'s matches.
     #[inline(always)]
     pub(super) fn distances<K: Kernel, const NC: usize>(&self, y: usize, row: &mut [Cell]) {
-        let r = self.r;
         for (x, cell) in row.iter_mut().enumerate() {
             if cell.idx == NONE {
                 continue;
             }
-            let interior = y >= r && x >= r && y + r < self.th && x + r < self.tw;
-            cell.d = if NC > 0 && interior {
+            cell.d = if NC > 0 && self.interior(y, x) {
                 self.dist_interior::<K, NC>(y, x, cell.idx, f32::INFINITY)
             } else {
                 self.dist_with::<K>(y, x, cell.idx, f32::INFINITY)
@@ -315,7 +367,12 @@ impl Level<'_> {
         let (src, sh, sw) = half(&self.src, self.sh, self.sw, self.c);
         let (tgt, th, tw) = match &self.tgt {
             Some(t) => {
-                let (t, th, tw) = half(t, self.th, self.tw, self.c);
+                let (t, th, tw) = if self.tileable {
+                    let logical = self.target_image();
+                    half(&logical, self.th, self.tw, self.c)
+                } else {
+                    half(t, self.th, self.tw, self.c)
+                };
                 (Some(Cow::Owned(t)), th, tw)
             }
             None => (None, sh, sw),
@@ -334,8 +391,20 @@ impl Level<'_> {
             self.r,
             smask.as_deref(),
             need,
+            self.tileable,
         );
         (lvl, smask)
+    }
+
+    /// The target's `th × tw × c` values without the wrap padding.
+    fn target_image(&self) -> Vec<f32> {
+        let (o, stride, c) = (self.tgt_off, self.tgt_stride, self.c);
+        let mut out = Vec::with_capacity(self.th * self.tw * c);
+        for y in 0..self.th {
+            let t0 = ((y + o) * stride + o) * c;
+            out.extend_from_slice(&self.tgt()[t0..t0 + self.tw * c]);
+        }
+        out
     }
 }
 

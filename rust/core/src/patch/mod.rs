@@ -8,7 +8,7 @@
 //! (approximately, for PatchMatch) minimal. Distances are weighted sums of squared differences
 //! over all channels. Source patches always lie wholly inside the source; target patches are
 //! clipped at the target border (only the part inside is compared), so every target pixel gets
-//! a match.
+//! a match; a tileable target is a torus instead, whose patches wrap around its borders.
 //!
 //! Parallelism and determinism: an iteration splits the target into stripes of
 //! [`STRIPE_ROWS`] rows — a property of the image, not of the thread pool. Inside a stripe the
@@ -125,6 +125,10 @@ pub struct NnfInput<'a> {
     /// there, e.g. the occurrence penalty of Kaspar et al. 2015 that keeps texture
     /// optimisation from reusing a few source patches everywhere. Full resolution only.
     pub source_cost: Option<&'a [f32]>,
+    /// The target is a torus (a tileable texture): a target patch near an edge continues on
+    /// the opposite side instead of being clipped, and propagation crosses the wrap. Source
+    /// patches still lie wholly inside the source. Default false.
+    pub tileable: bool,
 }
 
 impl<'a> NnfInput<'a> {
@@ -141,6 +145,7 @@ impl<'a> NnfInput<'a> {
             init: None,
             source_knn: None,
             source_cost: None,
+            tileable: false,
         }
     }
 }
@@ -277,6 +282,7 @@ fn validate<'a>(input: &NnfInput<'a>, params: &NnfParams) -> Result<Level<'a>> {
         p / 2,
         input.source_mask,
         input.target_mask.map(Cow::Borrowed),
+        input.tileable,
     );
     if level.allowed_list.is_empty() {
         return Err(invalid(
@@ -490,15 +496,29 @@ pub fn patch_distance(
     (ty, tx): (usize, usize),
     (sy, sx): (usize, usize),
 ) -> f32 {
+    distance_at(source, target, patch_size, (ty, tx), (sy, sx), false)
+}
+
+/// [`patch_distance`], on a torus target with `tileable` (offsets wrap around the target).
+fn distance_at(
+    source: &Image<'_>,
+    target: &Image<'_>,
+    patch_size: usize,
+    (ty, tx): (usize, usize),
+    (sy, sx): (usize, usize),
+    tileable: bool,
+) -> f32 {
+    use crate::vote::wrap_or_skip;
     let r = patch_size as i64 / 2;
     let mut acc = 0f32;
     for dy in -r..=r {
         for dx in -r..=r {
-            let (y, x) = (ty as i64 + dy, tx as i64 + dx);
-            if y < 0 || x < 0 || y >= target.h as i64 || x >= target.w as i64 {
+            let y = wrap_or_skip(ty as i64 + dy, target.h, tileable);
+            let x = wrap_or_skip(tx as i64 + dx, target.w, tileable);
+            let (Some(y), Some(x)) = (y, x) else {
                 continue;
-            }
-            let a = target.pixel(y as usize, x as usize);
+            };
+            let a = target.pixel(y, x);
             let b = source.pixel((sy as i64 + dy) as usize, (sx as i64 + dx) as usize);
             acc += a.iter().zip(b).map(|(u, v)| (u - v) * (u - v)).sum::<f32>();
         }
@@ -582,6 +602,128 @@ mod tests {
         }
     }
 
+    /// Asserts that every distance of `f` is the minimum of `dist(target pixel, source
+    /// centre)` over all source centres of 5×5 patches of an `sh × sw` source.
+    fn assert_exact(
+        f: &Nnf,
+        (sh, sw): (usize, usize),
+        (th, tw): (usize, usize),
+        dist: impl Fn((usize, usize), (usize, usize)) -> f32,
+    ) {
+        for ty in 0..th {
+            for tx in 0..tw {
+                let mut best = f32::INFINITY;
+                for sy in 2..sh - 2 {
+                    for sx in 2..sw - 2 {
+                        best = best.min(dist((ty, tx), (sy, sx)));
+                    }
+                }
+                let got = f.dist[ty * tw + tx];
+                assert!(
+                    (got - best).abs() <= 1e-4 * best.max(1.0),
+                    "({ty},{tx}): {got} vs {best}"
+                );
+                let i = f.idx[ty * tw + tx] as usize;
+                let d = dist((ty, tx), (i / sw, i % sw));
+                assert!((d - got).abs() <= 1e-4 * d.max(1.0));
+            }
+        }
+    }
+
+    #[test]
+    fn tileable_exact_is_the_minimum_over_wrapped_patches() {
+        // Every target pixel, the corners included, compares its whole wrapped patch; both
+        // the general and the fixed-width kernels (c = 1 and c = 5 rows) are exercised.
+        for c in [1, 5] {
+            let (sh, sw, th, tw) = (18, 21, 9, 11);
+            let src = texture(sh, sw, c, 11);
+            let tgt = texture(th, tw, c, 12);
+            let (s, t) = (
+                Image::new("source", &src, sh, sw, c).unwrap(),
+                Image::new("target", &tgt, th, tw, c).unwrap(),
+            );
+            let input = NnfInput {
+                tileable: true,
+                ..NnfInput::new(s, t)
+            };
+            let params = NnfParams {
+                method: Method::Exact,
+                patch_size: 5,
+                ..NnfParams::default()
+            };
+            let f = nnf(&input, &params).unwrap();
+            assert_exact(&f, (sh, sw), (th, tw), |tp, sp| {
+                distance_at(&s, &t, 5, tp, sp, true)
+            });
+        }
+    }
+
+    #[test]
+    fn tileable_patchmatch_finds_patches_across_the_wrap() {
+        // The source is a 2×2 tiling of a periodic tile, the target that tile rolled: on the
+        // torus every target patch, those across the wrap included, has an exact copy.
+        let (h, w, p) = (40, 36, 7);
+        let tile = texture(h, w, 3, 13);
+        let (sh, sw) = (2 * h, 2 * w);
+        let mut src = Vec::with_capacity(sh * sw * 3);
+        for y in 0..sh {
+            for x in 0..sw {
+                src.extend_from_slice(&tile[((y % h) * w + x % w) * 3..][..3]);
+            }
+        }
+        let mut tgt = Vec::with_capacity(h * w * 3);
+        for y in 0..h {
+            for x in 0..w {
+                tgt.extend_from_slice(&tile[(((y + 17) % h) * w + (x + 5) % w) * 3..][..3]);
+            }
+        }
+        let input = NnfInput {
+            tileable: true,
+            ..NnfInput::new(
+                Image::new("source", &src, sh, sw, 3).unwrap(),
+                Image::new("target", &tgt, h, w, 3).unwrap(),
+            )
+        };
+        let params = NnfParams {
+            patch_size: p,
+            iterations: 6,
+            levels: 2,
+            ..NnfParams::default()
+        };
+        let f = nnf(&input, &params).unwrap();
+        let wrap_rows: Vec<usize> = (0..h * w)
+            .filter(|i| {
+                let (y, x) = (i / w, i % w);
+                y < 3 || x < 3 || y + 3 >= h || x + 3 >= w
+            })
+            .collect();
+        let exact = wrap_rows.iter().filter(|&&i| f.dist[i] == 0.0).count();
+        assert!(
+            exact as f32 > 0.9 * wrap_rows.len() as f32,
+            "{exact} of {} patches across the wrap found exactly",
+            wrap_rows.len()
+        );
+        // The same run on one thread and on three gives the same field.
+        for n in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .unwrap();
+            assert_eq!(pool.install(|| nnf(&input, &params).unwrap()).idx, f.idx);
+        }
+        // The kd-tree start reads the wrapped target patches too.
+        let kd = nnf(
+            &input,
+            &NnfParams {
+                method: Method::KdTree,
+                ..params.clone()
+            },
+        )
+        .unwrap();
+        let kd_exact = wrap_rows.iter().filter(|&&i| kd.dist[i] == 0.0).count();
+        assert!(kd_exact as f32 > 0.9 * wrap_rows.len() as f32);
+    }
+
     #[test]
     fn exact_finds_the_true_minimum() {
         let (sh, sw, th, tw) = (20, 24, 9, 11);
@@ -602,24 +744,9 @@ mod tests {
         );
         let s = Image::new("s", &src, sh, sw, 3).unwrap();
         let t = Image::new("t", &tgt, th, tw, 3).unwrap();
-        for ty in 0..th {
-            for tx in 0..tw {
-                let mut best = f32::INFINITY;
-                for sy in 2..sh - 2 {
-                    for sx in 2..sw - 2 {
-                        best = best.min(patch_distance(&s, &t, 5, (ty, tx), (sy, sx)));
-                    }
-                }
-                let got = f.dist[ty * tw + tx];
-                assert!(
-                    (got - best).abs() <= 1e-4 * best.max(1.0),
-                    "({ty},{tx}): {got} vs {best}"
-                );
-                let i = f.idx[ty * tw + tx] as usize;
-                let d = patch_distance(&s, &t, 5, (ty, tx), (i / sw, i % sw));
-                assert!((d - got).abs() <= 1e-4 * d.max(1.0));
-            }
-        }
+        assert_exact(&f, (sh, sw), (th, tw), |tp, sp| {
+            patch_distance(&s, &t, 5, tp, sp)
+        });
     }
 
     #[test]

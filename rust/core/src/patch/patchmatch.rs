@@ -40,6 +40,12 @@ impl Level<'_> {
             } else {
                 (stripe * STRIPE_ROWS).wrapping_sub(1)
             };
+            // On a torus the first stripe reads the last row and the last stripe the first.
+            let y = match (self.tileable, reverse) {
+                (true, false) if stripe == 0 => self.th - 1,
+                (true, true) if y >= self.th => 0,
+                _ => y,
+            };
             if y < self.th {
                 row.copy_from_slice(&cells[y * tw..(y + 1) * tw]);
             }
@@ -148,10 +154,14 @@ impl Level<'_> {
                 if best.idx == NONE {
                     continue;
                 }
-                let r = self.r;
-                let at = (y, x, y >= r && x >= r && y + r < self.th && x + r < tw);
-                // Propagation: the neighbour one step back along the scan, shifted.
-                let nx = x as i64 + step;
+                let at = (y, x, self.interior(y, x));
+                // Propagation: the neighbour one step back along the scan, shifted; on a
+                // torus the scan's first pixel reads the row's last one (as last iteration
+                // left it, the scan inside a stripe being sequential).
+                let mut nx = x as i64 + step;
+                if self.tileable {
+                    nx = nx.rem_euclid(tw as i64);
+                }
                 if nx >= 0 && nx < tw as i64 {
                     let n = chunk[ly * tw + nx as usize].idx;
                     if n != NONE {
@@ -168,7 +178,7 @@ impl Level<'_> {
                 let ny = y as i64 + step;
                 let n = if nly >= 0 && nly < rows as i64 {
                     chunk[nly as usize * tw + x].idx
-                } else if ny >= 0 && ny < self.th as i64 {
+                } else if self.tileable || (ny >= 0 && ny < self.th as i64) {
                     pass.prev[stripe * tw + x].idx
                 } else {
                     NONE
