@@ -270,7 +270,10 @@ def _options(p: argparse.ArgumentParser, job: str, params: Any, base: Path) -> t
         values = value if isinstance(value, list) else [value]
         if not values:
             raise _fail(f"params.{key}", "expected a value, got an empty list")
-        argv += [_flag(a), *(_path_value(a, _value_text(key, v), base) for v in values)]
+        texts = [_value_text(key, v) for v in values]
+        if a.dest in CACHED_JOBS.values():  # a cache folder need not exist yet
+            texts = [str((base / t).absolute()) for t in texts]
+        argv += [_flag(a), *(_path_value(a, t, base) for t in texts)]
     for a in positionals[1:]:
         if a.dest not in extra and a.nargs not in ("?", "*"):
             raise _fail("params", f"'phloem {job}' needs {a.metavar}: give it as params.{a.dest}")

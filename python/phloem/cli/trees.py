@@ -38,7 +38,7 @@ def _tree_library(args: argparse.Namespace, bar: Any) -> trees.Library:
             raise ValueError(f"trunk_model: {args.trunk_model}: {str(exc).removeprefix('data: ')}") from None
     return trees.Library.load(
         src, atlas=args.atlas, size=args.size, skip_bad=args.skip_bad, classifier=clf, max_pixels=args.max_pixels,
-        progress=bar, max_memory=args.max_memory,
+        progress=bar, max_memory=args.max_memory, cache=args.library_cache,
     )  # fmt: skip
 
 
@@ -84,7 +84,7 @@ def _cmd_trees(args: argparse.Namespace) -> None:
         if like is not None:
             rec["exemplars"] = [str(args.like), *rec["exemplars"]]
         stage_result(path, v.image, args, "trees", quiet=True,
-                     parameters={**params(args), "colors": colors, **rec, "variation_seed": sub_seed(args.seed, i)})  # fmt: skip
+                     parameters={**params(args, skip=("library_cache",)), "colors": colors, **rec, "variation_seed": sub_seed(args.seed, i)})  # fmt: skip
     if not args.quiet:
         transaction().notes.append(f"wrote {len(targets)} trees (and their .json) to {out_dir}")
     if args.sheet is not None:
@@ -162,6 +162,10 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--trunk-model", metavar="JSON", default=None,
                    help="crown/trunk segmentation by a classifier trained with phloem.trees.TrunkClassifier.fit and saved with "
                         "to_dict (default: the training-free width-profile segmenter)")  # fmt: skip
+    p.add_argument("--library-cache", metavar="DIR", default=None,
+                   help="keep the prepared library in DIR and reuse it while LIBRARY's images, these options and the "
+                        "phloem version are unchanged (checked by a SHA-256 of them); preparing it is most of a run's "
+                        "time (default: prepare it every run)")  # fmt: skip
     p.add_argument(
         "--skip-bad",
         action="store_true",

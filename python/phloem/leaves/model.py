@@ -166,13 +166,7 @@ class LeafModel:
             "dissimilarity": np.stack(self.dissimilarity[i]) if n_k else np.zeros((0, h, w), np.float32),
             "layers": np.stack(self.layers[i]) if n_k else np.zeros((0, h, w, 4), np.float32),
         }
-        buf = io.BytesIO()
-        # deflate level 1: models are large and level 6 is much slower for little gain (docs/pipelines/leaves/analysis.md)
-        with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as z:
-            for name, a in arrays.items():
-                with z.open(f"{name}.npy", "w", force_zip64=True) as f:
-                    np.lib.format.write_array(f, np.ascontiguousarray(a), allow_pickle=False)
-        return buf.getvalue()
+        return _files.npz_bytes(arrays)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> LeafModel:
