@@ -358,3 +358,17 @@ def npz_bytes(arrays: Mapping[str, Any]) -> bytes:
             with z.open(f"{name}.npy", "w", force_zip64=True) as f:
                 np.lib.format.write_array(f, np.ascontiguousarray(a), allow_pickle=False)
     return buf.getvalue()
+
+
+def write_folder(path: str | os.PathLike[str], files: Mapping[str, bytes], overwrite: bool) -> None:
+    """The files of a saved model (name → bytes) into the folder ``path``, made if missing:
+    all of them or none; an existing file is replaced only with ``overwrite``."""
+    folder = Path(path)
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"path: {folder} exists and is not a folder")
+    with Transaction(overwrite, make_folders=True) as tx:
+        for name in files:
+            tx.reserve(folder / name)
+        for name, data in files.items():
+            tx.stage(folder / name, data)
+        tx.commit()

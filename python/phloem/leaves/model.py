@@ -118,16 +118,7 @@ class LeafModel:
         """Write the model to the folder ``path``: ``model.json`` and one ``exemplar_NNN.npz``
         per exemplar (lossless float32, deflated). All files appear together or none do; an
         existing file is replaced only with ``overwrite``."""
-        folder = Path(path)
-        if folder.exists() and not folder.is_dir():
-            raise ValueError(f"path: {folder} exists and is not a folder")
-        with _files.Transaction(overwrite, make_folders=True) as tx:
-            files = self.files()
-            for name in files:
-                tx.reserve(folder / name)
-            for name, data in files.items():
-                tx.stage(folder / name, data)
-            tx.commit()
+        _files.write_folder(path, self.files(), overwrite)
 
     def files(self) -> dict[str, bytes]:
         """The folder :meth:`save` writes, as file name → bytes."""

@@ -177,16 +177,7 @@ class Library:
         >>> back.names == lib.names and all(np.array_equal(a.image, b.image) for a, b in zip(back, lib))
         True
         """
-        folder = Path(path)
-        if folder.exists() and not folder.is_dir():
-            raise ValueError(f"path: {folder} exists and is not a folder")
-        with _files.Transaction(overwrite, make_folders=True) as tx:
-            files = self.files(key=key)
-            for name in files:
-                tx.reserve(folder / name)
-            for name, data in files.items():
-                tx.stage(folder / name, data)
-            tx.commit()
+        _files.write_folder(path, self.files(key=key), overwrite)
 
     @classmethod
     def load_prepared(cls, path: str | os.PathLike[str], *, key: str | None = None) -> Library:
