@@ -152,6 +152,9 @@ def local_cluster(workers: int | None = None) -> Any:
         processes=True,
         memory_limit=_memory.default_limit() // n,
         dashboard_address=None,
+        # no dashboard; its HTTP server (metrics) on a free loopback port: the default 8787 may be taken
+        scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+        host="127.0.0.1",
         silence_logs=logging.ERROR,
     )
 
