@@ -169,3 +169,43 @@ def test_scheduler_in_another_process(tmp_path: Path):
         for p in reversed(procs):
             p.terminate()
             p.wait(timeout=30)
+
+
+def test_trees_batch_prepares_the_library_once(client, tmp_path: Path):
+    import numpy as np
+
+    from phloem.trees import library as library_module
+
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    rng = np.random.default_rng(0)
+    for s in range(2):  # two blob trees: a crown disk over a trunk, jittered
+        img = np.zeros((120, 90, 4), np.float32)
+        yy, xx = np.mgrid[:120, :90]
+        r = 30 + 5 * s
+        img[(yy - 45) ** 2 + (xx - 45) ** 2 < r * r] = (0.1, 0.5 + 0.1 * s, 0.1, 1.0)
+        img[70:118, 40:50] = (0.4, 0.3, 0.2, 1.0)
+        img[..., :3] += rng.uniform(0, 0.05, img.shape[:2] + (3,)).astype(np.float32) * img[..., 3:]
+        phloem.io.write_image(lib / f"t{s}.png", img)
+    spec = tmp_path / "trees.yaml"
+    spec.write_text("job: trees\ninputs: [lib]\nparams: {n-variations: 1, size: 96}\nseeds: 0..3\n")
+    out = tmp_path / "out"
+    summary = batch.run(spec, out_dir=out, client=client)
+    assert summary.ok and summary.made == 4, summary.line()
+    assert len(list((out / ".phloem-cache").iterdir())) == 1  # prepared by the first item, read by the others
+    records = _records(out)
+    assert [r["argv"].count("--library-cache") for r in records] == [1] * 4
+    made = outputs(out)
+    assert sum(name.endswith(".png") for name in made) == 4
+    # each item alone, with no cache at all: the same trees
+    for r in records:
+        argv = r["argv"]
+        i = argv.index("--library-cache")
+        alone = tmp_path / "alone" / Path(argv[argv.index("--out-dir") + 1]).name
+        argv = [*argv[:i], *argv[i + 2 :]]
+        argv[argv.index("--out-dir") + 1] = str(alone)
+        library_module._loaded.clear()
+        assert main(argv) == 0
+    for name, data in made.items():
+        if name.endswith(".png") and not name.startswith(".phloem-cache"):
+            assert (tmp_path / "alone" / name).read_bytes() == data, name
