@@ -195,6 +195,11 @@ def test_trees_batch_prepares_the_library_once(client, tmp_path: Path):
     assert len(list((out / ".phloem-cache").iterdir())) == 1  # prepared by the first item, read by the others
     records = _records(out)
     assert [r["argv"].count("--library-cache") for r in records] == [1] * 4
+    # a cache named in the spec, in either spelling, is the one used
+    spec.write_text("job: trees\ninputs: [lib]\nparams: {n-variations: 1, size: 96, library-cache: k}\nseeds: [0]\n")
+    assert batch.run(spec, out_dir=tmp_path / "out2", client=client).ok
+    assert _records(tmp_path / "out2")[0]["argv"].count("--library-cache") == 1
+    assert (tmp_path / "k").is_dir() and not (tmp_path / "out2" / ".phloem-cache").exists()
     made = outputs(out)
     assert sum(name.endswith(".png") for name in made) == 4
     # each item alone, with no cache at all: the same trees

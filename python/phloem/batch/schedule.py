@@ -247,7 +247,8 @@ def run(
     todo = [it for it in spec.items if not manifest.verified(done.get(it.name))]
     summary.skipped = summary.total - len(todo)
     extra: list[str] = []
-    if spec.cache_option is not None and spec.cache_option not in spec.params:
+    given = {k.lstrip("-").replace("-", "_") for k in spec.params}
+    if spec.cache_option is not None and spec.cache_option not in given:
         # a prepared model shared by all items: built by the first, loaded by the others
         extra = [f"--{spec.cache_option.replace('_', '-')}", str(root / ".phloem-cache")]
 
@@ -258,7 +259,18 @@ def run(
     report()
     if todo:
         with _client(client, workers) as (c, threads, memory):
-            _schedule(c, todo, root, extra, threads, memory, manifest, summary, report, alone_first=bool(extra))
+            _schedule(
+                c,
+                todo,
+                root,
+                extra,
+                threads,
+                memory,
+                manifest,
+                summary,
+                report,
+                alone_first=spec.cache_option is not None,
+            )
     summary.seconds = time.perf_counter() - t0
     return summary
 
