@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 import phloem.data
-from phloem.batch import load_spec
+from phloem.batch import load_spec, run
 
 BRICK = phloem.data.path("brick.png")
 
@@ -87,3 +87,12 @@ def test_spec_files_and_items(tmp_path: Path):
     comp = load_spec({"job": "complete", "inputs": ["in/a.png"], "params": {"mask": "mask.png"}, "seeds": [0]},
                      base=tmp_path)  # fmt: skip
     assert comp.items[0].argv(tmp_path)[1:3] == [str(tmp_path / "in" / "a.png"), str(tmp_path / "mask.png")]
+
+
+def test_run_argument_errors(tmp_path: Path):
+    spec = {"job": "synthesize", "inputs": [BRICK], "params": {"size": 8}, "seeds": [0]}
+    with pytest.raises(ValueError, match=r"^workers: expected a positive number"):
+        run(spec, out_dir=tmp_path / "o", workers=0)
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ValueError, match=r"^out_dir: .*file exists and is not a folder"):
+        run(spec, out_dir=tmp_path / "file")

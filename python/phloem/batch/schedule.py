@@ -237,6 +237,8 @@ def run(
         spec = load_spec(spec)
     if client is not None and workers is not None:
         raise ValueError("workers: give workers for a local cluster or a client, not both")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise ValueError(f"workers: expected a positive number of worker processes, got {workers!r}")
     root = Path(out_dir).absolute()
     if root.exists() and not root.is_dir():
         raise ValueError(f"out_dir: {root} exists and is not a folder")
