@@ -21,6 +21,7 @@ BRICK = phloem.data.path("brick.png")
         ({"job": "synth", "inputs": [BRICK], "seeds": [0]}, r"^job: 'synth' is no phloem sub-command .* synthesize"),
         ({"job": "branching", "inputs": [BRICK], "seeds": [0]}, r"^job: 'branching' needs an action: .*branching run"),
         ({"job": "studio", "inputs": [BRICK], "seeds": [0]}, r"^job: 'phloem studio' writes no --out"),
+        ({"job": "batch", "inputs": [BRICK], "seeds": [0]}, r"^job: a batch runs other sub-commands, not 'batch'"),
         ({"job": "synthesize", "inputs": [], "seeds": [0]}, r"^inputs: expected a list of paths or globs"),
         ({"job": "synthesize", "inputs": ["*.nothing"], "seeds": [0]}, r"^inputs: '\*\.nothing' matches no file"),
         ({"job": "synthesize", "inputs": [BRICK], "seeds": "0-9"}, r"^seeds: expected .* FIRST\.\.LAST"),

@@ -168,6 +168,8 @@ def _command_parser(job: Any) -> argparse.ArgumentParser:
 
     if not isinstance(job, str) or not job.strip():
         raise _fail("job", f"expected a phloem sub-command such as 'synthesize' or 'branching run', got {job!r}")
+    if job.split()[0] == "batch":
+        raise _fail("job", "a batch runs other sub-commands, not 'batch'")
     p: argparse.ArgumentParser = build_parser()
     for word in job.split():
         sub = next((a for a in p._actions if isinstance(a, argparse._SubParsersAction)), None)
