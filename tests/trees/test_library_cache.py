@@ -3,6 +3,7 @@ rebuilt when its images or options change (issue 21)."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -85,3 +86,27 @@ def test_cli_library_cache_same_files(ragged_tree, tmp_path: Path):
         assert data == (tmp_path / "b" / name).read_bytes() == (tmp_path / "c" / name).read_bytes()
     side = (tmp_path / "b" / "tree_0000.png.json").read_text()
     assert '"library_cache"' not in side  # where a library was kept says nothing about the trees
+
+
+def test_cache_read_once_per_process(ragged_tree, tmp_path: Path, monkeypatch):
+    """A batch worker runs many items on one library: it reads the cache folder once."""
+    src = tmp_path / "src"
+    src.mkdir()
+    phloem.io.write_image(src / "t0.png", ragged_tree(0))
+    cache = tmp_path / "cache"
+    trees.Library.load(src, size=96, cache=cache)
+    library_module._loaded.clear()
+    reads: list[Path] = []
+    real = trees.Library.load_prepared.__func__
+
+    def counting(cls, path, **kwargs):
+        reads.append(Path(path))
+        return real(cls, path, **kwargs)
+
+    monkeypatch.setattr(trees.Library, "load_prepared", classmethod(counting))
+    libs = [trees.Library.load(src, size=96, cache=cache) for _ in range(3)]
+    assert len(reads) == 1 and libs[0] is libs[1] is libs[2]
+    # a touched image is looked at again (its bytes decide whether the entry is stale)
+    os.utime(src / "t0.png", ns=(1, 1))
+    trees.Library.load(src, size=96, cache=cache)
+    assert len(reads) == 2
