@@ -7,12 +7,15 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import io
 import os
 import re
 import secrets
 import stat
 import tempfile
 import time
+import zipfile
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -344,3 +347,28 @@ def encode(path: Path, image: Any, bit_depth: int | None) -> bytes:
     if not ok:
         raise RuntimeError(f"out: OpenCV could not encode {path.name}")
     return buf.tobytes()
+
+
+def npz_bytes(arrays: Mapping[str, Any]) -> bytes:
+    """An ``.npz`` of ``arrays`` (no pickles), deflated at level 1: saved models are large, and
+    level 6 is much slower for little gain (docs/pipelines/leaves/analysis.md)."""
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as z:
+        for name, a in arrays.items():
+            with z.open(f"{name}.npy", "w", force_zip64=True) as f:
+                np.lib.format.write_array(f, np.ascontiguousarray(a), allow_pickle=False)
+    return buf.getvalue()
+
+
+def write_folder(path: str | os.PathLike[str], files: Mapping[str, bytes], overwrite: bool) -> None:
+    """The files of a saved model (name → bytes) into the folder ``path``, made if missing:
+    all of them or none; an existing file is replaced only with ``overwrite``."""
+    folder = Path(path)
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"path: {folder} exists and is not a folder")
+    with Transaction(overwrite, make_folders=True) as tx:
+        for name in files:
+            tx.reserve(folder / name)
+        for name, data in files.items():
+            tx.stage(folder / name, data)
+        tx.commit()

@@ -274,7 +274,7 @@ def sub_seed(seed: int, i: int) -> int:
 #: What a sidecar's ``parameters`` leave out: argparse's own entries, and the options about this
 #: machine or the terminal, or recorded apart (seed, threads).
 NOT_PARAMETERS = ("help", "func", "command", "action", "quiet", "force", "threads", "seed", "max_pixels", "max_memory",
-                  "from_json")  # fmt: skip
+                  "from_json", "library_cache")  # fmt: skip
 
 
 def params(args: argparse.Namespace, skip: Sequence[str] = ()) -> dict[str, Any]:

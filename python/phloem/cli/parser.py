@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from .. import __version__
-from . import bark, branching, demo, leaves, patch, replay, strokes, studio, texture, trees
+from . import bark, batch, branching, demo, leaves, patch, replay, strokes, studio, texture, trees
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -27,6 +27,7 @@ def build_parser() -> argparse.ArgumentParser:
         leaves,
         strokes,
         branching,
+        batch,
         demo,
         replay,
         studio,

@@ -37,7 +37,7 @@ def _tree_library(args: argparse.Namespace, bar: Any) -> trees.Library:
             raise ValueError(f"trunk_model: {args.trunk_model}: {str(exc).removeprefix('data: ')}") from None
     return trees.Library.load(
         src, atlas=args.atlas, size=args.size, skip_bad=args.skip_bad, classifier=clf, max_pixels=args.max_pixels,
-        progress=bar, max_memory=args.max_memory,
+        progress=bar, max_memory=args.max_memory, cache=args.library_cache,
     )  # fmt: skip
 
 
@@ -160,6 +160,10 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--trunk-model", metavar="JSON", default=None,
                    help="crown/trunk segmentation by a classifier trained with phloem.trees.TrunkClassifier.fit and saved with "
                         "to_dict (default: the training-free width-profile segmenter)")  # fmt: skip
+    p.add_argument("--library-cache", metavar="DIR", default=None,
+                   help="keep the prepared library in DIR and reuse it while LIBRARY's images, these options and the "
+                        "phloem version are unchanged (checked by a SHA-256 of them); preparing it is most of a run's "
+                        "time (default: prepare it every run)")  # fmt: skip
     p.add_argument(
         "--skip-bad",
         action="store_true",

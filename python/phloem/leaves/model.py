@@ -118,16 +118,7 @@ class LeafModel:
         """Write the model to the folder ``path``: ``model.json`` and one ``exemplar_NNN.npz``
         per exemplar (lossless float32, deflated). All files appear together or none do; an
         existing file is replaced only with ``overwrite``."""
-        folder = Path(path)
-        if folder.exists() and not folder.is_dir():
-            raise ValueError(f"path: {folder} exists and is not a folder")
-        with _files.Transaction(overwrite, make_folders=True) as tx:
-            files = self.files()
-            for name in files:
-                tx.reserve(folder / name)
-            for name, data in files.items():
-                tx.stage(folder / name, data)
-            tx.commit()
+        _files.write_folder(path, self.files(), overwrite)
 
     def files(self) -> dict[str, bytes]:
         """The folder :meth:`save` writes, as file name → bytes."""
@@ -166,13 +157,7 @@ class LeafModel:
             "dissimilarity": np.stack(self.dissimilarity[i]) if n_k else np.zeros((0, h, w), np.float32),
             "layers": np.stack(self.layers[i]) if n_k else np.zeros((0, h, w, 4), np.float32),
         }
-        buf = io.BytesIO()
-        # deflate level 1: models are large and level 6 is much slower for little gain (docs/pipelines/leaves/analysis.md)
-        with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as z:
-            for name, a in arrays.items():
-                with z.open(f"{name}.npy", "w", force_zip64=True) as f:
-                    np.lib.format.write_array(f, np.ascontiguousarray(a), allow_pickle=False)
-        return buf.getvalue()
+        return _files.npz_bytes(arrays)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> LeafModel:

@@ -1,0 +1,333 @@
+"""Running a batch on Dask distributed: one task per item, each the item's own ``phloem`` command.
+
+A task calls :func:`phloem.cli.main` in the worker process with the arguments of the single
+command-line run of its item (:meth:`Item.argv`), so a batch writes what those runs write,
+through the same checks and the same all-or-nothing output transaction. The driver keeps the
+manifest: it skips items whose files verify, retries a failed item once, records every item's
+outcome as it arrives and goes on past failures.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import logging
+import os
+import threading
+import time
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .. import _memory
+from .manifest import Manifest, file_hashes
+from .spec import Item, Spec, load_spec
+
+__all__ = ["Summary", "local_cluster", "run"]
+
+# phloem.cli.main keeps the running command's output transaction in a module-level stack and
+# swaps warnings.showwarning: one command at a time per worker process. A task gets the
+# worker's threads instead (``--threads``).
+_ONE_COMMAND = threading.Lock()
+
+#: Flags every task adds to its item's arguments: an item that runs is one whose files did not
+#: verify, so what it finds under its names is a killed or stale attempt, to be replaced.
+TASK_FLAGS = ("--force", "--quiet")
+
+
+@dataclass
+class Summary:
+    """What a batch did.
+
+    Attributes
+    ----------
+    total : int
+        Items in the spec.
+    made : int
+        Items run to success now.
+    skipped : int
+        Items whose files were already there and verified (hashes in the manifest).
+    failed : dict of str to str
+        Item name → its error, for items that failed twice.
+    submitted : int
+        Tasks sent to the cluster, retries included (0 for a finished batch).
+    seconds : float
+    manifest : Path
+    """
+
+    total: int
+    made: int = 0
+    skipped: int = 0
+    failed: dict[str, str] = field(default_factory=dict)
+    submitted: int = 0
+    seconds: float = 0.0
+    manifest: Path = Path()
+
+    @property
+    def ok(self) -> bool:
+        """Whether every item is done."""
+        return not self.failed and self.made + self.skipped == self.total
+
+    def line(self) -> str:
+        """The one-line summary the command prints."""
+        text = (
+            f"{self.total} items: {self.made} made, {self.skipped} already done, {len(self.failed)} failed "
+            f"({self.submitted} tasks, {self.seconds:.1f} s)"
+        )
+        if self.failed:
+            name, error = next(iter(self.failed.items()))
+            text += f"; first failure {name}: {error}; see {self.manifest}"
+        return text
+
+
+def _worker_share() -> tuple[int | None, int | None]:
+    """The threads and memory of the Dask worker running this task (None outside a worker)."""
+    try:
+        from distributed import get_worker
+
+        w = get_worker()
+    except (ImportError, ValueError):
+        return None, None
+    mem = w.memory_manager.memory_limit
+    return int(w.state.nthreads), (int(mem) if mem else None)
+
+
+def _last_line(text: str) -> str:
+    lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip()]
+    return lines[-1] if lines else ""
+
+
+def run_item(argv: list[str], target: str, root: str, threads: int | None, max_memory: int | None) -> dict[str, Any]:
+    """Run one item's ``phloem`` command here (in a worker); its outcome as a manifest record.
+
+    ``threads`` and ``max_memory`` default to the worker's own share.
+    """
+    from ..cli import main
+
+    own_threads, own_memory = _worker_share()
+    threads = threads if threads is not None else own_threads
+    max_memory = max_memory if max_memory is not None else own_memory
+    full = list(argv)
+    if threads is not None:
+        full += ["--threads", str(threads)]
+    if max_memory is not None:
+        full += ["--max-memory", str(max_memory)]
+    t0 = time.perf_counter()
+    err = io.StringIO()
+    error = ""
+    with _ONE_COMMAND:
+        try:
+            with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+                status = main([*full, *TASK_FLAGS])
+        except SystemExit as e:  # argparse refused the arguments
+            status = e.code if isinstance(e.code, int) else 2
+        except Exception as e:  # an internal failure of the command: record it, the batch goes on
+            status, error = 1, f"{type(e).__name__}: {_last_line(str(e)) or 'no message'}"
+    seconds = time.perf_counter() - t0
+    rec: dict[str, Any] = {"argv": full, "seconds": round(seconds, 3)}
+    if status == 0:
+        rec.update(status="ok", outputs=file_hashes(Path(target), Path(root)), error=None)
+    else:
+        rec.update(status="failed", outputs={}, error=error or _last_line(err.getvalue()) or f"exit status {status}")
+    return rec
+
+
+def local_cluster(workers: int | None = None) -> Any:
+    """A ``LocalCluster`` that shares this machine out without oversubscribing it.
+
+    ``workers`` processes (default: one per core), each running one task at a time; every
+    task gets ``cores // workers`` threads and ``1/workers`` of phloem's memory budget
+    (:func:`phloem._memory.default_limit`), which is also the worker's Dask memory limit.
+    """
+    from distributed import LocalCluster
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    n = cores if workers is None else workers
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise ValueError(f"workers: expected a positive number of worker processes, got {workers!r}")
+    return LocalCluster(  # type: ignore[no-untyped-call]
+        n_workers=n,
+        threads_per_worker=1,
+        processes=True,
+        memory_limit=_memory.default_limit() // n,
+        dashboard_address=None,
+        # no dashboard; its HTTP server (metrics) on a free loopback port: the default 8787 may be taken
+        scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+        host="127.0.0.1",
+        silence_logs=logging.ERROR,
+    )
+
+
+def _local_share(cluster: Any) -> tuple[int, int]:
+    """Threads and memory of each task on a :func:`local_cluster`."""
+    n = max(1, len(cluster.workers))
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(1, cores // n), _memory.default_limit() // n
+
+
+@contextlib.contextmanager
+def _client(client: Any, workers: int | None) -> Iterator[tuple[Any, int | None, int | None]]:
+    """The given client (the workers' own shares), or one on a new :func:`local_cluster`."""
+    if client is not None:
+        yield client, None, None
+        return
+    from distributed import Client
+
+    with local_cluster(workers) as cluster, Client(cluster) as c:  # type: ignore[no-untyped-call]
+        threads, memory = _local_share(cluster)
+        yield c, threads, memory
+
+
+def _record(item: Item, rec: Mapping[str, Any], attempts: int) -> dict[str, Any]:
+    return {
+        "item": item.name,
+        "job": item.job,
+        "input": item.input,
+        "seed": item.seed,
+        "params": item.params,
+        "attempts": attempts,
+        **rec,
+    }
+
+
+def run(
+    spec: Spec | Mapping[str, Any] | str | os.PathLike[str],
+    *,
+    out_dir: str | os.PathLike[str],
+    client: Any = None,
+    workers: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> Summary:
+    """Run a batch: every (input, seed) item of ``spec`` as one Dask task, resumably.
+
+    Parameters
+    ----------
+    spec : Spec, mapping or path-like
+        A spec file (YAML or JSON), its mapping, or a :func:`load_spec` result.
+    out_dir : path-like
+        The folder of the outputs and of ``manifest.jsonl`` (created if missing). Items
+        whose files are there and match the manifest's hashes are skipped.
+    client : distributed.Client, optional
+        Run on this client's cluster (e.g. ``Client("tcp://host:8786")``); each task then
+        takes its worker's threads and memory limit. The workers must see ``out_dir`` and the
+        inputs at the same paths. Default: a new :func:`local_cluster` for this batch.
+    workers : int, optional
+        Worker processes of the local cluster (default: one per core); not with ``client``.
+    progress : callable, optional
+        ``progress(done, total)`` as items finish (skipped items count as done).
+
+    Returns
+    -------
+    Summary
+        A failed item (after one retry) is in ``Summary.failed`` and in the manifest with
+        its error; the others are made regardless.
+
+    Examples
+    --------
+    >>> import tempfile, phloem.batch, phloem.data
+    >>> spec = {"job": "synthesize", "inputs": [phloem.data.path("brick.png")],
+    ...         "params": {"size": "32x32", "iterations": 1}, "seeds": [0, 1]}
+    >>> with tempfile.TemporaryDirectory() as out:  # doctest: +SKIP
+    ...     print(phloem.batch.run(spec, out_dir=out, workers=2).line())
+    2 items: 2 made, 0 already done, 0 failed (2 tasks, ...)
+    """
+    t0 = time.perf_counter()
+    if not isinstance(spec, Spec):
+        spec = load_spec(spec)
+    if client is not None and workers is not None:
+        raise ValueError("workers: give workers for a local cluster or a client, not both")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise ValueError(f"workers: expected a positive number of worker processes, got {workers!r}")
+    root = Path(out_dir).absolute()
+    if root.exists() and not root.is_dir():
+        raise ValueError(f"out_dir: {root} exists and is not a folder")
+    root.mkdir(parents=True, exist_ok=True)
+    manifest = Manifest(root)
+    done = manifest.records()
+    summary = Summary(total=len(spec.items), manifest=manifest.path)
+    todo = [it for it in spec.items if not manifest.verified(done.get(it.name))]
+    summary.skipped = summary.total - len(todo)
+    extra: list[str] = []
+    given = {k.lstrip("-").replace("-", "_") for k in spec.params}
+    if spec.cache_option is not None and spec.cache_option not in given:
+        # a prepared model shared by all items: built by the first, loaded by the others
+        extra = [f"--{spec.cache_option.replace('_', '-')}", str(root / ".phloem-cache")]
+
+    def report() -> None:
+        if progress is not None:
+            progress(summary.skipped + summary.made + len(summary.failed), summary.total)
+
+    report()
+    if todo:
+        with _client(client, workers) as (c, threads, memory):
+            _schedule(
+                c,
+                todo,
+                root,
+                extra,
+                threads,
+                memory,
+                manifest,
+                summary,
+                report,
+                alone_first=spec.cache_option is not None,
+            )
+    summary.seconds = time.perf_counter() - t0
+    return summary
+
+
+def _schedule(
+    c: Any,
+    todo: list[Item],
+    root: Path,
+    extra: list[str],
+    threads: int | None,
+    memory: int | None,
+    manifest: Manifest,
+    summary: Summary,
+    report: Callable[[], None],
+    *,
+    alone_first: bool,
+) -> None:
+    from distributed import as_completed
+
+    items = {it.name: it for it in todo}
+
+    def submit(item: Item, attempt: int) -> Any:
+        summary.submitted += 1
+        argv = item.argv(root, extra=extra)
+        key = f"phloem-batch-{item.name}-{attempt}"
+        name_of[key] = item.name
+        return c.submit(run_item, argv, str(item.outputs(root)), str(root), threads, memory,
+                        key=key, pure=False)  # fmt: skip
+
+    first = todo[:1] if alone_first else todo
+    rest = todo[1:] if alone_first else []
+    attempt_of: dict[str, int] = {}
+    name_of: dict[str, str] = {}  # task key -> item name
+    for batch in (first, rest):
+        if not batch:
+            continue
+        futures = as_completed()  # type: ignore[no-untyped-call]
+        for it in batch:
+            attempt_of[it.name] = 1
+            futures.add(submit(it, 1))  # type: ignore[no-untyped-call]
+        for fut in futures:
+            name = name_of[fut.key]
+            item = items[name]
+            try:
+                rec = fut.result()
+            except Exception as e:  # the worker died (e.g. killed for memory) or the task could not run
+                rec = {"status": "failed", "outputs": {}, "error": f"{type(e).__name__}: {_last_line(str(e))}"}
+            fut.release()
+            if rec["status"] != "ok" and attempt_of[name] == 1:
+                attempt_of[name] = 2
+                futures.add(submit(item, 2))  # type: ignore[no-untyped-call]
+                continue
+            manifest.append([_record(item, rec, attempt_of[name])])
+            if rec["status"] == "ok":
+                summary.made += 1
+            else:
+                summary.failed[name] = str(rec["error"])
+            report()

@@ -1,0 +1,216 @@
+"""phloem.batch.run and ``phloem batch``: the files of a batch are those of its single command
+lines, byte for byte; reruns, kills, failures and remote schedulers (issue 21)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import phloem.data
+from phloem import batch
+from phloem.cli import main
+
+from .conftest import outputs, write_spec
+
+ENV = {**os.environ, "PYTHONPATH": str(Path(phloem.__file__).parents[1])}
+
+
+def _records(out: Path) -> list[dict]:
+    return [json.loads(line) for line in (out / "manifest.jsonl").read_text().splitlines()]
+
+
+def _no_temporaries(out: Path) -> None:
+    assert not [p.name for p in out.rglob(".*")], "hidden temporaries left behind"
+
+
+def test_batch_is_the_single_runs_byte_for_byte(client, tmp_path: Path):
+    out = tmp_path / "out"
+    summary = batch.run(write_spec(tmp_path), out_dir=out, client=client)
+    assert (summary.total, summary.made, summary.skipped, summary.failed) == (20, 20, 0, {})
+    made = outputs(out)
+    assert len(made) == 40  # 20 images and their sidecars
+    records = _records(out)
+    assert sorted(r["item"] for r in records) == sorted(it.name for it in batch.load_spec(write_spec(tmp_path)).items)
+    assert all(r["status"] == "ok" and r["attempts"] == 1 and r["seconds"] > 0 for r in records)
+    # the 20 single command lines, as the manifest recorded them, into the same (emptied) folder
+    shutil.rmtree(out)
+    out.mkdir()  # the batch makes its folder; a single --out run needs it
+    for r in records:
+        assert main(r["argv"]) == 0
+    assert outputs(out) == made
+    _no_temporaries(out)
+
+
+def test_rerun_does_no_work_and_remakes_only_what_fails_to_verify(client, tmp_path: Path):
+    out = tmp_path / "out"
+    spec = write_spec(tmp_path, seeds="0..3")
+    assert batch.run(spec, out_dir=out, client=client).made == 4
+    before = outputs(out)
+    again = batch.run(spec, out_dir=out, client=client)
+    assert (again.submitted, again.made, again.skipped) == (0, 0, 4)
+    # a damaged image and a deleted sidecar: those two items are made again, the same bytes
+    victim = sorted(out.glob("*-s1.png"))[0]
+    victim.write_bytes(b"damaged")
+    sorted(out.glob("*-s2.png.json"))[0].unlink()
+    third = batch.run(spec, out_dir=out, client=client)
+    assert (third.submitted, third.made, third.skipped) == (2, 2, 2)
+    assert outputs(out) == before
+
+
+def test_failing_item_retried_once_then_recorded(client, tmp_path: Path):
+    (tmp_path / "in").mkdir()
+    shutil.copy(phloem.data.path("brick.png"), tmp_path / "in" / "good.png")
+    (tmp_path / "in" / "bad.png").write_bytes(b"this is no image")
+    out = tmp_path / "out"
+    summary = batch.run(write_spec(tmp_path, seeds=[0, 1], inputs=["in/*.png"]), out_dir=out, client=client)
+    assert summary.made == 2 and sorted(summary.failed) == sorted(n for n in summary.failed if n.startswith("bad-"))
+    assert len(summary.failed) == 2 and summary.submitted == 6  # 2 good, 2 bad twice
+    assert not summary.ok
+    bad = [r for r in _records(out) if r["item"].startswith("bad-")]
+    assert len(bad) == 2 and all(r["status"] == "failed" and r["attempts"] == 2 for r in bad)
+    assert all("bad.png" in r["error"] and "\n" not in r["error"] for r in bad)
+    assert not list(out.glob("bad-*"))
+
+
+def test_cli_exit_status_and_summary(tmp_path: Path, capsys):
+    (tmp_path / "bad.png").write_bytes(b"this is no image")
+    spec = write_spec(tmp_path, seeds=[0], inputs=["bad.png", phloem.data.path("brick.png")])
+    assert main(["batch", str(spec), "--out-dir", str(tmp_path / "out"), "--workers", "2"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("phloem batch: error: 2 items: 1 made, 0 already done, 1 failed")
+    assert main(["batch", str(tmp_path / "none.yaml"), "--out-dir", str(tmp_path / "out")]) == 2
+    assert capsys.readouterr().err.startswith("phloem batch: error: SPEC: cannot read")
+
+
+def test_sigkill_mid_batch_then_rerun_completes_the_set(client, tmp_path: Path):
+    spec = write_spec(tmp_path, seeds="0..11", size="64x64")
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "phloem", "batch", str(spec), "--out-dir", str(out), "--workers", "2", "-q"]
+    proc = subprocess.Popen(cmd, env=ENV, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 60
+    while not ((out / "manifest.jsonl").exists() and (out / "manifest.jsonl").stat().st_size > 0):
+        assert proc.poll() is None and time.monotonic() < deadline, "the batch ended before its first item"
+        time.sleep(0.05)
+    proc.kill()  # SIGKILL: no clean-up of any kind in the driver
+    proc.communicate()
+    assert proc.returncode == -signal.SIGKILL
+    first = len(_records(out))
+    assert 1 <= first < 12, f"{first} items were recorded before the kill"
+    # the cluster's worker processes go with their driver; wait for them before counting files
+    time.sleep(1.0)
+    rerun = batch.run(spec, out_dir=out, client=client)
+    assert rerun.ok and rerun.made + rerun.skipped == 12 and rerun.skipped >= first, rerun.line()
+    _no_temporaries(out)
+    ok = batch.Manifest(out)
+    assert all(ok.verified(r) for r in ok.records().values()) and len(ok.records()) == 12
+    assert len(outputs(out)) == 24
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_scheduler_in_another_process(tmp_path: Path):
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    port = address.rsplit(":", 1)[1]
+    procs = [
+        subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "distributed.cli.dask_scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                port,
+                "--no-dashboard",
+            ],
+            env=ENV,
+            stderr=subprocess.DEVNULL,
+        ),
+    ]
+    try:
+        procs.append(
+            subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "distributed.cli.dask_worker",
+                    address,
+                    "--nthreads",
+                    "1",
+                    "--no-dashboard",
+                    "--memory-limit",
+                    "2GiB",
+                ],
+                env=ENV,
+                stderr=subprocess.DEVNULL,
+            )
+        )
+        spec = write_spec(tmp_path, seeds="0..3")
+        res = subprocess.run([sys.executable, "-m", "phloem", "batch", str(spec), "--out-dir", str(tmp_path / "out"),
+                              "--scheduler", address], env=ENV, capture_output=True, text=True, timeout=120)  # fmt: skip
+        assert res.returncode == 0, res.stderr
+        assert "4 items: 4 made" in res.stderr
+        records = _records(tmp_path / "out")
+        # the task took the remote worker's share: its one thread and its memory limit
+        assert all(r["argv"][r["argv"].index("--threads") + 1] == "1" for r in records)
+        assert all(r["argv"][r["argv"].index("--max-memory") + 1] == str(2 * 2**30) for r in records)
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+            p.wait(timeout=30)
+
+
+def test_trees_batch_prepares_the_library_once(client, tmp_path: Path):
+    import numpy as np
+
+    from phloem.trees import library as library_module
+
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    rng = np.random.default_rng(0)
+    for s in range(2):  # two blob trees: a crown disk over a trunk, jittered
+        img = np.zeros((120, 90, 4), np.float32)
+        yy, xx = np.mgrid[:120, :90]
+        r = 30 + 5 * s
+        img[(yy - 45) ** 2 + (xx - 45) ** 2 < r * r] = (0.1, 0.5 + 0.1 * s, 0.1, 1.0)
+        img[70:118, 40:50] = (0.4, 0.3, 0.2, 1.0)
+        img[..., :3] += rng.uniform(0, 0.05, img.shape[:2] + (3,)).astype(np.float32) * img[..., 3:]
+        phloem.io.write_image(lib / f"t{s}.png", img)
+    spec = tmp_path / "trees.yaml"
+    spec.write_text("job: trees\ninputs: [lib]\nparams: {n-variations: 1, size: 96}\nseeds: 0..3\n")
+    out = tmp_path / "out"
+    summary = batch.run(spec, out_dir=out, client=client)
+    assert summary.ok and summary.made == 4, summary.line()
+    assert len(list((out / ".phloem-cache").iterdir())) == 1  # prepared by the first item, read by the others
+    records = _records(out)
+    assert [r["argv"].count("--library-cache") for r in records] == [1] * 4
+    # a cache named in the spec, in either spelling, is the one used
+    spec.write_text("job: trees\ninputs: [lib]\nparams: {n-variations: 1, size: 96, library-cache: k}\nseeds: [0]\n")
+    assert batch.run(spec, out_dir=tmp_path / "out2", client=client).ok
+    assert _records(tmp_path / "out2")[0]["argv"].count("--library-cache") == 1
+    assert (tmp_path / "k").is_dir() and not (tmp_path / "out2" / ".phloem-cache").exists()
+    made = outputs(out)
+    assert sum(name.endswith(".png") for name in made) == 4
+    # each item alone, with no cache at all: the same trees
+    for r in records:
+        argv = r["argv"]
+        i = argv.index("--library-cache")
+        alone = tmp_path / "alone" / Path(argv[argv.index("--out-dir") + 1]).name
+        argv = [*argv[:i], *argv[i + 2 :]]
+        argv[argv.index("--out-dir") + 1] = str(alone)
+        library_module._loaded.clear()
+        assert main(argv) == 0
+    for name, data in made.items():
+        if name.endswith(".png") and not name.startswith(".phloem-cache"):
+            assert (tmp_path / "alone" / name).read_bytes() == data, name
