@@ -71,6 +71,9 @@ def serve(
     except OSError as e:
         sock.close()
         raise OSError(f"port: cannot listen on {host}:{port}: {e.strerror}") from None
+    # Listen before the URL is printed: a browser (or script) that connects while uvicorn is still
+    # starting waits in the backlog instead of being refused.
+    sock.listen(128)
     bound = sock.getsockname()[1]
     app = create_app(project, threads=threads)
     shown = f"[{host}]" if ":" in host else host
