@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -43,3 +44,24 @@ def png_bytes(image: np.ndarray) -> bytes:
     from phloem import _files
 
     return _files.encode(Path("x.png"), image, 8)
+
+
+def finish_job(client: TestClient, job_id: str) -> dict[str, object]:
+    """The job's server-sent events until it ends; the last, with all of them under ``events``."""
+    events = []
+    with client.stream("GET", f"/api/jobs/{job_id}/events") as r:
+        assert r.status_code == 200 and r.headers["content-type"].startswith("text/event-stream")
+        for line in r.iter_lines():
+            if line.startswith("data: "):
+                events.append(json.loads(line[6:]))
+    assert events and events[-1]["state"] in ("done", "failed", "cancelled")
+    return {"events": events, **events[-1]}
+
+
+def run_job(client: TestClient, body: dict[str, object]) -> dict[str, object]:
+    """Submit a job, follow it to its end and check that it is done; its last state."""
+    r = client.post("/api/jobs", json=body)
+    assert r.status_code == 202, r.text
+    end = finish_job(client, r.json()["id"])
+    assert end["state"] == "done", end["message"]
+    return end
