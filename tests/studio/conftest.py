@@ -6,6 +6,7 @@ import json
 from collections.abc import Iterator
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
@@ -65,3 +66,16 @@ def run_job(client: TestClient, body: dict[str, object]) -> dict[str, object]:
     end = finish_job(client, r.json()["id"])
     assert end["state"] == "done", end["message"]
     return end
+
+
+def tree_image(seed: int, crown_r: int = 40, trunk_w: int = 10, trunk_h: int = 50) -> np.ndarray:
+    """A small RGBA tree: a leafy disk crown on a brown trunk standing on the bottom."""
+    img = np.zeros((160, 120, 4), np.float32)
+    top = 150 - trunk_h
+    img[top:150, 60 - trunk_w // 2 : 60 + trunk_w // 2] = (0.4, 0.25, 0.1, 1)
+    crown = np.zeros((160, 120), np.uint8)
+    cv2.circle(crown, (60, top - crown_r + 8), crown_r, 1, -1)
+    leaf = np.random.default_rng(seed).uniform(0.3, 0.8, (160, 120)).astype(np.float32)
+    on = crown > 0
+    img[on] = np.stack([0.1 * leaf[on], leaf[on], 0.2 * leaf[on], np.ones(on.sum(), np.float32)], -1)
+    return img

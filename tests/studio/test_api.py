@@ -72,7 +72,10 @@ def test_openapi_describes_every_endpoint_and_the_job_kinds(client):
 
 def test_info_and_file_list(client, project):
     info = client.get("/api/info").json()
-    assert info["workspaces"] == ["strokes", "bark", "branching", "leaves"] and info["max_pixels"] == project.max_pixels
+    assert (
+        info["workspaces"] == ["strokes", "bark", "branching", "leaves", "trees", "textures"]
+        and info["max_pixels"] == project.max_pixels
+    )
     (project.root / ".hidden").mkdir()
     (project.root / ".hidden" / "x.png").write_bytes(b"")
     (project.root / "notes.txt").write_text("x")

@@ -24,7 +24,7 @@ from phloem.branching import Skeleton
 from phloem.strokes import StrokeSet
 from phloem.testing import channel_scene, layered_leaf
 
-from .conftest import TOKEN
+from .conftest import TOKEN, tree_image
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 DRIVER = shutil.which("chromedriver")
@@ -69,6 +69,9 @@ def studio(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path
     io.write_image(root / "photos" / "channel.png", channel_scene(0)[0])
     for v in range(2):
         io.write_image(root / "photos" / f"leaf{v}.png", layered_leaf(variant=v, seed=v)[0])
+    (root / "trees").mkdir()
+    for i, kw in enumerate(({}, {"crown_r": 30, "trunk_w": 14, "trunk_h": 60}, {"crown_r": 50, "trunk_w": 8})):
+        io.write_image(root / "trees" / f"t{i}.png", tree_image(i, **kw))
     sock = socket.socket()
     sock.bind(("127.0.0.1", 0))
     app = create_app(Project(root), token=TOKEN, threads=1)
@@ -409,3 +412,48 @@ def test_scribble_two_layers_on_a_leaf_expand_and_synthesize(studio: tuple[str, 
     _shot(browser, "studio_leaves.png")
     sheet = message.split("and ")[1].split(",")[0]
     assert io.read_image(root / sheet).shape[0] >= 1000
+
+
+def test_fill_a_hole_painted_with_the_brush(studio: tuple[str, Path, Any], browser: Any) -> None:
+    url, root, _ = studio
+    _open(browser, url)
+    browser.find_element(By.CSS_SELECTOR, '#tabs button[data-ws="textures"]').click()
+    Select(browser.find_element(By.ID, "tx-image")).select_by_value("photos/bark.png")
+    WebDriverWait(browser, 30).until(
+        lambda d: d.execute_script("return document.getElementById('tx-canvas').width") == 96
+    )
+    browser.execute_script("document.getElementById('tx-brush').value = 12")
+    _drag(browser, browser.find_element(By.ID, "tx-canvas"), _line((30, 48), (66, 48), 10))
+    message = _run_and_show(browser, "tx-run", "tx", "studio_textures.png")
+
+    hole = io.read_image(root / "photos" / "bark_mask.png") > 0.5  # the CLI's mask: white where filled
+    assert hole[44:53, 32:65].all() and not hole[:35].any() and not hole[62:].any() and 300 < hole.sum() < 800
+    out = message.split("wrote ")[1].split(" and")[0]
+    before, after = io.read_image(root / "photos" / "bark.png"), io.read_image(root / out)
+    assert np.array_equal(after[~hole], before[~hole]) and not np.array_equal(after[hole], before[hole])
+    assert json.loads((root / f"{out}.json").read_text())["parameters"]["mask"] == "photos/bark_mask.png"
+
+
+def test_make_trees_from_a_library_folder(studio: tuple[str, Path, Any], browser: Any) -> None:
+    url, root, _ = studio
+    _open(browser, url)
+    browser.find_element(By.CSS_SELECTOR, '#tabs button[data-ws="trees"]').click()
+    Select(browser.find_element(By.ID, "tr-library")).select_by_value("trees")
+    assert len(browser.find_elements(By.CSS_SELECTOR, "#tr-library-gallery img")) == 3
+    _type(browser, "tr-count", "3")
+    _type(browser, "tr-size", "128")
+    browser.find_element(By.ID, "tr-run").click()
+    message = _wait_message(browser, "tr-msg", "sidecar")
+    WebDriverWait(browser, 30).until(
+        lambda d: d.execute_script(
+            "const i = [...document.querySelectorAll('#tr-gallery img')];"
+            "return i.length === 3 && i.every((x) => x.complete && x.naturalWidth === 128)"
+        )
+    )
+    _shot(browser, "studio_trees.png")
+    folder = message.split(" to ")[1].split(",")[0]
+    assert sorted(p.name for p in (root / folder).glob("tree_*.png")) == [
+        "tree_0000.png",
+        "tree_0001.png",
+        "tree_0002.png",
+    ]

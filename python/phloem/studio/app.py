@@ -31,11 +31,13 @@ from .jobs import JobManager
 from .outputs import LabelMap, Outputs, Side, decode_label_map
 from .workspaces import branching as branching_ws
 from .workspaces import leaves as leaves_ws
+from .workspaces import textures as textures_ws
+from .workspaces import trees as trees_ws
 
 __all__ = ["TOKEN_HEADER", "create_app"]
 
 TOKEN_HEADER = "X-Phloem-Token"
-WORKSPACES = ("strokes", "bark", "branching", "leaves")
+WORKSPACES = ("strokes", "bark", "branching", "leaves", "trees", "textures")
 # Bytes a JSON or form body may add around an upload's file (field names, boundaries).
 _BODY_SLACK = 64 * 1024
 _STATIC = ("app.js", "style.css")
@@ -146,7 +148,10 @@ JobRequest = Annotated[
     | branching_ws.BranchingGrowJob
     | branching_ws.BranchingRenderJob
     | leaves_ws.LeavesExpandJob
-    | leaves_ws.LeavesSynthesizeJob,
+    | leaves_ws.LeavesSynthesizeJob
+    | trees_ws.TreesJob
+    | textures_ws.TextureJob
+    | textures_ws.TextureCompleteJob,
     Field(discriminator="kind"),
 ]
 
@@ -221,7 +226,7 @@ def create_app(
     >>> app = create_app(Project(tempfile.mkdtemp()), token="secret")
     >>> with TestClient(app) as client:
     ...     client.get("/api/info").status_code, client.get("/api/info?token=secret").json()["workspaces"]
-    (401, ['strokes', 'bark', 'branching', 'leaves'])
+    (401, ['strokes', 'bark', 'branching', 'leaves', 'trees', 'textures'])
     """
     token = token or secrets.token_urlsafe(24)
     manager = JobManager(workers)
@@ -462,10 +467,15 @@ def create_app(
             return branching_ws.plan(req, outputs, threads)
         if isinstance(req, leaves_ws.LeavesExpandJob | leaves_ws.LeavesSynthesizeJob):
             return leaves_ws.plan(req, outputs, threads)
+        if isinstance(req, trees_ws.TreesJob):
+            return trees_ws.plan(req, outputs, threads)
+        if isinstance(req, textures_ws.TextureJob | textures_ws.TextureCompleteJob):
+            return textures_ws.plan(req, outputs, threads)
         return plan(req)
 
     branching_ws.mount(app, project, guarded, Saved)
     leaves_ws.mount(app, project, guarded, Saved)
+    textures_ws.mount(app, project, guarded, Saved)
 
     @app.post("/api/jobs", status_code=202, response_model=JobView)
     def submit(req: Annotated[JobRequest, Body()]) -> JobView:

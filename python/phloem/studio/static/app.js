@@ -337,14 +337,23 @@ function palette() {
   }
 }
 
-function paintAt(ev) {
-  const [cx, cy] = canvasPoint($("b-canvas"), ev);
-  const r = +$("b-brush").value / 2;
-  for (let y = Math.max(0, Math.floor(cy - r)); y <= Math.min(B.height - 1, Math.ceil(cy + r)); y++) {
-    for (let x = Math.max(0, Math.floor(cx - r)); x <= Math.min(B.width - 1, Math.ceil(cx + r)); x++) {
-      if ((x - cx) ** 2 + (y - cy) ** 2 <= r * r) B.labels[y * B.width + x] = B.brush;
+// A round brush of radius r dabbed along the segment a → b of a width × height label array, so
+// that a fast pointer move leaves no gaps.
+function brushLine(labels, width, height, a, b, r, value) {
+  const steps = Math.max(1, Math.ceil(Math.hypot(b[0] - a[0], b[1] - a[1]) / Math.max(0.5, r / 2)));
+  for (let i = steps === 1 ? 1 : 0; i <= steps; i++) {
+    const cx = a[0] + ((b[0] - a[0]) * i) / steps, cy = a[1] + ((b[1] - a[1]) * i) / steps;
+    for (let y = Math.max(0, Math.floor(cy - r)); y <= Math.min(height - 1, Math.ceil(cy + r)); y++) {
+      for (let x = Math.max(0, Math.floor(cx - r)); x <= Math.min(width - 1, Math.ceil(cx + r)); x++) {
+        if ((x - cx) ** 2 + (y - cy) ** 2 <= r * r) labels[y * width + x] = value;
+      }
     }
   }
+}
+
+function paintAt(ev) {
+  const p = canvasPoint($("b-canvas"), ev);
+  brushLine(B.labels, B.width, B.height, p, p, +$("b-brush").value / 2, B.brush);
   drawLabels();
 }
 
@@ -907,21 +916,9 @@ function leafPalette() {
   }
 }
 
-function dab(cx, cy) {
-  const r = +$("lv-brush").value / 2;
-  for (let y = Math.max(0, Math.floor(cy - r)); y <= Math.min(L.height - 1, Math.ceil(cy + r)); y++) {
-    for (let x = Math.max(0, Math.floor(cx - r)); x <= Math.min(L.width - 1, Math.ceil(cx + r)); x++) {
-      if ((x - cx) ** 2 + (y - cy) ** 2 <= r * r) L.labels[y * L.width + x] = L.brush;
-    }
-  }
-}
-
-// A stroke: dabs along the segment from the last pointer position, so a fast move leaves no gaps.
 function scribbleTo(ev) {
   const p = canvasPoint(lc, ev);
-  const last = L.painting.last || p;
-  const steps = Math.max(1, Math.ceil(Math.hypot(p[0] - last[0], p[1] - last[1]) / Math.max(0.5, $("lv-brush").value / 4)));
-  for (let i = 1; i <= steps; i++) dab(last[0] + ((p[0] - last[0]) * i) / steps, last[1] + ((p[1] - last[1]) * i) / steps);
+  brushLine(L.labels, L.width, L.height, L.painting.last || p, p, +$("lv-brush").value / 2, L.brush);
   L.painting.last = p;
   drawScribbles();
 }
@@ -1027,14 +1024,157 @@ $("lv-synth").onclick = guard(lMsg, async () => {
   say(lMsg, `wrote ${s.outputs.length - 1} leaves, the model and ${s.outputs[0]}, each with its sidecar`);
 });
 
+// -- Trees workspace ---------------------------------------------------------------------------
+const trMsg = $("tr-msg");
+const trUi = { msg: trMsg, progress: $("tr-progress"), cancel: $("tr-cancel") };
+let projectImages = [];
+
+function gallery(el, paths) {
+  el.innerHTML = "";
+  for (const path of paths) {
+    const img = document.createElement("img");
+    img.src = fileUrl(path);
+    img.title = img.alt = path;
+    el.appendChild(img);
+  }
+}
+
+// The folders holding images, as library choices; the chosen one's images as its gallery.
+async function treeLibraries() {
+  projectImages = (await api("GET", "/api/files")).filter((f) => f.kind === "image").map((f) => f.path);
+  const sel = $("tr-library");
+  const keep = sel.value;
+  const folders = [...new Set(projectImages.filter((p) => p.includes("/")).map((p) => p.slice(0, p.lastIndexOf("/"))))];
+  sel.innerHTML = "";
+  for (const f of folders.sort()) {
+    const o = document.createElement("option");
+    o.value = o.textContent = f;
+    sel.appendChild(o);
+  }
+  if (keep && folders.includes(keep)) sel.value = keep;
+  else if (folders.includes("trees")) sel.value = "trees";
+  showLibrary();
+}
+
+function showLibrary() {
+  const folder = $("tr-library").value;
+  gallery($("tr-library-gallery"), projectImages.filter((p) => p.slice(0, p.lastIndexOf("/")) === folder));
+}
+$("tr-library").onchange = showLibrary;
+$("tr-run").onclick = guard(trMsg, async () => {
+  const req = { kind: "trees-variations", library: $("tr-library").value, count: +$("tr-count").value,
+    n_sources: +$("tr-sources").value, size: +$("tr-size").value, seed: +$("tr-seed").value };
+  const s = await runJobReplacing(req, trUi);
+  gallery($("tr-gallery"), s.outputs);
+  say(trMsg, `wrote ${s.outputs.length} trees to ${s.outputs[0].slice(0, s.outputs[0].lastIndexOf("/"))}, each with its sidecar`);
+});
+
+// -- Textures workspace ------------------------------------------------------------------------
+const X = { img: null, width: 0, height: 0, mask: null, painting: null, savedAs: null };
+const xMsg = $("tx-msg");
+const xUi = { msg: xMsg, progress: $("tx-progress"), cancel: $("tx-cancel") };
+const xc = $("tx-canvas");
+
+function drawMask() {
+  if (!X.img) return;
+  const ctx = xc.getContext("2d");
+  ctx.drawImage(X.img, 0, 0);
+  const over = ctx.getImageData(0, 0, X.width, X.height);
+  for (let i = 0; i < X.mask.length; i++) {
+    if (X.mask[i]) over.data.set([230, 25, 75, 255], 4 * i);
+  }
+  ctx.putImageData(over, 0, 0);
+}
+
+function maskTo(ev) {
+  const p = canvasPoint(xc, ev);
+  brushLine(X.mask, X.width, X.height, X.painting.last || p, p, +$("tx-brush").value / 2, $("tx-erase").checked ? 0 : 1);
+  X.painting.last = p;
+  drawMask();
+}
+xc.addEventListener("pointerdown", (ev) => {
+  if (!X.img) return;
+  xc.setPointerCapture(ev.pointerId);
+  X.painting = { last: null };
+  maskTo(ev);
+});
+xc.addEventListener("pointermove", (ev) => X.painting && maskTo(ev));
+xc.addEventListener("pointerup", () => (X.painting = null));
+xc.addEventListener("pointercancel", () => (X.painting = null));
+
+async function showTextureImage(path) {
+  if (!path) return;
+  X.img = await loadImage(path);
+  X.width = xc.width = X.img.naturalWidth;
+  X.height = xc.height = X.img.naturalHeight;
+  X.mask = new Uint8Array(X.width * X.height);
+  X.savedAs = null;
+  const dot = path.lastIndexOf(".");
+  $("tx-file").value = path.slice(0, dot) + "_mask.png";
+  drawMask();
+}
+$("tx-image").onchange = guard(xMsg, () => showTextureImage($("tx-image").value));
+$("tx-upload").onchange = guard(xMsg, async () => {
+  const saved = await upload($("tx-upload"));
+  await imageList($("tx-image"), saved.path);
+  await showTextureImage(saved.path);
+  say(xMsg, `saved ${saved.path} (${saved.width}×${saved.height})`);
+});
+$("tx-clear").onclick = () => {
+  if (X.mask) X.mask.fill(0);
+  drawMask();
+};
+$("tx-run").onclick = guard(xMsg, async () => {
+  const kind = $("tx-mode").value;
+  const req = { kind, image: $("tx-image").value, seed: +$("tx-seed").value };
+  if (kind === "texture-complete") {
+    if (!X.mask || !X.mask.some((v) => v)) throw new Error("mask: paint the hole to fill on the image first");
+    const body = { width: X.width, height: X.height, n_labels: 2, data: base64(X.mask) };
+    req.mask = await putFile("/api/mask", $("tx-file").value.trim(), body, X);
+  } else {
+    req.size = [+$("tx-h").value, +$("tx-w").value];
+  }
+  const s = await runJob(req, xUi);
+  if (s.state !== "done") throw new Error(`${s.kind} ${s.state}: ${s.message}`);
+  $("tx-result").src = fileUrl(s.outputs[0]);
+  if (s.outputs[1]) $("tx-sources").src = fileUrl(s.outputs[1]);
+  else $("tx-sources").removeAttribute("src");
+  say(xMsg, `wrote ${s.outputs.join(" and ")} and the sidecar${s.outputs.length > 1 ? "s" : ""}`);
+});
+
+// -- bark on a cylinder ------------------------------------------------------------------------
+// Each column x of the preview looks at the angle asin((x - c) / r) on a trunk of radius r; the
+// texture's width wraps half way round (the front), shaded by the cosine of that angle.
+function cylinder(img) {
+  const c = $("b-cylinder");
+  const ctx = c.getContext("2d");
+  const r = c.width / 2;
+  const h = Math.min(c.height, (img.naturalHeight * c.width) / (img.naturalWidth / 2 || 1));
+  ctx.clearRect(0, 0, c.width, c.height);
+  for (let x = 0; x < c.width; x++) {
+    const s = (x + 0.5 - r) / r;
+    const angle = Math.asin(Math.max(-1, Math.min(1, s)));
+    const u = ((angle / Math.PI + 0.5) * img.naturalWidth) % img.naturalWidth;
+    ctx.globalAlpha = 1;
+    ctx.drawImage(img, Math.floor(u), 0, 1, img.naturalHeight, x, 0, 1, h);
+    ctx.globalAlpha = 1 - (0.25 + 0.75 * Math.cos(angle));
+    ctx.fillStyle = "#000";
+    ctx.fillRect(x, 0, 1, h);
+  }
+  ctx.globalAlpha = 1;
+}
+$("b-result").addEventListener("load", () => cylinder($("b-result")));
+
 // -- start -------------------------------------------------------------------------------------
 (async () => {
   try {
     const info = await api("GET", "/api/info");
     L.colours = info.layer_colours;
     leafPalette();
-    for (const id of ["s-image", "b-image", "br-image", "lv-image"]) await imageList($(id));
+    for (const id of ["s-image", "b-image", "br-image", "lv-image", "tx-image"]) await imageList($(id));
     await leafList();
+    await treeLibraries();
+    await showTextureImage($("tx-image").value);
     if ($("s-image").value) await showPhoto($("s-image").value);
     await showBarkPhoto();
     await showBranchingImage($("br-image").value);
