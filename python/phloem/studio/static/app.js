@@ -468,14 +468,18 @@ function drawSkeleton(canvas, branches, { background = null, sel = null, guide =
   ctx.lineJoin = ctx.lineCap = "round";
   branches.forEach((b, i) => {
     const color = background ? DEPTH_COLORS[depthOf(branches, i) % DEPTH_COLORS.length] : "#fff";
-    // the branch's thickness as a translucent band, then its centre line
-    for (let j = 1; j < b.points.length; j++) {
-      ctx.globalAlpha = background ? 0.3 : 1;
-      ctx.strokeStyle = color;
-      ctx.lineWidth = Math.max(1, b.thickness[j - 1] + b.thickness[j]);
+    // the branch's thickness as a translucent band, then its centre line; one path per run of
+    // edges of the same width (to half a pixel): thousands of separate strokes miss the frame
+    ctx.globalAlpha = background ? 0.3 : 1;
+    ctx.strokeStyle = color;
+    for (let j = 1; j < b.points.length; ) {
+      const width = Math.max(1, Math.round(2 * (b.thickness[j - 1] + b.thickness[j])) / 2);
+      ctx.lineWidth = width;
       ctx.beginPath();
       ctx.moveTo(...b.points[j - 1]);
-      ctx.lineTo(...b.points[j]);
+      for (; j < b.points.length && Math.max(1, Math.round(2 * (b.thickness[j - 1] + b.thickness[j])) / 2) === width; j++) {
+        ctx.lineTo(...b.points[j]);
+      }
       ctx.stroke();
     }
     ctx.globalAlpha = 1;
@@ -485,12 +489,18 @@ function drawSkeleton(canvas, branches, { background = null, sel = null, guide =
     b.points.forEach(([x, y], j) => (j ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
     ctx.stroke();
     if (vertices) {
+      // a dot per vertex, but none closer than 4 screen pixels to the last (a traced skeleton has
+      // a vertex every pixel); every vertex can still be grabbed
       ctx.fillStyle = color;
-      for (const [x, y] of b.points) {
-        ctx.beginPath();
+      ctx.beginPath();
+      let last = null;
+      b.points.forEach(([x, y], j) => {
+        if (last && j < b.points.length - 1 && Math.hypot(x - last[0], y - last[1]) < 4 * s) return;
+        ctx.moveTo(x + 2.2 * s, y);
         ctx.arc(x, y, 2.2 * s, 0, 2 * Math.PI);
-        ctx.fill();
-      }
+        last = [x, y];
+      });
+      ctx.fill();
     }
   });
   if (sel && branches[sel.b]) {
@@ -633,7 +643,7 @@ const brMode = () => document.querySelector('input[name="br-mode"]:checked').val
 
 kc.addEventListener("pointerdown", (ev) => {
   if (!K.img) return;
-  kc.focus();
+  kc.focus({ preventScroll: true }); // for the Delete key; scrolling now would move the canvas under the pointer
   kc.setPointerCapture(ev.pointerId);
   const p = canvasPoint(kc, ev);
   const r = 7 * pxScale(kc);
