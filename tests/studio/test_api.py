@@ -15,7 +15,7 @@ import phloem
 from phloem import bark, io
 from phloem.strokes import StrokeSet
 
-from .conftest import TOKEN, bar_photo, finish_job, png_bytes
+from .conftest import TOKEN, bar_photo, finish_job, png_bytes, run_job
 
 STROKES = {
     "format": "phloem.strokes",
@@ -306,6 +306,28 @@ def test_bark_labels_then_texture_from_the_painted_map(client, project):
     assert (
         json.loads((project.root / "t.png.json").read_text())["parameters"]["labels_in"] == "photos/bark_labels_in.png"
     )
+
+
+def test_a_texture_writes_its_new_label_map_which_painted_over_paints_the_next(client, project):
+    """The output label map (phloem bark --keep-intermediates' OUT_labels_out.png) is a stage to edit:
+    written beside the texture, read back as labels_out, whose shape sets the next texture's size."""
+    end = run_job(client, {"kind": "bark-texture", "image": "photos/bark.png", "n_labels": 2, "size": [40, 56],
+                           "out": "t.png"})  # fmt: skip
+    assert end["outputs"] == ["t.png", "t_labels_out.png"]
+    out_map = bark.decode_labels(io.read_image(project.root / "t_labels_out.png"))
+    assert out_map.shape == (40, 56) and set(np.unique(out_map)) <= {0, 1}
+    painted = np.zeros((40, 56), np.uint8)
+    painted[:, 28:] = 1  # half and half
+    client.put("/api/labels", params={"path": "t_labels_out.png", "overwrite": True}, json=_labels_body(painted, 2))
+    end = run_job(client, {"kind": "bark-texture", "image": "photos/bark.png", "n_labels": 2, "size": [8, 8],
+                           "labels_out": "t_labels_out.png", "out": "t2.png"})  # fmt: skip
+    tex = io.read_image(project.root / "t2.png")
+    assert tex.shape == (40, 56, 3)  # the painted map's size, not `size`
+    assert abs(float(tex[:, :28].mean()) - float(tex[:, 28:].mean())) > 0.05  # its two halves differ, as painted
+    assert json.loads((project.root / "t2.png.json").read_text())["parameters"]["labels_out"] == "t_labels_out.png"
+    r = client.post("/api/jobs", json={"kind": "bark-texture", "image": "photos/bark.png", "size": [8, 8],
+                                       "labels_out": "none.png"})  # fmt: skip
+    assert r.status_code == 404 and "labels_out: no file" in r.json()["detail"]
 
 
 @pytest.mark.parametrize(

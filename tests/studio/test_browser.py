@@ -249,6 +249,23 @@ def test_make_a_label_map_paint_it_and_make_a_texture(studio: tuple[str, Path, A
     side = json.loads((root / f"{out}.json").read_text())
     assert side["parameters"]["labels_in"] == "photos/bark_labels_in.png"
 
+    # The new label map the texture was painted by: edit it (label 1 down its left quarter) and paint again.
+    out_map = out.removesuffix(".png") + "_labels_out.png"
+    browser.find_element(By.ID, "b-edit-out").click()
+    _wait_message(browser, "b-msg", f"editing {out_map}")
+    assert browser.find_element(By.ID, "b-role").text == "new"
+    browser.find_elements(By.CSS_SELECTOR, "#b-palette button")[1].click()
+    browser.execute_script("document.getElementById('b-brush').value = 16")
+    _drag(browser, browser.find_element(By.ID, "b-canvas"), _line((8, 2), (8, 62), 8))
+    message = _run_and_show(browser, "b-texture", "b", "studio_bark_edited_map.png")
+    edited = bark.decode_labels(io.read_image(root / out_map))
+    assert edited.shape == (64, 64) and (edited[4:60, 2:14] == 1).all()
+    second = message.split("wrote ")[1].split(" and")[0]
+    side = json.loads((root / f"{second}.json").read_text())
+    assert (
+        side["parameters"]["labels_out"] == out_map and side["parameters"]["labels_in"] == "photos/bark_labels_in.png"
+    )
+
 
 def _loop_until_cancelled(progress: Any) -> list[str]:
     while True:  # holds the one worker until it is cancelled: its progress call then raises

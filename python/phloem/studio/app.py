@@ -132,7 +132,10 @@ class BarkTextureJob(BaseModel):
     kind: Literal["bark-texture"]
     image: str = Field(description="project name of the bark photo")
     labels_in: str | None = Field(None, description="project name of the photo's label map PNG")
-    size: tuple[Side, Side] = Field(description="output [height, width]")
+    labels_out: str | None = Field(
+        None, description="project name of a (painted) output label map PNG; the texture takes its size"
+    )
+    size: tuple[Side, Side] = Field(description="output [height, width] (unused with labels_out)")
     n_labels: int = Field(3, ge=2, le=16)
     tileable: bool = False
     seed: int = Field(0, ge=0, lt=2**63)
@@ -447,16 +450,23 @@ def create_app(
             raise ValueError(
                 f"labels_in: {lab_in.shape[1]}×{lab_in.shape[0]} px, but the photo is {photo.shape[1]}×{photo.shape[0]}"
             )
+        lab_out = None if req.labels_out is None else _labels(project, req.labels_out, "labels_out")
         out = out_path(req, f"results/bark-{secrets.token_hex(4)}.png")
+        # the new label map it was painted by, as 'phloem bark --keep-intermediates' writes it: edit it, resume
+        maps = out.with_name(f"{out.stem}_labels_out.png")
+        outputs.target(project.name(maps), suffixes=PNG_SUFFIX, overwrite=req.overwrite)
 
         def texture(progress: Progress) -> list[str]:
-            tex = bark.generate(
-                photo, req.size, n_labels=req.n_labels, labels_in=lab_in, tileable=req.tileable, seed=req.seed,
-                threads=threads, progress=progress, max_memory=project.max_memory,
+            res = bark.generate(
+                photo, None if lab_out is not None else req.size, n_labels=req.n_labels, labels_in=lab_in,
+                labels_out=lab_out, tileable=req.tileable, seed=req.seed, threads=threads, progress=progress,
+                max_memory=project.max_memory, full_output=True,
             )  # fmt: skip
             assert progress is not None
             progress(100, 100)
-            return [write(out, tex, req.kind, params, req.seed, req.overwrite)]
+            files = [(out, _files.encode(out, res.texture, None), params),
+                     (maps, _files.encode(maps, bark.encode_labels(res.labels_out), 8), params)]  # fmt: skip
+            return outputs.write_all(files, command=req.kind, seed=req.seed, overwrite=req.overwrite)
 
         return texture
 

@@ -303,7 +303,9 @@ $("s-render").onclick = guard(sMsg, async () => {
 // -- Bark workspace ----------------------------------------------------------------------------
 const PALETTE = ["#3b2416", "#c8a26b", "#6b8e23", "#4682b4", "#d2691e", "#8b008b", "#20b2aa", "#b22222",
   "#ffd700", "#708090", "#ff69b4", "#00ced1", "#556b2f", "#9370db", "#f4a460", "#2f4f4f"];
-const B = { width: 0, height: 0, n: 0, labels: null, brush: 0, painting: false, savedAs: null };
+// role: which map the canvas holds, the photo's ("in") or the new one a texture was painted by ("out")
+const B = { width: 0, height: 0, n: 0, labels: null, brush: 0, painting: false, savedAs: null, role: "in", inPath: null,
+  outPath: null };
 const bMsg = $("b-msg");
 const rgb = (hex) => [1, 3, 5].map((i) => parseInt(hex.slice(i, i + 2), 16));
 
@@ -367,7 +369,10 @@ bc.addEventListener("pointerdown", (ev) => {
 bc.addEventListener("pointermove", (ev) => B.painting && paintAt(ev));
 bc.addEventListener("pointerup", () => (B.painting = false));
 
-async function loadLabels(path) {
+async function loadLabels(path, role = "in") {
+  B.role = role;
+  $("b-role").textContent = role === "in" ? "photo's" : "new";
+  if (role === "in") B.inPath = path;
   const m = await api("GET", "/api/labels?" + q({ path }));
   const raw = atob(m.data);
   B.labels = Uint8Array.from(raw, (c) => c.charCodeAt(0));
@@ -416,7 +421,10 @@ $("b-labels").onclick = guard(bMsg, async () => {
   await loadLabels(s.outputs[0]);
   say(bMsg, `wrote ${s.outputs[0]}: paint it, save it, make a texture`);
 });
-$("b-load").onclick = guard(bMsg, () => loadLabels($("b-file").value.trim()));
+$("b-load").onclick = guard(bMsg, () => {
+  const path = $("b-file").value.trim();
+  return loadLabels(path, path.endsWith("_labels_out.png") ? "out" : "in");
+});
 $("b-save").onclick = guard(bMsg, async () => say(bMsg, `saved ${await saveLabels()}`));
 $("b-texture").onclick = guard(bMsg, async () => {
   const req = {
@@ -427,11 +435,24 @@ $("b-texture").onclick = guard(bMsg, async () => {
     tileable: $("b-tileable").checked,
     seed: +$("b-seed").value,
   };
-  if (B.labels) req.labels_in = await saveLabels();
+  if (B.labels && B.role === "out") {
+    req.labels_out = await saveLabels();
+    if (B.inPath) req.labels_in = B.inPath;
+  } else if (B.labels) {
+    req.labels_in = await saveLabels();
+  }
   const s = await runJob(req, bUi);
   if (s.state !== "done") throw new Error(`${s.kind} ${s.state}: ${s.message}`);
   $("b-result").src = withToken("/api/file?" + q({ path: s.outputs[0] }));
-  say(bMsg, `wrote ${s.outputs[0]} and its sidecar`);
+  B.outPath = s.outputs[1];
+  $("b-labels-out").src = fileUrl(B.outPath);
+  $("b-edit-out").disabled = false;
+  say(bMsg, `wrote ${s.outputs[0]} and its sidecar, and the new label map ${s.outputs[1]}`);
+});
+$("b-edit-in").onclick = guard(bMsg, () => loadLabels(B.inPath || labelsFor($("b-image").value)));
+$("b-edit-out").onclick = guard(bMsg, async () => {
+  await loadLabels(B.outPath, "out");
+  say(bMsg, `editing ${B.outPath}: paint it, then Make texture paints it`);
 });
 
 // -- Branching workspace -----------------------------------------------------------------------
