@@ -119,6 +119,9 @@ def test_trace_then_grow_then_render_write_the_cli_s_files_with_sidecars(client,
     on = grown.mask()
     assert out[on].mean() < out[~on].mean() - 0.1  # the dark channel painted along the grown skeleton
     assert json.loads((project.root / "results" / "new.png.json").read_text())["parameters"]["target"] == "grown.json"
+    assert end["outputs"] == ["results/new.png", "results/new_fragments.png"]
+    frag = io.read_image(project.root / "results" / "new_fragments.png")
+    assert frag.shape == (128, 224, 3) and len(np.unique(frag.reshape(-1, 3), axis=0)) > 3  # several fragments
 
 
 @pytest.mark.parametrize(

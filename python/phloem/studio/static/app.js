@@ -899,7 +899,8 @@ $("br-render").onclick = guard(kMsg, async () => {
     target: K.grownPath, seed: +$("br-seed").value };
   const s = await runJobReplacing(req, kUi);
   $("br-result").src = fileUrl(s.outputs[0]);
-  say(kMsg, `wrote ${s.outputs[0]} and its sidecar`);
+  $("br-fragments").src = fileUrl(s.outputs[1]);
+  say(kMsg, `wrote ${s.outputs[0]} and its sidecar, and the fragment map ${s.outputs[1]}`);
 });
 
 // -- Leaves workspace --------------------------------------------------------------------------

@@ -17,8 +17,9 @@ import numpy as np
 from fastapi import Body, FastAPI, Query
 from pydantic import BaseModel, Field, TypeAdapter, ValidationError
 
-from ... import _json, branching
+from ... import _files, _json, branching
 from ..._progress import Progress
+from ...cli.branching import fragment_map
 from ..files import JSON_SUFFIXES, Project, name_pattern
 from ..jobs import Work
 from ..outputs import Outputs, Side
@@ -192,15 +193,20 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
         raise ValueError(f"target: {req.target} has no shape; the new image's size comes from it")
     out = outputs.target(req.out or f"results/branching-{secrets.token_hex(4)}.png", suffixes=_OUT,
                          overwrite=req.overwrite)  # fmt: skip
+    # the fragment map (which fragment painted each pixel), as 'phloem branching render --fragment-map' writes it
+    fragments = out.with_name(f"{out.stem}_fragments.png")
+    outputs.target(project.name(fragments), suffixes=_OUT, overwrite=req.overwrite)
 
     def render(progress: Progress) -> list[str]:
         valid = branching.valid_region(img)
         res = branching.render(img, source, target, seed=req.seed, complete=req.complete,
                                valid=None if valid.all() else valid, threads=threads, progress=progress,
-                               max_memory=project.max_memory)  # fmt: skip
+                               max_memory=project.max_memory, full_output=True)  # fmt: skip
         assert progress is not None
         progress(1, 1)
-        return [outputs.image(out, res, command=req.kind, parameters=params, seed=req.seed, overwrite=req.overwrite)]
+        files = [(out, _files.encode(out, res.image, None), params),
+                 (fragments, _files.encode(fragments, fragment_map(res.labels), None), params)]  # fmt: skip
+        return outputs.write_all(files, command=req.kind, seed=req.seed, overwrite=req.overwrite)
 
     return render
 
