@@ -3,6 +3,7 @@ and render jobs with sidecars, interactive extension (§6) and the Fig. 7 histog
 
 from __future__ import annotations
 
+import base64
 import json
 
 import numpy as np
@@ -122,6 +123,29 @@ def test_trace_then_grow_then_render_write_the_cli_s_files_with_sidecars(client,
     assert end["outputs"] == ["results/new.png", "results/new_fragments.png"]
     frag = io.read_image(project.root / "results" / "new_fragments.png")
     assert frag.shape == (128, 224, 3) and len(np.unique(frag.reshape(-1, 3), axis=0)) > 3  # several fragments
+
+
+def test_several_guide_paths_are_a_mask_the_structure_follows(client, project, scene):
+    """The page saves two or more guide paths as a mask (PUT /api/mask), which --guide also takes."""
+    mask = np.zeros((128, 224), np.uint8)
+    mask[20:24, 10:214] = 1  # a path along the top, one along the bottom
+    mask[104:108, 10:214] = 1
+    body = {"width": 224, "height": 128, "n_labels": 2,
+            "data": base64.b64encode(mask.tobytes()).decode()}  # fmt: skip
+    assert client.put("/api/mask", params={"path": "guides.png"}, json=body).status_code == 200
+    end = run_job(client, {"kind": "branching-grow", "skeleton": "channel.json", "guide": "guides.png", "seed": 1,
+                           "out": "guided.json"})  # fmt: skip
+    grown = branching.Skeleton.load(project.root / end["outputs"][0])
+    pts = np.vstack([b.points for b in grown.branches])
+    near = (np.abs(pts[:, 1] - 22) < 15) | (np.abs(pts[:, 1] - 106) < 15)
+    assert near.mean() > 0.5, near.mean()  # most of the structure runs along the two paths
+    io.write_image(project.root / "blank.png", np.zeros((128, 224), np.float32))
+    for name, words in (
+        ("photos/bar.png", "is 160×60, but the new structure is 224×128"),
+        ("blank.png", "marks no path"),
+    ):
+        r = client.post("/api/jobs", json={"kind": "branching-grow", "skeleton": "channel.json", "guide": name})
+        assert r.status_code == 422 and words in r.json()["detail"], r.text
 
 
 @pytest.mark.parametrize(

@@ -381,6 +381,16 @@ def test_trace_and_edit_a_skeleton_by_mouse_then_grow_and_render(studio: tuple[s
     assert io.read_image(root / out).shape[:2] == (128, 224)
     assert json.loads((root / f"{out}.json").read_text())["parameters"]["target"] == grown_name
 
+    # A second guide path: the guide becomes a mask (--guide takes one), and Re-roll grows with the next seed.
+    _drag(browser, canvas, _line((10, 15), (214, 15), 12))
+    browser.find_element(By.ID, "br-reroll").click()
+    message = _wait_message(browser, "br-msg", "grew")
+    assert browser.find_element(By.ID, "br-seed").get_attribute("value") == "3"
+    mask = io.read_image(root / "guide.png") > 0.5
+    assert mask[110, 20:200].all() and mask[15, 20:200].all() and not mask[40:90].any()
+    side = json.loads((root / f"{message.split('grew ')[1].split(':')[0]}.json").read_text())
+    assert side["parameters"]["guide"] == "guide.png" and side["seed"] == 3
+
 
 def test_scribble_two_layers_on_a_leaf_expand_and_synthesize(studio: tuple[str, Path, Any], browser: Any) -> None:
     url, root, _ = studio

@@ -459,7 +459,7 @@ $("b-edit-out").onclick = guard(bMsg, async () => {
 // The skeleton is edited here, in image pixels, and only saved on request: a drag redraws the
 // canvas and sends nothing (an edit shows within a frame).
 const K = {
-  img: null, shape: null, branches: [], sel: null, drag: null, guide: [], history: [],
+  img: null, shape: null, branches: [], sel: null, drag: null, guides: [], history: [],
   savedAs: null, example: null, grown: null, grownPath: null, extendSeed: 0,
 };
 const G = { savedAs: null }; // the guide file's save state
@@ -477,7 +477,7 @@ function depthOf(branches, i) {
 // Pixels per CSS pixel of a canvas: hit radii and line widths stay the same size on screen.
 const pxScale = (canvas) => canvas.width / (canvas.clientWidth || canvas.width);
 
-function drawSkeleton(canvas, branches, { background = null, sel = null, guide = null, vertices = true } = {}) {
+function drawSkeleton(canvas, branches, { background = null, sel = null, guides = [], vertices = true } = {}) {
   const ctx = canvas.getContext("2d");
   const s = pxScale(canvas);
   ctx.clearRect(0, 0, canvas.width, canvas.height);
@@ -532,19 +532,19 @@ function drawSkeleton(canvas, branches, { background = null, sel = null, guide =
     ctx.arc(x, y, 5 * s, 0, 2 * Math.PI);
     ctx.stroke();
   }
-  if (guide && guide.length) {
-    ctx.setLineDash([6 * s, 4 * s]);
-    ctx.strokeStyle = "#00ffd0";
-    ctx.lineWidth = 2.5 * s;
+  ctx.setLineDash([6 * s, 4 * s]);
+  ctx.strokeStyle = "#00ffd0";
+  ctx.lineWidth = 2.5 * s;
+  for (const guide of guides) {
     ctx.beginPath();
     guide.forEach(([x, y], j) => (j ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
     ctx.stroke();
-    ctx.setLineDash([]);
   }
+  ctx.setLineDash([]);
 }
 
 function redrawBranching() {
-  drawSkeleton(kc, K.branches, { background: K.img, sel: K.sel, guide: K.guide });
+  drawSkeleton(kc, K.branches, { background: K.img, sel: K.sel, guides: K.guides });
   const t = $("br-thick");
   if (K.sel && K.branches[K.sel.b]) {
     const b = K.branches[K.sel.b];
@@ -669,7 +669,7 @@ kc.addEventListener("pointerdown", (ev) => {
   const p = canvasPoint(kc, ev);
   const r = 7 * pxScale(kc);
   if (brMode() === "guide") {
-    K.guide = [p];
+    K.guides.push([p]);
     K.drag = { kind: "guide" };
     redrawBranching();
     return;
@@ -710,7 +710,7 @@ kc.addEventListener("pointermove", (ev) => {
     K.branches[K.sel.b].points[K.sel.v] = at;
     for (const o of K.drag.kids) o.points[0] = [at[0], at[1]];
   } else {
-    const pts = K.drag.kind === "guide" ? K.guide : K.branches[K.drag.b].points;
+    const pts = K.drag.kind === "guide" ? K.guides[K.guides.length - 1] : K.branches[K.drag.b].points;
     const last = pts[pts.length - 1];
     if (Math.hypot(p[0] - last[0], p[1] - last[1]) < 4 * pxScale(kc)) return;
     pts.push(p);
@@ -730,7 +730,7 @@ function endDrag() {
     if (b.points.length < 2) K.branches.pop();
     else K.sel = { b: d.b, v: b.points.length - 1 };
   }
-  if (d && d.kind === "guide" && K.guide.length < 2) K.guide = [];
+  if (d && d.kind === "guide" && K.guides[K.guides.length - 1].length < 2) K.guides.pop();
   redrawBranching();
 }
 kc.addEventListener("pointerup", endDrag);
@@ -781,9 +781,35 @@ $("br-delete-branch").onclick = guard(kMsg, () => {
   redrawBranching();
 });
 $("br-guide-clear").onclick = () => {
-  K.guide = [];
+  K.guides = [];
   redrawBranching();
 };
+
+// The guide as --guide takes it: one path as its JSON points, several as a mask, white along them.
+async function saveGuide() {
+  const name = $("br-guide-file").value.trim().replace(/\.(json|png)$/i, "");
+  const round = (v) => Math.round(v * 10) / 10;
+  if (K.guides.length === 1) {
+    return putFile("/api/guide", name + ".json", K.guides[0].map(([x, y]) => [round(x), round(y)]), G);
+  }
+  const [h, w] = K.shape;
+  const c = document.createElement("canvas");
+  c.width = w;
+  c.height = h;
+  const ctx = c.getContext("2d");
+  ctx.strokeStyle = "#fff";
+  ctx.lineWidth = 5;
+  ctx.lineJoin = ctx.lineCap = "round";
+  for (const guide of K.guides) {
+    ctx.beginPath();
+    guide.forEach(([x, y], j) => (j ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
+    ctx.stroke();
+  }
+  const px = ctx.getImageData(0, 0, w, h).data;
+  const mask = new Uint8Array(w * h);
+  for (let i = 0; i < mask.length; i++) mask[i] = px[4 * i] > 127 ? 1 : 0;
+  return putFile("/api/mask", name + ".png", { width: w, height: h, n_labels: 2, data: base64(mask) }, G);
+}
 
 function skeletonFor(path) {
   const dot = path.lastIndexOf(".");
@@ -868,10 +894,7 @@ function drawHistograms(h) {
 async function grow() {
   const skeleton = await saveSkeleton();
   const req = { kind: "branching-grow", skeleton, seed: +$("br-seed").value };
-  if (K.guide.length >= 2) {
-    const round = (v) => Math.round(v * 10) / 10;
-    req.guide = await putFile("/api/guide", $("br-guide-file").value.trim(), K.guide.map(([x, y]) => [round(x), round(y)]), G);
-  }
+  if (K.guides.length) req.guide = await saveGuide();
   const s = await runJobReplacing(req, kUi);
   K.example = skeleton;
   K.grownPath = s.outputs[0];

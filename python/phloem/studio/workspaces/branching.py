@@ -3,7 +3,8 @@ of one branch (§6), angle and thickness histograms (Fig. 7), and the trace, gro
 
 Vertex edits happen in the page (no request per drag); the page saves the skeleton as the same
 ``phloem.skeleton`` JSON that ``phloem branching trace`` writes and ``grow``/``render`` read, and
-guide paths as the JSON list of ``[x, y]`` points that ``--guide`` takes.
+guide paths as ``--guide`` takes them: one path as a JSON list of ``[x, y]`` points, several as a
+mask PNG (white along the paths).
 """
 
 from __future__ import annotations
@@ -68,7 +69,10 @@ class BranchingGrowJob(BaseModel):
     size: tuple[Side, Side] | None = Field(
         None, description="[height, width] of the new structure; default the example's"
     )
-    guide: str | None = Field(None, description="project name of a guide path (.json list of [x, y]), §4.5")
+    guide: str | None = Field(
+        None,
+        description="project name of a guide (§4.5): a .json list of [x, y] points, or a mask .png, white along the paths",
+    )
     seed: Seed = 0
     max_length: Literal["input"] | None = Field(
         "input", description="'input': about as much structure as the example; null: one tree"
@@ -132,6 +136,21 @@ def read_guide(project: Project, name: str, name_of: str = "guide") -> list[tupl
         raise ValueError(f"{name_of}: {name} must hold a JSON list of at least two [x, y] points") from None
 
 
+def _guide(project: Project, name: str, shape: tuple[int, int]) -> Any:
+    """A guide file as :func:`phloem.branching.grow` takes it: points, or a mask of the grown size."""
+    if Path(name).suffix.lower() in JSON_SUFFIXES:
+        return np.asarray(read_guide(project, name))
+    img = project.read_image(name, name_of="guide")
+    mask = (img if img.ndim == 2 else img[..., :3].max(axis=2)) >= 0.5
+    if mask.shape != tuple(shape):
+        raise ValueError(
+            f"guide: {name} is {mask.shape[1]}×{mask.shape[0]}, but the new structure is {shape[1]}×{shape[0]}"
+        )
+    if not mask.any():
+        raise ValueError(f"guide: {name} marks no path (white = path)")
+    return mask
+
+
 def _skeleton(project: Project, name: str, name_of: str) -> branching.Skeleton:
     return branching.Skeleton.load(project.existing(name, suffixes=JSON_SUFFIXES, name_of=name_of))
 
@@ -172,7 +191,7 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
         shape = req.size or source.shape
         if shape is None:
             raise ValueError(f"size: {req.skeleton} has no shape; give size [height, width]")
-        guide = None if req.guide is None else np.asarray(read_guide(project, req.guide))
+        guide = None if req.guide is None else _guide(project, req.guide, shape)
         out = outputs.target(req.out or f"results/grown-{secrets.token_hex(4)}.json",
                              suffixes=JSON_SUFFIXES, overwrite=req.overwrite)  # fmt: skip
 
