@@ -159,6 +159,7 @@ def test_several_guide_paths_are_a_mask_the_structure_follows(client, project, s
         ({"kind": "branching-grow", "skeleton": "channel.json", "guide": "none.json"}, 404, "guide: no file"),
         ({"kind": "branching-grow", "skeleton": "channel.json", "size": [0, 10]}, 422, "size"),
         ({"kind": "branching-grow", "skeleton": "photos/bar.png"}, 400, "skeleton:"),
+        ({"kind": "branching-grow", "skeleton": "channel.json", "size": [8000, 8000]}, 422, "over the pixel limit"),
         (
             {
                 "kind": "branching-render",
@@ -193,6 +194,7 @@ def test_a_branch_is_extended_at_its_tip_and_nothing_is_written(client, project,
     assert set(project.root.rglob("*")) == before
     for body, words in (({"skeleton": doc, "branch": 5}, "branch: expected 0 .. 1"),
                         ({"skeleton": {**doc, "shape": None}, "branch": 0}, "no shape"),
+                        ({"skeleton": {**doc, "shape": [100_000, 100_000]}, "branch": 0}, "over the pixel limit"),
                         ({"skeleton": {"format": "x"}, "branch": 0}, "format"),
                         ({"skeleton": doc, "branch": 0, "example": "none.json"}, "example: no file")):  # fmt: skip
         r = client.post("/api/skeleton/extend", json=body)

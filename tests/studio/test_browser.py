@@ -361,6 +361,16 @@ def test_trace_and_edit_a_skeleton_by_mouse_then_grow_and_render(studio: tuple[s
     assert added.thickness[-1] == 5.0
     _shot(browser, "studio_branching_edit.png")
 
+    # Extend the main branch at its tip (§6): select the tip, press Extend branch; the page's skeleton grows.
+    browser.find_element(By.CSS_SELECTOR, 'input[name="br-mode"][value="edit"]').click()
+    _drag(browser, canvas, [tuple(new_main[-1])])
+    assert browser.find_element(By.ID, "br-sel").text.startswith(f"branch 0 #{len(new_main) - 1} ")
+    browser.find_element(By.ID, "br-extend").click()
+    message = _wait_message(browser, "br-msg", "extended branch 0")
+    assert int(message.split(" to ")[1].split(" ")[0]) > len(new_main)
+    browser.find_element(By.ID, "br-undo").click()  # and back: the saved skeleton is what grows below
+    assert browser.execute_script("return K.branches[0].points.length") == len(new_main)
+
     # Grow along the guide, then render the grown skeleton; the histograms are drawn.
     _type(browser, "br-seed", "2")
     browser.find_element(By.ID, "br-grow").click()
@@ -382,6 +392,7 @@ def test_trace_and_edit_a_skeleton_by_mouse_then_grow_and_render(studio: tuple[s
     assert json.loads((root / f"{out}.json").read_text())["parameters"]["target"] == grown_name
 
     # A second guide path: the guide becomes a mask (--guide takes one), and Re-roll grows with the next seed.
+    browser.find_element(By.CSS_SELECTOR, 'input[name="br-mode"][value="guide"]').click()
     _drag(browser, canvas, _line((10, 15), (214, 15), 12))
     browser.find_element(By.ID, "br-reroll").click()
     message = _wait_message(browser, "br-msg", "grew")

@@ -66,6 +66,7 @@ def test_synthesis_and_quilting_write_textures_and_quilting_its_source_map(clien
         ),
         ({"kind": "texture-complete", "image": "photos/bark.png", "mask": "black.png"}, 422, "marks no pixel"),
         ({"kind": "texture-synthesize", "image": "photos/bark.png", "size": [0, 8]}, 422, "size"),
+        ({"kind": "texture-quilt", "image": "photos/bark.png", "size": [8000, 8000]}, 422, "over the pixel limit"),
         ({"kind": "texture-quilt", "image": "../bark.png", "size": [8, 8]}, 400, "image:"),
         ({"kind": "trees-variations", "library": "none"}, 404, "library: no folder"),
         ({"kind": "trees-variations", "library": "photos"}, 422, "no alpha channel"),

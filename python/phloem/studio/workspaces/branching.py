@@ -136,6 +136,12 @@ def read_guide(project: Project, name: str, name_of: str = "guide") -> list[tupl
         raise ValueError(f"{name_of}: {name} must hold a JSON list of at least two [x, y] points") from None
 
 
+def _check_pixels(shape: tuple[int, int], max_pixels: int, name_of: str) -> None:
+    """Growth and rendering hold several maps of the structure's size: the project's pixel limit applies."""
+    if shape[0] * shape[1] > max_pixels:
+        raise ValueError(f"{name_of}: {shape[1]}×{shape[0]} is over the pixel limit of {max_pixels}")
+
+
 def _guide(project: Project, name: str, shape: tuple[int, int]) -> Any:
     """A guide file as :func:`phloem.branching.grow` takes it: points, or a mask of the grown size."""
     if Path(name).suffix.lower() in JSON_SUFFIXES:
@@ -191,6 +197,7 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
         shape = req.size or source.shape
         if shape is None:
             raise ValueError(f"size: {req.skeleton} has no shape; give size [height, width]")
+        _check_pixels(shape, project.max_pixels, "size")
         guide = None if req.guide is None else _guide(project, req.guide, shape)
         out = outputs.target(req.out or f"results/grown-{secrets.token_hex(4)}.json",
                              suffixes=JSON_SUFFIXES, overwrite=req.overwrite)  # fmt: skip
@@ -210,6 +217,7 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
     target = _skeleton(project, req.target, "target")
     if target.shape is None:
         raise ValueError(f"target: {req.target} has no shape; the new image's size comes from it")
+    _check_pixels(target.shape, project.max_pixels, "target")
     out = outputs.target(req.out or f"results/branching-{secrets.token_hex(4)}.png", suffixes=_OUT,
                          overwrite=req.overwrite)  # fmt: skip
     # the fragment map (which fragment painted each pixel), as 'phloem branching render --fragment-map' writes it
@@ -288,6 +296,7 @@ def mount(app: FastAPI, project: Project, guarded: Callable[[Callable[[], Any]],
             sk = branching.Skeleton.from_dict(body.skeleton)
             if sk.shape is None:
                 raise ValueError("skeleton: the document has no shape; extension needs the image size")
+            _check_pixels(sk.shape, project.max_pixels, "skeleton")
             if body.branch >= len(sk.branches):
                 raise ValueError(f"branch: expected 0 .. {len(sk.branches) - 1}, got {body.branch}")
             example = sk if body.example is None else _skeleton(project, body.example, "example")

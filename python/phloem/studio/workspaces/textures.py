@@ -87,6 +87,8 @@ def plan(req: TextureJob | TextureCompleteJob, outputs: Outputs, threads: int | 
             ]
 
         return fill
+    if req.size[0] * req.size[1] > project.max_pixels:
+        raise ValueError(f"size: {req.size[1]}×{req.size[0]} is over the pixel limit of {project.max_pixels}")
     name = req.kind.removeprefix("texture-")
     out = outputs.target(
         req.out or f"results/{name}-{secrets.token_hex(4)}.png", suffixes=_OUT, overwrite=req.overwrite
