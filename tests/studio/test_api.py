@@ -15,7 +15,7 @@ import phloem
 from phloem import bark, io
 from phloem.strokes import StrokeSet
 
-from .conftest import TOKEN, bar_photo, png_bytes
+from .conftest import TOKEN, bar_photo, finish_job, png_bytes, run_job
 
 STROKES = {
     "format": "phloem.strokes",
@@ -72,7 +72,10 @@ def test_openapi_describes_every_endpoint_and_the_job_kinds(client):
 
 def test_info_and_file_list(client, project):
     info = client.get("/api/info").json()
-    assert info["workspaces"] == ["strokes", "bark"] and info["max_pixels"] == project.max_pixels
+    assert (
+        info["workspaces"] == ["strokes", "bark", "branching", "leaves", "trees", "textures"]
+        and info["max_pixels"] == project.max_pixels
+    )
     (project.root / ".hidden").mkdir()
     (project.root / ".hidden" / "x.png").write_bytes(b"")
     (project.root / "notes.txt").write_text("x")
@@ -262,24 +265,12 @@ def test_a_photo_is_no_label_map(client):
 
 
 # -- jobs ---------------------------------------------------------------------------------------
-def _finish(client, job_id: str) -> dict[str, object]:
-    """The job's events until it ends; the last."""
-    events = []
-    with client.stream("GET", f"/api/jobs/{job_id}/events") as r:
-        assert r.status_code == 200 and r.headers["content-type"].startswith("text/event-stream")
-        for line in r.iter_lines():
-            if line.startswith("data: "):
-                events.append(json.loads(line[6:]))
-    assert events and events[-1]["state"] in ("done", "failed", "cancelled")
-    return {"events": events, **events[-1]}
-
-
 def test_a_strokes_job_streams_progress_and_writes_its_result_and_sidecar(client, project):
     client.put("/api/strokes", params={"path": "strokes.json"}, json=STROKES)
     r = client.post("/api/jobs", json={"kind": "strokes-edit", "image": "photos/bar.png", "strokes": "strokes.json",
                                        "out": "results/bent.png"})  # fmt: skip
     assert r.status_code == 202, r.text
-    end = _finish(client, r.json()["id"])
+    end = finish_job(client, r.json()["id"])
     assert end["state"] == "done", end["message"]
     assert end["outputs"] == ["results/bent.png"]
     assert any(e["total"] > 0 for e in end["events"])  # progress reached the stream
@@ -299,7 +290,7 @@ def test_a_strokes_job_streams_progress_and_writes_its_result_and_sidecar(client
 def test_bark_labels_then_texture_from_the_painted_map(client, project):
     r = client.post("/api/jobs", json={"kind": "bark-labels", "image": "photos/bark.png", "n_labels": 2})
     assert r.status_code == 202, r.text
-    end = _finish(client, r.json()["id"])
+    end = finish_job(client, r.json()["id"])
     assert end["state"] == "done" and end["outputs"] == ["photos/bark_labels_in.png"]
     labels = client.get("/api/labels", params={"path": "photos/bark_labels_in.png"}).json()
     assert (labels["width"], labels["height"], labels["n_labels"]) == (96, 96, 2)
@@ -309,12 +300,34 @@ def test_bark_labels_then_texture_from_the_painted_map(client, project):
                       json=_labels_body(lab, 2)).status_code == 200  # fmt: skip
     r = client.post("/api/jobs", json={"kind": "bark-texture", "image": "photos/bark.png", "n_labels": 2,
                                        "labels_in": "photos/bark_labels_in.png", "size": [48, 64], "out": "t.png"})  # fmt: skip
-    end = _finish(client, r.json()["id"])
+    end = finish_job(client, r.json()["id"])
     assert end["state"] == "done", end["message"]
     assert io.read_image(project.root / "t.png").shape == (48, 64, 3)
     assert (
         json.loads((project.root / "t.png.json").read_text())["parameters"]["labels_in"] == "photos/bark_labels_in.png"
     )
+
+
+def test_a_texture_writes_its_new_label_map_which_painted_over_paints_the_next(client, project):
+    """The output label map (phloem bark --keep-intermediates' OUT_labels_out.png) is a stage to edit:
+    written beside the texture, read back as labels_out, whose shape sets the next texture's size."""
+    end = run_job(client, {"kind": "bark-texture", "image": "photos/bark.png", "n_labels": 2, "size": [40, 56],
+                           "out": "t.png"})  # fmt: skip
+    assert end["outputs"] == ["t.png", "t_labels_out.png"]
+    out_map = bark.decode_labels(io.read_image(project.root / "t_labels_out.png"))
+    assert out_map.shape == (40, 56) and set(np.unique(out_map)) <= {0, 1}
+    painted = np.zeros((40, 56), np.uint8)
+    painted[:, 28:] = 1  # half and half
+    client.put("/api/labels", params={"path": "t_labels_out.png", "overwrite": True}, json=_labels_body(painted, 2))
+    end = run_job(client, {"kind": "bark-texture", "image": "photos/bark.png", "n_labels": 2, "size": [8, 8],
+                           "labels_out": "t_labels_out.png", "out": "t2.png"})  # fmt: skip
+    tex = io.read_image(project.root / "t2.png")
+    assert tex.shape == (40, 56, 3)  # the painted map's size, not `size`
+    assert abs(float(tex[:, :28].mean()) - float(tex[:, 28:].mean())) > 0.05  # its two halves differ, as painted
+    assert json.loads((project.root / "t2.png.json").read_text())["parameters"]["labels_out"] == "t_labels_out.png"
+    r = client.post("/api/jobs", json={"kind": "bark-texture", "image": "photos/bark.png", "size": [8, 8],
+                                       "labels_out": "none.png"})  # fmt: skip
+    assert r.status_code == 404 and "labels_out: no file" in r.json()["detail"]
 
 
 @pytest.mark.parametrize(
@@ -369,7 +382,7 @@ def test_jobs_and_uploads_are_held_to_the_project_s_memory_limit(project):
             "/api/jobs",
             json={"kind": "bark-texture", "image": "photos/bark.png", "size": [2048, 2048], "out": "big.png"},
         )
-        end = _finish(c, r.json()["id"])
+        end = finish_job(c, r.json()["id"])
         assert end["state"] == "failed" and "size: 2048×2048" in end["message"] and "memory limit" in end["message"]
         assert not (project.root / "big.png").exists()
         big = png_bytes(np.zeros((300, 300), np.float32))  # 90 000 px: under the pixel limit, over 1 MiB decoded

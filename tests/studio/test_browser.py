@@ -20,9 +20,11 @@ import pytest
 
 import phloem
 from phloem import bark, io
+from phloem.branching import Skeleton
 from phloem.strokes import StrokeSet
+from phloem.testing import channel_scene, layered_leaf
 
-from .conftest import TOKEN
+from .conftest import TOKEN, tree_image
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 DRIVER = shutil.which("chromedriver")
@@ -64,6 +66,12 @@ def studio(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path
     (root / "photos").mkdir(parents=True)
     io.write_image(root / "photos" / "bar.png", _photo())
     io.write_image(root / "photos" / "bark.png", phloem.data.bark()[:96, :96, :3])
+    io.write_image(root / "photos" / "channel.png", channel_scene(0)[0])
+    for v in range(2):
+        io.write_image(root / "photos" / f"leaf{v}.png", layered_leaf(variant=v, seed=v)[0])
+    (root / "trees").mkdir()
+    for i, kw in enumerate(({}, {"crown_r": 30, "trunk_w": 14, "trunk_h": 60}, {"crown_r": 50, "trunk_w": 8})):
+        io.write_image(root / "trees" / f"t{i}.png", tree_image(i, **kw))
     sock = socket.socket()
     sock.bind(("127.0.0.1", 0))
     app = create_app(Project(root), token=TOKEN, threads=1)
@@ -110,9 +118,10 @@ def _open(browser: Any, url: str) -> None:
     assert not errors, errors  # e.g. a script or image the page's security policy blocked
 
 
-def _drag(browser: Any, canvas: Any, points: list[tuple[float, float]]) -> None:
-    """Press, move through ``points`` (canvas pixels) and release, as a mouse does."""
+def _drag(browser: Any, canvas: Any, points: list[tuple[float, float]], *, shift: bool = False) -> None:
+    """Press, move through ``points`` (canvas pixels) and release, as a mouse does (with Shift held)."""
     from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.keys import Keys
 
     # Selenium offsets are from the element's centre, in CSS px; the canvas may be shown scaled.
     width, height, css_w, css_h = browser.execute_script(
@@ -122,10 +131,16 @@ def _drag(browser: Any, canvas: Any, points: list[tuple[float, float]]) -> None:
     def offset(p: tuple[float, float]) -> tuple[int, int]:
         return round((p[0] + 0.5) * css_w / width - css_w / 2), round((p[1] + 0.5) * css_h / height - css_h / 2)
 
-    chain = ActionChains(browser, duration=10).move_to_element_with_offset(canvas, *offset(points[0])).click_and_hold()
+    chain = ActionChains(browser, duration=10).move_to_element_with_offset(canvas, *offset(points[0]))
+    if shift:
+        chain = chain.key_down(Keys.SHIFT)
+    chain = chain.click_and_hold()
     for p in points[1:]:
         chain = chain.move_to_element_with_offset(canvas, *offset(p))
-    chain.release().perform()
+    chain = chain.release()
+    if shift:
+        chain = chain.key_up(Keys.SHIFT)
+    chain.perform()
 
 
 def _type(browser: Any, element_id: str, text: str) -> None:
@@ -234,6 +249,23 @@ def test_make_a_label_map_paint_it_and_make_a_texture(studio: tuple[str, Path, A
     side = json.loads((root / f"{out}.json").read_text())
     assert side["parameters"]["labels_in"] == "photos/bark_labels_in.png"
 
+    # The new label map the texture was painted by: edit it (label 1 down its left quarter) and paint again.
+    out_map = out.removesuffix(".png") + "_labels_out.png"
+    browser.find_element(By.ID, "b-edit-out").click()
+    _wait_message(browser, "b-msg", f"editing {out_map}")
+    assert browser.find_element(By.ID, "b-role").text == "new"
+    browser.find_elements(By.CSS_SELECTOR, "#b-palette button")[1].click()
+    browser.execute_script("document.getElementById('b-brush').value = 16")
+    _drag(browser, browser.find_element(By.ID, "b-canvas"), _line((8, 2), (8, 62), 8))
+    message = _run_and_show(browser, "b-texture", "b", "studio_bark_edited_map.png")
+    edited = bark.decode_labels(io.read_image(root / out_map))
+    assert edited.shape == (64, 64) and (edited[4:60, 2:14] == 1).all()
+    second = message.split("wrote ")[1].split(" and")[0]
+    side = json.loads((root / f"{second}.json").read_text())
+    assert (
+        side["parameters"]["labels_out"] == out_map and side["parameters"]["labels_in"] == "photos/bark_labels_in.png"
+    )
+
 
 def _loop_until_cancelled(progress: Any) -> list[str]:
     while True:  # holds the one worker until it is cancelled: its progress call then raises
@@ -271,3 +303,195 @@ def test_cancel_a_job_from_the_page(studio: tuple[str, Path, Any], browser: Any)
     )
     assert job.state == "cancelled" and job.outputs == []
     assert (set((root / "results").glob("*")) if (root / "results").exists() else set()) == results
+
+
+def _shot(browser: Any, name: str) -> None:
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    browser.save_screenshot(str(SHOTS / name))
+
+
+def test_trace_and_edit_a_skeleton_by_mouse_then_grow_and_render(studio: tuple[str, Path, Any], browser: Any) -> None:
+    url, root, _ = studio
+    _open(browser, url)
+    browser.find_element(By.CSS_SELECTOR, '#tabs button[data-ws="branching"]').click()
+    Select(browser.find_element(By.ID, "br-image")).select_by_value("photos/channel.png")
+    WebDriverWait(browser, 30).until(
+        lambda d: d.execute_script("return document.getElementById('br-canvas').width") == 224
+    )
+    browser.find_element(By.ID, "br-trace").click()
+    _wait_message(browser, "br-msg", "edit it with the mouse")
+    path = root / "photos" / "channel_skeleton.json"
+    traced = Skeleton.load(path)
+    main = traced.branches[0].points
+    n = len(main)
+    canvas = browser.find_element(By.ID, "br-canvas")
+
+    # Drag vertex v of the main branch 15 px down; it moves by the drag, in image pixels.
+    v = n // 2
+    start = tuple(main[v])
+    _drag(browser, canvas, _line(start, (start[0], start[1] + 15), 6))
+    assert browser.find_element(By.ID, "br-sel").text.startswith(f"branch 0 #{v} ")
+    # Delete vertex v + 6 (click it, press Delete).
+    gone = tuple(main[v + 6])
+    _drag(browser, canvas, [gone])
+    canvas.send_keys("\ue017")  # the Delete key
+    # Shift-drag from vertex v - 20 draws a new branch on it, up and to the left.
+    root_pt = tuple(main[v - 20])
+    _drag(browser, canvas, _line(root_pt, (root_pt[0] - 30, root_pt[1] - 40), 10), shift=True)
+    # Its last vertex is selected: a thickness of 5 px.
+    _type(browser, "br-thick", "5\n")
+    # A guide path along the bottom of the image.
+    browser.find_element(By.CSS_SELECTOR, 'input[name="br-mode"][value="guide"]').click()
+    _drag(browser, canvas, _line((10, 110), (214, 110), 12))
+    browser.find_element(By.ID, "br-save").click()
+    _wait_message(browser, "br-msg", "saved photos/channel_skeleton.json")
+
+    edited = Skeleton.load(path)
+    new_main = edited.branches[0].points
+    assert len(new_main) == n - 1
+    assert np.allclose(new_main[v], (start[0], start[1] + 15), atol=1.0), (new_main[v], start)
+    assert not np.isclose(new_main, gone).all(axis=1).any()  # the deleted vertex is gone
+    assert np.array_equal(np.delete(new_main, [v], axis=0)[: v + 5], np.delete(main, [v], axis=0)[: v + 5].round(2))
+    added = edited.branches[-1]
+    # on the vertex pressed (its neighbours lie 1.4 px away, a CSS pixel is half an image pixel)
+    assert len(edited.branches) == len(traced.branches) + 1 and added.parent is not None
+    assert added.parent[0] == 0 and abs(added.parent[1] - (v - 20)) <= 1
+    assert np.allclose(added.points[0], new_main[added.parent[1]], atol=0.01)
+    assert np.allclose(added.points[-1], (root_pt[0] - 30, root_pt[1] - 40), atol=1.5)
+    assert added.thickness[-1] == 5.0
+    _shot(browser, "studio_branching_edit.png")
+
+    # Extend the main branch at its tip (§6): select the tip, press Extend branch; the page's skeleton grows.
+    browser.find_element(By.CSS_SELECTOR, 'input[name="br-mode"][value="edit"]').click()
+    _drag(browser, canvas, [tuple(new_main[-1])])
+    assert browser.find_element(By.ID, "br-sel").text.startswith(f"branch 0 #{len(new_main) - 1} ")
+    browser.find_element(By.ID, "br-extend").click()
+    message = _wait_message(browser, "br-msg", "extended branch 0")
+    assert int(message.split(" to ")[1].split(" ")[0]) > len(new_main)
+    browser.find_element(By.ID, "br-undo").click()  # and back: the saved skeleton is what grows below
+    assert browser.execute_script("return K.branches[0].points.length") == len(new_main)
+
+    # Grow along the guide, then render the grown skeleton; the histograms are drawn.
+    _type(browser, "br-seed", "2")
+    browser.find_element(By.ID, "br-grow").click()
+    message = _wait_message(browser, "br-msg", "grew")
+    guide = np.array(json.loads((root / "guide.json").read_text()))  # the CLI's --guide file, in image pixels
+    assert np.allclose(guide[0], (10, 110), atol=1) and np.allclose(guide[-1], (214, 110), atol=1)
+    grown_name = message.split("grew ")[1].split(":")[0]
+    grown = Skeleton.load(root / grown_name)
+    assert grown.shape == (128, 224)
+    assert json.loads((root / f"{grown_name}.json").read_text())["parameters"]["guide"] == "guide.json"
+    drawn = browser.execute_script(
+        "const c = document.getElementById('br-hist'); const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;"
+        "let n = 0; for (let i = 0; i < d.length; i += 4) if (d[i] > 200 && d[i + 1] > 100 && d[i + 1] < 160 && d[i + 2] < 80) n++; return n;"
+    )
+    assert drawn > 50  # orange bars of the grown skeleton
+    message = _run_and_show(browser, "br-render", "br", "studio_branching.png")
+    out = message.split("wrote ")[1].split(" and")[0]
+    assert io.read_image(root / out).shape[:2] == (128, 224)
+    assert json.loads((root / f"{out}.json").read_text())["parameters"]["target"] == grown_name
+
+    # A second guide path: the guide becomes a mask (--guide takes one), and Re-roll grows with the next seed.
+    browser.find_element(By.CSS_SELECTOR, 'input[name="br-mode"][value="guide"]').click()
+    _drag(browser, canvas, _line((10, 15), (214, 15), 12))
+    browser.find_element(By.ID, "br-reroll").click()
+    message = _wait_message(browser, "br-msg", "grew")
+    assert browser.find_element(By.ID, "br-seed").get_attribute("value") == "3"
+    mask = io.read_image(root / "guide.png") > 0.5
+    assert mask[110, 20:200].all() and mask[15, 20:200].all() and not mask[40:90].any()
+    side = json.loads((root / f"{message.split('grew ')[1].split(':')[0]}.json").read_text())
+    assert side["parameters"]["guide"] == "guide.png" and side["seed"] == 3
+
+
+def test_scribble_two_layers_on_a_leaf_expand_and_synthesize(studio: tuple[str, Path, Any], browser: Any) -> None:
+    url, root, _ = studio
+    _open(browser, url)
+    browser.find_element(By.CSS_SELECTOR, '#tabs button[data-ws="leaves"]').click()
+    Select(browser.find_element(By.ID, "lv-image")).select_by_value("photos/leaf0.png")
+    WebDriverWait(browser, 30).until(
+        lambda d: d.execute_script("return document.getElementById('lv-canvas').height") == 160
+    )
+    _type(browser, "lv-n", "2\n")
+    browser.execute_script("document.getElementById('lv-brush').value = 3")
+    canvas = browser.find_element(By.ID, "lv-canvas")
+    browser.find_element(By.CSS_SELECTOR, '#lv-palette button[data-layer="1"]').click()
+    _drag(browser, canvas, _line((48, 30), (48, 60), 8))  # along the midrib (veins)
+    browser.find_element(By.CSS_SELECTOR, '#lv-palette button[data-layer="2"]').click()
+    _drag(browser, canvas, _line((66, 60), (66, 90), 8))  # on the blade
+    browser.find_element(By.ID, "lv-expand").click()
+    _wait_message(browser, "lv-msg", "expanded")
+
+    labels, n = phloem.leaves.read_scribbles(root / "photos" / "leaf0_scribbles.png", (160, 96))
+    assert n == 2
+    assert (labels[32:59, 48] == 1).all() and (labels[62:89, 66] == 2).all()
+    assert set(np.unique(labels[:, :40])) == {0} and (labels > 0).sum() < 400  # only where drawn
+    WebDriverWait(browser, 30).until(
+        lambda d: d.execute_script(
+            "const i = document.getElementById('lv-layers'); return i.complete && i.naturalWidth"
+        )
+    )
+    layers = io.read_image(root / "photos" / "leaf0_scribbles_layers.png")
+    truth = layered_leaf(variant=0, seed=0)[1]
+    first = layers[..., 0] > 0.8  # layer 1 is red (#e6194b), layer 2 blue (#4363d8)
+    assert first[truth == 1].mean() > 0.6 and not first[truth == 3].mean() > 0.2
+    assert (layers[..., 3][truth == 0] == 0).all()
+
+    Select(browser.find_element(By.ID, "lv-leaves")).select_by_value("photos/leaf1.png")
+    _type(browser, "lv-count", "2")
+    browser.find_element(By.ID, "lv-synth").click()
+    message = _wait_message(browser, "lv-msg", "sidecar")
+    assert message.startswith("wrote 2 leaves")
+    WebDriverWait(browser, 30).until(
+        lambda d: d.execute_script(
+            "return [...document.querySelectorAll('#lv-gallery img, #lv-sheet')].every((i) => i.complete && i.naturalWidth)"
+            " && document.querySelectorAll('#lv-gallery img').length === 2"
+        )
+    )
+    _shot(browser, "studio_leaves.png")
+    sheet = message.split("and ")[1].split(",")[0]
+    assert io.read_image(root / sheet).shape[0] >= 1000
+
+
+def test_fill_a_hole_painted_with_the_brush(studio: tuple[str, Path, Any], browser: Any) -> None:
+    url, root, _ = studio
+    _open(browser, url)
+    browser.find_element(By.CSS_SELECTOR, '#tabs button[data-ws="textures"]').click()
+    Select(browser.find_element(By.ID, "tx-image")).select_by_value("photos/bark.png")
+    WebDriverWait(browser, 30).until(
+        lambda d: d.execute_script("return document.getElementById('tx-canvas').width") == 96
+    )
+    browser.execute_script("document.getElementById('tx-brush').value = 12")
+    _drag(browser, browser.find_element(By.ID, "tx-canvas"), _line((30, 48), (66, 48), 10))
+    message = _run_and_show(browser, "tx-run", "tx", "studio_textures.png")
+
+    hole = io.read_image(root / "photos" / "bark_mask.png") > 0.5  # the CLI's mask: white where filled
+    assert hole[44:53, 32:65].all() and not hole[:35].any() and not hole[62:].any() and 300 < hole.sum() < 800
+    out = message.split("wrote ")[1].split(" and")[0]
+    before, after = io.read_image(root / "photos" / "bark.png"), io.read_image(root / out)
+    assert np.array_equal(after[~hole], before[~hole]) and not np.array_equal(after[hole], before[hole])
+    assert json.loads((root / f"{out}.json").read_text())["parameters"]["mask"] == "photos/bark_mask.png"
+
+
+def test_make_trees_from_a_library_folder(studio: tuple[str, Path, Any], browser: Any) -> None:
+    url, root, _ = studio
+    _open(browser, url)
+    browser.find_element(By.CSS_SELECTOR, '#tabs button[data-ws="trees"]').click()
+    Select(browser.find_element(By.ID, "tr-library")).select_by_value("trees")
+    assert len(browser.find_elements(By.CSS_SELECTOR, "#tr-library-gallery img")) == 3
+    _type(browser, "tr-count", "3")
+    _type(browser, "tr-size", "128")
+    browser.find_element(By.ID, "tr-run").click()
+    message = _wait_message(browser, "tr-msg", "sidecar")
+    WebDriverWait(browser, 30).until(
+        lambda d: d.execute_script(
+            "const i = [...document.querySelectorAll('#tr-gallery img')];"
+            "return i.length === 3 && i.every((x) => x.complete && x.naturalWidth === 128)"
+        )
+    )
+    _shot(browser, "studio_trees.png")
+    folder = message.split(" to ")[1].split(",")[0]
+    assert sorted(p.name for p in (root / folder).glob("tree_*.png")) == [
+        "tree_0000.png",
+        "tree_0001.png",
+        "tree_0002.png",
+    ]

@@ -177,7 +177,9 @@ def _valid(args: argparse.Namespace, img: np.ndarray) -> Any:
     return (mask if mask.ndim == 2 else mask[..., :3].mean(axis=2)) > 0.5
 
 
-def _fragment_map(labels: np.ndarray) -> np.ndarray:
+def fragment_map(labels: np.ndarray) -> np.ndarray:
+    """The ``--fragment-map`` image: each fragment's pixels in a colour of its own, black where
+    no fragment painted (``labels`` -1); the studio's render job writes the same."""
     rng = np.random.default_rng(0)
     colours = rng.uniform(0.25, 1.0, (int(labels.max()) + 2, 3)).astype(np.float32)
     colours[0] = 0.0
@@ -271,7 +273,7 @@ def _cmd_branching_render(args: argparse.Namespace) -> None:
     )  # fmt: skip
     save(args, "branching render", res.image)
     if args.fragment_map:
-        stage_image(args.fragment_map, _fragment_map(res.labels), args)
+        stage_image(args.fragment_map, fragment_map(res.labels), args)
 
 
 def _branching_run_targets(args: argparse.Namespace) -> dict[str, Path]:
@@ -308,7 +310,7 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
     _write_skeleton(files["skeleton"], res.target, args, "branching run")
     stage_image(files["histograms"], branching.histogram_figure(res.source, res.target, h=res.bending.h), args)
     if "fragments" in files:
-        stage_image(files["fragments"], _fragment_map(res.render.labels), args)
+        stage_image(files["fragments"], fragment_map(res.render.labels), args)
 
 
 def add_parsers(sub: Any) -> None:

@@ -29,12 +29,16 @@ def _cmd_studio(args: argparse.Namespace) -> None:
 def add_parsers(sub: Any) -> None:
     p = sub.add_parser(
         "studio",
-        help="the interactive tools in a local web page: draw strokes, paint bark label maps, run jobs",
-        description="Starts a local web server over PROJECT_DIR and opens its page: draw source and target strokes "
-        "over an object photo and render them (phloem strokes edit), or turn a bark photo into a label map, paint "
-        "it with a brush and make a texture (phloem bark). Everything is saved in PROJECT_DIR as the files the CLI "
-        "reads (stroke JSON, label-map PNGs, results with their .json sidecars). The server listens on 127.0.0.1 "
-        "and every request needs the random token in the URL it prints. Ctrl-C stops it. Needs the studio extra: "
+        help="the interactive tools in a local web page: strokes, bark label maps, skeletons, leaf scribbles, trees, textures",
+        description="Starts a local web server over PROJECT_DIR and opens its page, one workspace per tool: draw "
+        "source and target strokes and render them (phloem strokes edit); turn a bark photo into a label map, paint "
+        "it and make a texture (phloem bark); trace a branching structure, edit its skeleton with the mouse, draw a "
+        "guide, grow and render new ones (phloem branching); scribble layers on a leaf, expand them and synthesise "
+        "new leaves (phloem leaves); make tree variations from a library folder (phloem trees); synthesise, quilt, "
+        "or fill a brush-painted hole (phloem synthesize, quilt, complete). Everything is saved in PROJECT_DIR as the "
+        "files the CLI reads (stroke, skeleton and guide JSON, label-map, scribble and mask PNGs, results with "
+        "their .json sidecars). The server listens on 127.0.0.1 and every request needs the random token in the "
+        "URL it prints. Ctrl-C stops it. Needs the studio extra: "
         'pip install "phloem[studio]". See docs/studio.md.',
     )
     p.add_argument("project", metavar="PROJECT_DIR", nargs="?", default=".",

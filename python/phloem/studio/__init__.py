@@ -1,9 +1,11 @@
 """phloem studio: the interactive tools of the papers in a local web page (``phloem studio``).
 
 A FastAPI application (:func:`create_app`) over one project folder (:class:`Project`): the page
-draws strokes and paints label maps on canvases, saves them as the same files the CLI reads
-(``phloem.strokes`` JSON, label-map PNGs) and runs phloem's engines as cancellable jobs
-(:class:`JobManager`) whose progress streams to the page. Needs the ``studio`` extra
+draws strokes, skeletons and guides, paints label maps, scribbles and masks on canvases, saves
+them as the same files the CLI reads (``phloem.strokes`` and ``phloem.skeleton`` JSON, guide
+JSON, label-map, scribble and mask PNGs) and runs phloem's engines as cancellable jobs
+(:class:`JobManager`) whose progress streams to the page. The workspaces beyond strokes and
+bark live in :mod:`phloem.studio.workspaces`. Needs the ``studio`` extra
 (``pip install "phloem[studio]"``). See ``docs/studio.md``.
 """
 
@@ -71,6 +73,9 @@ def serve(
     except OSError as e:
         sock.close()
         raise OSError(f"port: cannot listen on {host}:{port}: {e.strerror}") from None
+    # Listen before the URL is printed: a browser (or script) that connects while uvicorn is still
+    # starting waits in the backlog instead of being refused.
+    sock.listen(128)
     bound = sock.getsockname()[1]
     app = create_app(project, threads=threads)
     shown = f"[{host}]" if ":" in host else host

@@ -8,7 +8,6 @@ is a 4xx with a one-line ``detail`` naming the argument.
 from __future__ import annotations
 
 import base64
-import binascii
 import json
 import secrets
 from collections.abc import AsyncIterator, Awaitable, Callable, MutableMapping
@@ -29,16 +28,21 @@ from .. import __version__, _files, _memory, bark, io, strokes
 from .._progress import Progress
 from .files import IMAGE_SUFFIXES, JSON_SUFFIXES, PathError, Project, name_pattern
 from .jobs import JobManager
+from .outputs import LabelMap, Outputs, Side, decode_label_map
+from .workspaces import branching as branching_ws
+from .workspaces import leaves as leaves_ws
+from .workspaces import textures as textures_ws
+from .workspaces import trees as trees_ws
 
 __all__ = ["TOKEN_HEADER", "create_app"]
 
 TOKEN_HEADER = "X-Phloem-Token"
-WORKSPACES = ("strokes", "bark")
+WORKSPACES = ("strokes", "bark", "branching", "leaves", "trees", "textures")
 # Bytes a JSON or form body may add around an upload's file (field names, boundaries).
 _BODY_SLACK = 64 * 1024
-_MAX_SIDE = 8192
 _STATIC = ("app.js", "style.css")
 PNG_SUFFIX = frozenset({".png"})
+IMAGE_OUT = frozenset({".png", ".tif", ".tiff"})
 # The page's URL holds the token: no referrer carries it away, no other site frames the page, and
 # the page runs only its own scripts.
 _PAGE_HEADERS = {
@@ -100,9 +104,6 @@ class _Guard:
 
 
 # -- request and response bodies ------------------------------------------------------------
-Side = Annotated[int, Field(ge=1, le=_MAX_SIDE)]
-
-
 class StrokesEditJob(BaseModel):
     """Re-draw the object of ``image`` along the target strokes of ``strokes`` (:func:`phloem.strokes.edit`)."""
 
@@ -131,7 +132,10 @@ class BarkTextureJob(BaseModel):
     kind: Literal["bark-texture"]
     image: str = Field(description="project name of the bark photo")
     labels_in: str | None = Field(None, description="project name of the photo's label map PNG")
-    size: tuple[Side, Side] = Field(description="output [height, width]")
+    labels_out: str | None = Field(
+        None, description="project name of a (painted) output label map PNG; the texture takes its size"
+    )
+    size: tuple[Side, Side] = Field(description="output [height, width] (unused with labels_out)")
     n_labels: int = Field(3, ge=2, le=16)
     tileable: bool = False
     seed: int = Field(0, ge=0, lt=2**63)
@@ -139,16 +143,20 @@ class BarkTextureJob(BaseModel):
     overwrite: bool = False
 
 
-JobRequest = Annotated[StrokesEditJob | BarkLabelsJob | BarkTextureJob, Field(discriminator="kind")]
-
-
-class LabelMap(BaseModel):
-    """A label map as the page paints it: ``data`` is base64 of ``height × width`` bytes, row by row."""
-
-    width: Side
-    height: Side
-    n_labels: int = Field(ge=1, le=16)
-    data: str
+JobRequest = Annotated[
+    StrokesEditJob
+    | BarkLabelsJob
+    | BarkTextureJob
+    | branching_ws.BranchingTraceJob
+    | branching_ws.BranchingGrowJob
+    | branching_ws.BranchingRenderJob
+    | leaves_ws.LeavesExpandJob
+    | leaves_ws.LeavesSynthesizeJob
+    | trees_ws.TreesJob
+    | textures_ws.TextureJob
+    | textures_ws.TextureCompleteJob,
+    Field(discriminator="kind"),
+]
 
 
 class JobView(BaseModel):
@@ -221,7 +229,7 @@ def create_app(
     >>> app = create_app(Project(tempfile.mkdtemp()), token="secret")
     >>> with TestClient(app) as client:
     ...     client.get("/api/info").status_code, client.get("/api/info?token=secret").json()["workspaces"]
-    (401, ['strokes', 'bark'])
+    (401, ['strokes', 'bark', 'branching', 'leaves', 'trees', 'textures'])
     """
     token = token or secrets.token_urlsafe(24)
     manager = JobManager(workers)
@@ -301,6 +309,7 @@ def create_app(
             "workspaces": list(WORKSPACES),
             "max_pixels": project.max_pixels,
             "max_upload_bytes": project.max_upload_bytes,
+            "layer_colours": list(leaves_ws.LAYER_COLOURS),
         }
 
     @app.get("/api/files")
@@ -388,17 +397,7 @@ def create_app(
 
         def save() -> Saved:
             project.resolve(path, suffixes=PNG_SUFFIX)
-            if body.width * body.height > project.max_pixels:
-                raise ValueError(f"width: {body.width}×{body.height} is over the pixel limit of {project.max_pixels}")
-            try:
-                raw = base64.b64decode(body.data, validate=True)
-            except (binascii.Error, ValueError):
-                raise ValueError("data: not base64") from None
-            if len(raw) != body.width * body.height:
-                raise ValueError(f"data: expected {body.width * body.height} bytes (width × height), got {len(raw)}")
-            lab = np.frombuffer(raw, np.uint8).reshape(body.height, body.width)
-            if int(lab.max()) >= body.n_labels:
-                raise ValueError(f"data: label {int(lab.max())} is not below n_labels = {body.n_labels}")
+            lab = decode_label_map(body, project.max_pixels)
             img = bark.encode_labels(lab.astype(np.int32))
             project.write_bytes(path, _files.encode(Path(path), img, 8), overwrite=overwrite)
             return Saved(path=path, width=body.width, height=body.height)
@@ -407,18 +406,13 @@ def create_app(
         return result
 
     # -- jobs ------------------------------------------------------------------------------
+    outputs = Outputs(project)
+
     def out_path(req: StrokesEditJob | BarkLabelsJob | BarkTextureJob, job_hint: str) -> Path:
-        name = req.out or job_hint
-        path = project.resolve(name, suffixes=frozenset({".png", ".tif", ".tiff"}), name_of="out")
-        for p in (path, io.sidecar_path(path)):
-            if (p.exists() or p.is_symlink()) and not req.overwrite:
-                raise FileExistsError(f"out: {project.name(p)!r} already exists (pass overwrite=true to replace it)")
-        return path
+        return outputs.target(req.out or job_hint, suffixes=IMAGE_OUT, overwrite=req.overwrite)
 
     def write(path: Path, image: Any, kind: str, parameters: dict[str, Any], seed: int, overwrite: bool) -> str:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        io.write_result(path, image, command=f"studio {kind}", parameters=parameters, seed=seed, overwrite=overwrite)
-        return project.name(path)
+        return outputs.image(path, image, command=kind, parameters=parameters, seed=seed, overwrite=overwrite)
 
     def plan(req: StrokesEditJob | BarkLabelsJob | BarkTextureJob) -> Callable[[Progress], list[str]]:
         """Check a job's inputs and output before it is queued; its work."""
@@ -456,23 +450,47 @@ def create_app(
             raise ValueError(
                 f"labels_in: {lab_in.shape[1]}×{lab_in.shape[0]} px, but the photo is {photo.shape[1]}×{photo.shape[0]}"
             )
+        lab_out = None if req.labels_out is None else _labels(project, req.labels_out, "labels_out")
         out = out_path(req, f"results/bark-{secrets.token_hex(4)}.png")
+        # the new label map it was painted by, as 'phloem bark --keep-intermediates' writes it: edit it, resume
+        maps = out.with_name(f"{out.stem}_labels_out.png")
+        outputs.target(project.name(maps), suffixes=PNG_SUFFIX, overwrite=req.overwrite)
 
         def texture(progress: Progress) -> list[str]:
-            tex = bark.generate(
-                photo, req.size, n_labels=req.n_labels, labels_in=lab_in, tileable=req.tileable, seed=req.seed,
-                threads=threads, progress=progress, max_memory=project.max_memory,
+            res = bark.generate(
+                photo, None if lab_out is not None else req.size, n_labels=req.n_labels, labels_in=lab_in,
+                labels_out=lab_out, tileable=req.tileable, seed=req.seed, threads=threads, progress=progress,
+                max_memory=project.max_memory, full_output=True,
             )  # fmt: skip
             assert progress is not None
             progress(100, 100)
-            return [write(out, tex, req.kind, params, req.seed, req.overwrite)]
+            files = [(out, _files.encode(out, res.texture, None), params),
+                     (maps, _files.encode(maps, bark.encode_labels(res.labels_out), 8), params)]  # fmt: skip
+            return outputs.write_all(files, command=req.kind, seed=req.seed, overwrite=req.overwrite)
 
         return texture
+
+    def plan_any(req: Any) -> Callable[[Progress], list[str]]:
+        if isinstance(
+            req, branching_ws.BranchingTraceJob | branching_ws.BranchingGrowJob | branching_ws.BranchingRenderJob
+        ):
+            return branching_ws.plan(req, outputs, threads)
+        if isinstance(req, leaves_ws.LeavesExpandJob | leaves_ws.LeavesSynthesizeJob):
+            return leaves_ws.plan(req, outputs, threads)
+        if isinstance(req, trees_ws.TreesJob):
+            return trees_ws.plan(req, outputs, threads)
+        if isinstance(req, textures_ws.TextureJob | textures_ws.TextureCompleteJob):
+            return textures_ws.plan(req, outputs, threads)
+        return plan(req)
+
+    branching_ws.mount(app, project, guarded, Saved)
+    leaves_ws.mount(app, project, guarded, Saved)
+    textures_ws.mount(app, project, guarded, Saved)
 
     @app.post("/api/jobs", status_code=202, response_model=JobView)
     def submit(req: Annotated[JobRequest, Body()]) -> JobView:
         """Check a job's inputs and queue it; follow it with ``/api/jobs/{id}/events``."""
-        work = guarded(lambda: plan(req))
+        work = guarded(lambda: plan_any(req))
         job = manager.submit(req.kind, req.model_dump(), work)
         return JobView(**job.snapshot())
 

@@ -104,6 +104,21 @@ function runJob(request, ui) {
   });
 }
 
+// A job whose output file may exist: asks before replacing it; throws unless the job is done.
+async function runJobReplacing(req, ui) {
+  let s;
+  try {
+    s = await runJob(req, ui);
+  } catch (e) {
+    if (e.status !== 409 || !confirm(`${req.out} exists: replace it?`)) throw e;
+    s = await runJob({ ...req, overwrite: true }, ui);
+  }
+  if (s.state !== "done") throw new Error(`${s.kind} ${s.state}: ${s.message}`);
+  return s;
+}
+
+const fileUrl = (path) => withToken("/api/file?" + q({ path, v: Date.now() }));
+
 // -- tabs ------------------------------------------------------------------------------------
 for (const b of document.querySelectorAll("#tabs button")) {
   b.onclick = () => {
@@ -288,7 +303,9 @@ $("s-render").onclick = guard(sMsg, async () => {
 // -- Bark workspace ----------------------------------------------------------------------------
 const PALETTE = ["#3b2416", "#c8a26b", "#6b8e23", "#4682b4", "#d2691e", "#8b008b", "#20b2aa", "#b22222",
   "#ffd700", "#708090", "#ff69b4", "#00ced1", "#556b2f", "#9370db", "#f4a460", "#2f4f4f"];
-const B = { width: 0, height: 0, n: 0, labels: null, brush: 0, painting: false, savedAs: null };
+// role: which map the canvas holds, the photo's ("in") or the new one a texture was painted by ("out")
+const B = { width: 0, height: 0, n: 0, labels: null, brush: 0, painting: false, savedAs: null, role: "in", inPath: null,
+  outPath: null };
 const bMsg = $("b-msg");
 const rgb = (hex) => [1, 3, 5].map((i) => parseInt(hex.slice(i, i + 2), 16));
 
@@ -322,14 +339,23 @@ function palette() {
   }
 }
 
-function paintAt(ev) {
-  const [cx, cy] = canvasPoint($("b-canvas"), ev);
-  const r = +$("b-brush").value / 2;
-  for (let y = Math.max(0, Math.floor(cy - r)); y <= Math.min(B.height - 1, Math.ceil(cy + r)); y++) {
-    for (let x = Math.max(0, Math.floor(cx - r)); x <= Math.min(B.width - 1, Math.ceil(cx + r)); x++) {
-      if ((x - cx) ** 2 + (y - cy) ** 2 <= r * r) B.labels[y * B.width + x] = B.brush;
+// A round brush of radius r dabbed along the segment a → b of a width × height label array, so
+// that a fast pointer move leaves no gaps.
+function brushLine(labels, width, height, a, b, r, value) {
+  const steps = Math.max(1, Math.ceil(Math.hypot(b[0] - a[0], b[1] - a[1]) / Math.max(0.5, r / 2)));
+  for (let i = steps === 1 ? 1 : 0; i <= steps; i++) {
+    const cx = a[0] + ((b[0] - a[0]) * i) / steps, cy = a[1] + ((b[1] - a[1]) * i) / steps;
+    for (let y = Math.max(0, Math.floor(cy - r)); y <= Math.min(height - 1, Math.ceil(cy + r)); y++) {
+      for (let x = Math.max(0, Math.floor(cx - r)); x <= Math.min(width - 1, Math.ceil(cx + r)); x++) {
+        if ((x - cx) ** 2 + (y - cy) ** 2 <= r * r) labels[y * width + x] = value;
+      }
     }
   }
+}
+
+function paintAt(ev) {
+  const p = canvasPoint($("b-canvas"), ev);
+  brushLine(B.labels, B.width, B.height, p, p, +$("b-brush").value / 2, B.brush);
   drawLabels();
 }
 
@@ -343,7 +369,10 @@ bc.addEventListener("pointerdown", (ev) => {
 bc.addEventListener("pointermove", (ev) => B.painting && paintAt(ev));
 bc.addEventListener("pointerup", () => (B.painting = false));
 
-async function loadLabels(path) {
+async function loadLabels(path, role = "in") {
+  B.role = role;
+  $("b-role").textContent = role === "in" ? "photo's" : "new";
+  if (role === "in") B.inPath = path;
   const m = await api("GET", "/api/labels?" + q({ path }));
   const raw = atob(m.data);
   B.labels = Uint8Array.from(raw, (c) => c.charCodeAt(0));
@@ -388,18 +417,14 @@ $("b-upload").onchange = guard(bMsg, async () => {
 $("b-labels").onclick = guard(bMsg, async () => {
   const image = $("b-image").value;
   const req = { kind: "bark-labels", image, n_labels: +$("b-n").value, out: $("b-file").value.trim() };
-  let s;
-  try {
-    s = await runJob(req, bUi);
-  } catch (e) {
-    if (e.status !== 409 || !confirm(`${req.out} exists: replace it?`)) throw e;
-    s = await runJob({ ...req, overwrite: true }, bUi);
-  }
-  if (s.state !== "done") throw new Error(`${s.kind} ${s.state}: ${s.message}`);
+  const s = await runJobReplacing(req, bUi);
   await loadLabels(s.outputs[0]);
   say(bMsg, `wrote ${s.outputs[0]}: paint it, save it, make a texture`);
 });
-$("b-load").onclick = guard(bMsg, () => loadLabels($("b-file").value.trim()));
+$("b-load").onclick = guard(bMsg, () => {
+  const path = $("b-file").value.trim();
+  return loadLabels(path, path.endsWith("_labels_out.png") ? "out" : "in");
+});
 $("b-save").onclick = guard(bMsg, async () => say(bMsg, `saved ${await saveLabels()}`));
 $("b-texture").onclick = guard(bMsg, async () => {
   const req = {
@@ -410,20 +435,805 @@ $("b-texture").onclick = guard(bMsg, async () => {
     tileable: $("b-tileable").checked,
     seed: +$("b-seed").value,
   };
-  if (B.labels) req.labels_in = await saveLabels();
+  if (B.labels && B.role === "out") {
+    req.labels_out = await saveLabels();
+    if (B.inPath) req.labels_in = B.inPath;
+  } else if (B.labels) {
+    req.labels_in = await saveLabels();
+  }
   const s = await runJob(req, bUi);
   if (s.state !== "done") throw new Error(`${s.kind} ${s.state}: ${s.message}`);
   $("b-result").src = withToken("/api/file?" + q({ path: s.outputs[0] }));
-  say(bMsg, `wrote ${s.outputs[0]} and its sidecar`);
+  B.outPath = s.outputs[1];
+  $("b-labels-out").src = fileUrl(B.outPath);
+  $("b-edit-out").disabled = false;
+  say(bMsg, `wrote ${s.outputs[0]} and its sidecar, and the new label map ${s.outputs[1]}`);
 });
+$("b-edit-in").onclick = guard(bMsg, () => loadLabels(B.inPath || labelsFor($("b-image").value)));
+$("b-edit-out").onclick = guard(bMsg, async () => {
+  await loadLabels(B.outPath, "out");
+  say(bMsg, `editing ${B.outPath}: paint it, then Make texture paints it`);
+});
+
+// -- Branching workspace -----------------------------------------------------------------------
+// The skeleton is edited here, in image pixels, and only saved on request: a drag redraws the
+// canvas and sends nothing (an edit shows within a frame).
+const K = {
+  img: null, shape: null, branches: [], sel: null, drag: null, guides: [], history: [],
+  savedAs: null, example: null, grown: null, grownPath: null, extendSeed: 0,
+};
+const G = { savedAs: null }; // the guide file's save state
+const kMsg = $("br-msg");
+const kUi = { msg: kMsg, progress: $("br-progress"), cancel: $("br-cancel") };
+const kc = $("br-canvas");
+const DEPTH_COLORS = ["#ff3b1f", "#ffb000", "#35d0ff", "#b06bff", "#5ee05e"];
+
+function depthOf(branches, i) {
+  let d = 0;
+  for (let p = branches[i].parent; p && d < 50; p = branches[p[0]].parent) d++;
+  return d;
+}
+
+// Pixels per CSS pixel of a canvas: hit radii and line widths stay the same size on screen.
+const pxScale = (canvas) => canvas.width / (canvas.clientWidth || canvas.width);
+
+function drawSkeleton(canvas, branches, { background = null, sel = null, guides = [], vertices = true } = {}) {
+  const ctx = canvas.getContext("2d");
+  const s = pxScale(canvas);
+  ctx.clearRect(0, 0, canvas.width, canvas.height);
+  if (background) ctx.drawImage(background, 0, 0);
+  else {
+    ctx.fillStyle = "#000";
+    ctx.fillRect(0, 0, canvas.width, canvas.height);
+  }
+  ctx.lineJoin = ctx.lineCap = "round";
+  branches.forEach((b, i) => {
+    const color = background ? DEPTH_COLORS[depthOf(branches, i) % DEPTH_COLORS.length] : "#fff";
+    // the branch's thickness as a translucent band, then its centre line; one path per run of
+    // edges of the same width (to half a pixel): thousands of separate strokes miss the frame
+    ctx.globalAlpha = background ? 0.3 : 1;
+    ctx.strokeStyle = color;
+    for (let j = 1; j < b.points.length; ) {
+      const width = Math.max(1, Math.round(2 * (b.thickness[j - 1] + b.thickness[j])) / 2);
+      ctx.lineWidth = width;
+      ctx.beginPath();
+      ctx.moveTo(...b.points[j - 1]);
+      for (; j < b.points.length && Math.max(1, Math.round(2 * (b.thickness[j - 1] + b.thickness[j])) / 2) === width; j++) {
+        ctx.lineTo(...b.points[j]);
+      }
+      ctx.stroke();
+    }
+    ctx.globalAlpha = 1;
+    if (!background) return;
+    ctx.lineWidth = 1.5 * s;
+    ctx.beginPath();
+    b.points.forEach(([x, y], j) => (j ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
+    ctx.stroke();
+    if (vertices) {
+      // a dot per vertex, but none closer than 4 screen pixels to the last (a traced skeleton has
+      // a vertex every pixel); every vertex can still be grabbed
+      ctx.fillStyle = color;
+      ctx.beginPath();
+      let last = null;
+      b.points.forEach(([x, y], j) => {
+        if (last && j < b.points.length - 1 && Math.hypot(x - last[0], y - last[1]) < 4 * s) return;
+        ctx.moveTo(x + 2.2 * s, y);
+        ctx.arc(x, y, 2.2 * s, 0, 2 * Math.PI);
+        last = [x, y];
+      });
+      ctx.fill();
+    }
+  });
+  if (sel && branches[sel.b]) {
+    const [x, y] = branches[sel.b].points[sel.v];
+    ctx.lineWidth = 2 * s;
+    ctx.strokeStyle = "#fff";
+    ctx.beginPath();
+    ctx.arc(x, y, 5 * s, 0, 2 * Math.PI);
+    ctx.stroke();
+  }
+  ctx.setLineDash([6 * s, 4 * s]);
+  ctx.strokeStyle = "#00ffd0";
+  ctx.lineWidth = 2.5 * s;
+  for (const guide of guides) {
+    ctx.beginPath();
+    guide.forEach(([x, y], j) => (j ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
+    ctx.stroke();
+  }
+  ctx.setLineDash([]);
+}
+
+function redrawBranching() {
+  drawSkeleton(kc, K.branches, { background: K.img, sel: K.sel, guides: K.guides });
+  const t = $("br-thick");
+  if (K.sel && K.branches[K.sel.b]) {
+    const b = K.branches[K.sel.b];
+    const [x, y] = b.points[K.sel.v];
+    $("br-sel").textContent = `branch ${K.sel.b} #${K.sel.v} (${x.toFixed(1)}, ${y.toFixed(1)})`;
+    t.disabled = false;
+    if (document.activeElement !== t) t.value = (+b.thickness[K.sel.v]).toFixed(2);
+  } else {
+    K.sel = null;
+    $("br-sel").textContent = "none";
+    t.disabled = true;
+    t.value = "";
+  }
+}
+
+function remember() {
+  K.history.push(JSON.stringify(K.branches));
+  if (K.history.length > 200) K.history.shift();
+}
+
+function setSkeleton(doc) {
+  K.branches = doc.branches.map((b) => ({
+    points: b.points.map((p) => [p[0], p[1]]),
+    thickness: Array.isArray(b.thickness) ? [...b.thickness] : b.points.map(() => b.thickness),
+    parent: b.parent ? [b.parent[0], b.parent[1]] : null,
+  }));
+  if (doc.shape) K.shape = doc.shape;
+  K.sel = null;
+  redrawBranching();
+}
+
+function skeletonDocument() {
+  if (!K.branches.length) throw new Error("skeleton: trace or load one, or shift-drag to draw a branch");
+  const round = (v) => Math.round(v * 100) / 100;
+  return {
+    format: "phloem.skeleton",
+    version: 1,
+    shape: K.shape || [kc.height, kc.width],
+    branches: K.branches.map((b) => ({
+      points: b.points.map(([x, y]) => [round(x), round(y)]),
+      thickness: b.thickness.map(round),
+      parent: b.parent,
+    })),
+  };
+}
+
+function nearestVertex(p, r) {
+  let best = null;
+  K.branches.forEach((b, bi) => b.points.forEach((q, vi) => {
+    const d = Math.hypot(q[0] - p[0], q[1] - p[1]);
+    // the parent wins a tie with a child's first vertex (which lies on it and moves with it)
+    if (d <= r && (!best || d < best.d)) best = { b: bi, v: vi, d };
+  }));
+  return best;
+}
+
+function nearestEdge(p, r) {
+  let best = null;
+  K.branches.forEach((b, bi) => {
+    for (let j = 1; j < b.points.length; j++) {
+      const [a, c] = [b.points[j - 1], b.points[j]];
+      const dx = c[0] - a[0], dy = c[1] - a[1];
+      const t = Math.max(0, Math.min(1, ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / (dx * dx + dy * dy || 1)));
+      const q = [a[0] + t * dx, a[1] + t * dy];
+      const d = Math.hypot(q[0] - p[0], q[1] - p[1]);
+      if (d <= r && (!best || d < best.d)) best = { b: bi, j, t, q, d };
+    }
+  });
+  return best;
+}
+
+// The branches attached to (b, v), and a new parent index for each child of b after vertex
+// edits: children keep their vertex, renumbered.
+function renumberChildren(b, map) {
+  for (const o of K.branches) {
+    if (o.parent && o.parent[0] === b) o.parent[1] = map(o.parent[1]);
+  }
+}
+
+function insertVertex(e) {
+  const b = K.branches[e.b];
+  const th = b.thickness[e.j - 1] * (1 - e.t) + b.thickness[e.j] * e.t;
+  b.points.splice(e.j, 0, e.q);
+  b.thickness.splice(e.j, 0, th);
+  renumberChildren(e.b, (v) => (v >= e.j ? v + 1 : v));
+  return { b: e.b, v: e.j };
+}
+
+function deleteBranch(bi) {
+  const gone = new Set([bi]);
+  K.branches.forEach((o, i) => o.parent && gone.has(o.parent[0]) && gone.add(i)); // parents come first
+  const index = [];
+  let n = 0;
+  K.branches.forEach((_, i) => (index[i] = gone.has(i) ? -1 : n++));
+  K.branches = K.branches.filter((_, i) => !gone.has(i));
+  for (const o of K.branches) if (o.parent) o.parent[0] = index[o.parent[0]];
+  K.sel = null;
+}
+
+function deleteVertex() {
+  if (!K.sel) throw new Error("vertex: select one first (click it)");
+  remember();
+  const { b, v } = K.sel;
+  const br = K.branches[b];
+  if (br.points.length <= 2) {
+    deleteBranch(b);
+  } else {
+    br.points.splice(v, 1);
+    br.thickness.splice(v, 1);
+    renumberChildren(b, (u) => Math.min(u > v ? u - 1 : u, br.points.length - 1));
+    K.sel = { b, v: Math.min(v, br.points.length - 1) };
+  }
+  redrawBranching();
+}
+
+const brMode = () => document.querySelector('input[name="br-mode"]:checked').value;
+
+kc.addEventListener("pointerdown", (ev) => {
+  if (!K.img) return;
+  kc.focus({ preventScroll: true }); // for the Delete key; scrolling now would move the canvas under the pointer
+  kc.setPointerCapture(ev.pointerId);
+  const p = canvasPoint(kc, ev);
+  const r = 7 * pxScale(kc);
+  if (brMode() === "guide") {
+    K.guides.push([p]);
+    K.drag = { kind: "guide" };
+    redrawBranching();
+    return;
+  }
+  const hit = nearestVertex(p, r);
+  if (ev.shiftKey) {
+    remember();
+    const from = hit ? K.branches[hit.b].points[hit.v] : p;
+    const th = hit ? K.branches[hit.b].thickness[hit.v] : 2;
+    K.branches.push({ points: [[from[0], from[1]]], thickness: [th], parent: hit ? [hit.b, hit.v] : null });
+    K.drag = { kind: "draw", b: K.branches.length - 1 };
+  } else if (hit) {
+    remember();
+    const pos = K.branches[hit.b].points[hit.v];
+    // children starting on the vertex move with it
+    const kids = K.branches.filter((o) => o.parent && o.parent[0] === hit.b && o.parent[1] === hit.v
+      && Math.hypot(o.points[0][0] - pos[0], o.points[0][1] - pos[1]) < 0.5);
+    K.sel = { b: hit.b, v: hit.v };
+    K.drag = { kind: "move", start: p, orig: [pos[0], pos[1]], kids };
+  } else {
+    const e = nearestEdge(p, r);
+    if (e) {
+      remember();
+      K.sel = insertVertex(e);
+      K.drag = { kind: "move", start: p, orig: [e.q[0], e.q[1]], kids: [] };
+    } else {
+      K.sel = null;
+    }
+  }
+  redrawBranching();
+});
+
+kc.addEventListener("pointermove", (ev) => {
+  if (!K.drag) return;
+  const p = canvasPoint(kc, ev);
+  if (K.drag.kind === "move") {
+    const at = [K.drag.orig[0] + p[0] - K.drag.start[0], K.drag.orig[1] + p[1] - K.drag.start[1]];
+    K.branches[K.sel.b].points[K.sel.v] = at;
+    for (const o of K.drag.kids) o.points[0] = [at[0], at[1]];
+  } else {
+    const pts = K.drag.kind === "guide" ? K.guides[K.guides.length - 1] : K.branches[K.drag.b].points;
+    const last = pts[pts.length - 1];
+    if (Math.hypot(p[0] - last[0], p[1] - last[1]) < 4 * pxScale(kc)) return;
+    pts.push(p);
+    if (K.drag.kind === "draw") {
+      const b = K.branches[K.drag.b];
+      b.thickness.push(b.thickness[b.thickness.length - 1]);
+    }
+  }
+  redrawBranching();
+});
+
+function endDrag() {
+  const d = K.drag;
+  K.drag = null;
+  if (d && d.kind === "draw") {
+    const b = K.branches[d.b];
+    if (b.points.length < 2) K.branches.pop();
+    else K.sel = { b: d.b, v: b.points.length - 1 };
+  }
+  if (d && d.kind === "guide" && K.guides[K.guides.length - 1].length < 2) K.guides.pop();
+  redrawBranching();
+}
+kc.addEventListener("pointerup", endDrag);
+kc.addEventListener("pointercancel", endDrag);
+
+kc.addEventListener("keydown", (ev) => {
+  if (ev.key === "Delete" || ev.key === "Backspace") {
+    ev.preventDefault();
+    guard(kMsg, deleteVertex)();
+  } else if (ev.key === "z" && (ev.ctrlKey || ev.metaKey)) {
+    ev.preventDefault();
+    $("br-undo").onclick();
+  }
+});
+
+// The wheel over a selected vertex scales its thickness by 10 % a notch.
+kc.addEventListener("wheel", (ev) => {
+  if (!K.sel) return;
+  ev.preventDefault();
+  const b = K.branches[K.sel.b];
+  const t = b.thickness[K.sel.v] * (ev.deltaY < 0 ? 1.1 : 1 / 1.1);
+  b.thickness[K.sel.v] = Math.max(0.1, Math.min(1000, t));
+  redrawBranching();
+}, { passive: false });
+
+$("br-thick").onchange = guard(kMsg, () => {
+  const v = +$("br-thick").value;
+  if (!K.sel) return;
+  if (!(v >= 0 && v <= 1000)) throw new Error("thickness: expected a number of pixels from 0 to 1000");
+  remember();
+  K.branches[K.sel.b].thickness[K.sel.v] = v;
+  redrawBranching();
+});
+
+$("br-undo").onclick = () => {
+  const last = K.history.pop();
+  if (last) {
+    K.branches = JSON.parse(last);
+    K.sel = null;
+  }
+  redrawBranching();
+};
+$("br-delete").onclick = guard(kMsg, deleteVertex);
+$("br-delete-branch").onclick = guard(kMsg, () => {
+  if (!K.sel) throw new Error("vertex: select a vertex of the branch first");
+  remember();
+  deleteBranch(K.sel.b);
+  redrawBranching();
+});
+$("br-guide-clear").onclick = () => {
+  K.guides = [];
+  redrawBranching();
+};
+
+// The guide as --guide takes it: one path as its JSON points, several as a mask, white along them.
+async function saveGuide() {
+  const name = $("br-guide-file").value.trim().replace(/\.(json|png)$/i, "");
+  const round = (v) => Math.round(v * 10) / 10;
+  if (K.guides.length === 1) {
+    return putFile("/api/guide", name + ".json", K.guides[0].map(([x, y]) => [round(x), round(y)]), G);
+  }
+  const [h, w] = K.shape;
+  const c = document.createElement("canvas");
+  c.width = w;
+  c.height = h;
+  const ctx = c.getContext("2d");
+  ctx.strokeStyle = "#fff";
+  ctx.lineWidth = 5;
+  ctx.lineJoin = ctx.lineCap = "round";
+  for (const guide of K.guides) {
+    ctx.beginPath();
+    guide.forEach(([x, y], j) => (j ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
+    ctx.stroke();
+  }
+  const px = ctx.getImageData(0, 0, w, h).data;
+  const mask = new Uint8Array(w * h);
+  for (let i = 0; i < mask.length; i++) mask[i] = px[4 * i] > 127 ? 1 : 0;
+  return putFile("/api/mask", name + ".png", { width: w, height: h, n_labels: 2, data: base64(mask) }, G);
+}
+
+function skeletonFor(path) {
+  const dot = path.lastIndexOf(".");
+  return path.slice(0, dot) + "_skeleton.json";
+}
+
+async function showBranchingImage(path) {
+  if (!path) return;
+  K.img = await loadImage(path);
+  kc.width = K.img.naturalWidth;
+  kc.height = K.img.naturalHeight;
+  K.shape = [kc.height, kc.width];
+  $("br-file").value = skeletonFor(path);
+  redrawBranching();
+}
+
+async function loadSkeleton(path) {
+  setSkeleton(await api("GET", "/api/skeleton?" + q({ path })));
+  K.history = [];
+  K.savedAs = path;
+  $("br-file").value = path;
+}
+
+const saveSkeleton = () => putFile("/api/skeleton", $("br-file").value.trim(), skeletonDocument(), K);
+
+$("br-image").onchange = guard(kMsg, () => showBranchingImage($("br-image").value));
+$("br-upload").onchange = guard(kMsg, async () => {
+  const saved = await upload($("br-upload"));
+  await imageList($("br-image"), saved.path);
+  await showBranchingImage(saved.path);
+  say(kMsg, `saved ${saved.path} (${saved.width}×${saved.height})`);
+});
+$("br-trace").onclick = guard(kMsg, async () => {
+  const req = { kind: "branching-trace", image: $("br-image").value, trace_kind: $("br-kind").value,
+    out: $("br-file").value.trim() };
+  const s = await runJobReplacing(req, kUi);
+  await loadSkeleton(s.outputs[0]);
+  say(kMsg, `traced ${s.outputs[0]}: ${K.branches.length} branches; edit it with the mouse`);
+});
+$("br-load").onclick = guard(kMsg, async () => {
+  await loadSkeleton($("br-file").value.trim());
+  say(kMsg, `loaded ${K.savedAs}: ${K.branches.length} branches`);
+});
+$("br-save").onclick = guard(kMsg, async () => say(kMsg, `saved ${await saveSkeleton()}`));
+$("br-extend").onclick = guard(kMsg, async () => {
+  if (!K.sel) throw new Error("vertex: select a vertex of the branch to extend");
+  const body = { skeleton: skeletonDocument(), branch: K.sel.b, steps: 1, seed: +$("br-seed").value + K.extendSeed++ };
+  const doc = await api("POST", "/api/skeleton/extend", body);
+  remember();
+  const b = K.sel.b;
+  setSkeleton(doc);
+  K.sel = { b, v: K.branches[b].points.length - 1 };
+  redrawBranching();
+  say(kMsg, `extended branch ${b} to ${K.branches[b].points.length} vertices`);
+});
+
+function drawHistograms(h) {
+  const c = $("br-hist");
+  const ctx = c.getContext("2d");
+  ctx.clearRect(0, 0, c.width, c.height);
+  ctx.font = "12px sans-serif";
+  [["angle (rad)", h.angle], ["thickness (px)", h.thickness]].forEach(([title, d], k) => {
+    const x0 = 10 + (k * c.width) / 2, w = c.width / 2 - 20, top = 22, height = c.height - 44;
+    const n = d.source.length, top1 = Math.max(...d.source, ...d.result) || 1;
+    ctx.fillStyle = "#222";
+    ctx.fillText(`${title}  L1 = ${d.distance.toFixed(3)}`, x0, 14);
+    ctx.fillText(d.edges[0].toFixed(2), x0, c.height - 6);
+    ctx.fillText(d.edges[n].toFixed(2), x0 + w - 30, c.height - 6);
+    for (let i = 0; i < n; i++) {
+      const bw = w / n;
+      [[d.source[i], "#999"], [d.result[i], "#f08020"]].forEach(([v, col], j) => {
+        const bh = (v / top1) * height;
+        ctx.fillStyle = col;
+        ctx.fillRect(x0 + i * bw + (j * bw) / 2, top + height - bh, bw / 2 - 1, bh);
+      });
+    }
+    ctx.strokeStyle = "#555";
+    ctx.strokeRect(x0, top, w, height);
+  });
+}
+
+async function grow() {
+  const skeleton = await saveSkeleton();
+  const req = { kind: "branching-grow", skeleton, seed: +$("br-seed").value };
+  if (K.guides.length) req.guide = await saveGuide();
+  const s = await runJobReplacing(req, kUi);
+  K.example = skeleton;
+  K.grownPath = s.outputs[0];
+  K.grown = await api("GET", "/api/skeleton?" + q({ path: K.grownPath }));
+  const g = $("br-grown");
+  [g.height, g.width] = K.grown.shape;
+  drawSkeleton(g, K.grown.branches, { vertices: false });
+  $("br-grown-name").textContent = `${K.grownPath} (seed ${req.seed})`;
+  drawHistograms(await api("GET", "/api/histograms?" + q({ source: skeleton, result: K.grownPath })));
+  say(kMsg, `grew ${K.grownPath}: ${K.grown.branches.length} branches`);
+}
+$("br-grow").onclick = guard(kMsg, grow);
+$("br-reroll").onclick = guard(kMsg, async () => {
+  $("br-seed").value = +$("br-seed").value + 1;
+  await grow();
+});
+$("br-edit-grown").onclick = guard(kMsg, async () => {
+  if (!K.grownPath) throw new Error("grown: grow a skeleton first");
+  await loadSkeleton(K.grownPath);
+  say(kMsg, `editing ${K.grownPath}: select a branch and extend it`);
+});
+$("br-render").onclick = guard(kMsg, async () => {
+  if (!K.grownPath) throw new Error("grown: grow a skeleton first");
+  const req = { kind: "branching-render", image: $("br-image").value, skeleton: K.example,
+    target: K.grownPath, seed: +$("br-seed").value };
+  const s = await runJobReplacing(req, kUi);
+  $("br-result").src = fileUrl(s.outputs[0]);
+  $("br-fragments").src = fileUrl(s.outputs[1]);
+  say(kMsg, `wrote ${s.outputs[0]} and its sidecar, and the fragment map ${s.outputs[1]}`);
+});
+
+// -- Leaves workspace --------------------------------------------------------------------------
+// Scribbles are labels 0 (none) and 1..n over the training leaf's image, saved as the integer
+// label PNG phloem leaves reads; the brush colours are the server's (the expanded layers use them).
+const L = { img: null, width: 0, height: 0, labels: null, brush: 1, painting: null, savedAs: null, colours: [] };
+const lMsg = $("lv-msg");
+const lUi = { msg: lMsg, progress: $("lv-progress"), cancel: $("lv-cancel") };
+const lc = $("lv-canvas");
+let overlay = null; // an off-screen canvas of the scribbles, drawn over the leaf
+
+function drawScribbles() {
+  if (!L.labels) return;
+  const ctx = lc.getContext("2d");
+  ctx.clearRect(0, 0, lc.width, lc.height);
+  ctx.drawImage(L.img, 0, 0);
+  const o = overlay.getContext("2d");
+  const img = o.createImageData(L.width, L.height);
+  const cols = L.colours.map(rgb);
+  for (let i = 0; i < L.labels.length; i++) {
+    const k = L.labels[i];
+    if (k) img.data.set([...cols[(k - 1) % cols.length], 255], 4 * i);
+  }
+  o.putImageData(img, 0, 0);
+  ctx.drawImage(overlay, 0, 0);
+}
+
+function leafPalette() {
+  const p = $("lv-palette");
+  p.innerHTML = "";
+  const n = Math.max(2, Math.min(8, +$("lv-n").value || 2));
+  if (L.brush > n) L.brush = n;
+  for (let k = 0; k <= n; k++) {
+    const b = document.createElement("button");
+    b.dataset.layer = k;
+    if (k) b.style.background = L.colours[(k - 1) % L.colours.length];
+    else b.textContent = "⌫";
+    b.title = k ? `layer ${k}${k === n ? " (background)" : ""}` : "eraser";
+    b.classList.toggle("active", k === L.brush);
+    b.onclick = () => {
+      L.brush = k;
+      leafPalette();
+    };
+    p.appendChild(b);
+  }
+}
+
+function scribbleTo(ev) {
+  const p = canvasPoint(lc, ev);
+  brushLine(L.labels, L.width, L.height, L.painting.last || p, p, +$("lv-brush").value / 2, L.brush);
+  L.painting.last = p;
+  drawScribbles();
+}
+lc.addEventListener("pointerdown", (ev) => {
+  if (!L.labels) return;
+  lc.setPointerCapture(ev.pointerId);
+  L.painting = { last: null };
+  scribbleTo(ev);
+});
+lc.addEventListener("pointermove", (ev) => L.painting && scribbleTo(ev));
+lc.addEventListener("pointerup", () => (L.painting = null));
+lc.addEventListener("pointercancel", () => (L.painting = null));
+
+function scribblesFor(path) {
+  const dot = path.lastIndexOf(".");
+  return path.slice(0, dot) + "_scribbles.png";
+}
+
+async function showLeaf(path) {
+  if (!path) return;
+  L.img = await loadImage(path);
+  L.width = lc.width = L.img.naturalWidth;
+  L.height = lc.height = L.img.naturalHeight;
+  overlay = document.createElement("canvas");
+  overlay.width = L.width;
+  overlay.height = L.height;
+  L.labels = new Uint8Array(L.width * L.height);
+  L.savedAs = null;
+  $("lv-file").value = scribblesFor(path);
+  $("lv-layers").removeAttribute("src");
+  drawScribbles();
+}
+
+function saveScribbles() {
+  const n = L.labels.reduce((a, k) => (k > a ? k : a), 0);
+  const body = { width: L.width, height: L.height, n_labels: Math.max(n, 1) + 1, data: base64(L.labels) };
+  return putFile("/api/scribbles", $("lv-file").value.trim(), body, L);
+}
+
+async function leafList() {
+  const files = await api("GET", "/api/files");
+  const sel = $("lv-leaves");
+  const chosen = new Set([...sel.selectedOptions].map((o) => o.value));
+  sel.innerHTML = "";
+  for (const f of files.filter((f) => f.kind === "image")) {
+    const o = document.createElement("option");
+    o.value = o.textContent = f.path;
+    o.selected = chosen.has(f.path);
+    sel.appendChild(o);
+  }
+}
+
+$("lv-n").onchange = leafPalette;
+$("lv-image").onchange = guard(lMsg, () => showLeaf($("lv-image").value));
+$("lv-upload").onchange = guard(lMsg, async () => {
+  const saved = await upload($("lv-upload"));
+  await imageList($("lv-image"), saved.path);
+  await leafList();
+  await showLeaf(saved.path);
+  say(lMsg, `saved ${saved.path} (${saved.width}×${saved.height})`);
+});
+$("lv-clear").onclick = () => {
+  if (L.labels) L.labels.fill(0);
+  drawScribbles();
+};
+$("lv-save").onclick = guard(lMsg, async () => say(lMsg, `saved ${await saveScribbles()}`));
+$("lv-load").onclick = guard(lMsg, async () => {
+  const path = $("lv-file").value.trim();
+  const m = await api("GET", "/api/scribbles?" + q({ path, image: $("lv-image").value }));
+  L.labels = Uint8Array.from(atob(m.data), (c) => c.charCodeAt(0));
+  L.savedAs = path;
+  $("lv-n").value = Math.max(2, m.n_labels - 1);
+  leafPalette();
+  drawScribbles();
+  say(lMsg, `loaded ${path}: ${m.n_labels - 1} layers`);
+});
+$("lv-expand").onclick = guard(lMsg, async () => {
+  if (!L.labels) throw new Error("image: choose the training leaf first");
+  const scribbles = await saveScribbles();
+  const dot = scribbles.lastIndexOf(".");
+  const req = { kind: "leaves-expand", image: $("lv-image").value, scribbles, out: scribbles.slice(0, dot) + "_layers.png" };
+  const s = await runJobReplacing(req, lUi);
+  $("lv-layers").src = fileUrl(s.outputs[0]);
+  say(lMsg, `expanded the scribbles into ${s.outputs[0]}`);
+});
+$("lv-synth").onclick = guard(lMsg, async () => {
+  if (!L.labels) throw new Error("image: choose the training leaf first");
+  const training = $("lv-image").value;
+  const others = [...$("lv-leaves").selectedOptions].map((o) => o.value).filter((p) => p !== training);
+  if (!others.length) throw new Error("leaves: pick at least one other leaf of the species (Other leaves)");
+  const req = { kind: "leaves-synthesize", leaves: [training, ...others], training, scribbles: await saveScribbles(),
+    count: +$("lv-count").value, seed: +$("lv-seed").value };
+  const s = await runJobReplacing(req, lUi);
+  $("lv-sheet").src = fileUrl(s.outputs[0]);
+  const gallery = $("lv-gallery");
+  gallery.innerHTML = "";
+  for (const path of s.outputs.slice(1)) {
+    const img = document.createElement("img");
+    img.src = fileUrl(path);
+    img.title = img.alt = path;
+    gallery.appendChild(img);
+  }
+  say(lMsg, `wrote ${s.outputs.length - 1} leaves, the model and ${s.outputs[0]}, each with its sidecar`);
+});
+
+// -- Trees workspace ---------------------------------------------------------------------------
+const trMsg = $("tr-msg");
+const trUi = { msg: trMsg, progress: $("tr-progress"), cancel: $("tr-cancel") };
+let projectImages = [];
+
+function gallery(el, paths) {
+  el.innerHTML = "";
+  for (const path of paths) {
+    const img = document.createElement("img");
+    img.src = fileUrl(path);
+    img.title = img.alt = path;
+    el.appendChild(img);
+  }
+}
+
+// The folders holding images, as library choices; the chosen one's images as its gallery.
+async function treeLibraries() {
+  projectImages = (await api("GET", "/api/files")).filter((f) => f.kind === "image").map((f) => f.path);
+  const sel = $("tr-library");
+  const keep = sel.value;
+  const folders = [...new Set(projectImages.filter((p) => p.includes("/")).map((p) => p.slice(0, p.lastIndexOf("/"))))];
+  sel.innerHTML = "";
+  for (const f of folders.sort()) {
+    const o = document.createElement("option");
+    o.value = o.textContent = f;
+    sel.appendChild(o);
+  }
+  if (keep && folders.includes(keep)) sel.value = keep;
+  else if (folders.includes("trees")) sel.value = "trees";
+  showLibrary();
+}
+
+function showLibrary() {
+  const folder = $("tr-library").value;
+  gallery($("tr-library-gallery"), projectImages.filter((p) => p.slice(0, p.lastIndexOf("/")) === folder));
+}
+$("tr-library").onchange = showLibrary;
+$("tr-run").onclick = guard(trMsg, async () => {
+  const req = { kind: "trees-variations", library: $("tr-library").value, count: +$("tr-count").value,
+    n_sources: +$("tr-sources").value, size: +$("tr-size").value, seed: +$("tr-seed").value };
+  const s = await runJobReplacing(req, trUi);
+  gallery($("tr-gallery"), s.outputs);
+  say(trMsg, `wrote ${s.outputs.length} trees to ${s.outputs[0].slice(0, s.outputs[0].lastIndexOf("/"))}, each with its sidecar`);
+});
+
+// -- Textures workspace ------------------------------------------------------------------------
+const X = { img: null, width: 0, height: 0, mask: null, painting: null, savedAs: null };
+const xMsg = $("tx-msg");
+const xUi = { msg: xMsg, progress: $("tx-progress"), cancel: $("tx-cancel") };
+const xc = $("tx-canvas");
+
+function drawMask() {
+  if (!X.img) return;
+  const ctx = xc.getContext("2d");
+  ctx.drawImage(X.img, 0, 0);
+  const over = ctx.getImageData(0, 0, X.width, X.height);
+  for (let i = 0; i < X.mask.length; i++) {
+    if (X.mask[i]) over.data.set([230, 25, 75, 255], 4 * i);
+  }
+  ctx.putImageData(over, 0, 0);
+}
+
+function maskTo(ev) {
+  const p = canvasPoint(xc, ev);
+  brushLine(X.mask, X.width, X.height, X.painting.last || p, p, +$("tx-brush").value / 2, $("tx-erase").checked ? 0 : 1);
+  X.painting.last = p;
+  drawMask();
+}
+xc.addEventListener("pointerdown", (ev) => {
+  if (!X.img) return;
+  xc.setPointerCapture(ev.pointerId);
+  X.painting = { last: null };
+  maskTo(ev);
+});
+xc.addEventListener("pointermove", (ev) => X.painting && maskTo(ev));
+xc.addEventListener("pointerup", () => (X.painting = null));
+xc.addEventListener("pointercancel", () => (X.painting = null));
+
+async function showTextureImage(path) {
+  if (!path) return;
+  X.img = await loadImage(path);
+  X.width = xc.width = X.img.naturalWidth;
+  X.height = xc.height = X.img.naturalHeight;
+  X.mask = new Uint8Array(X.width * X.height);
+  X.savedAs = null;
+  const dot = path.lastIndexOf(".");
+  $("tx-file").value = path.slice(0, dot) + "_mask.png";
+  drawMask();
+}
+$("tx-image").onchange = guard(xMsg, () => showTextureImage($("tx-image").value));
+$("tx-upload").onchange = guard(xMsg, async () => {
+  const saved = await upload($("tx-upload"));
+  await imageList($("tx-image"), saved.path);
+  await showTextureImage(saved.path);
+  say(xMsg, `saved ${saved.path} (${saved.width}×${saved.height})`);
+});
+$("tx-clear").onclick = () => {
+  if (X.mask) X.mask.fill(0);
+  drawMask();
+};
+$("tx-run").onclick = guard(xMsg, async () => {
+  const kind = $("tx-mode").value;
+  const req = { kind, image: $("tx-image").value, seed: +$("tx-seed").value };
+  if (kind === "texture-complete") {
+    if (!X.mask || !X.mask.some((v) => v)) throw new Error("mask: paint the hole to fill on the image first");
+    const body = { width: X.width, height: X.height, n_labels: 2, data: base64(X.mask) };
+    req.mask = await putFile("/api/mask", $("tx-file").value.trim(), body, X);
+  } else {
+    req.size = [+$("tx-h").value, +$("tx-w").value];
+  }
+  const s = await runJob(req, xUi);
+  if (s.state !== "done") throw new Error(`${s.kind} ${s.state}: ${s.message}`);
+  $("tx-result").src = fileUrl(s.outputs[0]);
+  if (s.outputs[1]) $("tx-sources").src = fileUrl(s.outputs[1]);
+  else $("tx-sources").removeAttribute("src");
+  say(xMsg, `wrote ${s.outputs.join(" and ")} and the sidecar${s.outputs.length > 1 ? "s" : ""}`);
+});
+
+// -- bark on a cylinder ------------------------------------------------------------------------
+// Each column x of the preview looks at the angle asin((x - c) / r) on a trunk of radius r; the
+// texture's width wraps half way round (the front), shaded by the cosine of that angle.
+function cylinder(img) {
+  const c = $("b-cylinder");
+  const ctx = c.getContext("2d");
+  const r = c.width / 2;
+  const h = Math.min(c.height, (img.naturalHeight * c.width) / (img.naturalWidth / 2 || 1));
+  ctx.clearRect(0, 0, c.width, c.height);
+  for (let x = 0; x < c.width; x++) {
+    const s = (x + 0.5 - r) / r;
+    const angle = Math.asin(Math.max(-1, Math.min(1, s)));
+    const u = ((angle / Math.PI + 0.5) * img.naturalWidth) % img.naturalWidth;
+    ctx.globalAlpha = 1;
+    ctx.drawImage(img, Math.floor(u), 0, 1, img.naturalHeight, x, 0, 1, h);
+    ctx.globalAlpha = 1 - (0.25 + 0.75 * Math.cos(angle));
+    ctx.fillStyle = "#000";
+    ctx.fillRect(x, 0, 1, h);
+  }
+  ctx.globalAlpha = 1;
+}
+$("b-result").addEventListener("load", () => cylinder($("b-result")));
 
 // -- start -------------------------------------------------------------------------------------
 (async () => {
   try {
-    await imageList($("s-image"));
-    await imageList($("b-image"));
+    const info = await api("GET", "/api/info");
+    L.colours = info.layer_colours;
+    leafPalette();
+    for (const id of ["s-image", "b-image", "br-image", "lv-image", "tx-image"]) await imageList($(id));
+    await leafList();
+    await treeLibraries();
+    await showTextureImage($("tx-image").value);
     if ($("s-image").value) await showPhoto($("s-image").value);
     await showBarkPhoto();
+    await showBranchingImage($("br-image").value);
+    await showLeaf($("lv-image").value);
   } catch (e) {
     say(sMsg, e.message, true);
   }
