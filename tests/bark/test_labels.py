@@ -78,6 +78,15 @@ def test_input_labels_are_deterministic_and_ordered_by_lightness():
     assert means == sorted(means)
 
 
+def test_input_labels_report_progress_from_the_start_without_changing_the_labels():
+    # the studio's first progress event comes from here: 0 before the denoising, the total at the end
+    img = phloem.data.bark()[:64, :64]
+    calls: list[tuple[int, int]] = []
+    lab = bark.input_labels(img, 3, erosion=2, seed=1, progress=lambda d, t: calls.append((d, t)))
+    assert calls == [(0, 4), (1, 4), (2, 4), (3, 4), (4, 4)]
+    np.testing.assert_array_equal(lab, bark.input_labels(img, 3, erosion=2, seed=1))
+
+
 def _majority_reference(labels: np.ndarray, k: int) -> np.ndarray:
     """§3.5.4 written out pixel by pixel: the most common of the 8 neighbours (mirrored border,
     OpenCV's BORDER_REFLECT), keeping the pixel's own label when it ties for the most."""

@@ -151,11 +151,11 @@ def _first_run(name: str, inputs: Path, out: Path) -> list[str]:
 
 
 def _options(command: str) -> set[str]:
-    """The options of a sub-command a sidecar records: all but machine, terminal and seed ones."""
+    """The options of a sub-command a sidecar records: all but machine, terminal, cache and seed ones."""
     p = build_parser()
     for word in command.split():
         p = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction)).choices[word]
-    machine = {"help", "seed", "threads", "max_pixels", "max_memory", "quiet", "force", "from_json"}
+    machine = {"help", "seed", "threads", "max_pixels", "max_memory", "quiet", "force", "from_json", "library_cache"}
     return {a.dest for a in p._actions if a.help != argparse.SUPPRESS and a.dest not in machine}
 
 

@@ -100,7 +100,7 @@ def test_trace_then_grow_then_render_write_the_cli_s_files_with_sidecars(client,
     assert end["outputs"] == ["photos/channel_skeleton.json"]
     traced = branching.Skeleton.load(project.root / "photos" / "channel_skeleton.json")
     assert traced.shape == (128, 224) and traced.total_length() > 150  # the channel is 210 px long
-    side = json.loads((project.root / "photos" / "channel_skeleton.json.json").read_text())
+    side = json.loads((project.root / "photos" / "channel_skeleton.sidecar.json").read_text())
     assert side["command"] == "studio branching-trace" and side["parameters"]["image"] == "photos/channel.png"
 
     client.put("/api/guide", params={"path": "guide.json"}, json=[[10, 100], [210, 100]])
@@ -108,7 +108,7 @@ def test_trace_then_grow_then_render_write_the_cli_s_files_with_sidecars(client,
     end = run_job(client, grow)
     grown = branching.Skeleton.load(project.root / "grown.json")
     assert end["outputs"] == ["grown.json"] and grown.shape == (128, 224) and grown.total_length() > 50
-    side = json.loads((project.root / "grown.json.json").read_text())
+    side = json.loads((project.root / "grown.sidecar.json").read_text())
     assert side["seed"] == 3 and side["parameters"]["guide"] == "guide.json" and side["parameters"]["h"] > 0
     again = run_job(client, {**grow, "out": "grown2.json"})
     assert branching.Skeleton.load(project.root / again["outputs"][0]) == grown  # one seed, one structure

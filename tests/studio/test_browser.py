@@ -380,7 +380,7 @@ def test_trace_and_edit_a_skeleton_by_mouse_then_grow_and_render(studio: tuple[s
     grown_name = message.split("grew ")[1].split(":")[0]
     grown = Skeleton.load(root / grown_name)
     assert grown.shape == (128, 224)
-    assert json.loads((root / f"{grown_name}.json").read_text())["parameters"]["guide"] == "guide.json"
+    assert json.loads((io.sidecar_path(root / grown_name)).read_text())["parameters"]["guide"] == "guide.json"
     drawn = browser.execute_script(
         "const c = document.getElementById('br-hist'); const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;"
         "let n = 0; for (let i = 0; i < d.length; i += 4) if (d[i] > 200 && d[i + 1] > 100 && d[i + 1] < 160 && d[i + 2] < 80) n++; return n;"
@@ -399,7 +399,7 @@ def test_trace_and_edit_a_skeleton_by_mouse_then_grow_and_render(studio: tuple[s
     assert browser.find_element(By.ID, "br-seed").get_attribute("value") == "3"
     mask = io.read_image(root / "guide.png") > 0.5
     assert mask[110, 20:200].all() and mask[15, 20:200].all() and not mask[40:90].any()
-    side = json.loads((root / f"{message.split('grew ')[1].split(':')[0]}.json").read_text())
+    side = json.loads(io.sidecar_path(root / message.split("grew ")[1].split(":")[0]).read_text())
     assert side["parameters"]["guide"] == "guide.png" and side["seed"] == 3
 
 

@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 
 from .._api import Seed, renamed
 from .._color import check_denoise, denoised_lab, rgb8
+from .._progress import Progress
 from .._validate import as_image, as_labels, check_int, check_seed
 
 __all__ = ["add_edge_label", "input_labels"]
@@ -81,6 +82,7 @@ def input_labels(
     denoise: float = 10.0,
     erosion: int = 1,
     seed: Seed = 0,
+    progress: Progress = None,
 ) -> NDArray[np.int32]:
     """Segment a bark photo into ``n_labels`` regions: the input label map of the bark thesis (§3.5).
 
@@ -106,6 +108,9 @@ def input_labels(
         Passes of the majority filter (default 1, as in the thesis).
     seed : int or numpy.random.Generator, optional
         Seed of the k-means seeding.
+    progress : callable, optional
+        ``progress(done, total)`` when the work starts and after each step (denoising,
+        k-means, every majority pass).
 
     Returns
     -------
@@ -132,15 +137,24 @@ def input_labels(
     distinct = len(np.unique(u8.reshape(-1, 3), axis=0))
     if k > distinct:
         raise ValueError(f"n_labels: asked for {k} regions, but the image has only {distinct} distinct colours")
+    steps = 2 + erosion
+    if progress is not None:
+        progress(0, steps)
     lab = denoised_lab(u8, denoise)
+    if progress is not None:
+        progress(1, steps)
     rng = np.random.default_rng(check_seed(seed))
     assign, centres = _kmeans(lab.reshape(-1, 3), k, rng)
+    if progress is not None:
+        progress(2, steps)
     order = np.argsort(centres[:, 0], kind="stable")
     rank = np.empty(k, np.int32)
     rank[order] = np.arange(k, dtype=np.int32)
     labels = rank[assign].reshape(img.shape[:2])
-    for _ in range(erosion):
+    for i in range(erosion):
         labels = _majority(labels, k)
+        if progress is not None:
+            progress(3 + i, steps)
     return labels
 
 

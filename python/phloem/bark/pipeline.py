@@ -215,7 +215,7 @@ def generate(
         _memory.check_size(_memory.bark(shape, img.shape, channels), max_memory, shape)
     seeds = np.random.SeedSequence(check_seed(seed)).generate_state(3, np.uint64)
     if labels_in is None:
-        lab_in = input_labels(img, n_labels, denoise=denoise, seed=int(seeds[0]))
+        lab_in = input_labels(img, n_labels, denoise=denoise, seed=int(seeds[0]), progress=_stage(progress, 0, 10))
     else:
         lab_in = as_labels(labels_in, "labels_in")
         if lab_in.shape != img.shape[:2]:

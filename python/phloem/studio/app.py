@@ -438,9 +438,7 @@ def create_app(
 
             def labels(progress: Progress) -> list[str]:
                 assert progress is not None
-                progress(0, 1)
-                lab = bark.input_labels(photo, req.n_labels, seed=req.seed)
-                progress(1, 1)
+                lab = bark.input_labels(photo, req.n_labels, seed=req.seed, progress=progress)
                 return [write(out, bark.encode_labels(lab), req.kind, params, req.seed, req.overwrite)]
 
             return labels
