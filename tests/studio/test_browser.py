@@ -223,6 +223,62 @@ def test_draw_a_source_and_a_target_stroke_and_render(
     assert side["parameters"]["image"] == "photos/my_bar.png"
 
 
+def test_move_a_target_stroke_point_by_mouse_then_render(studio: tuple[str, Path, Any], browser: Any) -> None:
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.keys import Keys
+
+    url, root, _ = studio
+    _open(browser, url)
+    Select(browser.find_element(By.ID, "s-image")).select_by_value("photos/bar.png")
+    WebDriverWait(browser, 30).until(
+        lambda d: d.execute_script("return document.getElementById('s-source').width") == W
+    )
+    source = browser.find_element(By.ID, "s-source")
+    target = browser.find_element(By.ID, "s-target")
+    _drag(browser, source, _line((20, 45), (220, 45)))
+    _drag(browser, target, _line((30, 70), (120, 20), 8) + _line((120, 20), (210, 60), 8)[1:])
+    _type(browser, "s-file", "moved.json")
+    browser.find_element(By.ID, "s-save").click()
+    _wait_message(browser, "s-msg", "saved moved.json")
+    before = StrokeSet.load(root / "moved.json").pairs[0]
+    tgt = before.target.points
+    k = int(np.argmin(np.hypot(*(tgt - (120, 20)).T)))  # the bend's point; its neighbours lie ~14 px away
+    assert 0 < k < len(tgt) - 3
+
+    # Edit mode: drag that point 15 px right and 30 px down (16 and 32 CSS px: the 240 px canvas is
+    # shown 256 px wide, so the mouse moves by whole CSS pixels).
+    browser.find_element(By.CSS_SELECTOR, 'input[name="s-mode"][value="edit"]').click()
+    start = (float(tgt[k][0]), float(tgt[k][1]))
+    _drag(browser, target, _line(start, (start[0] + 15, start[1] + 30), 6))
+    assert browser.find_element(By.ID, "s-sel").text.startswith(f"target 1 #{k} ")
+    browser.find_element(By.ID, "s-save").click()
+    _wait_message(browser, "s-msg", "saved moved.json")
+    after = StrokeSet.load(root / "moved.json").pairs[0]
+    moved = after.target.points
+    assert moved.shape == tgt.shape
+    assert np.allclose(moved[k] - tgt[k], (15, 30), atol=1.0), (moved[k], tgt[k])
+    assert np.array_equal(np.delete(moved, k, axis=0), np.delete(tgt, k, axis=0))  # only that point moved
+    assert np.array_equal(after.source.points, before.source.points)
+    message = _run_and_show(browser, "s-render", "s", "studio_strokes_moved.png")
+    out = message.split("wrote ")[1].split(" and")[0]
+    assert (root / out).is_file() and io.read_image(root / out).shape == (H, W, 4)
+
+    # A double click halfway along a segment adds a point there; Delete removes it; Undo (three
+    # times) takes back the delete, the insertion and the move.
+    count = "return S.target[0].length"
+    mid = (tgt[k + 2] + tgt[k + 3]) / 2
+    css_w, css_h = browser.execute_script("return [arguments[0].clientWidth, arguments[0].clientHeight]", target)
+    dx, dy = round((mid[0] + 0.5) * css_w / W - css_w / 2), round((mid[1] + 0.5) * css_h / H - css_h / 2)
+    ActionChains(browser).move_to_element_with_offset(target, dx, dy).double_click().perform()
+    assert browser.execute_script(count) == len(tgt) + 1
+    assert browser.find_element(By.ID, "s-sel").text.startswith(f"target 1 #{k + 3} ")
+    target.send_keys(Keys.DELETE)
+    assert browser.execute_script(count) == len(tgt)
+    for _ in range(3):
+        browser.find_element(By.ID, "s-undo").click()
+    assert np.allclose(browser.execute_script("return S.target[0]"), tgt)
+
+
 def test_make_a_label_map_paint_it_and_make_a_texture(studio: tuple[str, Path, Any], browser: Any) -> None:
     url, root, _ = studio
     _open(browser, url)

@@ -135,12 +135,75 @@ function canvasPoint(canvas, ev) {
   return [Math.min(Math.max(x, 0), canvas.width - 1), Math.min(Math.max(y, 0), canvas.height - 1)];
 }
 
-// -- Strokes workspace -------------------------------------------------------------------------
-const S = { photo: null, source: [], target: [], order: [], drawing: null, savedAs: null };
-const COLORS = ["#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#42d4f4", "#f032e6", "#9a6324"];
+// Pixels per CSS pixel of a canvas: hit radii and line widths stay the same size on screen.
+const pxScale = (canvas) => canvas.width / (canvas.clientWidth || canvas.width);
 
-function drawStrokes(canvas, strokes, background) {
+// Hit tests on polylines (arrays of [x, y] points), shared by the Strokes and Branching editors:
+// the nearest point within r as { b: line, v: point, d }, the first line winning a tie ...
+function nearestPoint(lines, p, r) {
+  let best = null;
+  lines.forEach((pts, bi) => pts.forEach((q, vi) => {
+    const d = Math.hypot(q[0] - p[0], q[1] - p[1]);
+    if (d <= r && (!best || d < best.d)) best = { b: bi, v: vi, d };
+  }));
+  return best;
+}
+
+// ... and the nearest segment within r as { b: line, j: its end point, t: 0..1 along it, q: the
+// point on it, d }.
+function nearestSegment(lines, p, r) {
+  let best = null;
+  lines.forEach((pts, bi) => {
+    for (let j = 1; j < pts.length; j++) {
+      const [a, c] = [pts[j - 1], pts[j]];
+      const dx = c[0] - a[0], dy = c[1] - a[1];
+      const t = Math.max(0, Math.min(1, ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / (dx * dx + dy * dy || 1)));
+      const q = [a[0] + t * dx, a[1] + t * dy];
+      const d = Math.hypot(q[0] - p[0], q[1] - p[1]);
+      if (d <= r && (!best || d < best.d)) best = { b: bi, j, t, q, d };
+    }
+  });
+  return best;
+}
+
+// A dot on each point of a polyline, none closer than 4 screen pixels to the last drawn (a drawn
+// or traced line has a point every pixel or two); every point can still be grabbed.
+function pointDots(ctx, pts, s) {
+  ctx.beginPath();
+  let last = null;
+  pts.forEach(([x, y], j) => {
+    if (last && j < pts.length - 1 && Math.hypot(x - last[0], y - last[1]) < 4 * s) return;
+    ctx.moveTo(x + 2.2 * s, y);
+    ctx.arc(x, y, 2.2 * s, 0, 2 * Math.PI);
+    last = [x, y];
+  });
+  ctx.fill();
+}
+
+// A white ring outlined in black around the selected point, seen on a photo and on white.
+function ringAt(ctx, [x, y], s) {
+  ctx.beginPath();
+  ctx.arc(x, y, 5 * s, 0, 2 * Math.PI);
+  ctx.lineWidth = 4 * s;
+  ctx.strokeStyle = "#000";
+  ctx.stroke();
+  ctx.lineWidth = 2 * s;
+  ctx.strokeStyle = "#fff";
+  ctx.stroke();
+}
+
+// -- Strokes workspace -------------------------------------------------------------------------
+// sel: the selected point in edit mode, { side: "source" | "target", s: stroke, v: point };
+// history: the stroke lists as JSON before each edit, for Undo.
+const S = { photo: null, source: [], target: [], history: [], drawing: null, drag: null, sel: null, savedAs: null };
+const COLORS = ["#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#42d4f4", "#f032e6", "#9a6324"];
+const sMode = () => document.querySelector('input[name="s-mode"]:checked').value;
+const roundTenth = (v) => Math.round(v * 10) / 10;
+
+function drawStrokes(canvas, strokes, background, sel) {
   const ctx = canvas.getContext("2d");
+  const s = pxScale(canvas);
+  const edit = sMode() === "edit";
   ctx.clearRect(0, 0, canvas.width, canvas.height);
   if (background) ctx.drawImage(background, 0, 0);
   const all = S.drawing && S.drawing.canvas === canvas ? [...strokes, S.drawing.points] : strokes;
@@ -160,26 +223,72 @@ function drawStrokes(canvas, strokes, background) {
       ctx.strokeText(String(i + 1), pts[0][0] + 4, pts[0][1] - 6);
       ctx.fillStyle = color;
       ctx.fillText(String(i + 1), pts[0][0] + 4, pts[0][1] - 6);
+      if (edit) pointDots(ctx, pts, s); // the control points, to grab
       ctx.lineWidth = Math.max(2, canvas.width / 200);
     }
   });
+  if (edit && sel && strokes[sel.s]) ringAt(ctx, strokes[sel.s][sel.v], s);
 }
 
 function redrawStrokes() {
-  drawStrokes($("s-source"), S.source, S.photo);
-  drawStrokes($("s-target"), S.target, null);
+  const sel = (side) => (S.sel && S.sel.side === side ? S.sel : null);
+  drawStrokes($("s-source"), S.source, S.photo, sel("source"));
+  drawStrokes($("s-target"), S.target, null, sel("target"));
   $("s-nsrc").textContent = S.source.length;
   $("s-ntgt").textContent = S.target.length;
+  const p = S.sel && S[S.sel.side][S.sel.s]?.[S.sel.v];
+  $("s-sel").textContent = p ? `${S.sel.side} ${S.sel.s + 1} #${S.sel.v} (${p[0].toFixed(1)}, ${p[1].toFixed(1)})` : "none";
 }
 
-function strokeCanvas(canvas, list) {
+function rememberStrokes() {
+  S.history.push(JSON.stringify([S.source, S.target]));
+  if (S.history.length > 200) S.history.shift();
+}
+
+// Delete the selected point; a stroke keeps at least 2.
+function deleteStrokePoint() {
+  if (!S.sel) throw new Error("point: select one first (edit mode, click it)");
+  const pts = S[S.sel.side][S.sel.s];
+  if (pts.length <= 2) throw new Error("point: a stroke keeps at least 2 points");
+  rememberStrokes();
+  pts.splice(S.sel.v, 1);
+  S.sel.v = Math.min(S.sel.v, pts.length - 1);
+  redrawStrokes();
+}
+
+// Draw mode: a drag draws a stroke. Edit mode: a drag from (within 6 screen px of) a point moves it,
+// a double click on a segment adds a point there, Delete or Backspace removes the selected point.
+// Edits stay in the page, in the canvas's pixels (the image's), until Save or Render.
+function strokeCanvas(canvas, side) {
   canvas.addEventListener("pointerdown", (ev) => {
+    canvas.focus({ preventScroll: true }); // for the Delete key
     canvas.setPointerCapture(ev.pointerId);
-    S.drawing = { canvas, points: [canvasPoint(canvas, ev)] };
+    const p = canvasPoint(canvas, ev);
+    if (sMode() === "draw") {
+      S.drawing = { canvas, points: [p] };
+      return;
+    }
+    const hit = nearestPoint(S[side], p, 6 * pxScale(canvas));
+    S.sel = hit ? { side, s: hit.b, v: hit.v } : null;
+    if (hit) {
+      const orig = S[side][hit.b][hit.v];
+      S.drag = { canvas, start: p, orig: [orig[0], orig[1]], moved: false };
+    }
+    redrawStrokes();
   });
   canvas.addEventListener("pointermove", (ev) => {
-    if (!S.drawing || S.drawing.canvas !== canvas) return;
     const p = canvasPoint(canvas, ev);
+    if (S.drag && S.drag.canvas === canvas) {
+      const d = S.drag;
+      if (!d.moved) rememberStrokes(); // a click without a move is no edit
+      d.moved = true;
+      const x = Math.min(Math.max(d.orig[0] + p[0] - d.start[0], 0), canvas.width - 1);
+      const y = Math.min(Math.max(d.orig[1] + p[1] - d.start[1], 0), canvas.height - 1);
+      S[side][S.sel.s][S.sel.v] = [roundTenth(x), roundTenth(y)];
+      redrawStrokes();
+      return;
+    }
+    if (!S.drawing || S.drawing.canvas !== canvas) return;
     const last = S.drawing.points[S.drawing.points.length - 1];
     if (Math.hypot(p[0] - last[0], p[1] - last[1]) >= 2) {
       S.drawing.points.push(p);
@@ -187,20 +296,41 @@ function strokeCanvas(canvas, list) {
     }
   });
   const end = () => {
+    S.drag = null;
     if (!S.drawing || S.drawing.canvas !== canvas) return;
     const pts = S.drawing.points;
     S.drawing = null;
     if (pts.length >= 2) {
-      list().push(pts.map(([x, y]) => [Math.round(x * 10) / 10, Math.round(y * 10) / 10]));
-      S.order.push(list());
+      rememberStrokes();
+      S[side].push(pts.map(([x, y]) => [roundTenth(x), roundTenth(y)]));
     }
     redrawStrokes();
   };
   canvas.addEventListener("pointerup", end);
   canvas.addEventListener("pointercancel", end);
+  canvas.addEventListener("dblclick", (ev) => {
+    if (sMode() !== "edit") return;
+    const p = canvasPoint(canvas, ev);
+    const e = nearestSegment(S[side], p, 6 * pxScale(canvas));
+    if (!e) return;
+    rememberStrokes();
+    S[side][e.b].splice(e.j, 0, [roundTenth(e.q[0]), roundTenth(e.q[1])]);
+    S.sel = { side, s: e.b, v: e.j };
+    redrawStrokes();
+  });
+  canvas.addEventListener("keydown", (ev) => {
+    if ((ev.key === "Delete" || ev.key === "Backspace") && sMode() === "edit" && S.sel?.side === side) {
+      ev.preventDefault();
+      guard(sMsg, deleteStrokePoint)();
+    } else if (ev.key === "z" && (ev.ctrlKey || ev.metaKey)) {
+      ev.preventDefault();
+      $("s-undo").onclick();
+    }
+  });
 }
-strokeCanvas($("s-source"), () => S.source);
-strokeCanvas($("s-target"), () => S.target);
+strokeCanvas($("s-source"), "source");
+strokeCanvas($("s-target"), "target");
+for (const r of document.querySelectorAll('input[name="s-mode"]')) r.onchange = redrawStrokes;
 
 function setTargetSize(w, h) {
   $("s-tw").value = w;
@@ -267,21 +397,27 @@ $("s-upload").onchange = guard(sMsg, async () => {
   say(sMsg, `saved ${saved.path} (${saved.width}×${saved.height})`);
 });
 $("s-undo").onclick = () => {
-  const list = S.order.pop();
-  if (list) list.pop();
+  const last = S.history.pop();
+  if (last) [S.source, S.target] = JSON.parse(last);
+  S.sel = null;
   redrawStrokes();
 };
 $("s-clear").onclick = () => {
-  S.source.length = S.target.length = S.order.length = 0;
+  rememberStrokes();
+  S.source = [];
+  S.target = [];
+  S.sel = null;
   redrawStrokes();
 };
+$("s-delete").onclick = guard(sMsg, deleteStrokePoint);
 $("s-save").onclick = guard(sMsg, async () => say(sMsg, `saved ${await saveStrokes()}`));
 $("s-load").onclick = guard(sMsg, async () => {
   const path = $("s-file").value.trim();
   const doc = await api("GET", "/api/strokes?" + q({ path }));
   S.source = doc.pairs.map((p) => p.source);
   S.target = doc.pairs.map((p) => p.target);
-  S.order = [];
+  S.history = [];
+  S.sel = null;
   S.savedAs = path;
   if (doc.target_size) setTargetSize(doc.target_size[1], doc.target_size[0]);
   redrawStrokes();
@@ -474,9 +610,6 @@ function depthOf(branches, i) {
   return d;
 }
 
-// Pixels per CSS pixel of a canvas: hit radii and line widths stay the same size on screen.
-const pxScale = (canvas) => canvas.width / (canvas.clientWidth || canvas.width);
-
 function drawSkeleton(canvas, branches, { background = null, sel = null, guides = [], vertices = true } = {}) {
   const ctx = canvas.getContext("2d");
   const s = pxScale(canvas);
@@ -510,28 +643,11 @@ function drawSkeleton(canvas, branches, { background = null, sel = null, guides 
     b.points.forEach(([x, y], j) => (j ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
     ctx.stroke();
     if (vertices) {
-      // a dot per vertex, but none closer than 4 screen pixels to the last (a traced skeleton has
-      // a vertex every pixel); every vertex can still be grabbed
       ctx.fillStyle = color;
-      ctx.beginPath();
-      let last = null;
-      b.points.forEach(([x, y], j) => {
-        if (last && j < b.points.length - 1 && Math.hypot(x - last[0], y - last[1]) < 4 * s) return;
-        ctx.moveTo(x + 2.2 * s, y);
-        ctx.arc(x, y, 2.2 * s, 0, 2 * Math.PI);
-        last = [x, y];
-      });
-      ctx.fill();
+      pointDots(ctx, b.points, s);
     }
   });
-  if (sel && branches[sel.b]) {
-    const [x, y] = branches[sel.b].points[sel.v];
-    ctx.lineWidth = 2 * s;
-    ctx.strokeStyle = "#fff";
-    ctx.beginPath();
-    ctx.arc(x, y, 5 * s, 0, 2 * Math.PI);
-    ctx.stroke();
-  }
+  if (sel && branches[sel.b]) ringAt(ctx, branches[sel.b].points[sel.v], s);
   ctx.setLineDash([6 * s, 4 * s]);
   ctx.strokeStyle = "#00ffd0";
   ctx.lineWidth = 2.5 * s;
@@ -589,31 +705,6 @@ function skeletonDocument() {
       parent: b.parent,
     })),
   };
-}
-
-function nearestVertex(p, r) {
-  let best = null;
-  K.branches.forEach((b, bi) => b.points.forEach((q, vi) => {
-    const d = Math.hypot(q[0] - p[0], q[1] - p[1]);
-    // the parent wins a tie with a child's first vertex (which lies on it and moves with it)
-    if (d <= r && (!best || d < best.d)) best = { b: bi, v: vi, d };
-  }));
-  return best;
-}
-
-function nearestEdge(p, r) {
-  let best = null;
-  K.branches.forEach((b, bi) => {
-    for (let j = 1; j < b.points.length; j++) {
-      const [a, c] = [b.points[j - 1], b.points[j]];
-      const dx = c[0] - a[0], dy = c[1] - a[1];
-      const t = Math.max(0, Math.min(1, ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / (dx * dx + dy * dy || 1)));
-      const q = [a[0] + t * dx, a[1] + t * dy];
-      const d = Math.hypot(q[0] - p[0], q[1] - p[1]);
-      if (d <= r && (!best || d < best.d)) best = { b: bi, j, t, q, d };
-    }
-  });
-  return best;
 }
 
 // The branches attached to (b, v), and a new parent index for each child of b after vertex
@@ -674,7 +765,7 @@ kc.addEventListener("pointerdown", (ev) => {
     redrawBranching();
     return;
   }
-  const hit = nearestVertex(p, r);
+  const hit = nearestPoint(K.branches.map((b) => b.points), p, r);
   if (ev.shiftKey) {
     remember();
     const from = hit ? K.branches[hit.b].points[hit.v] : p;
@@ -690,7 +781,7 @@ kc.addEventListener("pointerdown", (ev) => {
     K.sel = { b: hit.b, v: hit.v };
     K.drag = { kind: "move", start: p, orig: [pos[0], pos[1]], kids };
   } else {
-    const e = nearestEdge(p, r);
+    const e = nearestSegment(K.branches.map((b) => b.points), p, r);
     if (e) {
       remember();
       K.sel = insertVertex(e);
