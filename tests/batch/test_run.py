@@ -119,6 +119,23 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def test_a_rerun_removes_temporaries_of_dead_writers_only(client, tmp_path: Path):
+    spec = write_spec(tmp_path, seeds="0..1", size="64x64")
+    out = tmp_path / "out"
+    assert batch.run(spec, out_dir=out, client=client).ok
+    first = out / sorted(outputs(out))[0]
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    left = first.with_name(f".{first.name}.{dead.pid}.abcd1234.tmp")  # a worker killed while staging it
+    live = first.with_name(f".{first.name}.{os.getpid()}.wxyz5678.tmp")  # a writer that still runs
+    left.write_bytes(b"partial")
+    live.write_bytes(b"partial")
+    rerun = batch.run(spec, out_dir=out, client=client)
+    assert rerun.made == 0 and not left.exists() and live.exists()
+    live.unlink()
+    _no_temporaries(out)
+
+
 def test_scheduler_in_another_process(tmp_path: Path):
     address = f"tcp://127.0.0.1:{_free_port()}"
     port = address.rsplit(":", 1)[1]

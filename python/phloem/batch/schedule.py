@@ -13,6 +13,7 @@ import contextlib
 import io
 import logging
 import os
+import re
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
@@ -20,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .. import _memory
+from .. import _files, _memory
 from .manifest import Manifest, file_hashes
 from .spec import Item, Spec, load_spec
 
@@ -243,6 +244,7 @@ def run(
     if root.exists() and not root.is_dir():
         raise ValueError(f"out_dir: {root} exists and is not a folder")
     root.mkdir(parents=True, exist_ok=True)
+    _sweep(root)
     manifest = Manifest(root)
     done = manifest.records()
     summary = Summary(total=len(spec.items), manifest=manifest.path)
@@ -273,8 +275,21 @@ def run(
                 report,
                 alone_first=spec.cache_option is not None,
             )
+    _sweep(root)
     summary.seconds = time.perf_counter() - t0
     return summary
+
+
+_TEMPORARY = re.compile(r"\.(.+)\.\d+\.[a-z0-9_]{8}\.tmp")
+
+
+def _sweep(root: Path) -> None:
+    """Remove the temporaries that writers killed mid-write left in ``root`` (a killed batch's
+    workers can outlive its driver by a moment); a live writer's are left alone."""
+    for p in root.rglob(".*.tmp"):
+        m = _TEMPORARY.fullmatch(p.name)
+        if m is not None:
+            _files.remove_stale_temporaries(p.parent / m.group(1))
 
 
 def _schedule(
