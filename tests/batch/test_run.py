@@ -231,3 +231,12 @@ def test_trees_batch_prepares_the_library_once(client, tmp_path: Path):
     for name, data in made.items():
         if name.endswith(".png") and not name.startswith(".phloem-cache"):
             assert (tmp_path / "alone" / name).read_bytes() == data, name
+
+
+def test_a_local_cluster_leaves_the_callers_environment_alone():
+    # Dask's nannies set OMP_NUM_THREADS=1, MALLOC_TRIM_THRESHOLD_ ... in the spawning process; a
+    # caller's later subprocesses (its own phloem runs) would inherit them
+    before = dict(os.environ)
+    with batch.local_cluster(1):
+        assert dict(os.environ) == before
+    assert dict(os.environ) == before

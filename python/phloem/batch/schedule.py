@@ -147,17 +147,25 @@ def local_cluster(workers: int | None = None) -> Any:
     n = cores if workers is None else workers
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise ValueError(f"workers: expected a positive number of worker processes, got {workers!r}")
-    return LocalCluster(  # type: ignore[no-untyped-call]
-        n_workers=n,
-        threads_per_worker=1,
-        processes=True,
-        memory_limit=_memory.default_limit() // n,
-        dashboard_address=None,
-        # no dashboard; its HTTP server (metrics) on a free loopback port: the default 8787 may be taken
-        scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
-        host="127.0.0.1",
-        silence_logs=logging.ERROR,
-    )
+    # Dask's nannies set their workers' variables (OMP_NUM_THREADS=1, MALLOC_TRIM_THRESHOLD_, ...)
+    # in this process's own environment before spawning; every later subprocess of the caller
+    # would inherit them, so the caller's environment is put back once the workers exist.
+    saved = dict(os.environ)
+    try:
+        return LocalCluster(  # type: ignore[no-untyped-call]
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            memory_limit=_memory.default_limit() // n,
+            dashboard_address=None,
+            # no dashboard; its HTTP server (metrics) on a free loopback port: the default 8787 may be taken
+            scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+            host="127.0.0.1",
+            silence_logs=logging.ERROR,
+        )
+    finally:
+        os.environ.clear()
+        os.environ.update(saved)
 
 
 def _local_share(cluster: Any) -> tuple[int, int]:
