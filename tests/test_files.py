@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import time
+from pathlib import Path
 
 import pytest
 
@@ -54,3 +55,23 @@ def test_stale_cleanup_leaves_folders_and_links_of_matching_names_alone(tmp_path
     os.utime(tmp_path / ".a.png.zzzzzzzz.tmp", (old, old), follow_symlinks=False)
     assert _files.remove_stale_temporaries(tmp_path / "a.png") == []
     assert sorted(os.listdir(tmp_path)) == [".a.png.1.abcdefgh.tmp", ".a.png.zzzzzzzz.tmp", "target"]
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/stat"), reason="zombies are read from /proc")
+def test_a_zombie_writers_temporary_is_stale_and_a_live_writers_is_not(tmp_path):
+    # a killed batch's worker that nothing reaps stays a zombie: it answers signal 0 but is dead
+    pid = os.fork()
+    if pid == 0:
+        os._exit(0)
+    try:
+        deadline = time.monotonic() + 10
+        while Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z":
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        (tmp_path / f".a.png.{pid}.abcdefgh.tmp").write_bytes(b"half")
+        (tmp_path / f".a.png.{os.getppid()}.abcdefgh.tmp").write_bytes(b"live")
+        removed = _files.remove_stale_temporaries(tmp_path / "a.png")
+        assert [p.name for p in removed] == [f".a.png.{pid}.abcdefgh.tmp"]
+        assert os.listdir(tmp_path) == [f".a.png.{os.getppid()}.abcdefgh.tmp"]
+    finally:
+        os.waitpid(pid, 0)

@@ -74,8 +74,14 @@ def _pid_alive(pid: int) -> bool:
     except ProcessLookupError:
         return False
     except OSError:  # EPERM: it exists, owned by someone else
+        pass
+    # a killed writer whose parent died too can stay a zombie where nothing reaps orphans
+    # (CI containers): it answers signal 0 but writes nothing more
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
         return True
-    return True
+    return state not in ("Z", "X")
 
 
 def remove_stale_temporaries(path: Path) -> list[Path]:
