@@ -15,6 +15,7 @@ import numpy as np
 
 from .. import _files, _memory, io
 from .._progress import Bar
+from .._seeds import sub_seed as sub_seed
 
 T = TypeVar("T")
 
@@ -263,12 +264,6 @@ def sidecar(
         path, command, params(args) if parameters is None else parameters, getattr(args, "seed", None), str,
         threads=threads_used(args), inputs=args._input_digests, details=details,
     )  # fmt: skip
-
-
-def sub_seed(seed: int, i: int) -> int:
-    """The seed of output ``i`` of a run with ``--seed seed``, recorded in its sidecar, so that the
-    output can be remade alone by the Python call the CLI makes for it (``count=1, seed=`` it)."""
-    return int(np.random.SeedSequence([seed, i]).generate_state(1)[0])
 
 
 #: What a sidecar's ``parameters`` leave out: argparse's own entries, and the options about this

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from .. import _json, branching, io
+from ..branching._fragment_map import fragment_map
 from ..branching.measures import resolve_trace_options
 from ._common import (
     check_writable,
@@ -175,16 +176,6 @@ def _valid(args: argparse.Namespace, img: np.ndarray) -> Any:
             f"--valid: {args.valid} is {mask.shape[1]}x{mask.shape[0]}, but IN is {img.shape[1]}x{img.shape[0]}"
         )
     return (mask if mask.ndim == 2 else mask[..., :3].mean(axis=2)) > 0.5
-
-
-def fragment_map(labels: np.ndarray) -> np.ndarray:
-    """The ``--fragment-map`` image: each fragment's pixels in a colour of its own, black where
-    no fragment painted (``labels`` -1); the studio's render job writes the same."""
-    rng = np.random.default_rng(0)
-    colours = rng.uniform(0.25, 1.0, (int(labels.max()) + 2, 3)).astype(np.float32)
-    colours[0] = 0.0
-    out: np.ndarray = colours[labels + 1]
-    return out
 
 
 def _grow_options(p: argparse.ArgumentParser) -> None:

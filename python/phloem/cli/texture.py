@@ -6,9 +6,8 @@ import argparse
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
-
 from .. import io, texture
+from .._masks import hole_from_mask
 from ..texture.synthesis import _auto_levels
 from ._common import common_options, parse_size, positive, preflight, run, save
 
@@ -49,23 +48,6 @@ def _cmd_quilt(args: argparse.Namespace) -> None:
         ex, args.size, block=args.block, overlap=args.overlap, randomness=args.randomness, cost=args.cost,
         tileable=args.tileable, seed=args.seed, threads=args.threads, progress=bar, max_memory=args.max_memory,
     ), resolve)  # fmt: skip
-
-
-def hole_from_mask(m: np.ndarray, name: str, *, alpha: bool, invert: bool) -> np.ndarray:
-    """The hole of ``phloem complete`` from its mask image: white (or, with ``alpha``, not fully
-    opaque) pixels, flipped by ``invert``."""
-    channels = 1 if m.ndim == 2 else m.shape[2]
-    if alpha:
-        # Gray+alpha or RGBA; anything else has no alpha, and its colours would be taken for one.
-        if channels not in (2, 4):
-            raise ValueError(f"mask_alpha: {name} has no alpha channel ({channels} channels); drop --mask-alpha")
-        m = m[..., channels - 1]
-    elif m.ndim == 3:
-        m = m[..., : min(channels, 3)].max(axis=2)
-    # With alpha, every pixel that is not fully opaque is filled: soft edges (alpha 0.5-1) kept
-    # as they are would leave a pale ring of half-transparent colour around the fill.
-    hole: np.ndarray = (m < 1.0 - 0.5 / 65535) if alpha else (m >= 0.5)
-    return ~hole if invert else hole
 
 
 def _cmd_complete(args: argparse.Namespace) -> None:

@@ -20,7 +20,7 @@ from pydantic import BaseModel, Field, TypeAdapter, ValidationError
 
 from ... import _files, _json, branching
 from ..._progress import Progress
-from ...cli.branching import fragment_map
+from ...branching._fragment_map import fragment_map
 from ..files import JSON_SUFFIXES, Project, name_pattern
 from ..jobs import Work
 from ..outputs import Outputs, Side

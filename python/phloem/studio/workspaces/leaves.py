@@ -21,7 +21,7 @@ from pydantic import BaseModel, Field
 
 from ... import _files, io, leaves
 from ..._progress import Progress
-from ...cli._common import sub_seed
+from ..._seeds import sub_seed
 from ..files import IMAGE_SUFFIXES, Project, name_pattern
 from ..jobs import Work
 from ..outputs import LabelMap, Outputs, decode_label_map, gray_png

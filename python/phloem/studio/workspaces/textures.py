@@ -14,8 +14,8 @@ from fastapi import FastAPI, Query
 from pydantic import BaseModel, Field
 
 from ... import _files, texture
+from ..._masks import hole_from_mask
 from ..._progress import Progress
-from ...cli.texture import hole_from_mask
 from ..files import Project, name_pattern
 from ..jobs import Work
 from ..outputs import LabelMap, Outputs, Side, decode_label_map, gray_png

@@ -13,7 +13,7 @@ from pydantic import BaseModel, Field
 
 from ... import _files, trees
 from ..._progress import Progress
-from ...cli._common import sub_seed
+from ..._seeds import sub_seed
 from ..files import IMAGE_SUFFIXES
 from ..jobs import Work
 from ..outputs import Outputs
