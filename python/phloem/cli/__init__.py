@@ -118,7 +118,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"phloem {name}: error: {_in_flags(_message(e), ap, args)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"phloem {args.command}: interrupted; nothing was written", file=sys.stderr)
+        # a batch keeps every item it finished (each is written whole); the others write nothing
+        what = ("finished items are kept; run it again to go on" if args.command == "batch"
+                else "nothing was written")  # fmt: skip
+        print(f"phloem {args.command}: interrupted; {what}", file=sys.stderr)
         return 130
     for note in tx.notes:
         print(note, file=sys.stderr)
