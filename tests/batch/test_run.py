@@ -243,3 +243,49 @@ def test_a_local_cluster_leaves_the_callers_environment_alone():
     with batch.local_cluster(1):
         assert dict(os.environ) == before
     assert dict(os.environ) == before
+
+
+def test_small_items_are_chunked_and_still_each_recorded(client, tmp_path: Path):
+    # 8×8 syntheses take milliseconds: after a probe of single items they go several to a task
+    out = tmp_path / "out"
+    summary = batch.run(write_spec(tmp_path, seeds="0..59", size="8x8"), out_dir=out, client=client)
+    assert summary.ok and summary.made == 60, summary.line()
+    assert summary.submitted < 30, summary.line()
+    records = _records(out)
+    assert len(records) == 60 and len({r["item"] for r in records}) == 60
+    ok = batch.Manifest(out)
+    assert all(ok.verified(r) for r in ok.records().values())
+    # each recorded command line, run alone, makes the very same bytes
+    made = outputs(out)
+    shutil.rmtree(out)
+    out.mkdir()
+    for r in records[::7]:
+        assert main(r["argv"]) == 0
+    assert all(made[name] == data for name, data in outputs(out).items())
+
+
+def test_chunk_size_fills_half_a_second_and_keeps_four_tasks_per_worker():
+    from phloem.batch.schedule import _chunk_size
+
+    assert _chunk_size([0.04] * 6, 190, 2) == 12  # 0.5 s / 40 ms
+    assert _chunk_size([0.01] * 6, 40, 2) == 5  # 40 left on 2 workers: no fewer than 8 tasks
+    assert _chunk_size([1.3] * 6, 40, 2) == 1  # items of seconds go singly
+    assert _chunk_size([0.04, 0.04, 0.04, 3.0], 190, 2) == 12  # a worker's first item (a model load) aside
+    assert _chunk_size([], 10, 2) == 1
+
+
+def test_ctrl_c_keeps_the_finished_items_and_says_so(tmp_path: Path):
+    spec = write_spec(tmp_path, seeds="0..39", size="64x64")
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "phloem", "batch", str(spec), "--out-dir", str(out), "--workers", "2", "-q"]
+    proc = subprocess.Popen(cmd, env=ENV, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not ((out / "manifest.jsonl").exists() and (out / "manifest.jsonl").stat().st_size > 0):
+        assert proc.poll() is None and time.monotonic() < deadline, "the batch ended before its first item"
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    err = proc.communicate(timeout=60)[1]
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == ["phloem batch: interrupted; finished items are kept; run it again to go on"]
+    kept = batch.Manifest(out)
+    assert kept.records() and all(kept.verified(r) for r in kept.records().values())

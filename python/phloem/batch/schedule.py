@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from .. import _files, _memory
 from .manifest import Manifest, file_hashes
 from .spec import Item, Spec, load_spec
@@ -260,9 +262,14 @@ def run(
     summary.skipped = summary.total - len(todo)
     extra: list[str] = []
     given = {k.lstrip("-").replace("-", "_") for k in spec.params}
-    if spec.cache_option is not None and spec.cache_option not in given:
+    cache: Path | None = None
+    if spec.cache_option is not None:
         # a prepared model shared by all items: built by the first, loaded by the others
-        extra = [f"--{spec.cache_option.replace('_', '-')}", str(root / ".phloem-cache")]
+        flag = f"--{spec.cache_option.replace('_', '-')}"
+        if spec.cache_option not in given:
+            extra = [flag, str(root / ".phloem-cache")]
+        argv = spec.items[0].argv(root, extra=extra) if spec.items else []
+        cache = Path(argv[argv.index(flag) + 1]) if flag in argv else None
 
     def report() -> None:
         if progress is not None:
@@ -281,7 +288,8 @@ def run(
                 manifest,
                 summary,
                 report,
-                alone_first=spec.cache_option is not None,
+                # a cache made before (a stale one is remade, by every worker at worst)
+                alone_first=cache is not None and not (cache.is_dir() and any(cache.iterdir())),
             )
     _sweep(root)
     summary.seconds = time.perf_counter() - t0
@@ -300,6 +308,28 @@ def _sweep(root: Path) -> None:
             _files.remove_stale_temporaries(p.parent / m.group(1))
 
 
+def run_items(argvs: list[tuple[list[str], str]], root: str, threads: int | None,
+              max_memory: int | None) -> list[dict[str, Any]]:  # fmt: skip
+    """Run a chunk of items one after the other here (in a worker): :func:`run_item` for each."""
+    return [run_item(argv, target, root, threads, max_memory) for argv, target in argvs]
+
+
+#: Items are run singly until this many per worker have finished; their median time then sets
+#: how many later items go into one task, so that each task takes about ``_TASK_SECONDS``.
+_PROBE_PER_WORKER = 3
+_TASK_SECONDS = 0.5
+
+
+def _chunk_size(seconds: list[float], remaining: int, workers: int) -> int:
+    """Items per task for the rest of a batch: enough to make a task about ``_TASK_SECONDS``
+    (a task costs the scheduler some 20 ms of worker time), but at least 4 tasks per worker
+    left, so that no worker idles long at the end."""
+    if not seconds or remaining <= 0:
+        return 1
+    per_item = max(float(np.median(seconds)), 1e-3)
+    return max(1, min(int(_TASK_SECONDS / per_item), remaining // (4 * workers), 64))
+
+
 def _schedule(
     c: Any,
     todo: list[Item],
@@ -315,42 +345,63 @@ def _schedule(
 ) -> None:
     from distributed import as_completed
 
-    items = {it.name: it for it in todo}
-
-    def submit(item: Item, attempt: int) -> Any:
-        summary.submitted += 1
-        argv = item.argv(root, extra=extra)
-        key = f"phloem-batch-{item.name}-{attempt}"
-        name_of[key] = item.name
-        return c.submit(run_item, argv, str(item.outputs(root)), str(root), threads, memory,
-                        key=key, pure=False)  # fmt: skip
-
-    first = todo[:1] if alone_first else todo
-    rest = todo[1:] if alone_first else []
+    workers = max(1, len(c.scheduler_info().get("workers", {})))
+    names_of: dict[str, list[str]] = {}  # task key -> its items' names
     attempt_of: dict[str, int] = {}
-    name_of: dict[str, str] = {}  # task key -> item name
-    for batch in (first, rest):
-        if not batch:
-            continue
-        futures = as_completed()  # type: ignore[no-untyped-call]
-        for it in batch:
-            attempt_of[it.name] = 1
-            futures.add(submit(it, 1))  # type: ignore[no-untyped-call]
-        for fut in futures:
-            name = name_of[fut.key]
+
+    def submit(chunk: list[Item], attempt: int) -> Any:
+        summary.submitted += 1
+        key = f"phloem-batch-{chunk[0].name}" + (f"+{len(chunk) - 1}" if len(chunk) > 1 else "") + f"-{attempt}"
+        names_of[key] = [it.name for it in chunk]
+        for it in chunk:
+            attempt_of[it.name] = attempt
+        argvs = [(it.argv(root, extra=extra), str(it.outputs(root))) for it in chunk]
+        return c.submit(run_items, argvs, str(root), threads, memory, key=key, pure=False)
+
+    items = {it.name: it for it in todo}
+    queue = list(todo)
+    # the first item alone when it builds the shared cache the others read
+    n_probe = 1 if alone_first else min(len(queue), _PROBE_PER_WORKER * workers)
+    futures = as_completed()  # type: ignore[no-untyped-call]
+    for it in queue[:n_probe]:
+        futures.add(submit([it], 1))  # type: ignore[no-untyped-call]
+    queue = queue[n_probe:]
+    probe_left = n_probe
+    seconds: list[float] = []
+    for fut in futures:
+        names = names_of.pop(fut.key)
+        try:
+            recs = fut.result()
+        except Exception as e:  # the worker died (e.g. killed for memory) or the task could not run
+            rec = {"status": "failed", "outputs": {}, "error": f"{type(e).__name__}: {_last_line(str(e))}"}
+            recs = [rec] * len(names)
+        fut.release()
+        done = []
+        for name, rec in zip(names, recs):
             item = items[name]
-            try:
-                rec = fut.result()
-            except Exception as e:  # the worker died (e.g. killed for memory) or the task could not run
-                rec = {"status": "failed", "outputs": {}, "error": f"{type(e).__name__}: {_last_line(str(e))}"}
-            fut.release()
             if rec["status"] != "ok" and attempt_of[name] == 1:
-                attempt_of[name] = 2
-                futures.add(submit(item, 2))  # type: ignore[no-untyped-call]
+                futures.add(submit([item], 2))  # type: ignore[no-untyped-call]  # retried alone
                 continue
-            manifest.append([_record(item, rec, attempt_of[name])])
+            if rec["status"] == "ok":
+                seconds.append(float(rec["seconds"]))
+            done.append(_record(item, rec, attempt_of[name]))
             if rec["status"] == "ok":
                 summary.made += 1
             else:
                 summary.failed[name] = str(rec["error"])
+        if done:
+            manifest.append(done)
             report()
+        probe_left -= 1
+        if queue and (probe_left <= 0 or (not alone_first and len(seconds) >= 2 * workers)):
+            if alone_first and probe_left == 0:
+                # the cache exists now: probe the item time on every worker before chunking
+                n_probe = min(len(queue), _PROBE_PER_WORKER * workers)
+                for it in queue[:n_probe]:
+                    futures.add(submit([it], 1))  # type: ignore[no-untyped-call]
+                queue, probe_left, alone_first = queue[n_probe:], n_probe, False
+                continue
+            size = _chunk_size(seconds, len(queue), workers)
+            for k in range(0, len(queue), size):
+                futures.add(submit(queue[k : k + size], 1))  # type: ignore[no-untyped-call]
+            queue = []
