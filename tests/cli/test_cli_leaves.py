@@ -126,3 +126,27 @@ def test_one_leaf_only_and_a_bad_model_folder(tmp_path, files, capsys) -> None:
     err = capsys.readouterr().err
     assert "model.json" in err and err.count("\n") == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_synthesize_reads_a_model_once_per_process_until_it_changes(tmp_path, files, monkeypatch) -> None:
+    # a batch worker runs many synthesize items of one model: it is read once, and again if rewritten
+    from phloem import leaves
+
+    leaves_in, sc = files
+    model = tmp_path / "model"
+    assert main(["leaves", "analyze", *map(str, leaves_in), "--scribbles", str(sc), "--out", str(model), *_FAST]) == 0
+    reads = []
+    real = leaves.LeafModel.load
+    monkeypatch.setattr(leaves.LeafModel, "load", lambda path: reads.append(path) or real(path))
+
+    def synth(out: str, seed: str) -> bytes:
+        args = ["leaves", "synthesize", str(model), "--count", "1", "--out-dir", str(tmp_path / out), "--seed", seed]
+        assert main([*args, "-q"]) == 0
+        return (tmp_path / out / "leaf_0000.png").read_bytes()
+
+    first = synth("a", "1")
+    assert synth("b", "1") == first and synth("c", "2") != first
+    assert len(reads) == 1
+    meta = json.loads((model / "model.json").read_text())
+    (model / "model.json").write_text(json.dumps(meta, indent=2))  # the same model, rewritten
+    assert synth("d", "1") == first and len(reads) == 2
