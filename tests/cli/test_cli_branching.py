@@ -200,3 +200,33 @@ def test_branching_trace_leaves_a_photo_frame_out(tmp_path):
         lengths[valid] = Skeleton.load(out).total_length()
     # the halo (about 400 px around) is traced only without the frame detection
     assert lengths["none"] > lengths["auto"] + 200
+
+
+def test_grow_fits_once_per_skeleton_and_options_in_a_process(tmp_path, monkeypatch):
+    # a batch worker grows many seeds of one skeleton: the models are fitted once and shared,
+    # and sharing them changes no output
+    from phloem import branching
+    from phloem.branching import Skeleton
+
+    _river_png(tmp_path / "river.png")
+    skel = tmp_path / "river.json"
+    assert main(["branching", "trace", str(tmp_path / "river.png"), "--kind", "mask", "--out", str(skel), "-q"]) == 0
+    fits = []
+    real = branching.fit_models
+    monkeypatch.setattr(branching, "fit_models", lambda *a, **k: fits.append(k) or real(*a, **k))
+
+    def grow(name: str, *extra: str) -> Skeleton:
+        assert main(["branching", "grow", str(skel), "--out", str(tmp_path / name), "-q", *extra]) == 0
+        return Skeleton.load(tmp_path / name)
+
+    first = grow("a.json", "--seed", "5")
+    assert len(fits) == 1
+    assert grow("b.json", "--seed", "6") != first and len(fits) == 1
+    assert grow("c.json", "--seed", "5") == first and len(fits) == 1
+    grow("d.json", "--seed", "5", "--order", "2")  # other options: fitted again
+    assert len(fits) == 2
+    monkeypatch.setattr(branching, "fit_models", real)
+    from phloem.cli import _common
+
+    _common._KEPT.clear()  # fresh, as in a new process: the same skeleton
+    assert grow("e.json", "--seed", "6") == Skeleton.load(tmp_path / "b.json")

@@ -300,3 +300,21 @@ def run(label: str, args: argparse.Namespace, work: Callable[[Any], T]) -> T:
 def save(args: argparse.Namespace, command: str, image: np.ndarray, **details: Any) -> None:
     """OUT and its sidecar; ``details`` are what the run found (recorded, not replayed)."""
     stage_result(args.out, image, args, command, details)
+
+
+#: What :func:`kept` keeps: per kind, the last (key, value) this process made.
+_KEPT: dict[str, tuple[tuple[Any, ...], Any]] = {}
+
+
+def kept(kind: str, files: Sequence[Path], options: tuple[Any, ...], make: Callable[[], T]) -> T:
+    """``make()``, or what it gave last time in this process for the same ``files`` (by path,
+    size and modification time) and ``options``. A batch worker runs many items of one model;
+    the commands never change what they read, so sharing it is safe."""
+    key = (tuple((str(f.absolute()), f.stat().st_size, f.stat().st_mtime_ns) for f in files), options)
+    last = _KEPT.get(kind)
+    if last is not None and last[0] == key:
+        value: T = last[1]
+        return value
+    made = make()
+    _KEPT[kind] = (key, made)
+    return made

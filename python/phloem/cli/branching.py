@@ -15,6 +15,7 @@ from ._common import (
     check_writable,
     common_options,
     deprecated_alias,
+    kept,
     parse_size,
     positive,
     preflight,
@@ -235,9 +236,10 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     shape = args.size or source.shape
     if shape is None:
         raise ValueError("size: the skeleton file has no shape; pass --size WxH")
-    bend, fur = branching.fit_models(
-        source, h=args.h, order=args.order, m=args.m, n_best=args.n_best, course=args.course
-    )
+    # fitting is seconds on real skeletons (2-4 s); a batch worker fits once per skeleton and options
+    options = (args.h, args.order, args.m, args.n_best, args.course)
+    bend, fur = kept("branching models", [Path(args.skeleton)], options, lambda: branching.fit_models(
+        source, h=args.h, order=args.order, m=args.m, n_best=args.n_best, course=args.course))  # fmt: skip
     new = run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
     _resolve_models(args, bend)
     args.size = shape

@@ -12,6 +12,7 @@ from .. import io, leaves
 from ._common import (
     check_writable,
     common_options,
+    kept,
     params,
     positive,
     run,
@@ -169,23 +170,15 @@ def _cmd_leaves_analyze(args: argparse.Namespace) -> None:
         stage_image(args.sheet, leaves.contact_sheet(model), args)
 
 
-#: The last model this process read, by folder and file stamps: a batch worker runs many
-#: ``leaves synthesize`` items of one model, and reading one is seconds (LeafModel.load of 12
-#: exemplars at 512²: 1.9 s). The CLI never changes a model, so sharing it is safe.
-_last_model: dict[tuple[str, tuple[tuple[str, int, int], ...]], leaves.LeafModel] = {}
-
-
 def _load_model(folder: Path) -> leaves.LeafModel:
+    # a batch worker runs many items of one model, and reading one is seconds (12 exemplars at
+    # 512²: 1.9 s); the CLI never changes a model, so the process keeps the last one it read
     try:
-        stamps = tuple(sorted((p.name, p.stat().st_size, p.stat().st_mtime_ns) for p in folder.iterdir()))
+        files = sorted(folder.iterdir())
     except OSError:
         return leaves.LeafModel.load(folder)  # its own one-line error
-    key = (str(folder.absolute()), stamps)
-    if key not in _last_model:
-        model = leaves.LeafModel.load(folder)
-        _last_model.clear()
-        _last_model[key] = model
-    return _last_model[key]
+    model: leaves.LeafModel = kept("leaves model", files, (), lambda: leaves.LeafModel.load(folder))
+    return model
 
 
 def _cmd_leaves_synthesize(args: argparse.Namespace) -> None:
