@@ -8,6 +8,7 @@ from typing import Any
 
 from .. import io, texture
 from .._masks import hole_from_mask
+from ..texture.quilt import _default_block, _default_overlap
 from ..texture.synthesis import _auto_levels
 from ._common import common_options, parse_size, positive, preflight, run, save
 
@@ -37,12 +38,11 @@ def _cmd_synthesize(args: argparse.Namespace) -> None:
 
 def _cmd_quilt(args: argparse.Namespace) -> None:
     def resolve(ex: Any) -> None:
-        # texture.quilt's defaults; the replay tests pass them back and compare bytes, so a change
-        # there that is not made here fails them
+        # texture.quilt's own defaults, recorded as used
         if args.block is None:
-            args.block = max(2, min(64, min(ex.shape[:2]) // 2))
+            args.block = _default_block(*ex.shape[:2])
         if args.overlap is None:
-            args.overlap = max(1, args.block // 4)
+            args.overlap = _default_overlap(args.block)
 
     _from_exemplar(args, "quilt", lambda ex, bar: texture.quilt(
         ex, args.size, block=args.block, overlap=args.overlap, randomness=args.randomness, cost=args.cost,

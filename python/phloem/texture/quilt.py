@@ -49,6 +49,16 @@ def _masked_ssd(ex: NDArray[np.float32], tmpl: NDArray[np.float32], mask: NDArra
     return np.maximum(out, 0)
 
 
+def _default_block(eh: int, ew: int) -> int:
+    """The block side when none is given: half the exemplar's shorter side, 2 to 64 pixels."""
+    return max(2, min(64, min(eh, ew) // 2))
+
+
+def _default_overlap(block: int) -> int:
+    """The overlap when none is given: a quarter of the block, at least 1 pixel."""
+    return max(1, block // 4)
+
+
 @overload
 def quilt(
     exemplar: Any,
@@ -177,10 +187,10 @@ def quilt(
     eh, ew, nc = ex.shape
     if min(eh, ew) < 2:
         raise ValueError(f"exemplar: expected at least 2×2 pixels, got {eh}×{ew}")
-    b = max(2, min(64, min(eh, ew) // 2)) if block is None else check_int(block, "block", 2)
+    b = _default_block(eh, ew) if block is None else check_int(block, "block", 2)
     if b > min(eh, ew):
         raise ValueError(f"block: {b} does not fit in the {eh}×{ew} exemplar")
-    ov = max(1, b // 4) if overlap is None else check_int(overlap, "overlap", 1)
+    ov = _default_overlap(b) if overlap is None else check_int(overlap, "overlap", 1)
     if ov >= b:
         raise ValueError(f"overlap: expected less than block = {b}, got {ov}")
     k = float(randomness)
