@@ -165,10 +165,12 @@ def by_numbers(size: tuple[int, int], example: tuple[int, ...], channels: int) -
     return (200 + 30 * channels) * _px(size) + (200 + 30 * channels) * _px(example)
 
 
-def complete(shape: tuple[int, ...]) -> int:
+def complete(shape: tuple[int, ...], pad: int = 0) -> int:
     """Completion works on the whole image: values and gradients (3 × channels f32), the vote
-    accumulators, the hole pyramid and the field and distances."""
-    return (100 + 40 * _ch(shape)) * _px(shape)
+    accumulators, the hole pyramid and the field and distances. A tileable completion also holds
+    the features and source mask grown by ``pad`` on every side (the source of its patches)."""
+    grown = 0 if pad <= 0 else (12 * _ch(shape) + 1) * (shape[0] + 2 * pad) * (shape[1] + 2 * pad)
+    return (100 + 40 * _ch(shape)) * _px(shape) + grown
 
 
 def leaves_analyze(size: tuple[int, int], n_exemplars: int, n_layers: int) -> int:

@@ -170,3 +170,18 @@ def test_patch_engine_wraps_the_target(exemplar):
 def test_tileable_bad_input_errors(exemplar, call, match):
     with pytest.raises(ValueError, match=match):
         call(exemplar)
+
+
+def test_a_tileable_completion_counts_its_grown_source_against_max_memory():
+    import phloem
+
+    img = np.random.default_rng(0).random((256, 256, 3), dtype=np.float32)
+    hole = np.zeros((256, 256), bool)
+    hole[100:120, 100:120] = True
+    plain = phloem._memory.complete(img.shape)
+    grown = phloem._memory.complete(img.shape, 3)  # patch 7: 3 pixels wrapped round every side
+    assert grown - plain == (12 * 3 + 1) * 262 * 262
+    budget = plain + 1_000_000
+    complete(img, hole, patch_size=7, iterations=1, max_memory=budget)
+    with pytest.raises(phloem.MemoryLimitError, match="image"):
+        complete(img, hole, patch_size=7, iterations=1, tileable=True, max_memory=budget)

@@ -536,10 +536,11 @@ def complete(
     True
     """
     img = as_image(image, "image")
-    _memory.check_size(_memory.complete(img.shape), max_memory, img.shape[:2], "image")
+    p = check_patch_size(patch_size)
+    pad = p // 2 if tileable else 0
+    _memory.check_size(_memory.complete(img.shape, pad), max_memory, img.shape[:2], "image")
     hole = as_mask(mask, "mask", img.shape[:2])
     allowed = None if source_mask is None else as_mask(source_mask, "source_mask", img.shape[:2])
-    p = check_patch_size(patch_size)
     if not hole.any():
         raise ValueError("mask: no pixel is selected for filling (the mask is empty)")
     if pyramid not in ("auto", "interpolate", "strict"):
