@@ -16,6 +16,8 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+from ..io import sidecar_path
+
 __all__ = ["MANIFEST", "Manifest", "file_hashes", "sha256"]
 
 MANIFEST = "manifest.jsonl"
@@ -33,7 +35,7 @@ def sha256(path: str | os.PathLike[str]) -> str:
 def output_files(target: Path) -> list[Path]:
     """The files one item wrote: its ``--out`` file (or the files of an ``--out`` folder, such
     as a leaf model) and its sidecar, or the files of its ``--out-dir`` folder."""
-    side = target.with_name(target.name + ".json")
+    side = sidecar_path(target)
     found: list[Path] = []
     if target.is_dir():
         found += sorted(p for p in target.rglob("*") if p.is_file() and not p.name.startswith("."))
