@@ -296,3 +296,27 @@ def test_local_workers_keep_glibcs_own_malloc_trimming(client):
     # Dask's default MALLOC_TRIM_THRESHOLD_=65536 made every tree variation a third slower
     got = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_"))
     assert set(got.values()) == {os.environ.get("MALLOC_TRIM_THRESHOLD_")}
+
+
+def test_extra_outputs_asked_by_true_are_per_item_hashed_and_verified(client, tmp_path: Path):
+    import numpy as np
+
+    img = np.zeros((64, 80), np.float32)
+    img[30:34, 5:75] = 1.0
+    img[10:34, 40:43] = 1.0
+    phloem.io.write_image(tmp_path / "river.png", img)
+    spec = tmp_path / "spec.yaml"
+    spec.write_text("job: branching trace\ninputs: [river.png]\nparams: {kind: mask, overlay: true}\nseeds: [0, 1]\n")
+    out = tmp_path / "out"
+    summary = batch.run(spec, out_dir=out, client=client)
+    assert summary.ok and summary.made == 2, summary.line()
+    for r in _records(out):
+        name = r["item"]
+        # the skeleton, its sidecar (X.sidecar.json) and the item's own overlay
+        assert sorted(r["outputs"]) == sorted([f"{name}.json", f"{name}.sidecar.json", f"{name}_overlay.png"])
+        assert phloem.io.read_image(out / f"{name}_overlay.png").shape[:2] == (64, 80)
+    # an extra output gone: its item is made again, the other is not
+    first = _records(out)[0]["item"]
+    (out / f"{first}_overlay.png").unlink()
+    again = batch.run(spec, out_dir=out, client=client)
+    assert (again.made, again.skipped) == (1, 1) and (out / f"{first}_overlay.png").is_file()

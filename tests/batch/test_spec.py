@@ -38,6 +38,8 @@ BRICK = phloem.data.path("brick.png")
          r"^params\.out: is set by the batch"),
         ({"job": "synthesize", "inputs": [BRICK], "seeds": [0], "params": {"size": 8, "seed": 3}},
          r"^params\.seed: is set by the batch"),
+        ({"job": "trees", "inputs": [BRICK], "seeds": [0], "params": {"sheet": "mine.png"}},
+         r"^params\.sheet: is named by the batch for each item; give true to write it, got 'mine.png'"),
         ({"job": "synthesize", "inputs": [BRICK], "seeds": [0]}, r"^params: 'phloem synthesize' does not accept.*--size"),
         ({"job": "complete", "inputs": [BRICK], "seeds": [0]}, r"^params: 'phloem complete' needs MASK: .*params\.mask"),
         ({"job": "trees", "inputs": [BRICK], "seeds": [0], "params": {"histogram": "yes"}},

@@ -16,7 +16,7 @@ import os
 import re
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -101,8 +101,10 @@ def _last_line(text: str) -> str:
     return lines[-1] if lines else ""
 
 
-def run_item(argv: list[str], target: str, root: str, threads: int | None, max_memory: int | None) -> dict[str, Any]:
-    """Run one item's ``phloem`` command here (in a worker); its outcome as a manifest record.
+def run_item(argv: list[str], targets: Sequence[str], root: str, threads: int | None,
+             max_memory: int | None) -> dict[str, Any]:  # fmt: skip
+    """Run one item's ``phloem`` command here (in a worker); its outcome as a manifest record
+    with the hashes of the files of ``targets`` (its output, then any extra outputs).
 
     ``threads`` and ``max_memory`` default to the worker's own share.
     """
@@ -130,7 +132,8 @@ def run_item(argv: list[str], target: str, root: str, threads: int | None, max_m
     seconds = time.perf_counter() - t0
     rec: dict[str, Any] = {"argv": full, "seconds": round(seconds, 3)}
     if status == 0:
-        rec.update(status="ok", outputs=file_hashes(Path(target), Path(root)), error=None)
+        hashes = {k: v for t in targets for k, v in file_hashes(Path(t), Path(root)).items()}
+        rec.update(status="ok", outputs=hashes, error=None)
     else:
         rec.update(status="failed", outputs={}, error=error or _last_line(err.getvalue()) or f"exit status {status}")
     return rec
@@ -313,10 +316,10 @@ def _sweep(root: Path) -> None:
             _files.remove_stale_temporaries(p.parent / m.group(1))
 
 
-def run_items(argvs: list[tuple[list[str], str]], root: str, threads: int | None,
+def run_items(argvs: list[tuple[list[str], list[str]]], root: str, threads: int | None,
               max_memory: int | None) -> list[dict[str, Any]]:  # fmt: skip
     """Run a chunk of items one after the other here (in a worker): :func:`run_item` for each."""
-    return [run_item(argv, target, root, threads, max_memory) for argv, target in argvs]
+    return [run_item(argv, targets, root, threads, max_memory) for argv, targets in argvs]
 
 
 #: Items are run singly until 2 per worker have finished; their lower-quartile time then sets
@@ -363,7 +366,8 @@ def _schedule(
         names_of[key] = [it.name for it in chunk]
         for it in chunk:
             attempt_of[it.name] = attempt
-        argvs = [(it.argv(root, extra=extra), str(it.outputs(root))) for it in chunk]
+        argvs = [(it.argv(root, extra=extra), [str(it.outputs(root)), *map(str, it.extra_outputs(root).values())])
+                 for it in chunk]  # fmt: skip
         return c.submit(run_items, argvs, str(root), threads, memory, key=key, pure=False)
 
     items = {it.name: it for it in todo}

@@ -25,23 +25,20 @@ from typing import Any
 __all__ = ["Item", "Spec", "load_spec"]
 
 #: Options the batch sets itself for every item: where it writes, its seed, its share of the
-#: machine, and files that only a single run asks for (a contact sheet of one item).
-RESERVED = (
-    "out",
-    "out_dir",
-    "prefix",
-    "seed",
-    "threads",
-    "max_memory",
-    "force",
-    "quiet",
-    "sheet",
-    "labels_out",
-    "model_out",
-    "overlay",
-    "preview",
-    "histograms",
-)
+#: machine.
+RESERVED = ("out", "out_dir", "prefix", "seed", "threads", "max_memory", "force", "quiet")
+
+#: A command's extra output files (a contact sheet, a preview, an intermediate map): ``true`` in
+#: ``params`` has each item write its own, named ``ITEM_OPTION`` + this suffix beside its output.
+EXTRA_OUTPUTS = {
+    "sheet": ".png",
+    "labels_out": ".png",
+    "model_out": "",
+    "overlay": ".png",
+    "preview": ".png",
+    "histograms": ".png",
+    "fragment_map": ".png",
+}
 
 #: Metavars of the options and positionals that name an input file or folder: a relative path
 #: there is taken from the spec file's folder (when that file exists), like ``inputs``.
@@ -83,10 +80,16 @@ class Item:
     options: tuple[str, ...] = field(repr=False)
     out_kind: str = field(repr=False)
     out_suffix: str = field(repr=False)
+    extras: tuple[str, ...] = field(default=(), repr=False)
 
     def outputs(self, out_dir: str | os.PathLike[str]) -> Path:
         """The item's ``--out`` file, or its ``--out-dir`` folder, inside ``out_dir``."""
         return Path(out_dir).absolute() / f"{self.name}{self.out_suffix}"
+
+    def extra_outputs(self, out_dir: str | os.PathLike[str]) -> dict[str, Path]:
+        """The extra files the spec asked for (``sheet: true``...), by option, inside ``out_dir``."""
+        root = Path(out_dir).absolute()
+        return {dest: root / f"{self.name}_{dest}{EXTRA_OUTPUTS[dest]}" for dest in self.extras}
 
     def argv(self, out_dir: str | os.PathLike[str], *, extra: Sequence[str] = ()) -> list[str]:
         """The ``phloem`` arguments of the single command-line run that makes this item.
@@ -102,6 +105,7 @@ class Item:
             self.input,
             *self.options,
             *extra,
+            *(a for dest, path in self.extra_outputs(out_dir).items() for a in (_dest_flag(dest), str(path))),
             f"--{self.out_kind}",
             out,
             "--seed",
@@ -240,8 +244,11 @@ def _path_value(a: argparse.Action, text: str, base: Path) -> str:
     return text
 
 
-def _options(p: argparse.ArgumentParser, job: str, params: Any, base: Path) -> tuple[list[str], dict[str, str]]:
-    """The option arguments of ``params``, and the positionals other than the input by dest."""
+def _options(
+    p: argparse.ArgumentParser, job: str, params: Any, base: Path
+) -> tuple[list[str], dict[str, str], list[str]]:
+    """The option arguments of ``params``, the positionals other than the input by dest, and
+    the extra outputs asked for (dests of :data:`EXTRA_OUTPUTS`)."""
     if params is None:
         params = {}
     if not isinstance(params, Mapping) or not all(isinstance(k, str) for k in params):
@@ -250,6 +257,7 @@ def _options(p: argparse.ArgumentParser, job: str, params: Any, base: Path) -> t
     known = sorted(_flag(a) for a in p._actions if a.option_strings and a.dest not in RESERVED and a.dest != "help")
     argv: list[str] = []
     extra: dict[str, str] = {}
+    asked: list[str] = []
     for key, value in params.items():
         a = _dest_of(p, key)
         if a is None:
@@ -258,6 +266,14 @@ def _options(p: argparse.ArgumentParser, job: str, params: Any, base: Path) -> t
             raise _fail(
                 f"params.{key}", "is set by the batch for each item (output, seed, threads, memory); leave it out"
             )
+        if a.dest in EXTRA_OUTPUTS:
+            if not isinstance(value, bool):
+                raise _fail(
+                    f"params.{key}", f"is named by the batch for each item; give true to write it, got {value!r}"
+                )
+            if value:
+                asked.append(a.dest)
+            continue
         if not a.option_strings:
             if a is positionals[0]:
                 raise _fail(f"params.{key}", "is the item's input; list it under inputs")
@@ -279,7 +295,11 @@ def _options(p: argparse.ArgumentParser, job: str, params: Any, base: Path) -> t
     for a in positionals[1:]:
         if a.dest not in extra and a.nargs not in ("?", "*"):
             raise _fail("params", f"'phloem {job}' needs {a.metavar}: give it as params.{a.dest}")
-    return argv, extra
+    return argv, extra, asked
+
+
+def _dest_flag(dest: str) -> str:
+    return "--" + dest.replace("_", "-")
 
 
 def _check_argv(p: argparse.ArgumentParser, job: str, argv: list[str]) -> None:
@@ -360,7 +380,7 @@ def load_spec(spec: str | os.PathLike[str] | Mapping[str, Any], *, base: str | o
     inputs = _inputs(data["inputs"], folder)
     seeds = _seeds(data["seeds"])
     params = dict(data.get("params") or {})
-    options, extra = _options(p, job, params, folder)
+    options, extra, asked = _options(p, job, params, folder)
     outs = [a for a in p._actions if a.dest in ("out", "out_dir") and a.option_strings]
     if not outs:
         raise _fail("job", f"'phloem {job}' writes no --out or --out-dir; a batch cannot run it")
@@ -369,7 +389,7 @@ def load_spec(spec: str | os.PathLike[str] | Mapping[str, Any], *, base: str | o
     # the other positionals go right after the input, in the parser's order
     positionals = [a for a in p._actions if not a.option_strings and a.dest != "help"][1:]
     options = [extra[a.dest] for a in positionals if a.dest in extra] + options
-    probe = [inputs[0], *options, _flag(out), f"probe{suffix}"]
+    probe = [inputs[0], *options, *(a for d in asked for a in (_dest_flag(d), "x")), _flag(out), f"probe{suffix}"]
     _check_argv(p, job, probe)
     digest = hashlib.sha256(json.dumps({"job": job, "params": params}, sort_keys=True).encode()).hexdigest()[:8]
     slug = job.replace(" ", "-")
@@ -382,5 +402,6 @@ def load_spec(spec: str | os.PathLike[str] | Mapping[str, Any], *, base: str | o
         names[stem] = inp
         for s in seeds:
             name = f"{stem}-{slug}-{digest}-s{s}"
-            items.append(Item(name, job, inp, s, params, tuple(options), out.dest.replace("_", "-"), suffix))
+            items.append(Item(name, job, inp, s, params, tuple(options), out.dest.replace("_", "-"), suffix,
+                              tuple(asked)))  # fmt: skip
     return Spec(job=job, inputs=inputs, params=params, seeds=seeds, items=items)
