@@ -230,3 +230,37 @@ def test_grow_fits_once_per_skeleton_and_options_in_a_process(tmp_path, monkeypa
 
     _common._KEPT.clear()  # fresh, as in a new process: the same skeleton
     assert grow("e.json", "--seed", "6") == Skeleton.load(tmp_path / "b.json")
+
+
+def test_run_traces_and_fits_once_per_input_and_options_in_a_process(tmp_path, monkeypatch):
+    # many seeds of one input (a batch worker): traced and fitted once, each seed's files unchanged
+    from phloem.branching import pipeline
+    from phloem.cli import _common
+
+    _dark_river_png(tmp_path / "river.png")
+    _common._KEPT.clear()
+    calls = []
+    real_trace, real_fit = pipeline.trace, pipeline.fit_models
+    monkeypatch.setattr(pipeline, "trace", lambda *a, **k: calls.append("trace") or real_trace(*a, **k))
+    monkeypatch.setattr(pipeline, "fit_models", lambda *a, **k: calls.append("fit") or real_fit(*a, **k))
+    base = ["branching", "run", str(tmp_path / "river.png"), "--kind", "dark", "--sigmas", "2", "3", "-q"]
+
+    def files(name: str, seed: str, *extra: str) -> dict[str, bytes]:
+        assert main([*base, "--out", str(tmp_path / name / "new.png"), "--seed", seed, *extra]) == 0
+        return {p.name: p.read_bytes() for p in sorted((tmp_path / name).iterdir())}
+
+    (tmp_path / "a").mkdir(), (tmp_path / "b").mkdir(), (tmp_path / "c").mkdir(), (tmp_path / "d").mkdir()
+    a = files("a", "1")
+    b = files("b", "2")
+    assert calls == ["trace", "fit"] and a["new.png"] != b["new.png"]
+    files("c", "1", "--order", "2")  # another model order: fitted (and traced) again
+    assert calls == ["trace", "fit"] * 2
+    _common._KEPT.clear()  # a fresh process: the same files, and the same recorded parameters
+    d = files("d", "2")
+    assert sorted(d) == sorted(b)
+    for name in d:
+        if name.endswith((".sidecar.json", ".png.json")):
+            got, want = (json.loads(x[name])["parameters"] for x in (d, b))
+            assert got.pop("out") != want.pop("out") and got == want, name  # all but the folder
+        else:
+            assert d[name] == b[name], name

@@ -117,6 +117,7 @@ def synthesize(
     threads: int | None = None,
     progress: Progress = None,
     max_memory: int | None = None,
+    models: tuple[BendingModel, FurcationModel | None] | None = None,
 ) -> SynthesisResult:
     """A new image of a branching structure like the one in ``image`` (Sibbing et al. 2010).
 
@@ -158,6 +159,10 @@ def synthesize(
     max_memory : int, optional
         Refuse the job with :class:`phloem.MemoryLimitError` if its estimated peak memory is
         over this many bytes (default None: 75% of the machine's memory; see ``docs/hardening/memory.md``).
+    models : (BendingModel, FurcationModel or None), optional
+        Models fitted to ``skeleton`` before (an earlier result's ``bending`` and ``furcation``),
+        used instead of fitting them again: many seeds of one input fit once. ``h``, ``order``,
+        ``m``, ``n_best`` and ``course`` are then not used.
 
     Returns
     -------
@@ -201,7 +206,17 @@ def synthesize(
     else:
         raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
     tick(1)
-    bending, furcation = fit_models(source, h=h, order=order, m=m, n_best=n_best, course=course)
+    if models is None:
+        bending, furcation = fit_models(source, h=h, order=order, m=m, n_best=n_best, course=course)
+    elif (
+        isinstance(models, tuple)
+        and len(models) == 2
+        and isinstance(models[0], BendingModel)
+        and (models[1] is None or isinstance(models[1], FurcationModel))
+    ):
+        bending, furcation = models
+    else:
+        raise TypeError("models: expected (BendingModel, FurcationModel or None), as a result's bending and furcation")
     tick(2)
     target = grow(
         bending, furcation, size=shape, seed=seed, generations=generations, max_length=max_length,

@@ -306,15 +306,29 @@ def save(args: argparse.Namespace, command: str, image: np.ndarray, **details: A
 _KEPT: dict[str, tuple[tuple[Any, ...], Any]] = {}
 
 
+def stamp(files: Sequence[Path], options: tuple[Any, ...]) -> tuple[Any, ...]:
+    """A key for :func:`recall`: ``files`` by path, size and modification time, and ``options``."""
+    return (tuple((str(f.absolute()), f.stat().st_size, f.stat().st_mtime_ns) for f in files), options)
+
+
+def recall(kind: str, key: tuple[Any, ...]) -> Any:
+    """What :func:`remember` kept last for ``kind`` under ``key`` in this process, or None."""
+    last = _KEPT.get(kind)
+    return last[1] if last is not None and last[0] == key else None
+
+
+def remember(kind: str, key: tuple[Any, ...], value: Any) -> None:
+    """Keep ``value`` as the last ``kind`` made from ``key`` (one per kind)."""
+    _KEPT[kind] = (key, value)
+
+
 def kept(kind: str, files: Sequence[Path], options: tuple[Any, ...], make: Callable[[], T]) -> T:
     """``make()``, or what it gave last time in this process for the same ``files`` (by path,
     size and modification time) and ``options``. A batch worker runs many items of one model;
     the commands never change what they read, so sharing it is safe."""
-    key = (tuple((str(f.absolute()), f.stat().st_size, f.stat().st_mtime_ns) for f in files), options)
-    last = _KEPT.get(kind)
-    if last is not None and last[0] == key:
-        value: T = last[1]
-        return value
-    made = make()
-    _KEPT[kind] = (key, made)
-    return made
+    key = stamp(files, options)
+    value: T | None = recall(kind, key)
+    if value is None:
+        value = make()
+        remember(kind, key, value)
+    return value

@@ -19,11 +19,14 @@ from ._common import (
     parse_size,
     positive,
     preflight,
+    recall,
+    remember,
     run,
     save,
     sidecar,
     stage,
     stage_image,
+    stamp,
     transaction,
 )
 
@@ -284,15 +287,23 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
     img = io.read_image(args.input, max_pixels=args.max_pixels)
     source = None if args.skeleton is None else branching.Skeleton.load(args.skeleton)
     valid = _valid(args, img)
+    # tracing and fitting are seconds on real inputs and the same for every seed: a batch worker
+    # does them once per input and options, and grows and renders each seed from them
+    read = [Path(p) for p in (args.input, args.skeleton) if p is not None]
+    if args.valid not in ("auto", "none"):
+        read.append(Path(args.valid))
+    key = stamp(read, (_trace_kwargs(args), args.valid, args.h, args.order, args.m, args.n_best, args.course))
+    prior = recall("branching run models", key)
     res = run(
         "branching run", args,
         lambda bar: branching.synthesize(
-            img, source, size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, order=args.order,
+            img, source if prior is None else prior[0], models=None if prior is None else prior[1:], size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, order=args.order,
             m=args.m, n_best=args.n_best, course=args.course, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize,
             guide=_guide(args.guide, args), valid=valid, render_options=_render_kwargs(args),
             threads=args.threads, progress=bar, max_memory=args.max_memory,
         ),
     )  # fmt: skip
+    remember("branching run models", key, (res.source, res.bending, res.furcation))
     written = {role: str(p) for role, p in files.items()}
     if source is None:
         _resolve_kind(args, img)
