@@ -146,6 +146,7 @@ def local_cluster(workers: int | None = None) -> Any:
     task gets ``cores // workers`` threads and ``1/workers`` of phloem's memory budget
     (:func:`phloem._memory.default_limit`), which is also the worker's Dask memory limit.
     """
+    import dask
     from distributed import LocalCluster
 
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
@@ -156,11 +157,9 @@ def local_cluster(workers: int | None = None) -> Any:
     # in this process's own environment before spawning; every later subprocess of the caller
     # would inherit them, so the caller's environment is put back once the workers exist.
     saved = dict(os.environ)
-    import dask
-
     try:
-        # Dask's default MALLOC_TRIM_THRESHOLD_=65536 for workers makes glibc map and fault in
-        # every large array afresh: a tree variation at 256² takes 55 ms instead of 41 ms
+        # Dask's default MALLOC_TRIM_THRESHOLD_=65536 makes glibc map and fault in every large
+        # array afresh, which slows array-heavy items (docs/pipelines/batch.md#speed)
         with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
             return LocalCluster(  # type: ignore[no-untyped-call]
                 n_workers=n,
@@ -331,12 +330,12 @@ _TASK_SECONDS = 0.5
 
 def _chunk_size(seconds: list[float], remaining: int, workers: int) -> int:
     """Items per task for the rest of a batch: enough to make a task about ``_TASK_SECONDS``
-    (a task costs the scheduler some 20 ms of worker time), but at least 4 tasks per worker
-    left, so that no worker idles long at the end."""
+    (each task has a fixed scheduling cost), but at least 4 tasks per worker left, so that no
+    worker idles long at the end."""
     if not seconds or remaining <= 0:
         return 1
-    # the lower quartile: each worker's first item also reads the shared model (seconds), and the
-    # workers read it side by side, so up to half of the first results are such reads
+    # the lower quartile: each worker's first item also reads the shared model, and the workers
+    # read it side by side, so up to half of the first results are such reads
     per_item = max(float(np.percentile(seconds, 25)), 1e-3)
     return max(1, min(int(_TASK_SECONDS / per_item), remaining // (4 * workers), 64))
 

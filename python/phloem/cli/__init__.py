@@ -118,9 +118,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"phloem {name}: error: {_in_flags(_message(e), ap, args)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        # a batch keeps every item it finished (each is written whole); the others write nothing
-        what = ("finished items are kept; run it again to go on" if args.command == "batch"
-                else "nothing was written")  # fmt: skip
+        what = getattr(args, "interrupted", "nothing was written")  # a command may keep finished work
         print(f"phloem {args.command}: interrupted; {what}", file=sys.stderr)
         return 130
     for note in tx.notes:

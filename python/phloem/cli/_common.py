@@ -269,7 +269,7 @@ def sidecar(
 #: What a sidecar's ``parameters`` leave out: argparse's own entries, and the options about this
 #: machine or the terminal, or recorded apart (seed, threads).
 NOT_PARAMETERS = ("help", "func", "command", "action", "quiet", "force", "threads", "seed", "max_pixels", "max_memory",
-                  "from_json", "library_cache")  # fmt: skip
+                  "from_json", "library_cache", "interrupted")  # fmt: skip
 
 
 def params(args: argparse.Namespace, skip: Sequence[str] = ()) -> dict[str, Any]:

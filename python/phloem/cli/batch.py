@@ -57,4 +57,5 @@ def add_parsers(sub: Any) -> None:
                        help="run on a running Dask scheduler, e.g. tcp://10.0.0.5:8786, instead of a local cluster; "
                             "its workers must see the inputs and DIR at the same paths")  # fmt: skip
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar and no summary line")
-    p.set_defaults(func=_cmd_batch)
+    # finished items stay on disk, each written whole
+    p.set_defaults(func=_cmd_batch, interrupted="finished items are kept; run it again to go on")

@@ -239,7 +239,7 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     shape = args.size or source.shape
     if shape is None:
         raise ValueError("size: the skeleton file has no shape; pass --size WxH")
-    # fitting is seconds on real skeletons (2-4 s); a batch worker fits once per skeleton and options
+    # fitting takes seconds on real skeletons; a batch worker fits once per skeleton and options
     options = (args.h, args.order, args.m, args.n_best, args.course)
     bend, fur = kept("branching models", [Path(args.skeleton)], options, lambda: branching.fit_models(
         source, h=args.h, order=args.order, m=args.m, n_best=args.n_best, course=args.course))  # fmt: skip

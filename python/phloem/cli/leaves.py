@@ -171,8 +171,8 @@ def _cmd_leaves_analyze(args: argparse.Namespace) -> None:
 
 
 def _load_model(folder: Path) -> leaves.LeafModel:
-    # a batch worker runs many items of one model, and reading one is seconds (12 exemplars at
-    # 512²: 1.9 s); the CLI never changes a model, so the process keeps the last one it read
+    # a batch worker runs many items of one model, and reading one takes seconds; the CLI never
+    # changes a model, so the process keeps the last one it read
     try:
         files = sorted(folder.iterdir())
     except OSError:
