@@ -39,6 +39,54 @@ def test_save_load_prepared_round_trip(library, tmp_path: Path):
         trees.Library.load_prepared(tmp_path / "none")
 
 
+def test_load_prepared_reads_only_the_trees_used(library, tmp_path: Path, monkeypatch):
+    """A variation reads its two exemplars from the folder, not the whole library; a tree
+    damaged in the archive raises a one-line error when it is first used."""
+    import pickle
+    import zipfile
+
+    from phloem.trees import _stored
+
+    library.save(tmp_path / "lib")
+    back = trees.Library.load_prepared(tmp_path / "lib")
+    read: list[int] = []
+    real = _stored.StoredTrees._read
+
+    def counting(self, i):
+        read.append(i)
+        return real(self, i)
+
+    monkeypatch.setattr(_stored.StoredTrees, "_read", counting)
+    v = trees.variation(back, seed=3)
+    assert sorted(read) == sorted(i for i in v.sources if i != 0)  # tree 0 is read on load
+    assert np.array_equal(v.image, trees.variation(library, seed=3).image)
+    trees.variation(back, seed=3)
+    assert len(read) == len([i for i in v.sources if i != 0])  # kept once read
+    assert back[-1] is back.trees[3] and [t.pins for t in back.trees[1:3]] == [t.pins for t in library.trees[1:3]]
+    # a pickled library (e.g. sent to another process) carries its trees
+    again = pickle.loads(pickle.dumps(back))
+    assert isinstance(again.trees, list) and all(np.array_equal(a.image, b.image) for a, b in zip(again, library))
+    # the archive with tree 2's image replaced by one of another size
+    src = zipfile.ZipFile(tmp_path / "lib" / "trees.npz")
+    members = {n: src.read(n) for n in src.namelist()}
+    src.close()
+    members["image_2.npy"] = members["trunk_2.npy"]
+    with zipfile.ZipFile(tmp_path / "lib" / "trees.npz", "w") as z:
+        for n, data in members.items():
+            z.writestr(n, data)
+    damaged = trees.Library.load_prepared(tmp_path / "lib")
+    assert damaged[1].pins == library[1].pins
+    with pytest.raises(ValueError, match=r"^path: .*trees.npz cannot be read as a prepared tree library \(tree 2: "):
+        damaged[2]
+    # a tree missing from the archive is refused on load
+    del members["outline_3.npy"]
+    with zipfile.ZipFile(tmp_path / "lib" / "trees.npz", "w") as z:
+        for n, data in members.items():
+            z.writestr(n, data)
+    with pytest.raises(ValueError, match=r"^path: .*trees.npz cannot be read as a prepared tree library \(KeyError\)"):
+        trees.Library.load_prepared(tmp_path / "lib")
+
+
 def test_cache_reused_then_rebuilt_when_stale(ragged_tree, tmp_path: Path, monkeypatch):
     src = tmp_path / "src"
     src.mkdir()

@@ -3,12 +3,9 @@
 from __future__ import annotations
 
 import hashlib
-import io as _io
 import json
 import os
 import re
-import zipfile
-import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,6 +16,7 @@ import numpy as np
 from .. import _files, _json, _memory, io
 from .._api import warn_deprecated
 from .._validate import check_int
+from ._stored import TREE_ARRAYS, StoredTrees
 from .atlas import split_atlas
 from .classifier import TrunkClassifier
 from .preprocessing import Tree, prepare
@@ -44,15 +42,22 @@ class Library:
 
     Attributes
     ----------
-    trees : list of Tree
+    trees : sequence of Tree
+        A list; for a library read from a folder (:meth:`load_prepared`, ``load(cache=)``) a
+        sequence that reads each tree from the folder when it is first used.
     names : list of str
         One name per tree (file name, with ``[i]`` for the i-th tree of an atlas).
     """
 
-    trees: list[Tree]
+    trees: Sequence[Tree]
     names: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
+        if isinstance(self.trees, StoredTrees):  # checked tree by tree as they are read
+            self.names = list(self.names)
+            if len(self.names) != len(self.trees):
+                raise ValueError(f"names: expected {len(self.trees)} names, got {len(self.names)}")
+            return
         self.trees = list(self.trees)
         if not self.trees:
             raise ValueError("trees: a library needs at least one tree")
@@ -153,7 +158,7 @@ class Library:
             "dilation": np.array([t.dilation for t in self.trees], np.int64),
         }
         for i, t in enumerate(self.trees):
-            for name in _TREE_ARRAYS:
+            for name in TREE_ARRAYS:
                 arrays[f"{name}_{i}"] = getattr(t, name)
         return {"library.json": (json.dumps(meta, indent=1) + "\n").encode(), "trees.npz": _files.npz_bytes(arrays)}
 
@@ -195,6 +200,8 @@ class Library:
         ------
         ValueError
             One line naming the file, if the folder is missing, foreign, damaged or stale.
+            The trees are read when first used (a variation reads its few exemplars, not the
+            library), so a tree damaged after the first raises then.
         """
         folder = Path(path)
         if not folder.is_dir():
@@ -215,23 +222,7 @@ class Library:
             a, b, c = (int(v) for v in meta["split"])
         except (KeyError, TypeError, ValueError):
             raise ValueError(f"path: {folder / 'library.json'} lacks a field or has one of the wrong type") from None
-        p = folder / "trees.npz"
-        try:
-            # read whole first: np.load leaves the file open when the archive is corrupt
-            with np.load(_io.BytesIO(p.read_bytes()), allow_pickle=False) as z:
-                pins, dilation = z["pins"], z["dilation"]
-                trees_ = [
-                    Tree(
-                        **{name: z[f"{name}_{i}"] for name in _TREE_ARRAYS},
-                        pins=(int(pins[i, 0]), int(pins[i, 1]), int(pins[i, 2])),
-                        split=(a, b, c),
-                        dilation=int(dilation[i]),
-                    )
-                    for i in range(n)
-                ]
-        except (OSError, KeyError, IndexError, ValueError, zipfile.BadZipFile, EOFError, zlib.error) as e:
-            raise ValueError(f"path: {p} cannot be read as a prepared tree library ({type(e).__name__})") from None
-        return cls(trees_, names)
+        return cls(StoredTrees(folder / "trees.npz", n, (a, b, c)), names)
 
     @classmethod
     def load(
@@ -403,7 +394,3 @@ class Library:
         if not trees_:
             raise ValueError(f"path: no usable tree in {folder}")
         return cls(trees_, names)
-
-
-#: The array fields of :class:`Tree` that :meth:`Library.save` stores per tree.
-_TREE_ARRAYS = ("image", "trunk", "contour", "resampled", "simplified", "outline")
