@@ -445,3 +445,18 @@ def test_image_size_reads_the_header_as_read_image_would(tmp_path: Path) -> None
     assert image_size(turned) == read_image(turned).shape[:2] == (10, 6)
     with pytest.raises(ImageReadError, match="over the limit of 10"):
         image_size(plain, max_pixels=10)
+
+
+def test_file_digest_sees_a_rewrite_that_keeps_size_and_mtime(tmp_path):
+    """Digests are kept per process (a batch worker hashes the same inputs for every item), but a
+    file rewritten in place to the same size, with its mtime set back, is hashed again."""
+    f = tmp_path / "a.bin"
+    f.write_bytes(b"abcd")
+    st = f.stat()
+    first = phloem.io.file_digest(f)
+    assert phloem.io.file_digest(f) == first
+    f.write_bytes(b"abce")
+    os.utime(f, ns=(st.st_atime_ns, st.st_mtime_ns))
+    assert f.stat().st_size == st.st_size and f.stat().st_mtime_ns == st.st_mtime_ns
+    assert phloem.io.file_digest(f) != first
+    assert phloem.io.file_digest(tmp_path) != ""  # a folder's digest goes through its files'

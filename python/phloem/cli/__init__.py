@@ -10,6 +10,7 @@ parameters they set (``docs/conventions.md``).
 from __future__ import annotations
 
 import argparse
+import functools
 import re
 import sys
 import warnings
@@ -98,9 +99,16 @@ def _from_json(argv: list[str]) -> list[str]:
     return ["replay", sidecar, "--expect", " ".join(words), *rest]
 
 
+@functools.cache
+def _parser() -> argparse.ArgumentParser:
+    # built once per process: building every sub-command's options costs more than a small
+    # item's work when a batch worker runs hundreds of commands (parsing does not change it)
+    return build_parser()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``phloem`` command; returns the exit status."""
-    ap = build_parser()
+    ap = _parser()
     argv = _from_json(list(sys.argv[1:] if argv is None else argv))
     args = ap.parse_args(join_negative_values(argv))
     name = f"{args.command} {args.action}" if getattr(args, "action", None) else args.command
