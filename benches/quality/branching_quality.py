@@ -78,6 +78,7 @@ class Result:
     share_in: float = math.nan
     share_out: float = math.nan
     drift: float = math.nan
+    drift_spread: float = math.nan
     heading_in: float = math.nan
     heading_out: float = math.nan
     two_level: float | None = None
@@ -88,6 +89,7 @@ class Result:
     seconds: float = math.nan
     error: str = ""
     passed: dict[str, bool] = field(default_factory=dict)
+    drift_within_spread: bool = False
 
 
 def load(path: Path, max_side: int = 0) -> tuple[np.ndarray, bool]:
@@ -176,6 +178,8 @@ def measure(
         r.drift = drift(src, tgt)
     except ValueError as e:
         r.error = str(e)
+    with contextlib.suppress(ValueError):  # the input's own sampling spread: its two halves
+        r.drift_spread = drift(*input_halves(src))
     if mask:
         r.two_level = two_level_fraction(res.image, img)
     r.angle, r.angle_spread, r.thickness, r.thickness_spread = _hist_distances(res.bending, tgt)
@@ -186,6 +190,9 @@ def measure(
         "two_level": r.two_level is None or r.two_level >= TWO_LEVEL_MIN,
         "histograms": not (r.angle >= 1.5 * r.angle_spread or r.thickness >= r.thickness_spread),
     }
+    # not a mark of the issue: drift against the larger of its mark and the input's half-to-half
+    # spread, which on inputs with few long branches exceeds the mark (see the quality page)
+    r.drift_within_spread = r.drift <= max(DRIFT_MAX, r.drift_spread if not math.isnan(r.drift_spread) else 0.0)
     return r
 
 
@@ -199,7 +206,7 @@ def _f(x: float | None, fmt: str = ".2f") -> str:
 
 def table(results: list[Result]) -> str:
     head = (
-        "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 | heading in → out (rad) "
+        "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input halves) | heading in → out (rad) "
         "| two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
     lines = [head, "|" + "---|" * 12]
@@ -211,7 +218,7 @@ def table(results: list[Result]) -> str:
         tl = _f(None if r.two_level is None else 100 * r.two_level, ".1f") + ("%" if r.two_level is not None else "")
         lines.append(
             f"| {r.input} | {r.seed} | {size} | {_f(r.f1)} ({_f(r.precision)}/{_f(r.recall)}) "
-            f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} | {_f(r.heading_in)} → {_f(r.heading_out)} "
+            f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} ({_f(r.drift_spread)}) | {_f(r.heading_in)} → {_f(r.heading_out)} "
             f"| {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
             f"| {_f(r.seconds, '.1f')} | {fails} |"
         )
@@ -228,6 +235,8 @@ def summary(results: list[Result]) -> str:
         lines.append(f"| {n} | " + " | ".join(cells) + " |")
     total = sum(all(r.passed.values()) for r in results)
     lines.append(f"\nruns passing every mark: {total}/{len(results)}")
+    spread = sum(all(ok or (k == "drift" and r.drift_within_spread) for k, ok in r.passed.items()) for r in results)
+    lines.append(f"with drift against max({DRIFT_MAX}, the input's half-to-half drift): {spread}/{len(results)}")
     return "\n".join(lines)
 
 

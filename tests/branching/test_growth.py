@@ -474,3 +474,31 @@ def test_forest_output_keeps_the_input_tree_sizes():
             tree.append(i if b.parent is None else tree[b.parent[0]])
             size[tree[i]] = size.get(tree[i], 0.0) + b.length()
         assert abs(max(size.values()) / sum(size.values()) - want) < 0.15
+
+
+def test_blocked_children_do_not_end_a_tree_short_of_its_template(monkeypatch):
+    # Child starts fail in runs of 20 (as crossings or the border would block a crowded region),
+    # so now and then a queued or topped-up child cannot start at any vertex: the tree must
+    # keep topping up its own branches until it has its template's length, not end at the first
+    # child that could not start once its queue was empty (a traced delta came out as a few large
+    # trees instead of one).
+    from phloem.branching import growth as growth_module
+
+    src = synthetic_skeleton(1, length=500.0, furcations=12)  # 13 branches, a fifth of the length in the stem
+    bend, fur = BendingModel.fit(src, h=2.0), FurcationModel.fit(src, h=2.0)
+    real = growth_module._new_branch
+    calls = {"n": 0}
+
+    def runs_blocked(world, grower, start, heading, r0, alpha, r, parent, *args, **kwargs):
+        if parent is not None:
+            calls["n"] += 1
+            if (calls["n"] // 20) % 2 == 0:
+                return None
+        return real(world, grower, start, heading, r0, alpha, r, parent, *args, **kwargs)
+
+    monkeypatch.setattr(growth_module, "_new_branch", runs_blocked)
+    template = input_trees(bend.source)[0].length
+    for seed in range(4):
+        out = grow(bend, fur, size=src.shape, seed=seed, max_length="input")
+        assert sum(b.parent is None for b in out.branches) == 1
+        assert out.total_length() > 0.9 * template

@@ -542,7 +542,8 @@ def _top_up(
     """A further furcation ``(branch, vertex, child generation)`` on the tree ``out[first:]``.
 
     The parent is drawn in proportion to its length among the tree's branches whose children's
-    generation the template has; the vertex is the furcation model's best free one.
+    generation the template has (the next draw when it has no free vertex); the vertex is the
+    furcation model's best free one.
     """
     gens: list[int] = []
     for b in out[first:]:
@@ -555,11 +556,16 @@ def _top_up(
     if not ok:
         return None
     w = np.array([out[first + i].length() for i in ok])
-    i = ok[int(rng.choice(len(ok), p=w / w.sum()))]
-    pi = first + i
-    kids = [b.parent[1] for b in out[first:] if b.parent is not None and b.parent[0] == pi]
-    picked = furcation.pick(out[pi], 1, existing=tried.get(pi, []) + kids, min_spacing=min_spacing)
-    return (pi, picked[0], gens[i] + 1) if picked else None
+    # parents in a random order weighted by length: one without a free vertex left (every vertex
+    # tried or too near a child) must not end the tree while others have room
+    for j in rng.choice(len(ok), size=len(ok), replace=False, p=w / w.sum()):
+        i = ok[int(j)]
+        pi = first + i
+        kids = [b.parent[1] for b in out[first:] if b.parent is not None and b.parent[0] == pi]
+        picked = furcation.pick(out[pi], 1, existing=tried.get(pi, []) + kids, min_spacing=min_spacing)
+        if picked:
+            return pi, picked[0], gens[i] + 1
+    return None
 
 
 def _input_length(bending: BendingModel, shape: tuple[int, int]) -> float:
@@ -873,47 +879,57 @@ def grow(
                 progress(len(out), len(out) + len(queue) - qpos)
             current = None
             retries = 0
-            if qpos == len(queue) and tree is not None and furcation is not None and top_ups < _TOP_UPS:
-                # Blocked children leave the tree short of its template: more furcations on the
-                # tree's own branches, rather than a new tree, keep the input's connectivity.
-                short = tree.length - (world.total_length - start_length)
-                if not stop and short > 0.05 * tree.length:
-                    top_ups += 1
-                    extra = _top_up(out, first_branch, tree, furcation, tried, rng, generations, min_spacing)
-                    if extra is not None:
-                        pi, v, gen = extra
-                        queue.append((pi, v, gen, *template_branch(tree, gen)))
-            while not stop and current is None and qpos < len(queue):
-                pi, v, gen, goal, d = queue[qpos]
-                assert furcation is not None
-                pb = out[pi]
-                tried.setdefault(pi, []).append(v)
-                for j in furcation.child_start(pb, v, rng)[: max(furcation.c, 4)]:
-                    hd = _tangent(pb, v) + float(furcation.offsets[j])
-                    current = _new_branch(
-                        world,
-                        grower,
-                        pb.points[v],
-                        hd,
-                        float(furcation.child_r0[j]),
-                        furcation.child_alpha[j],
-                        furcation.child_r[j],
-                        (pi, v),
-                        gen,
-                        len(out),
-                        partial=False,
-                    )
-                    if current is not None:
-                        break
-                if current is None and retries < _CHILD_RETRIES:
-                    # blocked here (crossing, border): the same child from the parent's next-best vertex
-                    alt = furcation.pick(pb, 1, existing=tried[pi], min_spacing=min_spacing)
-                    if alt:
-                        queue[qpos] = (pi, alt[0], gen, goal, d)
-                        retries += 1
-                        continue
-                qpos += 1
-                retries = 0
+            while True:
+                added = False
+                can_top_up = tree is not None and furcation is not None and top_ups < _TOP_UPS
+                qpos_was_end = qpos == len(queue)
+                if qpos_was_end and top_ups < _TOP_UPS and tree is not None and furcation is not None:
+                    # Blocked children leave the tree short of its template: more furcations on the
+                    # tree's own branches, rather than a new tree, keep the input's connectivity.
+                    short = tree.length - (world.total_length - start_length)
+                    if not stop and short > 0.05 * tree.length:
+                        top_ups += 1
+                        extra = _top_up(out, first_branch, tree, furcation, tried, rng, generations, min_spacing)
+                        if extra is not None:
+                            pi, v, gen = extra
+                            queue.append((pi, v, gen, *template_branch(tree, gen)))
+                            added = True
+                while not stop and current is None and qpos < len(queue):
+                    pi, v, gen, goal, d = queue[qpos]
+                    assert furcation is not None
+                    pb = out[pi]
+                    tried.setdefault(pi, []).append(v)
+                    for j in furcation.child_start(pb, v, rng)[: max(furcation.c, 4)]:
+                        hd = _tangent(pb, v) + float(furcation.offsets[j])
+                        current = _new_branch(
+                            world,
+                            grower,
+                            pb.points[v],
+                            hd,
+                            float(furcation.child_r0[j]),
+                            furcation.child_alpha[j],
+                            furcation.child_r[j],
+                            (pi, v),
+                            gen,
+                            len(out),
+                            partial=False,
+                        )
+                        if current is not None:
+                            break
+                    if current is None and retries < _CHILD_RETRIES:
+                        # blocked here (crossing, border): the same child from the parent's next-best vertex
+                        alt = furcation.pick(pb, 1, existing=tried[pi], min_spacing=min_spacing)
+                        if alt:
+                            queue[qpos] = (pi, alt[0], gen, goal, d)
+                            retries += 1
+                            continue
+                    qpos += 1
+                    retries = 0
+                # children that could not start (queued or topped up) must not end a tree that is
+                # still short: top up again until one starts, the tree is long enough or no
+                # branch has room
+                if current is not None or stop or not can_top_up or (qpos_was_end and not added):
+                    break
         # a tree whose stem could not grow beyond its copied start counts as a failed placement
         failures = failures + 1 if stalled else 0
         if failures >= 8:
