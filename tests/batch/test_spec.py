@@ -99,3 +99,24 @@ def test_run_argument_errors(tmp_path: Path):
     (tmp_path / "file").write_text("")
     with pytest.raises(ValueError, match=r"^out_dir: .*file exists and is not a folder"):
         run(spec, out_dir=tmp_path / "file")
+
+
+def test_shared_cache_of_a_trees_batch(tmp_path: Path):
+    """A trees batch gives every item one library cache: the out folder's, or the one params name."""
+    out = tmp_path / "out"
+    spec = load_spec({"job": "trees", "inputs": [BRICK], "seeds": [0, 1], "params": {"size": 32, "n-variations": 1}})
+    extra, cache = spec.shared_cache(out)
+    assert extra == ["--library-cache", str(out / ".phloem-cache")] and cache == out / ".phloem-cache"
+    assert all(it.argv(out, extra=extra).count("--library-cache") == 1 for it in spec.items)
+    mine = load_spec(
+        {
+            "job": "trees",
+            "inputs": [BRICK],
+            "seeds": [0],
+            "params": {"size": 32, "n-variations": 1, "library-cache": str(tmp_path / "k")},
+        }
+    )
+    assert mine.shared_cache(out) == ([], tmp_path / "k")
+    assert load_spec({"job": "synthesize", "inputs": [BRICK], "seeds": [0], "params": {"size": 8}}).shared_cache(
+        out
+    ) == ([], None)

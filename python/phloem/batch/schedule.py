@@ -267,16 +267,8 @@ def run(
     summary = Summary(total=len(spec.items), manifest=manifest.path)
     todo = [it for it in spec.items if not manifest.verified(done.get(it.name))]
     summary.skipped = summary.total - len(todo)
-    extra: list[str] = []
-    given = {k.lstrip("-").replace("-", "_") for k in spec.params}
-    cache: Path | None = None
-    if spec.cache_option is not None:
-        # a prepared model shared by all items: built by the first, loaded by the others
-        flag = f"--{spec.cache_option.replace('_', '-')}"
-        if spec.cache_option not in given:
-            extra = [flag, str(root / ".phloem-cache")]
-        argv = spec.items[0].argv(root, extra=extra) if spec.items else []
-        cache = Path(argv[argv.index(flag) + 1]) if flag in argv else None
+    # a prepared model shared by all items: built by the first, loaded by the others
+    extra, cache = spec.shared_cache(root)
 
     def report() -> None:
         if progress is not None:

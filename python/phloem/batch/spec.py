@@ -139,6 +139,18 @@ class Spec:
         """The option (dest) of the job's prepared-model cache, if it has one."""
         return CACHED_JOBS.get(self.job)
 
+    def shared_cache(self, out_dir: Path) -> tuple[list[str], Path | None]:
+        """The options a batch adds to every item so that all share the job's prepared-model
+        cache (``--library-cache OUT_DIR/.phloem-cache`` unless ``params`` names one), and that
+        cache's folder; ``([], None)`` for a job without one."""
+        if self.cache_option is None:
+            return [], None
+        flag = f"--{self.cache_option.replace('_', '-')}"
+        given = {k.lstrip("-").replace("-", "_") for k in self.params}
+        extra = [] if self.cache_option in given else [flag, str(out_dir / ".phloem-cache")]
+        argv = self.items[0].argv(out_dir, extra=extra) if self.items else []
+        return extra, (Path(argv[argv.index(flag) + 1]) if flag in argv else None)
+
 
 def _fail(key: str, what: str) -> ValueError:
     return ValueError(f"{key}: {what}")
