@@ -493,8 +493,8 @@ def file_digest(path: str | os.PathLike[str]) -> str:
             h.update(block)
     if len(_digests) >= 4096:
         _digests.clear()
-    _digests[key] = h.hexdigest()
-    return _digests[key]
+    digest = _digests[key] = h.hexdigest()
+    return digest
 
 
 _digests: dict[tuple[Any, ...], str] = {}

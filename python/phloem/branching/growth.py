@@ -883,7 +883,8 @@ def grow(
                 added = False
                 can_top_up = tree is not None and furcation is not None and top_ups < _TOP_UPS
                 qpos_was_end = qpos == len(queue)
-                if qpos_was_end and top_ups < _TOP_UPS and tree is not None and furcation is not None:
+                if qpos_was_end and can_top_up:
+                    assert tree is not None and furcation is not None
                     # Blocked children leave the tree short of its template: more furcations on the
                     # tree's own branches, rather than a new tree, keep the input's connectivity.
                     short = tree.length - (world.total_length - start_length)

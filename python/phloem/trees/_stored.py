@@ -1,9 +1,9 @@
 """The trees of a saved library, each read from its ``trees.npz`` on first use.
 
 A variation combines two exemplars of hundreds, so a process that makes a few trees from a
-prepared library should not inflate all of them (457 FlightGear trees at 256²: 540 MB of
-arrays, about 2 s of inflating) before its first one. The archive stays open; a tree's arrays
-are read and checked against the library's first tree when it is first asked for, then kept.
+prepared library should not inflate all of them first (docs/pipelines/trees.md). The archive
+stays open; a tree's arrays are read and checked against the library's first tree when it is
+first asked for, then kept.
 """
 
 from __future__ import annotations
