@@ -9,19 +9,18 @@ from the rest of the leaf), so the next layer is induced on what remains (Fig. 7
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
-from typing import Any, TypeVar
+from typing import Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import _core, _memory
+from .. import _memory
 from .._progress import Progress
 from .._validate import as_image, check_float, check_int, check_seed, check_threads, derive_seed
 from ._fill import fill_holes, fill_region
+from ._stages import Stages, Task
 from .correction import checked, correct_texture
 from .induction import induce
 from .model import LeafModel
@@ -32,7 +31,6 @@ from .scribbles import layers_from_scribbles, read_scribbles
 __all__ = ["analyze"]
 
 F32 = NDArray[np.float32]
-T = TypeVar("T")
 
 #: Pixels around a layer that are peeled with it: its anti-aliased edge, widened by the
 #: registration warp's bilinear resampling, is half layer colour and would stay behind as a
@@ -89,78 +87,12 @@ def _peel(
 
 
 def _on_pool(fill: Callable[..., F32], *args: Any, seed: int) -> Task[F32]:
-    """``fill(*args, seed=seed)`` as a task of :class:`_Stages` (its threads and stop check)."""
+    """``fill(*args, seed=seed)`` as a task of :class:`~phloem.leaves._stages.Stages` (its threads and stop check)."""
 
     def task(threads: int | None, check: Callable[[], None]) -> F32:
         return fill(*args, seed=seed, threads=threads, check=check)
 
     return task
-
-
-class _Stopped(Exception):
-    """Raised in a task of :class:`_Stages` once the analysis is being abandoned."""
-
-
-#: A stage task: called with its thread count and a check to call between engine calls.
-Task = Callable[[int | None, Callable[[], None]], T]
-
-
-class _Stages:
-    """Runs the independent per-exemplar calls of a stage side by side.
-
-    The engines release the GIL, but each runs partly serial (NumPy between the Rust calls,
-    the sequential quilting), so ``threads`` cores are better used by tasks side by side, each
-    on ``threads // width`` rayon threads, than by one task at a time on all of them
-    (docs/pipelines/leaves/analysis.md). Every task has its own seed and results come back
-    in submission order, so the model is the one the serial order makes. Python delivers
-    Ctrl-C only to the main thread, which here waits on the tasks: on any exception there the
-    tasks are told to stop (they raise at their next check, between engine calls), those not
-    started are dropped, and the exception is raised once every task has ended.
-    """
-
-    def __init__(self, threads: int | None) -> None:
-        self.threads = threads
-        self.cores = _core.default_threads() if threads is None else threads
-        self.stop = threading.Event()
-
-    def width(self, n_tasks: int) -> int:
-        return max(1, min(self.cores, n_tasks))
-
-    def check(self) -> None:
-        if self.stop.is_set():
-            raise _Stopped
-
-    def run(self, tasks: Sequence[Task[Any]], done: Callable[[int], None]) -> list[Any]:
-        """Results of ``tasks`` in order; ``done(k)`` in the calling thread after task k's."""
-        width = self.width(len(tasks))
-        if width == 1:
-            out = []
-            for k, task in enumerate(tasks):
-                out.append(task(self.threads, self.check))
-                done(k)
-            return out
-        per = self.cores // width
-
-        def start(task: Task[Any]) -> Any:
-            self.check()
-            return task(per, self.check)
-
-        pool = ThreadPoolExecutor(width, thread_name_prefix="phloem-leaves")
-        futures: list[Future[Any]] = []
-        try:
-            futures = [pool.submit(start, task) for task in tasks]
-            out = []
-            for k, fut in enumerate(futures):
-                out.append(fut.result())
-                done(k)
-            return out
-        except BaseException:
-            self.stop.set()
-            for fut in futures:
-                fut.cancel()
-            raise
-        finally:
-            pool.shutdown(wait=True)
 
 
 def analyze(
@@ -270,7 +202,7 @@ def analyze(
 
     mats, scales, size = canvas(imgs, t)
     n = len(imgs)
-    stages = _Stages(th)
+    stages = Stages(th)
     # Side by side, each of the widest stage's tasks holds one completion's buffers.
     extra = (stages.width(n) - 1) * _memory.complete((*size, 3))
     _memory.check_size(_memory.leaves_analyze(size, n, n_layers) + extra, max_memory, size, "leaves")

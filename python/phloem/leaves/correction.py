@@ -270,7 +270,7 @@ def correct_texture(
     if not allowed_box.any():
         sy, sx, allowed_box = slice(0, src.shape[0]), slice(0, src.shape[1]), allowed
     src_box = np.ascontiguousarray(src_feat[sy, sx])
-    hole_box, need_box = hole[ty, tx], np.ascontiguousarray(need[ty, tx])
+    hole_box, need_box = np.ascontiguousarray(hole[ty, tx]), np.ascontiguousarray(need[ty, tx])
     oy, ox = cy[ty, tx] - sy.start, cx[ty, tx] - sx.start
     ok = (inside & allowed[cy, cx])[ty, tx] & (oy >= 0) & (ox >= 0) & (oy < src_box.shape[0]) & (ox < src_box.shape[1])
     ok &= allowed_box[np.clip(oy, 0, src_box.shape[0] - 1), np.clip(ox, 0, src_box.shape[1] - 1)]
@@ -283,8 +283,9 @@ def correct_texture(
             target_mask=need_box, init=init, source_knn=None, source_cost=None, threads=nthreads, kdtree=False,
         )  # fmt: skip
         _check()
+        # Only the hole's pixels are kept, so only they are voted (each as the full vote would).
         voted, weight = _core.vote(
-            src_box, nnf, patch_size=p, weights=None, threads=nthreads, mean_shift=0, pixels=None
+            src_box, nnf, patch_size=p, weights=None, threads=nthreads, mean_shift=0, pixels=hole_box
         )
         _check()
         _paste(out_box, hole_box, voted, weight)

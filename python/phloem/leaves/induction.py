@@ -22,7 +22,7 @@ For a layer ``c`` (pixels of the training leaf ``t``) and an exemplar ``e`` alig
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,6 +32,7 @@ from scipy import ndimage  # type: ignore[import-untyped]
 
 from .._api import Seed
 from .._validate import as_image, as_mask, check_float, check_seed, check_threads
+from ._stages import Stages, Task
 from .color import color_distance
 
 __all__ = ["Induction", "induce", "liberal_layer"]
@@ -232,14 +233,22 @@ def induce(
     seed = check_seed(seed)
     threads = check_threads(threads)
 
-    def s_of(image: F32, reference: F32 | None) -> F32:
-        return color_distance(image, c, reference=reference, window=window, n_bins=n_bins, seed=seed, threads=threads)
+    # The training leaf itself with `reference=` gives the same palette and map: it is computed
+    # once. The maps are independent and partly serial (palette, quantisation): side by side.
+    own = [i for i, e in enumerate(ex) if not np.array_equal(e, t)]
 
-    s_t = s_of(t, None)
+    def map_of(image: F32) -> Task[F32]:
+        def task(threads: int | None, check: Callable[[], None]) -> F32:
+            return color_distance(image, c, reference=t, window=window, n_bins=n_bins, seed=seed, threads=threads)
+
+        return task
+
+    s_t, *maps = Stages(threads).run([map_of(t), *(map_of(ex[i]) for i in own)], lambda _: None)
+    s_e = [s_t] * len(ex)
+    for i, m in zip(own, maps, strict=True):
+        s_e[i] = m
     d = _distance(c)
     f = spatial_term(d, s_t, leaf_t, epsilon)
-    # The training leaf itself with `reference=` gives the same palette and map: reuse it.
-    s_e = [s_t if np.array_equal(e, t) else s_of(e, t) for e in ex]
 
     # λ (Eqs. 5–6): the training leaf is always one of the leaves compared (∩ and ∪ are
     # idempotent, so passing it among the exemplars too changes nothing). The colour bound is
