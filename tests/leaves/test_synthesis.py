@@ -192,6 +192,31 @@ def test_layers_of_other_exemplars_show_up() -> None:
     assert found
 
 
+@pytest.mark.parametrize(("n_exemplars", "n_layers"), [(2, 1), (4, 2), (3, 3)])
+def test_a_set_of_leaves_uses_every_mix_before_repeating_one(n_exemplars: int, n_layers: int) -> None:
+    total = n_exemplars * (n_exemplars - 1) ** n_layers
+    mixes = synth._mixes(n_exemplars, n_layers, 5, 2 * total + 3)
+    assert all(0 <= bg < n_exemplars and bg not in layers for bg, layers in mixes)  # mixing is the point
+    keys = [(bg, tuple(layers)) for bg, layers in mixes]
+    assert len(set(keys[:total])) == total and len(set(keys[total : 2 * total])) == total
+    # the first leaves spread over the backgrounds, and each layer over its exemplars
+    assert sorted(bg for bg, _ in mixes[:n_exemplars]) == list(range(n_exemplars))
+    for k in range(n_layers):
+        counts = np.bincount([layers[k] for _, layers in mixes[:total]], minlength=n_exemplars)
+        assert counts.max() - counts.min() <= n_exemplars - 1
+    assert synth._mixes(n_exemplars, n_layers, 5, 4) == mixes[:4]  # leaf n depends on the seed and n only
+    if total > 2:  # another seed deals in another order
+        assert keys != [(bg, tuple(layers)) for bg, layers in synth._mixes(n_exemplars, n_layers, 6, 2 * total + 3)]
+
+
+def test_mixes_beyond_the_dealt_limit_are_drawn_and_still_valid(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(synth, "MAX_DEALT", 10)
+    mixes = synth._mixes(4, 2, 0, 300)
+    assert all(bg not in layers for bg, layers in mixes)
+    assert len({(bg, tuple(layers)) for bg, layers in mixes}) == 36  # every mix still reachable
+    assert synth._mixes(4, 2, 0, 8) == mixes[:8]
+
+
 def test_structural_layers_stay_and_stochastic_layers_move() -> None:
     """λ = κ: the vein is exactly one exemplar's vein in the training frame; λ = 0: it moves."""
 
@@ -201,7 +226,14 @@ def test_structural_layers_stay_and_stochastic_layers_move() -> None:
         moved = []
         for seed in range(6):
             rgba = straight(
-                synth._training_frame(model, np.random.default_rng(seed), [2.0, 2.0, 3.0], [lam / 1.5] * 2, 1)
+                synth._training_frame(
+                    model,
+                    synth._mixes(3, 2, 0, seed + 1)[seed],
+                    np.random.default_rng(seed),
+                    [2.0, 2.0, 3.0],
+                    [lam / 1.5] * 2,
+                    1,
+                )
             )
             vein = (np.abs(rgba[..., :3] - VEIN).max(axis=2) < 0.05) & (rgba[..., 3] > 0.5)
             assert vein.sum() > 50

@@ -54,6 +54,10 @@ WARP_SMOOTHNESS = 0.2
 #: Eq. 7's coefficient grid: this fraction of the smaller side between random coefficients
 #: (Fig. 8 shows a handful of blobs over the leaf).
 BLEND_SMOOTHNESS = 0.3
+#: Up to this many exemplar mixes, a set of new leaves uses every mix before repeating one.
+MAX_DEALT = 20_000
+# The mixes' random stream: a seed sequence of its own, apart from every leaf's warps.
+_MIX_STREAM = 1
 #: Transparent margin in px around each cropped leaf.
 MARGIN = 8
 # D where it is undefined (NaN off a leaf): far beyond any threshold, weight ~1e-16.
@@ -340,16 +344,71 @@ def _corrector() -> Callable[..., Any]:
     return correct_texture
 
 
+def _mixes(n_exemplars: int, n_layers: int, seed: int, count: int) -> list[tuple[int, list[int]]]:
+    """The exemplars of leaves ``0 .. count - 1``: each one's background, and each layer's
+    (never the background's).
+
+    Two leaves of one mix differ only by small warps and their shape, and drawn independently,
+    8 leaves of 4 exemplars with 2 layers (36 mixes) would share one in more than half of the
+    sets. So the mixes are dealt: each leaf takes, of the mixes used least so far, one whose
+    background and then whose layers' exemplars have been used least, ties broken by a seeded
+    shuffle. A set therefore repeats no mix before it has used them all, and its first leaves
+    spread over the backgrounds. Leaf ``n`` depends only on the seed and ``n``. Beyond
+    :data:`MAX_DEALT` mixes they are drawn independently; repeats are then rare anyway.
+    """
+    others = n_exemplars - 1
+    total = n_exemplars * others**n_layers
+    if total > MAX_DEALT:
+        picks = [int(np.random.default_rng((seed, _MIX_STREAM, leaf)).integers(total)) for leaf in range(count)]
+        return [_decode(k, n_exemplars, n_layers) for k in picks]
+    decoded = [_decode(k, n_exemplars, n_layers) for k in range(total)]
+    bg = np.array([d[0] for d in decoded], np.int64)
+    lay = np.array([d[1] for d in decoded], np.int64).reshape(total, n_layers)
+    rank = np.empty(total, np.int64)
+    rank[np.random.default_rng((seed, _MIX_STREAM)).permutation(total)] = np.arange(total)
+    uses, bg_uses, layer_uses = (
+        np.zeros(total, np.int64),
+        np.zeros(n_exemplars, np.int64),
+        np.zeros((n_layers, n_exemplars), np.int64),
+    )
+    out = []
+    for _ in range(count):
+        cand = np.flatnonzero(uses == uses.min())
+        key = bg_uses[bg[cand]]
+        cand = cand[key == key.min()]
+        key = layer_uses[np.arange(n_layers), lay[cand]].sum(axis=1)
+        cand = cand[key == key.min()]
+        k = int(cand[np.argmin(rank[cand])])
+        uses[k] += 1
+        bg_uses[bg[k]] += 1
+        layer_uses[np.arange(n_layers), lay[k]] += 1
+        out.append(decoded[k])
+    return out
+
+
+def _decode(k: int, n_exemplars: int, n_layers: int) -> tuple[int, list[int]]:
+    """Mix number ``k``: background ``k mod n``, then each layer's exemplar among the others."""
+    k, j_bg = divmod(k, n_exemplars)
+    j_layers = []
+    for _ in range(n_layers):
+        k, j = divmod(k, n_exemplars - 1)
+        j_layers.append(j if j < j_bg else j + 1)
+    return j_bg, j_layers
+
+
 def _training_frame(
-    m: LeafModel, rng: np.random.Generator, bounds: list[float], structure: list[float], threads: int | None
+    m: LeafModel,
+    mix: tuple[int, list[int]],
+    rng: np.random.Generator,
+    bounds: list[float],
+    structure: list[float],
+    threads: int | None,
 ) -> F32:
-    """Steps 1–2: a background and layers of other exemplars, randomly warped and fused by D,
-    in the training frame (premultiplied RGBA)."""
-    n_ex, n_layers = m.n_exemplars, m.n_layers - 1
+    """Steps 1–2: the background of exemplar ``mix[0]`` and layer ``k`` of exemplar
+    ``mix[1][k]``, randomly warped and fused by D, in the training frame (premultiplied RGBA)."""
+    n_layers = m.n_layers - 1
     h, w = m.size
-    j_bg = int(rng.integers(n_ex))
-    others = [j for j in range(n_ex) if j != j_bg]
-    j_layers = [others[int(rng.integers(len(others)))] for _ in range(n_layers)]
+    j_bg, j_layers = mix
     seeds = rng.integers(0, 2**63, size=n_layers + 1)
     smooth = max(WARP_SMOOTHNESS * min(h, w), 1.0)
     field = random_warp((h, w), bounds[j_bg], smoothness=smooth, seed=int(seeds[0]))
@@ -424,10 +483,11 @@ def synthesize(
     structure = [min(max(float(lam) / m.kappa, 0.0), 1.0) for lam in m.lam]
     correct = _corrector()
     inverse = [as_field(f, f"model.inverse[{i}]") for i, f in enumerate(m.inverse)]
+    mixes = _mixes(m.n_exemplars, m.n_layers - 1, s, n_leaves)
     out: list[F32] = []
-    for leaf in range(n_leaves):
+    for leaf, mix in enumerate(mixes):
         rng = np.random.default_rng(derive_seed(s, leaf))
-        composition = _training_frame(m, rng, bounds, structure, nt)
+        composition = _training_frame(m, mix, rng, bounds, structure, nt)
         seeds = rng.integers(0, 2**63, size=2)
         back, coefficients = _blend(inverse, int(seeds[0]), max(BLEND_SMOOTHNESS * side, 1.0))
         pre = sample_checked(composition, back, nt)
