@@ -348,9 +348,9 @@ def _mixes(n_exemplars: int, n_layers: int, seed: int, count: int) -> list[tuple
     """The exemplars of leaves ``0 .. count - 1``: each one's background, and each layer's
     (never the background's).
 
-    Two leaves of one mix differ only by small warps and their shape, and drawn independently,
-    8 leaves of 4 exemplars with 2 layers (36 mixes) would share one in more than half of the
-    sets. So the mixes are dealt: each leaf takes, of the mixes used least so far, one whose
+    Two leaves of one mix differ only by small warps and their shape, and independent draws
+    repeat mixes early (docs/pipelines/leaves/synthesis.md). So the mixes are dealt: each leaf
+    takes, of the mixes used least so far, one whose
     background and then whose layers' exemplars have been used least, ties broken by a seeded
     shuffle. A set therefore repeats no mix before it has used them all, and its first leaves
     spread over the backgrounds. Leaf ``n`` depends only on the seed and ``n``. Beyond
