@@ -23,6 +23,7 @@ __all__ = [
     "mvc_weights",
     "nearest_colour",
     "nnf",
+    "polylines_crossing",
     "seam",
     "seamless",
     "shape_layer_order",
@@ -167,6 +168,7 @@ def emd_map(
     window: int,
     threads: int | None,
 ) -> NDArray[np.float32]: ...
+def polylines_crossing(paths: NDArray[np.float64], segments: NDArray[np.float64]) -> NDArray[np.bool_]: ...
 def emd(hist_a: NDArray[np.float64], hist_b: NDArray[np.float64], ground: NDArray[np.float64]) -> float: ...
 def nearest_colour(
     points: NDArray[np.float32],

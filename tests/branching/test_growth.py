@@ -502,3 +502,27 @@ def test_blocked_children_do_not_end_a_tree_short_of_its_template(monkeypatch):
         out = grow(bend, fur, size=src.shape, seed=seed, max_length="input")
         assert sum(b.parent is None for b in out.branches) == 1
         assert out.total_length() > 0.9 * template
+
+
+def test_the_planarity_test_agrees_with_every_pair_tested():
+    from phloem import _core
+
+    def orient(a, b, c):
+        return (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
+
+    rng = np.random.default_rng(4)
+    paths = rng.uniform(0, 10, (200, 1, 2)) + np.cumsum(rng.normal(0, 0.5, (200, 5, 2)), axis=1)
+    start = rng.uniform(0, 10, (60, 2))
+    segs = np.hstack([start, start + rng.normal(0, 1, (60, 2))])
+    # a segment touching a path's vertex is no crossing (a child starting on its parent)
+    segs[0, :2] = paths[0, 2]
+    p, q = paths[:, :-1, None, :], paths[:, 1:, None, :]
+    a, b = segs[None, None, :, :2], segs[None, None, :, 2:]
+    want = ((orient(p, q, a) * orient(p, q, b) < 0) & (orient(a, b, p) * orient(a, b, q) < 0)).any(axis=(1, 2))
+    got = _core.polylines_crossing(paths, segs)
+    np.testing.assert_array_equal(got, want)
+    assert 0 < got.sum() < len(got)
+    with pytest.raises(ValueError, match="^paths:"):
+        _core.polylines_crossing(paths[:, :1], segs)
+    with pytest.raises(ValueError, match="^segments:"):
+        _core.polylines_crossing(paths, segs[:, :3])

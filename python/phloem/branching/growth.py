@@ -37,7 +37,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import _memory
+from .. import _core, _memory
 from .._api import Seed, Size, renamed
 from .._progress import Progress
 from .._validate import check_float, check_int, check_seed
@@ -230,36 +230,15 @@ class _World:
         near = self.near_segments(np.minimum(flat.min(axis=0), tip), np.maximum(flat.max(axis=0), tip))
         if len(near) == 0:
             return np.zeros(C, bool)
-        seg = self._seg[near]
-        A, B = seg[:, :2], seg[:, 2:]
-        path = np.concatenate([np.broadcast_to(tip, (C, 1, 2)), ext], axis=1)
-        P, Q = path[:, :-1].reshape(-1, 2), path[:, 1:].reshape(-1, 2)
-        hit = _cross(P, Q, A, B).any(axis=1)
-        return np.asarray(hit.reshape(C, -1).any(axis=1))
+        seg = np.ascontiguousarray(self._seg[near], np.float64)
+        path = np.ascontiguousarray(np.concatenate([np.broadcast_to(tip, (C, 1, 2)), ext], axis=1), np.float64)
+        # proper crossings only: a child starting on its parent or consecutive edges touch
+        return _core.polylines_crossing(path, seg)
 
     def ray_max(self, grid: Any, tip: F64, direction: F64, length: float, samples: int) -> F64:
         s = length * np.arange(1, samples + 1) / samples
         pts = tip[None, None, :] + direction[:, None, :] * s[None, :, None]
         return np.asarray(self._lookup(grid, pts).max(axis=1))
-
-
-def _orient(a: F64, b: F64, c: F64) -> F64:
-    return np.asarray(
-        (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
-    )
-
-
-def _cross(P: F64, Q: F64, A: F64, B: F64) -> NDArray[np.bool_]:
-    """Proper crossings between segments ``P[i]Q[i]`` and ``A[j]B[j]`` as an ``(i, j)`` table.
-
-    Touching at an end point (a child starting on its parent, consecutive edges) is not a
-    crossing; a strict sign change of both orientation pairs is.
-    """
-    p, q = P[:, None, :], Q[:, None, :]
-    a, b = A[None, :, :], B[None, :, :]
-    o1, o2 = _orient(p, q, a), _orient(p, q, b)
-    o3, o4 = _orient(a, b, p), _orient(a, b, q)
-    return np.asarray((o1 * o2 < 0) & (o3 * o4 < 0))
 
 
 def _guide_map(guide: Any, shape: tuple[int, int], width: float) -> tuple[F64, F64 | None]:
@@ -371,17 +350,20 @@ class _Grower:
         order = top[np.lexsort((top, -q[top]))]
         order = order[np.isfinite(q[order])]
         valid: list[int] = []
-        pos = 0
+        pos, full = 0, False
         while len(valid) < m.c and pos < len(q):
-            if pos == chunk:
-                order = np.argsort(-q, kind="stable")
+            if pos == chunk and not full:
+                order = np.argsort(-q, kind="stable")  # the same order as ``top``'s, continued
                 order = order[np.isfinite(q[order])]
-            # chunks double after the first, so a blocked tip costs a few calls, not C / chunk
-            size = chunk if pos == 0 else pos
-            idx = order[pos : pos + size]
+                full = True
+            # The c best first: the crossing test's cost grows with the box around the
+            # extensions tested, and the c best are usually valid. Then sizes double, so a
+            # blocked tip costs a few calls, not C / c.
+            end = pos + max(m.c, pos) if full else min(pos + max(m.c, pos), chunk)
+            idx = order[pos:end]
             if len(idx) == 0:
                 break
-            pos += size
+            pos = end
             bad = self.world.crossings(tip, ext[idx])
             valid.extend(int(i) for i in idx[~bad][: m.c - len(valid)])
         if not valid:

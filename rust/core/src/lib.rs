@@ -32,11 +32,14 @@
 //!   Rangarajan 2003) with dense forward and inverse warps (Assa & Cohen-Or, §3).
 //! - [`strokes`]: pieces of an object fetched along strokes and their compositing energy
 //!   (Luo, Lin, Shen & Chen).
+//! - [`crossings`]: proper crossings of candidate polylines with existing segments, the
+//!   planarity test of branching growth (Sibbing et al. 2010, §4.4).
 //! - [`correction`]: guided quilting, the start of texture correction after a warp (Assa &
 //!   Cohen-Or §3, after Fang & Hart 2007).
 
 pub mod cancel;
 pub mod correction;
+pub mod crossings;
 pub mod distance;
 pub mod emd;
 pub mod error;

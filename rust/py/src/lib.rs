@@ -13,6 +13,7 @@ mod blend;
 mod call;
 mod convert;
 mod correction;
+mod crossings;
 mod emd;
 mod errors;
 mod patch;
@@ -54,6 +55,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(correction::guided_quilt_py, m)?)?;
     m.add_function(wrap_pyfunction!(strokes::stroke_pieces_py, m)?)?;
     m.add_function(wrap_pyfunction!(strokes::stroke_pair_energies_py, m)?)?;
+    m.add_function(wrap_pyfunction!(crossings::polylines_crossing_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::default_threads_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::after_fork_in_child_py, m)?)?;
     Ok(())
