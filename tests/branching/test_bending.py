@@ -120,6 +120,50 @@ def test_course_off_is_the_paper_model():
         BendingModel.fit(Skeleton([b]), h=2.0, course=-1)
 
 
+def test_block_sums_of_a_short_and_a_long_history():
+    from phloem.branching.bending import block_sums
+
+    a = np.arange(12.0)
+    assert block_sums(a[:7], 1, 4) is None  # fewer than (k + 1) m angles
+    np.testing.assert_array_equal(block_sums(a, 1, 4), [4 + 5 + 6 + 7, 8 + 9 + 10 + 11])
+    np.testing.assert_array_equal(block_sums(a, 2, 4), [6, 22, 38])
+
+
+def test_candidates_coarse_histories_are_the_block_sums_before_them():
+    from phloem.branching._elements import _elements
+    from phloem.branching.bending import block_sums
+
+    rng = np.random.default_rng(1)
+    brs = [Branch.from_angles([10, 40 + 30 * j], 0.0, rng.normal(0, 0.3, 50 + 9 * j), np.full(52 + 9 * j, 2.0), 2.0)
+           for j in range(3)]  # fmt: skip
+    model = BendingModel.fit(Skeleton(brs), h=2.0, k=3, m=3)
+    assert model.cand_coarse.shape == (len(model.next_alpha), model.k + 1) and model.coarse_history == 2.0
+    for row, (b, i) in enumerate(model.cand_where):
+        a = _elements(model.source.branches[b])[0]
+        # brute force: the history's angles and all before them, with zeros before the branch's start
+        before = np.concatenate([np.zeros((model.k + 1) * model.m), a[: i + model.k + 1]])
+        np.testing.assert_allclose(model.cand_coarse[row], block_sums(before, model.k, model.m), atol=1e-12)
+
+
+def test_coarse_history_off_is_the_model_without_it():
+    rng = np.random.default_rng(0)
+    b = Branch.from_angles([10, 100], 0.0, rng.normal(0, 0.3, 60), np.full(62, 2.0), 2.0)
+    on = BendingModel.fit(Skeleton([b]), h=2.0)
+    off = BendingModel.fit(Skeleton([b]), h=2.0, coarse_history=0)
+    a, r = on.cand_hist_alpha[20], on.cand_hist_r[20] * 2.0
+    z, coarse = np.zeros(on.bins), on.cand_coarse[20]
+    assert np.array_equal(off.log_quality(a, r, z, z, coarse=coarse), off.log_quality(a, r, z, z))
+    with_coarse = on.log_quality(a, r, z, z, coarse=coarse)
+    assert not np.array_equal(with_coarse, on.log_quality(a, r, z, z))
+    # the weight is the exponent of the paper's dist on the block sums
+    d = np.linalg.norm(on.cand_coarse - coarse, axis=1)
+    np.testing.assert_allclose(with_coarse - on.log_quality(a, r, z, z), 2.0 * np.log(1 / (d + 1) + 1))
+    with pytest.raises(ValueError, match="^coarse_history:"):
+        BendingModel.fit(Skeleton([b]), h=2.0, coarse_history=-1.0)
+    with pytest.raises(ValueError, match="^coarse:"):
+        on.log_quality(a, r, z, z, coarse=coarse[:2])
+
+
 def test_course_is_an_option_of_the_pipeline():
     from phloem.branching import fit_models, synthesize, synthetic_skeleton
 
@@ -127,5 +171,6 @@ def test_course_is_an_option_of_the_pipeline():
     assert fit_models(src, h=2.0)[0].course == 8 * 4
     assert fit_models(src, h=2.0, course=0)[0].course == 0
     img = np.where(src.mask(), 0.1, 0.8).astype(np.float32)
-    res = synthesize(img, src, course=12, seed=0, render_options={"complete": False})
-    assert res.bending.course == 12
+    assert fit_models(src, h=2.0, coarse_history=0.5)[0].coarse_history == 0.5
+    res = synthesize(img, src, course=12, coarse_history=0, seed=0, render_options={"complete": False})
+    assert res.bending.course == 12 and res.bending.coarse_history == 0

@@ -165,7 +165,7 @@ def test_branching_valid_flag(tmp_path, capsys):
     assert json.loads((tmp_path / "b.png.json").read_text())["parameters"]["valid"].endswith("half.png")
 
 
-def test_branching_course_flag_reaches_the_model(tmp_path):
+def test_branching_course_and_coarse_history_flags_reach_the_model(tmp_path):
     from phloem.branching import Skeleton
 
     _dark_river_png(tmp_path / "river.png")
@@ -179,6 +179,15 @@ def test_branching_course_flag_reaches_the_model(tmp_path):
             == 0
         )
     assert Skeleton.load(outs["0"]) != Skeleton.load(outs["32"])
+    for weight in ("0", "4"):
+        out = tmp_path / f"coarse{weight}.json"
+        assert (
+            main(["branching", "grow", str(skel), "--out", str(out), "--seed", "1", "--coarse-history", weight, "-q"])
+            == 0
+        )
+        outs[weight] = out
+    assert Skeleton.load(outs["0"]) != Skeleton.load(outs["4"])
+    assert json.loads(io.sidecar_path(outs["4"]).read_text())["parameters"]["coarse_history"] == 4.0
 
 
 def test_branching_trace_leaves_a_photo_frame_out(tmp_path):

@@ -43,7 +43,7 @@ from .._progress import Progress
 from .._validate import check_float, check_int, check_seed
 from ._elements import F64, I64, _bin, _check_skeleton, _direction, _elements, _tangent, _wrap
 from ._forest import InputTree, input_trees
-from .bending import BendingModel, course_deviation
+from .bending import BendingModel, block_sums, course_deviation
 from .furcation import FurcationModel
 from .skeleton import Branch, Skeleton
 
@@ -321,7 +321,8 @@ class _Grower:
         if m.course > 0:
             tail = np.asarray(br.points[-(m.course + 1) :])  # the chord needs no more than the last course edges
             dev = float(course_deviation(tail, np.array([len(tail) - 1]), m.course)[0])
-        q = m.log_quality(np.asarray(br.alpha[-L:]), np.asarray(br.r[-L:]), w.counts_alpha, w.counts_r, dev)
+        coarse = block_sums(np.asarray(br.alpha[-(m.k + 1) * m.m :]), m.k, m.m) if m.coarse_history > 0 else None
+        q = m.log_quality(np.asarray(br.alpha[-L:]), np.asarray(br.r[-L:]), w.counts_alpha, w.counts_r, dev, coarse)
         tip = br.points[-1]
         c, s = math.cos(br.heading), math.sin(br.heading)
         rx, ry = self.rel_ext[..., 0], self.rel_ext[..., 1]
@@ -725,10 +726,11 @@ def grow(
     >>> out == grow(bend, fur, size=(200, 300), seed=1, generations=2)
     True
 
-    About as much structure as the input, in as many trees as it takes:
+    About as much structure per pixel as the input, in as many trees as it takes:
 
-    >>> forest = grow(bend, fur, size=src.shape, seed=1, max_length="input")
-    >>> bool(forest.total_length() > 0.9 * src.total_length()), len(forest.branches) > len(out.branches)
+    >>> forest = grow(bend, fur, size=(200, 300), seed=1, max_length="input")
+    >>> scale = 200 * 300 / (src.shape[0] * src.shape[1])
+    >>> bool(forest.total_length() > 0.9 * scale * src.total_length()), len(forest.branches) > len(out.branches)
     (True, True)
     """
     from .._validate import check_size

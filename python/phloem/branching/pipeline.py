@@ -59,6 +59,7 @@ def fit_models(
     m: int | None = None,
     n_best: int = 2,
     course: int | None = None,
+    coarse_history: float = 2.0,
 ) -> tuple[BendingModel, FurcationModel | None]:
     """The bending model (§4.2) and, if the skeleton branches at all, the furcation model (§4.3).
 
@@ -81,6 +82,9 @@ def fit_models(
     course : int, optional
         Edges over which the bending model matches a branch's course (default ``8 m``; 0: the
         paper's model; see :meth:`BendingModel.fit`).
+    coarse_history : float, optional
+        Weight of the bending model's coarse history, the sums of ``m`` angles over the last
+        ``k + 1`` extensions (default 2; 0: the paper's model; see :meth:`BendingModel.fit`).
 
     Examples
     --------
@@ -89,7 +93,7 @@ def fit_models(
     >>> bend.h, fur is not None
     (2.0, True)
     """
-    bending = BendingModel.fit(skeleton, h=h, k=order, m=m, c=n_best, course=course)
+    bending = BendingModel.fit(skeleton, h=h, k=order, m=m, c=n_best, course=course, coarse_history=coarse_history)
     has_children = any(b.parent is not None for b in skeleton.branches)
     furcation = FurcationModel.fit(skeleton, h=bending.h, k=order, c=n_best) if has_children else None
     return bending, furcation
@@ -108,6 +112,7 @@ def synthesize(
     m: int | None = None,
     n_best: int = 2,
     course: int | None = None,
+    coarse_history: float = 2.0,
     generations: int | None = None,
     max_length: float | str | None = "input",
     colonize: bool = True,
@@ -141,7 +146,7 @@ def synthesize(
         Seed of the growth and of the fragment choices.
     trace_options : dict, optional
         Keyword arguments for :func:`trace` (e.g. ``{"kind": "dark", "sigmas": (1.5, 3, 5)}``).
-    h, order, m, n_best, course : optional
+    h, order, m, n_best, course, coarse_history : optional
         Model parameters, as in :func:`fit_models` (``k`` and ``c`` before, deprecated).
     generations, max_length, colonize, guide : optional
         See :func:`grow`.
@@ -162,7 +167,7 @@ def synthesize(
     models : (BendingModel, FurcationModel or None), optional
         Models fitted to ``skeleton`` before (an earlier result's ``bending`` and ``furcation``),
         used instead of fitting them again: many seeds of one input fit once. ``h``, ``order``,
-        ``m``, ``n_best`` and ``course`` are then not used.
+        ``m``, ``n_best``, ``course`` and ``coarse_history`` are then not used.
 
     Returns
     -------
@@ -207,7 +212,9 @@ def synthesize(
         raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
     tick(1)
     if models is None:
-        bending, furcation = fit_models(source, h=h, order=order, m=m, n_best=n_best, course=course)
+        bending, furcation = fit_models(
+            source, h=h, order=order, m=m, n_best=n_best, course=course, coarse_history=coarse_history
+        )
     elif (
         isinstance(models, tuple)
         and len(models) == 2

@@ -207,6 +207,14 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
         help="edges over which a branch keeps its course (default 8 m; 0: the paper's Markov model alone)",
     )
     g.add_argument(
+        "--coarse-history",
+        type=float,
+        default=2.0,
+        metavar="WEIGHT",
+        help="weight of matching each branch's turns summed over its last order + 1 extensions, so that turns "
+        "stay correlated as in the input over several extensions (default 2; 0: the paper's Markov model alone)",
+    )
+    g.add_argument(
         "--generations",
         type=positive,
         default=None,
@@ -240,9 +248,10 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     if shape is None:
         raise ValueError("size: the skeleton file has no shape; pass --size WxH")
     # fitting takes seconds on real skeletons; a batch worker fits once per skeleton and options
-    options = (args.h, args.order, args.m, args.n_best, args.course)
+    options = (args.h, args.order, args.m, args.n_best, args.course, args.coarse_history)
     bend, fur = kept("branching models", [Path(args.skeleton)], options, lambda: branching.fit_models(
-        source, h=args.h, order=args.order, m=args.m, n_best=args.n_best, course=args.course))  # fmt: skip
+        source, h=args.h, order=args.order, m=args.m, n_best=args.n_best, course=args.course,
+        coarse_history=args.coarse_history))  # fmt: skip
     new = run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
     _resolve_models(args, bend)
     args.size = shape
@@ -292,13 +301,14 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
     read = [Path(p) for p in (args.input, args.skeleton) if p is not None]
     if args.valid not in ("auto", "none"):
         read.append(Path(args.valid))
-    key = stamp(read, (_trace_kwargs(args), args.valid, args.h, args.order, args.m, args.n_best, args.course))
+    key = stamp(read, (_trace_kwargs(args), args.valid, args.h, args.order, args.m, args.n_best, args.course,
+                               args.coarse_history))  # fmt: skip
     prior = recall("branching run models", key)
     res = run(
         "branching run", args,
         lambda bar: branching.synthesize(
             img, source if prior is None else prior[0], models=None if prior is None else prior[1:], size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, order=args.order,
-            m=args.m, n_best=args.n_best, course=args.course, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize,
+            m=args.m, n_best=args.n_best, course=args.course, coarse_history=args.coarse_history, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize,
             guide=_guide(args.guide, args), valid=valid, render_options=_render_kwargs(args),
             threads=args.threads, progress=bar, max_memory=args.max_memory,
         ),
