@@ -374,7 +374,7 @@ def test_retina_input_sized_structure_matches_the_input():
 
 @pytest.mark.shared
 def test_river_mask_input_sized_structure_matches_the_input():
-    # one traced tree of 118 branches (halves: alternate branches); spread 0.13 and 0.45;
+    # a traced tree of 111 branches (halves: alternate branches); spread 0.13 and 0.45;
     # grown: ~3000 nodes, 0.2-0.4 and 0.1-0.2 spread
     from phloem import io
     from phloem.branching import trace

@@ -373,3 +373,20 @@ def test_a_lake_is_not_traced_as_a_branch() -> None:
         assert sk.total_length() > 150  # the channels stay
     with pytest.raises(ValueError, match="^blob:"):
         trace(mask, kind="mask", blob=0.5)
+
+
+def test_a_blob_is_not_a_branch_but_a_short_thin_branch_is() -> None:
+    import cv2
+
+    mask = np.zeros((200, 300), np.uint8)
+    cv2.line(mask, (10, 150), (290, 150), 1, thickness=5)  # a long channel
+    cv2.line(mask, (200, 150), (200, 120), 1, thickness=3)  # a short, thin tributary: kept
+    cv2.ellipse(mask, (150, 60), (50, 30), 0, 0, 360, 1, -1)  # a pond: axis ~64 px, radius 30
+    sk = trace(mask, kind="mask")
+    pts = np.concatenate([b.points for b in sk.branches])
+    assert pts[:, 1].min() > 100  # nothing in the pond
+    assert len(sk.branches) == 2 and sk.branches[1].parent is not None
+    # a larger spur factor drops the tributary too; 0 keeps the pond
+    assert len(trace(mask, kind="mask", spur=12.0).branches) == 1
+    kept = trace(mask, kind="mask", spur=0.0)
+    assert np.concatenate([b.points for b in kept.branches])[:, 1].min() < 100

@@ -55,7 +55,7 @@ _EPS = 1.0 / INV_EPS
 #: Further vertices of the parent tried for a child that cannot start where it was picked.
 _CHILD_RETRIES = 3
 #: Extra furcations tried on a tree that its template's topology left short of the template's length.
-_TOP_UPS = 64
+_TOP_UPS = 256
 
 
 @dataclass

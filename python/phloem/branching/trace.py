@@ -426,8 +426,10 @@ def trace(
        default, at the end of its longest path whose first ``4 r`` pixels are thicker. The
        longest path from the root is the main branch; every subtree hanging off a branch
        becomes a child branch along its own longest path, attached at the branch pixel it grows
-       from; recursively. Children shorter than ``spur`` times the parent's radius at the
-       attachment (skeletonisation spurs) or than ``min_length`` are dropped with their subtree.
+       from; recursively. Branches (roots too) shorter than ``spur`` times the largest radius
+       along them, the attachment included, or than ``min_length`` are dropped with their
+       subtree: skeletonisation spurs, and the medial axes of blobs (a wide patch of water
+       whose axis is shorter than its width is not a branch).
     6. **Polylines.** Pixel chains are smoothed by a Gaussian of ``smooth`` vertices (the first
        vertex is kept so children stay attached), thickness likewise, and resampled to edge
        length ``h`` when given.
@@ -452,7 +454,7 @@ def trace(
     min_length : float
         Shortest branch kept, in px.
     spur : float
-        Child branches shorter than this many parent radii are dropped.
+        Branches shorter than this many times the largest radius along them are dropped.
     smooth : float
         Smoothing of the pixel chains, in vertices; 0 for none.
     h : float, optional
@@ -599,7 +601,7 @@ def trace(
                 continue
             p = np.stack([xs[path], ys[path]], axis=1).astype(np.float64)
             seg = float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
-            attach_r = float(r[path[0]]) if parent is not None else 0.0
+            attach_r = float(r[path].max())
             if seg < max(min_length, spur * attach_r):
                 continue
             thick = r[path].astype(np.float64)
