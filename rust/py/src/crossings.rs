@@ -24,8 +24,8 @@ pub fn polylines_crossing_py<'py>(
             format!("expected (n, len, 2) points, got (n, len, {two})"),
         )));
     }
-    if segments.as_array().dim().1 != 4 {
-        let cols = segments.as_array().dim().1;
+    let cols = segments.as_array().dim().1;
+    if cols != 4 {
         return Err(to_py(invalid(
             "segments",
             format!("expected (m, 4) rows, got (m, {cols})"),
