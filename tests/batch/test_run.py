@@ -10,8 +10,11 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
+
+import pytest
 
 import phloem.data
 from phloem import batch
@@ -275,16 +278,21 @@ def test_chunk_size_fills_half_a_second_and_keeps_four_tasks_per_worker():
     assert _chunk_size([], 10, 2) == 1
 
 
-def test_ctrl_c_keeps_the_finished_items_and_says_so(tmp_path: Path):
+# a terminal's Ctrl-C goes to the whole process group, workers included; `kill -INT` to the driver alone
+@pytest.mark.parametrize("group", [True, False], ids=["terminal", "driver"])
+def test_ctrl_c_keeps_the_finished_items_and_says_so(tmp_path: Path, group: bool):
     spec = write_spec(tmp_path, seeds="0..39", size="64x64")
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "phloem", "batch", str(spec), "--out-dir", str(out), "--workers", "2", "-q"]
-    proc = subprocess.Popen(cmd, env=ENV, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(cmd, env=ENV, stderr=subprocess.PIPE, text=True, start_new_session=group)
     deadline = time.monotonic() + 60
     while not ((out / "manifest.jsonl").exists() and (out / "manifest.jsonl").stat().st_size > 0):
         assert proc.poll() is None and time.monotonic() < deadline, "the batch ended before its first item"
         time.sleep(0.05)
-    proc.send_signal(signal.SIGINT)
+    if group:
+        os.killpg(proc.pid, signal.SIGINT)
+    else:
+        proc.send_signal(signal.SIGINT)
     err = proc.communicate(timeout=60)[1]
     assert proc.returncode == 130, err
     assert err.strip().splitlines() == ["phloem batch: interrupted; finished items are kept; run it again to go on"]
@@ -320,3 +328,20 @@ def test_extra_outputs_asked_by_true_are_per_item_hashed_and_verified(client, tm
     (out / f"{first}_overlay.png").unlink()
     again = batch.run(spec, out_dir=out, client=client)
     assert (again.made, again.skipped) == (1, 1) and (out / f"{first}_overlay.png").is_file()
+
+
+def test_a_ctrl_c_while_the_cluster_starts_is_held_until_it_is_up():
+    from phloem.batch.schedule import _interrupts_held
+
+    seen: list[object] = []
+    with pytest.raises(KeyboardInterrupt), _interrupts_held():
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.2)  # a KeyboardInterrupt here would leave a half-started cluster
+        # threads started meanwhile, and the worker processes they spawn, keep SIGINT blocked
+        t = threading.Thread(target=lambda: seen.append(signal.pthread_sigmask(signal.SIG_BLOCK, set())))
+        t.start()
+        t.join()
+        seen.append("built")
+    assert seen == [{signal.SIGINT}, "built"]
+    assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, set())
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

@@ -14,6 +14,7 @@ import io
 import logging
 import os
 import re
+import signal
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -157,11 +158,15 @@ def local_cluster(workers: int | None = None) -> Any:
     # in this process's own environment before spawning; every later subprocess of the caller
     # would inherit them, so the caller's environment is put back once the workers exist.
     saved = dict(os.environ)
+    cluster = None
     try:
         # Dask's default MALLOC_TRIM_THRESHOLD_=65536 makes glibc map and fault in every large
         # array afresh, which slows array-heavy items (docs/pipelines/batch.md#speed)
-        with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
-            return LocalCluster(  # type: ignore[no-untyped-call]
+        with (
+            dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}),
+            _interrupts_held(),
+        ):
+            cluster = LocalCluster(  # type: ignore[no-untyped-call]
                 n_workers=n,
                 threads_per_worker=1,
                 processes=True,
@@ -170,11 +175,55 @@ def local_cluster(workers: int | None = None) -> Any:
                 # no dashboard; its HTTP server (metrics) on a free loopback port: the default 8787 may be taken
                 scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
                 host="127.0.0.1",
-                silence_logs=logging.ERROR,
+                # workers' and scheduler's own log lines off: a batch reports each item itself, and
+                # an interrupted batch's teardown races the workers' heartbeats, which log errors
+                silence_logs=logging.CRITICAL,
             )
+    except BaseException:  # e.g. a Ctrl-C held back while the workers started
+        if cluster is not None:
+            cluster.close()
+        raise
     finally:
         os.environ.clear()
         os.environ.update(saved)
+    return cluster
+
+
+@contextlib.contextmanager
+def _interrupts_held() -> Iterator[None]:
+    """A Ctrl-C held back meanwhile and raised on leaving; SIGINT blocked in every thread and
+    process started meanwhile.
+
+    The cluster's loop thread inherits the blocked mask, and so do the worker processes it
+    spawns, now or on a restart: a terminal's Ctrl-C, sent to the whole process group, then
+    reaches only this process, which shuts the workers down itself instead of each worker
+    dying with its own traceback. Held back, a Ctrl-C cannot abort the cluster half-built,
+    beyond the reach of the caller's clean-up.
+    """
+    if not hasattr(signal, "pthread_sigmask"):  # Windows: no process groups to share a Ctrl-C
+        yield
+        return
+    from multiprocessing import resource_tracker
+
+    # started here first: starting it unblocks SIGINT in whichever thread does so
+    resource_tracker.ensure_running()
+    held: list[int] = []
+    # threads started before (a BLAS pool) still take SIGINT: Python's handler must not raise meanwhile
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, lambda signum, _: held.append(signum)) if main else None
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        if signal.SIGINT in signal.sigpending():
+            held.append(signal.sigwait({signal.SIGINT}))
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        if main:
+            signal.signal(signal.SIGINT, previous)
+            if held and callable(previous):
+                previous(signal.SIGINT, None)  # Python's own handler raises KeyboardInterrupt
+            elif held and previous == signal.SIG_DFL:
+                signal.raise_signal(signal.SIGINT)
 
 
 def _local_share(cluster: Any) -> tuple[int, int]:
@@ -192,9 +241,28 @@ def _client(client: Any, workers: int | None) -> Iterator[tuple[Any, int | None,
         return
     from distributed import Client
 
-    with local_cluster(workers) as cluster, Client(cluster) as c:  # type: ignore[no-untyped-call]
+    with _dask_logs_silenced(), local_cluster(workers) as cluster, Client(cluster) as c:  # type: ignore[no-untyped-call]
         threads, memory = _local_share(cluster)
         yield c, threads, memory
+
+
+@contextlib.contextmanager
+def _dask_logs_silenced() -> Iterator[None]:
+    """This process's Dask and Tornado log handlers at CRITICAL while a batch's own cluster lives.
+
+    Ctrl-C lands in the client's waits and its cancellation callbacks, which Dask and Tornado
+    log as errors with tracebacks while the batch's one-line message is all a user should see.
+    """
+    handlers = [h for name in ("distributed", "tornado", "tornado.application")
+                for h in logging.getLogger(name).handlers if isinstance(h, logging.StreamHandler)]  # fmt: skip
+    saved = [h.level for h in handlers]
+    for h in handlers:
+        h.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        for h, level in zip(handlers, saved):
+            h.setLevel(level)
 
 
 def _record(item: Item, rec: Mapping[str, Any], attempts: int) -> dict[str, Any]:
