@@ -13,6 +13,8 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
   pixels would otherwise be traced as a photo);
 - largest-tree share of the input's and the output's skeletons;
 - drift: L1 distance of the heading-change histograms over 60 px (and both medians);
+- the share of the input's and the output's length that runs along the frame (``border_share``,
+  not a pass mark);
 - two-level fraction of the output (two-level inputs only);
 - the angle and thickness histogram distances of the output to the input's model, with the
   spread between the input's two halves that the growth tests bound them by (1.5× and 1×);
@@ -52,6 +54,7 @@ from phloem.branching import (
 )
 from phloem.branching.measures import resolve_trace_options
 from phloem.metrics import (
+    border_share,
     drift,
     largest_tree_share,
     median_heading_change,
@@ -81,6 +84,8 @@ class Result:
     drift_spread: float = math.nan
     heading_in: float = math.nan
     heading_out: float = math.nan
+    border_in: float = math.nan
+    border_out: float = math.nan
     two_level: float | None = None
     angle: float = math.nan
     angle_spread: float = math.nan
@@ -171,6 +176,8 @@ def measure(
             raise
         r.f1 = r.precision = r.recall = 0.0
     r.share_in, r.share_out = largest_tree_share(src), largest_tree_share(tgt)
+    # not a mark of the issue: stems that the frame stops and that run along it (the contact sheets)
+    r.border_in, r.border_out = border_share(src), border_share(tgt)
     for attr, sk in (("heading_in", src), ("heading_out", tgt)):
         with contextlib.suppress(ValueError):
             setattr(r, attr, median_heading_change(sk))
@@ -207,9 +214,9 @@ def _f(x: float | None, fmt: str = ".2f") -> str:
 def table(results: list[Result]) -> str:
     head = (
         "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input halves) | heading in → out (rad) "
-        "| two-level | angle d (spread) | thickness d (spread) | time s | fails |"
+        "| along the frame in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
-    lines = [head, "|" + "---|" * 12]
+    lines = [head, "|" + "---|" * 13]
     for r in results:
         fails = ", ".join(k for k, ok in r.passed.items() if not ok) or "—"
         if r.error:
@@ -219,7 +226,7 @@ def table(results: list[Result]) -> str:
         lines.append(
             f"| {r.input} | {r.seed} | {size} | {_f(r.f1)} ({_f(r.precision)}/{_f(r.recall)}) "
             f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} ({_f(r.drift_spread)}) | {_f(r.heading_in)} → {_f(r.heading_out)} "
-            f"| {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
+            f"| {_f(r.border_in)} → {_f(r.border_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
             f"| {_f(r.seconds, '.1f')} | {fails} |"
         )
     return "\n".join(lines)

@@ -17,7 +17,8 @@ as :func:`phloem.leaves.induce` implements it) with a leaf-set diversity measure
 stroke measures of Luo et al.'s edits (coverage of the target strokes, width agreement across
 corresponding strokes; defined in :mod:`phloem.strokes.measures`), and the measures of whether a
 synthesised branching structure looks like its input's kind (re-trace agreement, largest-tree
-share, heading-change drift, two-level fraction; defined in :mod:`phloem.branching.measures`).
+share, heading-change drift, two-level fraction, and the share of the structure that runs along
+the frame; defined in :mod:`phloem.branching.measures`).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from ._validate import as_image, as_mask, check_patch_size
 from .branching.histograms import angle_histogram, histogram_distance, thickness_histogram
 from .branching.measures import (
     Agreement,
+    border_share,
     drift,
     heading_change_histogram,
     heading_changes,
@@ -51,6 +53,7 @@ from .strokes.measures import stroke_coverage, width_agreement
 __all__ = [
     "Agreement",
     "angle_histogram",
+    "border_share",
     "chord_length",
     "coherence_map",
     "drift",

@@ -10,6 +10,7 @@ import pytest
 import phloem
 from phloem.branching import Branch, Skeleton, trace
 from phloem.branching.measures import (
+    border_share,
     drift,
     heading_change_histogram,
     heading_changes,
@@ -28,7 +29,9 @@ def arc_branch(radius: float, angle: float, centre=(150.0, 150.0), n: int = 2000
 
 
 def test_metrics_reexports_the_measures() -> None:
-    for name in ("retrace_agreement", "skeleton_agreement", "largest_tree_share", "drift", "two_level_fraction"):
+    for name in (
+        "retrace_agreement", "skeleton_agreement", "largest_tree_share", "border_share", "drift", "two_level_fraction"
+    ):  # fmt: skip
         assert getattr(phloem.metrics, name) is getattr(phloem.branching.measures, name)
         assert name in phloem.metrics.__all__
 
@@ -119,6 +122,43 @@ def test_largest_tree_share_of_known_trees() -> None:
     )
     pieces = Skeleton([Branch([[0, 5 * i], [10, 5 * i]], 1.0) for i in range(4)])
     assert largest_tree_share(pieces) == pytest.approx(0.25)
+
+
+# -- border share -----------------------------------------------------------------------------
+
+
+def test_border_share_is_the_length_within_the_band_of_any_side() -> None:
+    shape = (100, 200)  # H, W: the right side is x = 199, the bottom y = 99
+    middle = Branch([[50, 50], [150, 50]], 1.0)
+    assert border_share(Skeleton([middle], shape=shape), band=5) == 0.0
+    top = Branch([[20, 1], [120, 1]], 1.0)
+    assert border_share(Skeleton([top], shape=shape), band=5) == 1.0
+    # a stem down the right side, then into the middle: 40 px along the side, 3 more leaving the band
+    bend = Branch([[197, 10], [197, 50], [97, 50]], 1.0)
+    assert border_share(Skeleton([bend], shape=shape), band=5) == pytest.approx(43 / 140)
+    # a branch crossing the frame spends only the band's width in it, on either side
+    across = Branch([[100, 0], [100, 99]], 1.0)
+    assert border_share(Skeleton([across], shape=shape), band=5) == pytest.approx(10 / 99)
+    both = Skeleton([middle, top], shape=shape)
+    assert border_share(both, band=5) == pytest.approx(0.5)
+
+
+def test_border_share_band_defaults_to_four_median_thicknesses() -> None:
+    sk = Skeleton([Branch([[50, 2], [50, 52]], 3.0)], shape=(100, 100))  # 12 px band: y < 12 counts
+    assert border_share(sk) == pytest.approx(border_share(sk, band=12.0)) == pytest.approx(10 / 50)
+    thin = Skeleton([Branch([[50, 0], [50, 50]], 0.0)], shape=(100, 100))  # at least 2 px
+    assert border_share(thin) == pytest.approx(2 / 50)
+
+
+def test_border_share_refuses_what_it_cannot_measure() -> None:
+    sk = Skeleton([Branch([[0, 0], [30, 0]], 1.0)], shape=(10, 40))
+    with pytest.raises(ValueError, match="^skeleton: has no shape"):
+        border_share(Skeleton([Branch([[0, 0], [30, 0]], 1.0)]))
+    for band in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="^band:"):
+            border_share(sk, band=band)
+    with pytest.raises(ValueError, match="^skeleton: the branches have no length"):
+        border_share(Skeleton([Branch([[1, 1], [1, 1]], 1.0)], shape=(10, 10)))
 
 
 # -- agreement --------------------------------------------------------------------------------

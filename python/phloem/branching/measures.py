@@ -22,6 +22,7 @@ from .trace import DEFAULT_SIGMAS, _gray, _resolve_kind, _sigmas, trace
 
 __all__ = [
     "Agreement",
+    "border_share",
     "drift",
     "heading_change_histogram",
     "heading_changes",
@@ -232,6 +233,61 @@ def largest_tree_share(skeleton: Skeleton) -> float:
     if total <= 0:
         raise ValueError("skeleton: the branches have no length")
     return float(lengths.max()) / total
+
+
+def border_share(skeleton: Skeleton, *, band: float | None = None) -> float:
+    """Share of the total branch length that runs within ``band`` px of the image's border.
+
+    A grown stem that the frame stops runs along it; an input's branches mostly cross the
+    frame or stay away from it. Compare an output's share with its input's at the same
+    ``band``. Branches are sampled at 1 px; a piece counts if its middle is nearer than
+    ``band`` to the first or last row or column.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        With its ``shape`` (the image the branches lie in).
+    band : float, optional
+        Width of the border band in px. Default: 4 × the median thickness over the arc
+        length (one bending feature at the default ``h`` and ``m``), at least 2 px.
+
+    Returns
+    -------
+    float
+        In [0, 1]. Lower is further from the frame.
+
+    Examples
+    --------
+    >>> from phloem.branching import Branch, Skeleton
+    >>> sk = Skeleton([Branch([[50, 2], [50, 50]], 1.0)], shape=(100, 100))
+    >>> border_share(sk, band=5) == 3 / 48
+    True
+    """
+    _check_skeleton(skeleton)
+    if skeleton.shape is None:
+        raise ValueError("skeleton: has no shape; border_share needs the image the branches lie in")
+    H, W = skeleton.shape
+    pts, thick = [], []
+    for b in skeleton.branches:
+        p, t, _ = _dense(b, 1.0)
+        pts.append(p)
+        thick.append(t)
+    if band is None:
+        # thickness weighted by arc length: the 1-px samples are that already
+        band = max(2.0, 4.0 * float(np.median(np.concatenate(thick))))
+    else:
+        band = check_float(band, "band", 0.0, inclusive=False)
+    lengths, near = [], []
+    for p in pts:
+        seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        mid = 0.5 * (p[1:] + p[:-1])
+        d = np.minimum(np.minimum(mid[:, 0], W - 1 - mid[:, 0]), np.minimum(mid[:, 1], H - 1 - mid[:, 1]))
+        lengths.append(seg)
+        near.append(seg[d < band])
+    total = float(np.concatenate(lengths).sum())
+    if total <= 0:
+        raise ValueError("skeleton: the branches have no length")
+    return float(np.concatenate(near).sum()) / total
 
 
 def _check_arc(arc: Any) -> float:
