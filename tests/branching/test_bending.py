@@ -164,6 +164,36 @@ def test_coarse_history_off_is_the_model_without_it():
         on.log_quality(a, r, z, z, coarse=coarse[:2])
 
 
+def test_candidates_total_turns_are_the_sums_of_all_angles_before_them():
+    from phloem.branching._elements import _elements
+
+    rng = np.random.default_rng(2)
+    brs = [Branch.from_angles([10, 40 + 30 * j], 0.0, rng.normal(0.05, 0.3, 50 + 9 * j), np.full(52 + 9 * j, 2.0), 2.0)
+           for j in range(3)]  # fmt: skip
+    model = BendingModel.fit(Skeleton(brs), h=2.0, k=3, m=3)
+    assert model.cand_turn.shape == (len(model.next_alpha),) and model.total_turn == 0.0  # off by default
+    for row, (b, i) in enumerate(model.cand_where):
+        a = _elements(model.source.branches[b])[0]
+        # the heading at the history's end minus the branch's first edge's, not wrapped
+        assert model.cand_turn[row] == pytest.approx(float(np.sum(a[: i + model.k + 1])), abs=1e-9)
+
+
+def test_total_turn_off_is_the_model_without_it():
+    rng = np.random.default_rng(0)
+    b = Branch.from_angles([10, 100], 0.0, rng.normal(0.05, 0.3, 60), np.full(62, 2.0), 2.0)
+    on = BendingModel.fit(Skeleton([b]), h=2.0, total_turn=2.0)
+    off = BendingModel.fit(Skeleton([b]), h=2.0)
+    a, r = on.cand_hist_alpha[20], on.cand_hist_r[20] * 2.0
+    z = np.zeros(on.bins)
+    assert np.array_equal(off.log_quality(a, r, z, z, turn=1.5), off.log_quality(a, r, z, z))
+    with_turn = on.log_quality(a, r, z, z, turn=1.5)
+    # the weight is the exponent of the paper's dist on the total turns
+    d = np.abs(on.cand_turn - 1.5)
+    np.testing.assert_allclose(with_turn - on.log_quality(a, r, z, z), 2.0 * np.log(1 / (d + 1) + 1))
+    with pytest.raises(ValueError, match="^total_turn:"):
+        BendingModel.fit(Skeleton([b]), h=2.0, total_turn=-1.0)
+
+
 def test_course_is_an_option_of_the_pipeline():
     from phloem.branching import fit_models, synthesize, synthetic_skeleton
 
@@ -172,5 +202,6 @@ def test_course_is_an_option_of_the_pipeline():
     assert fit_models(src, h=2.0, course=0)[0].course == 0
     img = np.where(src.mask(), 0.1, 0.8).astype(np.float32)
     assert fit_models(src, h=2.0, coarse_history=0.5)[0].coarse_history == 0.5
-    res = synthesize(img, src, course=12, coarse_history=0, seed=0, render_options={"complete": False})
-    assert res.bending.course == 12 and res.bending.coarse_history == 0
+    assert fit_models(src, h=2.0, total_turn=0.5)[0].total_turn == 0.5
+    res = synthesize(img, src, course=12, coarse_history=0, total_turn=0, seed=0, render_options={"complete": False})
+    assert res.bending.course == 12 and res.bending.coarse_history == 0 and res.bending.total_turn == 0

@@ -442,6 +442,51 @@ def test_course_keeps_the_input_course():
     assert abs(turn(None, 2.0) - want) < 0.5 * abs(markov_only - want)
 
 
+def _meanders(seed: int = 0) -> Skeleton:
+    # headings on a slow meander (80 elements a period) with jitter, around a fixed direction
+    rng = np.random.default_rng(seed)
+    t = np.arange(299)
+    brs = []
+    for j in range(4):
+        head = 0.8 * np.sin(2 * np.pi * t / 80 + rng.uniform(0, 2 * np.pi)) + 0.15 * rng.standard_normal(299)
+        brs.append(Branch.from_angles([10, 40 + 60 * j], 0.0, np.diff(head), np.full(300, 2.0), 2.0))
+    return Skeleton(brs)
+
+
+def test_total_turn_keeps_a_long_branch_on_the_inputs_course():
+    # The input's branches meander around a fixed direction: none turns more than about 2 rad from
+    # its start. A branch twice as long as theirs, grown by the histories alone (fine, coarse,
+    # course), wanders off that direction; matching the total turn keeps it within the input's.
+    src = _meanders()
+    widest = max(float(np.abs(np.cumsum(b.angles())).max()) for b in src.branches)
+
+    def widest_turn(weight: float) -> float:
+        m = BendingModel.fit(src, h=2.0, total_turn=weight)
+        grown = [grow(m, size=(700, 1400), seed=s, start=(20, 350, 0.0), branch_length=1200, colonize=False)
+                 for s in range(8)]  # fmt: skip
+        return float(np.median([np.abs(np.cumsum(g.branches[0].angles())).max() for g in grown]))
+
+    assert widest_turn(0.0) > 1.4 * widest
+    assert widest_turn(2.0) < 1.1 * widest
+
+
+def test_repel_border_keeps_a_stem_off_the_border_it_starts_on():
+    from phloem.metrics import border_share
+
+    m = BendingModel.fit(_meanders(), h=2.0)
+
+    def shares(repel: bool) -> list[float]:
+        # a stem started on the top border, heading along it, with room for it below
+        return [border_share(grow(m, size=(300, 300), seed=s, start=(150, 1, 0.0), branch_length=500,
+                                  repel_border=repel), band=8.0) for s in range(6)]  # fmt: skip
+
+    off, on = shares(False), shares(True)
+    assert np.median(off) > 0.15  # without it the stem slides along the border it meets
+    assert np.median(on) < 0.3 * np.median(off) and max(on) < 0.2
+    with pytest.raises(TypeError, match="^repel_border:"):
+        grow(m, size=(300, 300), repel_border="yes")  # type: ignore[arg-type]
+
+
 def test_coarse_history_holds_a_meander_under_jitter():
     # Headings on a slow meander (80 elements a period) with jitter: over k + 1 = 4 elements
     # the turns are mostly jitter, and the sums over m-element blocks show the meander's phase.

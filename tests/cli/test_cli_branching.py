@@ -165,7 +165,7 @@ def test_branching_valid_flag(tmp_path, capsys):
     assert json.loads((tmp_path / "b.png.json").read_text())["parameters"]["valid"].endswith("half.png")
 
 
-def test_branching_course_and_coarse_history_flags_reach_the_model(tmp_path):
+def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
     from phloem.branching import Skeleton
 
     _dark_river_png(tmp_path / "river.png")
@@ -188,6 +188,15 @@ def test_branching_course_and_coarse_history_flags_reach_the_model(tmp_path):
         outs[weight] = out
     assert Skeleton.load(outs["0"]) != Skeleton.load(outs["4"])
     assert json.loads(io.sidecar_path(outs["4"]).read_text())["parameters"]["coarse_history"] == 4.0
+    for flags in (["--total-turn", "0"], ["--total-turn", "4"], ["--repel-border"]):
+        out = tmp_path / ("grown" + "".join(flags) + ".json")
+        assert main(["branching", "grow", str(skel), "--out", str(out), "--seed", "1", *flags, "-q"]) == 0
+        outs[" ".join(flags)] = out
+    grown = {k: Skeleton.load(v) for k, v in outs.items()}
+    assert grown["--total-turn 0"] != grown["--total-turn 4"]
+    assert grown["--repel-border"] != grown["32"]  # --course 32 is the default course
+    assert json.loads(io.sidecar_path(outs["--total-turn 4"]).read_text())["parameters"]["total_turn"] == 4.0
+    assert json.loads(io.sidecar_path(outs["--repel-border"]).read_text())["parameters"]["repel_border"] is True
 
 
 def test_branching_trace_leaves_a_photo_frame_out(tmp_path):

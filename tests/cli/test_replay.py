@@ -210,7 +210,7 @@ def test_sidecars_record_resolved_values_threads_and_input_hashes(inputs: Path, 
     assert trace["parameters"]["kind"] == "dark" and trace["details"]["branches"] >= 2
     run = json.loads((out / "n.png.json").read_text())["parameters"]
     assert run["kind"] == "dark" and run["size"] == [96, 128] and run["m"] == 4 and run["course"] == 32
-    assert run["coarse_history"] == 2.0
+    assert run["coarse_history"] == 2.0 and run["total_turn"] == 0.0 and run["repel_border"] is False
     assert run["h"] > 0
 
 

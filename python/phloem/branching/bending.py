@@ -127,6 +127,8 @@ class BendingModel:
         Edges over which a branch's course is matched (0: off).
     coarse_history : float
         Weight of the coarse history's ``log dist`` beside the fine history's (0: off).
+    total_turn : float
+        Weight of the ``log dist`` of the turn since the branch's start (0: off).
 
     Examples
     --------
@@ -167,6 +169,9 @@ class BendingModel:
     # (C, k+1) sums of m angles over the k + 1 blocks ending with each history (see block_sums)
     cand_coarse: F64 = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
     coarse_history: float = 0.0
+    # (C,) the turn from the source branch's first edge to the end of each history (radians, unwrapped)
+    cand_turn: F64 = field(default_factory=lambda: np.zeros(0), repr=False)
+    total_turn: float = 0.0
 
     @classmethod
     def fit(
@@ -183,6 +188,7 @@ class BendingModel:
         warm_start: float | None = None,
         course: int | None = None,
         coarse_history: float = 2.0,
+        total_turn: float = 0.0,
     ) -> BendingModel:
         """Learn the bending model from an example skeleton.
 
@@ -227,6 +233,17 @@ class BendingModel:
             before each candidate, with the paper's ``dist`` raised to this power. With the
             fine history alone turns correlate over ``k + 1`` elements only, and branches
             turned about twice as much as the input's over 60 px.
+        total_turn : float
+            Weight of the total turn (default 0: off; 2 is the weight measured). Beyond the paper: each
+            history also holds the branch's heading minus the heading of its first edge
+            (the sum of all its angles, not wrapped), matched against the same sum at the end
+            of each candidate's history with the paper's ``dist`` raised to this power. A
+            branch then turns over its whole length as the input's branches do after as
+            much turning, so that a stem keeps a course across the image instead of
+            curling. Off by default: with :func:`grow`'s ``repel_border`` it takes the river
+            deltas' stems across the image, but it makes other inputs' branches straighter
+            than their input's and moves the angle histograms away from it
+            (``docs/pipelines/branching/quality.md``).
 
         Returns
         -------
@@ -260,6 +277,7 @@ class BendingModel:
         warm = float(bins * m) if warm_start is None else check_float(warm_start, "warm_start", 0.0)
         n_course = 8 * m if course is None else check_int(course, "course", 0)
         coarse_history = check_float(coarse_history, "coarse_history", 0.0)
+        total_turn = check_float(total_turn, "total_turn", 0.0)
         src = skeleton.resample(h)
         elems = [_elements(b) for b in src.branches]
         all_a = np.concatenate([a for a, _ in elems])
@@ -274,7 +292,7 @@ class BendingModel:
         ra, rr = _range(all_a), _range(all_r)
         hist_a = np.bincount(_bin(all_a, *ra, bins), minlength=bins) / all_a.size
         hist_r = np.bincount(_bin(all_r, *rr, bins), minlength=bins) / all_r.size
-        ha, hr, na, nr, where, dev, coarse = [], [], [], [], [], [], []
+        ha, hr, na, nr, where, dev, coarse, turn = [], [], [], [], [], [], [], []
         for bi, (a, r) in enumerate(elems):
             n = len(a) - need + 1
             if n <= 0:
@@ -288,6 +306,7 @@ class BendingModel:
             csum = np.concatenate([[0.0], np.cumsum(a)])
             ends = np.maximum(idx + k + 1 - m * np.arange(k + 1)[::-1], 0)
             coarse.append(csum[ends] - csum[np.maximum(ends - m, 0)])
+            turn.append(csum[np.arange(n) + k + 1])
             ha.append(a[idx + np.arange(k + 1)])
             hr.append(r[idx + np.arange(k + 1)] / h)
             na.append(a[idx + k + 1 + np.arange(m)])
@@ -327,6 +346,8 @@ class BendingModel:
             course=n_course,
             cand_coarse=np.vstack(coarse),
             coarse_history=coarse_history,
+            cand_turn=np.concatenate(turn),
+            total_turn=total_turn,
         )
 
     def log_quality(
@@ -337,6 +358,7 @@ class BendingModel:
         counts_r: F64,
         deviation: float | None = None,
         coarse: F64 | None = None,
+        turn: float | None = None,
     ) -> F64:
         """``log Q*_i`` of every candidate for a branch history (vectorised over candidates).
 
@@ -353,6 +375,9 @@ class BendingModel:
         coarse : ndarray, shape (k + 1,), optional
             The branch's coarse history, :func:`block_sums` of all its angles; matched
             against the candidates' when given and ``coarse_history > 0``.
+        turn : float, optional
+            The branch's total turn, the sum of all its angles; matched against the
+            candidates' when given and ``total_turn > 0``.
 
         Returns
         -------
@@ -368,6 +393,8 @@ class BendingModel:
             if np.shape(coarse) != (self.k + 1,):
                 raise ValueError(f"coarse: expected {self.k + 1} block sums, got shape {np.shape(coarse)}")
             q += self.coarse_history * np.log(_dist(self.cand_coarse, np.asarray(coarse, np.float64)[None, :]))
+        if turn is not None and self.total_turn > 0 and len(self.cand_turn):
+            q += self.total_turn * np.log(1.0 / (np.abs(self.cand_turn - float(turn)) + 1.0) + 1.0)
         if deviation is not None and self.course > 0:
             q += np.log(1.0 / (np.abs(_angle(self.cand_course - deviation)) + 1.0) + 1.0)
         n_t = float(counts_alpha.sum())

@@ -88,10 +88,12 @@ class _World:
         rho: float,
         guide: F64 | None,
         rng: np.random.Generator,
+        repel_border: bool = False,
     ) -> None:
         self.model = model
         self.shape = shape
         self.colonize = colonize
+        self.repel_border = repel_border
         self.rho = rho
         self.guide = guide
         self.rng = rng
@@ -235,10 +237,22 @@ class _World:
         # proper crossings only: a child starting on its parent or consecutive edges touch
         return _core.polylines_crossing(path, seg)
 
-    def ray_max(self, grid: Any, tip: F64, direction: F64, length: float, samples: int) -> F64:
+    def ray_max(self, grid: Any, tip: F64, direction: F64, length: float, samples: int, *, border: bool = False) -> F64:
         s = length * np.arange(1, samples + 1) / samples
         pts = tip[None, None, :] + direction[:, None, :] * s[None, :, None]
-        return np.asarray(self._lookup(grid, pts).max(axis=1))
+        vals = self._lookup(grid, pts)
+        if border:
+            vals = np.maximum(vals, self.border_density(pts))
+        return np.asarray(vals.max(axis=1))
+
+    def border_density(self, pts: F64) -> F64:
+        """The density of the image's border as if it were structure: ``exp(-d²/ρ²)`` with ``d``
+        the distance from the pixel to the first pixel outside, 1 outside."""
+        H, W = self.shape
+        ix = np.rint(pts[..., 0])
+        iy = np.rint(pts[..., 1])
+        d = np.minimum(np.minimum(ix + 1.0, W - ix), np.minimum(iy + 1.0, H - iy))
+        return np.asarray(np.exp(-(np.maximum(d, 0.0) ** 2) / self.rho**2), dtype=np.float64)
 
 
 def _guide_map(guide: Any, shape: tuple[int, int], width: float) -> tuple[F64, F64 | None]:
@@ -322,7 +336,10 @@ class _Grower:
             tail = np.asarray(br.points[-(m.course + 1) :])  # the chord needs no more than the last course edges
             dev = float(course_deviation(tail, np.array([len(tail) - 1]), m.course)[0])
         coarse = block_sums(np.asarray(br.alpha[-(m.k + 1) * m.m :]), m.k, m.m) if m.coarse_history > 0 else None
-        q = m.log_quality(np.asarray(br.alpha[-L:]), np.asarray(br.r[-L:]), w.counts_alpha, w.counts_r, dev, coarse)
+        turn = float(np.sum(br.alpha)) if m.total_turn > 0 else None
+        q = m.log_quality(
+            np.asarray(br.alpha[-L:]), np.asarray(br.r[-L:]), w.counts_alpha, w.counts_r, dev, coarse, turn
+        )
         tip = br.points[-1]
         c, s = math.cos(br.heading), math.sin(br.heading)
         rx, ry = self.rel_ext[..., 0], self.rel_ext[..., 1]
@@ -332,7 +349,8 @@ class _Grower:
             direction = _direction(br.heading + self.ray_psi)
             if w.colonize and w.dens is not None:
                 view = _DensityView(w, br.parent, self.near)
-                q -= np.log(w.ray_max(view, tip, direction, self.ray_length, self.ray_samples) + _EPS)[self.ray_of]
+                ray = w.ray_max(view, tip, direction, self.ray_length, self.ray_samples, border=w.repel_border)
+                q -= np.log(ray + _EPS)[self.ray_of]
             if w.guide is not None:
                 q -= np.log(w.ray_max(w.guide, tip, direction, self.ray_length, self.ray_samples) + _EPS)[self.ray_of]
         choice = self._choose(q, tip, ext)
@@ -628,6 +646,7 @@ def grow(
     branch_length: float | None = None,
     children: int | None = None,
     colonize: bool = True,
+    repel_border: bool = False,
     rho: float | None = None,
     guide: Any = None,
     guide_width: float | None = None,
@@ -691,6 +710,14 @@ def grow(
     colonize : bool
         Space colonisation (§4.4): density map with ``Q** = Q* / (D + ε)``, ``1/ε = 10³``.
         Crossing extensions are always rejected, also without colonisation.
+    repel_border : bool
+        With ``colonize``: the image's border counts as structure in the density a
+        candidate sees (``exp(-d²/ρ²)`` at distance ``d`` from the first pixel outside, 1
+        beyond it). Beyond the paper, which grows without a frame: without it a tip that
+        meets the border can only turn along it, and stems run down the image's edges.
+        Off by default: alone it keeps stems off the border but lets them curl in a
+        corner; with the bending model's ``total_turn`` they cross the image
+        (``docs/pipelines/branching/quality.md``).
     rho : float, optional
         Density width ``ρ`` in pixels; default ``m h`` (one bending feature).
     guide : (H, W) array or (n, 2) array, optional
@@ -758,7 +785,11 @@ def grow(
     rho = m * h if rho is None else check_float(rho, "rho", 0.0, inclusive=False)
     gw = 3.0 * m * h if guide_width is None else check_float(guide_width, "guide_width", 0.0, inclusive=False)
     gmap, gline = (None, None) if guide is None else _guide_map(guide, shape, gw)
-    world = _World(bending, shape, colonize=bool(colonize), rho=rho, guide=gmap, rng=rng)
+    if not isinstance(repel_border, (bool, np.bool_)):
+        raise TypeError(f"repel_border: expected True or False, got {repel_border!r}")
+    world = _World(
+        bending, shape, colonize=bool(colonize), rho=rho, guide=gmap, rng=rng, repel_border=bool(repel_border)
+    )
     grower = _Grower(world, bending)
 
     H, W = shape

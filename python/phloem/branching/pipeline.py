@@ -60,6 +60,7 @@ def fit_models(
     n_best: int = 2,
     course: int | None = None,
     coarse_history: float = 2.0,
+    total_turn: float = 0.0,
 ) -> tuple[BendingModel, FurcationModel | None]:
     """The bending model (§4.2) and, if the skeleton branches at all, the furcation model (§4.3).
 
@@ -85,6 +86,9 @@ def fit_models(
     coarse_history : float, optional
         Weight of the bending model's coarse history, the sums of ``m`` angles over the last
         ``k + 1`` extensions (default 2; 0: the paper's model; see :meth:`BendingModel.fit`).
+    total_turn : float, optional
+        Weight of the bending model's total turn, each branch's turn since its start
+        (default 0: the paper's model; see :meth:`BendingModel.fit`).
 
     Examples
     --------
@@ -93,7 +97,9 @@ def fit_models(
     >>> bend.h, fur is not None
     (2.0, True)
     """
-    bending = BendingModel.fit(skeleton, h=h, k=order, m=m, c=n_best, course=course, coarse_history=coarse_history)
+    bending = BendingModel.fit(
+        skeleton, h=h, k=order, m=m, c=n_best, course=course, coarse_history=coarse_history, total_turn=total_turn
+    )
     has_children = any(b.parent is not None for b in skeleton.branches)
     furcation = FurcationModel.fit(skeleton, h=bending.h, k=order, c=n_best) if has_children else None
     return bending, furcation
@@ -113,9 +119,11 @@ def synthesize(
     n_best: int = 2,
     course: int | None = None,
     coarse_history: float = 2.0,
+    total_turn: float = 0.0,
     generations: int | None = None,
     max_length: float | str | None = "input",
     colonize: bool = True,
+    repel_border: bool = False,
     guide: Any = None,
     valid: Any = "auto",
     render_options: dict[str, Any] | None = None,
@@ -146,9 +154,9 @@ def synthesize(
         Seed of the growth and of the fragment choices.
     trace_options : dict, optional
         Keyword arguments for :func:`trace` (e.g. ``{"kind": "dark", "sigmas": (1.5, 3, 5)}``).
-    h, order, m, n_best, course, coarse_history : optional
+    h, order, m, n_best, course, coarse_history, total_turn : optional
         Model parameters, as in :func:`fit_models` (``k`` and ``c`` before, deprecated).
-    generations, max_length, colonize, guide : optional
+    generations, max_length, colonize, repel_border, guide : optional
         See :func:`grow`.
     valid : (H, W) array_like of bool, "auto" or None, optional
         Where ``image`` shows content: structure is traced there only (when ``skeleton`` is
@@ -167,7 +175,7 @@ def synthesize(
     models : (BendingModel, FurcationModel or None), optional
         Models fitted to ``skeleton`` before (an earlier result's ``bending`` and ``furcation``),
         used instead of fitting them again: many seeds of one input fit once. ``h``, ``order``,
-        ``m``, ``n_best``, ``course`` and ``coarse_history`` are then not used.
+        ``m``, ``n_best``, ``course``, ``coarse_history`` and ``total_turn`` are then not used.
 
     Returns
     -------
@@ -213,8 +221,9 @@ def synthesize(
     tick(1)
     if models is None:
         bending, furcation = fit_models(
-            source, h=h, order=order, m=m, n_best=n_best, course=course, coarse_history=coarse_history
-        )
+            source, h=h, order=order, m=m, n_best=n_best, course=course, coarse_history=coarse_history,
+            total_turn=total_turn,
+        )  # fmt: skip
     elif (
         isinstance(models, tuple)
         and len(models) == 2
@@ -227,7 +236,7 @@ def synthesize(
     tick(2)
     target = grow(
         bending, furcation, size=shape, seed=seed, generations=generations, max_length=max_length,
-        colonize=colonize, guide=guide,
+        colonize=colonize, repel_border=repel_border, guide=guide,
     )  # fmt: skip
     tick(3)
     # A 2-D input goes to render as 2-D, so that the new image is 2-D as well.

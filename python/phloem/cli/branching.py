@@ -215,6 +215,15 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
         "stay correlated as in the input over several extensions (default 2; 0: the paper's Markov model alone)",
     )
     g.add_argument(
+        "--total-turn",
+        type=float,
+        default=0.0,
+        metavar="WEIGHT",
+        help="weight of matching each branch's whole turn since its start, so that stems keep a course across the "
+        "image instead of curling (default 0: the paper's Markov model alone; 2 with --repel-border takes river "
+        "stems across the image)",
+    )
+    g.add_argument(
         "--generations",
         type=positive,
         default=None,
@@ -226,6 +235,12 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--no-colonize", action="store_true", help="turn off space colonisation (§4.4; crossings are still refused)"
     )
+    g.add_argument(
+        "--repel-border",
+        action="store_true",
+        help="count the image's border as structure in the colonisation density, so that stems do not run "
+        "along it (default: the border is empty space, as in the paper)",
+    )
     g.add_argument("--guide", metavar="PATH", default=None,
                    help="guided synthesis (§4.5): a JSON list of [x, y] points or a mask image the structure should follow")  # fmt: skip
 
@@ -233,7 +248,8 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
 def _grow(args: argparse.Namespace, bend: Any, fur: Any, shape: tuple[int, int], bar: Any) -> branching.Skeleton:
     return branching.grow(
         bend, fur, size=shape, seed=args.seed, generations=args.generations, max_length=args.max_length,
-        colonize=not args.no_colonize, guide=_guide(args.guide, args), progress=bar, max_memory=args.max_memory,
+        colonize=not args.no_colonize, repel_border=args.repel_border, guide=_guide(args.guide, args),
+        progress=bar, max_memory=args.max_memory,
     )  # fmt: skip
 
 
@@ -248,10 +264,10 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     if shape is None:
         raise ValueError("size: the skeleton file has no shape; pass --size WxH")
     # fitting takes seconds on real skeletons; a batch worker fits once per skeleton and options
-    options = (args.h, args.order, args.m, args.n_best, args.course, args.coarse_history)
+    options = (args.h, args.order, args.m, args.n_best, args.course, args.coarse_history, args.total_turn)
     bend, fur = kept("branching models", [Path(args.skeleton)], options, lambda: branching.fit_models(
         source, h=args.h, order=args.order, m=args.m, n_best=args.n_best, course=args.course,
-        coarse_history=args.coarse_history))  # fmt: skip
+        coarse_history=args.coarse_history, total_turn=args.total_turn))  # fmt: skip
     new = run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
     _resolve_models(args, bend)
     args.size = shape
@@ -302,13 +318,13 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
     if args.valid not in ("auto", "none"):
         read.append(Path(args.valid))
     key = stamp(read, (_trace_kwargs(args), args.valid, args.h, args.order, args.m, args.n_best, args.course,
-                               args.coarse_history))  # fmt: skip
+                               args.coarse_history, args.total_turn))  # fmt: skip
     prior = recall("branching run models", key)
     res = run(
         "branching run", args,
         lambda bar: branching.synthesize(
             img, source if prior is None else prior[0], models=None if prior is None else prior[1:], size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, order=args.order,
-            m=args.m, n_best=args.n_best, course=args.course, coarse_history=args.coarse_history, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize,
+            m=args.m, n_best=args.n_best, course=args.course, coarse_history=args.coarse_history, total_turn=args.total_turn, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize, repel_border=args.repel_border,
             guide=_guide(args.guide, args), valid=valid, render_options=_render_kwargs(args),
             threads=args.threads, progress=bar, max_memory=args.max_memory,
         ),
