@@ -205,3 +205,15 @@ def test_course_is_an_option_of_the_pipeline():
     assert fit_models(src, h=2.0, total_turn=0.5)[0].total_turn == 0.5
     res = synthesize(img, src, course=12, coarse_history=0, total_turn=0, seed=0, render_options={"complete": False})
     assert res.bending.course == 12 and res.bending.coarse_history == 0 and res.bending.total_turn == 0
+
+
+def test_the_column_dist_is_the_papers_dist_to_the_bit():
+    # log_quality reads the history tables by columns (contiguous, fast); the growth must not
+    # change by a bit for it
+    from phloem.branching._elements import _dist, _dist_columns
+
+    rng = np.random.default_rng(3)
+    for L in range(1, 6):
+        table = rng.normal(0.0, 1.0, (4000, L)) * rng.choice([1e-3, 1.0, 30.0], (4000, 1))
+        y = rng.normal(0.0, 1.0, L)
+        assert np.array_equal(_dist_columns(np.ascontiguousarray(table.T), y), _dist(table, y[None, :]))

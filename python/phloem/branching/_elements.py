@@ -31,6 +31,20 @@ def _dist(x: F64, y: F64) -> F64:
     return np.asarray(1.0 / (np.linalg.norm(x - y, axis=-1) + 1.0) + 1.0, dtype=np.float64)
 
 
+def _dist_columns(cols: F64, y: F64) -> F64:
+    """:func:`_dist` of each column of ``cols`` ``(L, C)`` against ``y`` ``(L,)``, to the bit.
+
+    The squares are summed row by row in the order ``np.linalg.norm`` sums a row of length
+    ``L < 8``; contiguous rows make it several times faster than the norm over a short last axis.
+    """
+    d = cols[0] - y[0]
+    s = d * d
+    for i in range(1, len(y)):
+        d = cols[i] - y[i]
+        s += d * d
+    return np.asarray(1.0 / (np.sqrt(s) + 1.0) + 1.0, dtype=np.float64)
+
+
 def _elements(branch: Branch) -> tuple[F64, F64]:
     """The per-vertex elements ``(α_i, r_i)`` at the interior vertices of a resampled branch."""
     if len(branch) < 3:

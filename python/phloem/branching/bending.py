@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._validate import check_float, check_int
-from ._elements import F64, I64, _bin, _check_k, _check_skeleton, _dist, _elements, _generations, _range
+from ._elements import F64, I64, _bin, _check_k, _check_skeleton, _dist_columns, _elements, _generations, _range
 from .skeleton import Skeleton
 
 __all__ = ["BendingModel", "block_sums", "course_deviation", "default_h"]
@@ -387,12 +387,13 @@ class BendingModel:
         L = len(alpha)
         if not 1 <= L <= self.k + 1 or len(r) != L:
             raise ValueError(f"alpha, r: expected 1 .. {self.k + 1} history elements each, got {len(alpha)}, {len(r)}")
-        q = np.log(_dist(self.cand_hist_alpha[:, -L:], alpha[None, :]))
-        q += np.log(_dist(self.cand_hist_r[:, -L:], (r / self.h)[None, :]))
+        cols = self._columns()
+        q = np.log(_dist_columns(cols[0][-L:], np.asarray(alpha, np.float64)))
+        q += np.log(_dist_columns(cols[1][-L:], np.asarray(r, np.float64) / self.h))
         if coarse is not None and self.coarse_history > 0 and len(self.cand_coarse):
             if np.shape(coarse) != (self.k + 1,):
                 raise ValueError(f"coarse: expected {self.k + 1} block sums, got shape {np.shape(coarse)}")
-            q += self.coarse_history * np.log(_dist(self.cand_coarse, np.asarray(coarse, np.float64)[None, :]))
+            q += self.coarse_history * np.log(_dist_columns(cols[2], np.asarray(coarse, np.float64)))
         if turn is not None and self.total_turn > 0 and len(self.cand_turn):
             q += self.total_turn * np.log(1.0 / (np.abs(self.cand_turn - float(turn)) + 1.0) + 1.0)
         if deviation is not None and self.course > 0:
@@ -403,6 +404,16 @@ class BendingModel:
             delta += self._delta(self.hist_r, counts_r, self.inc_r, n_t)
             q += self.omega_g * delta * (n_t / self.m)
         return q
+
+    def _columns(self) -> tuple[F64, F64, F64]:
+        """The history tables transposed, ``(k + 1, C)`` each (cached; rebuilt if a table is replaced)."""
+        got = self.__dict__.get("_cols")
+        tables = (self.cand_hist_alpha, self.cand_hist_r, self.cand_coarse)
+        if got is None or any(a is not b for a, b in zip(got[0], tables)):
+            cols = tuple(np.ascontiguousarray(t.T) for t in tables)
+            got = (tables, cols)
+            self.__dict__["_cols"] = got
+        return got[1]  # type: ignore[no-any-return]
 
     def _delta(self, target: F64, counts: F64, inc: F64, n_t: float) -> F64:
         now = float(((target - counts / n_t) ** 2).sum()) / self.bins
