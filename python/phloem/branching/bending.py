@@ -410,10 +410,15 @@ class BendingModel:
         got = self.__dict__.get("_cols")
         tables = (self.cand_hist_alpha, self.cand_hist_r, self.cand_coarse)
         if got is None or any(a is not b for a, b in zip(got[0], tables)):
-            cols = tuple(np.ascontiguousarray(t.T) for t in tables)
+            cols: tuple[F64, F64, F64] = (
+                np.ascontiguousarray(tables[0].T),
+                np.ascontiguousarray(tables[1].T),
+                np.ascontiguousarray(tables[2].T),
+            )
             got = (tables, cols)
             self.__dict__["_cols"] = got
-        return got[1]  # type: ignore[no-any-return]
+        out: tuple[F64, F64, F64] = got[1]
+        return out
 
     def _delta(self, target: F64, counts: F64, inc: F64, n_t: float) -> F64:
         now = float(((target - counts / n_t) ** 2).sum()) / self.bins
