@@ -219,7 +219,8 @@ def _interrupts_held() -> Iterator[None]:
             held.append(signal.sigwait({signal.SIGINT}))
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
         if main:
-            signal.signal(signal.SIGINT, previous)
+            # None: a handler installed outside Python, which signal.signal cannot put back
+            signal.signal(signal.SIGINT, previous if previous is not None else signal.default_int_handler)
             if held and callable(previous):
                 previous(signal.SIGINT, None)  # Python's own handler raises KeyboardInterrupt
             elif held and previous == signal.SIG_DFL:
