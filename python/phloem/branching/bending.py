@@ -395,7 +395,7 @@ class BendingModel:
                 raise ValueError(f"coarse: expected {self.k + 1} block sums, got shape {np.shape(coarse)}")
             q += self.coarse_history * np.log(_dist_columns(cols[2], np.asarray(coarse, np.float64)))
         if turn is not None and self.total_turn > 0 and len(self.cand_turn):
-            q += self.total_turn * np.log(1.0 / (np.abs(self.cand_turn - float(turn)) + 1.0) + 1.0)
+            q += self.total_turn * np.log(_dist_columns(self.cand_turn[None, :], np.array([float(turn)])))
         if deviation is not None and self.course > 0:
             q += np.log(1.0 / (np.abs(_angle(self.cand_course - deviation)) + 1.0) + 1.0)
         n_t = float(counts_alpha.sum())
