@@ -12,9 +12,11 @@ __all__ = [
     "by_numbers",
     "coherence_candidates",
     "default_threads",
+    "density_stamp",
     "emd",
     "emd_map",
     "grid_maxflow",
+    "growth_choose",
     "guided_quilt",
     "interpolate_field",
     "knn",
@@ -169,6 +171,36 @@ def emd_map(
     threads: int | None,
 ) -> NDArray[np.float32]: ...
 def polylines_crossing(paths: NDArray[np.float64], segments: NDArray[np.float64]) -> NDArray[np.bool_]: ...
+def growth_choose(
+    quality: NDArray[np.float64],
+    relative: NDArray[np.float64],
+    ray_of: NDArray[np.int64],
+    tip: tuple[float, float],
+    cos: float,
+    sin: float,
+    height: int,
+    width: int,
+    directions: NDArray[np.float64],
+    length: float,
+    samples: int,
+    density: tuple[NDArray[np.float32], NDArray[np.int32], NDArray[np.int32]] | None,
+    skip: tuple[int, int, int] | None,
+    border_rho: float | None,
+    guide: NDArray[np.float64] | None,
+    segments: NDArray[np.float64],
+    count: int,
+    eps: float,
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]: ...
+def density_stamp(
+    density: NDArray[np.float32],
+    owner_branch: NDArray[np.int32],
+    owner_vertex: NDArray[np.int32],
+    points: NDArray[np.float64],
+    thickness: NDArray[np.float64],
+    branch: int,
+    first: int,
+    rho: float,
+) -> float: ...
 def emd(hist_a: NDArray[np.float64], hist_b: NDArray[np.float64], ground: NDArray[np.float64]) -> float: ...
 def nearest_colour(
     points: NDArray[np.float32],

@@ -478,11 +478,11 @@ def test_repel_border_keeps_a_stem_off_the_border_it_starts_on():
     def shares(repel: bool) -> list[float]:
         # a stem started on the top border, heading along it, with room for it below
         return [border_share(grow(m, size=(300, 300), seed=s, start=(150, 1, 0.0), branch_length=500,
-                                  repel_border=repel), band=8.0) for s in range(6)]  # fmt: skip
+                                  repel_border=repel), band=8.0) for s in range(16)]  # fmt: skip
 
     off, on = shares(False), shares(True)
     assert np.median(off) > 0.15  # without it the stem slides along the border it meets
-    assert np.median(on) < 0.3 * np.median(off) and max(on) < 0.2
+    assert np.median(on) < 0.5 * np.median(off) and max(on) < 0.2
     with pytest.raises(TypeError, match="^repel_border:"):
         grow(m, size=(300, 300), repel_border="yes")  # type: ignore[arg-type]
 
@@ -605,3 +605,72 @@ def test_the_planarity_test_agrees_with_every_pair_tested():
         _core.polylines_crossing(paths[:, :1], segs)
     with pytest.raises(ValueError, match="^segments:"):
         _core.polylines_crossing(paths, segs[:, :3])
+
+
+def test_the_density_map_is_the_distance_to_the_branch_surface():
+    # §4.4: D(p) = exp(-d(p, B)² / ρ²), d the distance to the branch's surface (per segment, the
+    # distance to its nearest point minus the thickness there), written within 3ρ of it; brute
+    # force over every pixel
+    from phloem.branching.growth import _World
+
+    m = BendingModel.fit(_meanders(), h=2.0)
+    rho = 5.0
+    w = _World(m, (60, 90), colonize=True, rho=rho, guide=None, rng=np.random.default_rng(0))
+    t = np.linspace(0, 1, 23)
+    pts = np.stack([10 + 70 * t, 30 + 12 * np.sin(5 * t)], axis=1)
+    thick = 1.0 + 2.0 * t
+    w.stamp(pts, thick, 3, 7)
+    yy, xx = np.mgrid[0:60, 0:90]
+    p = np.stack([xx, yy], axis=-1).reshape(-1, 1, 2).astype(float)
+    a, d = pts[:-1], np.diff(pts, axis=0)
+    s = np.clip(((p - a) * d).sum(-1) / (d**2).sum(-1), 0, 1)
+    per_segment = np.sqrt(((p - (a + s[..., None] * d)) ** 2).sum(-1)) - (thick[:-1] + s * np.diff(thick))
+    j = per_segment.argmin(axis=1)
+    sj = s[np.arange(len(j)), j]
+    gap = np.maximum(per_segment.min(axis=1), 0).reshape(60, 90)
+    near = gap <= 3 * rho - 1e-6
+    want = np.exp(-(gap**2) / rho**2)
+    np.testing.assert_allclose(w.dens[near], want[near], atol=1e-6)
+    assert (w.dens[gap > 3 * rho + 1e-6] == 0).all()
+    assert (w.owner_branch[near] == 3).all()
+    # the owner is the vertex nearest to the nearest segment point (a near tie between two
+    # segments may go either way in the last bit)
+    owner = (7 + j + np.rint(sj)).reshape(60, 90)[near]
+    assert np.abs(w.owner_vertex[near] - owner).max() <= 1 and np.mean(w.owner_vertex[near] == owner) > 0.99
+    assert w.density_mean() == pytest.approx(float(w.dens.sum(dtype=np.float64)) / w.dens.size, rel=1e-9)
+
+
+def test_growth_choose_names_a_bad_argument():
+    from phloem import _core
+
+    rel = np.zeros((5, 2, 2))
+    good = dict(
+        quality=np.zeros(5), relative=rel, ray_of=np.zeros(5, np.int64), tip=(1.0, 1.0), cos=1.0, sin=0.0,
+        height=10, width=10, directions=np.array([[1.0, 0.0]]), length=3.0, samples=3, density=None, skip=None,
+        border_rho=None, guide=None, segments=np.zeros((0, 4)), count=2, eps=1e-3,
+    )  # fmt: skip
+    assert len(_core.growth_choose(**good)[0]) == 2
+    bad = [
+        ("relative", rel[..., :1]),
+        ("ray_of", np.ones(5, np.int64)),
+        ("segments", np.zeros((2, 3))),
+        ("density", (np.zeros((9, 10), np.float32), np.zeros((10, 10), np.int32), np.zeros((10, 10), np.int32))),
+        ("rays", 0.0),
+    ]
+    for name, value in bad:
+        kw = dict(good, **{"length" if name == "rays" else name: value})
+        with pytest.raises(ValueError, match=f"^{name if name != 'rays' else 'rays'}:"):
+            _core.growth_choose(**kw)
+
+
+def test_grow_does_not_depend_on_the_thread_count(monkeypatch, models: tuple[BendingModel, FurcationModel]):
+    # the density stamps split large windows between threads
+    bend, fur = models
+    runs = []
+    for threads in ("1", "2", "3"):
+        monkeypatch.setenv("PHLOEM_NUM_THREADS", threads)
+        runs.append(grow(bend, fur, size=(300, 400), seed=5, max_length=1500.0, rho=12.0))
+    for other in runs[1:]:
+        assert len(other.branches) == len(runs[0].branches)
+        for a, b in zip(runs[0].branches, other.branches):
+            np.testing.assert_array_equal(a.points, b.points)

@@ -17,11 +17,11 @@ Beyond the paper's text:
 * **Course.** The bending model also matches each branch's heading against its course over
   ``8 m`` edges (:class:`.BendingModel`, ``course``), so branches keep a course at the scale
   of the structure.
-* **Density map.** ``d(p, B)`` is OpenCV's labelled distance transform of the drawn
-  polyline in the ``3ρ`` window of each update minus the thickness at the nearest branch
-  point; candidates whose average directions agree to within a quarter pixel at the end of
-  the ``3 m h`` look-up ray share one ray. Crossings are tested exactly, against the segments
-  in the buckets of a grid that the candidate paths touch.
+* **Density map.** ``d(p, B)`` is the distance from a pixel to the nearest segment point
+  minus the thickness there, written in the ``3ρ`` window of each update
+  (:mod:`phloem._core`'s ``density_stamp``); candidates whose average directions agree to
+  within a quarter pixel at the end of the ``3 m h`` look-up ray share one ray. Crossings are
+  tested exactly, for the best candidates only, against the segments near them.
 
 All randomness comes from ``numpy.random.default_rng(seed)``, so a seed fixes the output.
 """
@@ -41,7 +41,7 @@ from .. import _core, _memory
 from .._api import Seed, Size, renamed
 from .._progress import Progress
 from .._validate import check_float, check_int, check_seed
-from ._elements import F64, I64, _bin, _check_skeleton, _direction, _elements, _tangent, _wrap
+from ._elements import F64, _bin, _check_skeleton, _direction, _elements, _tangent, _wrap
 from ._forest import InputTree, input_trees
 from .bending import BendingModel, block_sums, course_deviation
 from .furcation import FurcationModel
@@ -95,7 +95,6 @@ class _World:
         self.colonize = colonize
         self.repel_border = repel_border
         self.rho = rho
-        self.guide = guide
         self.rng = rng
         # the density map D = exp(-d²/ρ²) itself (float32), so that lookups are plain indexing
         self.dens = np.zeros(shape, np.float32) if colonize else None
@@ -103,12 +102,11 @@ class _World:
         # which branch vertex each pixel's distance comes from, to ignore where a child starts
         self.owner_branch = np.full(shape, -1, np.int32) if colonize else None
         self.owner_vertex = np.full(shape, -1, np.int32) if colonize else None
-        # segments in growable arrays plus a bucket grid (cell = one extension plus 2h), so a
-        # crossing test looks at the segments near the candidate paths only
+        # segments in a growable array; the crossing tests cut it down to those near the paths
         self._seg = np.zeros((256, 4))
         self._nseg = 0
-        self._cell = (model.m + 2) * model.h
-        self._grid: dict[tuple[int, int], list[int]] = {}
+        guide_map = None if guide is None else np.ascontiguousarray(guide, np.float64)
+        self.guide = guide_map
         # histogram matching starts from the model's warm start: pseudo-elements distributed
         # like the input (see BendingModel.warm_start)
         self.counts_alpha = model.warm_start * model.hist_alpha
@@ -131,26 +129,8 @@ class _World:
             self._seg = grown
         self._seg[self._nseg : self._nseg + n, :2] = pts[:-1]
         self._seg[self._nseg : self._nseg + n, 2:] = pts[1:]
-        lo = np.floor(np.minimum(pts[:-1], pts[1:]) / self._cell).astype(np.int64)
-        hi = np.floor(np.maximum(pts[:-1], pts[1:]) / self._cell).astype(np.int64)
-        for j in range(n):
-            for cx in range(int(lo[j, 0]), int(hi[j, 0]) + 1):
-                for cy in range(int(lo[j, 1]), int(hi[j, 1]) + 1):
-                    self._grid.setdefault((cx, cy), []).append(self._nseg + j)
         self._nseg += n
         self.total_length += float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
-
-    def near_segments(self, lo: F64, hi: F64) -> I64:
-        """Indices of the segments whose bounding box may overlap the box ``lo .. hi``."""
-        c0 = np.floor(lo / self._cell).astype(np.int64)
-        c1 = np.floor(hi / self._cell).astype(np.int64)
-        found: list[int] = []
-        for cx in range(int(c0[0]), int(c1[0]) + 1):
-            for cy in range(int(c0[1]), int(c1[1]) + 1):
-                ids = self._grid.get((cx, cy))
-                if ids:
-                    found.extend(ids)
-        return np.unique(np.asarray(found, dtype=np.int64))
 
     def add_elements(self, alpha: F64, r: F64) -> None:
         m = self.model
@@ -160,48 +140,23 @@ class _World:
     def stamp(self, pts: F64, thick: F64, branch: int, first: int) -> None:
         """Write segments into the density map, only within ``3ρ`` of them (§4.4 local update).
 
-        ``pts`` are vertices ``first, first + 1, ...`` of branch ``branch``. The polyline is
-        drawn (sub-pixel) into a window and OpenCV's distance transform with pixel labels
-        gives every window pixel its distance to the nearest drawn pixel (within about half a
-        pixel of the exact distance to the segments) and which one that is; the thickness of
-        the nearest branch point is subtracted.
+        ``pts`` are vertices ``first, first + 1, ...`` of branch ``branch``; every pixel in
+        reach takes ``exp(-d²/ρ²)`` where that is larger than its density, ``d`` being its
+        distance to the nearest segment point minus the thickness there, and remembers the
+        branch vertex nearest to that point.
         """
         if self.dens is None or self.owner_branch is None or self.owner_vertex is None or len(pts) < 2:
             return
-        H, W = self.shape
-        reach = 3.0 * self.rho + float(thick.max())
-        x0 = max(math.floor(pts[:, 0].min() - reach), 0)
-        x1 = min(math.ceil(pts[:, 0].max() + reach) + 1, W)
-        y0 = max(math.floor(pts[:, 1].min() - reach), 0)
-        y1 = min(math.ceil(pts[:, 1].max() + reach) + 1, H)
-        if x0 >= x1 or y0 >= y1:
-            return
-        win = np.full((y1 - y0, x1 - x0), 255, np.uint8)
-        local = np.round((pts - [x0, y0]) * 16.0).astype(np.int32).reshape(-1, 1, 2)
-        cv2.polylines(win, [local], False, 0, thickness=1, lineType=cv2.LINE_8, shift=4)
-        zy, zx = np.nonzero(win == 0)
-        if len(zy) == 0:
-            return
-        d, lab = cv2.distanceTransformWithLabels(win, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
-        # the nearest point of the polyline to every drawn pixel: its vertex and thickness
-        zp = np.stack([zx + x0, zy + y0], axis=1).astype(np.float64)
-        a, seg = pts[:-1], pts[1:] - pts[:-1]
-        dd = np.maximum((seg**2).sum(axis=1), 1e-12)
-        t = np.clip(((zp[:, None, :] - a[None]) * seg[None]).sum(axis=2) / dd[None], 0.0, 1.0)
-        e = ((zp[:, None, :] - (a[None] + t[..., None] * seg[None])) ** 2).sum(axis=2)
-        j = np.argmin(e, axis=1)
-        tj = t[np.arange(len(j)), j]
-        rz = thick[j] + tj * (thick[j + 1] - thick[j])
-        vz = (first + j + np.rint(tj)).astype(np.int32)
-        li = lab - 1  # labels count the drawn pixels in raster order, as np.nonzero does
-        dist = np.maximum(d - rz[li].astype(np.float32), 0.0)
-        new = np.exp(-(dist**2) / np.float32(self.rho**2)).astype(np.float32)
-        view = self.dens[y0:y1, x0:x1]
-        closer = new > view
-        self._dsum += float((new[closer] - view[closer]).sum(dtype=np.float64))
-        view[closer] = new[closer]
-        self.owner_branch[y0:y1, x0:x1][closer] = branch
-        self.owner_vertex[y0:y1, x0:x1][closer] = vz[li[closer]]
+        self._dsum += _core.density_stamp(
+            self.dens,
+            self.owner_branch,
+            self.owner_vertex,
+            np.ascontiguousarray(pts, np.float64),
+            np.ascontiguousarray(thick, np.float64),
+            int(branch),
+            int(first),
+            float(self.rho),
+        )
 
     def density_mean(self) -> float:
         if self.dens is None:
@@ -228,31 +183,9 @@ class _World:
         C = len(ext)
         if self._nseg == 0 or C == 0:
             return np.zeros(C, bool)
-        flat = ext.reshape(-1, 2)
-        near = self.near_segments(np.minimum(flat.min(axis=0), tip), np.maximum(flat.max(axis=0), tip))
-        if len(near) == 0:
-            return np.zeros(C, bool)
-        seg = np.ascontiguousarray(self._seg[near], np.float64)
         path = np.ascontiguousarray(np.concatenate([np.broadcast_to(tip, (C, 1, 2)), ext], axis=1), np.float64)
         # proper crossings only: a child starting on its parent or consecutive edges touch
-        return _core.polylines_crossing(path, seg)
-
-    def ray_max(self, grid: Any, tip: F64, direction: F64, length: float, samples: int, *, border: bool = False) -> F64:
-        s = length * np.arange(1, samples + 1) / samples
-        pts = tip[None, None, :] + direction[:, None, :] * s[None, :, None]
-        vals = self._lookup(grid, pts)
-        if border:
-            vals = np.maximum(vals, self.border_density(pts))
-        return np.asarray(vals.max(axis=1))
-
-    def border_density(self, pts: F64) -> F64:
-        """The density of the image's border as if it were structure: ``exp(-d²/ρ²)`` with ``d``
-        the distance from the pixel to the first pixel outside, 1 outside."""
-        H, W = self.shape
-        ix = np.rint(pts[..., 0])
-        iy = np.rint(pts[..., 1])
-        d = np.minimum(np.minimum(ix + 1.0, W - ix), np.minimum(iy + 1.0, H - iy))
-        return np.asarray(np.exp(-(np.maximum(d, 0.0) ** 2) / self.rho**2), dtype=np.float64)
+        return _core.polylines_crossing(path, self._seg[: self._nseg])
 
 
 def _guide_map(guide: Any, shape: tuple[int, int], width: float) -> tuple[F64, F64 | None]:
@@ -323,6 +256,7 @@ class _Grower:
         key = np.rint(psi / (0.25 / self.ray_length)).astype(np.int64)
         _, first, self.ray_of = np.unique(key, return_index=True, return_inverse=True)
         self.ray_psi = psi[first]
+        self.ray_of = np.ascontiguousarray(self.ray_of, np.int64)
 
     def step(self, br: _Growing) -> bool:
         """Append one extension of ``m`` elements to ``br``; False when no candidate is valid."""
@@ -341,55 +275,42 @@ class _Grower:
             np.asarray(br.alpha[-L:]), np.asarray(br.r[-L:]), w.counts_alpha, w.counts_r, dev, coarse, turn
         )
         tip = br.points[-1]
-        c, s = math.cos(br.heading), math.sin(br.heading)
-        rx, ry = self.rel_ext[..., 0], self.rel_ext[..., 1]
-        ext = np.stack([tip[0] + c * rx + s * ry, tip[1] - s * rx + c * ry], axis=-1)  # (C, m, 2) new vertices
-        q[~w.inside(ext)] = -np.inf
-        if w.colonize or w.guide is not None:
-            direction = _direction(br.heading + self.ray_psi)
-            if w.colonize and w.dens is not None:
-                view = _DensityView(w, br.parent, self.near)
-                ray = w.ray_max(view, tip, direction, self.ray_length, self.ray_samples, border=w.repel_border)
-                q -= np.log(ray + _EPS)[self.ray_of]
-            if w.guide is not None:
-                q -= np.log(w.ray_max(w.guide, tip, direction, self.ray_length, self.ray_samples) + _EPS)[self.ray_of]
-        choice = self._choose(q, tip, ext)
-        if choice is None:
+        H, W = w.shape
+        cos, sin = math.cos(br.heading), math.sin(br.heading)
+        density = None
+        if w.colonize and w.dens is not None and w.owner_branch is not None and w.owner_vertex is not None:
+            density = (w.dens, w.owner_branch, w.owner_vertex)
+        skip = None if br.parent is None else (br.parent[0], br.parent[1], self.near)
+        # the density and guidance terms, the frame and the crossings, for the best candidates
+        valid, lq = _core.growth_choose(
+            q,
+            self.rel_ext,
+            self.ray_of,
+            (float(tip[0]), float(tip[1])),
+            cos,
+            sin,
+            H,
+            W,
+            _direction(br.heading + self.ray_psi),
+            self.ray_length,
+            self.ray_samples,
+            density,
+            skip,
+            w.rho if w.repel_border else None,
+            w.guide,
+            w._seg[: w._nseg],
+            self.model.c,
+            _EPS,
+        )
+        if not len(valid):
             return False
-        self._append(br, choice, ext[choice])
-        return True
-
-    def _choose(self, q: F64, tip: F64, ext: F64) -> int | None:
-        """Among valid candidates (finite quality, no crossing), pick one of the ``c`` best ∝ quality."""
-        m = self.model
-        chunk = max(4 * m.c, 16)
-        # the best ``chunk`` candidates first (by quality, then index); the full order only when
-        # they do not hold ``c`` valid ones
-        top = np.argpartition(-q, chunk - 1)[:chunk] if len(q) > chunk else np.arange(len(q))
-        order = top[np.lexsort((top, -q[top]))]
-        order = order[np.isfinite(q[order])]
-        valid: list[int] = []
-        pos, full = 0, False
-        while len(valid) < m.c and pos < len(q):
-            if pos == chunk and not full:
-                order = np.argsort(-q, kind="stable")  # the same order as ``top``'s, continued
-                order = order[np.isfinite(q[order])]
-                full = True
-            # The c best first: the crossing test's cost grows with the box around the
-            # extensions tested, and the c best are usually valid. Then sizes double, so a
-            # blocked tip costs a few calls, not C / c.
-            end = pos + max(m.c, pos) if full else min(pos + max(m.c, pos), chunk)
-            idx = order[pos:end]
-            if len(idx) == 0:
-                break
-            pos = end
-            bad = self.world.crossings(tip, ext[idx])
-            valid.extend(int(i) for i in idx[~bad][: m.c - len(valid)])
-        if not valid:
-            return None
-        lq = q[valid]
+        # among the c best valid candidates, one drawn in proportion to its quality
         p = np.exp(lq - lq.max())
-        return int(self.world.rng.choice(valid, p=p / p.sum()))
+        choice = int(w.rng.choice(valid, p=p / p.sum()))
+        rx, ry = self.rel_ext[choice, :, 0], self.rel_ext[choice, :, 1]
+        new_pts = np.stack([tip[0] + cos * rx + sin * ry, tip[1] - sin * rx + cos * ry], axis=-1)
+        self._append(br, choice, new_pts)
+        return True
 
     def _append(self, br: _Growing, i: int, new_pts: F64) -> None:
         self.append_elements(br, self.model.next_alpha[i], self.model.next_r[i], new_pts)

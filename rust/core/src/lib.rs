@@ -34,16 +34,22 @@
 //!   (Luo, Lin, Shen & Chen).
 //! - [`crossings`]: proper crossings of candidate polylines with existing segments, the
 //!   planarity test of branching growth (Sibbing et al. 2010, §4.4).
+//! - [`colonisation`]: the density map of branching growth, its local update, and the
+//!   density and guidance maxima along rays (Sibbing et al. 2010, §4.4–4.5).
+//! - [`growth`]: the choice of a growth step's best valid candidates from their bending
+//!   quality, density, guidance, the frame and the planarity test (Sibbing et al. 2010, §4.4).
 //! - [`correction`]: guided quilting, the start of texture correction after a warp (Assa &
 //!   Cohen-Or §3, after Fang & Hart 2007).
 
 pub mod cancel;
+pub mod colonisation;
 pub mod correction;
 pub mod crossings;
 pub mod distance;
 pub mod emd;
 pub mod error;
 pub mod field;
+pub mod growth;
 pub mod image;
 pub(crate) mod kdtree;
 pub mod knn;

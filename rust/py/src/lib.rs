@@ -11,11 +11,13 @@ use pyo3::prelude::*;
 
 mod blend;
 mod call;
+mod colonisation;
 mod convert;
 mod correction;
 mod crossings;
 mod emd;
 mod errors;
+mod growth;
 mod patch;
 mod progress;
 mod seams;
@@ -56,6 +58,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(strokes::stroke_pieces_py, m)?)?;
     m.add_function(wrap_pyfunction!(strokes::stroke_pair_energies_py, m)?)?;
     m.add_function(wrap_pyfunction!(crossings::polylines_crossing_py, m)?)?;
+    m.add_function(wrap_pyfunction!(colonisation::density_stamp_py, m)?)?;
+    m.add_function(wrap_pyfunction!(growth::growth_choose_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::default_threads_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::after_fork_in_child_py, m)?)?;
     Ok(())
