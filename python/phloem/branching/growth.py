@@ -17,11 +17,12 @@ Beyond the paper's text:
 * **Course.** The bending model also matches each branch's heading against its course over
   ``8 m`` edges (:class:`.BendingModel`, ``course``), so branches keep a course at the scale
   of the structure.
-* **Density map.** ``d(p, B)`` is the distance from a pixel to the nearest segment point
-  minus the thickness there, written in the ``3ρ`` window of each update
-  (:mod:`phloem._core`'s ``density_stamp``); candidates whose average directions agree to
-  within a quarter pixel at the end of the ``3 m h`` look-up ray share one ray. Crossings are
-  tested exactly, for the best candidates only, against the segments near them.
+* **Density map.** ``d(p, B)`` is the distance from a pixel to the branch's surface (per
+  segment, the distance to its nearest point minus the thickness there), written where it is
+  at most ``3ρ`` (``phloem_core::colonisation``); candidates whose average directions agree to
+  within a quarter pixel at the end of the ``3 m h`` look-up ray share one ray. A step tests
+  only its best candidates for the frame and for crossings, exactly, against the segments
+  within their reach (``phloem_core::growth``).
 
 All randomness comes from ``numpy.random.default_rng(seed)``, so a seed fixes the output.
 """
@@ -95,6 +96,7 @@ class _World:
         self.colonize = colonize
         self.repel_border = repel_border
         self.rho = rho
+        self.guide = None if guide is None else np.ascontiguousarray(guide, np.float64)
         self.rng = rng
         # the density map D = exp(-d²/ρ²) itself (float32), so that lookups are plain indexing
         self.dens = np.zeros(shape, np.float32) if colonize else None
@@ -105,8 +107,6 @@ class _World:
         # segments in a growable array; the crossing tests cut it down to those near the paths
         self._seg = np.zeros((256, 4))
         self._nseg = 0
-        guide_map = None if guide is None else np.ascontiguousarray(guide, np.float64)
-        self.guide = guide_map
         # histogram matching starts from the model's warm start: pseudo-elements distributed
         # like the input (see BendingModel.warm_start)
         self.counts_alpha = model.warm_start * model.hist_alpha
@@ -114,10 +114,10 @@ class _World:
         self.total_length = 0.0
 
     # -- bookkeeping ----------------------------------------------------------------------
-    def segments(self) -> tuple[F64, F64]:
-        """All segments so far as ``(A, B)`` end point arrays."""
-        seg = self._seg[: self._nseg]
-        return seg[:, :2], seg[:, 2:]
+    @property
+    def segment_rows(self) -> F64:
+        """All segments so far as ``(s, 4)`` rows ``x0, y0, x1, y1``."""
+        return self._seg[: self._nseg]
 
     def add_segments(self, pts: F64) -> None:
         n = len(pts) - 1
@@ -140,10 +140,10 @@ class _World:
     def stamp(self, pts: F64, thick: F64, branch: int, first: int) -> None:
         """Write segments into the density map, only within ``3ρ`` of them (§4.4 local update).
 
-        ``pts`` are vertices ``first, first + 1, ...`` of branch ``branch``; every pixel in
-        reach takes ``exp(-d²/ρ²)`` where that is larger than its density, ``d`` being its
-        distance to the nearest segment point minus the thickness there, and remembers the
-        branch vertex nearest to that point.
+        ``pts`` are vertices ``first, first + 1, ...`` of branch ``branch``; every pixel with
+        ``d ≤ 3ρ`` takes ``exp(-d²/ρ²)`` where that is larger than its density, ``d`` being
+        its distance to the branch's surface (per segment, the distance to its nearest point
+        minus the thickness there), and remembers the branch vertex nearest to that point.
         """
         if self.dens is None or self.owner_branch is None or self.owner_vertex is None or len(pts) < 2:
             return
@@ -185,7 +185,7 @@ class _World:
             return np.zeros(C, bool)
         path = np.ascontiguousarray(np.concatenate([np.broadcast_to(tip, (C, 1, 2)), ext], axis=1), np.float64)
         # proper crossings only: a child starting on its parent or consecutive edges touch
-        return _core.polylines_crossing(path, self._seg[: self._nseg])
+        return _core.polylines_crossing(path, self.segment_rows)
 
 
 def _guide_map(guide: Any, shape: tuple[int, int], width: float) -> tuple[F64, F64 | None]:
@@ -298,7 +298,7 @@ class _Grower:
             skip,
             w.rho if w.repel_border else None,
             w.guide,
-            w._seg[: w._nseg],
+            w.segment_rows,
             self.model.c,
             _EPS,
         )
