@@ -649,53 +649,21 @@ mod tests {
     #[allow(clippy::float_cmp)] // nothing to write adds exactly zero
     fn stamp_rejects_bad_input() {
         let mut o = Owned::new(10, 10);
-        assert!(stamp(&mut o.map(), &[[0.0, 0.0], [1.0, 1.0]], &[0.0], 0, 0, 1.0).is_err());
-        assert!(stamp(
-            &mut o.map(),
-            &[[0.0, 0.0], [1.0, 1.0]],
-            &[0.0; 2],
-            0,
-            0,
-            0.0
-        )
-        .is_err());
-        assert!(stamp(
-            &mut o.map(),
-            &[[0.0, f64::NAN], [1.0, 1.0]],
-            &[0.0; 2],
-            0,
-            0,
-            1.0
-        )
-        .is_err());
+        let line = [[0.0, 0.0], [1.0, 1.0]];
+        let mut run =
+            |pts: &[[f64; 2]], th: &[f64], rho: f64| stamp(&mut o.map(), pts, th, 0, 0, rho);
+        assert!(run(&line, &[0.0], 1.0).is_err());
+        assert!(run(&line, &[0.0; 2], 0.0).is_err());
+        assert!(run(&[[0.0, f64::NAN], [1.0, 1.0]], &[0.0; 2], 1.0).is_err());
         // one point or points far outside: nothing to write
+        assert_eq!(run(&[[3.0, 3.0]], &[0.0], 1.0).unwrap(), 0.0);
         assert_eq!(
-            stamp(&mut o.map(), &[[3.0, 3.0]], &[0.0], 0, 0, 1.0).unwrap(),
-            0.0
-        );
-        assert_eq!(
-            stamp(
-                &mut o.map(),
-                &[[-90.0, 3.0], [-80.0, 3.0]],
-                &[0.0; 2],
-                0,
-                0,
-                1.0
-            )
-            .unwrap(),
+            run(&[[-90.0, 3.0], [-80.0, 3.0]], &[0.0; 2], 1.0).unwrap(),
             0.0
         );
         let mut short = Owned::new(10, 10);
         short.branch.pop();
-        assert!(stamp(
-            &mut short.map(),
-            &[[0.0, 0.0], [1.0, 1.0]],
-            &[0.0; 2],
-            0,
-            0,
-            1.0
-        )
-        .is_err());
+        assert!(stamp(&mut short.map(), &line, &[0.0; 2], 0, 0, 1.0).is_err());
     }
 
     #[test]
