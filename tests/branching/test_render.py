@@ -8,7 +8,8 @@ import pytest
 
 import phloem
 from phloem.branching import Branch, Skeleton, render
-from phloem.branching.render import _displacement, _drop_foreign, _in_order
+from phloem.branching._pixels import two_level
+from phloem.branching.render import _branch_map, _channel_range, _displacement, _drop_foreign, _in_order, _pt
 from phloem.testing import channel_scene, longest_path, shared_file, wavy_branch
 
 
@@ -269,6 +270,37 @@ def test_stages_can_be_switched_off() -> None:
     plain = render(img, sk, sk, seed=0, deform=False, photometric=False, seams=False, complete=False)
     assert plain.shape == (128, 224)
     assert np.isfinite(plain).all()
+
+
+def test_two_level_is_95_percent_of_pixels_at_a_channel_extreme_in_every_channel() -> None:
+    rng = np.random.default_rng(0)
+    for c in (1, 3, 5):
+        for off in (0.0, 0.03, 0.049, 0.051, 0.2):
+            img = np.repeat(rng.random((60, 50, 1)) > 0.5, c, axis=2).astype(np.float32)
+            # Off-level pixels in the last channel only: the channel-by-channel exit must reach it.
+            k = round(off * 60 * 50)
+            img.reshape(-1, c)[rng.permutation(60 * 50)[:k], c - 1] = 0.5
+            lo, hi = _channel_range(img)
+            direct = float(((img == lo) | (img == hi)).all(axis=2).mean()) >= 0.95
+            assert two_level(img, lo, hi) == direct == (off < 0.05), (c, off)
+
+
+def test_branch_map_is_each_branch_drawn_over_the_earlier_ones() -> None:
+    """The map drawn in each branch's box equals drawing every branch on the whole image."""
+    main = wavy_branch((3, 40), 0.1, 150, (9.0, 4.0), amp=0.5)
+    child = wavy_branch(tuple(main.points[30]), 1.2, 50, (4.0, 2.0), parent=(0, 30))
+    edge = Branch([[-0.4, -0.4], [80, 0.3], [159.4, 99.4]], [7.0, 2.0, 12.0], parent=(0, 5))
+    sk = Skeleton([main, child, edge], (100, 160))
+    want = np.full((100, 160), -1, np.int32)
+    for i, b in enumerate(sk.branches):
+        m = np.zeros((100, 160), np.uint8)
+        for a, bb, r0, r1 in zip(b.points[:-1], b.points[1:], b.thickness[:-1], b.thickness[1:], strict=True):
+            t = round(2 * (max(0.5 * (r0 + r1), 0.5) + 2.0))
+            cv2.line(m, _pt(a), _pt(bb), 1, thickness=t, lineType=cv2.LINE_8, shift=4)
+        want[m > 0] = i
+    got = _branch_map(sk, (100, 160))
+    assert (got >= 0).sum() > 3000
+    np.testing.assert_array_equal(got, want)
 
 
 def test_displacement_field_hits_its_constraints() -> None:

@@ -71,4 +71,13 @@ def _pt(p: F64) -> tuple[int, int]:
 
 def two_level(img: F32, lo: F32, hi: F32) -> bool:
     """Whether ``img`` is a mask: at least 95 % of its pixels at their channels' minimum or maximum."""
-    return bool(float(((img == lo) | (img == hi)).all(axis=2).mean()) >= 0.95)
+    need = 0.95 * img.shape[0] * img.shape[1]
+    at: NDArray[np.bool_] | None = None
+    # Channel by channel: a photo fails on its first channel, without a pass over the others.
+    for c in range(img.shape[2]):
+        ch = img[..., c]
+        here = (ch == lo[c]) | (ch == hi[c])
+        at = here if at is None else np.logical_and(at, here, out=at)
+        if np.count_nonzero(at) < need:
+            return False
+    return True

@@ -325,7 +325,7 @@ def render(
             "paste_structure: needs photometric=True and complete=True (it pastes into the completed gaps)"
         )
     sources, targets, lib = _cover_both(src_sk, tgt_sk, ok, lam_f, rf, k, mirror=mirror, keep=max(3, c_n))
-    painter = _Painter(img, tgt_sk, targets, lib, opts, draws=rng.random(len(targets)))
+    painter = _Painter(img, (lo, hi), tgt_sk, targets, lib, opts, draws=rng.random(len(targets)))
     _in_order(painter.boxes, painter.paint, workers=t if t is not None else _core.default_threads(), progress=progress)
 
     canvas = painter.canvas
@@ -415,7 +415,14 @@ class _Painter:
     """
 
     def __init__(
-        self, image: F32, target: Skeleton, targets: list[Fragment], lib: FragmentLibrary, opts: _Options, draws: F64
+        self,
+        image: F32,
+        levels: tuple[F32, F32],
+        target: Skeleton,
+        targets: list[Fragment],
+        lib: FragmentLibrary,
+        opts: _Options,
+        draws: F64,
     ) -> None:
         assert target.shape is not None
         H, W = target.shape
@@ -435,7 +442,7 @@ class _Painter:
         self.owner = np.full((H, W), -1, np.int32)
         self.choice = np.zeros(len(targets), np.int64)
         self.mirrored = np.zeros(len(targets), bool)
-        self.lo, self.hi = _channel_range(image)
+        self.lo, self.hi = levels  # the image's per-channel range
         # Colour differences in units of the input's range (C's weight is set for a full one):
         # on a terrain spanning 1 % of [0, 1] the colour term would otherwise be off.
         span2 = float(np.mean((self.hi - self.lo).astype(np.float64) ** 2))
@@ -778,10 +785,19 @@ def _branch_map(skeleton: Skeleton, shape: tuple[int, int]) -> NDArray[np.int32]
     """Index of the branch whose structure (thickness plus 2 px) covers each pixel, else -1;
     children are drawn over their parents."""
     out = np.full(shape, -1, np.int32)
+    h, w = shape
     for i, b in enumerate(skeleton.branches):
-        m = np.zeros(shape, np.uint8)
-        for (a, bb), (r0, r1) in zip(zip(b.points[:-1], b.points[1:]), zip(b.thickness[:-1], b.thickness[1:])):
-            r = max(0.5 * (r0 + r1), 0.5) + 2.0
-            cv2.line(m, _pt(a), _pt(bb), 1, thickness=min(max(1, round(2 * r)), 32767), lineType=cv2.LINE_8, shift=4)
-        out[m > 0] = i
+        r = np.maximum(0.5 * (b.thickness[:-1] + b.thickness[1:]), 0.5) + 2.0
+        # Drawn in the branch's box only: a full-size mask per branch costs more than the lines.
+        pad = float(r.max()) + 2.0
+        x0, y0 = (max(0, math.floor(v - pad)) for v in b.points.min(axis=0))
+        x1, y1 = math.ceil(b.points[:, 0].max() + pad) + 1, math.ceil(b.points[:, 1].max() + pad) + 1
+        x1, y1 = min(w, x1), min(h, y1)
+        if x1 <= x0 or y1 <= y0:
+            continue
+        m = np.zeros((y1 - y0, x1 - x0), np.uint8)
+        off = np.array([x0, y0], np.float64)
+        for a, bb, rr in zip(b.points[:-1] - off, b.points[1:] - off, r):
+            cv2.line(m, _pt(a), _pt(bb), 1, thickness=min(max(1, round(2 * rr)), 32767), lineType=cv2.LINE_8, shift=4)
+        out[y0:y1, x0:x1][m > 0] = i
     return out
