@@ -58,7 +58,7 @@ def row(path: Path, seed: int, max_side: int, tuned: bool) -> list[np.ndarray]:
         _label(_fit(overlay(_show(img), res.source, w), interpolation=cv2.INTER_AREA),
                f"traced: tree {r.share_in:.2f}, turn {r.heading_in:.2f} rad, frame {r.border_in:.2f}"),
         _label(_fit(overlay(np.zeros(img.shape[:2], np.float32), res.target, w), interpolation=cv2.INTER_AREA),
-               f"grown: tree {r.share_out:.2f}, turn {r.heading_out:.2f}, drift {r.drift:.2f}, frame {r.border_out:.2f}"),
+               f"grown: tree {r.share_out:.2f}, turn {r.heading_out:.2f}, drift {r.drift:.2f} (noise {r.drift_noise:.2f}), frame {r.border_out:.2f}"),
         _label(_fit(_show(res.image), interpolation=cv2.INTER_AREA), f"output{two}"),
         _label(_fit(retraced, interpolation=cv2.INTER_AREA),
                f"re-traced: F1 {r.f1:.2f} (P {r.precision:.2f} R {r.recall:.2f})"),

@@ -12,6 +12,7 @@ from phloem.branching import Branch, Skeleton, trace
 from phloem.branching.measures import (
     border_share,
     drift,
+    drift_noise,
     heading_change_histogram,
     heading_changes,
     largest_tree_share,
@@ -30,7 +31,8 @@ def arc_branch(radius: float, angle: float, centre=(150.0, 150.0), n: int = 2000
 
 def test_metrics_reexports_the_measures() -> None:
     for name in (
-        "retrace_agreement", "skeleton_agreement", "largest_tree_share", "border_share", "drift", "two_level_fraction"
+        "retrace_agreement", "skeleton_agreement", "largest_tree_share", "border_share", "drift", "drift_noise",
+        "two_level_fraction",
     ):  # fmt: skip
         assert getattr(phloem.metrics, name) is getattr(phloem.branching.measures, name)
         assert name in phloem.metrics.__all__
@@ -105,6 +107,51 @@ def test_drift_is_zero_for_the_same_bending_and_large_for_curls() -> None:
     mixed = Skeleton([*line.branches, *curl.branches])
     d = drift(line, mixed)
     assert 0.0 < d < 2.0
+
+
+def random_arcs(n: int, seed: int) -> Skeleton:
+    """``n`` branches of one process: arcs of random radius (80-400 px) and length (90-250 px)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        r, length = rng.uniform(80, 400), rng.uniform(90, 250)
+        out.append(arc_branch(r, length / r, n=int(length)))
+    return Skeleton(out)
+
+
+def test_drift_noise_is_the_quantile_of_drift_to_bootstrap_resamples() -> None:
+    """Against the brute force: each resample built as a skeleton and scored with drift()."""
+    sk = Skeleton([*random_arcs(9, 1).branches, Branch([[0, 0], [30, 0]], 1.0)])  # one branch too short
+    long_ = [b for b in sk.branches if heading_changes(Skeleton([b]), arc=60).size]
+    assert len(long_) == 9
+    rng = np.random.default_rng(5)
+    picks = rng.integers(0, len(long_), size=(50, len(long_)))
+    brute = [drift(sk, Skeleton([long_[i] for i in p])) for p in picks]
+    for q in (0.0, 0.5, 0.9, 1.0):
+        assert drift_noise(sk, quantile=q, resamples=50, seed=5) == pytest.approx(np.quantile(brute, q), abs=1e-12)
+
+
+def test_drift_noise_falls_as_the_structure_grows() -> None:
+    """Zero for one branch, and for one process smaller with 64 branches than with 6."""
+    assert drift_noise(Skeleton([arc_branch(50.0, 3.0)])) == 0.0
+    few = [drift_noise(random_arcs(6, s)) for s in range(4)]
+    many = [drift_noise(random_arcs(64, s)) for s in range(4)]
+    assert max(many) < min(few), (few, many)
+    # Two draws of the process differ by more than the bootstrap's median: it is a lower bound.
+    gaps = [drift(random_arcs(6, s), random_arcs(6, s + 10)) for s in range(8)]
+    assert np.median(gaps) > np.median([drift_noise(random_arcs(6, s), quantile=0.5) for s in range(8)])
+
+
+def test_drift_noise_names_a_bad_argument() -> None:
+    sk = random_arcs(5, 0)
+    with pytest.raises(ValueError, match=r"^quantile: expected a number in \[0, 1\]"):
+        drift_noise(sk, quantile=1.5)
+    with pytest.raises(ValueError, match=r"^resamples"):
+        drift_noise(sk, resamples=0)
+    with pytest.raises(ValueError, match=r"^skeleton: no branch is at least 70 px long"):
+        drift_noise(Skeleton([Branch([[0, 0], [50, 0]], 1.0)]))
+    with pytest.raises(TypeError, match=r"^skeleton"):
+        drift_noise(np.zeros((4, 2)))  # type: ignore[arg-type]
 
 
 # -- largest-tree share -----------------------------------------------------------------------

@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_image, check_float
-from ._elements import F64, _check_skeleton
+from .._validate import as_image, check_float, check_int
+from ._elements import F64, _bin, _check_skeleton
 from .histograms import _hist, histogram_distance
 from .skeleton import Branch, Skeleton
 from .trace import DEFAULT_SIGMAS, _gray, _resolve_kind, _sigmas, trace
@@ -24,6 +24,7 @@ __all__ = [
     "Agreement",
     "border_share",
     "drift",
+    "drift_noise",
     "heading_change_histogram",
     "heading_changes",
     "largest_tree_share",
@@ -328,7 +329,12 @@ def heading_changes(skeleton: Skeleton, *, arc: float = ARC) -> F64:
     True
     """
     _check_skeleton(skeleton)
-    a = _check_arc(arc)
+    out = _branch_changes(skeleton, _check_arc(arc))
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def _branch_changes(skeleton: Skeleton, a: float) -> list[F64]:
+    """:func:`heading_changes` branch by branch, for the branches long enough to give any."""
     half = a / 12
     out = []
     for b in skeleton.branches:
@@ -345,7 +351,7 @@ def heading_changes(skeleton: Skeleton, *, arc: float = ARC) -> F64:
 
         turn = heading(start + a) - heading(start)
         out.append(np.abs(np.pi - (np.pi - turn) % (2 * np.pi)))
-    return np.concatenate(out) if out else np.zeros(0)
+    return out
 
 
 def _changes_or_raise(skeleton: Skeleton, arc: float, name: str) -> F64:
@@ -432,6 +438,72 @@ def drift(reference: Skeleton, candidate: Skeleton, *, arc: float = ARC, bins: i
     a = _histogram(reference, arc, bins, "reference")[0]
     b = _histogram(candidate, arc, bins, "candidate")[0]
     return histogram_distance(a, b)
+
+
+def drift_noise(
+    skeleton: Skeleton,
+    *,
+    arc: float = ARC,
+    bins: int = 16,
+    quantile: float = 0.9,
+    resamples: int = 400,
+    seed: int = 0,
+) -> float:
+    """The drift that a skeleton's own sampling noise reaches: a scale for :func:`drift`.
+
+    A structure with few long branches has a noisy heading-change histogram, so another
+    structure drawn from the same process differs from it by a drift well above 0. This
+    draws ``resamples`` bootstrap samples of the skeleton's branches (as many as it has
+    long enough for ``arc``, with replacement) and returns the ``quantile`` of their drift to
+    the whole skeleton. A bootstrap sample differs from the skeleton about as much as the
+    skeleton differs from its process, which is less than two independent samples of the process
+    differ, so the value is a lower bound on the drift a faithful synthesis can be expected to
+    show against its input.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        E.g. the input's skeleton.
+    arc, bins : optional
+        See :func:`drift`.
+    quantile : float, optional
+        In [0, 1] (default 0.9).
+    resamples : int, optional
+        Bootstrap samples (default 400).
+    seed : int, optional
+        Seed of the resampling (default 0).
+
+    Returns
+    -------
+    float
+        In [0, 2]; 0 for a skeleton with a single long branch, whose resamples are all itself.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phloem.branching import Branch, Skeleton
+    >>> t = np.linspace(0, np.pi, 400)
+    >>> arcs = [Branch(np.c_[100 + r * np.cos(t), 100 - r * np.sin(t)], 1.0) for r in (30, 40, 60, 90)]
+    >>> drift_noise(Skeleton(arcs[:1])), drift_noise(Skeleton(arcs)) > 0.5
+    (0.0, True)
+    """
+    a = _check_arc(arc)
+    nb = check_int(bins, "bins", 1)
+    q = check_float(quantile, "quantile", 0.0)
+    if q > 1.0:
+        raise ValueError(f"quantile: expected a number in [0, 1], got {quantile!r}")
+    n_res = check_int(resamples, "resamples", 1)
+    parts = _branch_changes(_check_skeleton(skeleton, "skeleton"), a)
+    if not parts:
+        raise ValueError(f"skeleton: no branch is at least {7 * a / 6:g} px long (arc={arc:g} and its tangents)")
+    counts = np.stack([np.bincount(_bin(v, 0.0, math.pi, nb), minlength=nb) for v in parts]).astype(np.float64)
+    whole = counts.sum(axis=0) / counts.sum()
+    rng = np.random.default_rng(check_int(seed, "seed", 0))
+    picks = rng.integers(0, len(parts), size=(n_res, len(parts)))
+    times = np.stack([np.bincount(p, minlength=len(parts)) for p in picks]).astype(np.float64)
+    boot = times @ counts
+    boot /= boot.sum(axis=1, keepdims=True)
+    return float(np.quantile(np.abs(boot - whole).sum(axis=1), q))
 
 
 def two_level_fraction(image: Any, reference: Any, *, tolerance: float = 0.05) -> float:
