@@ -119,21 +119,31 @@ def random_arcs(n: int, seed: int) -> Skeleton:
     return Skeleton(out)
 
 
-def test_drift_noise_is_the_quantile_of_drift_to_bootstrap_resamples() -> None:
-    """Against the brute force: each resample built as a skeleton and scored with drift()."""
+def test_drift_noise_is_the_quantile_of_drift_to_block_bootstrap_resamples() -> None:
+    """Against a brute force: blocks of 60 heading changes per branch, resampled, histogrammed by numpy."""
     sk = Skeleton([*random_arcs(9, 1).branches, Branch([[0, 0], [30, 0]], 1.0)])  # one branch too short
-    long_ = [b for b in sk.branches if heading_changes(Skeleton([b]), arc=60).size]
-    assert len(long_) == 9
+    blocks = []
+    for b in sk.branches:
+        v = heading_changes(Skeleton([b]), arc=60)
+        blocks += [v[i : i + 60] for i in range(0, len(v), 60)]
+    assert len(blocks) > 9
+    whole = np.histogram(np.concatenate(blocks), bins=16, range=(0, np.pi))[0]
     rng = np.random.default_rng(5)
-    picks = rng.integers(0, len(long_), size=(50, len(long_)))
-    brute = [drift(sk, Skeleton([long_[i] for i in p])) for p in picks]
+    picks = rng.integers(0, len(blocks), size=(50, len(blocks)))
+    brute = []
+    for p in picks:
+        h = np.histogram(np.concatenate([blocks[i] for i in p]), bins=16, range=(0, np.pi))[0]
+        brute.append(np.abs(h / h.sum() - whole / whole.sum()).sum())
     for q in (0.0, 0.5, 0.9, 1.0):
         assert drift_noise(sk, quantile=q, resamples=50, seed=5) == pytest.approx(np.quantile(brute, q), abs=1e-12)
 
 
 def test_drift_noise_falls_as_the_structure_grows() -> None:
-    """Zero for one branch, and for one process smaller with 64 branches than with 6."""
+    """Zero for an arc of one radius, above zero for one wavy branch, and for one process smaller
+    with 64 branches than with 6."""
     assert drift_noise(Skeleton([arc_branch(50.0, 3.0)])) == 0.0
+    x = np.arange(0.0, 600.0)
+    assert drift_noise(Skeleton([Branch(np.c_[x, 100 + 30 * np.sin(x / 40)], 1.0)])) > 0.1
     few = [drift_noise(random_arcs(6, s)) for s in range(4)]
     many = [drift_noise(random_arcs(64, s)) for s in range(4)]
     assert max(many) < min(few), (few, many)
@@ -150,6 +160,8 @@ def test_drift_noise_names_a_bad_argument() -> None:
         drift_noise(sk, resamples=0)
     with pytest.raises(ValueError, match=r"^skeleton: no branch is at least 70 px long"):
         drift_noise(Skeleton([Branch([[0, 0], [50, 0]], 1.0)]))
+    with pytest.raises(ValueError, match=r"^skeleton: its long branches hold a single stretch of 60 px"):
+        drift_noise(Skeleton([Branch([[0, 0], [120, 0]], 1.0)]))  # 50 values: one block
     with pytest.raises(TypeError, match=r"^skeleton"):
         drift_noise(np.zeros((4, 2)))  # type: ignore[arg-type]
 

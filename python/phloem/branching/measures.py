@@ -451,14 +451,16 @@ def drift_noise(
 ) -> float:
     """The drift that a skeleton's own sampling noise reaches: a scale for :func:`drift`.
 
-    A structure with few long branches has a noisy heading-change histogram, so another
-    structure drawn from the same process differs from it by a drift well above 0. This
-    draws ``resamples`` bootstrap samples of the skeleton's branches (as many as it has
-    long enough for ``arc``, with replacement) and returns the ``quantile`` of their drift to
-    the whole skeleton. A bootstrap sample differs from the skeleton about as much as the
-    skeleton differs from its process, which is less than two independent samples of the process
-    differ, so the value is a lower bound on the drift a faithful synthesis can be expected to
-    show against its input.
+    A structure with little long branch has a noisy heading-change histogram, so another
+    structure drawn from the same process differs from it by a drift well above 0. The
+    heading changes (:func:`heading_changes`, one per px of branch) are cut into stretches of
+    ``arc`` px along each branch, the blocks of a block bootstrap (neighbouring values share
+    most of their arc, so single values are not independent). This draws ``resamples``
+    bootstrap samples of the blocks (as many as there are, with replacement) and returns the
+    ``quantile`` of their drift to the whole skeleton. A bootstrap sample differs from the
+    skeleton about as much as the skeleton differs from its process, which is less than two
+    independent samples of the process differ, so the value is a lower bound on the drift a
+    faithful synthesis can be expected to show against its input.
 
     Parameters
     ----------
@@ -476,14 +478,19 @@ def drift_noise(
     Returns
     -------
     float
-        In [0, 2]; 0 for a skeleton with a single long branch, whose resamples are all itself.
+        In [0, 2]; 0 when every block has the same histogram (e.g. arcs of one radius).
+
+    Raises
+    ------
+    ValueError
+        When no branch is long enough for ``arc``, or all together hold a single block.
 
     Examples
     --------
     >>> import numpy as np
     >>> from phloem.branching import Branch, Skeleton
     >>> t = np.linspace(0, np.pi, 400)
-    >>> arcs = [Branch(np.c_[100 + r * np.cos(t), 100 - r * np.sin(t)], 1.0) for r in (30, 40, 60, 90)]
+    >>> arcs = [Branch(np.c_[100 + r * np.cos(t), 100 - r * np.sin(t)], 1.0) for r in (60, 90, 30, 40)]
     >>> drift_noise(Skeleton(arcs[:1])), drift_noise(Skeleton(arcs)) > 0.5
     (0.0, True)
     """
@@ -496,11 +503,15 @@ def drift_noise(
     parts = _branch_changes(_check_skeleton(skeleton, "skeleton"), a)
     if not parts:
         raise ValueError(f"skeleton: no branch is at least {7 * a / 6:g} px long (arc={arc:g} and its tangents)")
-    counts = np.stack([np.bincount(_bin(v, 0.0, math.pi, nb), minlength=nb) for v in parts]).astype(np.float64)
+    block = max(1, math.ceil(a))
+    blocks = [v[i : i + block] for v in parts for i in range(0, len(v), block)]
+    if len(blocks) < 2:
+        raise ValueError(f"skeleton: its long branches hold a single stretch of {arc:g} px; the noise needs two")
+    counts = np.stack([np.bincount(_bin(v, 0.0, math.pi, nb), minlength=nb) for v in blocks]).astype(np.float64)
     whole = counts.sum(axis=0) / counts.sum()
     rng = np.random.default_rng(check_int(seed, "seed", 0))
-    picks = rng.integers(0, len(parts), size=(n_res, len(parts)))
-    times = np.stack([np.bincount(p, minlength=len(parts)) for p in picks]).astype(np.float64)
+    picks = rng.integers(0, len(blocks), size=(n_res, len(blocks)))
+    times = np.stack([np.bincount(p, minlength=len(blocks)) for p in picks]).astype(np.float64)
     boot = times @ counts
     boot /= boot.sum(axis=1, keepdims=True)
     return float(np.quantile(np.abs(boot - whole).sum(axis=1), q))
