@@ -74,6 +74,35 @@ def test_histogram_matching_raises_quality_of_helpful_candidates(walk_branch: Ca
     assert np.abs(gain2).max() > np.abs(gain).max()
 
 
+@pytest.mark.parametrize(("coarse", "turn"), [(0.0, 0.0), (2.0, 0.0), (2.0, 1.5)])
+def test_histogram_term_is_the_papers_with_the_angle_part_weighted_by_the_angle_terms(
+    walk_branch: Callable[..., Branch], coarse: float, turn: float
+) -> None:
+    """Against §4.2's formula written out: ω_G (a Δ_α + Δ_r) n_t / m with
+    Δ_x(i) = (‖Ĥ - H‖² - ‖Ĥ - H^i‖²) / B and a = 1 + coarse_history + total_turn."""
+    src = walk_branch(np.random.default_rng(2), 90, 0.3)
+    model = BendingModel.fit(Skeleton([src]), h=H, coarse_history=coarse, total_turn=turn)
+    assert model.angle_weight == 1.0 + coarse + turn
+    alpha, r = model.cand_hist_alpha[0], model.cand_hist_r[0] * H
+    rng = np.random.default_rng(3)
+    ca, cr = rng.integers(0, 9, 16).astype(float), rng.integers(0, 9, 16).astype(float)
+    n_t = ca.sum()
+    cr *= n_t / cr.sum()
+
+    def delta(target: np.ndarray, counts: np.ndarray, inc: np.ndarray) -> np.ndarray:
+        now = ((target - counts / n_t) ** 2).sum()
+        after = ((target[None] - (counts[None] + inc) / (n_t + model.m)) ** 2).sum(axis=1)
+        return (now - after) / model.bins
+
+    want = (
+        model.omega_g
+        * (n_t / model.m)
+        * ((1.0 + coarse + turn) * delta(model.hist_alpha, ca, model.inc_alpha) + delta(model.hist_r, cr, model.inc_r))
+    )
+    got = model.log_quality(alpha, r, ca, cr) - model.log_quality(alpha, r, np.zeros(16), np.zeros(16))
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9)
+
+
 def test_bad_input_errors() -> None:
     tiny = Skeleton([Branch([[0, 0], [2, 0], [4, 0], [6, 0]], 1.0)])
     with pytest.raises(ValueError, match="skeleton: the skeleton has no branches"):

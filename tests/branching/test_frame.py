@@ -64,16 +64,18 @@ def test_synthesize_keeps_the_frame_out_of_the_output() -> None:
     img, _ = _fundus()
     opts = {"kind": "dark", "sigmas": (1.5, 2.5)}
 
-    def black(valid, **render_options) -> float:
-        out = synthesize(img, seed=0, trace_options=opts, valid=valid, render_options=render_options).image
+    def black(valid, seed: int, **render_options) -> float:
+        out = synthesize(img, seed=seed, trace_options=opts, valid=valid, render_options=render_options).image
         return float((out.max(axis=2) < 0.1).mean())
 
-    # without it fragments and gaps copy the black frame; with it only the disc is copied. The
-    # structure paste alone lifts most of the black (it lay in fragments, now pasted to the
-    # level of the gaps around them), so valid's own effect is measured without the paste.
-    without = black(None, paste_structure=False)
+    # without it fragments and gaps copy the black frame (how much depends on where the seed's
+    # structure runs, so the most of three seeds); with it only the disc is copied, at every
+    # seed. The structure paste alone lifts most of the black (it lay in fragments, now pasted
+    # to the level of the gaps around them), so valid's own effect is measured without the paste.
+    seeds = range(3)
+    without = max(black(None, s, paste_structure=False) for s in seeds)
     assert without > 0.001
-    assert black("auto", paste_structure=False) < 0.2 * without
-    assert black("auto") < 0.2 * without
+    assert max(black("auto", s, paste_structure=False) for s in seeds) < 0.2 * without
+    assert max(black("auto", s) for s in seeds) < 0.2 * without
     with pytest.raises(ValueError, match="^valid:"):
         synthesize(img, valid="frame")

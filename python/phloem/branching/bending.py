@@ -111,7 +111,8 @@ class BendingModel:
         Markov order (history of ``k + 1`` elements), extension length, number of candidates
         to choose among, histogram bins ``B``.
     omega_g : float
-        Weight ``ω_G`` of the histogram matching.
+        Weight ``ω_G`` of the histogram matching (of the angle histogram times
+        :attr:`angle_weight`).
     source : Skeleton
         The input resampled to ``h``.
     hist_alpha, hist_r : ndarray, shape (bins,)
@@ -208,7 +209,10 @@ class BendingModel:
         bins : int
             Histogram bins ``B`` (paper: 16).
         omega_g : float
-            Histogram-matching weight ``ω_G`` (paper: 50; 0 switches the matching off).
+            Histogram-matching weight ``ω_G`` (paper: 50; 0 switches the matching off). The
+            angle histogram's term is weighted by ``ω_G`` times :attr:`angle_weight`
+            (``1 + coarse_history + total_turn``), which keeps the paper's balance beside the
+            extra angle terms below.
         feature_size : float, optional
             Typical bending feature size ``s`` in pixels, sets ``m`` when ``m`` is not given.
         warm_start : float, optional
@@ -382,7 +386,7 @@ class BendingModel:
         Returns
         -------
         ndarray of float64, shape (C,)
-            ``log Q_i + ω_G (Δ_α(i) + Δ_r(i)) n_t / m``.
+            ``log Q_i + ω_G (a Δ_α(i) + Δ_r(i)) n_t / m``, ``a`` the :attr:`angle_weight`.
         """
         L = len(alpha)
         if not 1 <= L <= self.k + 1 or len(r) != L:
@@ -400,10 +404,22 @@ class BendingModel:
             q += np.log(1.0 / (np.abs(_angle(self.cand_course - deviation)) + 1.0) + 1.0)
         n_t = float(counts_alpha.sum())
         if self.omega_g > 0 and n_t > 0:
-            delta = self._delta(self.hist_alpha, counts_alpha, self.inc_alpha, n_t)
+            delta = self.angle_weight * self._delta(self.hist_alpha, counts_alpha, self.inc_alpha, n_t)
             delta += self._delta(self.hist_r, counts_r, self.inc_r, n_t)
             q += self.omega_g * delta * (n_t / self.m)
         return q
+
+    @property
+    def angle_weight(self) -> float:
+        """The factor on ``ω_G`` for the angle histogram: ``1 + coarse_history + total_turn``.
+
+        The coarse history and the total turn are angle terms beyond the paper, each entering
+        ``log Q`` as the paper's ``dist`` raised to its weight. They widen the range of the
+        angle similarity by those weights, so the angle histogram's term is scaled with them to
+        keep the paper's balance between the two (without them, 1: the paper's model). The
+        thickness histogram keeps ``ω_G``, as the thickness similarity is unchanged.
+        """
+        return 1.0 + self.coarse_history + self.total_turn
 
     def _columns(self) -> tuple[F64, F64, F64]:
         """The history tables transposed, ``(k + 1, C)`` each (cached; rebuilt if a table is replaced)."""
