@@ -14,7 +14,7 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
 - largest-tree share of the input's and the output's skeletons;
 - drift: L1 distance of the heading-change histograms over 60 px (and both medians), with the
   input's own sampling noise beside it (``drift_noise``: the 90th percentile of the drift of
-  bootstrap resamples of its branches);
+  block-bootstrap resamples of its 60-px stretches of branch);
 - the share of the input's and the output's length that runs along the frame (``border_share``,
   not a pass mark);
 - two-level fraction of the output (two-level inputs only);
@@ -188,7 +188,7 @@ def measure(
         r.drift = drift(src, tgt)
     except ValueError as e:
         r.error = str(e)
-    with contextlib.suppress(ValueError):  # the input's own sampling noise (bootstrap of its branches)
+    with contextlib.suppress(ValueError):  # the input's own sampling noise (block bootstrap)
         r.drift_noise = drift_noise(src)
     if mask:
         r.two_level = two_level_fraction(res.image, img)

@@ -354,13 +354,17 @@ def _branch_changes(skeleton: Skeleton, a: float) -> list[F64]:
     return out
 
 
+def _parts_or_raise(skeleton: Skeleton, arc: float, name: str) -> list[F64]:
+    """:func:`_branch_changes` of a checked skeleton, raising when no branch is long enough."""
+    a = _check_arc(arc)
+    parts = _branch_changes(_check_skeleton(skeleton, name), a)
+    if not parts:
+        raise ValueError(f"{name}: no branch is at least {7 * a / 6:g} px long (arc={arc:g} and its tangents)")
+    return parts
+
+
 def _changes_or_raise(skeleton: Skeleton, arc: float, name: str) -> F64:
-    values = heading_changes(_check_skeleton(skeleton, name), arc=arc)
-    if values.size == 0:
-        raise ValueError(
-            f"{name}: no branch is at least {7 * _check_arc(arc) / 6:g} px long (arc={arc:g} and its tangents)"
-        )
-    return values
+    return np.concatenate(_parts_or_raise(skeleton, arc, name))
 
 
 def median_heading_change(skeleton: Skeleton, *, arc: float = ARC) -> float:
@@ -494,16 +498,13 @@ def drift_noise(
     >>> drift_noise(Skeleton(arcs[:1])), drift_noise(Skeleton(arcs)) > 0.5
     (0.0, True)
     """
-    a = _check_arc(arc)
     nb = check_int(bins, "bins", 1)
     q = check_float(quantile, "quantile", 0.0)
     if q > 1.0:
         raise ValueError(f"quantile: expected a number in [0, 1], got {quantile!r}")
     n_res = check_int(resamples, "resamples", 1)
-    parts = _branch_changes(_check_skeleton(skeleton, "skeleton"), a)
-    if not parts:
-        raise ValueError(f"skeleton: no branch is at least {7 * a / 6:g} px long (arc={arc:g} and its tangents)")
-    block = max(1, math.ceil(a))
+    parts = _parts_or_raise(skeleton, arc, "skeleton")
+    block = max(1, math.ceil(_check_arc(arc)))
     blocks = [v[i : i + block] for v in parts for i in range(0, len(v), block)]
     if len(blocks) < 2:
         raise ValueError(f"skeleton: its long branches hold a single stretch of {arc:g} px; the noise needs two")

@@ -793,8 +793,6 @@ def _branch_map(skeleton: Skeleton, shape: tuple[int, int]) -> NDArray[np.int32]
         x0, y0 = (max(0, math.floor(v - pad)) for v in b.points.min(axis=0))
         x1, y1 = math.ceil(b.points[:, 0].max() + pad) + 1, math.ceil(b.points[:, 1].max() + pad) + 1
         x1, y1 = min(w, x1), min(h, y1)
-        if x1 <= x0 or y1 <= y0:
-            continue
         m = np.zeros((y1 - y0, x1 - x0), np.uint8)
         off = np.array([x0, y0], np.float64)
         for a, bb, rr in zip(b.points[:-1] - off, b.points[1:] - off, r):
