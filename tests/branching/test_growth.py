@@ -674,3 +674,25 @@ def test_grow_does_not_depend_on_the_thread_count(monkeypatch, models: tuple[Ben
         assert len(other.branches) == len(runs[0].branches)
         for a, b in zip(runs[0].branches, other.branches):
             np.testing.assert_array_equal(a.points, b.points)
+
+
+def test_a_child_ignores_its_parent_near_the_attachment_only_until_it_is_3_rho_long():
+    # a child starts on its parent, where every direction would read D = 1; once it has grown
+    # 3ρ it must see the whole parent, or it can curl back onto the stretch it left unseen
+    from phloem.branching.growth import _Grower, _Growing, _World
+
+    m = BendingModel.fit(_meanders(), h=2.0)
+    rho = 5.0
+    w = _World(m, (60, 90), colonize=True, rho=rho, guide=None, rng=np.random.default_rng(0))
+    g = _Grower(w, m)
+    near = math.ceil(3 * rho / m.h) + 1
+    child = _Growing([np.zeros(2)], [1.0], [], [], 0.0, (0, 12), 1, 1)
+    seen = []
+    for _ in range(near + 3):
+        child.points.append(child.points[-1] + (m.h, 0.0))
+        seen.append(g.parent_skip(child))
+    # seen[i] is for a child of i + 1 edges: `near` edges are 3ρ of arc and at most one edge more
+    assert seen[:near] == [(0, 12, near)] * near
+    assert seen[near:] == [None] * 3
+    root = _Growing([np.zeros(2), np.ones(2)], [1.0, 1.0], [], [], 0.0, None, 0, 0)
+    assert g.parent_skip(root) is None

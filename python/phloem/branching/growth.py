@@ -280,7 +280,7 @@ class _Grower:
         density = None
         if w.colonize and w.dens is not None and w.owner_branch is not None and w.owner_vertex is not None:
             density = (w.dens, w.owner_branch, w.owner_vertex)
-        skip = None if br.parent is None else (br.parent[0], br.parent[1], self.near)
+        skip = self.parent_skip(br)
         # the density and guidance terms, the frame and the crossings, for the best candidates
         valid, lq = _core.growth_choose(
             q,
@@ -311,6 +311,18 @@ class _Grower:
         new_pts = np.stack([tip[0] + cos * rx + sin * ry, tip[1] - sin * rx + cos * ry], axis=-1)
         self._append(br, choice, new_pts)
         return True
+
+    def parent_skip(self, br: _Growing) -> tuple[int, int, int] | None:
+        """``(parent branch, attachment vertex, near)`` whose density ``br``'s candidates ignore, or None.
+
+        A child starts on its parent, where every direction would read ``D = 1``, so the parent's
+        vertices within ``near`` (``3ρ``) of the attachment read as empty, but only until the
+        child is ``3ρ`` long: beyond that it would not see the parent where it left it, and could
+        curl back onto it.
+        """
+        if br.parent is None or len(br.points) - 1 > self.near:
+            return None
+        return br.parent[0], br.parent[1], self.near
 
     def _append(self, br: _Growing, i: int, new_pts: F64) -> None:
         self.append_elements(br, self.model.next_alpha[i], self.model.next_r[i], new_pts)
