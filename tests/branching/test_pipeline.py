@@ -30,3 +30,46 @@ def test_models_of_an_earlier_result_make_the_same_image_as_fitting_again():
 def test_models_of_the_wrong_kind_are_refused(models):
     with pytest.raises(TypeError, match="^models: expected"):
         branching.synthesize(_river(), trace_options={"kind": "dark", "sigmas": (1.5,)}, models=models)
+
+
+def _meanders(n: int) -> branching.Skeleton:
+    from phloem.testing import meander
+
+    return branching.Skeleton(
+        [meander((20, 40 + 30 * i), 0.0, 600, (3, 3), phase=float(i)) for i in range(n)], (60 + 30 * n, 700)
+    )
+
+
+@pytest.mark.parametrize("n", [1, 2, 4, 8])
+def test_course_defaults_turn_on_where_the_input_s_drift_noise_is_at_most_0_125(n):
+    from phloem.metrics import drift_noise
+
+    sk = _meanders(n)
+    on = drift_noise(sk) <= 0.125
+    assert branching.course_defaults(sk) == ((2.0, True) if on else (0.0, False))
+
+
+def test_course_defaults_of_inputs_with_much_and_with_little_long_branch():
+    assert branching.course_defaults(_meanders(4)) == (2.0, True)  # 2400 px of branch: noise 0.10
+    assert branching.course_defaults(_meanders(1)) == (0.0, False)  # 600 px: noise 0.20
+    # no branch of 60 px: drift_noise has nothing to resample, so the paper's model
+    short = branching.Skeleton([branching.Branch(np.array([[5.0, 5.0], [40.0, 9.0]]), np.full(2, 2.0))], (50, 50))
+    assert branching.course_defaults(short) == (0.0, False)
+    with pytest.raises(TypeError, match="^skeleton: expected"):
+        branching.course_defaults("not a skeleton")  # type: ignore[arg-type]
+
+
+def test_synthesize_resolves_total_turn_and_repel_border_from_the_source():
+    sk = _meanders(4)
+    img = np.full(sk.shape, 0.8, np.float32)
+    for b in sk.branches:
+        cv2.polylines(img, [np.round(b.points).astype(np.int32)], False, 0.1, 5)
+    size = (120, 260)
+    auto = branching.synthesize(img, sk, size=size, seed=3)
+    assert auto.bending.total_turn == 2.0
+    explicit = branching.synthesize(img, sk, size=size, seed=3, total_turn=2.0, repel_border=True)
+    assert auto.target == explicit.target
+    border_off = branching.synthesize(img, sk, size=size, seed=3, repel_border=False)
+    assert border_off.bending.total_turn == 2.0 and border_off.target != auto.target
+    paper = branching.synthesize(img, sk, size=size, seed=3, total_turn=0.0)
+    assert paper.bending.total_turn == 0.0

@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 
-from phloem import io
+from phloem import branching, io
 from phloem.cli import main
 
 
@@ -188,15 +188,20 @@ def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
         outs[weight] = out
     assert Skeleton.load(outs["0"]) != Skeleton.load(outs["4"])
     assert json.loads(io.sidecar_path(outs["4"]).read_text())["parameters"]["coarse_history"] == 4.0
-    for flags in (["--total-turn", "0"], ["--total-turn", "4"], ["--repel-border"]):
+    for flags in (["--total-turn", "0"], ["--total-turn", "4"], ["--repel-border"], ["--no-repel-border"]):
         out = tmp_path / ("grown" + "".join(flags) + ".json")
         assert main(["branching", "grow", str(skel), "--out", str(out), "--seed", "1", *flags, "-q"]) == 0
         outs[" ".join(flags)] = out
     grown = {k: Skeleton.load(v) for k, v in outs.items()}
     assert grown["--total-turn 0"] != grown["--total-turn 4"]
-    assert grown["--repel-border"] != grown["32"]  # --course 32 is the default course
-    assert json.loads(io.sidecar_path(outs["--total-turn 4"]).read_text())["parameters"]["total_turn"] == 4.0
-    assert json.loads(io.sidecar_path(outs["--repel-border"]).read_text())["parameters"]["repel_border"] is True
+    assert grown["--repel-border"] != grown["--no-repel-border"]
+    sidecar = {k: json.loads(io.sidecar_path(v).read_text())["parameters"] for k, v in outs.items()}
+    assert sidecar["--total-turn 4"]["total_turn"] == 4.0
+    assert sidecar["--repel-border"]["repel_border"] is True and sidecar["--no-repel-border"]["repel_border"] is False
+    # left at their defaults, both are resolved for the example and recorded as used
+    default = branching.course_defaults(Skeleton.load(skel))
+    assert (sidecar["32"]["total_turn"], sidecar["32"]["repel_border"]) == default
+    assert grown["32"] == grown["--repel-border" if default[1] else "--no-repel-border"]
 
 
 def test_branching_trace_leaves_a_photo_frame_out(tmp_path):

@@ -210,7 +210,9 @@ def test_sidecars_record_resolved_values_threads_and_input_hashes(inputs: Path, 
     assert trace["parameters"]["kind"] == "dark" and trace["details"]["branches"] >= 2
     run = json.loads((out / "n.png.json").read_text())["parameters"]
     assert run["kind"] == "dark" and run["size"] == [96, 128] and run["m"] == 4 and run["course"] == 32
-    assert run["coarse_history"] == 2.0 and run["total_turn"] == 0.0 and run["repel_border"] is False
+    # straight channels: their heading statistics are known (drift_noise under 0.125), so
+    # course_defaults turned both on, and the sidecar records them as used
+    assert run["coarse_history"] == 2.0 and run["total_turn"] == 2.0 and run["repel_border"] is True
     assert run["h"] > 0
 
 
@@ -267,6 +269,10 @@ def test_no_overwrite_without_force(inputs: Path, tmp_path: Path, capsys) -> Non
         ('{"sidecar_version": 2, "command": "quilt", "parameters": {"size": "big"}, "inputs": []}', "valid 'phloem"),
         ('{"sidecar_version": 2, "command": "quilt", "parameters": {}, "inputs": [{"path": 1}]}', "inputs[0]"),
         ('{"sidecar_version": 2, "command": "demo", "seed": -1, "parameters": {}, "inputs": []}', "'seed' must be"),
+        (
+            '{"sidecar_version": 2, "command": "branching grow", "parameters": {"repel_border": "yes"}, "inputs": []}',
+            "'repel_border' must be true, false or null",
+        ),
     ],
 )
 def test_a_malformed_sidecar_is_one_line(text: str, message: str, tmp_path: Path, capsys) -> None:

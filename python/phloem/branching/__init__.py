@@ -22,7 +22,7 @@ from .frame import valid_region
 from .furcation import FurcationModel
 from .growth import extend, grow
 from .histograms import angle_histogram, histogram_distance, thickness_histogram
-from .pipeline import SynthesisResult, fit_models, synthesize
+from .pipeline import SynthesisResult, course_defaults, fit_models, synthesize
 from .rectify import rectify, unrectify
 from .render import RenderResult, render
 from .skeleton import Branch, Skeleton, SkeletonError
@@ -39,6 +39,7 @@ __all__ = [
     "SkeletonError",
     "SynthesisResult",
     "angle_histogram",
+    "course_defaults",
     "default_h",
     "estimate_thickness",
     "extend",

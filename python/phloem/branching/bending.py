@@ -245,9 +245,10 @@ class BendingModel:
             branch then turns over its whole length as the input's branches do after as
             much turning, so that a stem keeps a course across the image instead of
             curling. Off by default: with :func:`grow`'s ``repel_border`` it takes the river
-            deltas' stems across the image, but it makes other inputs' branches straighter
-            than their input's and moves the angle histograms away from it
-            (``docs/pipelines/branching/quality.md``).
+            deltas' stems across the image, but on inputs with few long branches it makes the
+            output drift further from them (``docs/pipelines/branching/quality.md``);
+            :func:`synthesize` turns both on where the input's course is known
+            (:func:`course_defaults`).
 
         Returns
         -------

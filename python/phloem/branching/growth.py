@@ -650,7 +650,8 @@ def grow(
         meets the border can only turn along it, and stems run down the image's edges.
         Off by default: alone it keeps stems off the border but lets them curl in a
         corner; with the bending model's ``total_turn`` they cross the image
-        (``docs/pipelines/branching/quality.md``).
+        (``docs/pipelines/branching/quality.md``), and :func:`synthesize` turns both on
+        where the input's course is known (:func:`course_defaults`).
     rho : float, optional
         Density width ``ρ`` in pixels; default ``m h`` (one bending feature).
     guide : (H, W) array or (n, 2) array, optional

@@ -16,11 +16,18 @@ from .bending import BendingModel
 from .frame import valid_region
 from .furcation import FurcationModel
 from .growth import grow
+from .measures import drift_noise
 from .render import RenderResult, render
 from .skeleton import Skeleton
 from .trace import trace
 
-__all__ = ["SynthesisResult", "fit_models", "synthesize"]
+__all__ = ["SynthesisResult", "course_defaults", "fit_models", "synthesize"]
+
+#: The largest ``drift_noise`` at which an input's heading statistics count as well determined:
+#: half of issue 19's drift mark (0.25), so that the mark measures the synthesis, not the input.
+COURSE_NOISE = 0.125
+#: The total-turn weight :func:`course_defaults` turns on (the weight measured).
+COURSE_TOTAL_TURN = 2.0
 
 
 @dataclass
@@ -105,6 +112,42 @@ def fit_models(
     return bending, furcation
 
 
+def course_defaults(skeleton: Skeleton) -> tuple[float, bool]:
+    """:func:`synthesize`'s defaults of ``total_turn`` and ``repel_border`` for this source skeleton.
+
+    ``(2.0, True)`` where the input's heading statistics are well determined, that is where
+    :func:`phloem.metrics.drift_noise` of ``skeleton`` is at most 0.125, half the drift mark
+    of ``docs/pipelines/branching/quality.md``: long stems then keep the input's course across
+    the image (the turn since a branch's start matched as the input's) and leave the frame
+    alone. Otherwise ``(0.0, False)``, the paper's model: an input with little long branch does
+    not say what course a stem keeps, and matching its few branches' total turn makes the
+    output's branches drift further from it (measured on that page).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        The example structure.
+
+    Returns
+    -------
+    (float, bool)
+        ``total_turn`` for :func:`fit_models` and ``repel_border`` for :func:`grow`.
+
+    Examples
+    --------
+    >>> from phloem.branching import synthetic_skeleton
+    >>> course_defaults(synthetic_skeleton(0))
+    (0.0, False)
+    """
+    if not isinstance(skeleton, Skeleton):
+        raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
+    try:
+        known = drift_noise(skeleton) <= COURSE_NOISE
+    except ValueError:  # no branch long enough, or a single stretch: nothing to learn a course from
+        known = False
+    return (COURSE_TOTAL_TURN, True) if known else (0.0, False)
+
+
 @renamed(k="order", c="n_best")
 def synthesize(
     image: Any,
@@ -119,11 +162,11 @@ def synthesize(
     n_best: int = 2,
     course: int | None = None,
     coarse_history: float = 2.0,
-    total_turn: float = 0.0,
+    total_turn: float | None = None,
     generations: int | None = None,
     max_length: float | str | None = "input",
     colonize: bool = True,
-    repel_border: bool = False,
+    repel_border: bool | None = None,
     guide: Any = None,
     valid: Any = "auto",
     render_options: dict[str, Any] | None = None,
@@ -156,8 +199,12 @@ def synthesize(
         Keyword arguments for :func:`trace` (e.g. ``{"kind": "dark", "sigmas": (1.5, 3, 5)}``).
     h, order, m, n_best, course, coarse_history, total_turn : optional
         Model parameters, as in :func:`fit_models` (``k`` and ``c`` before, deprecated).
-    generations, max_length, colonize, repel_border, guide : optional
+        ``total_turn`` defaults to :func:`course_defaults`'s for the source skeleton.
+    generations, max_length, colonize, guide : optional
         See :func:`grow`.
+    repel_border : bool, optional
+        See :func:`grow`; default :func:`course_defaults`'s for the source skeleton (on with
+        ``total_turn``).
     valid : (H, W) array_like of bool, "auto" or None, optional
         Where ``image`` shows content: structure is traced there only (when ``skeleton`` is
         not given), fragments are taken from inside it and the gaps completed from it.
@@ -219,6 +266,10 @@ def synthesize(
     else:
         raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
     tick(1)
+    if total_turn is None or repel_border is None:
+        turn_default, border_default = course_defaults(source)
+        total_turn = turn_default if total_turn is None else total_turn
+        repel_border = border_default if repel_border is None else repel_border
     if models is None:
         bending, furcation = fit_models(
             source, h=h, order=order, m=m, n_best=n_best, course=course, coarse_history=coarse_history,

@@ -72,6 +72,14 @@ def _resolve_models(args: argparse.Namespace, bend: Any) -> None:
     args.h, args.m, args.course = bend.h, bend.m, bend.course
 
 
+def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> None:
+    """``--total-turn`` and ``--repel-border`` left at their defaults, resolved for this example."""
+    if args.total_turn is None or args.repel_border is None:
+        turn, border = branching.course_defaults(source)
+        args.total_turn = turn if args.total_turn is None else args.total_turn
+        args.repel_border = border if args.repel_border is None else args.repel_border
+
+
 def _check_json_target(path: Path, args: argparse.Namespace) -> None:
     if path.suffix.lower() != ".json":
         raise ValueError(f"out: expected a .json file for the skeleton, got {path.name}")
@@ -217,11 +225,11 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--total-turn",
         type=float,
-        default=0.0,
+        default=None,
         metavar="WEIGHT",
         help="weight of matching each branch's whole turn since its start, so that stems keep a course across the "
-        "image instead of curling (default 0: the paper's Markov model alone; 2 with --repel-border takes river "
-        "stems across the image)",
+        "image instead of curling (default: 2 where the example's heading statistics are well determined, i.e. "
+        "phloem.metrics.drift_noise of its skeleton is at most 0.125, else 0, the paper's Markov model alone)",
     )
     g.add_argument(
         "--generations",
@@ -237,9 +245,10 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--repel-border",
-        action="store_true",
+        action=argparse.BooleanOptionalAction,
+        default=None,
         help="count the image's border as structure in the colonisation density, so that stems do not run "
-        "along it (default: the border is empty space, as in the paper)",
+        "along it (default: on with the default --total-turn 2, else off: the border is empty space, as in the paper)",
     )
     g.add_argument("--guide", metavar="PATH", default=None,
                    help="guided synthesis (§4.5): a JSON list of [x, y] points or a mask image the structure should follow")  # fmt: skip
@@ -263,6 +272,7 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     shape = args.size or source.shape
     if shape is None:
         raise ValueError("size: the skeleton file has no shape; pass --size WxH")
+    _resolve_course(args, source)
     # fitting takes seconds on real skeletons; a batch worker fits once per skeleton and options
     options = (args.h, args.order, args.m, args.n_best, args.course, args.coarse_history, args.total_turn)
     bend, fur = kept("branching models", [Path(args.skeleton)], options, lambda: branching.fit_models(
@@ -333,6 +343,7 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
     written = {role: str(p) for role, p in files.items()}
     if source is None:
         _resolve_kind(args, img)
+    _resolve_course(args, res.source)  # as synthesize resolved them, for the sidecar
     _resolve_models(args, res.bending)
     args.size = res.image.shape[:2]
     save(args, "branching run", res.image, files=written,

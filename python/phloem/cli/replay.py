@@ -127,7 +127,12 @@ def command_line(
                 argv += _words(action, value)
             continue
         flag = max(action.option_strings, key=len)
-        if isinstance(action, argparse._StoreTrueAction):
+        if isinstance(action, argparse.BooleanOptionalAction):  # --x / --no-x, None: the default
+            if isinstance(value, bool):
+                argv.append(action.option_strings[0 if value else 1])
+            elif value is not None:
+                raise _fail(path, f"parameter {dest!r} must be true, false or null, got {value!r}")
+        elif isinstance(action, argparse._StoreTrueAction):
             if value is True:
                 argv.append(flag)
             elif value is not False:
