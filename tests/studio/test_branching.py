@@ -110,6 +110,9 @@ def test_trace_then_grow_then_render_write_the_cli_s_files_with_sidecars(client,
     assert end["outputs"] == ["grown.json"] and grown.shape == (128, 224) and grown.total_length() > 50
     side = json.loads((project.root / "grown.sidecar.json").read_text())
     assert side["seed"] == 3 and side["parameters"]["guide"] == "guide.json" and side["parameters"]["h"] > 0
+    # the command line's course-keeping defaults, resolved for the example and recorded
+    course = branching.course_defaults(branching.Skeleton.load(project.root / "channel.json"))
+    assert (side["parameters"]["total_turn"], side["parameters"]["repel_border"]) == course
     again = run_job(client, {**grow, "out": "grown2.json"})
     assert branching.Skeleton.load(project.root / again["outputs"][0]) == grown  # one seed, one structure
 

@@ -203,12 +203,15 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
                              suffixes=JSON_SUFFIXES, overwrite=req.overwrite)  # fmt: skip
 
         def grow(progress: Progress) -> list[str]:
-            bend, fur = branching.fit_models(source, h=req.h, n_best=req.n_best)
+            # the same course-keeping defaults as synthesize and the command line
+            turn, border = branching.course_defaults(source)
+            bend, fur = branching.fit_models(source, h=req.h, n_best=req.n_best, total_turn=turn)
             new = branching.grow(bend, fur, size=shape, seed=req.seed, max_length=req.max_length, guide=guide,
-                                 progress=progress, max_memory=project.max_memory)  # fmt: skip
+                                 repel_border=border, progress=progress, max_memory=project.max_memory)  # fmt: skip
             assert progress is not None
             progress(1, 1)  # a cancel during the last step writes nothing
-            return [outputs.data(out, new.to_json().encode(), command=req.kind, parameters={**params, "h": bend.h},
+            used = {**params, "h": bend.h, "total_turn": turn, "repel_border": border}
+            return [outputs.data(out, new.to_json().encode(), command=req.kind, parameters=used,
                                  seed=req.seed, overwrite=req.overwrite)]  # fmt: skip
 
         return grow
