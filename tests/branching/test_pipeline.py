@@ -55,6 +55,10 @@ def test_course_defaults_of_inputs_with_much_and_with_little_long_branch():
     # no branch of 60 px: drift_noise has nothing to resample, so the paper's model
     short = branching.Skeleton([branching.Branch(np.array([[5.0, 5.0], [40.0, 9.0]]), np.full(2, 2.0))], (50, 50))
     assert branching.course_defaults(short) == (0.0, False)
+    # a caller's values are kept, only those left at None are defaulted
+    assert branching.course_defaults(_meanders(4), total_turn=0.5) == (0.5, True)
+    assert branching.course_defaults(_meanders(1), repel_border=True) == (0.0, True)
+    assert branching.course_defaults(short, total_turn=3.0, repel_border=False) == (3.0, False)
     with pytest.raises(TypeError, match="^skeleton: expected"):
         branching.course_defaults("not a skeleton")  # type: ignore[arg-type]
 

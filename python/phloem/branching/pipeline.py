@@ -112,7 +112,9 @@ def fit_models(
     return bending, furcation
 
 
-def course_defaults(skeleton: Skeleton) -> tuple[float, bool]:
+def course_defaults(
+    skeleton: Skeleton, *, total_turn: float | None = None, repel_border: bool | None = None
+) -> tuple[float, bool]:
     """:func:`synthesize`'s defaults of ``total_turn`` and ``repel_border`` for this source skeleton.
 
     ``(2.0, True)`` where the input's heading statistics are well determined, that is where
@@ -127,6 +129,9 @@ def course_defaults(skeleton: Skeleton) -> tuple[float, bool]:
     ----------
     skeleton : Skeleton
         The example structure.
+    total_turn, repel_border : optional
+        Values chosen by the caller, returned as they are; only those left at None are
+        defaulted.
 
     Returns
     -------
@@ -141,11 +146,14 @@ def course_defaults(skeleton: Skeleton) -> tuple[float, bool]:
     """
     if not isinstance(skeleton, Skeleton):
         raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
+    if total_turn is not None and repel_border is not None:
+        return total_turn, repel_border
     try:
         known = drift_noise(skeleton) <= COURSE_NOISE
     except ValueError:  # no branch long enough, or a single stretch: nothing to learn a course from
         known = False
-    return (COURSE_TOTAL_TURN, True) if known else (0.0, False)
+    turn, border = (COURSE_TOTAL_TURN, True) if known else (0.0, False)
+    return (turn if total_turn is None else total_turn), (border if repel_border is None else repel_border)
 
 
 @renamed(k="order", c="n_best")
@@ -266,10 +274,7 @@ def synthesize(
     else:
         raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
     tick(1)
-    if total_turn is None or repel_border is None:
-        turn_default, border_default = course_defaults(source)
-        total_turn = turn_default if total_turn is None else total_turn
-        repel_border = border_default if repel_border is None else repel_border
+    total_turn, repel_border = course_defaults(source, total_turn=total_turn, repel_border=repel_border)
     if models is None:
         bending, furcation = fit_models(
             source, h=h, order=order, m=m, n_best=n_best, course=course, coarse_history=coarse_history,

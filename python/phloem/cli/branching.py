@@ -74,10 +74,9 @@ def _resolve_models(args: argparse.Namespace, bend: Any) -> None:
 
 def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> None:
     """``--total-turn`` and ``--repel-border`` left at their defaults, resolved for this example."""
-    if args.total_turn is None or args.repel_border is None:
-        turn, border = branching.course_defaults(source)
-        args.total_turn = turn if args.total_turn is None else args.total_turn
-        args.repel_border = border if args.repel_border is None else args.repel_border
+    args.total_turn, args.repel_border = branching.course_defaults(
+        source, total_turn=args.total_turn, repel_border=args.repel_border
+    )
 
 
 def _check_json_target(path: Path, args: argparse.Namespace) -> None:
