@@ -78,3 +78,17 @@ def test_bad_inputs_name_the_argument() -> None:
         fragments(img, sk, lam=1.5)
     with pytest.raises(ValueError, match="source_points: expected shape"):
         rigid_align(np.zeros((3, 3)), np.zeros((3, 3)))
+
+
+def test_a_library_without_any_usable_furcation_fragment_still_matches_branch_fragments() -> None:
+    from phloem.branching.fragments import FragmentLibrary, cover
+
+    _, sk = channel_scene()
+    frs = cover(sk, 0.75, 3.0, 16, order=False)
+    furc = np.array([f.furcation for f in frs])
+    assert furc.any() and (~furc).any()
+    lib = FragmentLibrary(frs, mirror=True, exclude=furc)
+    plain = next(f for f in frs if not f.furcation)
+    entries, S, _ = lib.shape_distance(plain, 2.0)
+    assert len(entries) == int((~furc).sum()) and not lib.flip.any()
+    assert float(S.min()) == pytest.approx(0.0, abs=1e-9)  # itself

@@ -311,7 +311,7 @@ class FragmentLibrary:
         self.flip = np.array(flip, dtype=bool)
         self.points = [frs[i].points * ([1.0, -1.0] if fl else [1.0, 1.0]) for i, fl in zip(frag, flip, strict=True)]
         self.groups: dict[int, NDArray[np.int64]] = {}
-        for m in {len(f.points) for f in frs}:
+        for m in {len(frs[i].points) for i in frag}:  # shapes with no usable fragment have no group
             self.groups[m] = np.array([e for e, i in enumerate(frag) if len(frs[i].points) == m], dtype=np.int64)
         self.P = {m: np.stack([self.points[e] for e in idx]) for m, idx in self.groups.items()}
         self.T = {m: np.stack([frs[frag[e]].thickness for e in idx]) for m, idx in self.groups.items()}
