@@ -94,14 +94,15 @@ def test_fragment_choice_does_not_depend_on_the_input_contrast(n_best: int) -> N
 
 
 def test_fragments_reaching_outside_valid_are_not_used() -> None:
-    # The right third of the input is "frame" (value 5, outside `valid`); the source branch
+    # The right half of the input is "frame" (value 5, outside `valid`); the source branch
     # runs through it. No pixel of it may reach the output, and a `valid` that leaves no
-    # fragment whole is an error naming it.
+    # fragment whole is an error naming it. (Half the fragments lie in it, so without `valid`
+    # they are not outliers of the fragments' surroundings either.)
     img, sk = channel_scene()
     img = img.copy()
-    img[:, 150:] = 5.0
+    img[:, 90:] = 5.0
     valid = np.zeros(img.shape[:2], bool)
-    valid[:, :150] = True
+    valid[:, :90] = True
     tgt = Skeleton([wavy_branch((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
     assert float(render(img, sk, tgt, seed=1, complete=False).max()) > 4.0  # without `valid` it does
     out = render(img, sk, tgt, seed=1, valid=valid)
@@ -382,3 +383,32 @@ def test_real_river_channel_along_a_rotated_skeleton() -> None:
     core = tm & (cv2.distanceTransform(tm.astype(np.uint8), cv2.DIST_L2, 3) > 2)
     assert core.sum() > 3000
     assert float(np.mean(out[core] > 0.5)) > 0.95
+
+
+def test_fragments_in_unusual_surroundings_are_left_out() -> None:
+    # A dark vessel across a grey photo, through a bright disc (an optic disc) and a band lit
+    # from one side (a fundus rim's shading): only the fragments there are outliers.
+    from phloem.branching.fragments import cover
+    from phloem.branching.render import _unusual_surroundings
+
+    rng = np.random.default_rng(0)
+    img = 0.5 + 0.01 * rng.standard_normal((120, 600)).astype(np.float32)
+    yy, xx = np.mgrid[:120, :600]
+    disc = (xx - 480) ** 2 + (yy - 60) ** 2 <= 40**2
+    img[disc] = 0.9
+    lit = (xx >= 200) & (xx < 280)
+    img[lit] += (0.004 * (yy - 60))[lit]  # 0.2 of brightness across the band's fragments
+    img[57:64] = 0.2
+    sk = Skeleton([Branch([[5, 60], [595, 60]], 3.0)], (120, 600))
+    frs = cover(sk, 0.75, 3.0, 16, order=False)
+    img = img[..., None]
+    span = _channel_range(img)
+    out = _unusual_surroundings(img, span, sk, frs, np.zeros(len(frs), bool), keep=3)
+    x = np.array([f.center[0] for f in frs])
+    r = np.array([f.radius for f in frs])
+    touches = ((x + r > 440) & (x - r < 520)) | ((x + r > 200) & (x - r < 280))
+    inside = ((x - r >= 440) & (x + r <= 520)) | ((x - r >= 200) & (x + r <= 280))
+    assert out[inside].all() and inside.sum() >= 8
+    assert not out[~touches].any()
+    # never all of them: with too few left, none is left out
+    assert not _unusual_surroundings(img, span, sk, frs, ~inside, keep=3).any()

@@ -34,6 +34,10 @@ Beyond the paper (each needed for clean junctions, see the tests):
   disks carry pieces of neighbouring channels, which stood as islands;
 - furcation fragments are also offered mirrored (``mirror=True``), since with rotations only
   a target sub-branch on the other side of its parent may have no match;
+- source fragments whose surroundings are an outlier among all fragments' (by colour or by
+  slope, a modified z-score over 3.5) are not used, photos and fields only: a branch start or
+  end has no painted neighbour to hold its colour, and stamped the place its source lay in
+  (a fundus photo's optic disc, its rim's shading) into the output;
 - the structure is pasted into the completed gaps as a whole (``paste_structure``, step 5):
   §5.3's per-fragment paste keeps each fragment's level where it borders the unpainted gaps,
   so on a terrain or an unevenly lit photo every disk showed; without the structure paste the
@@ -324,7 +328,9 @@ def render(
         raise ValueError(
             "paste_structure: needs photometric=True and complete=True (it pastes into the completed gaps)"
         )
-    sources, targets, lib = _cover_both(src_sk, tgt_sk, ok, lam_f, rf, k, mirror=mirror, keep=max(3, c_n))
+    sources, targets, lib = _cover_both(
+        img, src_sk, tgt_sk, ok, lam_f, rf, k, mirror=mirror, keep=max(3, c_n), lighting=None if mask_like else (lo, hi)
+    )
     painter = _Painter(img, (lo, hi), tgt_sk, targets, lib, opts, draws=rng.random(len(targets)))
     _in_order(painter.boxes, painter.paint, workers=t if t is not None else _core.default_threads(), progress=progress)
 
@@ -367,6 +373,7 @@ class _Options:
 
 
 def _cover_both(
+    image: F32,
     source: Skeleton,
     target: Skeleton,
     valid: NDArray[np.bool_] | None,
@@ -376,14 +383,18 @@ def _cover_both(
     *,
     mirror: bool,
     keep: int,
+    lighting: tuple[F32, F32] | None,
 ) -> tuple[list[Fragment], list[Fragment], FragmentLibrary]:
-    """Source fragments, target fragments in synthesis order, and the library of usable sources."""
+    """Source fragments, target fragments in synthesis order, and the library of usable sources
+    (``lighting``: the image's channel range, None for a mask, whose fragments are not compared)."""
     sources = cover(source, lam, rf, k, order=False)
     # Fragments that reach outside the valid region would paste its outside (a fundus
     # photo's black frame) into the output.
     outside = np.array([valid is not None and _reaches_out(f, valid) for f in sources], bool)
     if all(outside[i] for i, f in enumerate(sources) if not f.furcation):
         raise ValueError("valid: every source branch fragment reaches outside it; nothing is left to paint with")
+    if lighting is not None:
+        outside |= _unusual_surroundings(image, lighting, source, sources, outside, keep=keep)
     # Without furcation fragments in the source a target furcation is painted by branch fragments.
     furcations = any(f.furcation and not out for f, out in zip(sources, outside, strict=True))
     targets = cover(target, lam, rf, k, order=True, furcations=furcations)
@@ -677,6 +688,67 @@ def _reaches_out(f: Fragment, ok: NDArray[np.bool_]) -> bool:
     """Whether the disk of source fragment ``f`` holds a pixel outside ``ok``."""
     ys, xs, disk, _, _ = _disk(ok.shape, f.center, f.radius)
     return bool((disk & ~ok[ys, xs]).any())
+
+
+#: Modified z-score above which a fragment's surroundings are an outlier (Iglewicz and Hoaglin).
+SURROUNDINGS_Z = 3.5
+
+
+def _unusual_surroundings(
+    image: F32,
+    channel_range: tuple[F32, F32],
+    skeleton: Skeleton,
+    frs: list[Fragment],
+    excluded: NDArray[np.bool_],
+    *,
+    keep: int,
+) -> NDArray[np.bool_]:
+    """Source fragments whose surroundings are outliers among all fragments' surroundings.
+
+    A fragment's surroundings are its disk's pixels off the structure (beyond ``1.5 r + 1`` of
+    every branch). Two features, per channel: their median colour, and their slope (a plane
+    fitted by least squares, as the change across the disk's radius). Each is compared with
+    the other fragments' by the modified z-score ``(v − median) / (1.4826 MAD)``, the MAD at
+    least 1 % of the channel's range: the colour both ways, the slope only upwards. A fragment
+    above ``SURROUNDINGS_Z`` lies in a place unlike where the structure usually runs (on a
+    fundus photo's optic disc, in its rim's shading, across another vessel): pasted at a
+    branch start or end, where nothing painted yet constrains it, it stamps that place into the
+    output. None are excluded if fewer than ``keep`` branch fragments would remain beside
+    those ``excluded`` already.
+    """
+    if not frs:
+        return np.zeros(0, bool)
+    off = ~_tube(skeleton, 1.5, 1.0)
+    h, w = image.shape[:2]
+    n, c = len(frs), image.shape[2]
+    level = np.empty((n, c), np.float64)
+    slope = np.empty((n, c), np.float64)
+    for i, f in enumerate(frs):
+        ys, xs, disk, _, _ = _disk((h, w), f.center, f.radius)
+        # about 16 samples across the disk are enough for a median and a plane
+        st = max(1, int(f.radius) // 8)
+        ys, xs, disk = slice(ys.start, ys.stop, st), slice(xs.start, xs.stop, st), disk[::st, ::st]
+        m = disk & off[ys, xs]
+        if m.sum() < 6:  # a plane needs a few pixels
+            m = disk
+        yy, xx = np.nonzero(m)
+        yy, xx = yy * st, xx * st
+        px = image[ys, xs][m].astype(np.float64)
+        level[i] = np.median(px, axis=0)
+        a = np.stack([xx - xx.mean(), yy - yy.mean(), np.ones(len(xx))], axis=1)
+        coef = np.linalg.lstsq(a, px, rcond=None)[0]
+        slope[i] = np.hypot(coef[0], coef[1]) * f.radius
+    lo, hi = channel_range
+    floor = 0.01 * (hi - lo).astype(np.float64)
+
+    def z(v: NDArray[np.float64]) -> NDArray[np.float64]:
+        mid = np.median(v, axis=0)
+        return (v - mid) / np.maximum(1.4826 * np.median(np.abs(v - mid), axis=0), floor)
+
+    out = np.asarray((np.abs(z(level)).max(axis=1) > SURROUNDINGS_Z) | (z(slope).max(axis=1) > SURROUNDINGS_Z))
+    if sum(1 for f, o in zip(frs, out | excluded, strict=True) if not (o or f.furcation)) < keep:
+        out[:] = False
+    return out
 
 
 def _sample(img: F32, mapx: F32, mapy: F32) -> F32:
