@@ -5,7 +5,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from phloem.branching.gaps import _match_borders
+from phloem.branching import Branch, Skeleton
+from phloem.branching.gaps import _match_borders, _relight, fill_gaps
 
 
 def _texture(shape: tuple[int, int], seed: int) -> np.ndarray:
@@ -42,3 +43,50 @@ def test_match_borders_leaves_content_steps_alone() -> None:
     assert float(np.abs(out[far]).max()) < 0.02
     white = np.where(hole[..., None], 0.0, 1.0).astype(np.float32)
     assert np.array_equal(_match_borders(white, hole, lo, hi, radius=10.0, threads=1), white)
+
+
+def test_gaps_of_a_field_keep_its_large_scale_layout() -> None:
+    # A field rising from 0.2 to 0.8 across, faint texture on it, one dark valley along the
+    # middle; only a strip of the canvas is painted. The completed gaps rise as the field
+    # does (§5.4's patches alone settle on one level across such large gaps).
+    rng = np.random.default_rng(1)
+    H, W = 120, 240
+    tex = cv2.GaussianBlur(rng.normal(size=(H, W)).astype(np.float32), (0, 0), 1.5)
+    ramp = np.linspace(0.2, 0.8, W, dtype=np.float32)[None, :]
+    image = (ramp + 0.03 * tex)[..., None].astype(np.float32)
+    image[55:66] -= 0.15
+    valley = Skeleton([Branch([[0, 60], [239, 60]], 3.0)], (H, W))
+    filled = np.zeros((H, W), bool)
+    filled[:, 110:130] = True
+    canvas = np.where(filled[..., None], image, 0.0).astype(np.float32)
+    lo, hi = image.reshape(-1, 1).min(0), image.reshape(-1, 1).max(0)
+    out = fill_gaps(
+        canvas, filled, image, valley, valid=None, radius_factor=3.0, radius=3.0, lo=lo, hi=hi,
+        match_borders=False, photometric=False, patch_size=7, iterations=4, seed=0, threads=1,
+    )  # fmt: skip
+    assert np.array_equal(out[filled], image[filled])
+    rise = float(out[:, -60:].mean() - out[:, :60].mean())
+    assert 0.3 < rise < 0.5  # the field's outer quarters differ by 0.45
+
+
+def test_relight_moves_brightness_and_not_hue() -> None:
+    # A backdrop red on the left and blue on the right, equally bright, then dark on the left
+    # and bright on the right: the gaps of a uniform canvas take the second layout's
+    # brightness, the same shift in every channel (keeping their own hue), and nothing of the
+    # first one's hue.
+    H, W = 60, 200
+    hole = np.zeros((H, W), bool)
+    hole[2:-2, 2:-2] = True
+    canvas = np.ones((H, W, 3), np.float32) * np.float32([0.5, 0.3, 0.2])  # as bright as both layouts' mean
+    allowed = np.ones((H, W), bool)
+    left = np.arange(W) < W // 2
+    hue = np.where(left[None, :, None], [0.6, 0.2, 0.2], [0.2, 0.2, 0.6]).astype(np.float32) * np.ones((H, 1, 1))
+    out = _relight(canvas, hole, hue.astype(np.float32), allowed, sigma=8.0)
+    assert float(np.abs(out - canvas).max()) < 1e-5
+    light = np.where(left[None, :, None], 0.2, 0.6).astype(np.float32) * np.ones((H, 1, 3), np.float32)
+    out = _relight(canvas, hole, light, allowed, sigma=8.0)
+    assert np.array_equal(out[~hole], canvas[~hole])
+    shift = (out - canvas)[hole]
+    assert float(np.ptp(shift, axis=1).max()) < 1e-6  # one shift for all channels
+    inner = out[10:-10]
+    assert abs(float(inner[:, 10:40].mean()) - 0.2) < 0.01 and abs(float(inner[:, -40:-10].mean()) - 0.6) < 0.01

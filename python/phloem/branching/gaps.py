@@ -5,9 +5,10 @@ against the painted structure.
 :func:`fill_gaps` is the step :func:`~phloem.branching.render` runs after the fragments.
 :func:`_complete_background` runs :func:`phloem.texture.complete` with patches only from the
 ``allowed`` pixels of the input (the source structure, dilated to the fragment radius, is
-excluded, so no pseudo-branches appear); :func:`_match_borders` shifts the completed gaps in the
-gradient domain so that they meet the structure without a colour step, as §5.3 does for the
-fragments.
+excluded, so no pseudo-branches appear); on photos and fields :func:`_relight` gives the
+completed gaps the input background's large-scale layout, which patches copied into large gaps
+average away; :func:`_match_borders` shifts the completed gaps in the gradient domain so that
+they meet the structure without a colour step, as §5.3 does for the fragments.
 """
 
 from __future__ import annotations
@@ -84,6 +85,32 @@ def _complete_background(
         ) from None
     res: F32 = canvas.copy()
     res[hole] = out[:H, :W][hole]
+    return res
+
+
+def _relight(canvas: F32, hole: NDArray[np.bool_], source: F32, allowed: NDArray[np.bool_], *, sigma: float) -> F32:
+    """The completed ``hole`` of ``canvas`` with its large-scale brightness (the mean over
+    channels) replaced by that of ``source``'s ``allowed`` pixels (both smoothed by a Gaussian
+    of ``sigma`` source pixels; the layout resampled to the canvas).
+
+    Patch completion of gaps that make up most of the canvas settles on the patches nearest
+    one level, so a terrain's plateau and lowland, or a photo's uneven lighting, become one
+    flat grey. Only the brightness moves: no other patch is copied, so no darker structure
+    the trace left out is drawn into the gaps (starting the completion from the layout did
+    that, docs/pipelines/branching/quality.md).
+    """
+    H, W = canvas.shape[:2]
+    hs, ws = source.shape[:2]
+    layout, dens = _smooth_masked(source, allowed.astype(np.float32), sigma)
+    layout[dens <= 1e-6] = np.median(source[allowed], axis=0)
+    if (hs, ws) != (H, W):  # the input's layout, stretched to the output
+        layout = np.asarray(cv2.resize(layout, (W, H), interpolation=cv2.INTER_LINEAR), np.float32).reshape(H, W, -1)
+    own, _ = _smooth_masked(canvas, hole.astype(np.float32), sigma * math.sqrt(H * W / (hs * ws)))
+    # One shift for all channels: the layout's brightness, not its hue (a leaf's blue backdrop
+    # would tint the leaf's texture).
+    shift = (layout - own).mean(axis=2, keepdims=True)
+    res: F32 = canvas.copy()
+    np.add(res, shift, out=res, where=hole[..., None])
     return res
 
 
@@ -206,8 +233,13 @@ def fill_gaps(
     canvas = _complete_background(
         canvas, ~filled, image, allowed, patch_size=patch_size, iterations=iterations, seed=seed, threads=threads
     )
+    mask = two_level(image, lo, hi)
+    if not mask:  # a mask's background is one level
+        # Large-scale: an eighth of the input's shorter side, and never finer than four patches.
+        sigma = max(min(H0, W0) / 8, 4.0 * patch_size)
+        canvas = _clip_channels(_relight(canvas, ~filled, image, allowed, sigma=sigma), lo, hi)
     if match_borders is None:  # a mask has no lighting to match
-        match_borders = not two_level(image, lo, hi)
+        match_borders = not mask
     if photometric and match_borders:
         canvas = _match_borders(canvas, ~filled, lo, hi, radius=radius, threads=threads)
     return canvas

@@ -233,6 +233,9 @@ def render(
         ``False`` is the paper's behaviour.
     complete : bool, optional
         Fill the gaps between the branches (§5.4, default True); without it they stay 0.
+        On photos and fields (not two-level masks) the filled gaps then take the input
+        background's large-scale brightness, where the input has it (an eighth of its
+        shorter side and coarser; a terrain's plateau, a photo's lighting).
     match_borders : bool, optional
         Shift the completed gaps in the gradient domain so that they meet the painted
         structure without a colour step (only the smooth part of the step, made of small
