@@ -189,6 +189,26 @@ def _header(path: Path, max_pixels: int) -> tuple[str, int, int, int, bool]:
     return str(fmt), w, h, orientation if 1 <= orientation <= 8 else 1, inverted
 
 
+def _stored_bits(path: str | os.PathLike[str]) -> int:
+    """16 when the image file stores more than 8 bits per sample (a 16-bit PNG, a 16-bit or
+    float TIFF), else 8; from the header alone, 8 for anything unreadable."""
+    try:
+        with open(path, "rb") as fp:
+            head = fp.read(26)
+            fmt = _format(head[:16])
+            if fmt == "PNG":  # IHDR: the bit depth is byte 24
+                return 16 if len(head) > 24 and head[24] == 16 else 8
+            if fmt == "TIFF":
+                import tifffile
+
+                fp.seek(0)
+                with tifffile.TiffFile(fp) as tf:
+                    return 16 if len(tf.pages) and int(tf.pages.first.bitspersample) > 8 else 8
+    except Exception:  # reading the image itself reports what is wrong with it
+        return 8
+    return 8
+
+
 def _other_format(path: Path) -> str:
     """What a file we do not read is, for the message: 'a BMP file' or 'not an image'."""
     try:

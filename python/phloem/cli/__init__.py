@@ -17,7 +17,7 @@ import warnings
 from collections.abc import Sequence
 
 from .. import io
-from ._common import join_negative_values, outputs
+from ._common import join_negative_values, outputs, resolve_bit_depth
 from .parser import build_parser
 
 __all__ = ["build_parser", "main"]
@@ -120,6 +120,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         with warnings.catch_warnings(), outputs(args) as tx:
             warnings.showwarning = one_line
+            resolve_bit_depth(args)
             args.func(args)
             tx.commit()
     except (ValueError, TypeError, OSError, io.ImageReadError) as e:

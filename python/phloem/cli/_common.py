@@ -120,8 +120,9 @@ def common_options(p: argparse.ArgumentParser, *, writes: bool = True) -> None:
             "--bit-depth",
             type=int,
             choices=(8, 16),
-            default=8,
-            help="bits per channel of OUT (16 for PNG/TIFF only; default 8)",
+            default=None,
+            help="bits per channel of OUT (16 for PNG/TIFF only; default: 16 where the input image has "
+            "more than 8 bits and OUT can hold them, such as a 16-bit elevation model, else 8)",
         )
 
 
@@ -173,6 +174,19 @@ def transaction() -> _files.Transaction:
     if not _active:
         raise RuntimeError("no output transaction: run sub-commands through phloem.cli.main")
     return _active[-1]
+
+
+def resolve_bit_depth(args: argparse.Namespace) -> None:
+    """``--bit-depth``'s default, set on ``args`` before the command runs (so the sidecar records
+    it): 16 where the input image (``IN``/``IMAGE``) stores more than 8 bits and OUT is a PNG or
+    TIFF, else 8. An 8-bit copy of a 16-bit elevation model keeps a handful of levels."""
+    if not hasattr(args, "bit_depth") or args.bit_depth is not None:
+        return
+    src = next((v for v in (getattr(args, d, None) for d in ("input", "image")) if isinstance(v, str)), None)
+    out = getattr(args, "out", None)
+    deep = src is not None and Path(src).is_file() and io._stored_bits(src) == 16
+    holds = out is not None and _files.WRITE_EXTENSIONS.get(Path(str(out)).suffix.lower(), 8) == 16
+    args.bit_depth = 16 if deep and holds else 8
 
 
 def check_writable(path: Path, args: argparse.Namespace) -> None:
