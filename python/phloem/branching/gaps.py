@@ -93,11 +93,9 @@ def _relight(canvas: F32, hole: NDArray[np.bool_], source: F32, allowed: NDArray
     channels) replaced by that of ``source``'s ``allowed`` pixels (both smoothed by a Gaussian
     of ``sigma`` source pixels; the layout resampled to the canvas).
 
-    Patch completion of gaps that make up most of the canvas settles on the patches nearest
-    one level, so a terrain's plateau and lowland, or a photo's uneven lighting, become one
-    flat grey. Only the brightness moves: no other patch is copied, so no darker structure
-    the trace left out is drawn into the gaps (starting the completion from the layout did
-    that, docs/pipelines/branching/quality.md).
+    Patch completion of gaps that make up most of the canvas settles on one level, so a
+    terrain's plateau and lowland, or a photo's uneven lighting, become one flat grey. Only
+    the brightness moves, so no other patch (no untraced structure) is drawn into the gaps.
     """
     H, W = canvas.shape[:2]
     hs, ws = source.shape[:2]
