@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from phloem.branching import BendingModel, Branch, Skeleton, SkeletonError, grow
+from phloem.branching.bending import TURN_BOUND
 
 H = 2.0
 
@@ -210,7 +211,7 @@ def test_candidates_total_turns_are_the_sums_of_all_angles_before_them():
 def test_total_turn_off_is_the_model_without_it():
     rng = np.random.default_rng(0)
     b = Branch.from_angles([10, 100], 0.0, rng.normal(0.05, 0.3, 60), np.full(62, 2.0), 2.0)
-    on = BendingModel.fit(Skeleton([b]), h=2.0, total_turn=2.0)
+    on = BendingModel.fit(Skeleton([b]), h=2.0, total_turn=2.0, turn_bound=0.0)
     off = BendingModel.fit(Skeleton([b]), h=2.0)
     a, r = on.cand_hist_alpha[20], on.cand_hist_r[20] * 2.0
     z = np.zeros(on.bins)
@@ -221,6 +222,45 @@ def test_total_turn_off_is_the_model_without_it():
     np.testing.assert_allclose(with_turn - on.log_quality(a, r, z, z), 2.0 * np.log(1 / (d + 1) + 1))
     with pytest.raises(ValueError, match="^total_turn:"):
         BendingModel.fit(Skeleton([b]), h=2.0, total_turn=-1.0)
+
+
+def test_turn_bound_costs_the_excess_of_the_total_turn_over_the_inputs():
+    rng = np.random.default_rng(0)
+    b = Branch.from_angles([10, 100], 0.0, rng.normal(0.05, 0.3, 60), np.full(62, 2.0), 2.0)
+    free = BendingModel.fit(Skeleton([b]), h=2.0, total_turn=2.0, turn_bound=0.0)
+    bound = BendingModel.fit(Skeleton([b]), h=2.0, total_turn=2.0)
+    assert bound.turn_bound == TURN_BOUND > 0  # on where the total turn is matched
+    assert BendingModel.fit(Skeleton([b]), h=2.0).turn_bound == 0.0  # and off with it
+    assert bound.turn_limit == pytest.approx(float(np.percentile(np.abs(bound.cand_turn), 90)))
+    a, r = bound.cand_hist_alpha[20], bound.cand_hist_r[20] * 2.0
+    z = np.zeros(bound.bins)
+    for turn in (0.0, bound.turn_limit + 1.0, -bound.turn_limit - 3.0):
+        after = np.abs(turn + bound.next_alpha.sum(axis=1))
+        want = -TURN_BOUND * np.maximum(after - bound.turn_limit, 0.0)
+        got = bound.log_quality(a, r, z, z, turn=turn) - free.log_quality(a, r, z, z, turn=turn)
+        np.testing.assert_allclose(got, want, atol=1e-12)
+    # furcations are not bounded
+    far = bound.turn_limit + 1.0
+    assert np.array_equal(bound.log_quality(a, r, z, z, turn=far, stem=False), free.log_quality(a, r, z, z, turn=far))
+    # inside the input's range nothing changes; beyond it, continuations that turn back win
+    assert np.array_equal(bound.log_quality(a, r, z, z, turn=0.0), free.log_quality(a, r, z, z, turn=0.0))
+    far = bound.log_quality(a, r, z, z, turn=bound.turn_limit + 1.0)
+    back, on = bound.next_alpha.sum(axis=1) < -0.2, bound.next_alpha.sum(axis=1) > 0.2
+    assert np.median(far[back]) > np.median(far[on]) + 1.0
+    with pytest.raises(ValueError, match="^turn_bound:"):
+        BendingModel.fit(Skeleton([b]), h=2.0, turn_bound=-1.0)
+
+
+def test_turn_limit_is_the_stems():
+    # a nearly straight stem and a child that curls: the limit is the stem's, not the curl's
+    rng = np.random.default_rng(1)
+    stem = Branch.from_angles([10, 100], 0.0, rng.normal(0.0, 0.05, 80), np.full(82, 2.0), 2.0)
+    curl = Branch.from_angles(stem.points[40], 1.0, np.full(60, 0.15), np.full(62, 2.0), 2.0, parent=(0, 40))
+    model = BendingModel.fit(Skeleton([stem, curl]), h=2.0, total_turn=2.0)
+    mine = model.cand_where[:, 0] == 0
+    assert 0 < mine.sum() < len(mine)
+    assert model.turn_limit == pytest.approx(float(np.percentile(np.abs(model.cand_turn[mine]), 90)))
+    assert model.turn_limit < 0.5 < float(np.abs(model.cand_turn).max())
 
 
 def test_course_is_an_option_of_the_pipeline():

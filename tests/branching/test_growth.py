@@ -470,6 +470,32 @@ def test_total_turn_keeps_a_long_branch_on_the_inputs_course():
     assert widest_turn(2.0) < 1.1 * widest
 
 
+def test_turn_bound_holds_a_long_branch_that_matching_the_total_turn_lets_go():
+    # Matching the total turn pulls a branch back only while the input has turned as far: once
+    # a branch eight times as long as the input's has wandered beyond them, every candidate is
+    # about as far and it is free to spiral (one seed in eight here). The bound holds all of
+    # them within the input's range and on a course across the image.
+    src = _meanders()
+
+    def grown(bound: float) -> list[Skeleton]:
+        m = BendingModel.fit(src, h=2.0, total_turn=2.0, turn_bound=bound)
+        return [grow(m, size=(700, 2800), seed=s, start=(20, 350, 0.0), branch_length=2400, colonize=False)
+                for s in range(8)]  # fmt: skip
+
+    def widest(sk: Skeleton) -> float:
+        return float(np.abs(np.cumsum(sk.branches[0].angles())).max())
+
+    def chord(sk: Skeleton) -> float:
+        p = sk.branches[0].points
+        return float(np.linalg.norm(p[-1] - p[0]) / sk.branches[0].length())
+
+    limit = BendingModel.fit(src, h=2.0, total_turn=2.0).turn_limit
+    free, held = grown(0.0), grown(5.0)
+    assert max(widest(g) for g in free) > limit + 2.0
+    assert max(widest(g) for g in held) < limit + 0.5
+    assert min(chord(g) for g in held) > 0.7 > min(chord(g) for g in free)
+
+
 def test_repel_border_keeps_a_stem_off_the_border_it_starts_on():
     from phloem.metrics import border_share
 

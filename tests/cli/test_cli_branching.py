@@ -188,7 +188,9 @@ def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
         outs[weight] = out
     assert Skeleton.load(outs["0"]) != Skeleton.load(outs["4"])
     assert json.loads(io.sidecar_path(outs["4"]).read_text())["parameters"]["coarse_history"] == 4.0
-    for flags in (["--total-turn", "0"], ["--total-turn", "4"], ["--repel-border"], ["--no-repel-border"]):
+    flag_sets = (["--total-turn", "0"], ["--total-turn", "4"], ["--total-turn", "4", "--turn-bound", "0"],
+                 ["--repel-border"], ["--no-repel-border"])  # fmt: skip
+    for flags in flag_sets:
         out = tmp_path / ("grown" + "".join(flags) + ".json")
         assert main(["branching", "grow", str(skel), "--out", str(out), "--seed", "1", *flags, "-q"]) == 0
         outs[" ".join(flags)] = out
@@ -197,6 +199,9 @@ def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
     assert grown["--repel-border"] != grown["--no-repel-border"]
     sidecar = {k: json.loads(io.sidecar_path(v).read_text())["parameters"] for k, v in outs.items()}
     assert sidecar["--total-turn 4"]["total_turn"] == 4.0
+    # the bound on the stems' turn follows the total turn unless it is given
+    assert sidecar["--total-turn 4"]["turn_bound"] == 5.0 and sidecar["--total-turn 0"]["turn_bound"] == 0.0
+    assert sidecar["--total-turn 4 --turn-bound 0"]["turn_bound"] == 0.0
     assert sidecar["--repel-border"]["repel_border"] is True and sidecar["--no-repel-border"]["repel_border"] is False
     # left at their defaults, both are resolved for the example and recorded as used
     default = branching.course_defaults(Skeleton.load(skel))

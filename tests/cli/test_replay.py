@@ -213,6 +213,7 @@ def test_sidecars_record_resolved_values_threads_and_input_hashes(inputs: Path, 
     # straight channels: their heading statistics are known (drift_noise under 0.125), so
     # course_defaults turned both on, and the sidecar records them as used
     assert run["coarse_history"] == 2.0 and run["total_turn"] == 2.0 and run["repel_border"] is True
+    assert run["turn_bound"] == 5.0  # with the total turn, its bound, recorded as fitted
     assert run["h"] > 0
 
 

@@ -113,6 +113,7 @@ def test_trace_then_grow_then_render_write_the_cli_s_files_with_sidecars(client,
     # the command line's course-keeping defaults, resolved for the example and recorded
     course = branching.course_defaults(branching.Skeleton.load(project.root / "channel.json"))
     assert (side["parameters"]["total_turn"], side["parameters"]["repel_border"]) == course
+    assert side["parameters"]["turn_bound"] == (5.0 if course[0] > 0 else 0.0)
     again = run_job(client, {**grow, "out": "grown2.json"})
     assert branching.Skeleton.load(project.root / again["outputs"][0]) == grown  # one seed, one structure
 

@@ -22,6 +22,7 @@ input at the scale of several extensions (``docs/pipelines/branching/quality.md`
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,7 +31,11 @@ from .._validate import check_float, check_int
 from ._elements import F64, I64, _bin, _check_k, _check_skeleton, _dist_columns, _elements, _generations, _range
 from .skeleton import Skeleton
 
-__all__ = ["BendingModel", "block_sums", "course_deviation", "default_h"]
+__all__ = ["TURN_BOUND", "BendingModel", "block_sums", "course_deviation", "default_h"]
+
+#: Weight of the bound on the total turn where the total turn is matched (measured in
+#: ``docs/pipelines/branching/quality.md``).
+TURN_BOUND = 5.0
 
 
 def course_deviation(points: F64, tips: I64, edges: int) -> F64:
@@ -130,6 +135,11 @@ class BendingModel:
         Weight of the coarse history's ``log dist`` beside the fine history's (0: off).
     total_turn : float
         Weight of the ``log dist`` of the turn since the branch's start (0: off).
+    turn_bound : float
+        Weight of the bound on a stem's total turn (0: off), see :meth:`fit`.
+    turn_limit : float
+        The bound: the 90th percentile of the absolute total turns of the input's stems
+        (radians).
 
     Examples
     --------
@@ -173,6 +183,8 @@ class BendingModel:
     # (C,) the turn from the source branch's first edge to the end of each history (radians, unwrapped)
     cand_turn: F64 = field(default_factory=lambda: np.zeros(0), repr=False)
     total_turn: float = 0.0
+    turn_bound: float = 0.0
+    turn_limit: float = math.inf
 
     @classmethod
     def fit(
@@ -190,6 +202,7 @@ class BendingModel:
         course: int | None = None,
         coarse_history: float = 2.0,
         total_turn: float = 0.0,
+        turn_bound: float | None = None,
     ) -> BendingModel:
         """Learn the bending model from an example skeleton.
 
@@ -249,6 +262,16 @@ class BendingModel:
             output drift further from them (``docs/pipelines/branching/quality.md``);
             :func:`synthesize` turns both on where the input's course is known
             (:func:`course_defaults`).
+        turn_bound : float, optional
+            Weight of the bound on a stem's total turn (default :data:`TURN_BOUND` where
+            ``total_turn > 0``, else 0: off). Beyond the paper: a candidate whose continuation
+            takes a stem's (a root tree's main branch's) absolute total turn beyond
+            :attr:`turn_limit` (the 90th percentile of the input's stems') loses
+            ``turn_bound`` times the excess (radians) in ``log Q``. Matching the total turn
+            alone holds no branch back once it has turned further than the input's: every
+            candidate is then about as far, and a river's stem spiralled in a corner of the
+            image instead of crossing it. Furcations are not bounded: bounding them too
+            damped the turns of the side channels.
 
         Returns
         -------
@@ -283,6 +306,9 @@ class BendingModel:
         n_course = 8 * m if course is None else check_int(course, "course", 0)
         coarse_history = check_float(coarse_history, "coarse_history", 0.0)
         total_turn = check_float(total_turn, "total_turn", 0.0)
+        if turn_bound is None:
+            turn_bound = TURN_BOUND if total_turn > 0 else 0.0
+        turn_bound = check_float(turn_bound, "turn_bound", 0.0)
         src = skeleton.resample(h)
         elems = [_elements(b) for b in src.branches]
         all_a = np.concatenate([a for a, _ in elems])
@@ -323,6 +349,10 @@ class BendingModel:
         np.add.at(inc_a, (np.broadcast_to(rows, next_a.shape), _bin(next_a, *ra, bins)), 1.0)
         inc_r = np.zeros((len(next_a), bins))
         np.add.at(inc_r, (np.broadcast_to(rows, next_r.shape), _bin(next_r, *rr, bins)), 1.0)
+        cand_turn = np.concatenate(turn)
+        gens = np.asarray(_generations(src))
+        stems = gens[np.concatenate([w[:, 0] for w in where])] == 0
+        limit = float(np.percentile(np.abs(cand_turn[stems] if stems.any() else cand_turn), 90))
         lengths: dict[int, list[float]] = {}
         for g, b in zip(_generations(src), src.branches):
             lengths.setdefault(g, []).append(b.length())
@@ -351,8 +381,10 @@ class BendingModel:
             course=n_course,
             cand_coarse=np.vstack(coarse),
             coarse_history=coarse_history,
-            cand_turn=np.concatenate(turn),
+            cand_turn=cand_turn,
             total_turn=total_turn,
+            turn_bound=turn_bound,
+            turn_limit=limit,
         )
 
     def log_quality(
@@ -364,6 +396,7 @@ class BendingModel:
         deviation: float | None = None,
         coarse: F64 | None = None,
         turn: float | None = None,
+        stem: bool = True,
     ) -> F64:
         """``log Q*_i`` of every candidate for a branch history (vectorised over candidates).
 
@@ -382,7 +415,10 @@ class BendingModel:
             against the candidates' when given and ``coarse_history > 0``.
         turn : float, optional
             The branch's total turn, the sum of all its angles; matched against the
-            candidates' when given and ``total_turn > 0``.
+            candidates' when given and ``total_turn > 0``, and bounded by :attr:`turn_limit`
+            when ``turn_bound > 0`` and the branch is a ``stem``.
+        stem : bool
+            Whether the branch is a root tree's main branch (the total turn's bound applies).
 
         Returns
         -------
@@ -401,6 +437,9 @@ class BendingModel:
             q += self.coarse_history * np.log(_dist_columns(cols[2], np.asarray(coarse, np.float64)))
         if turn is not None and self.total_turn > 0 and len(self.cand_turn):
             q += self.total_turn * np.log(_dist_columns(self.cand_turn[None, :], np.array([float(turn)])))
+        if turn is not None and stem and self.turn_bound > 0:
+            after = np.abs(float(turn) + self._next_turn())
+            q -= self.turn_bound * np.maximum(after - self.turn_limit, 0.0)
         if deviation is not None and self.course > 0:
             q += np.log(1.0 / (np.abs(_angle(self.cand_course - deviation)) + 1.0) + 1.0)
         n_t = float(counts_alpha.sum())
@@ -421,6 +460,15 @@ class BendingModel:
         thickness histogram keeps ``ω_G``, as the thickness similarity is unchanged.
         """
         return 1.0 + self.coarse_history + self.total_turn
+
+    def _next_turn(self) -> F64:
+        """``(C,)`` the turn of every candidate's continuation, the sum of its ``m`` angles (cached)."""
+        got = self.__dict__.get("_next_turn_of")
+        if got is None or got[0] is not self.next_alpha:
+            got = (self.next_alpha, self.next_alpha.sum(axis=1))
+            self.__dict__["_next_turn_of"] = got
+        out: F64 = got[1]
+        return out
 
     def _columns(self) -> tuple[F64, F64, F64]:
         """The history tables transposed, ``(k + 1, C)`` each (cached; rebuilt if a table is replaced)."""

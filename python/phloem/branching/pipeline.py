@@ -68,6 +68,7 @@ def fit_models(
     course: int | None = None,
     coarse_history: float = 2.0,
     total_turn: float = 0.0,
+    turn_bound: float | None = None,
 ) -> tuple[BendingModel, FurcationModel | None]:
     """The bending model (§4.2) and, if the skeleton branches at all, the furcation model (§4.3).
 
@@ -96,6 +97,9 @@ def fit_models(
     total_turn : float, optional
         Weight of the bending model's total turn, each branch's turn since its start
         (default 0: the paper's model; see :meth:`BendingModel.fit`).
+    turn_bound : float, optional
+        Weight of the bound on a stem's total turn (default 5 where ``total_turn > 0``, else 0;
+        see :meth:`BendingModel.fit`).
 
     Examples
     --------
@@ -105,8 +109,9 @@ def fit_models(
     (2.0, True)
     """
     bending = BendingModel.fit(
-        skeleton, h=h, k=order, m=m, c=n_best, course=course, coarse_history=coarse_history, total_turn=total_turn
-    )
+        skeleton, h=h, k=order, m=m, c=n_best, course=course, coarse_history=coarse_history, total_turn=total_turn,
+        turn_bound=turn_bound,
+    )  # fmt: skip
     has_children = any(b.parent is not None for b in skeleton.branches)
     furcation = FurcationModel.fit(skeleton, h=bending.h, k=order, c=n_best) if has_children else None
     return bending, furcation
@@ -171,6 +176,7 @@ def synthesize(
     course: int | None = None,
     coarse_history: float = 2.0,
     total_turn: float | None = None,
+    turn_bound: float | None = None,
     generations: int | None = None,
     max_length: float | str | None = "input",
     colonize: bool = True,
@@ -205,9 +211,10 @@ def synthesize(
         Seed of the growth and of the fragment choices.
     trace_options : dict, optional
         Keyword arguments for :func:`trace` (e.g. ``{"kind": "dark", "sigmas": (1.5, 3, 5)}``).
-    h, order, m, n_best, course, coarse_history, total_turn : optional
+    h, order, m, n_best, course, coarse_history, total_turn, turn_bound : optional
         Model parameters, as in :func:`fit_models` (``k`` and ``c`` before, deprecated).
-        ``total_turn`` defaults to :func:`course_defaults`'s for the source skeleton.
+        ``total_turn`` defaults to :func:`course_defaults`'s for the source skeleton, and
+        ``turn_bound`` to 5 where the total turn is matched.
     generations, max_length, colonize, guide : optional
         See :func:`grow`.
     repel_border : bool, optional
@@ -230,7 +237,8 @@ def synthesize(
     models : (BendingModel, FurcationModel or None), optional
         Models fitted to ``skeleton`` before (an earlier result's ``bending`` and ``furcation``),
         used instead of fitting them again: many seeds of one input fit once. ``h``, ``order``,
-        ``m``, ``n_best``, ``course``, ``coarse_history`` and ``total_turn`` are then not used.
+        ``m``, ``n_best``, ``course``, ``coarse_history``, ``total_turn`` and ``turn_bound`` are
+        then not used.
 
     Returns
     -------
@@ -278,7 +286,7 @@ def synthesize(
     if models is None:
         bending, furcation = fit_models(
             source, h=h, order=order, m=m, n_best=n_best, course=course, coarse_history=coarse_history,
-            total_turn=total_turn,
+            total_turn=total_turn, turn_bound=turn_bound,
         )  # fmt: skip
     elif (
         isinstance(models, tuple)

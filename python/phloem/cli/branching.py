@@ -68,8 +68,8 @@ def _resolve_kind(args: argparse.Namespace, img: np.ndarray) -> None:
 
 
 def _resolve_models(args: argparse.Namespace, bend: Any) -> None:
-    """The defaults of the bending model (``--h``, ``--m``, ``--course``) recorded as fitted."""
-    args.h, args.m, args.course = bend.h, bend.m, bend.course
+    """The defaults of the bending model (``--h``, ``--m``, ``--course``, ``--turn-bound``) recorded as fitted."""
+    args.h, args.m, args.course, args.turn_bound = bend.h, bend.m, bend.course, bend.turn_bound
 
 
 def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> None:
@@ -231,6 +231,15 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
         "phloem.metrics.drift_noise of its skeleton is at most 0.125, else 0, the paper's Markov model alone)",
     )
     g.add_argument(
+        "--turn-bound",
+        type=float,
+        default=None,
+        metavar="WEIGHT",
+        help="weight of the bound on each stem's whole turn: a stem that has turned further than 90 %% of the "
+        "example's stems do is steered back, so that it crosses the image instead of spiralling (default: 5 "
+        "with --total-turn above 0, else 0: off)",
+    )
+    g.add_argument(
         "--generations",
         type=positive,
         default=None,
@@ -273,10 +282,11 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
         raise ValueError("size: the skeleton file has no shape; pass --size WxH")
     _resolve_course(args, source)
     # fitting takes seconds on real skeletons; a batch worker fits once per skeleton and options
-    options = (args.h, args.order, args.m, args.n_best, args.course, args.coarse_history, args.total_turn)
+    options = (args.h, args.order, args.m, args.n_best, args.course, args.coarse_history, args.total_turn,
+               args.turn_bound)  # fmt: skip
     bend, fur = kept("branching models", [Path(args.skeleton)], options, lambda: branching.fit_models(
         source, h=args.h, order=args.order, m=args.m, n_best=args.n_best, course=args.course,
-        coarse_history=args.coarse_history, total_turn=args.total_turn))  # fmt: skip
+        coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound))  # fmt: skip
     new = run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
     _resolve_models(args, bend)
     args.size = shape
@@ -327,13 +337,13 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
     if args.valid not in ("auto", "none"):
         read.append(Path(args.valid))
     key = stamp(read, (_trace_kwargs(args), args.valid, args.h, args.order, args.m, args.n_best, args.course,
-                               args.coarse_history, args.total_turn))  # fmt: skip
+                               args.coarse_history, args.total_turn, args.turn_bound))  # fmt: skip
     prior = recall("branching run models", key)
     res = run(
         "branching run", args,
         lambda bar: branching.synthesize(
             img, source if prior is None else prior[0], models=None if prior is None else prior[1:], size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, order=args.order,
-            m=args.m, n_best=args.n_best, course=args.course, coarse_history=args.coarse_history, total_turn=args.total_turn, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize, repel_border=args.repel_border,
+            m=args.m, n_best=args.n_best, course=args.course, coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize, repel_border=args.repel_border,
             guide=_guide(args.guide, args), valid=valid, render_options=_render_kwargs(args),
             threads=args.threads, progress=bar, max_memory=args.max_memory,
         ),

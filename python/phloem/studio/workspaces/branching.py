@@ -210,7 +210,7 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
                                  repel_border=border, progress=progress, max_memory=project.max_memory)  # fmt: skip
             assert progress is not None
             progress(1, 1)  # a cancel during the last step writes nothing
-            used = {**params, "h": bend.h, "total_turn": turn, "repel_border": border}
+            used = {**params, "h": bend.h, "total_turn": turn, "turn_bound": bend.turn_bound, "repel_border": border}
             return [outputs.data(out, new.to_json().encode(), command=req.kind, parameters=used,
                                  seed=req.seed, overwrite=req.overwrite)]  # fmt: skip
 
