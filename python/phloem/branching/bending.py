@@ -354,7 +354,7 @@ class BendingModel:
         stems = gens[np.concatenate([w[:, 0] for w in where])] == 0
         limit = float(np.percentile(np.abs(cand_turn[stems] if stems.any() else cand_turn), 90))
         lengths: dict[int, list[float]] = {}
-        for g, b in zip(_generations(src), src.branches):
+        for g, b in zip(gens.tolist(), src.branches):
             lengths.setdefault(g, []).append(b.length())
         return cls(
             h=h,
