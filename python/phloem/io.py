@@ -43,6 +43,7 @@ __all__ = [
     "image_size",
     "read_image",
     "sidecar_path",
+    "stored_bit_depth",
     "write_image",
     "write_result",
 ]
@@ -189,9 +190,33 @@ def _header(path: Path, max_pixels: int) -> tuple[str, int, int, int, bool]:
     return str(fmt), w, h, orientation if 1 <= orientation <= 8 else 1, inverted
 
 
-def _stored_bits(path: str | os.PathLike[str]) -> int:
-    """16 when the image file stores more than 8 bits per sample (a 16-bit PNG, a 16-bit or
-    float TIFF), else 8; from the header alone, 8 for anything unreadable."""
+def stored_bit_depth(path: str | os.PathLike[str]) -> int:
+    """Bits per sample an image file stores, from its header alone: 16 or 8.
+
+    16 for a 16-bit PNG and for a TIFF of more than 8 bits per sample (16-bit or float), else
+    8, also for a file that cannot be read (reading the image itself reports what is wrong
+    with it). The command line uses it for ``--bit-depth``'s default, so that a 16-bit
+    elevation model is not written back with a handful of levels.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        An image file.
+
+    Returns
+    -------
+    int
+        16 or 8.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     f = os.path.join(d, "dem.png")
+    ...     write_image(f, np.linspace(0, 1, 16, dtype=np.float32).reshape(4, 4), bit_depth=16)
+    ...     stored_bit_depth(f)
+    16
+    """
     try:
         with open(path, "rb") as fp:
             head = fp.read(26)

@@ -52,11 +52,11 @@ def test_an_8_bit_input_gives_an_8_bit_output(field: tuple[Path, Path], tmp_path
     assert out.dtype == np.uint8 and depth == 8
 
 
-def test_stored_bits_reads_the_header(field: tuple[Path, Path], tmp_path: Path) -> None:
+def test_stored_bit_depth_reads_the_header(field: tuple[Path, Path], tmp_path: Path) -> None:
     img, mask = field
-    assert io._stored_bits(img) == 16 and io._stored_bits(mask) == 8
+    assert io.stored_bit_depth(img) == 16 and io.stored_bit_depth(mask) == 8
     tif = tmp_path / "dem.tif"
     cv2.imwrite(str(tif), cv2.imread(str(img), cv2.IMREAD_UNCHANGED))
-    assert io._stored_bits(tif) == 16
+    assert io.stored_bit_depth(tif) == 16
     (tmp_path / "junk.png").write_bytes(b"not an image")
-    assert io._stored_bits(tmp_path / "junk.png") == 8
+    assert io.stored_bit_depth(tmp_path / "junk.png") == 8

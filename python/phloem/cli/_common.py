@@ -184,7 +184,7 @@ def resolve_bit_depth(args: argparse.Namespace) -> None:
         return
     src = next((v for v in (getattr(args, d, None) for d in ("input", "image")) if isinstance(v, str)), None)
     out = getattr(args, "out", None)
-    deep = src is not None and Path(src).is_file() and io._stored_bits(src) == 16
+    deep = src is not None and Path(src).is_file() and io.stored_bit_depth(src) == 16
     holds = out is not None and _files.WRITE_EXTENSIONS.get(Path(str(out)).suffix.lower(), 8) == 16
     args.bit_depth = 16 if deep and holds else 8
 
