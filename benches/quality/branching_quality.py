@@ -265,6 +265,9 @@ def main(argv: list[str] | None = None) -> int:
     if not paths:
         print(f"no images in {folder}", file=sys.stderr)
         return 1
+    # the numbers belong to the code that ran: an installed wheel shadows the working tree
+    # unless PYTHONPATH puts python/ first
+    print(f"phloem {phloem.__version__} from {Path(phloem.__file__).parent}", file=sys.stderr, flush=True)
     results = []
     for p in paths:
         img, mask = load(p, args.max_side)
