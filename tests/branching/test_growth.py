@@ -637,7 +637,7 @@ def test_the_density_map_is_the_distance_to_the_branch_surface():
     # §4.4: D(p) = exp(-d(p, B)² / ρ²), d the distance to the branch's surface (per segment, the
     # distance to its nearest point minus the thickness there), written within 3ρ of it; brute
     # force over every pixel
-    from phloem.branching.growth import _World
+    from phloem.branching._world import _World
 
     m = BendingModel.fit(_meanders(), h=2.0)
     rho = 5.0
@@ -705,7 +705,8 @@ def test_grow_does_not_depend_on_the_thread_count(monkeypatch, models: tuple[Ben
 def test_a_child_ignores_its_parent_near_the_attachment_only_until_it_is_3_rho_long():
     # a child starts on its parent, where every direction would read D = 1; once it has grown
     # 3ρ it must see the whole parent, or it can curl back onto the stretch it left unseen
-    from phloem.branching.growth import _Grower, _Growing, _World
+    from phloem.branching._world import _World
+    from phloem.branching.growth import _Grower, _Growing
 
     m = BendingModel.fit(_meanders(), h=2.0)
     rho = 5.0

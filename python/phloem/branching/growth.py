@@ -34,16 +34,15 @@ import numbers
 from dataclasses import dataclass
 from typing import Any
 
-import cv2
 import numpy as np
-from numpy.typing import NDArray
 
 from .. import _core, _memory
 from .._api import Seed, Size, renamed
 from .._progress import Progress
 from .._validate import check_float, check_int, check_seed
-from ._elements import F64, _bin, _check_skeleton, _direction, _elements, _tangent, _wrap
+from ._elements import F64, _check_skeleton, _direction, _elements, _tangent, _wrap
 from ._forest import InputTree, input_trees
+from ._world import _DensityView, _guide_map, _World
 from .bending import BendingModel, block_sums, course_deviation
 from .furcation import FurcationModel
 from .skeleton import Branch, Skeleton
@@ -75,152 +74,6 @@ class _Growing:
 
     def length(self) -> float:
         return float(len(self.points) - 1)
-
-
-class _World:
-    """The structure grown so far: segments, density map, histograms, guidance."""
-
-    def __init__(
-        self,
-        model: BendingModel,
-        shape: tuple[int, int],
-        *,
-        colonize: bool,
-        rho: float,
-        guide: F64 | None,
-        rng: np.random.Generator,
-        repel_border: bool = False,
-    ) -> None:
-        self.model = model
-        self.shape = shape
-        self.colonize = colonize
-        self.repel_border = repel_border
-        self.rho = rho
-        self.guide = None if guide is None else np.ascontiguousarray(guide, np.float64)
-        self.rng = rng
-        # the density map D = exp(-d²/ρ²) itself (float32), so that lookups are plain indexing
-        self.dens = np.zeros(shape, np.float32) if colonize else None
-        self._dsum = 0.0  # sum of D over the image, kept up to date by stamp()
-        # which branch vertex each pixel's distance comes from, to ignore where a child starts
-        self.owner_branch = np.full(shape, -1, np.int32) if colonize else None
-        self.owner_vertex = np.full(shape, -1, np.int32) if colonize else None
-        # segments in a growable array; the crossing tests cut it down to those near the paths
-        self._seg = np.zeros((256, 4))
-        self._nseg = 0
-        # histogram matching starts from the model's warm start: pseudo-elements distributed
-        # like the input (see BendingModel.warm_start)
-        self.counts_alpha = model.warm_start * model.hist_alpha
-        self.counts_r = model.warm_start * model.hist_r
-        self.total_length = 0.0
-
-    # -- bookkeeping ----------------------------------------------------------------------
-    @property
-    def segment_rows(self) -> F64:
-        """All segments so far as ``(s, 4)`` rows ``x0, y0, x1, y1``."""
-        return self._seg[: self._nseg]
-
-    def add_segments(self, pts: F64) -> None:
-        n = len(pts) - 1
-        if n < 1:
-            return
-        if self._nseg + n > len(self._seg):
-            grown = np.zeros((max(2 * len(self._seg), self._nseg + n), 4))
-            grown[: self._nseg] = self._seg[: self._nseg]
-            self._seg = grown
-        self._seg[self._nseg : self._nseg + n, :2] = pts[:-1]
-        self._seg[self._nseg : self._nseg + n, 2:] = pts[1:]
-        self._nseg += n
-        self.total_length += float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
-
-    def add_elements(self, alpha: F64, r: F64) -> None:
-        m = self.model
-        np.add.at(self.counts_alpha, _bin(alpha, *m.range_alpha, m.bins), 1.0)
-        np.add.at(self.counts_r, _bin(r, *m.range_r, m.bins), 1.0)
-
-    def stamp(self, pts: F64, thick: F64, branch: int, first: int) -> None:
-        """Write segments into the density map, only within ``3ρ`` of them (§4.4 local update).
-
-        ``pts`` are vertices ``first, first + 1, ...`` of branch ``branch``; every pixel with
-        ``d ≤ 3ρ`` takes ``exp(-d²/ρ²)`` where that is larger than its density, ``d`` being
-        its distance to the branch's surface (per segment, the distance to its nearest point
-        minus the thickness there), and remembers the branch vertex nearest to that point.
-        """
-        if self.dens is None or self.owner_branch is None or self.owner_vertex is None or len(pts) < 2:
-            return
-        self._dsum += _core.density_stamp(
-            self.dens,
-            self.owner_branch,
-            self.owner_vertex,
-            np.ascontiguousarray(pts, np.float64),
-            np.ascontiguousarray(thick, np.float64),
-            int(branch),
-            int(first),
-            float(self.rho),
-        )
-
-    def density_mean(self) -> float:
-        if self.dens is None:
-            return 0.0
-        return self._dsum / float(self.shape[0] * self.shape[1])
-
-    # -- candidate evaluation --------------------------------------------------------------
-    def _lookup(self, grid: Any, pts: F64) -> F64:
-        H, W = self.shape
-        ix = np.rint(pts[..., 0]).astype(np.int64)
-        iy = np.rint(pts[..., 1]).astype(np.int64)
-        inside = (ix >= 0) & (ix < W) & (iy >= 0) & (iy < H)
-        out = np.zeros(ix.shape)
-        out[inside] = grid[iy[inside], ix[inside]]
-        return out
-
-    def inside(self, pts: F64) -> NDArray[np.bool_]:
-        H, W = self.shape
-        ok = (pts[..., 0] >= 0) & (pts[..., 0] <= W - 1) & (pts[..., 1] >= 0) & (pts[..., 1] <= H - 1)
-        return np.asarray(ok.all(axis=-1))
-
-    def crossings(self, tip: F64, ext: F64) -> NDArray[np.bool_]:
-        """For each candidate extension ``(C, m, 2)`` from ``tip``: does it cross a segment?"""
-        C = len(ext)
-        if self._nseg == 0 or C == 0:
-            return np.zeros(C, bool)
-        path = np.ascontiguousarray(np.concatenate([np.broadcast_to(tip, (C, 1, 2)), ext], axis=1), np.float64)
-        # proper crossings only: a child starting on its parent or consecutive edges touch
-        return _core.polylines_crossing(path, self.segment_rows)
-
-
-def _guide_map(guide: Any, shape: tuple[int, int], width: float) -> tuple[F64, F64 | None]:
-    """The guidance map ``G`` (§4.5) and, for a polyline guide, the polyline.
-
-    A boolean ``(H, W)`` mask marks the path; an ``(n, 2)`` array is an ``(x, y)`` polyline;
-    both become ``G = 1 - exp(-d² / width²)`` with ``d`` the distance to the path. Any other
-    real ``(H, W)`` array is ``G`` itself (integers scaled by their dtype's maximum).
-    """
-    arr = np.asarray(guide)
-    if arr.ndim == 2 and arr.shape == tuple(shape):
-        if arr.dtype == np.bool_:
-            if not arr.any():
-                raise ValueError("guide: the path mask is empty")
-            d = cv2.distanceTransform(np.where(arr, 0, 255).astype(np.uint8), cv2.DIST_L2, 5).astype(np.float64)
-            return 1.0 - np.exp(-(d**2) / width**2), None
-        if not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
-            raise TypeError(f"guide: expected a real-valued or boolean map, got dtype {arr.dtype}")
-        g = arr.astype(np.float64)
-        if np.issubdtype(arr.dtype, np.integer):
-            g /= float(np.iinfo(arr.dtype).max)
-        if not np.isfinite(g).all():
-            raise ValueError("guide: the guidance map contains NaN or infinity")
-        return np.clip(g, 0.0, 1.0), None
-    if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < 2:
-        raise ValueError(
-            f"guide: expected an (H, W) = {tuple(shape)} map or mask, or an (n, 2) polyline of (x, y), got shape {arr.shape}"
-        )
-    line = arr.astype(np.float64)
-    if not np.isfinite(line).all():
-        raise ValueError("guide: the polyline contains NaN or infinity")
-    mask = np.full(shape, 255, np.uint8)
-    cv2.polylines(mask, [np.round(line * 16).astype(np.int32)], False, 0, thickness=1, lineType=cv2.LINE_8, shift=4)
-    d = cv2.distanceTransform(mask, cv2.DIST_L2, 5).astype(np.float64)
-    return 1.0 - np.exp(-(d**2) / width**2), line
 
 
 def _check_start(start: Any) -> tuple[float, float, float | None] | None:
@@ -355,31 +208,6 @@ class _Grower:
             th = np.asarray(br.thickness[br.inserted : upto + 1])
             w.stamp(pts, th, br.index, br.inserted)
             br.inserted = upto
-
-
-class _DensityView:
-    """``D = exp(-d²/ρ²)`` read lazily from the distance map (indexing only, no full-map copy).
-
-    A child starts on its parent, so every direction would see ``D = 1`` there and the
-    density could not tell directions apart; pixels whose nearest structure is the parent
-    within ``near`` vertices of the attachment read as empty (the child's own last ``3ρ``
-    are held back from the map for the same reason).
-    """
-
-    def __init__(self, world: _World, parent: tuple[int, int] | None = None, near: int = 0) -> None:
-        self.world = world
-        self.parent = parent
-        self.near = near
-
-    def __getitem__(self, key: Any) -> Any:
-        w = self.world
-        assert w.dens is not None and w.owner_branch is not None and w.owner_vertex is not None
-        out = w.dens[key].astype(np.float64)
-        if self.parent is not None:
-            pb, pv = self.parent
-            skip = (w.owner_branch[key] == pb) & (np.abs(w.owner_vertex[key] - pv) <= self.near)
-            out[skip] = 0.0
-        return out
 
 
 def _points_for(br: _Growing, alpha: F64, h: float) -> F64:
