@@ -267,11 +267,9 @@ class BendingModel:
             ``total_turn > 0``, else 0: off). Beyond the paper: a candidate whose continuation
             takes a stem's (a root tree's main branch's) absolute total turn beyond
             :attr:`turn_limit` (the 90th percentile of the input's stems') loses
-            ``turn_bound`` times the excess (radians) in ``log Q``. Matching the total turn
-            alone holds no branch back once it has turned further than the input's: every
-            candidate is then about as far, and a river's stem spiralled in a corner of the
-            image instead of crossing it. Furcations are not bounded: bounding them too
-            damped the turns of the side channels.
+            ``turn_bound`` times the excess (radians) in ``log Q``: matching the total turn
+            alone holds no branch back once it has turned further than any input branch
+            (measurements in ``docs/pipelines/branching/quality.md``).
 
         Returns
         -------
