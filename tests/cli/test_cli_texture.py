@@ -64,6 +64,10 @@ def test_complete_from_mask_file(tmp_path, bark):
     assert main(["complete", str(img), str(tmp_path / "mask.png"), "--out", str(out), "-q"]) == 0
     res = io.read_image(out)
     assert np.abs(res - io.read_image(img))[mask == 0].max() < 1e-6
+    varied = tmp_path / "varied.png"
+    assert main(["complete", str(img), str(tmp_path / "mask.png"), "--out", str(varied), "--diversity", "1", "-q"]) == 0
+    assert json.loads(io.sidecar_path(varied).read_text())["parameters"]["diversity"] == 1.0
+    assert not np.array_equal(io.read_image(varied), res)
 
 
 @pytest.mark.parametrize(
@@ -117,3 +121,12 @@ def test_quilt_tileable_too_small_is_a_clean_error(tmp_path, exemplar_png, capsy
     err = capsys.readouterr().err
     assert "size: a tileable quilt needs" in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_complete_refuses_a_negative_diversity(tmp_path, exemplar_png, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["complete", str(exemplar_png), str(exemplar_png), "--out", str(tmp_path / "o.png"), "--diversity", "-1"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "--diversity: expected a finite number >= 0, got -1" in err and "Traceback" not in err
+    assert not (tmp_path / "o.png").exists()

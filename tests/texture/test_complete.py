@@ -271,3 +271,53 @@ def test_cropped_completion_keeps_the_held_out_error(bark, monkeypatch):
             errs.append(float(np.abs(out[hide] - canvas[hide]).mean()))
         errors[frac] = float(np.mean(errs))
     assert errors[0.75] <= 1.25 * errors[0.0], errors
+
+
+def test_occurrence_cost_charges_overuse_only():
+    # 100 matches spread evenly over the 10×10 usable centres of a 16×16 source (p = 7) cost
+    # nothing; all on one centre cost λ × scale × overuse around it and nothing away from it.
+    from phloem.texture._occurrence import occurrence_cost
+
+    ys, xs = np.mgrid[3:13, 3:13]
+    even = np.stack([ys.ravel(), xs.ravel()], axis=1).astype(np.int32)
+    cost = occurrence_cost(even, (16, 16), 7, 2.0, 0.5, 100)
+    assert float(cost[5:11, 5:11].max()) == 0.0
+    one = np.full((100, 2), 8, np.int32)
+    cost = occurrence_cost(one, (16, 16), 7, 2.0, 0.5, 100)
+    # at the centre, the mean coverage over its own patch is 100, uniform is 100 × 49 / 100
+    assert cost[8, 8] == pytest.approx(2.0 * 0.5 * (100 / 49.0 - 1.0))
+    assert cost[0, 15] == 0.0  # a patch that does not overlap the overused one
+    assert float(occurrence_cost(np.full((4, 2), -1, np.int32), (16, 16), 7, 1.0, 1.0, 100).max()) == 0.0
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_diversity_keeps_the_fine_scale_of_a_collapsing_fill(seed):
+    # A source whose texture grows from nothing (left) to strong (right) and a hole three times
+    # its height, filled as the branching gaps are: plain completion settles on the smoothest
+    # patches, the occurrence penalty draws on more of the source and keeps more fine scale.
+    rng = np.random.default_rng(0)
+    H, W = 64, 192
+    grain = cv2.GaussianBlur(rng.normal(size=(H, W)).astype(np.float32), (0, 0), 0.8)
+    frame = np.full((112 + H, W), 0.5, np.float32)
+    frame[112:] += grain * np.linspace(0.0, 0.15, W, dtype=np.float32)[None, :]
+    hole = np.zeros(frame.shape, bool)
+    hole[8:88, 8:184] = True
+    sources = np.zeros_like(hole)
+    sources[112:] = True
+
+    def fine(diversity: float) -> float:
+        out = complete(
+            frame, hole, source_mask=sources, patch_size=7, levels=3, iterations=[0, 2, 4],
+            search_iterations=[1, 1, 3], pyramid="strict", gradient_weight=0.0, diversity=diversity, seed=seed,
+            threads=1,
+        )  # fmt: skip
+        return float((out - cv2.GaussianBlur(out, (0, 0), 2.0))[hole].std())
+
+    assert fine(1.0) > 1.1 * fine(0.0)
+
+
+def test_diversity_is_checked(hole_case):
+    img, hole, _ = hole_case
+    for bad in (-1.0, float("nan")):
+        with pytest.raises(ValueError, match="^diversity:"):
+            complete(img, hole, diversity=bad)

@@ -10,7 +10,7 @@ from .. import io, texture
 from .._masks import hole_from_mask
 from ..texture.quilt import _default_block, _default_overlap
 from ..texture.synthesis import _auto_levels
-from ._common import common_options, parse_size, positive, preflight, run, save
+from ._common import common_options, non_negative, parse_size, positive, preflight, run, save
 
 
 def _from_exemplar(
@@ -68,6 +68,7 @@ def _cmd_complete(args: argparse.Namespace) -> None:
             patch_size=args.patch_size,
             levels=args.levels,
             iterations=args.iterations,
+            diversity=args.diversity,
             tileable=args.tileable,
             seed=args.seed,
             threads=args.threads,
@@ -145,6 +146,9 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--levels", type=positive, default=None, help="pyramid levels (default: from the hole size)")
     p.add_argument("--iterations", type=positive, default=None,
                    help="search-and-vote iterations per level (default: 1 + 2 x level, coarsest level highest)")  # fmt: skip
+    p.add_argument("--diversity", type=non_negative, default=0.0,
+                   help="weight of the occurrence penalty (Kaspar et al. 2015): a large hole filled from few sources "
+                        "settles on the smoothest ones; 1 spreads the fill over more of them (default 0: off)")  # fmt: skip
     p.add_argument("--tileable", action="store_true",
                    help="IN is a tile: its opposite borders touch, so the hole may cross them, is filled from the "
                         "context on the other side, and the result still tiles")  # fmt: skip

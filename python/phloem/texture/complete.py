@@ -28,6 +28,7 @@ from .._validate import (
     derive_seed,
     restore_ndim,
 )
+from ._occurrence import occurrence_cost
 from ._pyramid import upsample_at
 
 __all__ = ["complete"]
@@ -270,10 +271,11 @@ class _Filler:
         progress: Progress,
         base: NDArray[np.float32] | None,
         wrap: bool = False,
+        diversity: float = 0.0,
     ) -> None:
         self.p, self.seed, self.threads, self.gw = p, seed, threads, gradient_weight
         self.progress, self.done, self.total = progress, 0, 0
-        self.base, self.wrap = base, wrap
+        self.base, self.wrap, self.diversity = base, wrap, diversity
 
     def features(self, img: NDArray[np.float32]) -> NDArray[np.float32]:
         return _with_gradients(img, self.gw, self.wrap) if self.gw > 0 else img
@@ -286,6 +288,7 @@ class _Filler:
         init: NDArray[np.int32] | None,
         seed: int,
         iterations: int,
+        cost: NDArray[np.float32] | None = None,
     ) -> tuple[NDArray[np.int32], NDArray[np.float32]]:
         """The hole's patches matched to the source centres. On a torus the target wraps in the
         engine and the source is the image grown by its opposite sides, so source patches
@@ -293,10 +296,11 @@ class _Filler:
         src, sm, ini, r = feat, smask, init, (self.p // 2 if self.wrap else 0)
         if self.wrap:
             src, sm = _wrap_pad(feat, r), _wrap_pad(smask, r)
+            cost = None if cost is None else _wrap_pad(cost, r)
             ini = None if init is None else np.where(init >= 0, init + r, init).astype(np.int32)
         field, dist, _ = _core.nnf(
             src, feat, patch_size=self.p, iterations=iterations, levels=1, exact=False, seed=seed, weights=None,
-            source_mask=sm, target_mask=need, init=ini, source_knn=None, source_cost=None, threads=self.threads,
+            source_mask=sm, target_mask=need, init=ini, source_knn=None, source_cost=cost, threads=self.threads,
             kdtree=False, tileable=self.wrap,
         )  # fmt: skip
         if self.wrap:
@@ -370,6 +374,7 @@ class _Filler:
             depth = cv2.distanceTransform(hole_l.astype(np.uint8), cv2.DIST_L2, 3)
         log_conf = -math.log(WEXLER_GAMMA) * depth[need]
         field = init
+        usable, last = int(smask.sum()), 0.0
         # A vote changes only hole pixels, and a gradient sees one pixel either side: after the
         # first iteration the features are refreshed on the hole's one-pixel dilation alone.
         feat: NDArray[np.float32] | None = None
@@ -385,8 +390,13 @@ class _Filler:
                         cv2.dilate(_wrap_pad(h8, 1), cross)[1:-1, 1:-1] if self.wrap else cv2.dilate(h8, cross)
                     )
                 _refresh_gradients(feat, cur, band, self.gw, self.wrap)
-            field, dist = self.nnf(feat, smask, need, field, derive_seed(self.seed, lv * 64 + it + 1), n_search)
+            # Kaspar's occurrence penalty from the second iteration on, as texture synthesis runs it.
+            cost = None
+            if self.diversity > 0 and it and field is not None:
+                cost = occurrence_cost(field[need], cur.shape[:2], self.p, self.diversity, last, usable)
+            field, dist = self.nnf(feat, smask, need, field, derive_seed(self.seed, lv * 64 + it + 1), n_search, cost)
             d = dist[need]
+            last = float(np.median(d))
             sigma2 = max(float(np.percentile(d, WEXLER_SIGMA_PERCENTILE)), 1e-8)
             wvote = np.zeros(dist.shape, np.float32)
             wvote[need] = np.exp(np.maximum(log_conf - d / (2.0 * sigma2), _LOG_WEIGHT_FLOOR))
@@ -432,6 +442,7 @@ def complete(
     search_iterations: int | Sequence[int] | None = None,
     pyramid: Pyramid = "auto",
     gradient_weight: float = COMPLETION_GRADIENT_WEIGHT,
+    diversity: float = 0.0,
     tileable: bool = False,
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
@@ -498,6 +509,10 @@ def complete(
     gradient_weight : float, optional
         Weight of the gradients in the patch distance (default
         :data:`COMPLETION_GRADIENT_WEIGHT`; 0: values only, faster).
+    diversity : float, optional
+        Weight λ of Kaspar et al.'s occurrence penalty, as in :func:`synthesize` (default 0:
+        Wexler's completion). A fill from few sources into a large hole settles on the
+        smoothest source patches; a λ of 1 spreads it over more of them, at some coherence.
     tileable : bool, optional
         Treat the image as a tile (default False): it is a torus whose opposite borders
         touch, so the hole may cross a border and continues on the other side, its context
@@ -546,6 +561,7 @@ def complete(
     if pyramid not in ("auto", "interpolate", "strict"):
         raise ValueError(f"pyramid: expected 'auto', 'interpolate' or 'strict', got {pyramid!r}")
     gw = check_float(gradient_weight, "gradient_weight", 0.0)
+    lam = check_float(diversity, "diversity", 0.0)
     s = check_seed(seed)
     t = check_threads(threads)
     max_levels = None if levels is None else check_int(levels, "levels", 1)
@@ -561,7 +577,7 @@ def complete(
             out = img.copy()
             out[box] = complete(
                 img[box], hole[box], source_mask=allowed[box], patch_size=p, levels=levels, iterations=iterations,
-                search_iterations=search_iterations, pyramid=pyramid, gradient_weight=gw, seed=s, threads=t,
+                search_iterations=search_iterations, pyramid=pyramid, gradient_weight=gw, diversity=lam, seed=s, threads=t,
                 progress=progress, max_memory=max_memory,
             )  # fmt: skip
             return restore_ndim(out, image)
@@ -584,7 +600,7 @@ def complete(
     # With restricted sources the hole's rim need not look like what fills it (a branch beside a
     # gap), so the coarsest level starts from the sources' median colour instead of the rim's.
     base = None if allowed is None else np.median(img[allowed & ~hole], axis=0).astype(np.float32)
-    filler = _Filler(p, s, t, gw, progress, base, wrap)
+    filler = _Filler(p, s, t, gw, progress, base, wrap, lam)
     # The alternative only has to show whether its fill is far better: one iteration less a level.
     alt_iters = [max(1, n - 1) for n in iters]
     filler.total = sum(iters[: len(main)]) + (sum(alt_iters[_STRICT_FROM : len(alt)]) if alt is not None else 0)

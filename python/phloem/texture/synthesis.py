@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -28,6 +27,7 @@ from .._validate import (
     derive_seed,
     restore_ndim,
 )
+from ._occurrence import occurrence_cost
 from ._pyramid import downsample, upsample_field
 
 __all__ = ["synthesize"]
@@ -53,24 +53,6 @@ def _block_field(
             field[y0 : y0 + hh, x0 : x0 + ww, 0] = sy + np.arange(hh)[:, None]
             field[y0 : y0 + hh, x0 : x0 + ww, 1] = sx + np.arange(ww)[None, :]
     return field
-
-
-def _occurrence_cost(
-    field: NDArray[np.int32], src_shape: tuple[int, int], p: int, lam: float, scale: float
-) -> NDArray[np.float32]:
-    """Occurrence penalty of Kaspar et al. 2015: how much more than uniformly each source
-    patch is covered by the current field, times ``lam`` and the median patch distance."""
-    sh, sw = src_shape
-    centres = np.bincount((field[..., 0] * sw + field[..., 1]).ravel(), minlength=sh * sw).reshape(sh, sw)
-    # Pixels covered: each used centre covers its p×p patch; a candidate's occurrence is the
-    # mean coverage over its own patch (two box filters).
-    cover = cv2.boxFilter(centres.astype(np.float32), -1, (p, p), normalize=False, borderType=cv2.BORDER_CONSTANT)
-    mean_cover = cv2.boxFilter(cover, -1, (p, p), normalize=True, borderType=cv2.BORDER_CONSTANT)
-    r = p // 2
-    usable = (sh - 2 * r) * (sw - 2 * r)
-    expected = field.shape[0] * field.shape[1] * p * p / max(usable, 1)
-    over = np.maximum(mean_cover / expected - 1.0, 0.0)
-    return np.ascontiguousarray(lam * max(scale, 1e-8) * over, dtype=np.float32)
 
 
 def _robust_weights(dist: NDArray[np.float32]) -> NDArray[np.float32]:
@@ -205,6 +187,7 @@ def synthesize(
     out: NDArray[np.float32] | None = None
     for lv in range(len(pyramid) - 1, -1, -1):
         ex_l, shape = pyramid[lv]
+        usable = (ex_l.shape[0] - 2 * r) * (ex_l.shape[1] - 2 * r)
         if field is None:
             field = _block_field(shape, ex_l.shape[:2], p, np.random.default_rng(s))
         else:
@@ -214,7 +197,9 @@ def synthesize(
         )
         last = 0.0
         for it in range(iters):
-            cost = _occurrence_cost(field, ex_l.shape[:2], p, lam, last) if lam > 0 and it else None
+            cost = (
+                occurrence_cost(field.reshape(-1, 2), ex_l.shape[:2], p, lam, last, usable) if lam > 0 and it else None
+            )
             field, dist, _ = _core.nnf(
                 ex_l, out, patch_size=p, iterations=s_iters, levels=1, exact=False,
                 seed=derive_seed(s, lv * 64 + it + 1), weights=wts, source_mask=None, target_mask=None, init=field,
