@@ -90,3 +90,30 @@ def test_relight_moves_brightness_and_not_hue() -> None:
     assert float(np.ptp(shift, axis=1).max()) < 1e-6  # one shift for all channels
     inner = out[10:-10]
     assert abs(float(inner[:, 10:40].mean()) - 0.2) < 0.01 and abs(float(inner[:, -40:-10].mean()) - 0.6) < 0.01
+
+
+def test_gap_diversity_keeps_more_of_the_backgrounds_grain() -> None:
+    # A background whose grain grows from nothing (left) to strong (right): the plain fill of
+    # the large gaps settles on the smoothest patches, the occurrence penalty keeps more grain.
+    rng = np.random.default_rng(0)
+    H, W = 96, 192
+    grain = cv2.GaussianBlur(rng.normal(size=(H, W)).astype(np.float32), (0, 0), 0.8)
+    image = (0.5 + grain * np.linspace(0.0, 0.15, W, dtype=np.float32)[None, :])[..., None].astype(np.float32)
+    valley = Skeleton([Branch([[0, 48], [191, 48]], 2.0)], (H, W))
+    filled = np.zeros((H, W), bool)
+    filled[:, 90:102] = True
+    canvas = np.where(filled[..., None], image, 0.0).astype(np.float32)
+    lo, hi = image.reshape(-1, 1).min(0), image.reshape(-1, 1).max(0)
+    gaps = ~filled
+    gaps[:, 80:112] = False  # the gaps' interior, away from the painted strip
+
+    def fine(diversity: float, seed: int) -> float:
+        out = fill_gaps(
+            canvas, filled, image, valley, valid=None, radius_factor=3.0, radius=3.0, lo=lo, hi=hi,
+            match_borders=False, photometric=False, patch_size=7, iterations=4, seed=seed, threads=1,
+            diversity=diversity,
+        )  # fmt: skip
+        return float((out[..., 0] - cv2.GaussianBlur(out[..., 0], (0, 0), 2.0))[gaps].std())
+
+    for seed in range(3):
+        assert fine(1.0, seed) > 1.2 * fine(0.0, seed)

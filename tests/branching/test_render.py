@@ -339,6 +339,8 @@ def test_bad_inputs_name_the_argument() -> None:
         render(img, sk, [[0, 0], [1, 1]])  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="n_best:"):
         render(img, sk, sk, n_best=0)
+    with pytest.raises(ValueError, match="^gap_diversity: expected a finite value >= 0"):
+        render(img, sk, sk, gap_diversity=-1.0)
 
 
 def test_sub_branches_connect_to_their_parent() -> None:

@@ -127,6 +127,11 @@ def test_branching_run_writes_image_skeleton_histograms_and_sidecar(tmp_path):
     assert main(["branching", "render", str(tmp_path / "river.png"), str(sk), str(tmp_path / "new_skeleton.json"),
                  "--out", str(again), "--seed", "2", "-q"]) == 0  # fmt: skip
     assert np.abs(io.read_image(again) - img).max() <= 1 / 255 + 1e-6
+    varied = tmp_path / "varied.png"
+    assert main(["branching", "render", str(tmp_path / "river.png"), str(sk), str(tmp_path / "new_skeleton.json"),
+                 "--out", str(varied), "--seed", "2", "--gap-diversity", "1", "-q"]) == 0  # fmt: skip
+    assert json.loads(io.sidecar_path(varied).read_text())["parameters"]["gap_diversity"] == 1.0
+    assert not np.array_equal(io.read_image(varied), io.read_image(again))  # the gaps are filled otherwise
     assert main(args) == 2  # no silent overwrite
 
 

@@ -38,6 +38,7 @@ def _complete_background(
     iterations: int,
     seed: int,
     threads: int | None,
+    diversity: float = 0.0,
 ) -> F32:
     """Completion of ``hole`` in ``canvas`` whose patches come only from the ``allowed`` pixels
     of ``source`` (the input's background), by :func:`phloem.texture.complete` on one frame:
@@ -75,7 +76,7 @@ def _complete_background(
         out = texture.complete(
             frame, fhole, source_mask=source_mask, patch_size=p, levels=levels, iterations=schedule,
             search_iterations=[1] * (levels - 1) + [3], pyramid="strict", gradient_weight=0.0,
-            seed=seed, threads=threads,
+            diversity=diversity, seed=seed, threads=threads,
         )  # fmt: skip
     except ValueError as e:
         if "source_mask" not in str(e):
@@ -210,13 +211,15 @@ def fill_gaps(
     iterations: int,
     seed: int,
     threads: int | None,
+    diversity: float = 0.0,
 ) -> F32:
     """Complete the pixels of ``canvas`` outside ``filled`` from the background of ``image`` (§5.4).
 
     Patches come from ``image`` minus its structure widened to ``radius_factor`` times its
     thickness, and only from inside ``valid``; with ``match_borders`` (None: on unless ``image``
     is a two-level mask) and ``photometric`` the completed gaps are then pasted in the gradient
-    domain against the structure, the step smoothed over about ``radius``.
+    domain against the structure, the step smoothed over about ``radius``. ``diversity`` is
+    the weight of the occurrence penalty in the completion (:func:`phloem.texture.complete`).
     """
     H0, W0 = image.shape[:2]
     ok = np.ones((H0, W0), bool) if valid is None else valid
@@ -229,8 +232,9 @@ def fill_gaps(
         if allowed.mean() >= 1 / 6:
             break
     canvas = _complete_background(
-        canvas, ~filled, image, allowed, patch_size=patch_size, iterations=iterations, seed=seed, threads=threads
-    )
+        canvas, ~filled, image, allowed, patch_size=patch_size, iterations=iterations, seed=seed, threads=threads,
+        diversity=diversity,
+    )  # fmt: skip
     mask = two_level(image, lo, hi)
     if not mask:  # a mask's background is one level
         # Large-scale: an eighth of the input's shorter side, and never finer than four patches.

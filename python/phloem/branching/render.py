@@ -125,6 +125,7 @@ def render(
     valid: Any = ...,
     patch_size: int = ...,
     completion_iterations: int = ...,
+    gap_diversity: float = ...,
     threads: int | None = ...,
     progress: Progress = ...,
     max_memory: int | None = ...,
@@ -153,6 +154,7 @@ def render(
     valid: Any = ...,
     patch_size: int = ...,
     completion_iterations: int = ...,
+    gap_diversity: float = ...,
     threads: int | None = ...,
     progress: Progress = ...,
     max_memory: int | None = ...,
@@ -183,6 +185,7 @@ def render(
     valid: Any = None,
     patch_size: int = 7,
     completion_iterations: int = 4,
+    gap_diversity: float = 0.0,
     threads: int | None = None,
     progress: Progress = None,
     max_memory: int | None = None,
@@ -262,6 +265,13 @@ def render(
         Search-and-vote iterations per pyramid level of the completion (default 4); the
         full-resolution level copies pixels through the upsampled half-resolution field
         without a search of its own.
+    gap_diversity : float, optional
+        Weight of Kaspar et al.'s occurrence penalty in the gap completion (default 0, plain
+        completion; see ``diversity`` of :func:`phloem.texture.complete`). Large gaps filled
+        from a small background settle on its smoothest patches and read as a blurred photo
+        or a smoothed terrain; 1 keeps about twice the background's fine grain there. The
+        grain may hold faint structure the trace left out, so the painted branches stand out
+        a little less from it, and a fill that was already coherent gets softer.
     threads : int, optional
         Worker threads (default: all cores). Fragments that do not overlap are painted at
         the same time, one per thread, each waiting only for the earlier fragments whose
@@ -315,6 +325,7 @@ def render(
     w_c = check_float(omega_c, "omega_c", 0.0)
     p = check_patch_size(patch_size)
     c_iters = check_int(completion_iterations, "completion_iterations", 1)
+    gap_div = check_float(gap_diversity, "gap_diversity", 0.0)
     s = check_seed(seed)
     t = check_threads(threads)
     rng = np.random.default_rng(s)
@@ -344,7 +355,7 @@ def render(
             canvas, painter.filled, img, src_sk, valid=ok, radius_factor=rf,
             radius=float(np.median([g.radius for g in targets])), lo=painter.lo, hi=painter.hi,
             match_borders=match_borders if match_borders is not None else not whole, photometric=photometric and not mask_like,
-            patch_size=p, iterations=c_iters, seed=s, threads=t,
+            patch_size=p, iterations=c_iters, seed=s, threads=t, diversity=gap_div,
         )  # fmt: skip
         if whole:
             canvas = _paste_structure(canvas, painter.filled, painter.labels, painter.lo, painter.hi, threads=t)

@@ -16,6 +16,7 @@ from ._common import (
     common_options,
     deprecated_alias,
     kept,
+    non_negative,
     parse_size,
     positive,
     preflight,
@@ -155,13 +156,25 @@ def _render_options(p: argparse.ArgumentParser) -> None:
         help="leave the background black instead of completing it from the example (§5.4)",
     )
     g.add_argument(
+        "--gap-diversity",
+        type=non_negative,
+        default=0.0,
+        help="weight of the occurrence penalty in the completion of the gaps: 1 keeps more of the background's "
+        "grain where large gaps come out smooth (a terrain, a photo), at some contrast of the branches (default 0)",
+    )
+    g.add_argument(
         "--fragment-map", metavar="PNG", default=None, help="also write the map of which fragment painted each pixel"
     )
     _valid_option(g)
 
 
 def _render_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    return {"omega_s": args.omega_s, "omega_c": args.omega_c, "complete": not args.no_complete}
+    return {
+        "omega_s": args.omega_s,
+        "omega_c": args.omega_c,
+        "complete": not args.no_complete,
+        "gap_diversity": args.gap_diversity,
+    }
 
 
 def _valid_option(g: Any) -> None:
