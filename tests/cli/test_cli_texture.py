@@ -130,3 +130,17 @@ def test_complete_refuses_a_negative_diversity(tmp_path, exemplar_png, capsys):
     err = capsys.readouterr().err
     assert "--diversity: expected a finite number >= 0, got -1" in err and "Traceback" not in err
     assert not (tmp_path / "o.png").exists()
+
+
+def test_synthesize_diversity_flag(tmp_path, exemplar_png):
+    outs = {}
+    for d in ("0", "1"):
+        outs[d] = tmp_path / f"d{d}.png"
+        assert main(["synthesize", str(exemplar_png), "--size", "40x40", "--out", str(outs[d]), "--diversity", d,
+                     "-q"]) == 0  # fmt: skip
+    assert json.loads(io.sidecar_path(outs["1"]).read_text())["parameters"]["diversity"] == 1.0
+    assert not np.array_equal(io.read_image(outs["0"]), io.read_image(outs["1"]))
+    # the default is the API's
+    again = tmp_path / "default.png"
+    assert main(["synthesize", str(exemplar_png), "--size", "40x40", "--out", str(again), "-q"]) == 0
+    assert np.array_equal(io.read_image(again), io.read_image(outs["1"]))

@@ -32,7 +32,7 @@ def _cmd_synthesize(args: argparse.Namespace) -> None:
 
     _from_exemplar(args, "synthesize", lambda ex, bar: texture.synthesize(
         ex, args.size, patch_size=args.patch_size, levels=args.levels, iterations=args.iterations,
-        tileable=args.tileable, seed=args.seed, threads=args.threads, progress=bar, max_memory=args.max_memory,
+        diversity=args.diversity, tileable=args.tileable, seed=args.seed, threads=args.threads, progress=bar, max_memory=args.max_memory,
     ), resolve)  # fmt: skip
 
 
@@ -98,6 +98,9 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--patch-size", type=int, default=7, help="patch side, odd (default 7)")
     p.add_argument("--levels", type=positive, default=None, help="pyramid levels (default: from the exemplar size)")
     p.add_argument("--iterations", type=positive, default=4, help="search-and-vote iterations per level (default 4)")
+    p.add_argument("--diversity", type=non_negative, default=1.0,
+                   help="weight of the occurrence penalty (Kaspar et al. 2015) that keeps the output from settling on a "
+                        "few, usually the smoothest, exemplar patches; 0 is plain texture optimisation (default 1)")  # fmt: skip
     p.add_argument("--tileable", action="store_true",
                    help="make OUT tile: synthesise on a torus, so copies of OUT placed side by side show no seam")  # fmt: skip
     common_options(p)
