@@ -1,7 +1,7 @@
 """Quality of ``phloem.branching.synthesize`` with its defaults on real inputs (issue 19's acceptance check).
 
     PYTHONPATH=python python benches/quality/branching_quality.py [--inputs DIR] [--seeds 0 1 2]
-        [--max-side N] [--threads 2] [--tuned-trace] [--json OUT]
+        [--max-side N] [--threads 2] [--tuned-trace] [--gap-diversity L] [--json OUT]
 
 For every image of ``--inputs`` (default: ``branching`` of the real-image collection,
 ``phloem.testing.shared_path``; skipped when absent) and every seed: ``synthesize(image,
@@ -131,12 +131,17 @@ def _hist_distances(bend: BendingModel, out: Skeleton) -> tuple[float, float, fl
 
 
 def run(
-    img: np.ndarray, seed: int, *, trace_options: dict[str, Any] | None = None, threads: int | None = None
+    img: np.ndarray,
+    seed: int,
+    *,
+    trace_options: dict[str, Any] | None = None,
+    threads: int | None = None,
+    render_options: dict[str, Any] | None = None,
 ) -> tuple[SynthesisResult | None, float, str]:
-    """``synthesize`` with the defaults (and ``trace_options``): the result, its time and any error."""
+    """``synthesize`` with the defaults (and ``trace_options``, ``render_options``): the result, its time and any error."""
     t0 = time.perf_counter()
     try:
-        res = synthesize(img, seed=seed, trace_options=trace_options, threads=threads)
+        res = synthesize(img, seed=seed, trace_options=trace_options, threads=threads, render_options=render_options)
     except Exception as e:  # a failure is a result too
         return None, math.nan, f"synthesize: {type(e).__name__}: {e}"
     return res, time.perf_counter() - t0, ""
@@ -150,9 +155,10 @@ def evaluate(
     *,
     trace_options: dict[str, Any] | None = None,
     threads: int | None = None,
+    render_options: dict[str, Any] | None = None,
 ) -> Result:
-    """Synthesise from ``img`` with the defaults (and ``trace_options``) and measure the output."""
-    res, seconds, error = run(img, seed, trace_options=trace_options, threads=threads)
+    """Synthesise from ``img`` with the defaults (and ``trace_options``, ``render_options``) and measure the output."""
+    res, seconds, error = run(img, seed, trace_options=trace_options, threads=threads, render_options=render_options)
     if res is None:
         return Result(name, seed, tuple(img.shape), mask, error=error, passed={"ok": False})
     return measure(name, img, mask, seed, res, seconds, trace_options=trace_options)
@@ -257,6 +263,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--max-side", type=int, default=0, help="scale inputs down to this long side first (0: no)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--tuned-trace", action="store_true", help="trace with phloem.testing.TRACE_SETTINGS")
+    ap.add_argument(
+        "--gap-diversity", type=float, default=None, help="render's gap_diversity (default: synthesize's, 0)"
+    )
     ap.add_argument("--only", nargs="*", default=None, help="file names to run (default: all)")
     ap.add_argument("--json", type=Path, default=None, help="write the results here")
     args = ap.parse_args(argv)
@@ -273,7 +282,8 @@ def main(argv: list[str] | None = None) -> int:
         img, mask = load(p, args.max_side)
         opts = TRACE_SETTINGS.get(p.name) if args.tuned_trace else None
         for seed in args.seeds:
-            r = evaluate(p.name, img, mask, seed, trace_options=opts, threads=args.threads)
+            render = None if args.gap_diversity is None else {"gap_diversity": args.gap_diversity}
+            r = evaluate(p.name, img, mask, seed, trace_options=opts, threads=args.threads, render_options=render)
             results.append(r)
             print(table([r]).splitlines()[-1], flush=True)
     print()
