@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 
 from phloem.branching import Branch, Skeleton
-from phloem.branching.gaps import _match_borders, _relight, fill_gaps
+from phloem.branching.gaps import _complete_background, _match_borders, _relight, fill_gaps
 
 
 def _texture(shape: tuple[int, int], seed: int) -> np.ndarray:
@@ -117,3 +117,23 @@ def test_gap_diversity_keeps_more_of_the_backgrounds_grain() -> None:
 
     for seed in range(3):
         assert fine(1.0, seed) > 1.2 * fine(0.0, seed)
+
+
+def test_completed_gaps_are_background_pixels_with_their_grain() -> None:
+    # The gaps are filled with pixels of the input's background itself (the finest level
+    # copies its field, no vote averages them), so a grainy background stays grainy.
+    image = _texture((96, 160), 2)
+    allowed = np.ones((96, 160), bool)
+    allowed[:, 70:90] = False  # the structure, widened
+    canvas = np.zeros((96, 160, 1), np.float32)
+    hole = np.ones((96, 160), bool)
+    hole[:, 75:85] = False
+    canvas[~hole] = image[~hole]
+    out = _complete_background(canvas, hole, image, allowed, patch_size=7, iterations=4, seed=0, threads=1)
+    assert np.isin(out[hole], np.unique(image[allowed])).all()
+    inner = cv2.erode(hole.astype(np.uint8), np.ones((11, 11), np.uint8)).astype(bool)
+
+    def fine(a: np.ndarray, where: np.ndarray) -> float:
+        return float((a[..., 0] - cv2.GaussianBlur(a[..., 0], (0, 0), 2.0))[where].std())
+
+    assert fine(out, inner) > 0.7 * fine(image, allowed)

@@ -68,6 +68,11 @@ def test_complete_from_mask_file(tmp_path, bark):
     assert main(["complete", str(img), str(tmp_path / "mask.png"), "--out", str(varied), "--diversity", "1", "-q"]) == 0
     assert json.loads(io.sidecar_path(varied).read_text())["parameters"]["diversity"] == 1.0
     assert not np.array_equal(io.read_image(varied), res)
+    copied = tmp_path / "copied.png"
+    assert main(["complete", str(img), str(tmp_path / "mask.png"), "--out", str(copied), "--finest", "copy", "-q"]) == 0
+    assert json.loads(io.sidecar_path(copied).read_text())["parameters"]["finest"] == "copy"
+    hole = io.read_image(copied)[mask > 0]
+    assert np.isin(hole, io.read_image(img)[mask == 0]).all()  # every filled pixel is a known one
 
 
 @pytest.mark.parametrize(

@@ -68,7 +68,8 @@ def _complete_background(
     source_mask = np.zeros(frame.shape[:2], bool)
     source_mask[H + gap :, :ws] = allowed
     # The field found at half resolution, upsampled, already copies full-resolution pixels, so
-    # the finest level only votes it, and the half-resolution level runs half the iterations.
+    # the finest level only copies them (a vote of the overlapping matches averages a grainy
+    # background into a smooth fill), and the half-resolution level runs half the iterations.
     schedule = (
         [iterations] if levels == 1 else [0, iterations] if levels == 2 else [0, max(1, iterations // 2), iterations]
     )
@@ -76,7 +77,7 @@ def _complete_background(
         out = texture.complete(
             frame, fhole, source_mask=source_mask, patch_size=p, levels=levels, iterations=schedule,
             search_iterations=[1] * (levels - 1) + [3], pyramid="strict", gradient_weight=0.0,
-            diversity=diversity, seed=seed, threads=threads,
+            diversity=diversity, finest="copy", seed=seed, threads=threads,
         )  # fmt: skip
     except ValueError as e:
         if "source_mask" not in str(e):

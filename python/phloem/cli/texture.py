@@ -69,6 +69,7 @@ def _cmd_complete(args: argparse.Namespace) -> None:
             levels=args.levels,
             iterations=args.iterations,
             diversity=args.diversity,
+            finest=args.finest,
             tileable=args.tileable,
             seed=args.seed,
             threads=args.threads,
@@ -152,6 +153,9 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--diversity", type=non_negative, default=0.0,
                    help="weight of the occurrence penalty (Kaspar et al. 2015): a large hole filled from few sources "
                         "settles on the smoothest ones; 1 spreads the fill over more of them (default 0: off)")  # fmt: skip
+    p.add_argument("--finest", choices=("vote", "copy"), default="vote",
+                   help="the full-resolution level's last step: the weighted mean of the overlapping matches (vote, "
+                        "Wexler's) or each pixel copied from its own match (copy: keeps a grainy texture's grain)")  # fmt: skip
     p.add_argument("--tileable", action="store_true",
                    help="IN is a tile: its opposite borders touch, so the hole may cross them, is filled from the "
                         "context on the other side, and the result still tiles")  # fmt: skip

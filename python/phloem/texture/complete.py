@@ -186,6 +186,19 @@ Pyramid = Literal["auto", "interpolate", "strict"]
 _Level = tuple[NDArray[np.float32], NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]
 
 
+def _copy_centres(level: _Level, field: NDArray[np.int32], cur: NDArray[np.float32]) -> NDArray[np.float32]:
+    """``cur`` with every hole pixel set to the known pixel its patch centre is matched to in
+    ``field`` (``complete(finest="copy")``); pixels without a match keep their value."""
+    orig, hole, _, smask = level
+    ys, xs = np.nonzero(hole)
+    at = field[ys, xs]
+    ok = (at[:, 0] >= 0) & (at[:, 1] >= 0)
+    ok[ok] = smask[at[ok, 0], at[ok, 1]]
+    out: NDArray[np.float32] = cur.copy()
+    out[ys[ok], xs[ok]] = orig[at[ok, 0], at[ok, 1]]
+    return out
+
+
 def _hole_pyramid(
     img: NDArray[np.float32],
     hole: NDArray[np.bool_],
@@ -443,6 +456,7 @@ def complete(
     pyramid: Pyramid = "auto",
     gradient_weight: float = COMPLETION_GRADIENT_WEIGHT,
     diversity: float = 0.0,
+    finest: Literal["vote", "copy"] = "vote",
     tileable: bool = False,
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
@@ -513,6 +527,12 @@ def complete(
         Weight λ of Kaspar et al.'s occurrence penalty, as in :func:`synthesize` (default 0:
         Wexler's completion). A fill from few sources into a large hole settles on the
         smoothest source patches; a λ of 1 spreads it over more of them, at some coherence.
+    finest : {"vote", "copy"}, optional
+        How the full-resolution level's last step sets the hole: ``"vote"`` (default), the
+        weighted mean of the overlapping matches (with mean-shift), Wexler's; ``"copy"``, each
+        pixel the source pixel its own patch centre is matched to. Where the matches disagree
+        (a stochastic texture: asphalt, leaf, terrain grain) the vote averages them into a
+        smooth fill, the copy keeps the grain; where they agree both give the same pixels.
     tileable : bool, optional
         Treat the image as a tile (default False): it is a torus whose opposite borders
         touch, so the hole may cross a border and continues on the other side, its context
@@ -562,6 +582,8 @@ def complete(
         raise ValueError(f"pyramid: expected 'auto', 'interpolate' or 'strict', got {pyramid!r}")
     gw = check_float(gradient_weight, "gradient_weight", 0.0)
     lam = check_float(diversity, "diversity", 0.0)
+    if finest not in ("vote", "copy"):
+        raise ValueError(f"finest: expected 'vote' or 'copy', got {finest!r}")
     s = check_seed(seed)
     t = check_threads(threads)
     max_levels = None if levels is None else check_int(levels, "levels", 1)
@@ -577,7 +599,8 @@ def complete(
             out = img.copy()
             out[box] = complete(
                 img[box], hole[box], source_mask=allowed[box], patch_size=p, levels=levels, iterations=iterations,
-                search_iterations=search_iterations, pyramid=pyramid, gradient_weight=gw, diversity=lam, seed=s, threads=t,
+                search_iterations=search_iterations, pyramid=pyramid, gradient_weight=gw, diversity=lam, finest=finest,
+                seed=s, threads=t,
                 progress=progress, max_memory=max_memory,
             )  # fmt: skip
             return restore_ndim(out, image)
@@ -605,7 +628,7 @@ def complete(
     alt_iters = [max(1, n - 1) for n in iters]
     filler.total = sum(iters[: len(main)]) + (sum(alt_iters[_STRICT_FROM : len(alt)]) if alt is not None else 0)
     if alt is None:
-        cur, _ = filler.run(main, 0, iters, search)
+        cur, field = filler.run(main, 0, iters, search)
     else:
         # Both pyramids down to the first level they share; there, the fill whose patches are
         # better explained by known ones continues.
@@ -626,6 +649,8 @@ def complete(
             shift = COMPLETION_MEAN_SHIFT if lv == 0 else 0
             cur, new = filler.iterate(main[lv], lv, cur, init, iters[lv], search[lv], shift)
             field = new if new is not None else init
+    if finest == "copy" and field is not None:
+        cur = _copy_centres(main[0], field, cur)
     out = img.copy()
     out[hole] = cur[hole]
     return restore_ndim(out, image)
