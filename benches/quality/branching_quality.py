@@ -277,13 +277,15 @@ def main(argv: list[str] | None = None) -> int:
     # the numbers belong to the code that ran: an installed wheel shadows the working tree
     # unless PYTHONPATH puts python/ first
     print(f"phloem {phloem.__version__} from {Path(phloem.__file__).parent}", file=sys.stderr, flush=True)
+    render_options = None if args.gap_diversity is None else {"gap_diversity": args.gap_diversity}
     results = []
     for p in paths:
         img, mask = load(p, args.max_side)
         opts = TRACE_SETTINGS.get(p.name) if args.tuned_trace else None
         for seed in args.seeds:
-            render = None if args.gap_diversity is None else {"gap_diversity": args.gap_diversity}
-            r = evaluate(p.name, img, mask, seed, trace_options=opts, threads=args.threads, render_options=render)
+            r = evaluate(
+                p.name, img, mask, seed, trace_options=opts, threads=args.threads, render_options=render_options
+            )
             results.append(r)
             print(table([r]).splitlines()[-1], flush=True)
     print()

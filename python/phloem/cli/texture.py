@@ -32,7 +32,8 @@ def _cmd_synthesize(args: argparse.Namespace) -> None:
 
     _from_exemplar(args, "synthesize", lambda ex, bar: texture.synthesize(
         ex, args.size, patch_size=args.patch_size, levels=args.levels, iterations=args.iterations,
-        diversity=args.diversity, tileable=args.tileable, seed=args.seed, threads=args.threads, progress=bar, max_memory=args.max_memory,
+        diversity=args.diversity, tileable=args.tileable, seed=args.seed, threads=args.threads, progress=bar,
+        max_memory=args.max_memory,
     ), resolve)  # fmt: skip
 
 

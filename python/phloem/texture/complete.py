@@ -186,17 +186,19 @@ Pyramid = Literal["auto", "interpolate", "strict"]
 _Level = tuple[NDArray[np.float32], NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]
 
 
-def _copy_centres(level: _Level, field: NDArray[np.int32], cur: NDArray[np.float32]) -> NDArray[np.float32]:
-    """``cur`` with every hole pixel set to the known pixel its patch centre is matched to in
-    ``field`` (``complete(finest="copy")``); pixels without a match keep their value."""
+def _copy_centres(level: _Level, field: NDArray[np.int32], cur: NDArray[np.float32]) -> NDArray[np.bool_]:
+    """Set every hole pixel of ``cur`` (in place) to the known pixel its patch centre is matched
+    to in ``field`` (``complete(finest="copy")``); returns the pixels set, those without a
+    usable match keep their value."""
     orig, hole, _, smask = level
     ys, xs = np.nonzero(hole)
     at = field[ys, xs]
     ok = (at[:, 0] >= 0) & (at[:, 1] >= 0)
     ok[ok] = smask[at[ok, 0], at[ok, 1]]
-    out: NDArray[np.float32] = cur.copy()
-    out[ys[ok], xs[ok]] = orig[at[ok, 0], at[ok, 1]]
-    return out
+    cur[ys[ok], xs[ok]] = orig[at[ok, 0], at[ok, 1]]
+    done = np.zeros_like(hole)
+    done[ys[ok], xs[ok]] = True
+    return done
 
 
 def _hole_pyramid(
@@ -285,10 +287,12 @@ class _Filler:
         base: NDArray[np.float32] | None,
         wrap: bool = False,
         diversity: float = 0.0,
+        copy_finest: bool = False,
     ) -> None:
         self.p, self.seed, self.threads, self.gw = p, seed, threads, gradient_weight
         self.progress, self.done, self.total = progress, 0, 0
         self.base, self.wrap, self.diversity = base, wrap, diversity
+        self.copy_finest = copy_finest  # the full-resolution level copies its field instead of voting it
 
     def features(self, img: NDArray[np.float32]) -> NDArray[np.float32]:
         return _with_gradients(img, self.gw, self.wrap) if self.gw > 0 else img
@@ -339,10 +343,11 @@ class _Filler:
         )  # fmt: skip
 
     def start(
-        self, level: _Level, field: NDArray[np.int32] | None
+        self, level: _Level, field: NDArray[np.int32] | None, copy: bool = False
     ) -> tuple[NDArray[np.float32], NDArray[np.int32] | None]:
         """A level's first image: the coarser field upsampled and voted with this level's own
-        pixels (no blurred upsampled image is carried down); at the coarsest, the onion peel or
+        pixels (no blurred upsampled image is carried down), or copied (``copy``: a finest
+        level without iterations under ``copy_finest``); at the coarsest, the onion peel or
         the ``base`` colour."""
         orig, hole_l, need, smask = level
         if field is None:
@@ -357,9 +362,12 @@ class _Filler:
         at = up[ys, xs]
         bad = ~smask[np.maximum(at[:, 0], 0), np.maximum(at[:, 1], 0)]
         up[ys[bad], xs[bad]] = -1
-        voted, wsum = self.vote(orig, up, None, 0, hole_l)
-        fill = hole_l & (wsum > 0)
-        cur[fill] = voted[fill]
+        if copy:
+            fill = _copy_centres(level, up, cur)
+        else:
+            voted, wsum = self.vote(orig, up, None, 0, hole_l)
+            fill = hole_l & (wsum > 0)
+            cur[fill] = voted[fill]
         rest = hole_l & ~fill
         if rest.any():
             cur = _fill_inward(cur, rest, self.wrap)
@@ -413,10 +421,13 @@ class _Filler:
             sigma2 = max(float(np.percentile(d, WEXLER_SIGMA_PERCENTILE)), 1e-8)
             wvote = np.zeros(dist.shape, np.float32)
             wvote[need] = np.exp(np.maximum(log_conf - d / (2.0 * sigma2), _LOG_WEIGHT_FLOOR))
-            shift = mean_shift if it == n_iters - 1 else 0
-            voted, wsum = self.vote(cur, field, wvote, shift, hole_l)
-            fill = hole_l & (wsum > 0)
-            cur[fill] = voted[fill]
+            if self.copy_finest and lv == 0 and it == n_iters - 1:
+                _copy_centres(level, field, cur)
+            else:
+                shift = mean_shift if it == n_iters - 1 else 0
+                voted, wsum = self.vote(cur, field, wvote, shift, hole_l)
+                fill = hole_l & (wsum > 0)
+                cur[fill] = voted[fill]
             self.done += 1
             if self.progress is not None:
                 self.progress(self.done, self.total)
@@ -429,7 +440,7 @@ class _Filler:
         field: NDArray[np.int32] | None = None
         cur = pyramid[-1][0]
         for lv in range(len(pyramid) - 1, stop - 1, -1):
-            cur, init = self.start(pyramid[lv], field)
+            cur, init = self.start(pyramid[lv], field, self.copy_finest and lv == 0 and iters[lv] == 0)
             shift = COMPLETION_MEAN_SHIFT if lv == 0 else 0
             cur, new = self.iterate(pyramid[lv], lv, cur, init, iters[lv], search[lv], shift)
             field = new if new is not None else init
@@ -623,12 +634,12 @@ def complete(
     # With restricted sources the hole's rim need not look like what fills it (a branch beside a
     # gap), so the coarsest level starts from the sources' median colour instead of the rim's.
     base = None if allowed is None else np.median(img[allowed & ~hole], axis=0).astype(np.float32)
-    filler = _Filler(p, s, t, gw, progress, base, wrap, lam)
+    filler = _Filler(p, s, t, gw, progress, base, wrap, lam, finest == "copy")
     # The alternative only has to show whether its fill is far better: one iteration less a level.
     alt_iters = [max(1, n - 1) for n in iters]
     filler.total = sum(iters[: len(main)]) + (sum(alt_iters[_STRICT_FROM : len(alt)]) if alt is not None else 0)
     if alt is None:
-        cur, field = filler.run(main, 0, iters, search)
+        cur, _ = filler.run(main, 0, iters, search)
     else:
         # Both pyramids down to the first level they share; there, the fill whose patches are
         # better explained by known ones continues.
@@ -645,12 +656,10 @@ def complete(
         )
         field = new if new is not None else field
         for lv in range(_STRICT_FROM - 2, -1, -1):
-            cur, init = filler.start(main[lv], field)
+            cur, init = filler.start(main[lv], field, filler.copy_finest and lv == 0 and iters[lv] == 0)
             shift = COMPLETION_MEAN_SHIFT if lv == 0 else 0
             cur, new = filler.iterate(main[lv], lv, cur, init, iters[lv], search[lv], shift)
             field = new if new is not None else init
-    if finest == "copy" and field is not None:
-        cur = _copy_centres(main[0], field, cur)
     out = img.copy()
     out[hole] = cur[hole]
     return restore_ndim(out, image)
