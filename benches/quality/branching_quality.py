@@ -1,7 +1,8 @@
 """Quality of ``phloem.branching.synthesize`` with its defaults on real inputs (issue 19's acceptance check).
 
     PYTHONPATH=python python benches/quality/branching_quality.py [--inputs DIR] [--seeds 0 1 2]
-        [--max-side N] [--threads 2] [--tuned-trace] [--gap-diversity L] [--json OUT]
+        [--max-side N] [--threads 2] [--tuned-trace] [--sigmas S ...] [--gap G] [--gap-diversity L]
+        [--only NAME ...] [--json OUT]
 
 For every image of ``--inputs`` (default: ``branching`` of the real-image collection,
 ``phloem.testing.shared_path``; skipped when absent) and every seed: ``synthesize(image,
@@ -25,7 +26,9 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
 Pass marks (issue 19): F1 ≥ 0.8, tree share within 0.15 of the input's, drift ≤ 0.25, masks
 two-level on ≥ 98 % of pixels; histograms as the growth tests require. ``--max-side`` scales
 inputs down first (masks are re-thresholded so they stay two-level); the default 0 keeps them
-at full size (the shared set takes about 100 s per seed on one thread).
+at full size (the shared set takes about 100 s per seed on one thread). ``--sigmas`` and
+``--gap`` trace the photos (not the masks) with those ``trace`` options instead of the
+defaults, on top of ``--tuned-trace``; the output is re-traced with the same options.
 """
 
 from __future__ import annotations
@@ -256,13 +259,33 @@ def summary(results: list[Result]) -> str:
     return "\n".join(lines)
 
 
+def photo_trace_options(
+    name: str, mask: bool, *, tuned: bool, sigmas: list[float] | None, gap: float | None
+) -> dict[str, Any] | None:
+    """The trace options of one input: ``TRACE_SETTINGS`` when ``tuned``, then ``sigmas`` and ``gap`` for photos."""
+    opts = dict(TRACE_SETTINGS.get(name) or {}) if tuned else {}
+    if not mask:
+        if sigmas:
+            opts["sigmas"] = tuple(sigmas)
+        if gap is not None:
+            opts["gap"] = gap
+    return opts or None
+
+
+def add_trace_arguments(ap: argparse.ArgumentParser) -> None:
+    """``--tuned-trace``, ``--sigmas`` and ``--gap`` (shared with the contact sheet)."""
+    ap.add_argument("--tuned-trace", action="store_true", help="trace with phloem.testing.TRACE_SETTINGS")
+    ap.add_argument("--sigmas", type=float, nargs="+", default=None, help="trace photos with these ridge scales")
+    ap.add_argument("--gap", type=float, default=None, help="trace photos with this bridging gap (px)")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--inputs", type=Path, default=None, help="folder of images (default: shared branching set)")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--max-side", type=int, default=0, help="scale inputs down to this long side first (0: no)")
     ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--tuned-trace", action="store_true", help="trace with phloem.testing.TRACE_SETTINGS")
+    add_trace_arguments(ap)
     ap.add_argument(
         "--gap-diversity", type=float, default=None, help="render's gap_diversity (default: synthesize's, 0)"
     )
@@ -281,7 +304,7 @@ def main(argv: list[str] | None = None) -> int:
     results = []
     for p in paths:
         img, mask = load(p, args.max_side)
-        opts = TRACE_SETTINGS.get(p.name) if args.tuned_trace else None
+        opts = photo_trace_options(p.name, mask, tuned=args.tuned_trace, sigmas=args.sigmas, gap=args.gap)
         for seed in args.seeds:
             r = evaluate(
                 p.name, img, mask, seed, trace_options=opts, threads=args.threads, render_options=render_options

@@ -1,7 +1,7 @@
 """Contact sheet of ``phloem.branching.synthesize`` with its defaults on real inputs (issue 19).
 
     PYTHONPATH=python python -m benches.sheets.sheet_branching_real --out OUT.png [--inputs DIR] [--seed 0]
-        [--max-side N] [--tuned-trace]
+        [--max-side N] [--tuned-trace] [--sigmas S ...] [--gap G] [--only NAME ...]
 
 One row per image of ``--inputs`` (default: ``branching`` of the real-image collection):
 input | input with its traced skeleton | grown skeleton | output image | output with its own
@@ -9,7 +9,8 @@ re-traced skeleton. Skeletons are drawn as sheet_branching_trace draws them (roo
 children yellow, deeper cyan, the traced radii as a green outline). The captions carry the
 measures of benches/quality/branching_quality.py: largest-tree share of input and output,
 median heading change over 60 px and the drift L1, re-trace F1, two-level fraction (masks), and
-the share of the length along the frame.
+the share of the length along the frame. ``--tuned-trace``, ``--sigmas`` and ``--gap`` are
+those of the quality script.
 """
 
 from __future__ import annotations
@@ -21,10 +22,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from benches.quality.branching_quality import inputs, load, measure, run
+from benches.quality.branching_quality import add_trace_arguments, inputs, load, measure, photo_trace_options, run
 from phloem.branching import trace
 from phloem.branching.measures import resolve_trace_options
-from phloem.testing import TRACE_SETTINGS, shared_path
+from phloem.testing import shared_path
 
 from ._sheet import TILE, _fit, _label, write_sheet
 from .sheet_branching_trace import overlay
@@ -36,9 +37,9 @@ def _show(img: np.ndarray) -> np.ndarray:
     return (img - lo) / (hi - lo) if hi - lo < 0.25 and hi > lo else np.clip(img, 0, 1)
 
 
-def row(path: Path, seed: int, max_side: int, tuned: bool) -> list[np.ndarray]:
+def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[np.ndarray]:
     img, mask = load(path, max_side)
-    opts = TRACE_SETTINGS.get(path.name) if tuned else None
+    opts = photo_trace_options(path.name, mask, tuned=args.tuned_trace, sigmas=args.sigmas, gap=args.gap)
     name = path.stem[:22]
     res, seconds, error = run(img, seed, trace_options=opts, threads=2)
     if res is None:
@@ -71,14 +72,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--inputs", type=Path, default=None, help="folder of images (default: shared branching set)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--max-side", type=int, default=0, help="scale inputs down to this long side first (0: no)")
-    ap.add_argument("--tuned-trace", action="store_true", help="trace with phloem.testing.TRACE_SETTINGS")
+    add_trace_arguments(ap)
+    ap.add_argument("--only", nargs="*", default=None, help="file names to show (default: all)")
     args = ap.parse_args(argv)
     folder = args.inputs if args.inputs is not None else shared_path("branching")
-    paths = inputs(folder) if folder.is_dir() else []
+    paths = [p for p in inputs(folder) if not args.only or p.name in args.only] if folder.is_dir() else []
     if not paths:
         print(f"no images in {folder}", file=sys.stderr)
         return 1
-    write_sheet([row(p, args.seed, args.max_side, args.tuned_trace) for p in paths], args.out)
+    write_sheet([row(p, args.seed, args.max_side, args) for p in paths], args.out)
     print(f"wrote {args.out}")
     return 0
 
