@@ -50,3 +50,19 @@ def test_synthesize_defaults_look_like_the_input(name: str, seed: int) -> None:
     if not r.thickness < r.thickness_spread:
         fails.append(f"thickness histogram distance {r.thickness:.2f} >= input spread {r.thickness_spread:.2f}")
     assert not fails, "; ".join(fails)
+
+
+def test_photo_trace_options_leave_masks_to_their_threshold() -> None:
+    # --sigmas and --gap reach the photos' trace; a mask is traced by its threshold either way
+    assert bench.photo_trace_options("a.png", True, tuned=False, sigmas=[1.0, 4.5], gap=12.0) is None
+    assert bench.photo_trace_options("a.jpg", False, tuned=False, sigmas=[1.0, 4.5], gap=12.0) == {
+        "sigmas": (1.0, 4.5),
+        "gap": 12.0,
+    }
+    assert bench.photo_trace_options("a.jpg", False, tuned=False, sigmas=None, gap=None) is None
+    name = sorted(TRACE_SETTINGS)[0]
+    tuned = bench.photo_trace_options(name, False, tuned=True, sigmas=[2.0], gap=None)
+    assert tuned is not None and tuned["sigmas"] == (2.0,)
+    assert {k: v for k, v in tuned.items() if k != "sigmas"} == {
+        k: v for k, v in TRACE_SETTINGS[name].items() if k != "sigmas"
+    }
