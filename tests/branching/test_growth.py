@@ -723,3 +723,39 @@ def test_a_child_ignores_its_parent_near_the_attachment_only_until_it_is_3_rho_l
     assert seen[near:] == [None] * 3
     root = _Growing([np.zeros(2), np.ones(2)], [1.0, 1.0], [], [], 0.0, None, 0, 0)
     assert g.parent_skip(root) is None
+
+
+def test_connected_inputs_minor_trees_start_in_their_place_or_not_at_all():
+    # A connected input's small second tree (Colville's coastal lagoon) is a piece of the
+    # structure in its place: it starts near its own position, and not where that is crowded,
+    # where a forest's tree would start anywhere in the image.
+    import importlib
+
+    growth = importlib.import_module("phloem.branching.growth")
+    from phloem.branching._world import _World
+
+    src = synthetic_skeleton(1)
+    speck = Skeleton([Branch.from_angles([2, 5], 0.0, np.zeros(8), np.full(10, 2.0), 2.0)], (20, 60))
+    specked = Skeleton.stack([src, speck])
+    bend = BendingModel.fit(specked, h=2.0)
+    assert specked.shape is not None
+    shape = specked.shape
+    root = input_trees(bend.source)[1].root
+    own = np.array(growth._default_start(bend, shape, root))
+
+    def place(anywhere: bool, crowded: bool, seed: int) -> object:
+        rng = np.random.default_rng(seed)
+        world = _World(bend, shape, colonize=True, rho=bend.m * bend.h, guide=None, rng=rng)
+        if crowded:
+            assert world.dens is not None
+            world.dens[:] = 1.0  # structure everywhere: no start is sparse
+        grower = growth._Grower(world, bend)
+        return growth._place_root(world, grower, bend, root, shape, rng, 0, anywhere=anywhere)
+
+    rho = bend.m * bend.h
+    for seed in range(5):
+        br = place(False, False, seed)
+        assert br is not None
+        assert np.linalg.norm(br.points[0] - own) <= 4 * 2 * rho  # within 4 sigma of the jitter
+        assert place(False, True, seed) is None
+        assert place(True, True, seed) is not None  # a forest's tree still starts somewhere

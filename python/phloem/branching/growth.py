@@ -56,6 +56,8 @@ _EPS = 1.0 / INV_EPS
 _CHILD_RETRIES = 3
 #: Extra furcations tried on a tree that its template's topology left short of the template's length.
 _TOP_UPS = 256
+#: Density along its first ``3 m h`` over which a connected input's further tree does not start.
+_CROWDED = 0.5
 
 
 @dataclass
@@ -349,6 +351,8 @@ def _place_root(
     rng: np.random.Generator,
     index: int,
     tries: int = 24,
+    *,
+    anywhere: bool = True,
 ) -> _Growing | None:
     """Start a further root tree, copying the input root branch ``root``, where the structure is sparse.
 
@@ -357,6 +361,11 @@ def _place_root(
     jittered by ``2ρ`` (roots at the image border stay there), the other half anywhere in the
     image. The start with the least density along its first ``3 m h`` wins, preferring a start
     near the input root when one is practically empty.
+
+    Without ``anywhere`` (a connected input's minor trees) every try starts near the root's
+    own position, and none where that density is over ``_CROWDED``: such a tree is a piece of
+    the input's structure in its place (Colville's coastal lagoon), which anywhere else in the
+    image reads as a foreign body. Returns None when no try can start.
     """
     H, W = shape
     h, rho = bending.h, world.rho
@@ -367,7 +376,7 @@ def _place_root(
     for t in range(tries):
         j = root
         x, y = _default_start(bending, shape, j)
-        if t < tries // 2:
+        if t < tries // 2 or not anywhere:
             x = float(np.clip(x + rng.normal(0.0, 2.0 * rho), 0.0, W - 1))
             y = float(np.clip(y + rng.normal(0.0, 2.0 * rho), 0.0, H - 1))
         else:
@@ -382,6 +391,8 @@ def _place_root(
         score = world._lookup(_DensityView(world), pts).max(axis=1)
     near = np.arange(tries) < tries // 2
     order = np.argsort(score + np.where(near & (score < 0.05), -1.0, 0.0), kind="stable")
+    if not anywhere:
+        order = order[score[order] <= _CROWDED]
     for t in order:
         j = int(js[t])
         heading, a0, r0, t0 = bending.start_elements(j)
@@ -432,7 +443,9 @@ def grow(
     placed where the density along its first ``3 m h`` is lowest among 24 tries, half near
     the root's own (scaled) position (jittered by ``2ρ``; preferred when practically empty,
     so border roots stay at the border) and half anywhere in the image, until ``roots`` trees
-    exist, the length or density limit is reached, or eight starts in a row fail.
+    exist, the length or density limit is reached, or eight starts in a row fail. The minor
+    trees of a connected input try near their own position only, and not where that density
+    is over 0.5: they are pieces of the input's structure in their place.
 
     Parameters
     ----------
@@ -555,12 +568,13 @@ def grow(
 
     H, W = shape
     forest = input_trees(bending.source)
+    # A connected input (its largest tree holds 90 % of the length, so a stray speck does not count)
+    dominant = bool(forest) and forest[0].length >= 0.9 * sum(t.length for t in forest)
     if n_roots is None:
-        # A connected input (its largest tree holds 90 % of the length) stays connected: its
-        # trees once per input area, a tree cut short by the room it finds topped up (see
-        # ``_top_up``). A forest takes as many trees as the length needs.
+        # A connected input stays connected: its trees once per input area, a tree cut short by
+        # the room it finds topped up (see ``_top_up``). A forest takes as many trees as the
+        # length needs.
         area_ratio = limit / max(bending.source.total_length(), 1e-9)
-        dominant = bool(forest) and forest[0].length >= 0.9 * sum(t.length for t in forest)
         n_roots = (
             1 if not input_sized else (max(1, math.ceil(len(forest) * area_ratio - 1e-9)) if dominant else 1_000_000)
         )
@@ -618,7 +632,10 @@ def grow(
                     f"start: the first edge from ({x:g}, {y:g}) with heading {heading:.2f} leaves the image"
                 )
         else:
-            current = _place_root(world, grower, bending, root, shape, rng, len(out))
+            # a connected input's minor trees belong where they were; copies of its main tree
+            # (a canvas larger than the input) go wherever there is room
+            anywhere = not dominant or tree is None or tree is forest[0]
+            current = _place_root(world, grower, bending, root, shape, rng, len(out), anywhere=anywhere)
             if current is None:
                 failures += 1
                 if failures >= 8:
