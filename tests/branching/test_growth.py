@@ -759,3 +759,28 @@ def test_connected_inputs_minor_trees_start_in_their_place_or_not_at_all():
         assert np.linalg.norm(br.points[0] - own) <= 4 * 2 * rho  # within 4 sigma of the jitter
         assert place(False, True, seed) is None
         assert place(True, True, seed) is not None  # a forest's tree still starts somewhere
+
+
+def test_a_minor_tree_without_room_is_left_out_not_replaced_by_the_main_tree(monkeypatch):
+    # Colville's lagoon with no room in its place: the output keeps one tree, and growth does
+    # not try a second copy of the main tree anywhere in the image instead
+    import importlib
+
+    growth = importlib.import_module("phloem.branching.growth")
+    src = synthetic_skeleton(1)
+    speck = Skeleton([Branch.from_angles([2, 5], 0.0, np.zeros(8), np.full(10, 2.0), 2.0)], (20, 60))
+    specked = Skeleton.stack([src, speck])
+    bend, fur = BendingModel.fit(specked, h=2.0), FurcationModel.fit(specked, h=2.0)
+    calls: list[bool] = []
+
+    def no_room(*args, anywhere=True, **kwargs):
+        calls.append(anywhere)
+        return None
+
+    monkeypatch.setattr(growth, "_place_root", no_room)
+    assert specked.shape is not None
+    for seed in range(3):
+        calls.clear()
+        out = grow(bend, fur, size=specked.shape, seed=seed, max_length="input")
+        assert sum(b.parent is None for b in out.branches) == 1
+        assert calls and not any(calls)

@@ -445,7 +445,8 @@ def grow(
     so border roots stay at the border) and half anywhere in the image, until ``roots`` trees
     exist, the length or density limit is reached, or eight starts in a row fail. The minor
     trees of a connected input try near their own position only, and not where that density
-    is over 0.5: they are pieces of the input's structure in their place.
+    is over 0.5: they are pieces of the input's structure in their place, and one without
+    room there is left out.
 
     Parameters
     ----------
@@ -636,6 +637,10 @@ def grow(
             # (a canvas larger than the input) go wherever there is room
             anywhere = not dominant or tree is None or tree is forest[0]
             current = _place_root(world, grower, bending, root, shape, rng, len(out), anywhere=anywhere)
+            if current is None and not anywhere:
+                # no room in its place: the tree is left out, not replaced by a copy of the main tree
+                trees += 1
+                continue
             if current is None:
                 failures += 1
                 if failures >= 8:
