@@ -342,6 +342,10 @@ class _Filler:
             tileable=self.wrap,
         )  # fmt: skip
 
+    def copies_start(self, lv: int, n_iters: int) -> bool:
+        """Whether level ``lv`` with ``n_iters`` iterations starts by copying (not voting) its field."""
+        return self.copy_finest and lv == 0 and n_iters == 0
+
     def start(
         self, level: _Level, field: NDArray[np.int32] | None, copy: bool = False
     ) -> tuple[NDArray[np.float32], NDArray[np.int32] | None]:
@@ -418,12 +422,12 @@ class _Filler:
             field, dist = self.nnf(feat, smask, need, field, derive_seed(self.seed, lv * 64 + it + 1), n_search, cost)
             d = dist[need]
             last = float(np.median(d))
-            sigma2 = max(float(np.percentile(d, WEXLER_SIGMA_PERCENTILE)), 1e-8)
-            wvote = np.zeros(dist.shape, np.float32)
-            wvote[need] = np.exp(np.maximum(log_conf - d / (2.0 * sigma2), _LOG_WEIGHT_FLOOR))
             if self.copy_finest and lv == 0 and it == n_iters - 1:
                 _copy_centres(level, field, cur)
             else:
+                sigma2 = max(float(np.percentile(d, WEXLER_SIGMA_PERCENTILE)), 1e-8)
+                wvote = np.zeros(dist.shape, np.float32)
+                wvote[need] = np.exp(np.maximum(log_conf - d / (2.0 * sigma2), _LOG_WEIGHT_FLOOR))
                 shift = mean_shift if it == n_iters - 1 else 0
                 voted, wsum = self.vote(cur, field, wvote, shift, hole_l)
                 fill = hole_l & (wsum > 0)
@@ -440,7 +444,7 @@ class _Filler:
         field: NDArray[np.int32] | None = None
         cur = pyramid[-1][0]
         for lv in range(len(pyramid) - 1, stop - 1, -1):
-            cur, init = self.start(pyramid[lv], field, self.copy_finest and lv == 0 and iters[lv] == 0)
+            cur, init = self.start(pyramid[lv], field, self.copies_start(lv, iters[lv]))
             shift = COMPLETION_MEAN_SHIFT if lv == 0 else 0
             cur, new = self.iterate(pyramid[lv], lv, cur, init, iters[lv], search[lv], shift)
             field = new if new is not None else init
@@ -656,7 +660,7 @@ def complete(
         )
         field = new if new is not None else field
         for lv in range(_STRICT_FROM - 2, -1, -1):
-            cur, init = filler.start(main[lv], field, filler.copy_finest and lv == 0 and iters[lv] == 0)
+            cur, init = filler.start(main[lv], field, filler.copies_start(lv, iters[lv]))
             shift = COMPLETION_MEAN_SHIFT if lv == 0 else 0
             cur, new = filler.iterate(main[lv], lv, cur, init, iters[lv], search[lv], shift)
             field = new if new is not None else init
