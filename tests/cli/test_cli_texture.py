@@ -73,6 +73,12 @@ def test_complete_from_mask_file(tmp_path, bark):
     assert json.loads(io.sidecar_path(copied).read_text())["parameters"]["finest"] == "copy"
     hole = io.read_image(copied)[mask > 0]
     assert np.isin(hole, io.read_image(img)[mask == 0]).all()  # every filled pixel is a known one
+    blocks = tmp_path / "blocks.png"
+    flags = ["--finest", "copy", "--start", "blocks", "-q"]
+    assert main(["complete", str(img), str(tmp_path / "mask.png"), "--out", str(blocks), *flags]) == 0
+    assert json.loads(io.sidecar_path(blocks).read_text())["parameters"]["start"] == "blocks"
+    assert not np.array_equal(io.read_image(blocks), io.read_image(copied))
+    assert np.isin(io.read_image(blocks)[mask > 0], io.read_image(img)[mask == 0]).all()
 
 
 @pytest.mark.parametrize(

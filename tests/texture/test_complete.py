@@ -348,3 +348,51 @@ def test_finest_copy_fills_with_source_pixels_and_keeps_the_grain():
     assert fine(copied) > 0.8 * src and fine(copied) > 1.8 * fine(voted)
     with pytest.raises(ValueError, match="^finest: expected 'vote' or 'copy'"):
         complete(img, hole, finest="mode")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_start_blocks_copies_many_sources_where_a_flat_start_repeats_a_few(seed):
+    # Blurred noise (every pixel value unique) and a hole filled as the branching gaps are, from
+    # the rows below it only: a flat start settles every half-resolution patch on the few
+    # smoothest sources, and the copied finest level repeats their 2×2 blocks, so the fill holds
+    # a twentieth as many distinct pixels as it has and their rows alternate in brightness.
+    # Random source blocks at the start keep the fill's pixels distinct and its rows level.
+    rng = np.random.default_rng(0)
+    img = cv2.GaussianBlur(rng.random((300, 300)).astype(np.float32), (0, 0), 0.8)
+    img = (img - img.min()) / (img.max() - img.min())
+    hole = np.zeros(img.shape, bool)
+    hole[20:150, 20:280] = True
+    rows = np.nonzero(hole)[0]
+
+    def fill(start: str) -> tuple[float, float]:
+        out = complete(
+            img, hole, source_mask=~hole, patch_size=7, levels=2, iterations=[0, 4], search_iterations=[1, 3],
+            pyramid="strict", gradient_weight=0.0, finest="copy", start=start, seed=seed, threads=1,  # type: ignore[arg-type]
+        )  # fmt: skip
+        f = out[hole]
+        assert np.isin(f, img[~hole]).all() and np.array_equal(out[~hole], img[~hole])
+        return np.unique(f).size / f.size, abs(float(f[rows % 2 == 0].mean() - f[rows % 2 == 1].mean()))
+
+    (flat_distinct, flat_rows), (block_distinct, block_rows) = fill("auto"), fill("blocks")
+    assert flat_distinct < 0.1 and block_distinct > 0.4
+    assert flat_rows > 0.01 and block_rows < 0.004
+    with pytest.raises(ValueError, match="^start: expected 'auto' or 'blocks'"):
+        complete(img, hole, start="noise")  # type: ignore[arg-type]
+
+
+def test_start_blocks_builds_no_level_with_too_few_sources():
+    # Sources in a band 24 px high: at half resolution a 7×7 patch barely fits in it, so that
+    # level would fill its hole from a few centres; with the cap it is not built (the full
+    # resolution always is).
+    from phloem.texture.complete import BLOCKS_MAX_REUSE, _hole_pyramid
+
+    img = np.random.default_rng(1).random((200, 200)).astype(np.float32)[..., None]
+    hole = np.zeros((200, 200), bool)
+    hole[:150] = True
+    allowed = np.zeros_like(hole)
+    allowed[170:194] = True
+    free = _hole_pyramid(img, hole, 7, None, allowed=allowed, strict_from=1)
+    capped = _hole_pyramid(img, hole, 7, None, allowed=allowed, strict_from=1, max_reuse=BLOCKS_MAX_REUSE)
+    ratios = [lv[1].sum() / lv[3].sum() for lv in free]
+    assert len(free) > 1 and ratios[1] > BLOCKS_MAX_REUSE
+    assert len(capped) == 1 and np.array_equal(capped[0][3], free[0][3])

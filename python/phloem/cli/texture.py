@@ -71,6 +71,7 @@ def _cmd_complete(args: argparse.Namespace) -> None:
             iterations=args.iterations,
             diversity=args.diversity,
             finest=args.finest,
+            start=args.start,
             tileable=args.tileable,
             seed=args.seed,
             threads=args.threads,
@@ -157,6 +158,10 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--finest", choices=("vote", "copy"), default="vote",
                    help="the full-resolution level's last step: the weighted mean of the overlapping matches (vote, "
                         "Wexler's) or each pixel copied from its own match (copy: keeps a grainy texture's grain)")  # fmt: skip
+    p.add_argument("--start", choices=("auto", "blocks"), default="auto",
+                   help="what the coarsest level starts from: the rim peeled inward (auto) or random source blocks "
+                        "(blocks; it also skips coarse levels with too few sources for their hole, so that a grainy "
+                        "fill copies many sources instead of repeating a few)")  # fmt: skip
     p.add_argument("--tileable", action="store_true",
                    help="IN is a tile: its opposite borders touch, so the hole may cross them, is filled from the "
                         "context on the other side, and the result still tiles")  # fmt: skip

@@ -169,6 +169,9 @@ _STRICT_KNOWN_WEIGHT = 0.999
 #: ``pyramid="auto"``'s strict alternative differs from the interpolating pyramid from this level
 #: on (0: the finest), so the two share the finer levels and are compared one level below.
 _STRICT_FROM = 2
+#: ``complete(start="blocks")`` builds no level whose hole has more pixels than this many per
+#: usable source centre: there the fill would repeat a few source patches.
+BLOCKS_MAX_REUSE = 8.0
 #: ``pyramid="auto"`` keeps the interpolating pyramid's fill unless the strict one's patch
 #: energy is below this fraction of it: a structure broken at the coarse levels (stripes out of
 #: phase) raises it several-fold, while on natural photos the two stay within about 20 %.
@@ -201,6 +204,25 @@ def _copy_centres(level: _Level, field: NDArray[np.int32], cur: NDArray[np.float
     return done
 
 
+def _random_blocks(need: NDArray[np.bool_], smask: NDArray[np.bool_], p: int, seed: int) -> NDArray[np.int32]:
+    """A field that tiles ``need`` with ``p``-sized blocks, each copied whole from a random usable
+    source centre (``complete(start="blocks")``); a pixel whose shifted centre is not usable
+    takes its block's centre."""
+    H, W = need.shape
+    sy, sx = np.nonzero(smask)
+    ys, xs = np.nonzero(need)
+    by, bx = ys // p, xs // p
+    block = by * (W // p + 1) + bx
+    pick = np.random.default_rng(seed).integers(0, sy.size, (H // p + 1) * (W // p + 1))[block]
+    cy, cx = sy[pick] + ys - by * p - p // 2, sx[pick] + xs - bx * p - p // 2
+    ok = (cy >= 0) & (cy < H) & (cx >= 0) & (cx < W)
+    ok[ok] = smask[cy[ok], cx[ok]]
+    field = np.full((H, W, 2), -1, np.int32)
+    field[ys, xs, 0] = np.where(ok, cy, sy[pick])
+    field[ys, xs, 1] = np.where(ok, cx, sx[pick])
+    return field
+
+
 def _hole_pyramid(
     img: NDArray[np.float32],
     hole: NDArray[np.bool_],
@@ -210,6 +232,7 @@ def _hole_pyramid(
     allowed: NDArray[np.bool_] | None = None,
     strict_from: int | None = None,
     wrap: bool = False,
+    max_reuse: float | None = None,
 ) -> list[_Level]:
     """Coarse-to-fine levels for :func:`complete`, finest first: (image, hole, pixels needing a
     match, usable source centres).
@@ -222,8 +245,9 @@ def _hole_pyramid(
     its whole kernel is (:data:`_STRICT_KNOWN_WEIGHT`). Source centres need a wholly known
     patch of ``allowed`` pixels (a coarse pixel is allowed when every fine pixel under its
     kernel is). Levels are added until the hole vanishes, the image gets narrower than a patch,
-    or no usable source patch is left (or ``max_levels`` is reached). With ``wrap`` the image
-    is a torus: the kernel and the patches continue across its borders.
+    or no usable source patch is left (or ``max_levels`` is reached), or, with ``max_reuse``,
+    until a level's hole has more than ``max_reuse`` pixels per usable source centre. With
+    ``wrap`` the image is a torus: the kernel and the patches continue across its borders.
     """
     forbid = None if allowed is None else ~allowed
     need, source = _patch_masks(hole if forbid is None else hole | forbid, p, wrap)
@@ -254,6 +278,8 @@ def _hole_pyramid(
             f = (down(f)[..., 0] >= _KNOWN_WEIGHT).astype(np.float32)
             source_l = _patch_masks(hole_l | (f > 0), p, wrap)[1]
         if not source_l.any():
+            break
+        if max_reuse is not None and hole_l.sum() > max_reuse * source_l.sum():
             break
         values = np.ascontiguousarray(v / np.maximum(k, _KNOWN_WEIGHT)[..., None], dtype=np.float32)
         values[hole_l] = 0.0
@@ -288,11 +314,13 @@ class _Filler:
         wrap: bool = False,
         diversity: float = 0.0,
         copy_finest: bool = False,
+        blocks: bool = False,
     ) -> None:
         self.p, self.seed, self.threads, self.gw = p, seed, threads, gradient_weight
         self.progress, self.done, self.total = progress, 0, 0
         self.base, self.wrap, self.diversity = base, wrap, diversity
         self.copy_finest = copy_finest  # the full-resolution level copies its field instead of voting it
+        self.blocks = blocks  # the coarsest level starts from random source blocks
 
     def features(self, img: NDArray[np.float32]) -> NDArray[np.float32]:
         return _with_gradients(img, self.gw, self.wrap) if self.gw > 0 else img
@@ -352,8 +380,15 @@ class _Filler:
         """A level's first image: the coarser field upsampled and voted with this level's own
         pixels (no blurred upsampled image is carried down), or copied (``copy``: a finest
         level without iterations under ``copy_finest``); at the coarsest, the onion peel or
-        the ``base`` colour."""
+        the ``base`` colour, or random source blocks (``blocks``) whose field the first search
+        starts from."""
         orig, hole_l, need, smask = level
+        if field is None and self.blocks:
+            # a stream of its own: the searches draw lv * 64 + it + 1, the energy lv * 64 + 63
+            field = _random_blocks(need, smask, self.p, derive_seed(self.seed, 4093))
+            cur = orig.copy()
+            rest = hole_l & ~_copy_centres(level, field, cur)
+            return (_fill_inward(cur, rest, self.wrap) if rest.any() else cur), field
         if field is None:
             if self.base is None:
                 return _fill_inward(orig, hole_l, self.wrap), None
@@ -472,6 +507,7 @@ def complete(
     gradient_weight: float = COMPLETION_GRADIENT_WEIGHT,
     diversity: float = 0.0,
     finest: Literal["vote", "copy"] = "vote",
+    start: Literal["auto", "blocks"] = "auto",
     tileable: bool = False,
     seed: int | np.random.Generator = 0,
     threads: int | None = None,
@@ -548,6 +584,14 @@ def complete(
         pixel the source pixel its own patch centre is matched to. Where the matches disagree
         (a stochastic texture: asphalt, leaf, terrain grain) the vote averages them into a
         smooth fill, the copy keeps the grain; where they agree both give the same pixels.
+    start : {"auto", "blocks"}, optional
+        What the coarsest level starts from. ``"auto"`` (default): the hole's rim peeled inward,
+        or with ``source_mask`` the sources' median colour. ``"blocks"``: random ``patch_size``
+        blocks copied from the sources, as texture synthesis starts, and the pyramid stops
+        before a level whose hole has more than :data:`BLOCKS_MAX_REUSE` pixels per usable
+        source patch. A flat start, or a coarse level with few sources, settles a large hole on
+        a few source patches, which ``finest="copy"`` then repeats as a regular pattern; the
+        blocks and the cap keep such a fill on many sources and a stochastic texture's grain.
     tileable : bool, optional
         Treat the image as a tile (default False): it is a torus whose opposite borders
         touch, so the hole may cross a border and continues on the other side, its context
@@ -599,6 +643,9 @@ def complete(
     lam = check_float(diversity, "diversity", 0.0)
     if finest not in ("vote", "copy"):
         raise ValueError(f"finest: expected 'vote' or 'copy', got {finest!r}")
+    if start not in ("auto", "blocks"):
+        raise ValueError(f"start: expected 'auto' or 'blocks', got {start!r}")
+    reuse = BLOCKS_MAX_REUSE if start == "blocks" else None
     s = check_seed(seed)
     t = check_threads(threads)
     max_levels = None if levels is None else check_int(levels, "levels", 1)
@@ -615,13 +662,14 @@ def complete(
             out[box] = complete(
                 img[box], hole[box], source_mask=allowed[box], patch_size=p, levels=levels, iterations=iterations,
                 search_iterations=search_iterations, pyramid=pyramid, gradient_weight=gw, diversity=lam, finest=finest,
-                seed=s, threads=t,
+                start=start, seed=s, threads=t,
                 progress=progress, max_memory=max_memory,
             )  # fmt: skip
             return restore_ndim(out, image)
     main = _hole_pyramid(
-        img, hole, p, max_levels, allowed=allowed, strict_from=1 if pyramid == "strict" else None, wrap=wrap
-    )
+        img, hole, p, max_levels, allowed=allowed, strict_from=1 if pyramid == "strict" else None, wrap=wrap,
+        max_reuse=reuse,
+    )  # fmt: skip
     if not main[0][3].any():  # the full-resolution level's usable source centres
         where = "the known region" if allowed is None else "the known pixels in source_mask"
         raise ValueError(f"mask: {where} holds no complete {p}×{p} patch to copy from")
@@ -629,7 +677,9 @@ def complete(
     if pyramid == "auto" and len(main) > _STRICT_FROM:
         # No deeper than the interpolating pyramid: the strict hole never vanishes, and its
         # extra levels would cost most of the time.
-        alt = _hole_pyramid(img, hole, p, len(main), allowed=allowed, strict_from=_STRICT_FROM, wrap=wrap)
+        alt = _hole_pyramid(
+            img, hole, p, len(main), allowed=allowed, strict_from=_STRICT_FROM, wrap=wrap, max_reuse=reuse
+        )
         if len(alt) <= _STRICT_FROM:
             alt = None
     n = max(len(main), len(alt) if alt is not None else 0)
@@ -638,7 +688,9 @@ def complete(
     # With restricted sources the hole's rim need not look like what fills it (a branch beside a
     # gap), so the coarsest level starts from the sources' median colour instead of the rim's.
     base = None if allowed is None else np.median(img[allowed & ~hole], axis=0).astype(np.float32)
-    filler = _Filler(p, s, t, gw, progress, base, wrap, lam, finest == "copy")
+    if start == "blocks":  # a coarsest level that starts from random blocks searches at least once
+        iters[len(main) - 1] = max(1, iters[len(main) - 1])
+    filler = _Filler(p, s, t, gw, progress, base, wrap, lam, finest == "copy", start == "blocks")
     # The alternative only has to show whether its fill is far better: one iteration less a level.
     alt_iters = [max(1, n - 1) for n in iters]
     filler.total = sum(iters[: len(main)]) + (sum(alt_iters[_STRICT_FROM : len(alt)]) if alt is not None else 0)
