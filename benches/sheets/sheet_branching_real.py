@@ -1,7 +1,7 @@
 """Contact sheet of ``phloem.branching.synthesize`` with its defaults on real inputs (issue 19).
 
     PYTHONPATH=python python -m benches.sheets.sheet_branching_real --out OUT.png [--inputs DIR] [--seed 0]
-        [--max-side N] [--tuned-trace] [--sigmas S ...] [--gap G] [--only NAME ...]
+        [--max-side N] [--tuned-trace] [--sigmas S ...] [--gap G] [--gap-diversity L] [--only NAME ...]
 
 One row per image of ``--inputs`` (default: ``branching`` of the real-image collection):
 input | input with its traced skeleton | grown skeleton | output image | output with its own
@@ -9,8 +9,8 @@ re-traced skeleton. Skeletons are drawn as sheet_branching_trace draws them (roo
 children yellow, deeper cyan, the traced radii as a green outline). The captions carry the
 measures of benches/quality/branching_quality.py: largest-tree share of input and output,
 median heading change over 60 px and the drift L1, re-trace F1, two-level fraction (masks), and
-the share of the length along the frame. ``--tuned-trace``, ``--sigmas`` and ``--gap`` are
-those of the quality script.
+the share of the length along the frame. ``--tuned-trace``, ``--sigmas``, ``--gap`` and
+``--gap-diversity`` are those of the quality script.
 """
 
 from __future__ import annotations
@@ -41,7 +41,8 @@ def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[
     img, mask = load(path, max_side)
     opts = photo_trace_options(path.name, mask, tuned=args.tuned_trace, sigmas=args.sigmas, gap=args.gap)
     name = path.stem[:22]
-    res, seconds, error = run(img, seed, trace_options=opts, threads=2)
+    render_options = None if args.gap_diversity is None else {"gap_diversity": args.gap_diversity}
+    res, seconds, error = run(img, seed, trace_options=opts, threads=2, render_options=render_options)
     if res is None:
         print(f"{path.name}: {error}")
         blank = np.ones((TILE, TILE, 3), np.float32)
@@ -73,6 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--max-side", type=int, default=0, help="scale inputs down to this long side first (0: no)")
     add_trace_arguments(ap)
+    ap.add_argument("--gap-diversity", type=float, default=None, help="render's gap_diversity (default: 0)")
     ap.add_argument("--only", nargs="*", default=None, help="file names to show (default: all)")
     args = ap.parse_args(argv)
     folder = args.inputs if args.inputs is not None else shared_path("branching")

@@ -137,3 +137,33 @@ def test_completed_gaps_are_background_pixels_with_their_grain() -> None:
         return float((a[..., 0] - cv2.GaussianBlur(a[..., 0], (0, 0), 2.0))[where].std())
 
     assert fine(out, inner) > 0.7 * fine(image, allowed)
+
+
+def test_gaps_with_diversity_copy_the_backgrounds_detail_under_its_layout() -> None:
+    # A plateau (left, 0.8) and a lowland (right, 0.2) with the same grain, and a gap over
+    # both. Blocks drawn from either side put lowland pieces on the plateau, a patchwork at the
+    # scale of the blocks; the completion of the detail under the layout does not.
+    H, W = 96, 192
+    grain = 0.5 * (_texture((H, W), 4) - 0.5)
+    layout = np.where(np.arange(W)[None, :] < W // 2, 0.8, 0.2).astype(np.float32)
+    image = (cv2.GaussianBlur(layout, (0, 0), 4.0)[..., None] + grain).astype(np.float32)
+    allowed = np.ones((H, W), bool)
+    allowed[40:56] = False  # a valley, widened
+    hole = allowed.copy()
+    canvas = np.where(hole[..., None], 0.0, image).astype(np.float32)
+    far = hole.copy()
+    far[:, W // 2 - 24 : W // 2 + 24] = False  # away from the step between the two
+
+    def off_layout(out: np.ndarray) -> float:
+        # the brightness at the blocks' scale against the input's at the same place
+        return float(np.abs(cv2.GaussianBlur(out[..., 0] - image[..., 0], (0, 0), 3.0))[far].mean())
+
+    for seed in range(3):
+        blocks = _complete_background(
+            canvas, hole, image, allowed, patch_size=7, iterations=4, seed=seed, threads=1, diversity=1.0
+        )
+        detail = _complete_background(
+            canvas, hole, image, allowed, patch_size=7, iterations=4, seed=seed, threads=1, diversity=1.0,
+            detail_sigma=16.0,
+        )  # fmt: skip
+        assert off_layout(detail) < 0.1 < off_layout(blocks)

@@ -39,10 +39,31 @@ def _complete_background(
     seed: int,
     threads: int | None,
     diversity: float = 0.0,
+    detail_sigma: float | None = None,
 ) -> F32:
     """Completion of ``hole`` in ``canvas`` whose patches come only from the ``allowed`` pixels
     of ``source`` (the input's background), by :func:`phloem.texture.complete` on one frame:
-    the canvas above, the source below, a separator between them."""
+    the canvas above, the source below, a separator between them.
+
+    With ``diversity`` the completion starts from random background blocks
+    (``start="blocks"``). With ``detail_sigma`` too, it runs on the background's detail: the
+    source and the painted canvas less their brightness smoothed over ``detail_sigma`` source
+    pixels (:func:`_layout`), the source's layout added back in the hole. Blocks from a plateau
+    and a lowland would otherwise make a patchwork at the scale of the blocks.
+    """
+    if diversity > 0 and detail_sigma is not None:
+        lay_src = _layout(source, allowed, detail_sigma, source.shape[:2]).mean(axis=2, keepdims=True)
+        lay_out = _layout(source, allowed, detail_sigma, canvas.shape[:2]).mean(axis=2, keepdims=True)
+        scale = math.sqrt(canvas.shape[0] * canvas.shape[1] / (source.shape[0] * source.shape[1]))
+        own, dens = _smooth_masked(canvas, (~hole).astype(np.float32), detail_sigma * scale)
+        own = np.where(dens[..., None] > 1e-6, own.mean(axis=2, keepdims=True), lay_out).astype(np.float32)
+        detail = _complete_background(
+            canvas - own, hole, source - lay_src, allowed, patch_size=patch_size, iterations=iterations, seed=seed,
+            threads=threads, diversity=diversity,
+        )  # fmt: skip
+        relit: F32 = canvas.copy()
+        relit[hole] = (detail + lay_out)[hole]
+        return relit
     p = patch_size
     H, W = canvas.shape[:2]
     hs, ws = source.shape[:2]
@@ -77,7 +98,8 @@ def _complete_background(
         out = texture.complete(
             frame, fhole, source_mask=source_mask, patch_size=p, levels=levels, iterations=schedule,
             search_iterations=[1] * (levels - 1) + [3], pyramid="strict", gradient_weight=0.0,
-            diversity=diversity, finest="copy", seed=seed, threads=threads,
+            diversity=diversity, finest="copy", start="blocks" if diversity > 0 else "auto", seed=seed,
+            threads=threads,
         )  # fmt: skip
     except ValueError as e:
         if "source_mask" not in str(e):
@@ -101,10 +123,7 @@ def _relight(canvas: F32, hole: NDArray[np.bool_], source: F32, allowed: NDArray
     """
     H, W = canvas.shape[:2]
     hs, ws = source.shape[:2]
-    layout, dens = _smooth_masked(source, allowed.astype(np.float32), sigma)
-    layout[dens <= 1e-6] = np.median(source[allowed], axis=0)
-    if (hs, ws) != (H, W):  # the input's layout, stretched to the output
-        layout = np.asarray(cv2.resize(layout, (W, H), interpolation=cv2.INTER_LINEAR), np.float32).reshape(H, W, -1)
+    layout = _layout(source, allowed, sigma, (H, W))
     own, _ = _smooth_masked(canvas, hole.astype(np.float32), sigma * math.sqrt(H * W / (hs * ws)))
     # One shift for all channels: the layout's brightness, not its hue (a leaf's blue backdrop
     # would tint the leaf's texture).
@@ -112,6 +131,17 @@ def _relight(canvas: F32, hole: NDArray[np.bool_], source: F32, allowed: NDArray
     res: F32 = canvas.copy()
     np.add(res, shift, out=res, where=hole[..., None])
     return res
+
+
+def _layout(source: F32, allowed: NDArray[np.bool_], sigma: float, shape: tuple[int, int]) -> F32:
+    """The large-scale brightness of ``source``'s ``allowed`` pixels (a Gaussian of ``sigma``
+    source pixels; their median where none is near), stretched to ``shape``."""
+    layout, dens = _smooth_masked(source, allowed.astype(np.float32), sigma)
+    layout[dens <= 1e-6] = np.median(source[allowed], axis=0)
+    H, W = shape
+    if layout.shape[:2] != (H, W):  # the input's layout, stretched to the output
+        layout = np.asarray(cv2.resize(layout, (W, H), interpolation=cv2.INTER_LINEAR), np.float32).reshape(H, W, -1)
+    return layout
 
 
 def _smooth_masked(vals: F32, w: F32, sigma: float) -> tuple[F32, F32]:
@@ -232,14 +262,14 @@ def fill_gaps(
         allowed = _background(source_skeleton, (H0, W0), factor) & ok
         if allowed.mean() >= 1 / 6:
             break
+    mask = two_level(image, lo, hi)
+    # Large-scale: an eighth of the input's shorter side, and never finer than four patches.
+    sigma = max(min(H0, W0) / 8, 4.0 * patch_size)
     canvas = _complete_background(
         canvas, ~filled, image, allowed, patch_size=patch_size, iterations=iterations, seed=seed, threads=threads,
-        diversity=diversity,
+        diversity=diversity, detail_sigma=None if mask else sigma,
     )  # fmt: skip
-    mask = two_level(image, lo, hi)
     if not mask:  # a mask's background is one level
-        # Large-scale: an eighth of the input's shorter side, and never finer than four patches.
-        sigma = max(min(H0, W0) / 8, 4.0 * patch_size)
         canvas = _clip_channels(_relight(canvas, ~filled, image, allowed, sigma=sigma), lo, hi)
     if match_borders is None:  # a mask has no lighting to match
         match_borders = not mask

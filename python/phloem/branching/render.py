@@ -271,7 +271,11 @@ def render(
         from a small background settle on its smoothest patches and read as a blurred photo
         or a smoothed terrain; 1 keeps about twice the background's fine grain there. The
         grain may hold faint structure the trace left out, so the painted branches stand out
-        a little less from it, and a fill that was already coherent gets softer.
+        a little less from it, and a fill that was already coherent gets softer. Above 0 the
+        completion also starts from random background blocks and skips pyramid levels with
+        too few background patches for their gaps (``start="blocks"`` of
+        :func:`phloem.texture.complete`); at 0 a small background's gaps repeat a few of its
+        2×2 blocks, a fine striped pattern at full size.
     threads : int, optional
         Worker threads (default: all cores). Fragments that do not overlap are painted at
         the same time, one per thread, each waiting only for the earlier fragments whose
