@@ -167,3 +167,23 @@ def test_gaps_with_diversity_copy_the_backgrounds_detail_under_its_layout() -> N
             detail_sigma=16.0,
         )  # fmt: skip
         assert off_layout(detail) < 0.1 < off_layout(blocks)
+
+
+def test_gaps_with_diversity_leave_out_a_backdrop() -> None:
+    # A leaf's green grain with a blue backdrop in one corner (a tenth of the image): a fill
+    # spread over the whole background would copy blue pieces into the gaps; none may be there.
+    H, W = 120, 160
+    grain = 0.5 * (_texture((H, W), 5)[..., 0] - 0.5)
+    image = np.stack([0.2 + grain, 0.55 + grain, 0.2 + grain], axis=2).astype(np.float32)
+    image[:40, 112:] = np.float32([0.1, 0.2, 0.9]) + 0.5 * grain[:40, 112:, None]
+    allowed = np.ones((H, W), bool)
+    allowed[56:64] = False  # a vein, widened
+    hole = allowed.copy()
+    canvas = np.where(hole[..., None], 0.0, image).astype(np.float32)
+    for seed in range(3):
+        out = _complete_background(
+            canvas, hole, image, allowed, patch_size=7, iterations=4, seed=seed, threads=1, diversity=1.0,
+            detail_sigma=20.0,
+        )  # fmt: skip
+        blue = out[..., 2] > out[..., 1]
+        assert not blue[hole].any()

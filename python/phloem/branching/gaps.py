@@ -27,6 +27,10 @@ from .skeleton import Skeleton
 
 __all__ = ["fill_gaps"]
 
+#: Background detail farther than this many robust deviations from the typical is no source
+#: for a spread fill (``gap_diversity > 0``): the leaf crop's blue backdrop, not its grain.
+OUTLIER_MADS = 6.0
+
 
 def _complete_background(
     canvas: F32,
@@ -49,10 +53,13 @@ def _complete_background(
     (``start="blocks"``). With ``detail_sigma`` too, it runs on the background's detail: the
     source and the painted canvas less their brightness smoothed over ``detail_sigma`` source
     pixels (:func:`_layout`), the source's layout added back in the hole. Blocks from a plateau
-    and a lowland would otherwise make a patchwork at the scale of the blocks.
+    and a lowland would otherwise make a patchwork at the scale of the blocks. Background
+    pixels whose detail is far from the typical (:func:`_outlying`) are then left out.
     """
     if diversity > 0 and detail_sigma is not None:
         lay_src = _layout(source, allowed, detail_sigma, source.shape[:2]).mean(axis=2, keepdims=True)
+        # A fill spread over many sources reaches the rare ones too: leave out those unlike the rest.
+        allowed = allowed & ~_outlying(source - lay_src, allowed)
         lay_out = _layout(source, allowed, detail_sigma, canvas.shape[:2]).mean(axis=2, keepdims=True)
         scale = math.sqrt(canvas.shape[0] * canvas.shape[1] / (source.shape[0] * source.shape[1]))
         own, dens = _smooth_masked(canvas, (~hole).astype(np.float32), detail_sigma * scale)
@@ -131,6 +138,17 @@ def _relight(canvas: F32, hole: NDArray[np.bool_], source: F32, allowed: NDArray
     res: F32 = canvas.copy()
     np.add(res, shift, out=res, where=hole[..., None])
     return res
+
+
+def _outlying(detail: F32, allowed: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """The ``allowed`` pixels whose ``detail`` lies more than :data:`OUTLIER_MADS` robust
+    deviations (1.4826 × the median absolute deviation) beyond the median distance from the
+    detail's median colour: a backdrop, a frame's rim, an optic disc."""
+    d = np.linalg.norm(detail - np.median(detail[allowed], axis=0), axis=2)
+    typical = float(np.median(d[allowed]))
+    spread = 1.4826 * float(np.median(np.abs(d[allowed] - typical)))
+    far: NDArray[np.bool_] = allowed & (d > typical + OUTLIER_MADS * spread)
+    return far
 
 
 def _layout(source: F32, allowed: NDArray[np.bool_], sigma: float, shape: tuple[int, int]) -> F32:
