@@ -159,8 +159,9 @@ def _render_options(p: argparse.ArgumentParser) -> None:
         "--gap-diversity",
         type=non_negative,
         default=0.0,
-        help="weight of the occurrence penalty in the completion of the gaps: 1 keeps more of the background's "
-        "grain where large gaps come out smooth (a terrain, a photo), at some contrast of the branches (default 0)",
+        help="weight of the occurrence penalty in the completion of the gaps; above 0 the gaps are also started "
+        "from random background blocks, so a grainy background (asphalt, bark, a leaf) keeps its grain instead of "
+        "repeating a few of its patches, at some contrast of the branches (default 0)",
     )
     g.add_argument(
         "--fragment-map", metavar="PNG", default=None, help="also write the map of which fragment painted each pixel"
