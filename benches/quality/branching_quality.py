@@ -272,11 +272,19 @@ def photo_trace_options(
     return opts or None
 
 
-def add_trace_arguments(ap: argparse.ArgumentParser) -> None:
-    """``--tuned-trace``, ``--sigmas`` and ``--gap`` (shared with the contact sheet)."""
+def add_run_arguments(ap: argparse.ArgumentParser) -> None:
+    """``--tuned-trace``, ``--sigmas``, ``--gap`` and ``--gap-diversity`` (shared with the contact sheet)."""
     ap.add_argument("--tuned-trace", action="store_true", help="trace with phloem.testing.TRACE_SETTINGS")
     ap.add_argument("--sigmas", type=float, nargs="+", default=None, help="trace photos with these ridge scales")
     ap.add_argument("--gap", type=float, default=None, help="trace photos with this bridging gap (px)")
+    ap.add_argument(
+        "--gap-diversity", type=float, default=None, help="render's gap_diversity (default: synthesize's, 0)"
+    )
+
+
+def render_options_of(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The ``render_options`` that ``--gap-diversity`` asks for (None: synthesize's defaults)."""
+    return None if args.gap_diversity is None else {"gap_diversity": args.gap_diversity}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -285,10 +293,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--max-side", type=int, default=0, help="scale inputs down to this long side first (0: no)")
     ap.add_argument("--threads", type=int, default=2)
-    add_trace_arguments(ap)
-    ap.add_argument(
-        "--gap-diversity", type=float, default=None, help="render's gap_diversity (default: synthesize's, 0)"
-    )
+    add_run_arguments(ap)
     ap.add_argument("--only", nargs="*", default=None, help="file names to run (default: all)")
     ap.add_argument("--json", type=Path, default=None, help="write the results here")
     args = ap.parse_args(argv)
@@ -300,7 +305,7 @@ def main(argv: list[str] | None = None) -> int:
     # the numbers belong to the code that ran: an installed wheel shadows the working tree
     # unless PYTHONPATH puts python/ first
     print(f"phloem {phloem.__version__} from {Path(phloem.__file__).parent}", file=sys.stderr, flush=True)
-    render_options = None if args.gap_diversity is None else {"gap_diversity": args.gap_diversity}
+    render_options = render_options_of(args)
     results = []
     for p in paths:
         img, mask = load(p, args.max_side)

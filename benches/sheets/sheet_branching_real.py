@@ -22,7 +22,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from benches.quality.branching_quality import add_trace_arguments, inputs, load, measure, photo_trace_options, run
+from benches.quality.branching_quality import (
+    add_run_arguments,
+    inputs,
+    load,
+    measure,
+    photo_trace_options,
+    render_options_of,
+    run,
+)
 from phloem.branching import trace
 from phloem.branching.measures import resolve_trace_options
 from phloem.testing import shared_path
@@ -41,8 +49,7 @@ def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[
     img, mask = load(path, max_side)
     opts = photo_trace_options(path.name, mask, tuned=args.tuned_trace, sigmas=args.sigmas, gap=args.gap)
     name = path.stem[:22]
-    render_options = None if args.gap_diversity is None else {"gap_diversity": args.gap_diversity}
-    res, seconds, error = run(img, seed, trace_options=opts, threads=2, render_options=render_options)
+    res, seconds, error = run(img, seed, trace_options=opts, threads=2, render_options=render_options_of(args))
     if res is None:
         print(f"{path.name}: {error}")
         blank = np.ones((TILE, TILE, 3), np.float32)
@@ -73,8 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--inputs", type=Path, default=None, help="folder of images (default: shared branching set)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--max-side", type=int, default=0, help="scale inputs down to this long side first (0: no)")
-    add_trace_arguments(ap)
-    ap.add_argument("--gap-diversity", type=float, default=None, help="render's gap_diversity (default: 0)")
+    add_run_arguments(ap)
     ap.add_argument("--only", nargs="*", default=None, help="file names to show (default: all)")
     args = ap.parse_args(argv)
     folder = args.inputs if args.inputs is not None else shared_path("branching")
