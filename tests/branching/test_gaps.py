@@ -139,6 +139,31 @@ def test_completed_gaps_are_background_pixels_with_their_grain() -> None:
     assert fine(out, inner) > 0.7 * fine(image, allowed)
 
 
+def test_gaps_get_the_grain_of_a_background_left_in_narrow_bands() -> None:
+    # Dense structure (10 px of every 24) leaves the background in 14-px bands: too narrow for
+    # a 7-px patch at the coarse levels of a large gap. Copying only the upsampled coarse
+    # field filled the gap with one flat colour; the finest level's own search finds the bands.
+    H, W = 120, 200
+    allowed = np.ones((H, W), bool)
+    for x in range(0, W, 24):
+        allowed[:, x : x + 10] = False
+    hole = np.ones((H, W), bool)
+    hole[:, 96:104] = False
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        grain = cv2.GaussianBlur(rng.normal(size=(H, W)).astype(np.float32), (0, 0), 0.8)
+        image = (0.5 + 0.1 * grain / 0.3)[..., None]
+        canvas = np.where(hole[..., None], 0.0, image).astype(np.float32)
+        out = _complete_background(canvas, hole, image, allowed, patch_size=7, iterations=4, seed=seed, threads=1)
+        assert np.isin(out[hole], np.unique(image[allowed])).all()
+        assert len(np.unique(out[hole])) > 500
+
+        def fine(a: np.ndarray, where: np.ndarray) -> float:
+            return float((a[..., 0] - cv2.GaussianBlur(a[..., 0], (0, 0), 2.0))[where].std())
+
+        assert fine(out, hole) > 0.5 * fine(image, allowed)  # 0.6 here; the flat fill had 0
+
+
 def test_gaps_with_diversity_copy_the_backgrounds_detail_under_its_layout() -> None:
     # A plateau (left, 0.8) and a lowland (right, 0.2) with the same grain, and a gap over
     # both. Blocks drawn from either side put lowland pieces on the plateau, a patchwork at the

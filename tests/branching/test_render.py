@@ -150,7 +150,11 @@ def test_paste_structure_leaves_no_disk_rims_under_uneven_light(seed: int) -> No
     border, gap = _steps(res[True].image, res[True].labels)
     assert float(border.mean()) < 1.2 * float(gap.mean()), (border.mean(), gap.mean())
     assert float(np.percentile(border, 99)) < 0.15
-    assert float(np.median(res[True].image[core])) < 0.25
+    # the channel keeps its depth (0.53 in the input) against the gaps beside it
+    ring = (cv2.dilate(core.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0) & ~core
+    out = res[True].image
+    depth = [out[ring[:, x], x].mean() - out[core[:, x], x].mean() for x in range(10, 170, 10) if core[:, x].any()]
+    assert min(depth) > 0.3, depth
     # the same without it: the rims show (the test sees the difference)
     rims, _ = _steps(res[False].image, res[False].labels)
     assert float(rims.mean()) > 2 * float(border.mean()) and float(np.percentile(rims, 99)) > 0.3

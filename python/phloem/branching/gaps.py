@@ -31,6 +31,10 @@ __all__ = ["fill_gaps"]
 #: for a spread fill (``gap_diversity > 0``): the leaf crop's blue backdrop, not its grain.
 OUTLIER_MADS = 6.0
 
+#: Search-and-copy iterations of the gaps' full-resolution level (where there are coarser
+#: ones) on photos and fields; a two-level mask's flat background needs none.
+FINEST_ITERATIONS = 1
+
 
 def _complete_background(
     canvas: F32,
@@ -44,6 +48,7 @@ def _complete_background(
     threads: int | None,
     diversity: float = 0.0,
     detail_sigma: float | None = None,
+    finest_iterations: int = FINEST_ITERATIONS,
 ) -> F32:
     """Completion of ``hole`` in ``canvas`` whose patches come only from the ``allowed`` pixels
     of ``source`` (the input's background), by :func:`phloem.texture.complete` on one frame:
@@ -55,6 +60,8 @@ def _complete_background(
     pixels (:func:`_layout`), the source's layout added back in the hole. Blocks from a plateau
     and a lowland would otherwise make a patchwork at the scale of the blocks. Background
     pixels whose detail is far from the typical (:func:`_outlying`) are then left out.
+    ``finest_iterations`` are the full-resolution level's searches (0: it copies the
+    upsampled coarser field).
     """
     if diversity > 0 and detail_sigma is not None:
         lay_src = _layout(source, allowed, detail_sigma, source.shape[:2]).mean(axis=2, keepdims=True)
@@ -66,7 +73,7 @@ def _complete_background(
         own = np.where(dens[..., None] > 1e-6, own.mean(axis=2, keepdims=True), lay_out).astype(np.float32)
         detail = _complete_background(
             canvas - own, hole, source - lay_src, allowed, patch_size=patch_size, iterations=iterations, seed=seed,
-            threads=threads, diversity=diversity,
+            threads=threads, diversity=diversity, finest_iterations=finest_iterations,
         )  # fmt: skip
         relit: F32 = canvas.copy()
         relit[hole] = (detail + lay_out)[hole]
@@ -95,12 +102,13 @@ def _complete_background(
     fhole[:H, :W] = hole
     source_mask = np.zeros(frame.shape[:2], bool)
     source_mask[H + gap :, :ws] = allowed
-    # The field found at half resolution, upsampled, already copies full-resolution pixels, so
-    # the finest level only copies them (a vote of the overlapping matches averages a grainy
-    # background into a smooth fill), and the half-resolution level runs half the iterations.
-    schedule = (
-        [iterations] if levels == 1 else [0, iterations] if levels == 2 else [0, max(1, iterations // 2), iterations]
-    )
+    # The finest level copies its matches' centre pixels (a vote of the overlapping matches
+    # averages a grainy background into a smooth fill), after searches of its own: the coarse
+    # levels see few background patches where the background is small or in narrow bands, and
+    # the upsampled field alone would repeat those few, or leave the gaps flat where there are
+    # none. The half-resolution level runs half the iterations.
+    coarser = [iterations] if levels == 2 else [max(1, iterations // 2), iterations]
+    schedule = [iterations] if levels == 1 else [finest_iterations, *coarser]
     try:
         out = texture.complete(
             frame, fhole, source_mask=source_mask, patch_size=p, levels=levels, iterations=schedule,
@@ -285,7 +293,7 @@ def fill_gaps(
     sigma = max(min(H0, W0) / 8, 4.0 * patch_size)
     canvas = _complete_background(
         canvas, ~filled, image, allowed, patch_size=patch_size, iterations=iterations, seed=seed, threads=threads,
-        diversity=diversity, detail_sigma=None if mask else sigma,
+        diversity=diversity, detail_sigma=None if mask else sigma, finest_iterations=0 if mask else FINEST_ITERATIONS,
     )  # fmt: skip
     if not mask:  # a mask's background is one level
         canvas = _clip_channels(_relight(canvas, ~filled, image, allowed, sigma=sigma), lo, hi)

@@ -263,8 +263,8 @@ def render(
         Patch side of the gap completion (default 7, odd).
     completion_iterations : int, optional
         Search-and-vote iterations per pyramid level of the completion (default 4); the
-        full-resolution level copies pixels through the upsampled half-resolution field
-        without a search of its own.
+        full-resolution level searches once and copies each pixel from its match (a
+        two-level mask's only copies the upsampled half-resolution field).
     gap_diversity : float, optional
         Weight of Kaspar et al.'s occurrence penalty in the gap completion (default 0, plain
         completion; see ``diversity`` of :func:`phloem.texture.complete`). Large gaps filled
