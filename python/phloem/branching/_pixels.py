@@ -1,5 +1,6 @@
 """Small helpers the image-side modules (fragments, render, gaps, rectify) share: the skeleton
-check, row-wise masked copies, per-channel clipping, rotations and sub-pixel line coordinates.
+check, row-wise masked copies, per-channel clipping, rotations, sub-pixel line coordinates and
+the modified z-score that finds outliers.
 """
 
 from __future__ import annotations
@@ -67,6 +68,16 @@ def _rot(theta: float) -> F64:
 
 def _pt(p: F64) -> tuple[int, int]:
     return round(p[0] * 16), round(p[1] * 16)
+
+
+def _robust_z(v: NDArray[Any], floor: Any = 0.0) -> NDArray[Any]:
+    """The modified z-score ``(v − median) / (1.4826 MAD)`` along the first axis, the MAD at
+    least ``floor`` (Iglewicz and Hoaglin: robust to the outliers it is meant to find)."""
+    mid = np.median(v, axis=0)
+    spread = np.maximum(1.4826 * np.median(np.abs(v - mid), axis=0), floor)
+    with np.errstate(divide="ignore", invalid="ignore"):  # a zero spread: any excess is an outlier
+        z: NDArray[Any] = (v - mid) / spread
+    return z
 
 
 def two_level(img: F32, lo: F32, hi: F32) -> bool:

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from .. import texture
 from ..blend import seamless
-from ._pixels import F32, _by_channels, _clip_channels, _paste, _pt, two_level
+from ._pixels import F32, _by_channels, _clip_channels, _paste, _pt, _robust_z, two_level
 from .fragments import MIN_RADIUS
 from .skeleton import Skeleton
 
@@ -153,9 +153,8 @@ def _outlying(detail: F32, allowed: NDArray[np.bool_]) -> NDArray[np.bool_]:
     deviations (1.4826 × the median absolute deviation) beyond the median distance from the
     detail's median colour: a backdrop, a frame's rim, an optic disc."""
     d = np.linalg.norm(detail - np.median(detail[allowed], axis=0), axis=2)
-    typical = float(np.median(d[allowed]))
-    spread = 1.4826 * float(np.median(np.abs(d[allowed] - typical)))
-    far: NDArray[np.bool_] = allowed & (d > typical + OUTLIER_MADS * spread)
+    far = np.zeros_like(allowed)
+    far[allowed] = _robust_z(d[allowed]) > OUTLIER_MADS
     return far
 
 

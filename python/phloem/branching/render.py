@@ -64,7 +64,7 @@ from .._progress import Progress
 from .._validate import as_image, as_mask, check_float, check_int, check_patch_size, check_seed, check_threads
 from ..blend import interpolate_field, seamless
 from ..seams import seam
-from ._pixels import F32, F64, _by_channels, _check_skeleton, _clip_channels, _paste, _pt, _rot, two_level
+from ._pixels import F32, F64, _by_channels, _check_skeleton, _clip_channels, _paste, _pt, _robust_z, _rot, two_level
 from .fragments import DEFAULT_SAMPLES, Fragment, FragmentLibrary, check_params, cover, foreign_fragments
 from .gaps import fill_gaps
 from .skeleton import MAX_THICKNESS, Branch, Skeleton
@@ -758,12 +758,8 @@ def _unusual_surroundings(
         slope[i] = np.hypot(coef[0], coef[1]) * f.radius
     lo, hi = channel_range
     floor = 0.01 * (hi - lo).astype(np.float64)
-
-    def z(v: NDArray[np.float64]) -> NDArray[np.float64]:
-        mid = np.median(v, axis=0)
-        return (v - mid) / np.maximum(1.4826 * np.median(np.abs(v - mid), axis=0), floor)
-
-    out = np.asarray((np.abs(z(level)).max(axis=1) > SURROUNDINGS_Z) | (z(slope).max(axis=1) > SURROUNDINGS_Z))
+    z_level, z_slope = _robust_z(level, floor), _robust_z(slope, floor)
+    out = np.asarray((np.abs(z_level).max(axis=1) > SURROUNDINGS_Z) | (z_slope.max(axis=1) > SURROUNDINGS_Z))
     if sum(1 for f, o in zip(frs, out | excluded, strict=True) if not (o or f.furcation)) < keep:
         out[:] = False
     return out
