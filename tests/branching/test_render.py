@@ -160,6 +160,52 @@ def test_paste_structure_leaves_no_disk_rims_under_uneven_light(seed: int) -> No
     assert float(rims.mean()) > 2 * float(border.mean()) and float(np.percentile(rims, 99)) > 0.3
 
 
+def _bolt(rng: np.random.Generator, x0: float, y0: float, n: int) -> np.ndarray:
+    """A downward random walk of ``n`` 3-px steps, heading within 45 degrees of straight down."""
+    pts, a = [(x0, y0)], np.pi / 2
+    for _ in range(n):
+        a = float(np.clip(a + rng.normal(0, 0.5), np.pi / 4, 3 * np.pi / 4))
+        pts.append((pts[-1][0] + 3 * np.cos(a), pts[-1][1] + 3 * np.sin(a)))
+    return np.array(pts)
+
+
+def _night_sky() -> tuple[np.ndarray, Skeleton]:
+    """Three thin bright bolts on a glowing sky over a dark, jagged horizon."""
+    rng = np.random.default_rng(0)
+    H, W = 160, 220
+    yy, xx = np.mgrid[:H, :W].astype(np.float32)
+    glow = np.exp(-((yy - 50) ** 2 / 50**2 + (xx - 110) ** 2 / 70**2))
+    sky = 0.3 + 0.35 * glow + rng.normal(0, 0.015, (H, W))
+    horizon = 130 + 6 * np.sin(xx[0] / 7.0) + rng.normal(0, 2, W)
+    img = np.where(yy > horizon[None, :], 0.03, sky).astype(np.float32)
+    bolts = []
+    for x0 in (40, 110, 175):
+        p = _bolt(rng, x0 + rng.uniform(-10, 10), 5, 30)
+        bolts.append(Branch(p, 1.2))
+        cv2.polylines(img, [np.round(p * 16).astype(np.int32)], False, 0.95, thickness=2, lineType=cv2.LINE_AA, shift=4)
+    return img, Skeleton(bolts, (H, W))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_gaps_beside_pasted_structure_are_plain_background(seed: int) -> None:
+    # issue 19: with the structure pasted afterwards, the gaps were completed around it, and
+    # partly known patches holding a bolt copied the sky's brightest (or, on a photo, its
+    # darkest) places beside it: a halo 0.10 brighter than the sky 8-20 px away. Completed
+    # without seeing the structure, the gaps beside it are the sky's own level.
+    img, sk = _night_sky()
+    rng = np.random.default_rng(100 + seed)
+    tgt = Skeleton([Branch(_bolt(rng, x0, 15, 25), 1.2) for x0 in (70, 150)], img.shape)
+    res = render(img, sk, tgt, seed=seed, full_output=True)
+    d = cv2.distanceTransform((res.labels < 0).astype(np.uint8), cv2.DIST_L2, 5)
+    sky = np.arange(img.shape[0])[:, None] < 120
+    near = float(res.image[(d > 0) & (d <= 3) & sky].mean())
+    far = float(res.image[(d >= 8) & (d <= 20) & sky].mean())
+    assert abs(near - far) < 0.05, (near, far)
+    # and the bolts still stand out from that sky
+    core = tgt.mask() & (res.labels >= 0)
+    assert float(res.image[core].mean()) > near + 0.3
+
+
 def test_a_mask_renders_as_a_mask() -> None:
     # issue 19: bilinear warps, Poisson pastes and the completion's votes gave grey ramps
     _, sk = channel_scene()

@@ -17,7 +17,8 @@ paints the target structure with disk-shaped fragments of the input:
    where it borders unpainted pixels (:func:`phloem.blend.seamless` with ``fixed``, §5.3).
    Before a sub-branch starts, the disk of its furcation fragment is deleted from the output
    and repainted by a furcation fragment (Fig. 6).
-4. The gaps between the branches are completed (§5.4, :mod:`.gaps`).
+4. The gaps between the branches are completed (§5.4, :mod:`.gaps`); where step 5 follows,
+   the whole canvas is completed without the structure as context.
 5. The whole structure is pasted into the completed gaps in the gradient domain
    (``paste_structure``, not two-level inputs): each fragment keeps its own gradients, with
    none between fragments or towards the gaps, so fragments from differently lit or high
@@ -42,7 +43,10 @@ Beyond the paper (each needed for clean junctions, see the tests):
   §5.3's per-fragment paste keeps each fragment's level where it borders the unpainted gaps,
   so on a terrain or an unevenly lit photo every disk showed; without the structure paste the
   completed gaps are instead pasted against the structure (``match_borders``), which leaves
-  large steps alone.
+  large steps alone;
+- before that paste the background is completed blind to the structure: its patches come
+  from the input's background only, and partly known patches holding a bolt or a valley
+  matched the background's few high-contrast places, copied beside the structure as halos.
 """
 
 from __future__ import annotations
@@ -253,6 +257,8 @@ def render(
         border, with the completed gaps as boundary values. Fragments from differently lit
         parts of a photo or from different heights of a terrain then meet each other and the
         background without steps: no disks show, and the structure keeps its own relief.
+        The completion then fills the whole canvas from the background without the structure
+        as context, so nothing structure-like is copied beside it.
         Default (None): on, except for two-level images (a mask has no ramps to blend and stays
         two-level). Needs ``photometric`` and ``complete``.
     valid : (H, W) array_like of bool, optional
@@ -355,13 +361,17 @@ def render(
     canvas = painter.canvas
     structure = canvas.copy() if full_output else canvas
     if complete and (~painter.filled).any():
+        # The structure is pasted afterwards, so the completion sees none of it: its patches are
+        # background only, and partly known patches holding a bolt copied halos beside it.
+        known = np.zeros_like(painter.filled) if whole else painter.filled
         canvas = fill_gaps(
-            canvas, painter.filled, img, src_sk, valid=ok, radius_factor=rf,
+            canvas, known, img, src_sk, valid=ok, radius_factor=rf,
             radius=float(np.median([g.radius for g in targets])), lo=painter.lo, hi=painter.hi,
             match_borders=match_borders if match_borders is not None else not whole, photometric=photometric and not mask_like,
             patch_size=p, iterations=c_iters, seed=s, threads=t, diversity=gap_div,
         )  # fmt: skip
         if whole:
+            canvas = np.where(painter.filled[..., None], painter.canvas, canvas).astype(np.float32)
             canvas = _paste_structure(canvas, painter.filled, painter.labels, painter.lo, painter.hi, threads=t)
     if mask_like:
         canvas = _drop_foreign(
