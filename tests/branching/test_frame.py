@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from phloem.branching import synthesize, trace, valid_region
+from phloem.branching.frame import MIN_SOLIDITY, _solidity
 
 
 def _fundus(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -40,6 +41,35 @@ def test_a_black_frame_is_found_and_nothing_else() -> None:
     padded = np.pad(noise, ((0, 0), (0, 20)), constant_values=1.0)
     ok = valid_region(padded)
     assert ok[:, :78].all() and not ok[:, 82:].any()
+
+
+def _venation(seed: int = 0) -> np.ndarray:
+    """White veins with spurs on a flat black background, blurred and noisy as a resized JPEG:
+    not two-level, and the black touches the border between every pair of veins."""
+    rng = np.random.default_rng(seed)
+    img = np.zeros((160, 220), np.float32)
+    for y0 in (20, 70, 120):
+        a, b = (0, y0 + 30), (220, y0 - 10)
+        cv2.line(img, a, b, 1.0, 5)
+        for t in np.linspace(0.1, 0.9, 9):
+            x, y = a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])
+            side = 1 if rng.random() < 0.5 else -1
+            cv2.line(img, (int(x), int(y)), (int(x + 8), int(y + side * 14)), 1.0, 2)
+    img = cv2.GaussianBlur(img, (0, 0), 0.8)
+    return np.clip(np.where(img > 0.02, img + rng.normal(0, 0.03, img.shape), 0.0), 0, 1).astype(np.float32)
+
+
+def test_a_flat_background_between_veins_is_no_frame() -> None:
+    # issue 19: a venation mask saved as a JPEG is not two-level, and its black background is
+    # flat and touches the border. Taken for a frame, it left a quarter of the image to trace
+    # (three pieces of vein) and the gaps had no background to copy.
+    img = _venation()
+    ok = valid_region(img)
+    assert ok.all()
+    # its picture would be far from convex; a fundus photo's disc is not
+    assert _solidity(img > 0.02) < 0.5 < MIN_SOLIDITY
+    fundus, disc = _fundus()
+    assert _solidity(disc) > 0.95 and not valid_region(fundus).all()
 
 
 def test_trace_leaves_the_frame_rim_alone() -> None:
