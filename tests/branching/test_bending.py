@@ -7,7 +7,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from phloem.branching import BendingModel, Branch, Skeleton, SkeletonError, grow
+from phloem.branching import BendingModel, Branch, Skeleton, SkeletonError, fit_models, grow
 from phloem.branching.bending import TURN_BOUND
 
 H = 2.0
@@ -194,6 +194,32 @@ def test_coarse_history_off_is_the_model_without_it():
         on.log_quality(a, r, z, z, coarse=coarse[:2])
 
 
+def test_orientation_matches_each_candidates_heading_on_the_image():
+    rng = np.random.default_rng(3)
+    brs = [Branch.from_angles([10, 40 + 30 * j], 0.4 * j, rng.normal(0, 0.3, 50), np.full(52, 2.0), 2.0)
+           for j in range(3)]  # fmt: skip
+    on = BendingModel.fit(Skeleton(brs), h=2.0, k=3, m=3, orientation=3.0)
+    off = BendingModel.fit(Skeleton(brs), h=2.0, k=3, m=3)
+    assert on.orientation == 3.0 and off.orientation == 0.0
+    # brute force: the direction of the edge into the tip after each history, y pointing down
+    for row, (b, i) in enumerate(on.cand_where):
+        p = on.source.branches[b].points
+        d = p[i + on.k + 2] - p[i + on.k + 1]
+        np.testing.assert_allclose(on.cand_heading[row], np.arctan2(-d[1], d[0]), atol=1e-12)
+    a, r = on.cand_hist_alpha[20], on.cand_hist_r[20] * 2.0
+    z = np.zeros(on.bins)
+    # the weight is the exponent of the paper's dist on the wrapped heading difference
+    delta = np.abs((on.cand_heading - 3.0 + np.pi) % (2 * np.pi) - np.pi)
+    np.testing.assert_allclose(
+        on.log_quality(a, r, z, z, heading=3.0) - on.log_quality(a, r, z, z), 3.0 * np.log(1 / (delta + 1) + 1)
+    )
+    # off, a heading changes nothing: the paper's orientation-independent model
+    assert np.array_equal(off.log_quality(a, r, z, z, heading=3.0), off.log_quality(a, r, z, z))
+    assert fit_models(Skeleton(brs), h=2.0, orientation=1.5)[0].orientation == 1.5
+    with pytest.raises(ValueError, match="^orientation:"):
+        BendingModel.fit(Skeleton(brs), h=2.0, orientation=-1.0)
+
+
 def test_candidates_total_turns_are_the_sums_of_all_angles_before_them():
     from phloem.branching._elements import _elements
 
@@ -264,7 +290,7 @@ def test_turn_limit_is_the_stems():
 
 
 def test_course_is_an_option_of_the_pipeline():
-    from phloem.branching import fit_models, synthesize, synthetic_skeleton
+    from phloem.branching import synthesize, synthetic_skeleton
 
     src = synthetic_skeleton(0)
     assert fit_models(src, h=2.0)[0].course == 8 * 4

@@ -539,6 +539,36 @@ def test_coarse_history_holds_a_meander_under_jitter():
     assert abs(with_coarse - want) < 0.5 * abs(fine_only - want)
 
 
+def test_orientation_keeps_the_way_the_input_runs():
+    # Branches that wander around straight down (headings an AR(1) process about -pi/2, as
+    # lightning falls): the paper's model knows only turns, so a grown branch's heading walks
+    # away from down; matched against the input's headings on the image, it stays.
+    rng = np.random.default_rng(0)
+    brs = []
+    for j in range(4):
+        x = np.zeros(299)
+        for t in range(1, 299):
+            x[t] = 0.9 * x[t - 1] + 0.35 * rng.standard_normal()
+        head = -np.pi / 2 + x
+        brs.append(Branch.from_angles([60 + 60 * j, 10], head[0], np.diff(head), np.full(300, 2.0), 2.0))
+    src = Skeleton(brs)
+
+    def down(sk: Skeleton) -> float:
+        d = np.concatenate([np.diff(b.points, axis=0) for b in sk.branches])
+        off = np.arctan2(-d[:, 1], d[:, 0]) + np.pi / 2
+        return float(np.mean(np.abs((off + np.pi) % (2 * np.pi) - np.pi) < np.pi / 4))
+
+    def share(weight: float) -> float:
+        m = BendingModel.fit(src, h=2.0, orientation=weight)
+        start = (350, 20, -np.pi / 2)
+        return float(np.mean([down(grow(m, size=(700, 700), seed=s, start=start, branch_length=560, colonize=False))
+                              for s in range(4)]))  # fmt: skip
+
+    want = down(src)  # 0.69
+    assert share(0.0) < want - 0.25  # 0.27
+    assert abs(share(3.0) - want) < 0.15  # 0.75
+
+
 def test_connected_input_grows_one_connected_tree():
     # one tree in, one tree out, about as long (the old growth started leftover trees instead)
     src = synthetic_skeleton(1)

@@ -193,6 +193,14 @@ def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
         outs[weight] = out
     assert Skeleton.load(outs["0"]) != Skeleton.load(outs["4"])
     assert json.loads(io.sidecar_path(outs["4"]).read_text())["parameters"]["coarse_history"] == 4.0
+    for weight in ("0", "3"):
+        out = tmp_path / f"orientation{weight}.json"
+        assert (
+            main(["branching", "grow", str(skel), "--out", str(out), "--seed", "1", "--orientation", weight, "-q"]) == 0
+        )
+        outs["o" + weight] = out
+    assert Skeleton.load(outs["o0"]) != Skeleton.load(outs["o3"])
+    assert json.loads(io.sidecar_path(outs["o3"]).read_text())["parameters"]["orientation"] == 3.0
     flag_sets = (["--total-turn", "0"], ["--total-turn", "4"], ["--total-turn", "4", "--turn-bound", "0"],
                  ["--repel-border"], ["--no-repel-border"])  # fmt: skip
     for flags in flag_sets:

@@ -127,7 +127,8 @@ class _Grower:
         coarse = block_sums(np.asarray(br.alpha[-(m.k + 1) * m.m :]), m.k, m.m) if m.coarse_history > 0 else None
         turn = float(np.sum(br.alpha)) if m.total_turn > 0 or m.turn_bound > 0 else None
         alpha, r = np.asarray(br.alpha[-L:]), np.asarray(br.r[-L:])
-        q = m.log_quality(alpha, r, w.counts_alpha, w.counts_r, dev, coarse, turn, stem=br.parent is None)
+        head = br.heading if m.orientation > 0 else None
+        q = m.log_quality(alpha, r, w.counts_alpha, w.counts_r, dev, coarse, turn, stem=br.parent is None, heading=head)
         tip = br.points[-1]
         H, W = w.shape
         cos, sin = math.cos(br.heading), math.sin(br.heading)

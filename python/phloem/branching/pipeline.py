@@ -69,6 +69,7 @@ def fit_models(
     coarse_history: float = 2.0,
     total_turn: float = 0.0,
     turn_bound: float | None = None,
+    orientation: float = 0.0,
 ) -> tuple[BendingModel, FurcationModel | None]:
     """The bending model (§4.2) and, if the skeleton branches at all, the furcation model (§4.3).
 
@@ -100,6 +101,10 @@ def fit_models(
     turn_bound : float, optional
         Weight of the bound on a stem's total turn (default 5 where ``total_turn > 0``, else 0;
         see :meth:`BendingModel.fit`).
+    orientation : float, optional
+        Weight of the bending model's absolute heading, so that branches run the ways the
+        input's run (default 0: the paper's orientation-independent model; see
+        :meth:`BendingModel.fit`).
 
     Examples
     --------
@@ -110,7 +115,7 @@ def fit_models(
     """
     bending = BendingModel.fit(
         skeleton, h=h, k=order, m=m, c=n_best, course=course, coarse_history=coarse_history, total_turn=total_turn,
-        turn_bound=turn_bound,
+        turn_bound=turn_bound, orientation=orientation,
     )  # fmt: skip
     has_children = any(b.parent is not None for b in skeleton.branches)
     furcation = FurcationModel.fit(skeleton, h=bending.h, k=order, c=n_best) if has_children else None
@@ -177,6 +182,7 @@ def synthesize(
     coarse_history: float = 2.0,
     total_turn: float | None = None,
     turn_bound: float | None = None,
+    orientation: float = 0.0,
     generations: int | None = None,
     max_length: float | str | None = "input",
     colonize: bool = True,
@@ -211,7 +217,7 @@ def synthesize(
         Seed of the growth and of the fragment choices.
     trace_options : dict, optional
         Keyword arguments for :func:`trace` (e.g. ``{"kind": "dark", "sigmas": (1.5, 3, 5)}``).
-    h, order, m, n_best, course, coarse_history, total_turn, turn_bound : optional
+    h, order, m, n_best, course, coarse_history, total_turn, turn_bound, orientation : optional
         Model parameters, as in :func:`fit_models` (``k`` and ``c`` before, deprecated).
         ``total_turn`` defaults to :func:`course_defaults`'s for the source skeleton, and
         ``turn_bound`` to 5 where the total turn is matched.
@@ -237,8 +243,8 @@ def synthesize(
     models : (BendingModel, FurcationModel or None), optional
         Models fitted to ``skeleton`` before (an earlier result's ``bending`` and ``furcation``),
         used instead of fitting them again: many seeds of one input fit once. ``h``, ``order``,
-        ``m``, ``n_best``, ``course``, ``coarse_history``, ``total_turn`` and ``turn_bound`` are
-        then not used.
+        ``m``, ``n_best``, ``course``, ``coarse_history``, ``total_turn``, ``turn_bound`` and
+        ``orientation`` are then not used.
 
     Returns
     -------
@@ -286,7 +292,7 @@ def synthesize(
     if models is None:
         bending, furcation = fit_models(
             source, h=h, order=order, m=m, n_best=n_best, course=course, coarse_history=coarse_history,
-            total_turn=total_turn, turn_bound=turn_bound,
+            total_turn=total_turn, turn_bound=turn_bound, orientation=orientation,
         )  # fmt: skip
     elif (
         isinstance(models, tuple)
