@@ -281,8 +281,8 @@ class BendingModel:
             its last edge on the image, matched against the branch's heading like the course.
             Continuations then come from input branches running the same way, so lightning
             keeps falling and a leaf's side veins keep their slant. Off by default: it raised
-            re-trace F1 and lowered drift on four held-out inputs but lowered both on the
-            Colville delta and on two crack inputs (``docs/pipelines/branching/quality.md``).
+            re-trace F1 and lowered drift on held-out photos, but lowered the Colville delta's
+            F1 and raised two crack inputs' drift (``docs/pipelines/branching/quality.md``).
 
         Returns
         -------

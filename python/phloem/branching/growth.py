@@ -17,6 +17,9 @@ Beyond the paper's text:
 * **Course.** The bending model also matches each branch's heading against its course over
   ``8 m`` edges (:class:`.BendingModel`, ``course``), so branches keep a course at the scale
   of the structure.
+* **Orientation** (an option, off by default). The bending model can also match each
+  branch's heading on the image (:class:`.BendingModel`, ``orientation``), so that branches
+  run the ways the input's run; the paper's model knows only turns.
 * **Density map.** ``d(p, B)`` is the distance from a pixel to the branch's surface (per
   segment, the distance to its nearest point minus the thickness there), written where it is
   at most ``3ρ`` (``phloem_core::colonisation``); candidates whose average directions agree to
