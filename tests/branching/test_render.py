@@ -327,13 +327,38 @@ def test_two_level_is_95_percent_of_pixels_at_a_channel_extreme_in_every_channel
     rng = np.random.default_rng(0)
     for c in (1, 3, 5):
         for off in (0.0, 0.03, 0.049, 0.051, 0.2):
-            img = np.repeat(rng.random((60, 50, 1)) > 0.5, c, axis=2).astype(np.float32)
+            # Two blocks: the off-level pixels fall mostly inside them, not on the edge between
+            # them, where a soft mask (below) would have its in-between values.
+            img = np.zeros((60, 50, c), np.float32)
+            img[:, 25:] = 1.0
             # Off-level pixels in the last channel only: the channel-by-channel exit must reach it.
             k = round(off * 60 * 50)
             img.reshape(-1, c)[rng.permutation(60 * 50)[:k], c - 1] = 0.5
             lo, hi = _channel_range(img)
             direct = float(((img == lo) | (img == hi)).all(axis=2).mean()) >= 0.95
             assert two_level(img, lo, hi) == direct == (off < 0.05), (c, off)
+
+
+def test_a_soft_mask_is_two_level_and_renders_as_one() -> None:
+    # issue 19: a venation mask scaled and saved as a JPEG has grey edges and noisy levels; it
+    # was taken for a photo, and its output had grey fringes and a grey haze.
+    rng = np.random.default_rng(1)
+    _, sk = channel_scene()
+    sharp = sk.mask().astype(np.float32)
+    soft = cv2.GaussianBlur(sharp, (0, 0), 1.0)
+    soft = np.clip(soft + rng.normal(0, 0.02, soft.shape) * (np.abs(soft - 0.5) > 0.45), 0, 1).astype(np.float32)
+    lo, hi = _channel_range(soft[..., None])
+    assert not float(((soft == lo) | (soft == hi)).mean()) >= 0.95  # not by the exact rule
+    assert two_level(soft[..., None], lo, hi)
+    tgt = Skeleton([wavy_branch((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
+    out = render(soft, sk, tgt, seed=0)
+    assert set(np.unique(out).tolist()) <= {float(lo[0]), float(hi[0])}
+    # a thin bright line in a wide glow on a black sky is a photo: its glow is not an edge
+    sky = np.zeros((100, 140), np.float32)
+    cv2.line(sky, (10, 50), (130, 40), 1.0, 2)
+    glow = np.clip(sky + 0.6 * cv2.GaussianBlur(sky, (0, 0), 6.0) / cv2.GaussianBlur(sky, (0, 0), 6.0).max(), 0, 1)
+    lo, hi = _channel_range(glow[..., None])
+    assert not two_level(glow[..., None].astype(np.float32), lo, hi)
 
 
 def test_branch_map_is_each_branch_drawn_over_the_earlier_ones() -> None:

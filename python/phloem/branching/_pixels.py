@@ -9,6 +9,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -80,9 +81,20 @@ def _robust_z(v: NDArray[Any], floor: Any = 0.0) -> NDArray[Any]:
     return z
 
 
+#: A soft mask (a mask anti-aliased, scaled or saved as a JPEG): at least this share of its
+#: pixels within :data:`SOFT_TOLERANCE` of the channel range from a level in every channel...
+SOFT_NEAR = 0.85
+SOFT_TOLERANCE = 0.1
+#: ... and at least this share of the others within 2 px of pixels near each level: edges, not
+#: shading. A photo of thin bright structure on a black sky has its glow away from both.
+SOFT_EDGES = 0.8
+
+
 def two_level(img: F32, lo: F32, hi: F32) -> bool:
-    """Whether ``img`` is a mask: at least 95 % of its pixels at their channels' minimum or maximum."""
-    need = 0.95 * img.shape[0] * img.shape[1]
+    """Whether ``img`` is a mask: at least 95 % of its pixels at their channels' minimum or
+    maximum, or a soft mask (:data:`SOFT_NEAR`, :data:`SOFT_EDGES`)."""
+    H, W = img.shape[:2]
+    need = 0.95 * H * W
     at: NDArray[np.bool_] | None = None
     # Channel by channel: a photo fails on its first channel, without a pass over the others.
     for c in range(img.shape[2]):
@@ -90,5 +102,26 @@ def two_level(img: F32, lo: F32, hi: F32) -> bool:
         here = (ch == lo[c]) | (ch == hi[c])
         at = here if at is None else np.logical_and(at, here, out=at)
         if np.count_nonzero(at) < need:
-            return False
+            return _soft_two_level(img, lo, hi)
     return True
+
+
+def _soft_two_level(img: F32, lo: F32, hi: F32) -> bool:
+    """Whether ``img`` is a soft mask: :data:`SOFT_NEAR` of its pixels near one of the two levels
+    in every channel, and :data:`SOFT_EDGES` of the rest on an edge between the two."""
+    H, W = img.shape[:2]
+    tol = SOFT_TOLERANCE * np.maximum(hi - lo, 1e-12)
+    near_lo = np.ones((H, W), bool)
+    near_hi = np.ones((H, W), bool)
+    for c in range(img.shape[2]):
+        ch = img[..., c]
+        near_lo &= ch <= lo[c] + tol[c]
+        near_hi &= ch >= hi[c] - tol[c]
+        if np.count_nonzero(near_lo | near_hi) < SOFT_NEAR * H * W:
+            return False
+    rest = ~(near_lo | near_hi)
+    if not rest.any():
+        return bool(near_lo.any() and near_hi.any())
+    k = np.ones((5, 5), np.uint8)
+    edge = (cv2.dilate(near_lo.view(np.uint8), k) > 0) & (cv2.dilate(near_hi.view(np.uint8), k) > 0)
+    return bool(np.count_nonzero(rest & edge) >= SOFT_EDGES * np.count_nonzero(rest))
