@@ -47,11 +47,20 @@ def course_deviation(points: F64, tips: I64, edges: int) -> F64:
     """
     p = np.asarray(points, dtype=np.float64)
     t = np.asarray(tips, dtype=np.int64)
-    last = p[t] - p[t - 1]
     chord = p[t] - p[np.maximum(t - max(edges, 1), 0)]
-    head = np.arctan2(-last[:, 1], last[:, 0])
     course = np.arctan2(-chord[:, 1], chord[:, 0])
-    return _angle(head - course)
+    return _angle(_edge_heading(p, t) - course)
+
+
+def _edge_heading(points: F64, tips: I64) -> F64:
+    """The heading on the image of the edge ending at each tip vertex (radians, counter-clockwise on screen)."""
+    last = points[tips] - points[tips - 1]
+    return np.asarray(np.arctan2(-last[:, 1], last[:, 0]), dtype=np.float64)
+
+
+def _log_dist_angle(delta: F64) -> F64:
+    """``log`` of the paper's ``dist`` on wrapped angle differences: ``log(1 / (|δ| + 1) + 1)``."""
+    return np.asarray(np.log(1.0 / (np.abs(_angle(delta)) + 1.0) + 1.0), dtype=np.float64)
 
 
 def block_sums(alpha: F64, k: int, m: int) -> F64 | None:
@@ -280,9 +289,8 @@ class BendingModel:
             the global path, to the user's guidance: each history also holds the direction of
             its last edge on the image, matched against the branch's heading like the course.
             Continuations then come from input branches running the same way, so lightning
-            keeps falling and a leaf's side veins keep their slant. Off by default: it raised
-            re-trace F1 and lowered drift on held-out photos, but lowered the Colville delta's
-            F1 and raised two crack inputs' drift (``docs/pipelines/branching/quality.md``).
+            keeps falling and a leaf's side veins keep their slant. Off by default: the
+            marks fall on the shared inputs (``docs/pipelines/branching/quality.md``).
 
         Returns
         -------
@@ -343,9 +351,7 @@ class BendingModel:
             # the tip after history i is vertex i + k + 2, reached along edge i + k + 1
             tips = np.arange(n) + k + 2
             dev.append(course_deviation(src.branches[bi].points, tips, n_course))
-            pts = src.branches[bi].points
-            last = pts[tips] - pts[tips - 1]
-            head.append(np.arctan2(-last[:, 1], last[:, 0]))
+            head.append(_edge_heading(src.branches[bi].points, tips))
             idx = np.arange(n)[:, None]
             # Blocks reaching before the branch's first element sum only what it has: a
             # candidate near a branch start is matched as if it had been straight before.
@@ -462,9 +468,9 @@ class BendingModel:
             after = np.abs(float(turn) + self._next_turn())
             q -= self.turn_bound * np.maximum(after - self.turn_limit, 0.0)
         if deviation is not None and self.course > 0:
-            q += np.log(1.0 / (np.abs(_angle(self.cand_course - deviation)) + 1.0) + 1.0)
+            q += _log_dist_angle(self.cand_course - deviation)
         if heading is not None and self.orientation > 0 and len(self.cand_heading):
-            q += self.orientation * np.log(1.0 / (np.abs(_angle(self.cand_heading - heading)) + 1.0) + 1.0)
+            q += self.orientation * _log_dist_angle(self.cand_heading - heading)
         n_t = float(counts_alpha.sum())
         if self.omega_g > 0 and n_t > 0:
             delta = self.angle_weight * self._delta(self.hist_alpha, counts_alpha, self.inc_alpha, n_t)

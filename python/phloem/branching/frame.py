@@ -19,8 +19,8 @@ from ._pixels import two_level
 
 __all__ = ["valid_region"]
 
-#: Smallest share of its convex hull that the picture inside a frame fills: a fundus photo's
-#: disc fills 0.98, a black background between a venation's veins 0.42.
+#: Smallest share of its convex hull that the picture inside a frame fills: a frame surrounds a
+#: disc or a quadrilateral (measurements in docs/pipelines/branching/quality.md).
 MIN_SOLIDITY = 0.75
 
 

@@ -371,7 +371,7 @@ def render(
             patch_size=p, iterations=c_iters, seed=s, threads=t, diversity=gap_div,
         )  # fmt: skip
         if whole:
-            canvas = np.where(painter.filled[..., None], painter.canvas, canvas).astype(np.float32)
+            _paste(canvas, painter.canvas, painter.filled)  # the structure over the completed background
             canvas = _paste_structure(canvas, painter.filled, painter.labels, painter.lo, painter.hi, threads=t)
     if mask_like:
         canvas = _drop_foreign(
