@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 
 from phloem.branching import Branch, Skeleton
-from phloem.branching.gaps import _complete_background, _match_borders, _relight, fill_gaps
+from phloem.branching.gaps import _complete_background, _match_borders, _recolour, _relight, fill_gaps
 
 
 def _texture(shape: tuple[int, int], seed: int) -> np.ndarray:
@@ -90,6 +90,31 @@ def test_relight_moves_brightness_and_not_hue() -> None:
     assert float(np.ptp(shift, axis=1).max()) < 1e-6  # one shift for all channels
     inner = out[10:-10]
     assert abs(float(inner[:, 10:40].mean()) - 0.2) < 0.01 and abs(float(inner[:, -40:-10].mean()) - 0.6) < 0.01
+
+
+def test_recolour_gives_the_gaps_the_backgrounds_colour_cast_and_keeps_their_brightness() -> None:
+    # Soil that is red but for a blue backdrop in a fifth of it, and gaps filled from a grey
+    # patch of it (a completion settled on a few patches): the gaps take the soil's colour cast,
+    # not the backdrop's, and every pixel keeps its brightness and its grain.
+    rng = np.random.default_rng(3)
+    H, W = 60, 100
+    source = np.empty((H, W, 3), np.float32)
+    source[:] = [0.45, 0.28, 0.27]
+    source[:, :20] = [0.2, 0.3, 0.6]
+    source += 0.03 * rng.normal(size=(H, W, 1)).astype(np.float32)
+    allowed = np.ones((H, W), bool)
+    hole = np.zeros((H, W), bool)
+    hole[5:55, 30:90] = True
+    canvas = (np.float32([0.33, 0.33, 0.34]) + 0.03 * rng.normal(size=(H, W, 1))).astype(np.float32)
+    out = _recolour(canvas, hole, source, allowed)
+    assert np.array_equal(out[~hole], canvas[~hole])
+    np.testing.assert_allclose(out[hole].mean(axis=1), canvas[hole].mean(axis=1), atol=1e-6)
+    np.testing.assert_allclose(np.ptp(out[hole] - canvas[hole], axis=0), 0.0, atol=1e-6)  # one shift per channel
+    cast = np.median(out[hole], axis=0) - np.median(out[hole], axis=0).mean()
+    soil = np.float32([0.45, 0.28, 0.27]) - np.float32([0.45, 0.28, 0.27]).mean()
+    np.testing.assert_allclose(cast, soil, atol=0.02)  # a mean would be 0.06 off, towards the backdrop
+    gray = canvas[..., :1]
+    assert np.array_equal(_recolour(gray, hole, source[..., :1], allowed), gray)  # one channel: no colour
 
 
 def test_gap_diversity_keeps_more_of_the_backgrounds_grain() -> None:

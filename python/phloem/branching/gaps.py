@@ -7,7 +7,8 @@ against the painted structure.
 ``allowed`` pixels of the input (the source structure, dilated to the fragment radius, is
 excluded, so no pseudo-branches appear); on photos and fields :func:`_relight` gives the
 completed gaps the input background's large-scale layout, which patches copied into large gaps
-average away; :func:`_match_borders` shifts the completed gaps in the gradient domain so that
+average away, and :func:`_recolour` its colour cast, which a fill settled on a few patches
+can lose; :func:`_match_borders` shifts the completed gaps in the gradient domain so that
 they meet the structure without a colour step, as §5.3 does for the fragments.
 """
 
@@ -145,6 +146,25 @@ def _relight(canvas: F32, hole: NDArray[np.bool_], source: F32, allowed: NDArray
     shift = (layout - own).mean(axis=2, keepdims=True)
     res: F32 = canvas.copy()
     np.add(res, shift, out=res, where=hole[..., None])
+    return res
+
+
+def _recolour(canvas: F32, hole: NDArray[np.bool_], source: F32, allowed: NDArray[np.bool_]) -> F32:
+    """The completed ``hole`` of ``canvas`` with its colour cast moved to that of ``source``'s
+    ``allowed`` pixels: one shift per channel, the difference of the two medians less its mean
+    over channels (brightness is :func:`_relight`'s).
+
+    A completion that settles on a few background patches can settle on grey soil among red
+    (the minirhizotron roots of ``docs/pipelines/branching/quality.md``), and the gaps lose the
+    background's colour although their brightness follows its layout. Medians, so that a
+    backdrop that is a minority of the background does not tint the gaps; one shift for the
+    whole canvas, so that no layout of hue is drawn in.
+    """
+    if canvas.shape[2] < 2 or not hole.any() or not allowed.any():
+        return canvas
+    step = np.median(source[allowed], axis=0) - np.median(canvas[hole], axis=0)
+    res: F32 = canvas.copy()
+    np.add(res, (step - step.mean()).astype(np.float32), out=res, where=hole[..., None])
     return res
 
 
@@ -295,7 +315,8 @@ def fill_gaps(
         diversity=diversity, detail_sigma=None if mask else sigma, finest_iterations=0 if mask else FINEST_ITERATIONS,
     )  # fmt: skip
     if not mask:  # a mask's background is one level
-        canvas = _clip_channels(_relight(canvas, ~filled, image, allowed, sigma=sigma), lo, hi)
+        canvas = _relight(canvas, ~filled, image, allowed, sigma=sigma)
+        canvas = _clip_channels(_recolour(canvas, ~filled, image, allowed), lo, hi)
     if match_borders is None:  # a mask has no lighting to match
         match_borders = not mask
     if photometric and match_borders:
