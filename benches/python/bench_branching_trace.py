@@ -6,7 +6,7 @@ always runs; with ``../shared/data/branching`` the table adds the real images wi
 the contact sheet (``benches/sheets/sheet_branching_trace.py``) uses.
 
 Run for figures:   pytest benches/python/bench_branching_trace.py --benchmark-enable --benchmark-only
-Table:             python benches/python/bench_branching_trace.py [--runs N]
+Table:             python benches/python/bench_branching_trace.py [--runs N] [--subpixel]
 In the default test run the benchmark executes once (``--benchmark-disable``).
 """
 
@@ -55,6 +55,7 @@ def test_bench_trace_synthetic_1024(benchmark):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--subpixel", action="store_true", help="trace the photos with subpixel=True")
     args = ap.parse_args()
     images: dict[str, tuple[np.ndarray, dict[str, Any]]] = {
         "synthetic tree 1024²": (synthetic_tree(), {"kind": "mask"})
@@ -62,7 +63,8 @@ def main() -> None:
     for name, kw in CASES.items():
         p = SHARED / name
         if p.exists():
-            images[name] = (phloem.io.read_image(p), kw)
+            extra = {"subpixel": True} if args.subpixel and kw.get("kind") != "mask" else {}
+            images[name] = (phloem.io.read_image(p), {**kw, **extra})
     print(f"{'image':<40} {'size':>11} {'branches':>8} {'length px':>10} {'seconds':>8}   (best of {args.runs})")
     for name, (img, kw) in images.items():
         times = []

@@ -235,6 +235,29 @@ def test_photo_rim_is_not_a_ridge_and_broken_vessels_are_bridged():
     assert len(trace(img, kind="dark", sigmas=(1.5, 3.0), gap=0).branches) == 2
 
 
+def _bolt_in_a_glow(seed: int) -> tuple[np.ndarray, float]:
+    """A bolt 1 px wide (a Gaussian profile of 0.4 px) wandering down through a bright glow on a
+    dark sky, with noise; and its length."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[:160, :240].astype(np.float32)
+    t = np.linspace(0, 1, 600)
+    bx, by = 120 + 40 * np.sin(3 * t) - 30 * t + 3 * np.sin(40 * t), 10 + 140 * t
+    d2 = np.min([(xx - x0) ** 2 + (yy - y0) ** 2 for x0, y0 in zip(bx, by)], axis=0)
+    img = 0.1 + 0.6 * np.exp(-((xx - 110) ** 2 + (yy - 70) ** 2) / (2 * 30.0**2))
+    img = img + 0.2 * np.exp(-d2 / (2 * 0.4**2)) + rng.normal(0, 0.02, yy.shape)
+    return img.astype(np.float32), float(np.hypot(np.diff(bx), np.diff(by)).sum())
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_subpixel_traces_a_thin_bolt_in_a_glow_whole(seed):
+    # On the pixel grid the bolt keeps its ridge response only where its centre falls near a
+    # pixel centre, so the default traces 24-37 px of it; on the finer grid it is one branch.
+    img, length = _bolt_in_a_glow(seed)
+    sk = trace(img, subpixel=True)
+    assert len(sk.branches) == 1
+    assert sk.total_length() > 0.9 * length
+
+
 # -- thickness by maximum gradient ----------------------------------------------------------
 
 
@@ -284,6 +307,7 @@ def test_estimate_thickness_keeps_structure():
         (Y_SHAPE.mask(), {"h": 0.0}, ValueError, "h"),
         (Y_SHAPE.mask(), {"thickness": "dt"}, ValueError, "thickness"),
         (Y_SHAPE.mask(), {"gap": -1.0}, ValueError, "gap"),
+        (Y_SHAPE.mask(), {"subpixel": "yes"}, TypeError, "subpixel"),
         (Y_SHAPE.mask(), {"kind": "mask", "threshold": 2.0}, ValueError, "image: nothing to trace"),
     ],
 )

@@ -243,6 +243,18 @@ def test_branching_trace_leaves_a_photo_frame_out(tmp_path):
     assert lengths["none"] > lengths["auto"] + 200
 
 
+def test_branching_trace_subpixel_reaches_trace_and_the_sidecar(tmp_path, monkeypatch):
+    seen = []
+    real = branching.trace
+    monkeypatch.setattr(branching, "trace", lambda *a, **k: seen.append(k.get("subpixel")) or real(*a, **k))
+    _river_png(tmp_path / "river.png")
+    for flags in ([], ["--subpixel"]):
+        out = tmp_path / f"river{len(flags)}.json"
+        assert main(["branching", "trace", str(tmp_path / "river.png"), "--out", str(out), *flags, "-q"]) == 0
+        assert json.loads(io.sidecar_path(out).read_text())["parameters"]["subpixel"] is bool(flags)
+    assert seen == [False, True]
+
+
 def test_grow_fits_once_per_skeleton_and_options_in_a_process(tmp_path, monkeypatch):
     # a batch worker grows many seeds of one skeleton: the models are fitted once and shared,
     # and sharing them changes no output

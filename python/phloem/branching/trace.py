@@ -402,6 +402,7 @@ def trace(
     thickness: Thickness = "auto",
     valid: Any = None,
     blob: float | None = 8.0,
+    subpixel: bool = False,
 ) -> Skeleton:
     """Trace the skeleton of a branching structure in an image (beyond [1]_, its future work).
 
@@ -413,7 +414,9 @@ def trace(
        the pixels above ``threshold / 2`` that are connected to one above ``threshold``
        (default: Otsu's threshold of the positive responses). ``"auto"``: a
        two-valued image is a mask, otherwise the polarity with the stronger 99th-percentile
-       response is used.
+       response is used. With ``subpixel`` the filter is evaluated on a twice finer grid, so
+       that lines a pixel or two wide whose centre falls between pixel centres keep their
+       response.
     2. **Cleaning.** Components and holes smaller than ``min_area`` pixels are removed / filled.
     3. **Skeleton.** :func:`skimage.morphology.skeletonize`, radius ``r`` = Euclidean distance
        transform of the mask minus 0.5 (the distance from a centre pixel to the nearest
@@ -479,6 +482,11 @@ def trace(
         (default 8; None keeps them): they lie in a lake or the sea a river mask opens into,
         a region, not a channel, whose skeleton would be traced as branches hundreds of pixels
         thick.
+    subpixel : bool, optional
+        Evaluate the ridge filter (photos only) on the image upsampled 2x, keeping each pixel's
+        best of its four sub-positions (default False). Thin lines in a glow (lightning) are then
+        traced whole instead of in pieces, but so are more of a textured surface's faint ridges
+        (asphalt, bark); the trace takes about twice as long. See ``docs/pipelines/branching.md``.
 
     Returns
     -------
@@ -532,6 +540,8 @@ def trace(
         gap = check_float(gap, "gap", 0.0)
     if blob is not None:
         blob = check_float(blob, "blob", 1.0)
+    if not isinstance(subpixel, (bool, np.bool_)):
+        raise TypeError(f"subpixel: expected True or False, got {subpixel!r}")
     if root is not None:
         try:
             rx, ry = (float(v) for v in root)
@@ -556,7 +566,7 @@ def trace(
     if kind == "mask":
         mask = gray > (0.5 * (lo + hi) if threshold is None else threshold)
     else:
-        resp = ridge_response(gray, sig, kind)
+        resp = ridge_response(gray, sig, kind, subpixel=bool(subpixel))
         if ok is not None:
             reach = 2 * math.ceil(3 * max(sig)) + 3
             inner = cv2.erode(ok.astype(np.uint8), np.ones((reach, reach), np.uint8), borderType=cv2.BORDER_REPLICATE)
