@@ -1,7 +1,7 @@
 """Quality of ``phloem.branching.synthesize`` with its defaults on real inputs (issue 19's acceptance check).
 
     PYTHONPATH=python python benches/quality/branching_quality.py [--inputs DIR] [--seeds 0 1 2]
-        [--max-side N] [--threads 2] [--tuned-trace] [--sigmas S ...] [--gap G] [--gap-diversity L]
+        [--max-side N] [--threads 2] [--tuned-trace] [--sigmas S ...] [--gap G] [--subpixel] [--gap-diversity L]
         [--only NAME ...] [--json OUT]
 
 For every image of ``--inputs`` (default: ``branching`` of the real-image collection,
@@ -27,7 +27,7 @@ Pass marks (issue 19): F1 ≥ 0.8, tree share within 0.15 of the input's, drift 
 two-level on ≥ 98 % of pixels; histograms as the growth tests require. ``--max-side`` scales
 inputs down first (masks are re-thresholded so they stay two-level); the default 0 keeps them
 at full size (the shared set takes about 100 s per seed on one thread). ``--sigmas`` and
-``--gap`` trace the photos (not the masks) with those ``trace`` options instead of the
+``--gap`` (and ``--subpixel``) trace the photos (not the masks) with those ``trace`` options instead of the
 defaults, on top of ``--tuned-trace``; the output is re-traced with the same options.
 """
 
@@ -260,23 +260,27 @@ def summary(results: list[Result]) -> str:
 
 
 def photo_trace_options(
-    name: str, mask: bool, *, tuned: bool, sigmas: list[float] | None, gap: float | None
+    name: str, mask: bool, *, tuned: bool, sigmas: list[float] | None, gap: float | None, subpixel: bool = False
 ) -> dict[str, Any] | None:
-    """The trace options of one input: ``TRACE_SETTINGS`` when ``tuned``, then ``sigmas`` and ``gap`` for photos."""
+    """The trace options of one input: ``TRACE_SETTINGS`` when ``tuned``, then ``sigmas``,
+    ``gap`` and ``subpixel`` for photos."""
     opts = dict(TRACE_SETTINGS.get(name) or {}) if tuned else {}
     if not mask:
         if sigmas:
             opts["sigmas"] = tuple(sigmas)
         if gap is not None:
             opts["gap"] = gap
+        if subpixel:
+            opts["subpixel"] = True
     return opts or None
 
 
 def add_run_arguments(ap: argparse.ArgumentParser) -> None:
-    """``--tuned-trace``, ``--sigmas``, ``--gap`` and ``--gap-diversity`` (shared with the contact sheet)."""
+    """``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel`` and ``--gap-diversity`` (shared with the contact sheet)."""
     ap.add_argument("--tuned-trace", action="store_true", help="trace with phloem.testing.TRACE_SETTINGS")
     ap.add_argument("--sigmas", type=float, nargs="+", default=None, help="trace photos with these ridge scales")
     ap.add_argument("--gap", type=float, default=None, help="trace photos with this bridging gap (px)")
+    ap.add_argument("--subpixel", action="store_true", help="trace photos with trace(subpixel=True)")
     ap.add_argument(
         "--gap-diversity", type=float, default=None, help="render's gap_diversity (default: synthesize's, 0)"
     )
@@ -309,7 +313,9 @@ def main(argv: list[str] | None = None) -> int:
     results = []
     for p in paths:
         img, mask = load(p, args.max_side)
-        opts = photo_trace_options(p.name, mask, tuned=args.tuned_trace, sigmas=args.sigmas, gap=args.gap)
+        opts = photo_trace_options(
+            p.name, mask, tuned=args.tuned_trace, sigmas=args.sigmas, gap=args.gap, subpixel=args.subpixel
+        )
         for seed in args.seeds:
             r = evaluate(
                 p.name, img, mask, seed, trace_options=opts, threads=args.threads, render_options=render_options

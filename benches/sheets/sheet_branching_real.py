@@ -1,7 +1,7 @@
 """Contact sheet of ``phloem.branching.synthesize`` with its defaults on real inputs (issue 19).
 
     PYTHONPATH=python python -m benches.sheets.sheet_branching_real --out OUT.png [--inputs DIR] [--seed 0]
-        [--max-side N] [--tuned-trace] [--sigmas S ...] [--gap G] [--gap-diversity L] [--only NAME ...]
+        [--max-side N] [--tuned-trace] [--sigmas S ...] [--gap G] [--subpixel] [--gap-diversity L] [--only NAME ...]
 
 One row per image of ``--inputs`` (default: ``branching`` of the real-image collection):
 input | input with its traced skeleton | grown skeleton | output image | output with its own
@@ -9,7 +9,7 @@ re-traced skeleton. Skeletons are drawn as sheet_branching_trace draws them (roo
 children yellow, deeper cyan, the traced radii as a green outline). The captions carry the
 measures of benches/quality/branching_quality.py: largest-tree share of input and output,
 median heading change over 60 px and the drift L1, re-trace F1, two-level fraction (masks), and
-the share of the length along the frame. ``--tuned-trace``, ``--sigmas``, ``--gap`` and
+the share of the length along the frame. ``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel`` and
 ``--gap-diversity`` are those of the quality script.
 """
 
@@ -47,7 +47,9 @@ def _show(img: np.ndarray) -> np.ndarray:
 
 def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[np.ndarray]:
     img, mask = load(path, max_side)
-    opts = photo_trace_options(path.name, mask, tuned=args.tuned_trace, sigmas=args.sigmas, gap=args.gap)
+    opts = photo_trace_options(
+        path.name, mask, tuned=args.tuned_trace, sigmas=args.sigmas, gap=args.gap, subpixel=args.subpixel
+    )
     name = path.stem[:22]
     res, seconds, error = run(img, seed, trace_options=opts, threads=2, render_options=render_options_of(args))
     if res is None:
