@@ -162,10 +162,17 @@ def _recolour(canvas: F32, hole: NDArray[np.bool_], source: F32, allowed: NDArra
     """
     if canvas.shape[2] < 2 or not hole.any() or not allowed.any():
         return canvas
-    step = np.median(source[allowed], axis=0) - np.median(canvas[hole], axis=0)
+    step = _median_colour(source, allowed) - _median_colour(canvas, hole)
     res: F32 = canvas.copy()
     np.add(res, (step - step.mean()).astype(np.float32), out=res, where=hole[..., None])
     return res
+
+
+def _median_colour(image: F32, where: NDArray[np.bool_], samples: int = 1 << 18) -> F32:
+    """Per-channel median of ``image`` over ``where``, from at most ``samples`` evenly spread pixels."""
+    idx = np.flatnonzero(where)
+    idx = idx[:: max(1, len(idx) // samples)]
+    return np.asarray(np.median(image.reshape(-1, image.shape[2])[idx], axis=0), np.float32)
 
 
 def _outlying(detail: F32, allowed: NDArray[np.bool_]) -> NDArray[np.bool_]:
