@@ -102,6 +102,7 @@ def test_trace_then_grow_then_render_write_the_cli_s_files_with_sidecars(client,
     assert traced.shape == (128, 224) and traced.total_length() > 150  # the channel is 210 px long
     side = json.loads((project.root / "photos" / "channel_skeleton.sidecar.json").read_text())
     assert side["command"] == "studio branching-trace" and side["parameters"]["image"] == "photos/channel.png"
+    assert side["parameters"]["subpixel"] is False
 
     client.put("/api/guide", params={"path": "guide.json"}, json=[[10, 100], [210, 100]])
     grow = {"kind": "branching-grow", "skeleton": "channel.json", "guide": "guide.json", "seed": 3, "out": "grown.json"}
@@ -127,6 +128,15 @@ def test_trace_then_grow_then_render_write_the_cli_s_files_with_sidecars(client,
     assert end["outputs"] == ["results/new.png", "results/new_fragments.png"]
     frag = io.read_image(project.root / "results" / "new_fragments.png")
     assert frag.shape == (128, 224, 3) and len(np.unique(frag.reshape(-1, 3), axis=0)) > 3  # several fragments
+
+
+def test_trace_subpixel_reaches_trace_and_the_sidecar(client, project, scene, monkeypatch):
+    seen = []
+    real = branching.trace
+    monkeypatch.setattr(branching, "trace", lambda *a, **k: seen.append(k.get("subpixel")) or real(*a, **k))
+    run_job(client, {"kind": "branching-trace", "image": "photos/channel.png", "subpixel": True, "out": "fine.json"})
+    assert seen == [True]
+    assert json.loads((project.root / "fine.sidecar.json").read_text())["parameters"]["subpixel"] is True
 
 
 def test_several_guide_paths_are_a_mask_the_structure_follows(client, project, scene):
@@ -158,6 +168,7 @@ def test_several_guide_paths_are_a_mask_the_structure_follows(client, project, s
         ({"kind": "branching-trace", "image": "photos/none.png"}, 404, "image: no file"),
         ({"kind": "branching-trace", "image": "photos/bar.png", "out": "x.png"}, 400, "must end in one of .json"),
         ({"kind": "branching-trace", "image": "photos/bar.png", "sigmas": []}, 422, "sigmas"),
+        ({"kind": "branching-trace", "image": "photos/bar.png", "subpixel": "maybe"}, 422, "subpixel"),
         ({"kind": "branching-trace", "image": "../bar.png"}, 400, "image:"),
         ({"kind": "branching-grow", "skeleton": "none.json"}, 404, "skeleton: no file"),
         ({"kind": "branching-grow", "skeleton": "channel.json", "guide": "none.json"}, 404, "guide: no file"),
