@@ -13,7 +13,7 @@ from phloem import _core
 from phloem.metrics import coherence_map
 from phloem.texture import complete
 from phloem.texture._pyramid import upsample_at, upsample_field
-from phloem.texture.complete import _hole_pyramid, _refresh_gradients, _with_gradients
+from phloem.texture.complete import _copy_centres, _hole_pyramid, _refresh_gradients, _with_gradients
 
 complete_module = importlib.import_module("phloem.texture.complete")
 
@@ -205,6 +205,53 @@ def test_upsample_at_equals_full_upsample_on_its_pixels():
     part = upsample_at(coarse, at, (24, 34), 3)
     np.testing.assert_array_equal(part[at], full[at])
     assert (part[~at] == -1).all()
+
+
+def _upsample_reference(coarse, at, src_shape, r, wrap):
+    """The coherent upsampling of one pixel at a time, as its docstring states it."""
+    up = np.full((*at.shape, 2), -1, np.int32)
+    for y, x in zip(*np.nonzero(at), strict=True):
+        py, px = min(y // 2, coarse.shape[0] - 1), min(x // 2, coarse.shape[1] - 1)
+        if coarse[py, px, 0] < 0:
+            continue
+        cy, cx = 2 * coarse[py, px, 0] + y - 2 * py, 2 * coarse[py, px, 1] + x - 2 * px
+        if wrap:
+            up[y, x] = cy % src_shape[0], cx % src_shape[1]
+        else:
+            up[y, x] = min(max(cy, r), src_shape[0] - 1 - r), min(max(cx, r), src_shape[1] - 1 - r)
+    return up
+
+
+@pytest.mark.parametrize("share", [0.03, 0.6])  # below and above DENSE_SHARE: both paths
+@pytest.mark.parametrize("wrap", [False, True])
+def test_upsample_at_agrees_with_a_pixel_by_pixel_reference(share, wrap):
+    rng = np.random.default_rng(7)
+    coarse = np.stack([rng.integers(0, 24, (12, 17)), rng.integers(0, 34, (12, 17))], -1).astype(np.int32)
+    coarse[rng.random((12, 17)) < 0.2] = -1
+    at = rng.random((25, 35)) < share  # odd sides: the last row and column repeat their parent
+    got = upsample_at(coarse, at, (24, 34), 3, wrap=wrap)
+    np.testing.assert_array_equal(got, _upsample_reference(coarse, at, (24, 34), 3, wrap))
+
+
+@pytest.mark.parametrize("share", [0.03, 0.6])
+def test_copy_centres_copies_usable_matches_only(share):
+    rng = np.random.default_rng(11)
+    orig = rng.random((30, 41, 3), dtype=np.float32)
+    hole = rng.random((30, 41)) < share
+    smask = ~hole & (rng.random((30, 41)) < 0.8)
+    field = np.stack([rng.integers(0, 30, (30, 41)), rng.integers(0, 41, (30, 41))], -1).astype(np.int32)
+    field[rng.random((30, 41)) < 0.1] = -1
+    cur = orig.copy()
+    cur[hole] = -1.0
+    done = _copy_centres((orig, hole, hole, smask), field, cur)
+    want = cur.copy()
+    want_done = np.zeros_like(hole)
+    for y, x in zip(*np.nonzero(hole), strict=True):
+        fy, fx = field[y, x]
+        if fy >= 0 and smask[fy, fx]:
+            want[y, x], want_done[y, x] = orig[fy, fx], True
+    np.testing.assert_array_equal(done, want_done)
+    np.testing.assert_array_equal(cur, want)
 
 
 def test_gradient_refresh_equals_full_features_on_the_band():

@@ -82,8 +82,8 @@ def _complete_background(
     p = patch_size
     H, W = canvas.shape[:2]
     hs, ws = source.shape[:2]
-    ys, xs = np.nonzero(hole)
-    extent = max(int(np.ptp(ys)) + 1, int(np.ptp(xs)) + 1)
+    rows, cols = np.flatnonzero(hole.any(axis=1)), np.flatnonzero(hole.any(axis=0))
+    extent = max(int(rows[-1] - rows[0]) + 1, int(cols[-1] - cols[0]) + 1)
     # Gaps are a few fragment radii wide: enough levels that they are a few patches wide.
     levels = max(1, min(5, int(math.log2(max(extent / (4 * p), 1.0))) + 1))
     # The separator is a patch wide at the coarsest level, so no level's pyramid kernel or patch

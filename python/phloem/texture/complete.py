@@ -29,7 +29,7 @@ from .._validate import (
     restore_ndim,
 )
 from ._occurrence import occurrence_cost
-from ._pyramid import upsample_at
+from ._pyramid import DENSE_SHARE, upsample_at
 
 __all__ = ["complete"]
 
@@ -194,6 +194,12 @@ def _copy_centres(level: _Level, field: NDArray[np.int32], cur: NDArray[np.float
     to in ``field`` (``complete(finest="copy")``); returns the pixels set, those without a
     usable match keep their value."""
     orig, hole, _, smask = level
+    if hole.mean() >= DENSE_SHARE and cur.flags.c_contiguous:
+        # flat indices on the whole level: one gather each instead of 2-d ones at nonzero pixels
+        src, ok = _usable_centres(field, smask, hole)
+        idx = np.flatnonzero(ok)
+        cur.reshape(-1, cur.shape[2])[idx] = orig.reshape(-1, orig.shape[2])[src.ravel()[idx]]
+        return ok
     ys, xs = np.nonzero(hole)
     at = field[ys, xs]
     ok = (at[:, 0] >= 0) & (at[:, 1] >= 0)
@@ -202,6 +208,19 @@ def _copy_centres(level: _Level, field: NDArray[np.int32], cur: NDArray[np.float
     done = np.zeros_like(hole)
     done[ys[ok], xs[ok]] = True
     return done
+
+
+def _usable_centres(
+    field: NDArray[np.int32], smask: NDArray[np.bool_], where: NDArray[np.bool_]
+) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+    """The flat index of every pixel's matched centre (0 where there is none) and whether it is
+    a usable source centre, for the pixels of ``where``."""
+    fy, fx = field[..., 0], field[..., 1]
+    ok = where & (fy >= 0) & (fx >= 0)
+    src = fy.astype(np.intp) * smask.shape[1] + fx
+    src[~ok] = 0
+    ok &= smask.ravel()[src]
+    return src, ok
 
 
 def _random_blocks(need: NDArray[np.bool_], smask: NDArray[np.bool_], p: int, seed: int) -> NDArray[np.int32]:
@@ -397,10 +416,13 @@ class _Filler:
             return cur, None
         cur = orig.copy()
         up = upsample_at(field, need, orig.shape[:2], self.p // 2, wrap=self.wrap)
-        ys, xs = np.nonzero(need)
-        at = up[ys, xs]
-        bad = ~smask[np.maximum(at[:, 0], 0), np.maximum(at[:, 1], 0)]
-        up[ys[bad], xs[bad]] = -1
+        if need.mean() >= DENSE_SHARE:
+            up[need & ~_usable_centres(up, smask, need)[1]] = -1
+        else:
+            ys, xs = np.nonzero(need)
+            at = up[ys, xs]
+            bad = ~smask[np.maximum(at[:, 0], 0), np.maximum(at[:, 1], 0)]
+            up[ys[bad], xs[bad]] = -1
         if copy:
             fill = _copy_centres(level, up, cur)
         else:
