@@ -75,15 +75,16 @@ def test_histogram_matching_raises_quality_of_helpful_candidates(walk_branch: Ca
     assert np.abs(gain2).max() > np.abs(gain).max()
 
 
-@pytest.mark.parametrize(("coarse", "turn"), [(0.0, 0.0), (2.0, 0.0), (2.0, 1.5)])
+@pytest.mark.parametrize(("coarse", "turn", "arcs"), [(0.0, 0.0, 0.0), (2.0, 0.0, 0.0), (2.0, 1.5, 3.0)])
 def test_histogram_term_is_the_papers_with_the_angle_part_weighted_by_the_angle_terms(
-    walk_branch: Callable[..., Branch], coarse: float, turn: float
+    walk_branch: Callable[..., Branch], coarse: float, turn: float, arcs: float
 ) -> None:
     """Against §4.2's formula written out: ω_G (a Δ_α + Δ_r) n_t / m with
-    Δ_x(i) = (‖Ĥ - H‖² - ‖Ĥ - H^i‖²) / B and a = 1 + coarse_history + total_turn."""
+    Δ_x(i) = (‖Ĥ - H‖² - ‖Ĥ - H^i‖²) / B and a = 1 + coarse_history + total_turn + turn_histogram."""
     src = walk_branch(np.random.default_rng(2), 90, 0.3)
-    model = BendingModel.fit(Skeleton([src]), h=H, coarse_history=coarse, total_turn=turn)
-    assert model.angle_weight == 1.0 + coarse + turn
+    model = BendingModel.fit(Skeleton([src]), h=H, coarse_history=coarse, total_turn=turn, turn_histogram=arcs)
+    assert model.turn_histogram == arcs  # the 178-px branch spans the 60-px arc
+    assert model.angle_weight == 1.0 + coarse + turn + arcs
     alpha, r = model.cand_hist_alpha[0], model.cand_hist_r[0] * H
     rng = np.random.default_rng(3)
     ca, cr = rng.integers(0, 9, 16).astype(float), rng.integers(0, 9, 16).astype(float)
@@ -98,10 +99,71 @@ def test_histogram_term_is_the_papers_with_the_angle_part_weighted_by_the_angle_
     want = (
         model.omega_g
         * (n_t / model.m)
-        * ((1.0 + coarse + turn) * delta(model.hist_alpha, ca, model.inc_alpha) + delta(model.hist_r, cr, model.inc_r))
+        * (
+            (1.0 + coarse + turn + arcs) * delta(model.hist_alpha, ca, model.inc_alpha)
+            + delta(model.hist_r, cr, model.inc_r)
+        )
     )
     got = model.log_quality(alpha, r, ca, cr) - model.log_quality(alpha, r, np.zeros(16), np.zeros(16))
     np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9)
+
+
+def test_arc_window_turns_of_constant_turns_wrap_to_pi():
+    from phloem.branching.bending import arc_window_turns
+
+    # a circle's arc: the heading changes by the sum of the turns, wrapped to [0, π]
+    np.testing.assert_allclose(arc_window_turns(np.full(40, 0.1), 30), np.full(11, 3.0), atol=1e-12)
+    np.testing.assert_allclose(arc_window_turns(np.full(40, -0.15), 30), np.full(11, 2 * np.pi - 4.5), atol=1e-12)
+    assert arc_window_turns(np.full(10, 0.1), 30).size == 0  # shorter than the arc: no value
+    # on a resampled circle of radius R it is the heading change over the arc, edges h / R apart
+    t = np.linspace(0, np.pi, 2000)
+    circle = Skeleton([Branch(np.c_[200 + 80 * np.cos(t), 200 - 80 * np.sin(t)], 1.0)])
+    a = circle.resample(2.0).branches[0].angles()
+    np.testing.assert_allclose(arc_window_turns(a, 30), 60 / 80, rtol=0.01)
+
+
+def test_fit_keeps_the_inputs_heading_change_histogram_over_the_arc(walk_branch: Callable[..., Branch]):
+    from phloem.branching.bending import arc_window_turns
+
+    src = Skeleton([walk_branch(np.random.default_rng(s), 90, 0.3) for s in range(3)])
+    model = BendingModel.fit(src, h=H, m=4)
+    assert model.arc_edges == 30  # 60 px at h = 2
+    turns = np.concatenate([arc_window_turns(b.angles(), 30) for b in model.source.branches])
+    want = np.histogram(turns, bins=16, range=(0, np.pi))[0] / turns.size
+    np.testing.assert_allclose(model.hist_arc, want, atol=1e-12)
+    assert BendingModel.fit(src, h=H, m=4, arc=4.0).arc_edges == 5  # at least one element beyond an extension
+    # no branch spans the arc: nothing to match, the term is off
+    assert BendingModel.fit(src, h=H, arc=400.0).turn_histogram == 0.0
+
+
+def test_arc_delta_is_the_papers_delta_on_the_heading_change_histogram(walk_branch: Callable[..., Branch]):
+    """Brute force: each candidate's continuation appended to the branch, its windows counted."""
+    from phloem.branching.bending import arc_window_turns
+
+    src = Skeleton([walk_branch(np.random.default_rng(s), 90, 0.4) for s in range(2)])
+    model = BendingModel.fit(src, h=H, m=4, arc=20.0)  # windows of 10 elements
+    rng = np.random.default_rng(5)
+    counts = rng.integers(0, 9, 16).astype(float)
+    for tail in (rng.normal(0, 0.4, 20), rng.normal(0, 0.4, 7)):  # all windows, then the first one missing
+        got = model.arc_delta(tail, counts)
+        assert got is not None
+        want = []
+        n = counts.sum()
+        now = ((model.hist_arc - counts / n) ** 2).sum()
+        for nxt in model.next_alpha:
+            full = np.concatenate([tail, nxt])
+            new = arc_window_turns(full, 10)[-min(4, len(full) - 9) :]
+            after = counts + np.bincount(np.minimum((new / np.pi * 16).astype(int), 15), minlength=16)
+            want.append((now - ((model.hist_arc - after / (n + len(new))) ** 2).sum()) / 16)
+        np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
+    assert model.arc_delta(rng.normal(0, 0.4, 5), counts) is None  # no window ends in the continuation
+    assert model.arc_delta(rng.normal(0, 0.4, 20), np.zeros(16)) is None  # nothing counted yet
+    # in log Q: ω_G turn_histogram Δ n / m beside the other terms
+    alpha, r = model.cand_hist_alpha[0], model.cand_hist_r[0] * H
+    ca, cr = 10.0 * model.hist_alpha, 10.0 * model.hist_r
+    tail = rng.normal(0, 0.4, 20)
+    extra = model.log_quality(alpha, r, ca, cr, arc_tail=tail, counts_arc=counts) - model.log_quality(alpha, r, ca, cr)
+    np.testing.assert_allclose(extra, model.omega_g * 3.0 * model.arc_delta(tail, counts) * counts.sum() / 4, rtol=1e-9)
 
 
 def test_bad_input_errors() -> None:
@@ -118,6 +180,10 @@ def test_bad_input_errors() -> None:
         BendingModel.fit(tiny, h=H, k=0)
     with pytest.raises(TypeError, match="^skeleton:"):
         BendingModel.fit([[0, 0], [1, 1]])  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="^turn_histogram:"):
+        BendingModel.fit(tiny, h=1.0, k=1, m=1, turn_histogram=-1.0)
+    with pytest.raises(ValueError, match="^arc:"):
+        BendingModel.fit(tiny, h=1.0, k=1, m=1, arc=0.0)
 
 
 def test_course_deviation_of_a_line_and_a_regular_polygon():

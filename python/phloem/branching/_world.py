@@ -7,6 +7,7 @@ counts of the histogram matching; the guidance map ``G`` of guided synthesis (§
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import cv2
@@ -15,7 +16,7 @@ from numpy.typing import NDArray
 
 from .. import _core
 from ._elements import F64, _bin
-from .bending import BendingModel
+from .bending import BendingModel, arc_window_turns
 
 
 class _World:
@@ -52,6 +53,7 @@ class _World:
         # like the input (see BendingModel.warm_start)
         self.counts_alpha = model.warm_start * model.hist_alpha
         self.counts_r = model.warm_start * model.hist_r
+        self.counts_arc = model.warm_start * model.hist_arc  # the heading-change histogram's
         self.total_length = 0.0
 
     # -- bookkeeping ----------------------------------------------------------------------
@@ -73,10 +75,15 @@ class _World:
         self._nseg += n
         self.total_length += float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
 
-    def add_elements(self, alpha: F64, r: F64) -> None:
+    def add_elements(self, alpha: F64, r: F64, windows: F64) -> None:
+        """Count new elements in the histograms; ``windows``: the branch's angles from
+        ``arc_edges - 1`` before the first new one, for the heading-change histogram."""
         m = self.model
         np.add.at(self.counts_alpha, _bin(alpha, *m.range_alpha, m.bins), 1.0)
         np.add.at(self.counts_r, _bin(r, *m.range_r, m.bins), 1.0)
+        if m.turn_histogram > 0:
+            turns = arc_window_turns(windows, m.arc_edges)
+            np.add.at(self.counts_arc, _bin(turns, 0.0, math.pi, m.bins), 1.0)
 
     def stamp(self, pts: F64, thick: F64, branch: int, first: int) -> None:
         """Write segments into the density map, only within ``3ρ`` of them (§4.4 local update).

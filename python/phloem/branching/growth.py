@@ -131,7 +131,11 @@ class _Grower:
         turn = float(np.sum(br.alpha)) if m.total_turn > 0 or m.turn_bound > 0 else None
         alpha, r = np.asarray(br.alpha[-L:]), np.asarray(br.r[-L:])
         head = br.heading if m.orientation > 0 else None
-        q = m.log_quality(alpha, r, w.counts_alpha, w.counts_r, dev, coarse, turn, stem=br.parent is None, heading=head)
+        recent = np.asarray(br.alpha[-(m.arc_edges - 1) :]) if m.turn_histogram > 0 else None
+        q = m.log_quality(
+            alpha, r, w.counts_alpha, w.counts_r, dev, coarse, turn, stem=br.parent is None, heading=head,
+            arc_tail=recent, counts_arc=w.counts_arc,
+        )  # fmt: skip
         tip = br.points[-1]
         H, W = w.shape
         cos, sin = math.cos(br.heading), math.sin(br.heading)
@@ -196,7 +200,9 @@ class _Grower:
         br.alpha.extend(float(a) for a in alpha)
         br.r.extend(float(v) for v in r)
         br.heading = _wrap(br.heading + float(np.sum(alpha)))
-        w.add_elements(np.asarray(alpha, dtype=np.float64), np.asarray(r, dtype=np.float64))
+        # the windows of the heading-change histogram that end at the new elements
+        windows = np.asarray(br.alpha[-(len(alpha) + self.model.arc_edges - 1) :], dtype=np.float64)
+        w.add_elements(np.asarray(alpha, dtype=np.float64), np.asarray(r, dtype=np.float64), windows)
         pts = np.asarray(br.points[start:])
         w.add_segments(pts)
         self.flush(br, final=False)
@@ -816,7 +822,7 @@ def extend(
         world.add_segments(b.points)
         a, r = _elements(b.resample(h))
         if len(a):
-            world.add_elements(a, r)
+            world.add_elements(a, r, a)
     target = skeleton.branches[bi]
     # resample from the tip backwards so that the tip stays exactly where it is
     tail = Branch(target.points[::-1].copy(), target.thickness[::-1].copy()).resample(h)

@@ -16,6 +16,7 @@ import numpy as np
 
 from .._validate import as_image, check_float, check_int
 from ._elements import F64, _bin, _check_skeleton
+from .bending import ARC  # the arc the bending model matches, so that the two stay one
 from .histograms import _hist, histogram_distance
 from .skeleton import Branch, Skeleton
 from .trace import DEFAULT_SIGMAS, _gray, _resolve_kind, _sigmas, trace
@@ -34,9 +35,6 @@ __all__ = [
     "skeleton_agreement",
     "two_level_fraction",
 ]
-
-#: Default arc over which heading change is measured, px (the figure issue 19 quotes).
-ARC = 60.0
 
 
 @dataclass(frozen=True)

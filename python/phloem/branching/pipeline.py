@@ -70,6 +70,7 @@ def fit_models(
     total_turn: float = 0.0,
     turn_bound: float | None = None,
     orientation: float = 0.0,
+    turn_histogram: float = 3.0,
 ) -> tuple[BendingModel, FurcationModel | None]:
     """The bending model (§4.2) and, if the skeleton branches at all, the furcation model (§4.3).
 
@@ -105,6 +106,10 @@ def fit_models(
         Weight of the bending model's absolute heading, so that branches run the ways the
         input's run (default 0: the paper's orientation-independent model; see
         :meth:`BendingModel.fit`).
+    turn_histogram : float, optional
+        Weight of the matching of the histogram of heading changes over 60 px, so that
+        branches turn over that arc as the input's do (default 3; 0: the paper's model; see
+        :meth:`BendingModel.fit`).
 
     Examples
     --------
@@ -115,7 +120,7 @@ def fit_models(
     """
     bending = BendingModel.fit(
         skeleton, h=h, k=order, m=m, c=n_best, course=course, coarse_history=coarse_history, total_turn=total_turn,
-        turn_bound=turn_bound, orientation=orientation,
+        turn_bound=turn_bound, orientation=orientation, turn_histogram=turn_histogram,
     )  # fmt: skip
     has_children = any(b.parent is not None for b in skeleton.branches)
     furcation = FurcationModel.fit(skeleton, h=bending.h, k=order, c=n_best) if has_children else None
@@ -183,6 +188,7 @@ def synthesize(
     total_turn: float | None = None,
     turn_bound: float | None = None,
     orientation: float = 0.0,
+    turn_histogram: float = 3.0,
     generations: int | None = None,
     max_length: float | str | None = "input",
     colonize: bool = True,
@@ -217,7 +223,7 @@ def synthesize(
         Seed of the growth and of the fragment choices.
     trace_options : dict, optional
         Keyword arguments for :func:`trace` (e.g. ``{"kind": "dark", "sigmas": (1.5, 3, 5)}``).
-    h, order, m, n_best, course, coarse_history, total_turn, turn_bound, orientation : optional
+    h, order, m, n_best, course, coarse_history, total_turn, turn_bound, orientation, turn_histogram : optional
         Model parameters, as in :func:`fit_models` (``k`` and ``c`` before, deprecated).
         ``total_turn`` defaults to :func:`course_defaults`'s for the source skeleton, and
         ``turn_bound`` to 5 where the total turn is matched.
@@ -243,8 +249,8 @@ def synthesize(
     models : (BendingModel, FurcationModel or None), optional
         Models fitted to ``skeleton`` before (an earlier result's ``bending`` and ``furcation``),
         used instead of fitting them again: many seeds of one input fit once. ``h``, ``order``,
-        ``m``, ``n_best``, ``course``, ``coarse_history``, ``total_turn``, ``turn_bound`` and
-        ``orientation`` are then not used.
+        ``m``, ``n_best``, ``course``, ``coarse_history``, ``total_turn``, ``turn_bound``,
+        ``orientation`` and ``turn_histogram`` are then not used.
 
     Returns
     -------
@@ -292,7 +298,7 @@ def synthesize(
     if models is None:
         bending, furcation = fit_models(
             source, h=h, order=order, m=m, n_best=n_best, course=course, coarse_history=coarse_history,
-            total_turn=total_turn, turn_bound=turn_bound, orientation=orientation,
+            total_turn=total_turn, turn_bound=turn_bound, orientation=orientation, turn_histogram=turn_histogram,
         )  # fmt: skip
     elif (
         isinstance(models, tuple)

@@ -275,6 +275,15 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
         "paper's model, which only knows turns; 3 is the weight measured)",
     )
     g.add_argument(
+        "--turn-histogram",
+        type=float,
+        default=3.0,
+        metavar="WEIGHT",
+        help="weight of matching the histogram of heading changes over 60 px of branch against the example's, "
+        "so that branches curl and zigzag as much as the example's over that arc, no more and no less "
+        "(default 3; 0: the paper's model)",
+    )
+    g.add_argument(
         "--generations",
         type=positive,
         default=None,
@@ -318,11 +327,11 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     _resolve_course(args, source)
     # fitting takes seconds on real skeletons; a batch worker fits once per skeleton and options
     options = (args.h, args.order, args.m, args.n_best, args.course, args.coarse_history, args.total_turn,
-               args.turn_bound, args.orientation)  # fmt: skip
+               args.turn_bound, args.orientation, args.turn_histogram)  # fmt: skip
     bend, fur = kept("branching models", [Path(args.skeleton)], options, lambda: branching.fit_models(
         source, h=args.h, order=args.order, m=args.m, n_best=args.n_best, course=args.course,
         coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound,
-        orientation=args.orientation))  # fmt: skip
+        orientation=args.orientation, turn_histogram=args.turn_histogram))  # fmt: skip
     new = run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
     _resolve_models(args, bend)
     args.size = shape
@@ -373,13 +382,14 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
     if args.valid not in ("auto", "none"):
         read.append(Path(args.valid))
     key = stamp(read, (_trace_kwargs(args), args.valid, args.h, args.order, args.m, args.n_best, args.course,
-                               args.coarse_history, args.total_turn, args.turn_bound, args.orientation))  # fmt: skip
+                               args.coarse_history, args.total_turn, args.turn_bound, args.orientation,
+                               args.turn_histogram))  # fmt: skip
     prior = recall("branching run models", key)
     res = run(
         "branching run", args,
         lambda bar: branching.synthesize(
             img, source if prior is None else prior[0], models=None if prior is None else prior[1:], size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, order=args.order,
-            m=args.m, n_best=args.n_best, course=args.course, coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound, orientation=args.orientation, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize, repel_border=args.repel_border,
+            m=args.m, n_best=args.n_best, course=args.course, coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound, orientation=args.orientation, turn_histogram=args.turn_histogram, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize, repel_border=args.repel_border,
             guide=_guide(args.guide, args), valid=valid, render_options=_render_kwargs(args),
             threads=args.threads, progress=bar, max_memory=args.max_memory,
         ),
