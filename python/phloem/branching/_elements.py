@@ -81,6 +81,11 @@ def _wrap(a: float) -> float:
     return float(math.pi - (math.pi - a) % (2 * math.pi))
 
 
+def _abs_turn(turn: F64) -> F64:
+    """Absolute heading changes, wrapped to ``[0, π]``."""
+    return np.asarray(np.abs(math.pi - (math.pi - turn) % (2 * math.pi)), dtype=np.float64)
+
+
 def _check_k(k: Any) -> int:
     return check_int(k, "k", 1)
 

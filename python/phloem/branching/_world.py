@@ -75,13 +75,13 @@ class _World:
         self._nseg += n
         self.total_length += float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
 
-    def add_elements(self, alpha: F64, r: F64, windows: F64) -> None:
+    def add_elements(self, alpha: F64, r: F64, windows: F64 | None) -> None:
         """Count new elements in the histograms; ``windows``: the branch's angles from
         ``arc_edges - 1`` before the first new one, for the heading-change histogram."""
         m = self.model
         np.add.at(self.counts_alpha, _bin(alpha, *m.range_alpha, m.bins), 1.0)
         np.add.at(self.counts_r, _bin(r, *m.range_r, m.bins), 1.0)
-        if m.turn_histogram > 0:
+        if windows is not None and m.turn_histogram > 0:
             turns = arc_window_turns(windows, m.arc_edges)
             np.add.at(self.counts_arc, _bin(turns, 0.0, math.pi, m.bins), 1.0)
 

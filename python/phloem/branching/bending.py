@@ -28,7 +28,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._validate import check_float, check_int
-from ._elements import F64, I64, _bin, _check_k, _check_skeleton, _dist_columns, _elements, _generations, _range
+from ._elements import (
+    F64,
+    I64,
+    _abs_turn,
+    _bin,
+    _check_k,
+    _check_skeleton,
+    _dist_columns,
+    _elements,
+    _generations,
+    _range,
+)
 from .skeleton import Skeleton
 
 __all__ = ["ARC", "TURN_BOUND", "BendingModel", "arc_window_turns", "block_sums", "course_deviation", "default_h"]
@@ -101,7 +112,7 @@ def arc_window_turns(alpha: F64, edges: int) -> F64:
         return np.zeros(0)
     c = np.concatenate([[0.0], np.cumsum(alpha)])
     t = c[edges:] - c[:-edges]
-    return np.asarray(np.abs(math.pi - (math.pi - t) % (2 * math.pi)), np.float64)
+    return _abs_turn(t)
 
 
 def _angle(a: F64) -> F64:
@@ -543,7 +554,7 @@ class BendingModel:
             delta += self._delta(self.hist_r, counts_r, self.inc_r, n_t)
             q += self.omega_g * delta * (n_t / self.m)
         if arc_tail is not None and counts_arc is not None and self.turn_histogram > 0 and self.omega_g > 0:
-            got = self.arc_delta(np.asarray(arc_tail, np.float64), counts_arc)
+            got = self.arc_delta(arc_tail, counts_arc)
             if got is not None:
                 q += self.omega_g * self.turn_histogram * got * (float(counts_arc.sum()) / self.m)
         return q
@@ -574,7 +585,7 @@ class BendingModel:
             return None
         back = np.concatenate([[0.0], np.cumsum(np.asarray(tail, np.float64)[::-1])])
         t = back[need[ok]][None, :] + self._next_cumsum()[:, ok]
-        b = _bin(np.abs(math.pi - (math.pi - t) % (2 * math.pi)), 0.0, math.pi, self.bins)
+        b = _bin(_abs_turn(t), 0.0, math.pi, self.bins)
         n = n0 + b.shape[1]
         now = float(((self.hist_arc - counts / n0) ** 2).sum())
         # ‖u − h_i/n‖² with u = Ĥ − H/n, h_i sparse (P ones): ‖u‖² − 2 Σ_p u[b_ip]/n + Σ_b h_ib²/n²

@@ -201,7 +201,9 @@ class _Grower:
         br.r.extend(float(v) for v in r)
         br.heading = _wrap(br.heading + float(np.sum(alpha)))
         # the windows of the heading-change histogram that end at the new elements
-        windows = np.asarray(br.alpha[-(len(alpha) + self.model.arc_edges - 1) :], dtype=np.float64)
+        windows = None
+        if self.model.turn_histogram > 0:
+            windows = np.asarray(br.alpha[-(len(alpha) + self.model.arc_edges - 1) :], dtype=np.float64)
         w.add_elements(np.asarray(alpha, dtype=np.float64), np.asarray(r, dtype=np.float64), windows)
         pts = np.asarray(br.points[start:])
         w.add_segments(pts)

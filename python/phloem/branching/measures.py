@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_image, check_float, check_int
-from ._elements import F64, _bin, _check_skeleton
+from ._elements import F64, _abs_turn, _bin, _check_skeleton
 from .bending import ARC  # the arc the bending model matches, so that the two stay one
 from .histograms import _hist, histogram_distance
 from .skeleton import Branch, Skeleton
@@ -348,7 +348,7 @@ def _branch_changes(skeleton: Skeleton, a: float) -> list[F64]:
             return np.arctan2(y1 - y0, x1 - x0)
 
         turn = heading(start + a) - heading(start)
-        out.append(np.abs(np.pi - (np.pi - turn) % (2 * np.pi)))
+        out.append(_abs_turn(turn))
     return out
 
 
