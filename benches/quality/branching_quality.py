@@ -18,6 +18,8 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
   block-bootstrap resamples of its 60-px stretches of branch);
 - the share of the input's and the output's length that runs along the frame (``border_share``,
   not a pass mark);
+- the share of the input's and the output's children that hook where they start, turning by more
+  than π/2 over their first ``3 m h`` px (``start_turns``, not a pass mark);
 - two-level fraction of the output (two-level inputs only);
 - the angle and thickness histogram distances of the output to the input's model, with the
   spread between the input's two halves that the growth tests bound them by (1.5× and 1×);
@@ -65,6 +67,7 @@ from phloem.metrics import (
     largest_tree_share,
     median_heading_change,
     skeleton_agreement,
+    start_turns,
     two_level_fraction,
 )
 from phloem.testing import TRACE_SETTINGS, input_halves, shared_path
@@ -92,6 +95,8 @@ class Result:
     heading_out: float = math.nan
     border_in: float = math.nan
     border_out: float = math.nan
+    hooks_in: float = math.nan
+    hooks_out: float = math.nan
     two_level: float | None = None
     angle: float = math.nan
     angle_spread: float = math.nan
@@ -190,6 +195,8 @@ def measure(
     r.share_in, r.share_out = largest_tree_share(src), largest_tree_share(tgt)
     # not a mark of the issue: stems that the frame stops and that run along it (the contact sheets)
     r.border_in, r.border_out = border_share(src), border_share(tgt)
+    # not a mark either: children that hook back where they leave their parent (the contact sheets)
+    r.hooks_in, r.hooks_out = (hooked_share(sk, 3.0 * res.bending.m * res.bending.h) for sk in (src, tgt))
     for attr, sk in (("heading_in", src), ("heading_out", tgt)):
         with contextlib.suppress(ValueError):
             setattr(r, attr, median_heading_change(sk))
@@ -215,6 +222,12 @@ def measure(
     return r
 
 
+def hooked_share(skeleton: Skeleton, arc: float) -> float:
+    """The share of children whose heading turns by more than π/2 over their first ``arc`` px (NaN: none)."""
+    turns = start_turns(skeleton, arc=arc)
+    return float(np.mean(turns > math.pi / 2)) if len(turns) else math.nan
+
+
 def inputs(folder: Path) -> list[Path]:
     return sorted(p for p in folder.glob("*") if p.suffix.lower() in SUFFIXES)
 
@@ -226,9 +239,9 @@ def _f(x: float | None, fmt: str = ".2f") -> str:
 def table(results: list[Result]) -> str:
     head = (
         "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input's noise) | heading in → out (rad) "
-        "| along the frame in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
+        "| along the frame in → out | hooked starts in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
-    lines = [head, "|" + "---|" * 13]
+    lines = [head, "|" + "---|" * 14]
     for r in results:
         fails = ", ".join(k for k, ok in r.passed.items() if not ok) or "—"
         if r.error:
@@ -238,7 +251,7 @@ def table(results: list[Result]) -> str:
         lines.append(
             f"| {r.input} | {r.seed} | {size} | {_f(r.f1)} ({_f(r.precision)}/{_f(r.recall)}) "
             f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} ({_f(r.drift_noise)}) | {_f(r.heading_in)} → {_f(r.heading_out)} "
-            f"| {_f(r.border_in)} → {_f(r.border_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
+            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
             f"| {_f(r.seconds, '.1f')} | {fails} |"
         )
     return "\n".join(lines)

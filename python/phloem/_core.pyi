@@ -184,7 +184,7 @@ def growth_choose(
     length: float,
     samples: int,
     density: tuple[NDArray[np.float32], NDArray[np.int32], NDArray[np.int32]] | None,
-    skip: tuple[int, int, int] | None,
+    skip: tuple[int, int, int, float] | None,
     border_rho: float | None,
     guide: NDArray[np.float64] | None,
     segments: NDArray[np.float64],

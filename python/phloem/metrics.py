@@ -17,8 +17,8 @@ as :func:`phloem.leaves.induce` implements it) with a leaf-set diversity measure
 stroke measures of Luo et al.'s edits (coverage of the target strokes, width agreement across
 corresponding strokes; defined in :mod:`phloem.strokes.measures`), and the measures of whether a
 synthesised branching structure looks like its input's kind (re-trace agreement, largest-tree
-share, heading-change drift, two-level fraction, and the share of the structure that runs along
-the frame; defined in :mod:`phloem.branching.measures`).
+share, heading-change drift, two-level fraction, the share of the structure that runs along the frame,
+and how much children turn where they start; defined in :mod:`phloem.branching.measures`).
 """
 
 from __future__ import annotations
@@ -47,6 +47,7 @@ from .branching.measures import (
     median_heading_change,
     retrace_agreement,
     skeleton_agreement,
+    start_turns,
     two_level_fraction,
 )
 from .strokes.measures import stroke_coverage, width_agreement
@@ -75,6 +76,7 @@ __all__ = [
     "retrace_agreement",
     "shape_similarity",
     "skeleton_agreement",
+    "start_turns",
     "stroke_coverage",
     "thickness_histogram",
     "two_level_fraction",

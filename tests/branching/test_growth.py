@@ -248,8 +248,14 @@ def test_guided_growth_follows_the_path(models: tuple[BendingModel, FurcationMod
 def test_extend_appends_to_one_branch(models: tuple[BendingModel, FurcationModel]):
     bend, fur = models
     sk = grow(bend, fur, size=(300, 300), seed=4, generations=2, branch_length=60)
-    # a branch whose tip has room to grow (not at the image border)
-    bi = next(i for i, b in enumerate(sk.branches) if (np.abs(b.points[-1] - 150.0) < 110.0).all())
+
+    # the branch whose tip has the most room to grow: farthest from the border and the other branches
+    def room(i: int) -> float:
+        tip = sk.branches[i].points[-1]
+        others = np.vstack([b.points for j, b in enumerate(sk.branches) if j != i])
+        return min(float(np.linalg.norm(others - tip, axis=1).min()), *tip, *(299.0 - tip))
+
+    bi = max(range(len(sk.branches)), key=room)
     out = extend(sk, bi, bend, steps=5, seed=1)
     old, new = sk.branches[bi], out.branches[bi]
     assert len(new) > len(old)
@@ -259,6 +265,9 @@ def test_extend_appends_to_one_branch(models: tuple[BendingModel, FurcationModel
     assert all(a is b for j, (a, b) in enumerate(zip(out.branches, sk.branches)) if j != bi)
     assert count_crossings(out) == 0
     assert extend(sk, bi, bend, steps=5, seed=1) == out
+    # a child extends with its parent's density near the attachment discounted, and crosses nothing
+    ci = next(i for i, b in enumerate(sk.branches) if b.parent is not None)
+    assert count_crossings(extend(sk, ci, bend, steps=3, seed=2)) == 0
 
 
 def mask_to_skeleton(mask: np.ndarray, min_pixels: int = 10) -> Skeleton:
@@ -694,19 +703,25 @@ def test_the_planarity_test_agrees_with_every_pair_tested():
         _core.polylines_crossing(paths, segs[:, :3])
 
 
+def _stamped_world(rho: float, amplitude: float, freq: float, *, branch: int, first: int):
+    """A 60×90 world with one wavy branch of growing thickness stamped into its density map."""
+    from phloem.branching._world import _World
+
+    m = BendingModel.fit(_meanders(), h=2.0)
+    w = _World(m, (60, 90), colonize=True, rho=rho, guide=None, rng=np.random.default_rng(0))
+    t = np.linspace(0, 1, 23)
+    pts = np.stack([10 + 70 * t, 30 + amplitude * np.sin(freq * t)], axis=1)
+    thick = 1.0 + 2.0 * t
+    w.stamp(pts, thick, branch, first)
+    return m, w, pts, thick
+
+
 def test_the_density_map_is_the_distance_to_the_branch_surface():
     # §4.4: D(p) = exp(-d(p, B)² / ρ²), d the distance to the branch's surface (per segment, the
     # distance to its nearest point minus the thickness there), written within 3ρ of it; brute
     # force over every pixel
-    from phloem.branching._world import _World
-
-    m = BendingModel.fit(_meanders(), h=2.0)
     rho = 5.0
-    w = _World(m, (60, 90), colonize=True, rho=rho, guide=None, rng=np.random.default_rng(0))
-    t = np.linspace(0, 1, 23)
-    pts = np.stack([10 + 70 * t, 30 + 12 * np.sin(5 * t)], axis=1)
-    thick = 1.0 + 2.0 * t
-    w.stamp(pts, thick, 3, 7)
+    _, w, pts, thick = _stamped_world(rho, 12.0, 5.0, branch=3, first=7)
     yy, xx = np.mgrid[0:60, 0:90]
     p = np.stack([xx, yy], axis=-1).reshape(-1, 1, 2).astype(float)
     a, d = pts[:-1], np.diff(pts, axis=0)
@@ -780,10 +795,60 @@ def test_a_child_ignores_its_parent_near_the_attachment_only_until_it_is_3_rho_l
         child.points.append(child.points[-1] + (m.h, 0.0))
         seen.append(g.parent_skip(child))
     # seen[i] is for a child of i + 1 edges: `near` edges are 3ρ of arc and at most one edge more
-    assert seen[:near] == [(0, 12, near)] * near
+    # (without the parent's geometry the floor is 1: every parent pixel near the attachment is empty)
+    assert seen[:near] == [(0, 12, near, 1.0)] * near
     assert seen[near:] == [None] * 3
     root = _Growing([np.zeros(2), np.ones(2)], [1.0, 1.0], [], [], 0.0, None, 0, 0)
     assert g.parent_skip(root) is None
+
+
+def test_a_child_sees_the_parent_density_above_the_one_at_its_tip():
+    # the floor is the parent's density at the tip, computed as the map's stamp does: it agrees
+    # with the stamped map at pixel centres, so rays read exactly the parent's density beyond
+    # what the tip already has, and a turn back towards the parent reads more than moving away
+    from phloem import _core
+    from phloem.branching.growth import _Grower, _Growing, surface_density
+
+    rho = 5.0
+    m, w, pts, thick = _stamped_world(rho, 6.0, 4.0, branch=0, first=0)
+    rng = np.random.default_rng(1)
+    for x, y in zip(rng.integers(12, 78, 200), rng.integers(16, 46, 200)):
+        assert surface_density(np.array([x, y], float), pts, thick, rho) == pytest.approx(float(w.dens[y, x]), abs=1e-6)
+    g = _Grower(w, m)
+    v = 11
+    child = _Growing([pts[v].copy()], [1.0], [], [], math.pi / 2, (0, v), 1, 1)
+    child.parent_near = (pts, thick)
+    for _ in range(3):  # three edges straight up, away from the parent (y grows downwards)
+        child.points.append(child.points[-1] + (0.0, -m.h))
+    skip = g.parent_skip(child)
+    assert skip is not None
+    tip = child.points[-1]
+    floor = skip[3]
+    assert 0.0 < floor < 1.0
+    assert floor == pytest.approx(surface_density(tip, pts, thick, rho))
+    # rays up (away), down (back to the parent) and along it, 2ρ long
+    dirs = np.array([[0.0, -1.0], [0.0, 1.0], [1.0, 0.0]])
+    C = 3
+    got = []
+    for s in (skip, skip[:3] + (1.0,)):
+        _, lq = _core.growth_choose(
+            np.zeros(C), np.zeros((C, 1, 2)) + [[[0.1, 0.0]]], np.arange(C, dtype=np.int64),
+            (float(tip[0]), float(tip[1])), 1.0, 0.0, 60, 90, dirs, 2 * rho, 10,
+            (w.dens, w.owner_branch, w.owner_vertex), s, None, None, np.zeros((0, 4)), C, 1e-3,
+        )  # fmt: skip
+        got.append(lq)
+    with_floor, blind = got
+    # going away reads empty, and going back reads much more than going away; a floor of 1
+    # (the parent near the attachment all empty) reads going back as empty too
+    assert with_floor[0] == pytest.approx(-math.log(1e-3), abs=1e-6)
+    assert with_floor[1] < with_floor[0] - 3.0
+    assert blind[1] == pytest.approx(blind[0], abs=1e-6)
+    with pytest.raises(ValueError, match="^skip:"):
+        _core.growth_choose(
+            np.zeros(C), np.zeros((C, 1, 2)), np.arange(C, dtype=np.int64), (float(tip[0]), float(tip[1])),
+            1.0, 0.0, 60, 90, dirs, 2 * rho, 10, (w.dens, w.owner_branch, w.owner_vertex),
+            (0, v, skip[2], math.nan), None, None, np.zeros((0, 4)), C, 1e-3,
+        )  # fmt: skip
 
 
 def test_the_heading_change_histogram_counts_every_window_of_every_grown_branch():

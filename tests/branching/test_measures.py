@@ -20,6 +20,7 @@ from phloem.branching.measures import (
     resolve_trace_options,
     retrace_agreement,
     skeleton_agreement,
+    start_turns,
     two_level_fraction,
 )
 
@@ -368,3 +369,34 @@ def test_bad_input_errors() -> None:
         two_level_fraction(np.eye(4), np.eye(4), tolerance=-0.1)
     with pytest.raises(TypeError, match="^image:"):
         two_level_fraction(np.eye(4, dtype=np.int64), np.eye(4))
+
+
+def _arc_branch(radius: float, turn: float, start: tuple[float, float], parent: tuple[int, int] | None) -> Branch:
+    """A circular arc of ``radius`` through ``turn`` radians, leaving ``start`` along +x."""
+    t = np.linspace(0.0, turn, max(8, int(radius * turn * 4)))
+    pts = np.c_[start[0] + radius * np.sin(t), start[1] - radius * (1 - np.cos(t))]
+    return Branch(pts, 1.0, parent=parent)
+
+
+def test_start_turns_is_the_turn_over_the_first_arc_of_every_child() -> None:
+    stem = Branch(np.c_[np.linspace(0, 300, 151), np.full(151, 150.0)], 1.0)
+    straight = Branch(np.c_[np.linspace(100, 160, 31), np.linspace(150, 100, 31)], 1.0, parent=(0, 50))
+    gentle = _arc_branch(60.0, 1.0, (200.0, 150.0), (0, 100))
+    # a loop: 20 px on a circle of radius 3 turn 5.6 rad, which wraps to 0.7 without unwrapping
+    loop = _arc_branch(3.0, 3 * np.pi, (40.0, 150.0), (0, 20))
+    short = Branch([[250.0, 150.0], [252.0, 149.0]], 1.0, parent=(0, 125))
+    sk = Skeleton([stem, straight, gentle, loop, short])
+    got = start_turns(sk, arc=20.0)
+    w = 20.0 / 6
+    # the root and the too-short child give nothing; chords from w/2 to 20 - w/2: (20 - w) / R
+    assert got.shape == (3,)
+    assert got[0] == pytest.approx(0.0, abs=1e-9)
+    assert got[1] == pytest.approx((20.0 - w) / 60.0, rel=0.02)
+    assert got[2] == pytest.approx((20.0 - w) / 3.0, rel=0.02)
+    assert got[2] > np.pi
+    # a child shorter than the arc is measured over its length
+    assert start_turns(Skeleton([stem, gentle]), arc=200.0)[0] == pytest.approx((60.0 - 200.0 / 6) / 60.0, rel=0.02)
+    with pytest.raises(ValueError, match="^arc:"):
+        start_turns(sk, arc=0.0)
+    with pytest.raises(TypeError, match="^skeleton:"):
+        start_turns([stem], arc=20.0)  # type: ignore[arg-type]

@@ -33,6 +33,7 @@ __all__ = [
     "resolve_trace_options",
     "retrace_agreement",
     "skeleton_agreement",
+    "start_turns",
     "two_level_fraction",
 ]
 
@@ -363,6 +364,57 @@ def _parts_or_raise(skeleton: Skeleton, arc: float, name: str) -> list[F64]:
 
 def _changes_or_raise(skeleton: Skeleton, arc: float, name: str) -> F64:
     return np.concatenate(_parts_or_raise(skeleton, arc, name))
+
+
+def start_turns(skeleton: Skeleton, *, arc: float = 20.0) -> F64:
+    """How much every child branch turns over its first ``arc`` px: hooks where children start.
+
+    The heading at arc position ``s`` is the chord from ``s - w/2`` to ``s + w/2`` (``w = arc /
+    6``, as in :func:`heading_changes`), taken at most 1 px apart from ``w/2`` to ``min(arc, L) - w/2``
+    (``L`` the branch's length) and unwrapped, so a loop reads more than π. The value is the
+    absolute difference between the last heading and the first. A child that leaves its parent
+    and runs on gives a small value; one that hooks back gives more than π/2. Branches without
+    a parent, and children shorter than ``w`` + 1 px, give no value.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    arc : float, optional
+        Arc length in px from the child's start (default 20).
+
+    Returns
+    -------
+    ndarray of float64
+        Radians, one per child long enough, in branch order.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phloem.branching import Branch, Skeleton
+    >>> t = np.linspace(0, np.pi, 200)
+    >>> hook = Branch(np.c_[100 + 5 * np.sin(t), 50 - 5 * np.cos(t)], 1.0, parent=(0, 50))
+    >>> stem = Branch(np.c_[np.linspace(0, 200, 101), np.full(101, 50.0)], 1.0)
+    >>> turns = start_turns(Skeleton([stem, hook]), arc=12)
+    >>> bool(abs(turns[0] - 12 / 5 * (1 - 1 / 6)) < 0.05)
+    True
+    """
+    _check_skeleton(skeleton)
+    a = _check_arc(arc)
+    w = a / 6
+    out = []
+    for b in skeleton.branches:
+        if b.parent is None:
+            continue
+        pts, _, s = _dense(b, 1.0)
+        end = min(a, float(s[-1]))
+        if end < w + 1.0:
+            continue
+        at = np.linspace(w / 2, end - w / 2, math.ceil(end - w) + 1)
+        x0, y0 = np.interp(at - w / 2, s, pts[:, 0]), np.interp(at - w / 2, s, pts[:, 1])
+        x1, y1 = np.interp(at + w / 2, s, pts[:, 0]), np.interp(at + w / 2, s, pts[:, 1])
+        theta = np.unwrap(np.arctan2(y1 - y0, x1 - x0))
+        out.append(abs(float(theta[-1] - theta[0])))
+    return np.asarray(out, dtype=np.float64)
 
 
 def median_heading_change(skeleton: Skeleton, *, arc: float = ARC) -> float:

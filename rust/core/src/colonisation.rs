@@ -37,13 +37,16 @@ pub struct DensityView<'a> {
     pub width: usize,
 }
 
-/// Pixels whose density comes from branch `branch` within `near` vertices of `vertex` read as
-/// empty: a child starts on its parent, where every direction would see `D = 1`.
+/// Pixels whose density comes from branch `branch` within `near` vertices of `vertex` read only
+/// their excess over `floor`, `max(D − floor, 0)`: a child starts on its parent, where every
+/// direction would see `D = 1`, and `floor`, the parent's density at the child's tip, lets the
+/// child still see a turn back towards the parent.
 #[derive(Clone, Copy, Debug)]
 pub struct Skip {
     pub branch: i32,
     pub vertex: i32,
     pub near: i32,
+    pub floor: f64,
 }
 
 /// `samples` points at `length · k / samples`, `k = 1 ..= samples`, along each unit direction
@@ -436,6 +439,9 @@ pub fn density_ray_max(
 ) -> Result<Vec<f64>> {
     view.check()?;
     check_rays(rays)?;
+    if skip.is_some_and(|s| !s.floor.is_finite()) {
+        return Err(invalid("skip", "expected a finite floor"));
+    }
     let (h, w) = (view.height, view.width);
     Ok(ray_max(rays, |x, y| {
         let inside = pixel(x, y, h, w).map_or(0.0, |i| match skip {
@@ -444,7 +450,7 @@ pub fn density_ray_max(
                     && (i64::from(view.owner_vertex[i]) - i64::from(s.vertex)).abs()
                         <= i64::from(s.near) =>
             {
-                0.0
+                (f64::from(view.density[i]) - s.floor).max(0.0)
             }
             _ => f64::from(view.density[i]),
         });
@@ -680,19 +686,35 @@ mod tests {
             length: 6.0,
             samples: 6,
         };
-        let read = |skip: Option<(i32, i32)>| {
-            let skip = skip.map(|(branch, vertex)| Skip {
+        let read = |skip: Option<(i32, i32, f64)>| {
+            let skip = skip.map(|(branch, vertex, floor)| Skip {
                 branch,
                 vertex,
                 near: 2,
+                floor,
             });
             density_ray_max(o.view(), &rays, skip, None).unwrap()
         };
         assert_eq!(read(None), vec![0.75, 0.5, 0.0]);
         // the parent's pixel at vertex 8 is within 2 of vertex 6, not of vertex 5
-        assert_eq!(read(Some((3, 6))), vec![0.0, 0.5, 0.0]);
-        assert_eq!(read(Some((3, 5))), vec![0.75, 0.5, 0.0]);
-        assert_eq!(read(Some((2, 8))), vec![0.75, 0.5, 0.0]);
+        assert_eq!(read(Some((3, 6, 1.0))), vec![0.0, 0.5, 0.0]);
+        assert_eq!(read(Some((3, 5, 1.0))), vec![0.75, 0.5, 0.0]);
+        assert_eq!(read(Some((2, 8, 1.0))), vec![0.75, 0.5, 0.0]);
+        // below the floor (the parent's density at the tip) nothing; above it, the excess
+        assert_eq!(read(Some((3, 6, 0.5))), vec![0.25, 0.5, 0.0]);
+        assert_eq!(read(Some((3, 6, 0.8))), vec![0.0, 0.5, 0.0]);
+        assert!(density_ray_max(
+            o.view(),
+            &rays,
+            Some(Skip {
+                branch: 3,
+                vertex: 6,
+                near: 2,
+                floor: f64::NAN
+            }),
+            None
+        )
+        .is_err());
         // the border: the left ray ends at x = 4, five pixels from x = -1
         let b = density_ray_max(o.view(), &rays, None, Some(2.0)).unwrap();
         assert!((b[2] - (-25.0f64 / 4.0).exp()).abs() < 1e-15);

@@ -309,6 +309,7 @@ mod tests {
                     branch: 1,
                     vertex: 5,
                     near: 2,
+                    floor: 0.25,
                 }),
                 border_rho: (case == 1).then_some(4.0),
             });

@@ -23,7 +23,7 @@ type Chosen<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<f64>>);
 /// candidate's ray (`ray_of`, into `directions`), valid when its path (`relative`, `(C, m, 2)`,
 /// turned by `(cos, sin)` and moved to `tip`) stays in the `height × width` image and crosses
 /// none of `segments`. `density` = `(map, owner_branch, owner_vertex)` or None; `skip` =
-/// `(branch, vertex, near)`; `border_rho` counts the image border as structure.
+/// `(branch, vertex, near, floor)`; `border_rho` counts the image border as structure.
 #[pyfunction]
 #[pyo3(
     name = "growth_choose",
@@ -47,7 +47,7 @@ pub fn growth_choose_py<'py>(
     length: f64,
     samples: usize,
     density: Option<DensityMaps<'py>>,
-    skip: Option<(i32, i32, i32)>,
+    skip: Option<(i32, i32, i32, f64)>,
     border_rho: Option<f64>,
     guide: Option<PyReadonlyArray2<'py, f64>>,
     segments: PyReadonlyArray2<'py, f64>,
@@ -110,10 +110,11 @@ pub fn growth_choose_py<'py>(
         },
         colonisation: view.map(|view| Colonisation {
             view,
-            skip: skip.map(|(branch, vertex, near)| Skip {
+            skip: skip.map(|(branch, vertex, near, floor)| Skip {
                 branch,
                 vertex,
                 near,
+                floor,
             }),
             border_rho,
         }),
