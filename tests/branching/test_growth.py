@@ -807,13 +807,13 @@ def test_a_child_sees_the_parent_density_above_the_one_at_its_tip():
     # with the stamped map at pixel centres, so rays read exactly the parent's density beyond
     # what the tip already has, and a turn back towards the parent reads more than moving away
     from phloem import _core
-    from phloem.branching.growth import _Grower, _Growing, surface_density
+    from phloem.branching.growth import _Grower, _Growing
 
     rho = 5.0
     m, w, pts, thick = _stamped_world(rho, 6.0, 4.0, branch=0, first=0)
     rng = np.random.default_rng(1)
     for x, y in zip(rng.integers(12, 78, 200), rng.integers(16, 46, 200)):
-        assert surface_density(np.array([x, y], float), pts, thick, rho) == pytest.approx(float(w.dens[y, x]), abs=1e-6)
+        assert w.surface_density(np.array([x, y], float), pts, thick) == pytest.approx(float(w.dens[y, x]), abs=1e-6)
     g = _Grower(w, m)
     v = 11
     child = _Growing([pts[v].copy()], [1.0], [], [], math.pi / 2, (0, v), 1, 1)
@@ -825,7 +825,7 @@ def test_a_child_sees_the_parent_density_above_the_one_at_its_tip():
     tip = child.points[-1]
     floor = skip[3]
     assert 0.0 < floor < 1.0
-    assert floor == pytest.approx(surface_density(tip, pts, thick, rho))
+    assert floor == pytest.approx(w.surface_density(tip, pts, thick))
     # rays up (away), down (back to the parent) and along it, 2ρ long
     dirs = np.array([[0.0, -1.0], [0.0, 1.0], [1.0, 0.0]])
     C = 3

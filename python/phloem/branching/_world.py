@@ -106,6 +106,23 @@ class _World:
             float(self.rho),
         )
 
+    def surface_density(self, point: F64, pts: F64, thick: F64) -> float:
+        """``exp(-d²/ρ²)`` at ``point``, ``d`` its distance to the surface of the polyline ``pts``
+        with thickness ``thick`` (zero inside), and 0 beyond ``3ρ``: what :meth:`stamp` would
+        write there for those vertices alone."""
+        p = np.asarray(point, np.float64)
+        a, th = np.asarray(pts, np.float64), np.asarray(thick, np.float64)
+        if len(a) == 1:
+            d = float(np.linalg.norm(p - a[0]) - th[0])
+        else:
+            seg = a[1:] - a[:-1]
+            ll = np.einsum("ij,ij->i", seg, seg)
+            t = np.clip(np.einsum("ij,ij->i", p - a[:-1], seg) / np.maximum(ll, 1e-300), 0.0, 1.0)
+            near = a[:-1] + t[:, None] * seg
+            d = float(np.min(np.linalg.norm(p - near, axis=1) - ((1.0 - t) * th[:-1] + t * th[1:])))
+        d = max(d, 0.0)
+        return math.exp(-(d * d) / (self.rho * self.rho)) if d <= 3.0 * self.rho else 0.0
+
     def density_mean(self) -> float:
         if self.dens is None:
             return 0.0

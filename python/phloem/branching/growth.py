@@ -144,7 +144,7 @@ class _Grower:
         density = None
         if w.colonize and w.dens is not None and w.owner_branch is not None and w.owner_vertex is not None:
             density = (w.dens, w.owner_branch, w.owner_vertex)
-        skip = self.parent_skip(br)
+        skip = self.parent_skip(br) if density is not None else None  # no density, nothing to skip
         # the density and guidance terms, the frame and the crossings, for the best candidates
         valid, lq = _core.growth_choose(
             q,
@@ -190,8 +190,13 @@ class _Grower:
             return None
         floor = 1.0
         if br.parent_near is not None:
-            floor = surface_density(br.points[-1], br.parent_near[0], br.parent_near[1], self.world.rho)
+            floor = self.world.surface_density(br.points[-1], *br.parent_near)
         return br.parent[0], br.parent[1], self.near, floor
+
+    def near_parent(self, parent: Branch, vertex: int) -> tuple[F64, F64]:
+        """The parent's vertices within ``near`` of the attachment ``vertex`` and their thickness."""
+        lo, hi = max(vertex - self.near, 0), vertex + self.near + 1
+        return parent.points[lo:hi], parent.thickness[lo:hi]
 
     def _append(self, br: _Growing, i: int, new_pts: F64) -> None:
         self.append_elements(br, self.model.next_alpha[i], self.model.next_r[i], new_pts)
@@ -229,24 +234,6 @@ class _Grower:
             th = np.asarray(br.thickness[br.inserted : upto + 1])
             w.stamp(pts, th, br.index, br.inserted)
             br.inserted = upto
-
-
-def surface_density(point: F64, pts: F64, thick: F64, rho: float) -> float:
-    """``exp(-d²/ρ²)`` at ``point``, ``d`` its distance to the surface of the polyline ``pts``
-    with thickness ``thick`` (zero inside), and 0 beyond ``3ρ``, as the density map's stamp
-    computes it (§4.4)."""
-    p = np.asarray(point, np.float64)
-    a, th = np.asarray(pts, np.float64), np.asarray(thick, np.float64)
-    if len(a) == 1:
-        d = float(np.linalg.norm(p - a[0]) - th[0])
-    else:
-        seg = a[1:] - a[:-1]
-        ll = np.einsum("ij,ij->i", seg, seg)
-        t = np.clip(np.einsum("ij,ij->i", p - a[:-1], seg) / np.maximum(ll, 1e-300), 0.0, 1.0)
-        near = a[:-1] + t[:, None] * seg
-        d = float(np.min(np.linalg.norm(p - near, axis=1) - ((1.0 - t) * th[:-1] + t * th[1:])))
-    d = max(d, 0.0)
-    return math.exp(-(d * d) / (rho * rho)) if d <= 3.0 * rho else 0.0
 
 
 def _points_for(br: _Growing, alpha: F64, h: float) -> F64:
@@ -751,8 +738,7 @@ def grow(
                             partial=False,
                         )
                         if current is not None:
-                            lo, hi = max(v - grower.near, 0), v + grower.near + 1
-                            current.parent_near = (pb.points[lo:hi], pb.thickness[lo:hi])
+                            current.parent_near = grower.near_parent(pb, v)
                             break
                     if current is None and retries < _CHILD_RETRIES:
                         # blocked here (crossing, border): the same child from the parent's next-best vertex
@@ -869,9 +855,7 @@ def extend(
         bi,
     )
     if target.parent is not None:
-        pb, v = skeleton.branches[target.parent[0]], target.parent[1]
-        lo, hi = max(v - grower.near, 0), v + grower.near + 1
-        br.parent_near = (pb.points[lo:hi], pb.thickness[lo:hi])
+        br.parent_near = grower.near_parent(skeleton.branches[target.parent[0]], target.parent[1])
     hold = math.ceil(3.0 * rho / h) + 1
     for j, b in enumerate(skeleton.branches):
         if j != bi:
