@@ -20,6 +20,8 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
   not a pass mark);
 - the share of the input's and the output's children that hook where they start, turning by more
   than π/2 over their first ``3 m h`` px (``start_turns``, not a pass mark);
+- the median arc length between neighbouring children on one parent, input and output
+  (``furcation_gaps``, not a pass mark: children packed along their parents);
 - two-level fraction of the output (two-level inputs only);
 - the angle and thickness histogram distances of the output to the input's model, with the
   spread between the input's two halves that the growth tests bound them by (1.5× and 1×);
@@ -64,6 +66,7 @@ from phloem.metrics import (
     border_share,
     drift,
     drift_noise,
+    furcation_gaps,
     largest_tree_share,
     median_heading_change,
     skeleton_agreement,
@@ -97,6 +100,8 @@ class Result:
     border_out: float = math.nan
     hooks_in: float = math.nan
     hooks_out: float = math.nan
+    gap_in: float = math.nan
+    gap_out: float = math.nan
     two_level: float | None = None
     angle: float = math.nan
     angle_spread: float = math.nan
@@ -197,6 +202,8 @@ def measure(
     r.border_in, r.border_out = border_share(src), border_share(tgt)
     # not a mark either: children that hook back where they leave their parent (the contact sheets)
     r.hooks_in, r.hooks_out = (hooked_share(sk, 3.0 * res.bending.m * res.bending.h) for sk in (src, tgt))
+    # nor this: children packed along their parents, combs where the input spaces them
+    r.gap_in, r.gap_out = (median_gap(sk) for sk in (src, tgt))
     for attr, sk in (("heading_in", src), ("heading_out", tgt)):
         with contextlib.suppress(ValueError):
             setattr(r, attr, median_heading_change(sk))
@@ -228,6 +235,12 @@ def hooked_share(skeleton: Skeleton, arc: float) -> float:
     return float(np.mean(turns > math.pi / 2)) if len(turns) else math.nan
 
 
+def median_gap(skeleton: Skeleton) -> float:
+    """The median arc length between neighbouring children on one parent (NaN: no parent has two)."""
+    gaps = furcation_gaps(skeleton)
+    return float(np.median(gaps)) if len(gaps) else math.nan
+
+
 def inputs(folder: Path) -> list[Path]:
     return sorted(p for p in folder.glob("*") if p.suffix.lower() in SUFFIXES)
 
@@ -239,9 +252,9 @@ def _f(x: float | None, fmt: str = ".2f") -> str:
 def table(results: list[Result]) -> str:
     head = (
         "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input's noise) | heading in → out (rad) "
-        "| along the frame in → out | hooked starts in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
+        "| along the frame in → out | hooked starts in → out | children's gap px in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
-    lines = [head, "|" + "---|" * 14]
+    lines = [head, "|" + "---|" * 15]
     for r in results:
         fails = ", ".join(k for k, ok in r.passed.items() if not ok) or "—"
         if r.error:
@@ -251,7 +264,7 @@ def table(results: list[Result]) -> str:
         lines.append(
             f"| {r.input} | {r.seed} | {size} | {_f(r.f1)} ({_f(r.precision)}/{_f(r.recall)}) "
             f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} ({_f(r.drift_noise)}) | {_f(r.heading_in)} → {_f(r.heading_out)} "
-            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
+            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
             f"| {_f(r.seconds, '.1f')} | {fails} |"
         )
     return "\n".join(lines)

@@ -13,6 +13,7 @@ from phloem.branching.measures import (
     border_share,
     drift,
     drift_noise,
+    furcation_gaps,
     heading_change_histogram,
     heading_changes,
     largest_tree_share,
@@ -33,7 +34,7 @@ def arc_branch(radius: float, angle: float, centre=(150.0, 150.0), n: int = 2000
 def test_metrics_reexports_the_measures() -> None:
     for name in (
         "retrace_agreement", "skeleton_agreement", "largest_tree_share", "border_share", "drift", "drift_noise",
-        "two_level_fraction",
+        "two_level_fraction", "start_turns", "furcation_gaps",
     ):  # fmt: skip
         assert getattr(phloem.metrics, name) is getattr(phloem.branching.measures, name)
         assert name in phloem.metrics.__all__
@@ -400,3 +401,18 @@ def test_start_turns_is_the_turn_over_the_first_arc_of_every_child() -> None:
         start_turns(sk, arc=0.0)
     with pytest.raises(TypeError, match="^skeleton:"):
         start_turns([stem], arc=20.0)  # type: ignore[arg-type]
+
+
+def test_furcation_gaps_are_arc_lengths_between_neighbouring_children() -> None:
+    # a bent stem (arc length differs from the x distance) with children at vertices 40, 10, 25, 25
+    t = np.linspace(0.0, np.pi / 2, 61)
+    stem = Branch(np.c_[100 + 80 * np.sin(t), 100 - 80 * (1 - np.cos(t))], 1.0)
+    s = 80 * t
+    kids = [Branch([stem.points[v], stem.points[v] + [0.0, 15.0]], 1.0, parent=(0, v)) for v in (40, 10, 25, 25)]
+    # a grandchild alone on its parent gives no gap
+    only = Branch([kids[0].points[1], kids[0].points[1] + [10.0, 0.0]], 1.0, parent=(1, 1))
+    got = furcation_gaps(Skeleton([stem, *kids, only]))
+    assert got == pytest.approx([s[25] - s[10], 0.0, s[40] - s[25]], rel=1e-4, abs=1e-9)
+    assert furcation_gaps(Skeleton([stem])).shape == (0,)
+    with pytest.raises(TypeError, match="^skeleton:"):
+        furcation_gaps([stem])  # type: ignore[arg-type]

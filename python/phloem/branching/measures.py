@@ -26,6 +26,7 @@ __all__ = [
     "border_share",
     "drift",
     "drift_noise",
+    "furcation_gaps",
     "heading_change_histogram",
     "heading_changes",
     "largest_tree_share",
@@ -415,6 +416,47 @@ def start_turns(skeleton: Skeleton, *, arc: float = 20.0) -> F64:
         theta = np.unwrap(np.arctan2(y1 - y0, x1 - x0))
         out.append(abs(float(theta[-1] - theta[0])))
     return np.asarray(out, dtype=np.float64)
+
+
+def furcation_gaps(skeleton: Skeleton) -> F64:
+    """Arc length between neighbouring children's attachments on each parent: combs of children.
+
+    For every branch with two or more children, the distances along it between consecutive
+    attachment vertices (children attached at one vertex give 0). A structure whose children
+    are packed along their parents, or spaced more evenly than its input's, shows it in the
+    low quantiles.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+
+    Returns
+    -------
+    ndarray of float64
+        Pixels, parents in branch order, each parent's gaps from its start to its end.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phloem.branching import Branch, Skeleton
+    >>> stem = Branch(np.c_[np.linspace(0, 100, 51), np.full(51, 50.0)], 1.0)
+    >>> kids = [Branch([[x, 50.0], [x, 20.0]], 1.0, parent=(0, x // 2)) for x in (60, 20, 30)]
+    >>> furcation_gaps(Skeleton([stem, *kids])).tolist()
+    [10.0, 30.0]
+    """
+    _check_skeleton(skeleton)
+    at: dict[int, list[int]] = {}
+    for b in skeleton.branches:
+        if b.parent is not None:
+            at.setdefault(b.parent[0], []).append(b.parent[1])
+    out: list[F64] = []
+    for i in sorted(at):
+        if len(at[i]) < 2:
+            continue
+        pts = skeleton.branches[i].points
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+        out.append(np.diff(s[np.sort(np.asarray(at[i]))]))
+    return np.concatenate(out) if out else np.zeros(0, np.float64)
 
 
 def median_heading_change(skeleton: Skeleton, *, arc: float = ARC) -> float:
