@@ -7,7 +7,8 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from phloem.branching import BendingModel, Branch, FurcationModel, Skeleton, synthetic_skeleton
+from phloem.branching import BendingModel, Branch, FurcationModel, Skeleton, grow, synthetic_skeleton
+from phloem.branching.furcation import SPACING_QUANTILE
 
 H = 2.0
 
@@ -47,3 +48,35 @@ def test_pick_respects_min_spacing(models: tuple[BendingModel, FurcationModel]):
     assert len(picks) == len(set(picks)) >= 3
     assert min(abs(a - b) for a in picks for b in picks if a != b) >= 10
     assert all(0 < p < len(main) - 1 for p in picks)
+
+
+def _comb(walk: Callable[..., Branch], rng: np.random.Generator) -> Skeleton:
+    """A wandering stem with a child every 15 vertices, on alternate sides, and one more child
+    a vertex beside the second: the close pair a trace makes at a junction."""
+    stem = walk(rng, 200, 0.05, start=(20.0, 200.0))
+    at = [*range(15, 190, 15), 31]
+    kids = []
+    for j, v in enumerate(sorted(at)):
+        side = 1.0 if j % 2 else -1.0
+        t = stem.points[v + 1] - stem.points[v - 1]
+        heading = float(np.arctan2(-t[1], t[0])) + side * 1.0
+        kid = walk(rng, 25, 0.1, start=tuple(stem.points[v]), heading=heading)
+        kids.append(Branch(kid.points, np.minimum(kid.thickness, 2.0), (0, v)))
+    return Skeleton([stem, *kids], (400, 480))
+
+
+def test_default_spacing_ignores_the_input_s_closest_pair(walk_branch: Callable[..., Branch]):
+    # The smallest gap (1 vertex) would let children be picked a vertex apart all along every
+    # branch; the default is the gaps' 10 % quantile, and growth (picks, retries, top-ups) keeps it.
+    src = _comb(walk_branch, np.random.default_rng(3))
+    gaps = np.diff(sorted(v for v, _ in src.resample(H).children()[0]))
+    assert gaps.min() <= 2
+    fur = FurcationModel.fit(src, h=H)
+    assert fur.min_spacing == int(np.floor(np.quantile(gaps, SPACING_QUANTILE))) >= 10
+    bend = BendingModel.fit(src, h=H)
+    for seed in range(3):
+        out = grow(bend, fur, size=(400, 480), seed=seed)
+        for vs in out.children().values():
+            if len(vs) > 1:
+                assert np.diff(sorted(v for v, _ in vs)).min() >= fur.min_spacing
+        assert sum(len(vs) for vs in out.children().values()) >= 6

@@ -20,6 +20,10 @@ from .skeleton import Branch, Skeleton
 
 __all__ = ["FurcationModel"]
 
+#: The quantile of the input's furcation distances that ``FurcationModel.fit`` takes as its
+#: default ``min_spacing``: the closest pairs, a vertex or two apart, are children leaving one junction.
+SPACING_QUANTILE = 0.1
+
 
 def _noncausal(a_full: F64, r_full: F64, k: int, h: float) -> tuple[F64, F64]:
     """Non-causal neighbourhoods ``(α_{i-k..i+k}, r_{i-k..i+k} / h)`` of every vertex of a branch.
@@ -142,8 +146,11 @@ class FurcationModel:
             SVM soft-margin constant ``C``; furcations are weighted up by the class ratio.
         min_spacing : int, optional
             Default minimum index distance between furcations picked on one branch (0 = none).
-            Default: the smallest distance between two furcations on one input branch, so the
-            output never clusters furcations more tightly than the input does.
+            Default: the :data:`SPACING_QUANTILE` quantile of the distances between neighbouring
+            furcations on one input branch (rounded down), so the output clusters furcations no
+            more tightly than all but the input's closest pairs do. The smallest distance would
+            let the trace's close pairs (two children leaving one junction) set the spacing of
+            every branch.
 
         Returns
         -------
@@ -168,7 +175,7 @@ class FurcationModel:
         kids = src.children()
         if min_spacing is None:
             gaps = [int(g) for v in kids.values() for g in np.diff(sorted({i for i, _ in v}))]
-            min_spacing = min(gaps) if gaps else 0
+            min_spacing = int(np.floor(np.quantile(gaps, SPACING_QUANTILE))) if gaps else 0
         min_spacing = check_int(min_spacing, "min_spacing", 0)
         gens = _generations(src)
         if not any(kids.values()):
