@@ -672,6 +672,9 @@ def test_blocked_children_do_not_end_a_tree_short_of_its_template(monkeypatch):
         return real(world, grower, start, heading, r0, alpha, r, parent, *args, **kwargs)
 
     monkeypatch.setattr(growth_module, "_new_branch", runs_blocked)
+    # only the schedule above blocks: on this small canvas the crowding check would also end a
+    # tree where no branch has room left, which is not what this test is about
+    monkeypatch.setattr(growth_module, "_CROWDED_START", math.inf)
     template = input_trees(bend.source)[0].length
     for seed in range(4):
         out = grow(bend, fur, size=src.shape, seed=seed, max_length="input")
@@ -939,3 +942,60 @@ def test_a_minor_tree_without_room_is_left_out_not_replaced_by_the_main_tree(mon
         assert not any(calls)
         tried += bool(calls)
     assert tried  # at some seed the main tree fell short of the input's length and the minor tree was tried
+
+
+def test_a_child_does_not_start_squeezed_against_another_branch():
+    # a parent along y = 40 and another branch 8 px above it (ρ = 5): a child leaving straight
+    # up would come within ρ of that branch over its first 3 m h = 24 px, straight down it would
+    # not; along the parent it reads the parent beyond the 9 vertices (18 px) near the attachment
+    from phloem.branching._world import _World
+    from phloem.branching.growth import _Grower
+
+    m = BendingModel.fit(_meanders(), h=2.0)
+    w = _World(m, (60, 90), colonize=True, rho=5.0, guide=None, rng=np.random.default_rng(0))
+    xs = np.arange(0.0, 90.0, 2.0)
+    parent = np.stack([xs, np.full_like(xs, 40.0)], axis=1)
+    w.stamp(parent, np.ones(len(xs)), 0, 0)
+    g = _Grower(w, m)
+    assert (g.ray_length, g.near * m.h) == (24.0, 18.0)
+    start, v = parent[22], 22
+    assert not g.crowded_start(start, -math.pi / 2, (0, v))  # down: nothing there
+    assert not g.crowded_start(start, math.pi / 2, (0, v))  # up: nothing there yet
+    assert g.crowded_start(start, 0.0, (0, v))  # along the parent, beyond the skipped stretch
+    w.stamp(np.stack([xs, np.full_like(xs, 32.0)], axis=1), np.ones(len(xs)), 1, 0)
+    assert g.crowded_start(start, math.pi / 2, (0, v))
+    assert not g.crowded_start(start, -math.pi / 2, (0, v))
+    # 45° up: the ray crosses the other branch 11 px from the start
+    assert g.crowded_start(start, math.pi / 4, (0, v))
+    # without colonisation there is no density to read
+    bare = _World(m, (60, 90), colonize=False, rho=5.0, guide=None, rng=np.random.default_rng(0))
+    assert not _Grower(bare, m).crowded_start(start, math.pi / 2, (0, v))
+
+
+def test_children_start_where_there_is_room(models: tuple[BendingModel, FurcationModel], monkeypatch):
+    # a crowded canvas: the share of children whose first 3ρ come within ρ of a branch grown
+    # before them (other than the parent) is lower at every seed than without the start check
+    import phloem.branching.growth as growth
+
+    bend, fur = models
+    rho = bend.m * bend.h
+
+    def squeezed(seed: int) -> float:
+        sk = grow(bend, fur, size=(160, 200), seed=seed, max_length=2500.0, children=4)
+        bad = n = 0
+        for i, b in enumerate(sk.branches):
+            others = [o for j, o in enumerate(sk.branches[:i]) if b.parent is not None and j != b.parent[0]]
+            if not others:
+                continue
+            pts, th = np.vstack([o.points for o in others]), np.concatenate([o.thickness for o in others])
+            s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(b.points, axis=0), axis=1))])
+            first = b.points[(s > 0) & (s <= 3 * rho)]
+            d = np.linalg.norm(first[:, None] - pts[None], axis=2)
+            n += 1
+            bad += bool((d - th[None]).min() < rho) if len(first) else 0
+        return bad / n
+
+    with_check = [squeezed(seed) for seed in range(4)]
+    monkeypatch.setattr(growth, "_CROWDED_START", math.inf)
+    without = [squeezed(seed) for seed in range(4)]
+    assert all(a < b for a, b in zip(with_check, without))

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import _core
-from ._elements import F64, _bin
+from ._elements import F64, _bin, _direction
 from .bending import BendingModel, arc_window_turns
 
 
@@ -137,6 +137,27 @@ class _World:
         out = np.zeros(ix.shape)
         out[inside] = grid[iy[inside], ix[inside]]
         return out
+
+    def ray_density(
+        self,
+        starts: F64,
+        headings: F64,
+        length: float,
+        samples: int,
+        parent: tuple[int, int] | None = None,
+        near: int = 0,
+        *,
+        include_start: bool = True,
+    ) -> F64:
+        """The largest density along each ray from ``starts`` (``(n, 2)``) along ``headings``
+        (``(n,)``), ``length`` px long and read every ``length / samples`` px from the start
+        (``include_start``) or from the first step: how crowded a new branch's first stretch
+        would be. With ``parent = (branch, vertex)`` the parent's vertices within ``near`` of the
+        vertex read as empty (a child starts on them)."""
+        assert self.dens is not None
+        s = length * np.arange(0 if include_start else 1, samples + 1) / samples
+        pts = np.asarray(starts)[:, None, :] + _direction(np.asarray(headings))[:, None, :] * s[None, :, None]
+        return np.asarray(self._lookup(_DensityView(self, parent, near), pts).max(axis=1), np.float64)
 
     def inside(self, pts: F64) -> NDArray[np.bool_]:
         H, W = self.shape

@@ -45,7 +45,7 @@ from .._progress import Progress
 from .._validate import check_float, check_int, check_seed
 from ._elements import F64, _check_skeleton, _direction, _elements, _tangent, _wrap
 from ._forest import InputTree, input_trees
-from ._world import _DensityView, _guide_map, _World
+from ._world import _guide_map, _World
 from .bending import BendingModel, block_sums, course_deviation
 from .furcation import FurcationModel
 from .skeleton import Branch, Skeleton
@@ -61,6 +61,10 @@ _CHILD_RETRIES = 3
 _TOP_UPS = 256
 #: Density along its first ``3 m h`` over which a connected input's further tree does not start.
 _CROWDED = 0.5
+#: A child whose first ``3 m h`` reads a density above this (it would come within ``ρ``, the
+#: paper's "how close the different branches are allowed to approach", of other structure)
+#: does not start there: squeezed between branches it could only run alongside them.
+_CROWDED_START = math.exp(-1.0)
 
 
 @dataclass
@@ -192,6 +196,19 @@ class _Grower:
         if br.parent_near is not None:
             floor = self.world.surface_density(br.points[-1], *br.parent_near)
         return br.parent[0], br.parent[1], self.near, floor
+
+    def crowded_start(self, start: F64, heading: float, parent: tuple[int, int]) -> bool:
+        """Whether a child leaving ``parent = (branch, vertex)`` at ``start`` along ``heading``
+        would come within ``ρ`` of other structure (density over :data:`_CROWDED_START`) over
+        its first ``3 m h``; the parent near the attachment does not count."""
+        w = self.world
+        if w.dens is None:
+            return False
+        d = w.ray_density(
+            np.asarray(start)[None, :], np.array([heading]), self.ray_length, self.ray_samples, parent, self.near,
+            include_start=False,
+        )  # fmt: skip
+        return bool(d[0] > _CROWDED_START)
 
     def near_parent(self, parent: Branch, vertex: int) -> tuple[F64, F64]:
         """The parent's vertices within ``near`` of the attachment ``vertex`` and their thickness."""
@@ -392,7 +409,7 @@ def _place_root(
     image reads as a foreign body. Returns None when no try can start.
     """
     H, W = shape
-    h, rho = bending.h, world.rho
+    rho = world.rho
     xs = np.zeros(tries)
     ys = np.zeros(tries)
     js = np.zeros(tries, np.int64)
@@ -408,11 +425,7 @@ def _place_root(
         xs[t], ys[t], js[t], heads[t] = x, y, j, bending.source.branches[j].heading()
     score = np.zeros(tries)
     if world.dens is not None:
-        samples = max(3 * bending.m, 4)
-        s = 3.0 * bending.m * h * np.arange(samples + 1) / samples
-        tip = np.stack([xs, ys], axis=1)
-        pts = tip[:, None, :] + _direction(heads)[:, None, :] * s[None, :, None]
-        score = world._lookup(_DensityView(world), pts).max(axis=1)
+        score = world.ray_density(np.stack([xs, ys], axis=1), heads, grower.ray_length, grower.ray_samples)
     near = np.arange(tries) < tries // 2
     order = np.argsort(score + np.where(near & (score < 0.05), -1.0, 0.0), kind="stable")
     if not anywhere:
@@ -457,7 +470,8 @@ def grow(
     root's length; each finished branch gets as many furcations from the furcation model as a
     branch of the template of the same generation has, drawn together with that branch's
     length, whose children are grown the same way, breadth first. A child that cannot start
-    at its vertex (crossing, border) tries the parent's next-best vertices; a tree left short
+    at its vertex (crossing, border, or within ``ρ`` of other structure over its first ``3 m h``)
+    tries the parent's next-best vertices; a tree left short
     of its template's length gets further furcations on its own branches.
 
     With ``roots`` above 1, or with ``max_length="input"`` (about as much structure as the
@@ -724,6 +738,8 @@ def grow(
                     tried.setdefault(pi, []).append(v)
                     for j in furcation.child_start(pb, v, rng)[: max(furcation.c, 4)]:
                         hd = _tangent(pb, v) + float(furcation.offsets[j])
+                        if grower.crowded_start(pb.points[v], hd, (pi, v)):
+                            continue  # blocked as a crossing start is: the next example, vertex or top-up
                         current = _new_branch(
                             world,
                             grower,
@@ -741,8 +757,10 @@ def grow(
                             current.parent_near = grower.near_parent(pb, v)
                             break
                     if current is None and retries < _CHILD_RETRIES:
-                        # blocked here (crossing, border): the same child from the parent's next-best vertex
-                        alt = furcation.pick(pb, 1, existing=tried[pi], min_spacing=min_spacing)
+                        # blocked here (crossing, border, crowding): the same child from the parent's
+                        # next-best vertex, kept apart from its siblings still queued as from those tried
+                        queued = [e[1] for e in queue[qpos + 1 :] if e[0] == pi]
+                        alt = furcation.pick(pb, 1, existing=tried[pi] + queued, min_spacing=min_spacing)
                         if alt:
                             queue[qpos] = (pi, alt[0], gen, goal, d)
                             retries += 1
