@@ -18,7 +18,8 @@ stroke measures of Luo et al.'s edits (coverage of the target strokes, width agr
 corresponding strokes; defined in :mod:`phloem.strokes.measures`), and the measures of whether a
 synthesised branching structure looks like its input's kind (re-trace agreement, largest-tree
 share, heading-change drift, two-level fraction, the share of the structure that runs along the frame,
-and how much children turn where they start; defined in :mod:`phloem.branching.measures`).
+how much children turn where they start and how far apart they leave their parent; defined in
+:mod:`phloem.branching.measures`).
 """
 
 from __future__ import annotations

@@ -52,6 +52,11 @@ def _elements(branch: Branch) -> tuple[F64, F64]:
     return branch.angles(), branch.thickness[1:-1].copy()
 
 
+def _arc_lengths(branch: Branch) -> F64:
+    """The arc length from ``branch``'s first vertex to each of its vertices, px."""
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(branch.points, axis=0), axis=1))])
+
+
 def _generations(skeleton: Skeleton) -> list[int]:
     gen: list[int] = []
     for b in skeleton.branches:

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validate import as_image, check_float, check_int
+from ._elements import _arc_lengths
 from ._pixels import F64, _check_skeleton, _rot
 from .skeleton import Branch, Skeleton
 
@@ -156,10 +157,6 @@ def _at(branch: Branch, cum: F64, arcs: F64) -> tuple[F64, F64]:
     return pts, np.interp(a, cum, branch.thickness)
 
 
-def _cum(branch: Branch) -> F64:
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(branch.points, axis=0), axis=1))])
-
-
 def _radius_cap(skeleton: Skeleton, rf: float) -> float:
     """Largest fragment radius: ``rf`` times twice the 90th percentile of the thickness.
 
@@ -207,7 +204,7 @@ def cover(skeleton: Skeleton, lam: float, rf: float, k: int, *, order: bool, fur
     replaces the first fragment of its child branch and follows the parent's fragments).
     Without ``furcations`` no furcation fragments are made."""
     out: list[Fragment] = []
-    cums = [_cum(b) for b in skeleton.branches]
+    cums = [_arc_lengths(b) for b in skeleton.branches]
     rmax = _radius_cap(skeleton, rf)
     for bi, b in enumerate(skeleton.branches):
         cum = cums[bi]

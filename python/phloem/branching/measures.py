@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_image, check_float, check_int
-from ._elements import F64, _abs_turn, _bin, _check_skeleton
+from ._elements import F64, _abs_turn, _arc_lengths, _bin, _check_skeleton
 from .bending import ARC  # the arc the bending model matches, so that the two stay one
 from .histograms import _hist, histogram_distance
 from .skeleton import Branch, Skeleton
@@ -63,8 +63,7 @@ class Agreement:
 
 def _dense(branch: Branch, spacing: float) -> tuple[F64, F64, F64]:
     """Points, thicknesses and arc positions along ``branch`` at most ``spacing`` px apart (ends included)."""
-    seg = np.linalg.norm(np.diff(branch.points, axis=0), axis=1)
-    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    cum = _arc_lengths(branch)
     n = max(2, math.ceil(cum[-1] / spacing) + 1)
     s = np.linspace(0.0, float(cum[-1]), n)
     pts = np.stack([np.interp(s, cum, branch.points[:, 0]), np.interp(s, cum, branch.points[:, 1])], axis=1)
@@ -453,8 +452,7 @@ def furcation_gaps(skeleton: Skeleton) -> F64:
     for i in sorted(at):
         if len(at[i]) < 2:
             continue
-        pts = skeleton.branches[i].points
-        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+        s = _arc_lengths(skeleton.branches[i])
         out.append(np.diff(s[np.sort(np.asarray(at[i]))]))
     return np.concatenate(out) if out else np.zeros(0, np.float64)
 
