@@ -22,6 +22,9 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
   than π/2 over their first ``3 m h`` px (``start_turns``, not a pass mark);
 - the median arc length between neighbouring children on one parent, input and output
   (``furcation_gaps``, not a pass mark: children packed along their parents);
+- the L1 distance of the output's histogram of directions on the image to the input's, and the
+  input's ``direction_concentration`` (``orientation_distance``, not a pass mark: bolts that
+  hang down in the input and run sideways in the output);
 - two-level fraction of the output (two-level inputs only);
 - the angle and thickness histogram distances of the output to the input's model, with the
   spread between the input's two halves that the growth tests bound them by (1.5× and 1×);
@@ -64,11 +67,13 @@ from phloem.branching import (
 from phloem.branching.measures import resolve_trace_options
 from phloem.metrics import (
     border_share,
+    direction_concentration,
     drift,
     drift_noise,
     furcation_gaps,
     largest_tree_share,
     median_heading_change,
+    orientation_distance,
     skeleton_agreement,
     start_turns,
     two_level_fraction,
@@ -102,6 +107,8 @@ class Result:
     hooks_out: float = math.nan
     gap_in: float = math.nan
     gap_out: float = math.nan
+    directions: float = math.nan
+    concentration: float = math.nan
     two_level: float | None = None
     angle: float = math.nan
     angle_spread: float = math.nan
@@ -204,6 +211,9 @@ def measure(
     r.hooks_in, r.hooks_out = (hooked_share(sk, 3.0 * res.bending.m * res.bending.h) for sk in (src, tgt))
     # nor this: children packed along their parents, combs where the input spaces them
     r.gap_in, r.gap_out = (median_gap(sk) for sk in (src, tgt))
+    # nor this: the ways the structure runs on the image, which the turn measures do not see
+    with contextlib.suppress(ValueError):
+        r.directions, r.concentration = orientation_distance(src, tgt), direction_concentration(src)
     for attr, sk in (("heading_in", src), ("heading_out", tgt)):
         with contextlib.suppress(ValueError):
             setattr(r, attr, median_heading_change(sk))
@@ -252,9 +262,9 @@ def _f(x: float | None, fmt: str = ".2f") -> str:
 def table(results: list[Result]) -> str:
     head = (
         "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input's noise) | heading in → out (rad) "
-        "| along the frame in → out | hooked starts in → out | children's gap px in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
+        "| along the frame in → out | hooked starts in → out | children's gap px in → out | directions L1 (input's concentration) | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
-    lines = [head, "|" + "---|" * 15]
+    lines = [head, "|" + "---|" * 16]
     for r in results:
         fails = ", ".join(k for k, ok in r.passed.items() if not ok) or "—"
         if r.error:
@@ -264,7 +274,7 @@ def table(results: list[Result]) -> str:
         lines.append(
             f"| {r.input} | {r.seed} | {size} | {_f(r.f1)} ({_f(r.precision)}/{_f(r.recall)}) "
             f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} ({_f(r.drift_noise)}) | {_f(r.heading_in)} → {_f(r.heading_out)} "
-            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
+            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.directions)} ({_f(r.concentration)}) | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
             f"| {_f(r.seconds, '.1f')} | {fails} |"
         )
     return "\n".join(lines)

@@ -8,8 +8,9 @@ input | input with its traced skeleton | grown skeleton | output image | output 
 re-traced skeleton. Skeletons are drawn as sheet_branching_trace draws them (roots red,
 children yellow, deeper cyan, the traced radii as a green outline). The captions carry the
 measures of benches/quality/branching_quality.py: largest-tree share of input and output,
-median heading change over 60 px and the drift L1, re-trace F1, two-level fraction (masks), and
-the share of the length along the frame. ``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel`` and
+median heading change over 60 px and the drift L1, re-trace F1, two-level fraction (masks),
+the share of the length along the frame, the input's direction concentration ("one way") and the
+output's direction-histogram distance to it. ``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel`` and
 ``--gap-diversity`` are those of the quality script.
 """
 
@@ -67,10 +68,10 @@ def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[
     return [
         _label(_fit(_show(img), interpolation=cv2.INTER_AREA), f"{name} seed {seed}, {seconds:.0f} s"),
         _label(_fit(overlay(_show(img), res.source, w), interpolation=cv2.INTER_AREA),
-               f"traced: tree {r.share_in:.2f}, turn {r.heading_in:.2f} rad, frame {r.border_in:.2f}"),
+               f"traced: tree {r.share_in:.2f}, turn {r.heading_in:.2f} rad, frame {r.border_in:.2f}, one way {r.concentration:.2f}"),
         _label(_fit(overlay(np.zeros(img.shape[:2], np.float32), res.target, w), interpolation=cv2.INTER_AREA),
                f"grown: tree {r.share_out:.2f}, turn {r.heading_out:.2f}, drift {r.drift:.2f} (noise {r.drift_noise:.2f}), frame {r.border_out:.2f}"),
-        _label(_fit(_show(res.image), interpolation=cv2.INTER_AREA), f"output{two}"),
+        _label(_fit(_show(res.image), interpolation=cv2.INTER_AREA), f"output{two}, directions L1 {r.directions:.2f}"),
         _label(_fit(retraced, interpolation=cv2.INTER_AREA),
                f"re-traced: F1 {r.f1:.2f} (P {r.precision:.2f} R {r.recall:.2f})"),
     ]  # fmt: skip

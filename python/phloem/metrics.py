@@ -18,7 +18,8 @@ stroke measures of Luo et al.'s edits (coverage of the target strokes, width agr
 corresponding strokes; defined in :mod:`phloem.strokes.measures`), and the measures of whether a
 synthesised branching structure looks like its input's kind (re-trace agreement, largest-tree
 share, heading-change drift, two-level fraction, the share of the structure that runs along the frame,
-how much children turn where they start and how far apart they leave their parent; defined in
+how much children turn where they start and how far apart they leave their parent, and which ways it
+runs on the image; defined in
 :mod:`phloem.branching.measures`).
 """
 
@@ -40,6 +41,8 @@ from .branching.histograms import angle_histogram, histogram_distance, thickness
 from .branching.measures import (
     Agreement,
     border_share,
+    direction_concentration,
+    direction_histogram,
     drift,
     drift_noise,
     furcation_gaps,
@@ -47,6 +50,7 @@ from .branching.measures import (
     heading_changes,
     largest_tree_share,
     median_heading_change,
+    orientation_distance,
     retrace_agreement,
     skeleton_agreement,
     start_turns,
@@ -60,6 +64,8 @@ __all__ = [
     "border_share",
     "chord_length",
     "coherence_map",
+    "direction_concentration",
+    "direction_histogram",
     "drift",
     "drift_noise",
     "emd",
@@ -74,6 +80,7 @@ __all__ = [
     "layer_objective",
     "leaf_diversity",
     "median_heading_change",
+    "orientation_distance",
     "patch_coherence",
     "repetition",
     "retrace_agreement",

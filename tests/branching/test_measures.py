@@ -11,6 +11,8 @@ import phloem
 from phloem.branching import Branch, Skeleton, trace
 from phloem.branching.measures import (
     border_share,
+    direction_concentration,
+    direction_histogram,
     drift,
     drift_noise,
     furcation_gaps,
@@ -18,6 +20,7 @@ from phloem.branching.measures import (
     heading_changes,
     largest_tree_share,
     median_heading_change,
+    orientation_distance,
     resolve_trace_options,
     retrace_agreement,
     skeleton_agreement,
@@ -34,7 +37,8 @@ def arc_branch(radius: float, angle: float, centre=(150.0, 150.0), n: int = 2000
 def test_metrics_reexports_the_measures() -> None:
     for name in (
         "retrace_agreement", "skeleton_agreement", "largest_tree_share", "border_share", "drift", "drift_noise",
-        "two_level_fraction", "start_turns", "furcation_gaps",
+        "two_level_fraction", "start_turns", "furcation_gaps", "direction_histogram", "direction_concentration",
+        "orientation_distance",
     ):  # fmt: skip
         assert getattr(phloem.metrics, name) is getattr(phloem.branching.measures, name)
         assert name in phloem.metrics.__all__
@@ -416,3 +420,64 @@ def test_furcation_gaps_are_arc_lengths_between_neighbouring_children() -> None:
     assert furcation_gaps(Skeleton([stem])).shape == (0,)
     with pytest.raises(TypeError, match="^skeleton:"):
         furcation_gaps([stem])  # type: ignore[arg-type]
+
+
+# -- directions on the image -------------------------------------------------------------------
+
+
+def _segments(angles_deg: list[float], lengths: list[float]) -> Skeleton:
+    """One two-vertex branch per (angle, length), counter-clockwise on screen, spread apart."""
+    brs = []
+    for i, (a, n) in enumerate(zip(angles_deg, lengths)):
+        start = np.array([50.0 + 30 * i, 200.0])
+        t = np.deg2rad(a)
+        brs.append(Branch([start, start + n * np.array([np.cos(t), -np.sin(t)])], 1.0))
+    return Skeleton(brs)
+
+
+def test_direction_histogram_weights_axes_by_length_in_bins_centred_on_the_image_axes() -> None:
+    # 12 bins of 15 degrees centred on 0, 15, ...: 7 and -7 degrees fall in the horizontal bin,
+    # an edge and its reverse in one bin, 95 degrees beside the vertical's
+    sk = _segments([7.0, -7.0, 180.0, 90.0, 270.0, 95.0, 50.0], [10.0, 10.0, 20.0, 30.0, 10.0, 15.0, 5.0])
+    hist, edges = direction_histogram(sk)
+    want = np.zeros(12)
+    want[0] = 40.0
+    want[6] = 40.0
+    want[round(95 / 15)] += 15.0  # 95 degrees: bin 6 is [82.5, 97.5)
+    want[round(50 / 15)] += 5.0  # bin 3 is [37.5, 52.5)
+    assert hist == pytest.approx(want / want.sum())
+    assert edges[0] == pytest.approx(-np.pi / 24) and edges[-1] == pytest.approx(np.pi - np.pi / 24)
+    # a polyline's edges each count with their own direction
+    bent = Skeleton([Branch([[0.0, 0.0], [30.0, 0.0], [30.0, 10.0]], 1.0)])
+    assert direction_histogram(bent, bins=2)[0] == pytest.approx([0.75, 0.25])
+
+
+def test_direction_concentration_is_the_mean_resultant_length_of_doubled_axes() -> None:
+    rng = np.random.default_rng(0)
+    a = rng.uniform(0, 360, 40)
+    n = rng.uniform(5, 30, 40)
+    t = np.deg2rad(a)
+    brute = abs(np.sum(n * np.exp(2j * t))) / n.sum()
+    assert direction_concentration(_segments(list(a), list(n))) == pytest.approx(brute)
+    assert direction_concentration(_segments([90.0, 270.0, 90.0], [10.0, 20.0, 5.0])) == pytest.approx(1.0)
+    # two perpendicular axes equally: no one way
+    assert direction_concentration(_segments([0.0, 90.0], [10.0, 10.0])) == pytest.approx(0.0, abs=1e-12)
+    # turning the structure does not change it
+    assert direction_concentration(_segments(list(a + 33.0), list(n))) == pytest.approx(brute)
+
+
+def test_orientation_distance_sees_a_turned_structure_that_the_turn_measures_do_not() -> None:
+    a = [80.0, 95.0, 100.0, 85.0, 90.0]
+    n = [40.0, 60.0, 30.0, 50.0, 70.0]
+    hanging = _segments(a, n)
+    assert orientation_distance(hanging, hanging) == 0.0
+    # turned by 90 degrees: every bin moves, so the histograms share nothing
+    turned = _segments([x - 90.0 for x in a], n)
+    assert orientation_distance(hanging, turned) == pytest.approx(2.0)
+    # half of the length turned: half the mass moves
+    half = _segments([90.0, 0.0], [50.0, 50.0])
+    assert orientation_distance(_segments([90.0], [100.0]), half) == pytest.approx(1.0)
+    with pytest.raises(TypeError, match="^candidate:"):
+        orientation_distance(hanging, [1, 2])  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="^skeleton: the skeleton has no length"):
+        direction_histogram(Skeleton([Branch([[3.0, 3.0], [3.0, 3.0]], 1.0)]))
