@@ -77,3 +77,50 @@ def test_synthesize_resolves_total_turn_and_repel_border_from_the_source():
     assert border_off.bending.total_turn == 2.0 and border_off.target != auto.target
     paper = branching.synthesize(img, sk, size=size, seed=3, total_turn=0.0)
     assert paper.bending.total_turn == 0.0
+
+
+def _hanging(n: int, jitter: float) -> branching.Skeleton:
+    """``n`` branches zig-zagging down the image by ``jitter`` px either side."""
+    rng = np.random.default_rng(1)
+    brs = []
+    for i in range(n):
+        y = np.arange(10.0, 190.0, 6.0)
+        x = 20.0 + 25 * i + rng.uniform(-jitter, jitter, len(y))
+        brs.append(branching.Branch(np.c_[x, y], 2.0))
+    return branching.Skeleton(brs, (200, 40 + 25 * n))
+
+
+def test_orientation_default_turns_on_where_the_input_runs_one_way():
+    from phloem.metrics import direction_concentration
+
+    for jitter in (0.0, 2.0, 4.0, 6.0, 12.0):
+        sk = _hanging(5, jitter)
+        on = direction_concentration(sk) >= 0.4
+        assert branching.orientation_default(sk) == (3.0 if on else 0.0)
+    assert branching.orientation_default(_hanging(5, 1.0)) == 3.0  # nearly straight down
+    assert branching.orientation_default(_hanging(5, 12.0)) == 0.0  # zig-zags every way
+    # a caller's weight is kept; a structure of no length has no direction
+    assert branching.orientation_default(_hanging(5, 1.0), orientation=0.5) == 0.5
+    assert branching.orientation_default(_hanging(5, 1.0), guided=True) == 0.0  # a guide sets the way
+    assert branching.orientation_default(_hanging(5, 1.0), orientation=0.5, guided=True) == 0.5
+    dot = branching.Skeleton([branching.Branch(np.array([[5.0, 5.0], [5.0, 5.0]]), np.full(2, 1.0))], (10, 10))
+    assert branching.orientation_default(dot) == 0.0
+    with pytest.raises(TypeError, match="^skeleton: expected"):
+        branching.orientation_default("not a skeleton")  # type: ignore[arg-type]
+
+
+def test_synthesize_resolves_orientation_from_the_source():
+    for jitter, want in ((1.0, 3.0), (12.0, 0.0)):
+        sk = _hanging(4, jitter)
+        img = np.full(sk.shape, 0.8, np.float32)
+        for b in sk.branches:
+            cv2.polylines(img, [np.round(b.points).astype(np.int32)], False, 0.1, 3)
+        auto = branching.synthesize(img, sk, seed=2)
+        assert auto.bending.orientation == want
+        explicit = branching.synthesize(img, sk, seed=2, orientation=want)
+        assert explicit.target == auto.target
+        other = branching.synthesize(img, sk, seed=2, orientation=3.0 - want)
+        assert other.bending.orientation == 3.0 - want and other.target != auto.target
+    # a guide sets the way the new structure runs (§4.5)
+    guided = branching.synthesize(img, _hanging(4, 1.0), seed=2, guide=np.array([[10.0, 100.0], [110.0, 100.0]]))
+    assert guided.bending.orientation == 0.0

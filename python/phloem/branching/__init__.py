@@ -22,7 +22,7 @@ from .frame import valid_region
 from .furcation import FurcationModel
 from .growth import extend, grow
 from .histograms import angle_histogram, histogram_distance, thickness_histogram
-from .pipeline import SynthesisResult, course_defaults, fit_models, synthesize
+from .pipeline import SynthesisResult, course_defaults, fit_models, orientation_default, synthesize
 from .rectify import rectify, unrectify
 from .render import RenderResult, render
 from .skeleton import Branch, Skeleton, SkeletonError
@@ -48,6 +48,7 @@ __all__ = [
     "grow",
     "histogram_distance",
     "histogram_figure",
+    "orientation_default",
     "rectify",
     "render",
     "rigid_align",

@@ -335,8 +335,10 @@ class BendingModel:
             the global path, to the user's guidance: each history also holds the direction of
             its last edge on the image, matched against the branch's heading like the course.
             Continuations then come from input branches running the same way, so lightning
-            keeps falling and a leaf's side veins keep their slant. Off by default: the
-            marks fall on the shared inputs (``docs/pipelines/branching/quality.md``).
+            keeps falling and a leaf's side veins keep their slant. Off by default: on
+            inputs that run every way the marks fall (``docs/pipelines/branching/quality.md``);
+            :func:`synthesize` turns it on where the input runs one way
+            (:func:`orientation_default`).
         turn_histogram : float
             Weight of the heading-change histogram (default 3; 0 switches it off). Beyond the
             paper: §4.2's histogram matching applied to a third histogram, of the absolute

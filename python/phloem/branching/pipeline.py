@@ -16,18 +16,24 @@ from .bending import BendingModel
 from .frame import valid_region
 from .furcation import FurcationModel
 from .growth import grow
-from .measures import drift_noise
+from .measures import direction_concentration, drift_noise
 from .render import RenderResult, render
 from .skeleton import Skeleton
 from .trace import trace
 
-__all__ = ["SynthesisResult", "course_defaults", "fit_models", "synthesize"]
+__all__ = ["SynthesisResult", "course_defaults", "fit_models", "orientation_default", "synthesize"]
 
 #: The largest ``drift_noise`` at which an input's heading statistics count as well determined:
 #: half of issue 19's drift mark (0.25), so that the mark measures the synthesis, not the input.
 COURSE_NOISE = 0.125
 #: The total-turn weight :func:`course_defaults` turns on (the weight measured).
 COURSE_TOTAL_TURN = 2.0
+#: The :func:`~phloem.metrics.direction_concentration` from which an input counts as running one
+#: way: for axes drawn from a von Mises law, its most common direction is then about six times
+#: as frequent as its least common.
+ORIENTATION_CONCENTRATION = 0.4
+#: The heading weight :func:`orientation_default` turns on there (the weight measured).
+ORIENTATION_WEIGHT = 3.0
 
 
 @dataclass
@@ -172,6 +178,52 @@ def course_defaults(
 
 
 @renamed(k="order", c="n_best")
+def orientation_default(skeleton: Skeleton, *, orientation: float | None = None, guided: bool = False) -> float:
+    """:func:`synthesize`'s default of ``orientation`` for this source skeleton.
+
+    ``3.0`` where the input runs one way on the image, that is where
+    :func:`phloem.metrics.direction_concentration` of ``skeleton`` is at least 0.4 (bolts that
+    hang down, cracks and roots that run along one axis): branches then keep the ways the
+    input's run, which the paper's turn-only model forgets after a few steps. Otherwise
+    ``0.0``, the paper's orientation-independent model: a structure that runs every way has
+    no direction to keep, and matching its headings only narrows the candidates. Also ``0.0``
+    where the growth is ``guided``: a guide says which way the new structure runs (§4.5).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        The example structure.
+    orientation : float, optional
+        A weight chosen by the caller, returned as it is.
+    guided : bool, optional
+        Whether :func:`grow` is given a ``guide`` (default False).
+
+    Returns
+    -------
+    float
+        ``orientation`` for :func:`fit_models`.
+
+    Examples
+    --------
+    >>> from phloem.branching import Branch, Skeleton
+    >>> orientation_default(Skeleton([Branch([[10, 0], [12, 50], [9, 100]], 1.0)]))
+    3.0
+    >>> orientation_default(Skeleton([Branch([[0, 0], [50, 0], [50, 50]], 1.0)]))
+    0.0
+    """
+    if not isinstance(skeleton, Skeleton):
+        raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
+    if orientation is not None:
+        return orientation
+    if guided:
+        return 0.0
+    try:
+        directed = direction_concentration(skeleton) >= ORIENTATION_CONCENTRATION
+    except ValueError:  # no branch with any length: no direction to keep
+        directed = False
+    return ORIENTATION_WEIGHT if directed else 0.0
+
+
 def synthesize(
     image: Any,
     skeleton: Skeleton | None = None,
@@ -187,7 +239,7 @@ def synthesize(
     coarse_history: float = 2.0,
     total_turn: float | None = None,
     turn_bound: float | None = None,
-    orientation: float = 0.0,
+    orientation: float | None = None,
     turn_histogram: float = 3.0,
     generations: int | None = None,
     max_length: float | str | None = "input",
@@ -225,8 +277,10 @@ def synthesize(
         Keyword arguments for :func:`trace` (e.g. ``{"kind": "dark", "sigmas": (1.5, 3, 5)}``).
     h, order, m, n_best, course, coarse_history, total_turn, turn_bound, orientation, turn_histogram : optional
         Model parameters, as in :func:`fit_models` (``k`` and ``c`` before, deprecated).
-        ``total_turn`` defaults to :func:`course_defaults`'s for the source skeleton, and
-        ``turn_bound`` to 5 where the total turn is matched.
+        ``total_turn`` defaults to :func:`course_defaults`'s for the source skeleton,
+        ``turn_bound`` to 5 where the total turn is matched, and ``orientation`` to
+        :func:`orientation_default`'s (3 where the source runs one way on the image and no
+        ``guide`` is given, else 0).
     generations, max_length, colonize, guide : optional
         See :func:`grow`.
     repel_border : bool, optional
@@ -295,6 +349,7 @@ def synthesize(
         raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
     tick(1)
     total_turn, repel_border = course_defaults(source, total_turn=total_turn, repel_border=repel_border)
+    orientation = orientation_default(source, orientation=orientation, guided=guide is not None)
     if models is None:
         bending, furcation = fit_models(
             source, h=h, order=order, m=m, n_best=n_best, course=course, coarse_history=coarse_history,

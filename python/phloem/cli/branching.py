@@ -86,9 +86,12 @@ def _resolve_models(args: argparse.Namespace, bend: Any) -> None:
 
 
 def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> None:
-    """``--total-turn`` and ``--repel-border`` left at their defaults, resolved for this example."""
+    """``--total-turn``, ``--repel-border`` and ``--orientation`` left at their defaults, resolved for this example."""
     args.total_turn, args.repel_border = branching.course_defaults(
         source, total_turn=args.total_turn, repel_border=args.repel_border
+    )
+    args.orientation = branching.orientation_default(
+        source, orientation=args.orientation, guided=getattr(args, "guide", None) is not None
     )
 
 
@@ -268,11 +271,12 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--orientation",
         type=float,
-        default=0.0,
+        default=None,
         metavar="WEIGHT",
         help="weight of matching each branch's heading on the image against the example's branches, so that "
-        "branches run the ways the example's run (lightning falls, side veins keep their slant; default 0: the "
-        "paper's model, which only knows turns; 3 is the weight measured)",
+        "branches run the ways the example's run (lightning falls, roots keep their slant; default: 3 where the "
+        "example runs one way, i.e. phloem.metrics.direction_concentration of its skeleton is at least 0.4, and "
+        "no --guide is given, else 0, the paper's model, which only knows turns)",
     )
     g.add_argument(
         "--turn-histogram",

@@ -210,12 +210,20 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
         def grow(progress: Progress) -> list[str]:
             # the same course-keeping defaults as synthesize and the command line
             turn, border = branching.course_defaults(source)
-            bend, fur = branching.fit_models(source, h=req.h, n_best=req.n_best, total_turn=turn)
+            heading = branching.orientation_default(source, guided=guide is not None)
+            bend, fur = branching.fit_models(source, h=req.h, n_best=req.n_best, total_turn=turn, orientation=heading)
             new = branching.grow(bend, fur, size=shape, seed=req.seed, max_length=req.max_length, guide=guide,
                                  repel_border=border, progress=progress, max_memory=project.max_memory)  # fmt: skip
             assert progress is not None
             progress(1, 1)  # a cancel during the last step writes nothing
-            used = {**params, "h": bend.h, "total_turn": turn, "turn_bound": bend.turn_bound, "repel_border": border}
+            used = {
+                **params,
+                "h": bend.h,
+                "total_turn": turn,
+                "turn_bound": bend.turn_bound,
+                "repel_border": border,
+                "orientation": heading,
+            }
             return [outputs.data(out, new.to_json().encode(), command=req.kind, parameters=used,
                                  seed=req.seed, overwrite=req.overwrite)]  # fmt: skip
 
