@@ -11,7 +11,8 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
 - re-trace F1 (with precision and recall) of the target skeleton against ``trace`` of the output
   with the input's trace settings (the defaults, or ``TRACE_SETTINGS`` with ``--tuned-trace``),
   ``kind="auto"`` resolved on the input (``resolve_trace_options``: a mask output with a few grey
-  pixels would otherwise be traced as a photo);
+  pixels would otherwise be traced as a photo) and the input's ``valid_region`` stretched to
+  the output (``synthesize`` keeps the input's frame there);
 - largest-tree share of the input's and the output's skeletons;
 - drift: L1 distance of the heading-change histograms over 60 px (and both medians), with the
   input's own sampling noise beside it (``drift_noise``: the 90th percentile of the drift of
@@ -63,6 +64,7 @@ from phloem.branching import (
     synthesize,
     thickness_histogram,
     trace,
+    valid_region,
 )
 from phloem.branching.measures import resolve_trace_options
 from phloem.metrics import (
@@ -198,7 +200,7 @@ def measure(
     r = Result(name, seed, tuple(img.shape), mask, seconds=seconds)
     src, tgt = res.source, res.target
     try:
-        agree = skeleton_agreement(tgt, trace(res.image, **resolve_trace_options(img, trace_options)))
+        agree = skeleton_agreement(tgt, trace(res.image, **retrace_options(img, res.image, trace_options)))
         r.f1, r.precision, r.recall = agree.f1, agree.precision, agree.recall
     except ValueError as e:
         if not str(e).startswith("image: nothing to trace"):
@@ -237,6 +239,16 @@ def measure(
     # noise, which on inputs with few long branches exceeds the mark (see the quality page)
     r.drift_within_noise = r.drift <= max(DRIFT_MAX, r.drift_noise if not math.isnan(r.drift_noise) else 0.0)
     return r
+
+
+def retrace_options(img: np.ndarray, output: np.ndarray, trace_options: dict[str, Any] | None) -> dict[str, Any]:
+    """The trace options of the output: the input's, ``kind`` resolved on the input, and as
+    ``valid`` the input's :func:`valid_region` stretched to the output, where ``synthesize``
+    keeps the input's frame (whose rim is no structure)."""
+    ok = valid_region(img)
+    h, w = output.shape[:2]
+    valid = None if ok.all() else cv2.resize(ok.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST) > 0
+    return {"valid": valid} | resolve_trace_options(img, trace_options)
 
 
 def hooked_share(skeleton: Skeleton, arc: float) -> float:

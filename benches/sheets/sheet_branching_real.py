@@ -30,10 +30,10 @@ from benches.quality.branching_quality import (
     measure,
     photo_trace_options,
     render_options_of,
+    retrace_options,
     run,
 )
 from phloem.branching import trace
-from phloem.branching.measures import resolve_trace_options
 from phloem.testing import shared_path
 
 from ._sheet import TILE, _fit, _label, write_sheet
@@ -60,7 +60,7 @@ def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[
     r = measure(path.name, img, mask, seed, res, seconds, trace_options=opts)
     w = max(1, round(max(img.shape[:2]) / TILE))
     try:
-        retraced = overlay(_show(res.image), trace(res.image, **resolve_trace_options(img, opts)), w)
+        retraced = overlay(_show(res.image), trace(res.image, **retrace_options(img, res.image, opts)), w)
     except ValueError:  # nothing to trace
         retraced = _show(res.image)
     two = "" if r.two_level is None else f", 2-level {100 * r.two_level:.1f}%"

@@ -999,3 +999,31 @@ def test_children_start_where_there_is_room(models: tuple[BendingModel, Furcatio
     monkeypatch.setattr(growth, "_CROWDED_START", math.inf)
     without = [squeezed(seed) for seed in range(4)]
     assert all(a < b for a, b in zip(with_check, without))
+
+
+def test_a_domain_keeps_the_structure_inside_a_frame():
+    src = synthetic_skeleton(0)
+    bend, fur = BendingModel.fit(src, h=2.0), FurcationModel.fit(src, h=2.0)
+    yy, xx = np.mgrid[:200, :300]
+    disc = (yy - 100) ** 2 + (xx - 150) ** 2 < 90**2  # a fundus photo's disc; 57 % of the canvas is frame
+
+    def outside(sk: Skeleton) -> float:
+        at = np.round(np.vstack([b.points for b in sk.branches])).astype(int)
+        return float(np.mean(~disc[at[:, 1], at[:, 0]]))
+
+    for seed in range(4):
+        free = grow(bend, fur, size=(200, 300), seed=seed, max_length="input")
+        framed = grow(bend, fur, size=(200, 300), seed=seed, max_length="input", domain=disc)
+        assert outside(free) > 0.4 and outside(framed) == 0.0, (outside(free), outside(framed))
+        for b in framed.branches:  # every tree starts inside
+            if b.parent is None:
+                assert disc[round(b.points[0][1]), round(b.points[0][0])]
+    # a first root whose default start is in the frame starts at the nearest pixel inside
+    corner = np.zeros((200, 300), bool)
+    corner[150:, 220:] = True
+    sk = grow(bend, fur, size=(200, 300), seed=0, domain=corner, generations=1)
+    assert corner[round(sk.branches[0].points[0][1]), round(sk.branches[0].points[0][0])]
+    with pytest.raises(ValueError, match="^domain: expected some pixels"):
+        grow(bend, fur, size=(200, 300), domain=np.zeros((200, 300), bool))
+    with pytest.raises(ValueError, match="^domain: expected shape"):
+        grow(bend, fur, size=(200, 300), domain=disc[:100])

@@ -124,3 +124,24 @@ def test_synthesize_resolves_orientation_from_the_source():
     # a guide sets the way the new structure runs (§4.5)
     guided = branching.synthesize(img, _hanging(4, 1.0), seed=2, guide=np.array([[10.0, 100.0], [110.0, 100.0]]))
     assert guided.bending.orientation == 0.0
+
+
+def test_the_output_keeps_the_input_s_frame_and_grows_inside_it():
+    from phloem.testing import channel_scene
+
+    scene, _ = channel_scene()
+    img = np.zeros((168, 264), np.float32)  # the scene in a flat black frame 20 px wide
+    img[20:-20, 20:-20] = scene
+    ok = branching.valid_region(img)
+    assert not ok.all()
+    res = branching.synthesize(img, trace_options={"kind": "dark", "sigmas": (1.5, 2.5)}, seed=1)
+    core = cv2.erode((~ok).astype(np.uint8), np.ones((11, 11), np.uint8), borderType=cv2.BORDER_REPLICATE) > 0
+    assert np.array_equal(res.image[core], img[core])  # the frame as it was, beyond its fade
+    assert float(res.image[ok].mean()) > 0.5  # the picture inside, completed from the scene
+    at = np.round(np.vstack([b.points for b in res.target.branches])).astype(int)
+    assert ok[at[:, 1], at[:, 0]].all()  # the structure grows inside it
+    # a new size stretches the frame; valid=None fills the whole canvas
+    big = branching.synthesize(img, trace_options={"kind": "dark", "sigmas": (1.5, 2.5)}, seed=1, size=(336, 264))
+    assert np.all(big.image[:36] == 0.0) and float(big.image[60:-60, 60:-60].mean()) > 0.5
+    free = branching.synthesize(img, trace_options={"kind": "dark", "sigmas": (1.5, 2.5)}, seed=1, valid=None)
+    assert not np.array_equal(free.image[~ok], img[~ok])

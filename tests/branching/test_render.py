@@ -93,22 +93,43 @@ def test_fragment_choice_does_not_depend_on_the_input_contrast(n_best: int) -> N
     assert not np.array_equal(full.choice, render(img, sk, tgt, omega_c=0.0, **kw).choice)  # C matters here
 
 
+def _framed_scene(first: int) -> tuple[np.ndarray, Skeleton, np.ndarray]:
+    """The channel scene with a frame of value 5 from column ``first`` on, and its ``valid``."""
+    img, sk = channel_scene()
+    img = img.copy()
+    img[:, first:] = 5.0
+    valid = np.zeros(img.shape[:2], bool)
+    valid[:, :first] = True
+    return img, sk, valid
+
+
 def test_fragments_reaching_outside_valid_are_not_used() -> None:
     # The right half of the input is "frame" (value 5, outside `valid`); the source branch
     # runs through it. No pixel of it may reach the output, and a `valid` that leaves no
     # fragment whole is an error naming it. (Half the fragments lie in it, so without `valid`
     # they are not outliers of the fragments' surroundings either.)
-    img, sk = channel_scene()
-    img = img.copy()
-    img[:, 90:] = 5.0
-    valid = np.zeros(img.shape[:2], bool)
-    valid[:, :90] = True
+    img, sk, valid = _framed_scene(90)
     tgt = Skeleton([wavy_branch((20, 30), 0.2, 150, (4.0, 3.0), phase=2.0)], (80, 180))
     assert float(render(img, sk, tgt, seed=1, complete=False).max()) > 4.0  # without `valid` it does
-    out = render(img, sk, tgt, seed=1, valid=valid)
+    out = render(img, sk, tgt, seed=1, valid=valid, keep_frame=False)
     assert float(out.max()) < 1.5
     with pytest.raises(ValueError, match="valid"):
         render(img, sk, tgt, valid=np.zeros(img.shape[:2], bool))
+    # by default the new image keeps the input's frame (stretched to the target's 180 of the
+    # input's 224 columns, nearest pixel), faded in over its first 4 px, and only the frame
+    kept = render(img, sk, tgt, seed=1, valid=valid)
+    frame = np.floor(np.arange(180) * 224 / 180) >= 90
+    first = int(np.argmax(frame))
+    assert np.all(kept[:, first + 5 :] == 5.0) and float(kept[:, ~frame].max()) < 1.5
+    assert np.all(np.diff(kept[:, first : first + 5].mean(axis=0)) > 0.5)  # the fade
+    assert np.array_equal(kept[:, ~frame], out[:, ~frame])
+
+
+def test_the_frame_is_kept_in_place_at_the_input_s_size() -> None:
+    img, sk, valid = _framed_scene(190)
+    tgt = Skeleton([wavy_branch((20, 40), 0.2, 160, (4.0, 3.0), phase=2.0)], img.shape[:2])
+    out = render(img, sk, tgt, seed=1, valid=valid)
+    assert np.array_equal(out[:, 195:], img[:, 195:]) and float(out[:, :190].max()) < 1.5
 
 
 def test_paste_structure_default_is_off_for_masks_only() -> None:
@@ -489,3 +510,18 @@ def test_fragments_in_unusual_surroundings_are_left_out() -> None:
     assert not out[~touches].any()
     # never all of them: with too few left, none is left out
     assert not _unusual_surroundings(img, span, sk, frs, ~inside, keep=3).any()
+
+
+def test_a_frame_along_less_than_a_sixth_of_the_border_is_not_kept() -> None:
+    img, sk = channel_scene()
+    img = img.copy()
+    img[-30:, :60] = 0.0  # a flat patch in a corner: 90 of the border's 700 px, under a sixth
+    valid = np.ones(img.shape[:2], bool)
+    valid[-30:, :60] = False
+    tgt = Skeleton([wavy_branch((20, 40), 0.2, 160, (4.0, 3.0), phase=2.0)], img.shape[:2])
+    out = render(img, sk, tgt, seed=1, valid=valid)
+    assert float(out[-30:, :60].min()) > 0.3  # filled from the picture, not kept
+    img[-30:, :120] = 0.0  # along 150 px of the border: kept
+    valid[-30:, :120] = False
+    out = render(img, sk, tgt, seed=1, valid=valid)
+    assert np.all(out[-25:, :115] == 0.0)

@@ -1,7 +1,8 @@
 """The state a growth runs in (:func:`~phloem.branching.grow`, :func:`~phloem.branching.extend`).
 
 The structure grown so far, as segments for the crossing tests and as the density map
-``D(p) = exp(-d(p, B)² / ρ²)`` of space colonisation (Sibbing et al. 2010, §4.4); the
+``D(p) = exp(-d(p, B)² / ρ²)`` of space colonisation (Sibbing et al. 2010, §4.4), which
+starts from the region outside the growth's domain where one is given; the
 counts of the histogram matching; the guidance map ``G`` of guided synthesis (§4.5).
 """
 
@@ -32,6 +33,7 @@ class _World:
         guide: F64 | None,
         rng: np.random.Generator,
         repel_border: bool = False,
+        domain: NDArray[np.bool_] | None = None,
     ) -> None:
         self.model = model
         self.shape = shape
@@ -46,6 +48,11 @@ class _World:
         # which branch vertex each pixel's distance comes from, to ignore where a child starts
         self.owner_branch = np.full(shape, -1, np.int32) if colonize else None
         self.owner_vertex = np.full(shape, -1, np.int32) if colonize else None
+        # outside the domain (a photo's frame) is structure of no branch: D as at a branch's surface
+        self.domain = domain
+        if domain is not None and self.dens is not None:
+            d = cv2.distanceTransform(domain.astype(np.uint8), cv2.DIST_L2, 5)
+            self.dens[:] = np.where(d <= 3.0 * rho, np.exp(-((d / rho) ** 2)), 0.0)
         # segments in a growable array; the crossing tests cut it down to those near the paths
         self._seg = np.zeros((256, 4))
         self._nseg = 0
@@ -160,8 +167,13 @@ class _World:
         return np.asarray(self._lookup(_DensityView(self, parent, near), pts).max(axis=1), np.float64)
 
     def inside(self, pts: F64) -> NDArray[np.bool_]:
+        """For each polyline ``(..., n, 2)``: do all its points lie in the image (and the domain)?"""
         H, W = self.shape
         ok = (pts[..., 0] >= 0) & (pts[..., 0] <= W - 1) & (pts[..., 1] >= 0) & (pts[..., 1] <= H - 1)
+        if self.domain is not None:
+            x = np.clip(np.rint(pts[..., 0]), 0, W - 1).astype(np.intp)
+            y = np.clip(np.rint(pts[..., 1]), 0, H - 1).astype(np.intp)
+            ok &= self.domain[y, x]
         return np.asarray(ok.all(axis=-1))
 
     def crossings(self, tip: F64, ext: F64) -> NDArray[np.bool_]:

@@ -22,6 +22,12 @@ __all__ = ["valid_region"]
 #: Smallest share of its convex hull that the picture inside a frame fills: a frame surrounds a
 #: disc or a quadrilateral (measurements in docs/pipelines/branching/quality.md).
 MIN_SOLIDITY = 0.75
+#: Smallest share of the image's border along which a frame runs for a new image to keep it: a
+#: side of the image (the short side of a 2:1 photo is a sixth), as padding, a disc's surround
+#: or a tree line along the bottom run; a flat patch of dark ground is left to the gaps.
+KEEP_MIN_BORDER = 1 / 6
+#: Pixels over which a kept frame fades in from the new picture's side (see ``_keep_frame``).
+FEATHER = 4.0
 
 
 def valid_region(image: Any, *, tolerance: float = 0.01, min_share: float = 0.01, margin: int = 2) -> NDArray[np.bool_]:
@@ -117,3 +123,39 @@ def _solidity(inside: NDArray[np.bool_]) -> float:
     hull = cv2.convexHull(np.stack([xs, ys], axis=1).astype(np.int32))
     # pixel centres: the hull of a w x h block is (w - 1) x (h - 1); count its rim too
     return float(min(1.0, len(ys) / max(cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + 1.0, 1.0)))
+
+
+def _stretched(valid: NDArray[np.bool_], shape: tuple[int, int]) -> NDArray[np.bool_]:
+    """``valid`` stretched to ``shape`` (nearest pixel): where a new image of that size shows content."""
+    if valid.shape == tuple(shape):
+        return valid
+    H, W = shape
+    return np.asarray(cv2.resize(valid.astype(np.uint8), (W, H), interpolation=cv2.INTER_NEAREST), bool)
+
+
+def _kept(valid: NDArray[np.bool_]) -> bool:
+    """Whether a new image keeps the frame outside ``valid``: it runs along at least
+    :data:`KEEP_MIN_BORDER` of the image's border."""
+    frame = ~valid
+    border = np.concatenate([frame[0], frame[-1], frame[1:-1, 0], frame[1:-1, -1]])
+    return bool(border.mean() >= KEEP_MIN_BORDER)
+
+
+def _keep_frame(canvas: NDArray[np.float32], image: NDArray[np.float32], valid: NDArray[np.bool_]) -> None:
+    """Put ``image``'s frame (outside ``valid``), stretched to ``canvas``'s size, into ``canvas``
+    where :func:`_kept` says it is kept."""
+    if not _kept(valid):
+        return
+    H, W = canvas.shape[:2]
+    inside = _stretched(valid, (H, W))
+    if inside.all():
+        return
+    frame = image
+    if image.shape[:2] != (H, W):
+        frame = np.asarray(cv2.resize(image, (W, H), interpolation=cv2.INTER_LINEAR), np.float32).reshape(H, W, -1)
+    # faded in over its first FEATHER px: its rim (widened by valid_region's margin, a square)
+    # holds some of the input's background, which need not match the new picture beside it
+    d = cv2.distanceTransform((~inside).astype(np.uint8), cv2.DIST_L2, 5)
+    alpha = np.clip((d - 0.5) / FEATHER, 0.0, 1.0)[..., None]
+    out = ~inside
+    canvas[out] = (alpha * frame + (1.0 - alpha) * canvas)[out]

@@ -38,11 +38,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .. import _core, _memory
 from .._api import Seed, Size, renamed
 from .._progress import Progress
-from .._validate import check_float, check_int, check_seed
+from .._validate import as_mask, check_float, check_int, check_seed
 from ._elements import F64, _check_skeleton, _direction, _elements, _tangent, _wrap
 from ._forest import InputTree, input_trees
 from ._world import _guide_map, _World
@@ -170,6 +171,14 @@ class _Grower:
             self.model.c,
             _EPS,
         )
+        if w.domain is not None and len(valid):
+            # a branch ends where it would leave the domain (a photo's frame), as at the image's border
+            ext = self.rel_ext[valid]
+            pts = np.stack(
+                [tip[0] + cos * ext[..., 0] + sin * ext[..., 1], tip[1] - sin * ext[..., 0] + cos * ext[..., 1]], -1
+            )
+            keep = w.inside(pts)
+            valid, lq = valid[keep], lq[keep]
         if not len(valid):
             return False
         # among the c best valid candidates, one drawn in proportion to its quality
@@ -333,6 +342,15 @@ def _default_start(bending: BendingModel, shape: tuple[int, int], root: int) -> 
     return float((0.05 + 0.9 * fx) * (W - 1)), float((0.05 + 0.9 * fy) * (H - 1))
 
 
+def _nearest_inside(inside: NDArray[np.bool_], x: float, y: float) -> tuple[float, float]:
+    """``(x, y)``, or the centre of the pixel of ``inside`` nearest to it when it lies outside."""
+    if inside[round(y), round(x)]:
+        return x, y
+    ys, xs = np.nonzero(inside)
+    i = int(np.argmin((xs - x) ** 2 + (ys - y) ** 2))
+    return float(xs[i]), float(ys[i])
+
+
 def _top_up(
     out: list[Branch],
     first: int,
@@ -430,6 +448,8 @@ def _place_root(
     order = np.argsort(score + np.where(near & (score < 0.05), -1.0, 0.0), kind="stable")
     if not anywhere:
         order = order[score[order] <= _CROWDED]
+    if world.domain is not None:  # never in a photo's frame
+        order = order[world.domain[np.round(ys[order]).astype(int), np.round(xs[order]).astype(int)]]
     for t in order:
         j = int(js[t])
         heading, a0, r0, t0 = bending.start_elements(j)
@@ -459,6 +479,7 @@ def grow(
     guide: Any = None,
     guide_width: float | None = None,
     min_spacing: int | None = None,
+    domain: Any = None,
     progress: Progress = None,
     max_memory: int | None = None,
 ) -> Skeleton:
@@ -543,6 +564,14 @@ def grow(
         Valley width; default ``3 m h``.
     min_spacing : int, optional
         Minimum index distance between furcations on a branch (default: the model's).
+    domain : (H, W) array_like of bool, optional
+        Where the structure may grow (default everywhere), e.g. the inside of a photo's frame
+        (:func:`valid_region` of the input, stretched to ``size``). No vertex leaves it: a
+        branch ends where its next extension would, as at the image's border. With
+        ``colonize`` the rest counts as structure in the density (``exp(-d²/ρ²)`` at distance
+        ``d`` from it, 1 in it), so branches turn away before they meet it and children do not
+        start towards it. Further roots start inside only, and the first root, when its
+        default start lies outside, at the nearest pixel inside.
     progress : callable, optional
         ``progress(done, total)`` in finished branches.
     max_memory : int, optional
@@ -600,9 +629,13 @@ def grow(
     gmap, gline = (None, None) if guide is None else _guide_map(guide, shape, gw)
     if not isinstance(repel_border, (bool, np.bool_)):
         raise TypeError(f"repel_border: expected True or False, got {repel_border!r}")
+    inside = None if domain is None else as_mask(domain, "domain", shape)
+    if inside is not None and not inside.any():
+        raise ValueError("domain: expected some pixels where the structure may grow, got none")
     world = _World(
-        bending, shape, colonize=bool(colonize), rho=rho, guide=gmap, rng=rng, repel_border=bool(repel_border)
-    )
+        bending, shape, colonize=bool(colonize), rho=rho, guide=gmap, rng=rng, repel_border=bool(repel_border),
+        domain=inside,
+    )  # fmt: skip
     grower = _Grower(world, bending)
 
     H, W = shape
@@ -660,6 +693,8 @@ def grow(
                 x, y = float(gline[0, 0]), float(gline[0, 1])
             else:
                 x, y = _default_start(bending, shape, root)
+                if inside is not None:
+                    x, y = _nearest_inside(inside, x, y)
             if (st is None or st[2] is None) and gline is not None:
                 d = gline[min(1, len(gline) - 1)] - gline[0]
                 heading = math.atan2(-d[1], d[0])

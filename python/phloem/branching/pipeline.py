@@ -13,7 +13,7 @@ from .._api import Seed, Size, renamed
 from .._progress import Progress
 from .._validate import as_image, as_mask, check_size
 from .bending import BendingModel
-from .frame import valid_region
+from .frame import _kept, _stretched, valid_region
 from .furcation import FurcationModel
 from .growth import grow
 from .measures import direction_concentration, drift_noise
@@ -290,7 +290,10 @@ def synthesize(
         Where ``image`` shows content: structure is traced there only (when ``skeleton`` is
         not given), fragments are taken from inside it and the gaps completed from it.
         ``"auto"`` (default): :func:`valid_region`, everything but a flat frame touching the
-        border (a fundus photo's black disc frame, constant padding); None: everywhere.
+        border (a fundus photo's black disc frame, constant padding); None: everywhere. The
+        new image keeps the input's frame around it, stretched to ``size``, where that frame
+        runs along at least a sixth of the border (:func:`render`'s ``keep_frame``), and the
+        new structure then grows inside it (:func:`grow`'s ``domain``).
     render_options : dict, optional
         Keyword arguments for :func:`render`.
     threads : int, optional
@@ -368,6 +371,7 @@ def synthesize(
     target = grow(
         bending, furcation, size=shape, seed=seed, generations=generations, max_length=max_length,
         colonize=colonize, repel_border=repel_border, guide=guide,
+        domain=_stretched(ok, shape) if ok is not None and _kept(ok) else None,
     )  # fmt: skip
     tick(3)
     # A 2-D input goes to render as 2-D, so that the new image is 2-D as well.

@@ -70,6 +70,7 @@ from ..blend import interpolate_field, seamless
 from ..seams import seam
 from ._pixels import F32, F64, _by_channels, _check_skeleton, _clip_channels, _paste, _pt, _robust_z, _rot, two_level
 from .fragments import DEFAULT_SAMPLES, Fragment, FragmentLibrary, check_params, cover, foreign_fragments
+from .frame import _keep_frame
 from .gaps import fill_gaps
 from .skeleton import MAX_THICKNESS, Branch, Skeleton
 
@@ -127,6 +128,7 @@ def render(
     match_borders: bool | None = ...,
     paste_structure: bool | None = ...,
     valid: Any = ...,
+    keep_frame: bool = ...,
     patch_size: int = ...,
     completion_iterations: int = ...,
     gap_diversity: float = ...,
@@ -156,6 +158,7 @@ def render(
     match_borders: bool | None = ...,
     paste_structure: bool | None = ...,
     valid: Any = ...,
+    keep_frame: bool = ...,
     patch_size: int = ...,
     completion_iterations: int = ...,
     gap_diversity: float = ...,
@@ -187,6 +190,7 @@ def render(
     match_borders: bool | None = None,
     paste_structure: bool | None = None,
     valid: Any = None,
+    keep_frame: bool = True,
     patch_size: int = 7,
     completion_iterations: int = 4,
     gap_diversity: float = 0.0,
@@ -265,6 +269,12 @@ def render(
         Where ``image`` shows real content (default everywhere), e.g. the photo inside the
         frame of :func:`rectify` or a fundus photo's disc: only fragments that lie wholly
         inside it are pasted, and the gap completion copies only from there.
+    keep_frame : bool, optional
+        With ``valid``: the new image shows ``image``'s frame, the pixels outside ``valid``,
+        stretched to its size (default True), so a fundus photo stays a disc in its black
+        frame and a lightning photo keeps its tree line. Only a frame that runs along at
+        least a sixth of the image's border is kept (a side's worth; a flat patch of dark
+        ground is not). False: the gaps fill it too.
     patch_size : int, optional
         Patch side of the gap completion (default 7, odd).
     completion_iterations : int, optional
@@ -377,6 +387,8 @@ def render(
         canvas = _drop_foreign(
             np.where(canvas >= 0.5 * (lo + hi), hi, lo).astype(np.float32), img, src_sk, tgt_sk, lo, hi
         )
+    if ok is not None and keep_frame:
+        _keep_frame(canvas, img, ok)
     if progress is not None:
         progress(len(targets) + 1, len(targets) + 1)
     if flat:

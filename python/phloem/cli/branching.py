@@ -199,7 +199,9 @@ def _valid_option(g: Any) -> None:
         metavar="PNG|auto|none",
         default="auto",
         help="where the example shows content: a mask image (white = content, same size as IN), 'auto' "
-        "(default: all but a flat frame touching the border, such as a fundus photo's black frame) or 'none'",
+        "(default: all but a flat frame touching the border, such as a fundus photo's black frame) or 'none'. "
+        "The new image keeps a frame that runs along at least a sixth of the border, and the structure grows "
+        "inside it; 'none' fills the whole image",
     )
 
 
