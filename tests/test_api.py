@@ -226,6 +226,21 @@ def test_fit_models_k_and_c(models):
     assert (old_bend.k, old_bend.c) == (2, 1)
 
 
+def test_synthesize_k_and_c():
+    import cv2
+    import numpy as np
+
+    from phloem import branching
+
+    img = np.full((64, 96), 0.8, np.float32)
+    cv2.line(img, (5, 58), (90, 8), 0.1, 4)
+    opts = {"kind": "dark", "sigmas": (1.5, 2.5)}
+    new = branching.synthesize(img, trace_options=opts, order=2, n_best=1, seed=0)
+    old = _old(lambda: branching.synthesize(img, trace_options=opts, order=2, c=1, seed=0), "use n_best=")
+    assert (old.bending.k, old.bending.c) == (new.bending.k, new.bending.c) == (2, 1)
+    assert np.array_equal(old.image, new.image)
+
+
 def test_grow_and_extend_shape(models):
     from phloem import branching
 

@@ -177,7 +177,6 @@ def course_defaults(
     return (turn if total_turn is None else total_turn), (border if repel_border is None else repel_border)
 
 
-@renamed(k="order", c="n_best")
 def orientation_default(skeleton: Skeleton, *, orientation: float | None = None, guided: bool = False) -> float:
     """:func:`synthesize`'s default of ``orientation`` for this source skeleton.
 
@@ -224,6 +223,7 @@ def orientation_default(skeleton: Skeleton, *, orientation: float | None = None,
     return ORIENTATION_WEIGHT if directed else 0.0
 
 
+@renamed(k="order", c="n_best")
 def synthesize(
     image: Any,
     skeleton: Skeleton | None = None,
