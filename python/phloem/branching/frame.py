@@ -133,22 +133,24 @@ def _stretched(valid: NDArray[np.bool_], shape: tuple[int, int]) -> NDArray[np.b
     return np.asarray(cv2.resize(valid.astype(np.uint8), (W, H), interpolation=cv2.INTER_NEAREST), bool)
 
 
-def _kept(valid: NDArray[np.bool_]) -> bool:
-    """Whether a new image keeps the frame outside ``valid``: it runs along at least
-    :data:`KEEP_MIN_BORDER` of the image's border."""
+def _kept_inside(valid: NDArray[np.bool_], shape: tuple[int, int]) -> NDArray[np.bool_] | None:
+    """Where a new image of ``shape`` shows its picture inside the input's kept frame:
+    ``valid`` stretched to it, when the frame outside ``valid`` runs along at least
+    :data:`KEEP_MIN_BORDER` of the image's border; None when no frame is kept."""
     frame = ~valid
     border = np.concatenate([frame[0], frame[-1], frame[1:-1, 0], frame[1:-1, -1]])
-    return bool(border.mean() >= KEEP_MIN_BORDER)
+    if border.mean() < KEEP_MIN_BORDER:
+        return None
+    inside = _stretched(valid, shape)
+    return None if inside.all() else inside
 
 
 def _keep_frame(canvas: NDArray[np.float32], image: NDArray[np.float32], valid: NDArray[np.bool_]) -> None:
-    """Put ``image``'s frame (outside ``valid``), stretched to ``canvas``'s size, into ``canvas``
-    where :func:`_kept` says it is kept."""
-    if not _kept(valid):
-        return
+    """Put ``image``'s kept frame (outside ``valid``, see :func:`_kept_inside`), stretched to
+    ``canvas``'s size, into ``canvas``."""
     H, W = canvas.shape[:2]
-    inside = _stretched(valid, (H, W))
-    if inside.all():
+    inside = _kept_inside(valid, (H, W))
+    if inside is None:
         return
     frame = image
     if image.shape[:2] != (H, W):

@@ -173,20 +173,14 @@ class _Grower:
         )
         if w.domain is not None and len(valid):
             # a branch ends where it would leave the domain (a photo's frame), as at the image's border
-            ext = self.rel_ext[valid]
-            pts = np.stack(
-                [tip[0] + cos * ext[..., 0] + sin * ext[..., 1], tip[1] - sin * ext[..., 0] + cos * ext[..., 1]], -1
-            )
-            keep = w.inside(pts)
+            keep = w.inside(_placed(tip, cos, sin, self.rel_ext[valid]))
             valid, lq = valid[keep], lq[keep]
         if not len(valid):
             return False
         # among the c best valid candidates, one drawn in proportion to its quality
         p = np.exp(lq - lq.max())
         choice = int(w.rng.choice(valid, p=p / p.sum()))
-        rx, ry = self.rel_ext[choice, :, 0], self.rel_ext[choice, :, 1]
-        new_pts = np.stack([tip[0] + cos * rx + sin * ry, tip[1] - sin * rx + cos * ry], axis=-1)
-        self._append(br, choice, new_pts)
+        self._append(br, choice, _placed(tip, cos, sin, self.rel_ext[choice]))
         return True
 
     def parent_skip(self, br: _Growing) -> tuple[int, int, int, float] | None:
@@ -342,6 +336,12 @@ def _default_start(bending: BendingModel, shape: tuple[int, int], root: int) -> 
     return float((0.05 + 0.9 * fx) * (W - 1)), float((0.05 + 0.9 * fy) * (H - 1))
 
 
+def _placed(tip: F64, cos: float, sin: float, ext: F64) -> F64:
+    """Extensions ``(..., m, 2)`` relative to a tip heading ``(cos, sin)``, placed on the image."""
+    rx, ry = ext[..., 0], ext[..., 1]
+    return np.stack([tip[0] + cos * rx + sin * ry, tip[1] - sin * rx + cos * ry], axis=-1)
+
+
 def _nearest_inside(inside: NDArray[np.bool_], x: float, y: float) -> tuple[float, float]:
     """``(x, y)``, or the centre of the pixel of ``inside`` nearest to it when it lies outside."""
     if inside[round(y), round(x)]:
@@ -449,7 +449,7 @@ def _place_root(
     if not anywhere:
         order = order[score[order] <= _CROWDED]
     if world.domain is not None:  # never in a photo's frame
-        order = order[world.domain[np.round(ys[order]).astype(int), np.round(xs[order]).astype(int)]]
+        order = order[world.inside(np.stack([xs[order], ys[order]], axis=1)[:, None, :])]
     for t in order:
         j = int(js[t])
         heading, a0, r0, t0 = bending.start_elements(j)

@@ -13,7 +13,7 @@ from .._api import Seed, Size, renamed
 from .._progress import Progress
 from .._validate import as_image, as_mask, check_size
 from .bending import BendingModel
-from .frame import _kept, _stretched, valid_region
+from .frame import _kept_inside, valid_region
 from .furcation import FurcationModel
 from .growth import grow
 from .measures import direction_concentration, drift_noise
@@ -371,7 +371,7 @@ def synthesize(
     target = grow(
         bending, furcation, size=shape, seed=seed, generations=generations, max_length=max_length,
         colonize=colonize, repel_border=repel_border, guide=guide,
-        domain=_stretched(ok, shape) if ok is not None and _kept(ok) else None,
+        domain=None if ok is None else _kept_inside(ok, shape),
     )  # fmt: skip
     tick(3)
     # A 2-D input goes to render as 2-D, so that the new image is 2-D as well.
