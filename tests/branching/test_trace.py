@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import time
 
+import cv2
 import numpy as np
 import pytest
 
@@ -218,6 +219,20 @@ def test_photo_of_a_tree_traced_by_ridge_filter(dark):
     _, r = TREE.nearest(pts[keep])
     assert np.median(np.abs(thick[keep] - r)) < 0.5
     assert np.percentile(np.abs(thick[keep] - r), 90) < 1.0
+
+
+def test_photo_roots_its_tree_at_the_thick_end():
+    # Three arms from one fork, each end about as far from the others: only the thickness says
+    # which is the trunk. Its ridge mask is no wider than the arms' (the filter's largest scale
+    # is below its radius), so the root must come from the photo's own edges.
+    img = np.full((300, 300), 0.8, np.float32)
+    cv2.line(img, (150, 295), (150, 160), 0.2, thickness=13, lineType=cv2.LINE_AA)  # radius 6.5
+    for end in [(33, 92), (267, 92)]:
+        cv2.line(img, (150, 160), end, 0.2, thickness=5, lineType=cv2.LINE_AA)  # radius 2.5
+    sk = trace(cv2.GaussianBlur(img, (0, 0), 1.0))
+    main = sk.branches[0]
+    assert np.linalg.norm(main.points[0] - (150, 297)) < 6, f"rooted at {main.points[0]}, not the trunk's end"
+    assert np.median(main.thickness[:10]) > 5.0
 
 
 def test_photo_rim_is_not_a_ridge_and_broken_vessels_are_bridged():

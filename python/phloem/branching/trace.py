@@ -426,7 +426,11 @@ def trace(
        spanning forest for weights ``length / (r_a + r_b)``: every cycle (braided channels,
        loops) is cut at its thinnest place.
     5. **Branches.** Each tree is rooted at ``root`` (the nearest skeleton pixel) or, by
-       default, at the end of its longest path whose first ``4 r`` pixels are thicker. The
+       default, at its thickest far end: among the leaves at least 3/4 of the tree's diameter
+       from their farthest pixel, the one with the largest radius over its first pixels (a
+       mask: the mean distance-transform radius over ``max(5, 4 r + 1)`` pixels; a photo: the
+       median maximum-gradient thickness of 7. over ``2 ⌈max_radius⌉`` pixels, because a
+       ridge mask is about as narrow along a trunk as along a twig). The
        longest path from the root is the main branch; every subtree hanging off a branch
        becomes a child branch along its own longest path, attached at the branch pixel it grows
        from; recursively. Branches (roots too) shorter than ``spur`` times the largest radius
@@ -600,9 +604,17 @@ def trace(
     np.minimum.at(first, labels, np.arange(len(labels)))
     comp_order = sorted(range(n_comp), key=lambda c: (-int(sizes[c]), int(first[c])))
 
+    photo = thickness == "gradient" or (thickness == "auto" and kind != "mask")
+    max_radius = 2.0 * max(sig) + 2.0
+    picked = [c for c in comp_order if not (start is not None and labels[start] == c)]
+    cands = [_root_candidates(tree, int(first[c]), r, 2 * math.ceil(max_radius) if photo else 0) for c in picked]
+    radii = _end_radii(cands, xs, ys, r, gray if photo else None, shape, smooth, max_radius)
+    roots = {c: _pick_root(cs, rs) for c, cs, rs in zip(picked, cands, radii, strict=True)}
+    if start is not None:
+        roots[int(labels[start])] = start
     branches: list[Branch] = []
     for c in comp_order:
-        croot = start if start is not None and labels[start] == c else _pick_root(tree, int(first[c]), r)
+        croot = roots[c]
         new_index: dict[int, int] = {}
         for i, (path, parent, at) in enumerate(_decompose(tree, croot)):
             if parent is not None and parent not in new_index:
@@ -626,8 +638,8 @@ def trace(
     if not branches:
         raise ValueError(f"image: nothing to trace, every branch is shorter than min_length={min_length}")
     sk = Skeleton(branches, shape)
-    if thickness == "gradient" or (thickness == "auto" and kind != "mask"):
-        sk = estimate_thickness(gray, sk, max_radius=2.0 * max(sig) + 2.0)
+    if photo:
+        sk = estimate_thickness(gray, sk, max_radius=max_radius)
         for b in sk.branches:
             if len(b) > 2:
                 t = ndimage.median_filter(b.thickness, size=5, mode="nearest")
@@ -635,13 +647,12 @@ def trace(
     return sk.resample(h) if h is not None else sk
 
 
-def _pick_root(tree: Any, node: int, r: F64) -> int:
-    """The thickest far end of ``node``'s tree.
+def _root_candidates(tree: Any, node: int, r: F64, reach: int) -> list[tuple[int, list[int], float]]:
+    """The far ends of ``node``'s tree that may be its root: ``(leaf, its first pixels, eccentricity)``.
 
     Candidates are the leaves whose farthest other node is at least 3/4 of the tree's diameter
-    away (the ends of long paths, not side twigs); among them the one with the largest mean radius
-    over its first ``4 r`` pixels (at least 5) wins; ties go to the more eccentric, then the
-    lower index.
+    away (the ends of long paths, not side twigs). Each comes with the pixels from it inward,
+    ``max(5, 4 r + 1)`` of them at its own mask radius ``r``, or ``reach`` where that is more.
     """
     order, _, _ = _reach(tree, node)
     end_a = int(order[-1])
@@ -651,15 +662,50 @@ def _pick_root(tree: Any, node: int, r: F64) -> int:
     deg = np.diff(tree.indptr)[order_a]
     leaves = np.sort(order_a[deg <= 1])
     ecc = np.maximum(da[leaves], db[leaves])
-    cand = leaves[ecc >= 0.75 * da[end_b]]
-    best, best_key = end_a, (-math.inf, -math.inf)
-    for v in cand.tolist():
+    out = []
+    for v in leaves[ecc >= 0.75 * da[end_b]].tolist():
         pred = pred_b if v == end_a else pred_a
         path = [v]
-        want = max(5, int(4 * r[v]) + 1)
+        want = max(5, int(4 * r[v]) + 1, reach)
         while len(path) < want and pred[path[-1]] >= 0:
             path.append(int(pred[path[-1]]))
-        key = (round(float(r[np.asarray(path)].mean()), 6), float(max(da[v], db[v])))
+        out.append((v, path, float(max(da[v], db[v]))))
+    return out
+
+
+def _pick_root(candidates: list[tuple[int, list[int], float]], radius: list[float]) -> int:
+    """The thickest far end: the candidate of largest ``radius``; ties go to the more eccentric,
+    then the lower index."""
+    best, best_key = candidates[0][0], (-math.inf, -math.inf)
+    for (v, _, ecc), rad in zip(candidates, radius, strict=True):
+        key = (round(rad, 6), ecc)
         if key > best_key:
             best, best_key = v, key
     return best
+
+
+def _end_radii(
+    candidates: list[list[tuple[int, list[int], float]]],
+    xs: NDArray[np.intp],
+    ys: NDArray[np.intp],
+    r: F64,
+    gray: F32 | None,
+    shape: tuple[int, int],
+    smooth: float,
+    max_radius: float,
+) -> list[list[float]]:
+    """Each candidate's radius over its first pixels: the mean mask radius, or on a photo (``gray``)
+    the median of :func:`estimate_thickness` there, since a photo's ridge mask is a line a pixel or
+    two wide whatever the structure's width, and would make every end equally thin."""
+    if gray is None:
+        return [[float(r[np.asarray(path)].mean()) for _, path, _ in cands] for cands in candidates]
+    flat = [path for cands in candidates for _, path, _ in cands]
+    branches = []
+    for path in flat:
+        pts = np.stack([xs[path], ys[path]], axis=1).astype(np.float64)
+        if len(pts) == 1:
+            pts = np.vstack([pts, pts + [1e-3, 0.0]])
+        branches.append(Branch(_smooth_path(pts, smooth), r[path] if len(path) > 1 else np.repeat(r[path], 2)))
+    thick = estimate_thickness(gray, Skeleton(branches, shape), max_radius=max_radius).branches
+    it = iter(float(np.median(b.thickness)) for b in thick)
+    return [[next(it) for _ in cands] for cands in candidates]
