@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from .._distance import euclidean_distance
 from .._ridges import ridge_polarity, ridge_response
 from .._validate import as_image, as_mask, check_float, check_int
 from .skeleton import Branch, Skeleton
@@ -585,7 +586,7 @@ def trace(
     if not mask.any():
         raise ValueError("image: nothing to trace, no foreground left (check kind, threshold, min_area)")
 
-    dist = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    dist = euclidean_distance(mask)
     radius = np.maximum(dist - 0.5, 0.5).astype(np.float32)
     skel = np.asarray(skeletonize(mask), dtype=np.bool_)  # type: ignore[no-untyped-call]
     if blob is not None and skel.any():
