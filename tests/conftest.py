@@ -1,5 +1,6 @@
-"""pytest wiring: hypothesis profiles, the real-image collection's folder, and fixtures of the
-images that ship with the tests (tests/data) or the package.
+"""pytest wiring: hypothesis profiles, the real-image collection's folder, Ctrl-C as a user's
+terminal delivers it, and fixtures of the images that ship with the tests (tests/data) or the
+package.
 
 Helpers that benches and users need too live in :mod:`phloem.testing`, not here.
 """
@@ -7,6 +8,7 @@ Helpers that benches and users need too live in :mod:`phloem.testing`, not here.
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +42,12 @@ def gravel() -> np.ndarray:
 
 
 def pytest_configure(config: pytest.Config) -> None:
+    # A shell that starts pytest in the background (`pytest &`, or a runner without job control)
+    # ignores SIGINT for it, and Python then raises no KeyboardInterrupt, nor do the CLI runs its
+    # tests start, which inherit the disposition: the thirteen Ctrl-C tests failed that way.
+    # They test what a user's Ctrl-C does, so they get the handler a terminal's Python has.
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     os.environ.setdefault("HYPOTHESIS_PROFILE", "fast")
     from hypothesis import settings
 
