@@ -227,6 +227,37 @@ def test_the_gaps_beside_pasted_structure_are_plain_background(seed: int) -> Non
     assert float(res.image[core].mean()) > near + 0.3
 
 
+def _glowing_bolt(x0: float) -> tuple[np.ndarray, Branch]:
+    """A bright bolt 1.5 px in radius down a 160 x 220 dark sky at about ``x0``, in a glow that
+    fades over 6 px (a Gaussian), as a lightning photo's bolts are traced."""
+    rng = np.random.default_rng(3)
+    H, W = 160, 220
+    p = _bolt(rng, x0, 5, 50)
+    core = np.ones((H, W), np.uint8)
+    cv2.polylines(core, [np.round(p * 16).astype(np.int32)], False, 0, thickness=1, lineType=cv2.LINE_8, shift=4)
+    d = cv2.distanceTransform(core, cv2.DIST_L2, 5)
+    img = 0.08 + 0.45 * np.exp(-(d**2) / (2 * 6.0**2)) + 0.45 * (d <= 1.5) + rng.normal(0, 0.01, (H, W))
+    return np.clip(img, 0, 1).astype(np.float32), Branch(p, 1.5)
+
+
+def test_a_glow_follows_the_new_structure_not_the_old() -> None:
+    # issue 19: the gaps took the input's large-scale brightness where it was in the input, so
+    # a lightning photo's output carried its bolt's glow as a bright band where the input's bolt
+    # had been, and its own bolts sat unlit in a dark sky. The brightness that surrounds the
+    # whole structure now follows the new structure.
+    img, bolt = _glowing_bolt(50)
+    far_right = _glowing_bolt(170)[1]
+    res = render(img, Skeleton([bolt], img.shape), Skeleton([far_right], img.shape), seed=0, full_output=True)
+    gaps = res.labels < 0
+    d_new = cv2.distanceTransform(Skeleton([far_right], img.shape).mask().astype(np.uint8) ^ 1, cv2.DIST_L2, 5)
+    d_old = cv2.distanceTransform(Skeleton([bolt], img.shape).mask().astype(np.uint8) ^ 1, cv2.DIST_L2, 5)
+    beside_new = float(res.image[gaps & (d_new >= 4) & (d_new <= 10)].mean())
+    where_old_was = float(res.image[gaps & (d_old <= 14) & (d_new > 60)].mean())
+    open_sky = float(res.image[gaps & (d_old > 40) & (d_new > 40)].mean())
+    assert beside_new > open_sky + 0.1, (beside_new, open_sky)
+    assert where_old_was < open_sky + 0.05, (where_old_was, open_sky)
+
+
 def test_a_mask_renders_as_a_mask() -> None:
     # issue 19: bilinear warps, Poisson pastes and the completion's votes gave grey ramps
     _, sk = channel_scene()

@@ -7,7 +7,8 @@ against the painted structure.
 ``allowed`` pixels of the input (the source structure, dilated to the fragment radius, is
 excluded, so no pseudo-branches appear); on photos and fields :func:`_relight` gives the
 completed gaps the input background's large-scale layout, which patches copied into large gaps
-average away, and :func:`_recolour` its colour cast, which a fill settled on a few patches
+average away (the light that surrounds the whole structure, :func:`_proximity_profile`, laid
+round the new structure), and :func:`_recolour` its colour cast, which a fill settled on a few patches
 can lose; :func:`_match_borders` shifts the completed gaps in the gradient domain so that
 they meet the structure without a colour step, as §5.3 does for the fragments.
 """
@@ -22,7 +23,7 @@ from numpy.typing import NDArray
 
 from .. import texture
 from ..blend import seamless
-from ._pixels import F32, _by_channels, _clip_channels, _paste, _pt, _robust_z, two_level
+from ._pixels import F32, F64, _by_channels, _clip_channels, _paste, _pt, _robust_z, two_level
 from .fragments import MIN_RADIUS
 from .skeleton import Skeleton
 
@@ -31,6 +32,12 @@ __all__ = ["fill_gaps"]
 #: Background detail farther than this many robust deviations from the typical is no source
 #: for a spread fill (``gap_diversity > 0``): the leaf crop's blue backdrop, not its grain.
 OUTLIER_MADS = 6.0
+
+#: How far round the structure, in its median radius, its own light is measured (and then at
+#: most the layout's scale): the lightning photos' bolts are traced 1.5-1.7 px in radius and
+#: glow to some 15-20 px; measured out to the layout's scale (96-125 px on the brain scan and
+#: the retina) the profile picks up the lighting of the places the structure fills.
+GLOW_REACH = 10.0
 
 #: Search-and-copy iterations of the gaps' full-resolution level (where there are coarser
 #: ones) on photos and fields; a two-level mask's flat background needs none.
@@ -128,7 +135,21 @@ def _complete_background(
     return res
 
 
-def _relight(canvas: F32, hole: NDArray[np.bool_], source: F32, allowed: NDArray[np.bool_], *, sigma: float) -> F32:
+#: Distance (px) of every pixel to a skeleton's centre lines, and the row and column of the
+#: centre-line pixel nearest to it.
+_Nearest = tuple[F32, NDArray[np.intp], NDArray[np.intp]]
+
+
+def _relight(
+    canvas: F32,
+    hole: NDArray[np.bool_],
+    source: F32,
+    allowed: NDArray[np.bool_],
+    *,
+    sigma: float,
+    near: tuple[_Nearest, _Nearest] | None = None,
+    reach: float | None = None,
+) -> F32:
     """The completed ``hole`` of ``canvas`` with its large-scale brightness (the mean over
     channels) replaced by that of ``source``'s ``allowed`` pixels (both smoothed by a Gaussian
     of ``sigma`` source pixels; the layout resampled to the canvas).
@@ -136,10 +157,22 @@ def _relight(canvas: F32, hole: NDArray[np.bool_], source: F32, allowed: NDArray
     Patch completion of gaps that make up most of the canvas settles on one level, so a
     terrain's plateau and lowland, or a photo's uneven lighting, become one flat grey. Only
     the brightness moves, so no other patch (no untraced structure) is drawn into the gaps.
+
+    With ``near`` (each pixel's distance to the source's and to the canvas's structure, and
+    the structure pixel nearest to it: :func:`_nearest_structure`), the part of the layout
+    within ``reach`` of the structure that surrounds all of it (:func:`_proximity_profile`: a
+    lightning bolt's glow) moves with the structure; the rest stays where it is in the source,
+    stretched. Without it the glow round the input's bolt lights the gaps where that bolt was.
     """
     H, W = canvas.shape[:2]
     hs, ws = source.shape[:2]
-    layout = _layout(source, allowed, sigma, (H, W))
+    if near is None:
+        layout = _layout(source, allowed, sigma, (H, W))
+    else:
+        centres, profile = _proximity_profile(source, allowed, near[0], reach=sigma if reach is None else reach)
+        own_g = np.interp(near[0][0], centres, profile, right=0.0).astype(np.float32)[..., None]
+        layout = _layout(source - own_g, allowed, sigma, (H, W))
+        layout += np.interp(near[1][0], centres, profile, right=0.0).astype(np.float32)[..., None]
     own, _ = _smooth_masked(canvas, hole.astype(np.float32), sigma * math.sqrt(H * W / (hs * ws)))
     # One shift for all channels: the layout's brightness, not its hue (a leaf's blue backdrop
     # would tint the leaf's texture).
@@ -147,6 +180,66 @@ def _relight(canvas: F32, hole: NDArray[np.bool_], source: F32, allowed: NDArray
     res: F32 = canvas.copy()
     np.add(res, shift, out=res, where=hole[..., None])
     return res
+
+
+def _nearest_structure(skeleton: Skeleton, shape: tuple[int, int]) -> _Nearest:
+    """:data:`_Nearest` of ``skeleton`` drawn on a ``shape`` image (SciPy's exact transform,
+    which also gives the nearest pixel)."""
+    from scipy import ndimage  # type: ignore[import-untyped]
+
+    free = np.ones(shape, np.uint8)
+    for b in skeleton.branches:
+        pts = np.round(np.asarray(b.points, np.float64) * 16).astype(np.int32).reshape(-1, 1, 2)
+        cv2.polylines(free, [pts], False, 0, 1, cv2.LINE_8, shift=4)
+    dist, (rows, cols) = ndimage.distance_transform_edt(free, return_indices=True)
+    return np.asarray(dist, np.float32), np.asarray(rows, np.intp), np.asarray(cols, np.intp)
+
+
+def _proximity_profile(
+    source: F32, allowed: NDArray[np.bool_], near: _Nearest, *, reach: float, step: float = 2.0, min_count: int = 16
+) -> tuple[F64, F64]:
+    """The background's brightness against the distance to the structure: how much brighter
+    (or darker) the ``allowed`` pixels are, in bins of ``step`` px of distance, than those
+    round the same part of the structure at ``reach`` to ``1.5 reach`` px.
+
+    A structure's own light (a bolt's glow) surrounds all of it; lighting that is brighter
+    where part of it lies (a bright patch of sky behind one bolt) does not. So the profile is
+    measured separately round each ``reach``-sized cell of the structure (by the structure
+    pixel nearest to each background pixel), against that cell's own ring, and a bin counts
+    only where three quarters of the cells with at least ``min_count`` pixels in it and in
+    their ring agree on its sign, at the value three quarters of them reach (a bin no cell
+    measures takes its farther neighbour's value). It fades to 0 over the second half of
+    ``reach`` (a cosine), so that no edge shows where it ends. Returns the bin centres and the
+    profile.
+    """
+    dist, rows, cols = near
+    nb = max(1, math.ceil(reach / step))
+    centres = (np.arange(nb + 1, dtype=np.float64) + 0.5) * step
+    profile = np.zeros(nb + 1)
+    inside = allowed & (dist < 1.5 * reach)
+    if not inside.any():
+        return centres, profile
+    size = max(1, round(reach))
+    ncols = -(-source.shape[1] // size)
+    _, cell = np.unique((rows[inside] // size) * ncols + cols[inside] // size, return_inverse=True)
+    cell = cell.ravel()
+    k = np.minimum((dist[inside] / step).astype(np.int64), nb)  # bin nb: the ring
+    key = cell * (nb + 1) + k
+    n_keys = (int(cell.max()) + 1) * (nb + 1)
+    light = source.mean(axis=2)[inside].astype(np.float64)
+    count = np.bincount(key, minlength=n_keys).reshape(-1, nb + 1)
+    total = np.bincount(key, weights=light, minlength=n_keys).reshape(-1, nb + 1)
+    ok = (count >= min_count) & (count[:, nb : nb + 1] >= min_count)
+    diff = np.where(ok, total / np.maximum(count, 1) - (total[:, nb] / np.maximum(count[:, nb], 1))[:, None], np.nan)
+    for i in range(nb - 1, -1, -1):  # from far to near
+        col = diff[:, i][np.isfinite(diff[:, i])]
+        if col.size == 0:
+            profile[i] = profile[i + 1]
+            continue
+        low, high = np.percentile(col, [25, 75])
+        profile[i] = low if low > 0 else high if high < 0 else 0.0
+    t = np.clip((centres - 0.5 * reach) / (0.5 * reach), 0.0, 1.0)
+    return centres, profile * 0.5 * (1.0 + np.cos(np.pi * t))
 
 
 def _recolour(canvas: F32, hole: NDArray[np.bool_], source: F32, allowed: NDArray[np.bool_]) -> F32:
@@ -283,6 +376,7 @@ def fill_gaps(
     image: F32,
     source_skeleton: Skeleton,
     *,
+    target_skeleton: Skeleton | None = None,
     valid: NDArray[np.bool_] | None,
     radius_factor: float,
     radius: float,
@@ -322,7 +416,15 @@ def fill_gaps(
         diversity=diversity, detail_sigma=None if mask else sigma, finest_iterations=0 if mask else FINEST_ITERATIONS,
     )  # fmt: skip
     if not mask:  # a mask's background is one level
-        canvas = _relight(canvas, ~filled, image, allowed, sigma=sigma)
+        near, reach = None, None
+        if target_skeleton is not None:
+            near = (
+                _nearest_structure(source_skeleton, (H0, W0)),
+                _nearest_structure(target_skeleton, canvas.shape[:2]),
+            )
+            thick = np.concatenate([b.thickness for b in source_skeleton.branches])
+            reach = min(sigma, GLOW_REACH * max(float(np.median(thick)), 1.0))
+        canvas = _relight(canvas, ~filled, image, allowed, sigma=sigma, near=near, reach=reach)
         canvas = _clip_channels(_recolour(canvas, ~filled, image, allowed), lo, hi)
     if match_borders is None:  # a mask has no lighting to match
         match_borders = not mask

@@ -246,7 +246,9 @@ def render(
         Fill the gaps between the branches (§5.4, default True); without it they stay 0.
         On photos and fields (not two-level masks) the filled gaps then take the input
         background's large-scale brightness, where the input has it (an eighth of its
-        shorter side and coarser; a terrain's plateau, a photo's lighting).
+        shorter side and coarser; a terrain's plateau, a photo's lighting), except the light
+        that surrounds the whole structure (a lightning bolt's glow, within ten of its median
+        radii), which is laid round the new structure instead.
     match_borders : bool, optional
         Shift the completed gaps in the gradient domain so that they meet the painted
         structure without a colour step (only the smooth part of the step, made of small
@@ -375,7 +377,7 @@ def render(
         # background only, and partly known patches holding a bolt copied halos beside it.
         known = np.zeros_like(painter.filled) if whole else painter.filled
         canvas = fill_gaps(
-            canvas, known, img, src_sk, valid=ok, radius_factor=rf,
+            canvas, known, img, src_sk, target_skeleton=tgt_sk, valid=ok, radius_factor=rf,
             radius=float(np.median([g.radius for g in targets])), lo=painter.lo, hi=painter.hi,
             match_borders=match_borders if match_borders is not None else not whole, photometric=photometric and not mask_like,
             patch_size=p, iterations=c_iters, seed=s, threads=t, diversity=gap_div,
