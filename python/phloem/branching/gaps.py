@@ -33,10 +33,8 @@ __all__ = ["fill_gaps"]
 #: for a spread fill (``gap_diversity > 0``): the leaf crop's blue backdrop, not its grain.
 OUTLIER_MADS = 6.0
 
-#: How far round the structure, in its median radius, its own light is measured (and then at
-#: most the layout's scale): the lightning photos' bolts are traced 1.5-1.7 px in radius and
-#: glow to some 15-20 px; measured out to the layout's scale (96-125 px on the brain scan and
-#: the retina) the profile picks up the lighting of the places the structure fills.
+#: How far round the structure, in median radii of it, its own light is measured (at most the
+#: layout's scale): farther out the profile measures the lighting where the structure lies.
 GLOW_REACH = 10.0
 
 #: Search-and-copy iterations of the gaps' full-resolution level (where there are coarser
@@ -148,7 +146,7 @@ def _relight(
     *,
     sigma: float,
     near: tuple[_Nearest, _Nearest] | None = None,
-    reach: float | None = None,
+    reach: float = math.inf,
 ) -> F32:
     """The completed ``hole`` of ``canvas`` with its large-scale brightness (the mean over
     channels) replaced by that of ``source``'s ``allowed`` pixels (both smoothed by a Gaussian
@@ -160,7 +158,7 @@ def _relight(
 
     With ``near`` (each pixel's distance to the source's and to the canvas's structure, and
     the structure pixel nearest to it: :func:`_nearest_structure`), the part of the layout
-    within ``reach`` of the structure that surrounds all of it (:func:`_proximity_profile`: a
+    within ``reach`` (at most ``sigma``) of the structure that surrounds all of it (:func:`_proximity_profile`: a
     lightning bolt's glow) moves with the structure; the rest stays where it is in the source,
     stretched. Without it the glow round the input's bolt lights the gaps where that bolt was.
     """
@@ -169,7 +167,7 @@ def _relight(
     if near is None:
         layout = _layout(source, allowed, sigma, (H, W))
     else:
-        centres, profile = _proximity_profile(source, allowed, near[0], reach=sigma if reach is None else reach)
+        centres, profile = _proximity_profile(source, allowed, near[0], reach=min(sigma, reach))
         own_g = np.interp(near[0][0], centres, profile, right=0.0).astype(np.float32)[..., None]
         layout = _layout(source - own_g, allowed, sigma, (H, W))
         layout += np.interp(near[1][0], centres, profile, right=0.0).astype(np.float32)[..., None]
@@ -416,14 +414,14 @@ def fill_gaps(
         diversity=diversity, detail_sigma=None if mask else sigma, finest_iterations=0 if mask else FINEST_ITERATIONS,
     )  # fmt: skip
     if not mask:  # a mask's background is one level
-        near, reach = None, None
+        near = None
         if target_skeleton is not None:
             near = (
                 _nearest_structure(source_skeleton, (H0, W0)),
                 _nearest_structure(target_skeleton, canvas.shape[:2]),
             )
-            thick = np.concatenate([b.thickness for b in source_skeleton.branches])
-            reach = min(sigma, GLOW_REACH * max(float(np.median(thick)), 1.0))
+        thick = np.concatenate([b.thickness for b in source_skeleton.branches])
+        reach = GLOW_REACH * max(float(np.median(thick)), 1.0)
         canvas = _relight(canvas, ~filled, image, allowed, sigma=sigma, near=near, reach=reach)
         canvas = _clip_channels(_recolour(canvas, ~filled, image, allowed), lo, hi)
     if match_borders is None:  # a mask has no lighting to match

@@ -698,15 +698,14 @@ def _end_radii(
     """Each candidate's radius over its first pixels: the mean mask radius, or on a photo (``gray``)
     the median of :func:`estimate_thickness` there, since a photo's ridge mask is a line a pixel or
     two wide whatever the structure's width, and would make every end equally thin."""
-    if gray is None:
-        return [[float(r[np.asarray(path)].mean()) for _, path, _ in cands] for cands in candidates]
-    flat = [path for cands in candidates for _, path, _ in cands]
-    branches = []
-    for path in flat:
-        pts = np.stack([xs[path], ys[path]], axis=1).astype(np.float64)
-        if len(pts) == 1:
-            pts = np.vstack([pts, pts + [1e-3, 0.0]])
-        branches.append(Branch(_smooth_path(pts, smooth), r[path] if len(path) > 1 else np.repeat(r[path], 2)))
+    radii = [[float(r[np.asarray(path)].mean()) for _, path, _ in cands] for cands in candidates]
+    # (a single-pixel tree has no direction to measure across, so it keeps its mask radius)
+    long = [(i, j) for i, cands in enumerate(candidates) for j, (_, path, _) in enumerate(cands) if len(path) > 1]
+    if gray is None or not long:
+        return radii
+    paths = [candidates[i][j][1] for i, j in long]
+    branches = [Branch(_smooth_path(np.stack([xs[p], ys[p]], axis=1).astype(np.float64), smooth), r[p]) for p in paths]
     thick = estimate_thickness(gray, Skeleton(branches, shape), max_radius=max_radius).branches
-    it = iter(float(np.median(b.thickness)) for b in thick)
-    return [[next(it) for _ in cands] for cands in candidates]
+    for (i, j), b in zip(long, thick, strict=True):
+        radii[i][j] = float(np.median(b.thickness))
+    return radii
