@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from phloem.branching import BendingModel, Branch, Skeleton, SkeletonError, fit_models, grow
-from phloem.branching.bending import TURN_BOUND
+from phloem.branching.bending import STEM_THICKNESS, TURN_BOUND
 
 H = 2.0
 
@@ -284,6 +284,49 @@ def test_orientation_matches_each_candidates_heading_on_the_image():
     assert fit_models(Skeleton(brs), h=2.0, orientation=1.5)[0].orientation == 1.5
     with pytest.raises(ValueError, match="^orientation:"):
         BendingModel.fit(Skeleton(brs), h=2.0, orientation=-1.0)
+
+
+def test_stem_thickness_matches_each_candidates_following_thickness_against_the_profile():
+    rng = np.random.default_rng(4)
+    brs = [Branch.from_angles([10, 40 + 30 * j], 0.0, rng.normal(0, 0.2, 50), np.linspace(6.0 - j, 1.0, 52), 2.0)
+           for j in range(3)]  # fmt: skip
+    on = BendingModel.fit(Skeleton(brs), h=2.0, k=3, m=3)
+    off = BendingModel.fit(Skeleton(brs), h=2.0, k=3, m=3, stem_thickness=0.0)
+    assert on.stem_thickness == STEM_THICKNESS > 0 and off.stem_thickness == 0.0
+    a, r = on.cand_hist_alpha[20], on.cand_hist_r[20] * 2.0
+    z = np.zeros(on.bins)
+    want = np.array([5.0, 4.8, 4.6])
+    # the paper's dist between the m following thicknesses and the profile, in units of h
+    d = np.linalg.norm(on.next_r / 2.0 - want / 2.0, axis=1)
+    np.testing.assert_allclose(
+        on.log_quality(a, r, z, z, profile=want) - on.log_quality(a, r, z, z),
+        STEM_THICKNESS * np.log(1 / (d + 1) + 1),
+    )
+    # the best candidate continues where the branches are 4.6-5 px thick
+    best = on.log_quality(a, r, z, z, profile=want).argmax()
+    assert np.all(np.abs(on.next_r[best] - want) < 0.5)
+    # a child is not matched, nor is any branch with the term off
+    assert np.array_equal(on.log_quality(a, r, z, z, profile=want, stem=False), on.log_quality(a, r, z, z))
+    assert np.array_equal(off.log_quality(a, r, z, z, profile=want), off.log_quality(a, r, z, z))
+    with pytest.raises(ValueError, match="^profile:"):
+        on.log_quality(a, r, z, z, profile=want[:2])
+    with pytest.raises(ValueError, match="^stem_thickness:"):
+        BendingModel.fit(Skeleton(brs), h=2.0, stem_thickness=-1.0)
+    assert fit_models(Skeleton(brs), h=2.0, stem_thickness=1.5)[0].stem_thickness == 1.5
+
+
+def test_stem_profile_is_the_running_median_over_four_extensions():
+    t = np.linspace(8.0, 2.0, 60)
+    t[30] = 40.0  # a knot one vertex long: not the branch's level
+    b = Branch(np.stack([np.arange(60) * 2.0 + 5, np.full(60, 20.0)], axis=1), t)
+    model = BendingModel.fit(Skeleton([b]), h=2.0, k=3, m=3)
+    got = model.stem_profile(0)
+    src = model.source.branches[0].thickness
+    half = 2 * model.m
+    for i in range(len(src)):
+        window = [src[min(max(j, 0), len(src) - 1)] for j in range(i - half, i + half + 1)]
+        assert got[i] == np.median(window)
+    assert got.max() < 9.0
 
 
 def test_candidates_total_turns_are_the_sums_of_all_angles_before_them():

@@ -17,12 +17,14 @@ from phloem.branching import (
     Skeleton,
     angle_histogram,
     extend,
+    fit_models,
     grow,
     histogram_distance,
     synthetic_skeleton,
     thickness_histogram,
 )
 from phloem.branching._forest import input_trees
+from phloem.branching.bending import STEM_THICKNESS
 from phloem.testing import input_halves, shared_file
 
 H = 2.0
@@ -202,8 +204,10 @@ def test_input_sized_forest(
 
 
 def test_warm_start_keeps_the_stem_thickness(source: Skeleton, models: tuple[BendingModel, FurcationModel]):
-    bend, fur = models
-    literal = BendingModel.fit(source, h=H, warm_start=0.0, turn_histogram=0.0)  # the paper's histograms only
+    _, fur = models
+    # the paper's histograms only, and with the warm start; neither holds the stem by its profile
+    literal = BendingModel.fit(source, h=H, warm_start=0.0, turn_histogram=0.0, stem_thickness=0.0)
+    bend = BendingModel.fit(source, h=H, stem_thickness=0.0)
 
     def ratio(model: BendingModel) -> float:
         # thickness right after the first extension over the last copied stem element
@@ -218,6 +222,48 @@ def test_warm_start_keeps_the_stem_thickness(source: Skeleton, models: tuple[Ben
     # matching against the histograms of 4 copied elements thins the stem to ~15 % at once.
     assert ratio(literal) < 0.3
     assert ratio(bend) > 0.7
+
+
+def test_a_trunk_keeps_its_thickness_beside_thin_children():
+    # a 300-px trunk tapering from 6.5 to 3 px with fourteen children 1.5 px thick: most of
+    # the input's elements are thin, and without the stem's profile the grown trunk took the
+    # children's thickness within its first extensions (1.5 px)
+    rng = np.random.default_rng(0)
+
+    def walk(n: int, sigma: float) -> np.ndarray:
+        a = np.zeros(n)
+        for i in range(n):
+            a[i] = (0.5 * a[i - 1] if i else 0.0) + rng.normal(0.0, sigma)
+        return a
+
+    n = 150
+    trunk = Branch.from_angles([200, 390], np.pi / 2, walk(n - 2, 0.12), np.linspace(6.5, 3.0, n), 2.0)
+    branches = [trunk]
+    for v in range(12, n - 5, 10):
+        d = trunk.points[v + 1] - trunk.points[v]
+        heading = np.arctan2(-d[1], d[0]) + (0.8 if (v // 10) % 2 else -0.8)
+        k = int(rng.integers(25, 45))
+        thick = 1.5 + rng.normal(0.0, 0.1, k).clip(-0.3, 0.3)
+        branches.append(Branch.from_angles(trunk.points[v], heading, walk(k - 2, 0.2), thick, 2.0, parent=(0, v)))
+    src = Skeleton(branches, (400, 400))
+    want = float(np.median(trunk.thickness[: 3 * n // 4]))
+
+    def grown(weight: float) -> tuple[float, float]:
+        bend, fur = fit_models(src, h=2.0, stem_thickness=weight)
+        stems, dists = [], []
+        for seed in range(4):
+            out = grow(bend, fur, size=(400, 400), seed=seed, max_length="input")
+            t = out.branches[0].thickness
+            stems.append(float(np.median(t[: 3 * len(t) // 4])))
+            dists.append(histogram_distance(thickness_histogram(out, range=bend.range_r)[0], bend.hist_r))
+        return min(stems), max(dists)
+
+    stem, dist = grown(STEM_THICKNESS)
+    assert stem > 0.85 * want
+    flat, flat_dist = grown(0.0)
+    assert flat < 0.4 * want
+    # the trunk's thick elements where the input has them: the thickness histogram is closer too
+    assert dist < flat_dist
 
 
 def test_guided_growth_follows_the_path(models: tuple[BendingModel, FurcationModel]):

@@ -202,7 +202,7 @@ def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
     assert Skeleton.load(outs["o0"]) != Skeleton.load(outs["o3"])
     assert json.loads(io.sidecar_path(outs["o3"]).read_text())["parameters"]["orientation"] == 3.0
     flag_sets = (["--total-turn", "0"], ["--total-turn", "4"], ["--total-turn", "4", "--turn-bound", "0"],
-                 ["--repel-border"], ["--no-repel-border"], ["--turn-histogram", "0"])  # fmt: skip
+                 ["--repel-border"], ["--no-repel-border"], ["--turn-histogram", "0"], ["--stem-thickness", "0"])  # fmt: skip
     for flags in flag_sets:
         out = tmp_path / ("grown" + "".join(flags) + ".json")
         assert main(["branching", "grow", str(skel), "--out", str(out), "--seed", "1", *flags, "-q"]) == 0
@@ -213,6 +213,8 @@ def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
     assert grown["--turn-histogram 0"] != grown["32"]
     sidecar = {k: json.loads(io.sidecar_path(v).read_text())["parameters"] for k, v in outs.items()}
     assert sidecar["--turn-histogram 0"]["turn_histogram"] == 0.0 and sidecar["32"]["turn_histogram"] == 3.0
+    assert grown["--stem-thickness 0"] != grown["32"]
+    assert sidecar["--stem-thickness 0"]["stem_thickness"] == 0.0 and sidecar["32"]["stem_thickness"] == 5.0
     assert sidecar["--total-turn 4"]["total_turn"] == 4.0
     # the bound on the stems' turn follows the total turn unless it is given
     assert sidecar["--total-turn 4"]["turn_bound"] == 5.0 and sidecar["--total-turn 0"]["turn_bound"] == 0.0

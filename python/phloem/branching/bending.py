@@ -42,10 +42,22 @@ from ._elements import (
 )
 from .skeleton import Skeleton
 
-__all__ = ["ARC", "TURN_BOUND", "BendingModel", "arc_window_turns", "block_sums", "course_deviation", "default_h"]
+__all__ = [
+    "ARC",
+    "STEM_THICKNESS",
+    "TURN_BOUND",
+    "BendingModel",
+    "arc_window_turns",
+    "block_sums",
+    "course_deviation",
+    "default_h",
+]
 
 #: Arc of the heading-change histogram, px: the arc over which issue 19 measures drift.
 ARC = 60.0
+
+#: Weight of a stem's thickness profile (measured in ``docs/pipelines/branching/quality.md``).
+STEM_THICKNESS = 5.0
 
 #: Weight of the bound on the total turn where the total turn is matched (measured in
 #: ``docs/pipelines/branching/quality.md``).
@@ -189,6 +201,8 @@ class BendingModel:
         Elements in a heading-change window.
     turn_histogram : float
         Weight of the heading-change histogram's matching (0: off), see :meth:`fit`.
+    stem_thickness : float
+        Weight of a stem's thickness profile (0: off), see :meth:`fit`.
 
     Examples
     --------
@@ -241,6 +255,7 @@ class BendingModel:
     hist_arc: F64 = field(default_factory=lambda: np.zeros(0), repr=False)
     arc_edges: int = 0
     turn_histogram: float = 0.0
+    stem_thickness: float = 0.0
 
     @classmethod
     def fit(
@@ -262,6 +277,7 @@ class BendingModel:
         orientation: float = 0.0,
         turn_histogram: float = 3.0,
         arc: float = ARC,
+        stem_thickness: float = STEM_THICKNESS,
     ) -> BendingModel:
         """Learn the bending model from an example skeleton.
 
@@ -352,6 +368,16 @@ class BendingModel:
         arc : float
             Arc of the heading-change histogram in px (default 60, the arc of
             :func:`phloem.metrics.drift`).
+        stem_thickness : float
+            Weight of a stem's thickness profile (default :data:`STEM_THICKNESS`; 0 switches
+            it off). Beyond the paper: :func:`~phloem.branching.grow` gives each root tree's
+            main branch the thickness its template stem has at the same arc length (the
+            template's thickness under a running median of ``4 m + 1`` elements), and each
+            candidate's ``m`` following thicknesses are matched against it with the paper's
+            ``dist`` (in units of ``h``) raised to this power. The ``k + 1`` elements of the
+            history hold a thickness for a few extensions only, and the thickness histogram
+            pulls every extension towards the input's commonest thickness, so a thick trunk
+            thinned to its children's thickness within its first extensions.
 
         Returns
         -------
@@ -391,6 +417,7 @@ class BendingModel:
         turn_bound = check_float(turn_bound, "turn_bound", 0.0)
         orientation = check_float(orientation, "orientation", 0.0)
         turn_histogram = check_float(turn_histogram, "turn_histogram", 0.0)
+        stem_thickness = check_float(stem_thickness, "stem_thickness", 0.0)
         arc = check_float(arc, "arc", 0.0, inclusive=False)
         src = skeleton.resample(h)
         elems = [_elements(b) for b in src.branches]
@@ -480,6 +507,7 @@ class BendingModel:
             hist_arc=hist_arc.astype(np.float64),
             arc_edges=arc_edges,
             turn_histogram=turn_histogram,
+            stem_thickness=stem_thickness,
         )
 
     def log_quality(
@@ -495,6 +523,7 @@ class BendingModel:
         heading: float | None = None,
         arc_tail: F64 | None = None,
         counts_arc: F64 | None = None,
+        profile: F64 | None = None,
     ) -> F64:
         """``log Q*_i`` of every candidate for a branch history (vectorised over candidates).
 
@@ -524,6 +553,10 @@ class BendingModel:
             The branch's last angles and the structure's heading-change histogram counts;
             the histogram is matched (:meth:`arc_delta`) when both are given and
             ``turn_histogram > 0``.
+        profile : ndarray, shape (m,), optional
+            The thickness (pixels) the branch's template has at the ``m`` vertices an
+            extension writes (see :meth:`stem_profile`); matched against each candidate's
+            following thicknesses when given, ``stem`` is true and ``stem_thickness > 0``.
 
         Returns
         -------
@@ -546,6 +579,12 @@ class BendingModel:
         if turn is not None and stem and self.turn_bound > 0:
             after = np.abs(float(turn) + self._next_turn())
             q -= self.turn_bound * np.maximum(after - self.turn_limit, 0.0)
+        if profile is not None and stem and self.stem_thickness > 0:
+            if np.shape(profile) != (self.m,):
+                raise ValueError(f"profile: expected {self.m} thicknesses, got shape {np.shape(profile)}")
+            q += self.stem_thickness * np.log(
+                _dist_columns(self._next_r_rows(), np.asarray(profile, np.float64) / self.h)
+            )
         if deviation is not None and self.course > 0:
             q += _log_dist_angle(self.cand_course - deviation)
         if heading is not None and self.orientation > 0 and len(self.cand_heading):
@@ -617,6 +656,15 @@ class BendingModel:
         """
         return 1.0 + self.coarse_history + self.total_turn + self.turn_histogram
 
+    def _next_r_rows(self) -> F64:
+        """``(m, C)`` every candidate's following thicknesses over ``h``, transposed (cached)."""
+        got = self.__dict__.get("_next_r_rows_of")
+        if got is None or got[0] is not self.next_r:
+            got = (self.next_r, np.ascontiguousarray(self.next_r.T / self.h))
+            self.__dict__["_next_r_rows_of"] = got
+        out: F64 = got[1]
+        return out
+
     def _next_turn(self) -> F64:
         """``(C,)`` the turn of every candidate's continuation, the sum of its ``m`` angles (cached)."""
         got = self.__dict__.get("_next_turn_of")
@@ -660,3 +708,13 @@ class BendingModel:
         b = self.source.branches[branch]
         a, r = _elements(b)
         return b.heading(), a[: self.k + 1], r[: self.k + 1], float(b.thickness[0])
+
+    def stem_profile(self, branch: int = 0) -> F64:
+        """The thickness of an input branch at each of its vertices under a running median of
+        ``4 m + 1`` elements: its level along the branch, without the local texture that the
+        candidates bring (see ``stem_thickness`` in :meth:`fit`)."""
+        t = np.asarray(self.source.branches[branch].thickness, np.float64)
+        half = 2 * self.m
+        padded = np.concatenate([np.full(half, t[0]), t, np.full(half, t[-1])])
+        out: F64 = np.median(np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1), axis=1)
+        return out

@@ -17,6 +17,9 @@ Beyond the paper's text:
 * **Course.** The bending model also matches each branch's heading against its course over
   ``8 m`` edges (:class:`.BendingModel`, ``course``), so branches keep a course at the scale
   of the structure.
+* **Stem thickness.** Each root tree's main branch is matched against its template stem's
+  thickness at the same arc length (:class:`.BendingModel`, ``stem_thickness``), so that a
+  trunk stays as thick as the input's and tapers as it does.
 * **Orientation** (an option, off by default). The bending model can also match each
   branch's heading on the image (:class:`.BendingModel`, ``orientation``), so that branches
   run the ways the input's run; the paper's model knows only turns.
@@ -83,6 +86,8 @@ class _Growing:
     inserted: int = 0  # segments already written into the density map
     # the parent's vertices within ``near`` of the attachment and their thickness (children only)
     parent_near: tuple[F64, F64] | None = None
+    # a stem's template thickness per vertex (:meth:`BendingModel.stem_profile`), or None
+    profile: F64 | None = None
 
     def length(self) -> float:
         return float(len(self.points) - 1)
@@ -139,9 +144,14 @@ class _Grower:
         alpha, r = np.asarray(br.alpha[-L:]), np.asarray(br.r[-L:])
         head = br.heading if m.orientation > 0 else None
         recent = np.asarray(br.alpha[-(m.arc_edges - 1) :]) if m.turn_histogram > 0 else None
+        want = None
+        if br.profile is not None and m.stem_thickness > 0:
+            # the extension writes the thickness of the tip vertex and the m - 1 after it
+            n = len(br.points) - 1
+            want = br.profile[np.minimum(np.arange(n, n + m.m), len(br.profile) - 1)]
         q = m.log_quality(
             alpha, r, w.counts_alpha, w.counts_r, dev, coarse, turn, stem=br.parent is None, heading=head,
-            arc_tail=recent, counts_arc=w.counts_arc,
+            arc_tail=recent, counts_arc=w.counts_arc, profile=want,
         )  # fmt: skip
         tip = br.points[-1]
         H, W = w.shape
@@ -720,6 +730,7 @@ def grow(
                     break
                 continue
         goal, d = plan(float(bending.source.branches[root].length()), 0 if tree is None else tree.branches[0][0][1])
+        current.profile = bending.stem_profile(root) if bending.stem_thickness > 0 else None
         trees += 1
         first_branch, start_length, top_ups = len(out), world.total_length, 0
         stalled: bool | None = None  # did the tree's main branch stop short without a single step?

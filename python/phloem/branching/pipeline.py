@@ -12,7 +12,7 @@ from .. import _memory
 from .._api import Seed, Size, renamed
 from .._progress import Progress
 from .._validate import as_image, as_mask, check_size
-from .bending import BendingModel
+from .bending import STEM_THICKNESS, BendingModel
 from .frame import _kept_inside, valid_region
 from .furcation import FurcationModel
 from .growth import grow
@@ -77,6 +77,7 @@ def fit_models(
     turn_bound: float | None = None,
     orientation: float = 0.0,
     turn_histogram: float = 3.0,
+    stem_thickness: float = STEM_THICKNESS,
 ) -> tuple[BendingModel, FurcationModel | None]:
     """The bending model (§4.2) and, if the skeleton branches at all, the furcation model (§4.3).
 
@@ -116,6 +117,10 @@ def fit_models(
         Weight of the matching of the histogram of heading changes over 60 px, so that
         branches turn over that arc as the input's do (default 3; 0: the paper's model; see
         :meth:`BendingModel.fit`).
+    stem_thickness : float, optional
+        Weight of the match of each root tree's main branch against its template stem's
+        thickness, so that a trunk stays as thick as the input's (default 5; 0: the paper's
+        model; see :meth:`BendingModel.fit`).
 
     Examples
     --------
@@ -126,7 +131,7 @@ def fit_models(
     """
     bending = BendingModel.fit(
         skeleton, h=h, k=order, m=m, c=n_best, course=course, coarse_history=coarse_history, total_turn=total_turn,
-        turn_bound=turn_bound, orientation=orientation, turn_histogram=turn_histogram,
+        turn_bound=turn_bound, orientation=orientation, turn_histogram=turn_histogram, stem_thickness=stem_thickness,
     )  # fmt: skip
     has_children = any(b.parent is not None for b in skeleton.branches)
     furcation = FurcationModel.fit(skeleton, h=bending.h, k=order, c=n_best) if has_children else None
@@ -241,6 +246,7 @@ def synthesize(
     turn_bound: float | None = None,
     orientation: float | None = None,
     turn_histogram: float = 3.0,
+    stem_thickness: float = STEM_THICKNESS,
     generations: int | None = None,
     max_length: float | str | None = "input",
     colonize: bool = True,
@@ -275,7 +281,7 @@ def synthesize(
         Seed of the growth and of the fragment choices.
     trace_options : dict, optional
         Keyword arguments for :func:`trace` (e.g. ``{"kind": "dark", "sigmas": (1.5, 3, 5)}``).
-    h, order, m, n_best, course, coarse_history, total_turn, turn_bound, orientation, turn_histogram : optional
+    h, order, m, n_best, course, coarse_history, total_turn, turn_bound, orientation, turn_histogram, stem_thickness : optional
         Model parameters, as in :func:`fit_models` (``k`` and ``c`` before, deprecated).
         ``total_turn`` defaults to :func:`course_defaults`'s for the source skeleton,
         ``turn_bound`` to 5 where the total turn is matched, and ``orientation`` to
@@ -307,7 +313,7 @@ def synthesize(
         Models fitted to ``skeleton`` before (an earlier result's ``bending`` and ``furcation``),
         used instead of fitting them again: many seeds of one input fit once. ``h``, ``order``,
         ``m``, ``n_best``, ``course``, ``coarse_history``, ``total_turn``, ``turn_bound``,
-        ``orientation`` and ``turn_histogram`` are then not used.
+        ``orientation``, ``turn_histogram`` and ``stem_thickness`` are then not used.
 
     Returns
     -------
@@ -357,6 +363,7 @@ def synthesize(
         bending, furcation = fit_models(
             source, h=h, order=order, m=m, n_best=n_best, course=course, coarse_history=coarse_history,
             total_turn=total_turn, turn_bound=turn_bound, orientation=orientation, turn_histogram=turn_histogram,
+            stem_thickness=stem_thickness,
         )  # fmt: skip
     elif (
         isinstance(models, tuple)

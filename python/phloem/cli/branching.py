@@ -290,6 +290,15 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
         "(default 3; 0: the paper's model)",
     )
     g.add_argument(
+        "--stem-thickness",
+        type=float,
+        default=5.0,
+        metavar="WEIGHT",
+        help="weight of matching each tree's main branch against the thickness of the example's main branch at "
+        "the same length, so that a trunk stays as thick as the example's and tapers as it does (default 5; 0: "
+        "the paper's model, where a trunk thins to its children's thickness)",
+    )
+    g.add_argument(
         "--generations",
         type=positive,
         default=None,
@@ -333,11 +342,11 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     _resolve_course(args, source)
     # fitting takes seconds on real skeletons; a batch worker fits once per skeleton and options
     options = (args.h, args.order, args.m, args.n_best, args.course, args.coarse_history, args.total_turn,
-               args.turn_bound, args.orientation, args.turn_histogram)  # fmt: skip
+               args.turn_bound, args.orientation, args.turn_histogram, args.stem_thickness)  # fmt: skip
     bend, fur = kept("branching models", [Path(args.skeleton)], options, lambda: branching.fit_models(
         source, h=args.h, order=args.order, m=args.m, n_best=args.n_best, course=args.course,
         coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound,
-        orientation=args.orientation, turn_histogram=args.turn_histogram))  # fmt: skip
+        orientation=args.orientation, turn_histogram=args.turn_histogram, stem_thickness=args.stem_thickness))  # fmt: skip
     new = run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
     _resolve_models(args, bend)
     args.size = shape
@@ -389,13 +398,13 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
         read.append(Path(args.valid))
     key = stamp(read, (_trace_kwargs(args), args.valid, args.h, args.order, args.m, args.n_best, args.course,
                                args.coarse_history, args.total_turn, args.turn_bound, args.orientation,
-                               args.turn_histogram))  # fmt: skip
+                               args.turn_histogram, args.stem_thickness))  # fmt: skip
     prior = recall("branching run models", key)
     res = run(
         "branching run", args,
         lambda bar: branching.synthesize(
             img, source if prior is None else prior[0], models=None if prior is None else prior[1:], size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, order=args.order,
-            m=args.m, n_best=args.n_best, course=args.course, coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound, orientation=args.orientation, turn_histogram=args.turn_histogram, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize, repel_border=args.repel_border,
+            m=args.m, n_best=args.n_best, course=args.course, coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound, orientation=args.orientation, turn_histogram=args.turn_histogram, stem_thickness=args.stem_thickness, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize, repel_border=args.repel_border,
             guide=_guide(args.guide, args), valid=valid, render_options=_render_kwargs(args),
             threads=args.threads, progress=bar, max_memory=args.max_memory,
         ),
