@@ -543,6 +543,41 @@ def test_fragments_in_unusual_surroundings_are_left_out() -> None:
     assert not _unusual_surroundings(img, span, sk, frs, ~inside, keep=3).any()
 
 
+def _rim_scene(start_thickness: float) -> tuple[np.ndarray, Skeleton, Skeleton, np.ndarray]:
+    """A grey photo with a flat black frame along its left side, a vessel that starts 11 px from
+    the frame and one that starts in the middle ``start_thickness`` thick; the target is one
+    vessel starting in the middle, 3 px thick as the first."""
+    rng = np.random.default_rng(0)
+    img = 0.5 + 0.01 * rng.standard_normal((160, 300)).astype(np.float32)
+    img[:, :20] = 0.0
+    valid = np.ones(img.shape, bool)
+    valid[:, :20] = False
+    by_frame = Branch([[31, 50], [160, 50]], 3.0)
+    inside = Branch([[150, 120], [290, 120]], [start_thickness, 3.0])
+    for y, x0, x1 in ((50, 31, 160), (120, 150, 290)):
+        img[y - 2 : y + 3, x0:x1] -= 0.3
+    tgt = Skeleton([Branch([[150, 40], [280, 40]], 3.0)], img.shape)
+    return img, Skeleton([by_frame, inside], img.shape), tgt, valid
+
+
+def test_a_branch_start_away_from_the_frame_is_not_painted_from_beside_it() -> None:
+    # A fundus photo's vessels end at its rim, and a source fragment there carries the rim's
+    # shading: pasted at a target branch start in the middle of the disc, it stamped the
+    # rim there. The best-shaped start (11 px from the frame, radius 9) is left to targets by
+    # their own frame; the start in the middle, a worse shape, paints the target's start.
+    img, sk, tgt, valid = _rim_scene(4.0)
+    res = render(img, sk, tgt, seed=0, valid=valid, full_output=True)
+    assert res.targets[0].arc == 0.0
+    np.testing.assert_allclose(res.sources[res.choice[0]].center, [150.0, 120.0])
+    # without a frame the same source is the best start (the shape term alone decides)
+    free = render(img, sk, tgt, seed=0, full_output=True)
+    np.testing.assert_allclose(free.sources[free.choice[0]].center, [31.0, 50.0])
+    # a target start by its own frame may take it
+    by_frame = Skeleton([Branch([[31, 100], [160, 100]], 3.0)], img.shape)
+    res = render(img, sk, by_frame, seed=0, valid=valid, full_output=True)
+    np.testing.assert_allclose(res.sources[res.choice[0]].center, [31.0, 50.0])
+
+
 def test_a_frame_along_less_than_a_sixth_of_the_border_is_not_kept() -> None:
     img, sk = channel_scene()
     img = img.copy()

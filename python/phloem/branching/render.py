@@ -64,13 +64,14 @@ from numpy.typing import NDArray
 
 from .. import _core, _memory
 from .._api import Seed, renamed
+from .._distance import euclidean_distance
 from .._progress import Progress
 from .._validate import as_image, as_mask, check_float, check_int, check_patch_size, check_seed, check_threads
 from ..blend import interpolate_field, seamless
 from ..seams import seam
 from ._pixels import F32, F64, _by_channels, _check_skeleton, _clip_channels, _paste, _pt, _robust_z, _rot, two_level
 from .fragments import DEFAULT_SAMPLES, Fragment, FragmentLibrary, check_params, cover, foreign_fragments
-from .frame import _keep_frame
+from .frame import _keep_frame, _kept_inside
 from .gaps import fill_gaps
 from .skeleton import MAX_THICKNESS, Branch, Skeleton
 
@@ -270,7 +271,10 @@ def render(
     valid : (H, W) array_like of bool, optional
         Where ``image`` shows real content (default everywhere), e.g. the photo inside the
         frame of :func:`rectify` or a fundus photo's disc: only fragments that lie wholly
-        inside it are pasted, and the gap completion copies only from there.
+        inside it are pasted, and the gap completion copies only from there. A fragment whose
+        disk comes within its radius of the outside (a fundus rim's shading) paints only
+        target fragments as near the new image's frame (the input's stretched, where it is
+        kept), unless no other source fits.
     keep_frame : bool, optional
         With ``valid``: the new image shows ``image``'s frame, the pixels outside ``valid``,
         stretched to its size (default True), so a fundus photo stays a disc in its black
@@ -367,7 +371,13 @@ def render(
     sources, targets, lib = _cover_both(
         img, src_sk, tgt_sk, ok, lam_f, rf, k, mirror=mirror, keep=max(3, c_n), lighting=None if mask_like else (lo, hi)
     )
-    painter = _Painter(img, (lo, hi), tgt_sk, targets, lib, opts, draws=rng.random(len(targets)))
+    frame_near = None
+    if ok is not None:
+        # the target's frame: the input's stretched, where a frame that long is kept (whether
+        # or not this call keeps it, which only puts it back at the end); else none at all
+        assert tgt_sk.shape is not None  # checked above
+        frame_near = (_near_frame(sources, ok), _near_frame(targets, _kept_inside(ok, tgt_sk.shape)))
+    painter = _Painter(img, (lo, hi), tgt_sk, targets, lib, opts, draws=rng.random(len(targets)), frame_near=frame_near)
     _in_order(painter.boxes, painter.paint, workers=t if t is not None else _core.default_threads(), progress=progress)
 
     canvas = painter.canvas
@@ -450,6 +460,21 @@ def _leaves_image(f: Fragment, shape: tuple[int, int]) -> bool:
     return bool(x - r < -1.0 or y - r < -1.0 or x + r > shape[1] or y + r > shape[0])
 
 
+def _near_frame(frs: list[Fragment], inside: NDArray[np.bool_] | None) -> NDArray[np.bool_]:
+    """Whether each fragment's disk comes within its radius of the frame outside ``inside``
+    (the image's own border does not count; None: no frame, none is near)."""
+    if inside is None or inside.all():
+        return np.zeros(len(frs), bool)
+    dist = euclidean_distance(np.pad(inside, 1, constant_values=True))[1:-1, 1:-1]
+    h, w = inside.shape
+    near = np.zeros(len(frs), bool)
+    for i, f in enumerate(frs):
+        x = min(max(round(float(f.center[0])), 0), w - 1)
+        y = min(max(round(float(f.center[1])), 0), h - 1)
+        near[i] = dist[y, x] < 2.0 * f.radius
+    return near
+
+
 def _channel_range(img: F32) -> tuple[F32, F32]:
     """Per-channel minimum and maximum (reducing over rows first, which is much faster)."""
     H0, C = img.shape[0], img.shape[2]
@@ -476,6 +501,7 @@ class _Painter:
         lib: FragmentLibrary,
         opts: _Options,
         draws: F64,
+        frame_near: tuple[NDArray[np.bool_], NDArray[np.bool_]] | None = None,
     ) -> None:
         assert target.shape is not None
         H, W = target.shape
@@ -501,6 +527,8 @@ class _Painter:
         span2 = float(np.mean((self.hi - self.lo).astype(np.float64) ** 2))
         self.contrast = 1.0 / span2 if span2 > 0 else 1.0
         self.clipped = np.array([_leaves_image(f, image.shape[:2]) for f in lib.frs], bool)
+        # (sources, targets) whose disks come within a radius of their image's frame
+        self.frame_near = frame_near
         self.crops: list[tuple[slice, slice, NDArray[np.bool_], int, int]] = []
         self.boxes = np.zeros((len(targets), 4), np.int64)
         for j, g in enumerate(targets):
@@ -537,6 +565,12 @@ class _Painter:
             # A source disk that leaves its image carries the reflected border; inside the
             # output (at a branch end: a blob) only when nothing else is left.
             out = self.clipped[lib.frag[idx]]
+            if not out.all():
+                S = np.where(out, np.inf, S)
+        if self.frame_near is not None and not self.frame_near[1][j]:
+            # Likewise a source disk by the frame (a fundus photo's rim) carries the frame's
+            # shading: away from the target's frame only when nothing else is left.
+            out = self.frame_near[0][lib.frag[idx]]
             if not out.all():
                 S = np.where(out, np.inf, S)
         order = np.argsort(S, kind="stable")[: o.n_eval]
