@@ -26,6 +26,8 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
 - the L1 distance of the output's histogram of directions on the image to the input's, and the
   input's ``direction_concentration`` (``orientation_distance``, not a pass mark: bolts that
   hang down in the input and run sideways in the output);
+- the structure's contrast on the input and on the output (``structure_contrast``, not a pass
+  mark: bolts and vessels fainter than the input's);
 - two-level fraction of the output (two-level inputs only);
 - the angle and thickness histogram distances of the output to the input's model, with the
   spread between the input's two halves that the growth tests bound them by (1.5× and 1×);
@@ -78,6 +80,7 @@ from phloem.metrics import (
     orientation_distance,
     skeleton_agreement,
     start_turns,
+    structure_contrast,
     two_level_fraction,
 )
 from phloem.testing import TRACE_SETTINGS, input_halves, shared_path
@@ -111,6 +114,8 @@ class Result:
     gap_out: float = math.nan
     directions: float = math.nan
     concentration: float = math.nan
+    contrast_in: float = math.nan
+    contrast_out: float = math.nan
     two_level: float | None = None
     angle: float = math.nan
     angle_spread: float = math.nan
@@ -216,6 +221,9 @@ def measure(
     # nor this: the ways the structure runs on the image, which the turn measures do not see
     with contextlib.suppress(ValueError):
         r.directions, r.concentration = orientation_distance(src, tgt), direction_concentration(src)
+    # nor this: how much the structure stands out from its surroundings (a faint copy re-traces)
+    with contextlib.suppress(ValueError):
+        r.contrast_in, r.contrast_out = structure_contrast(img, src), structure_contrast(res.image, tgt)
     for attr, sk in (("heading_in", src), ("heading_out", tgt)):
         with contextlib.suppress(ValueError):
             setattr(r, attr, median_heading_change(sk))
@@ -274,9 +282,9 @@ def _f(x: float | None, fmt: str = ".2f") -> str:
 def table(results: list[Result]) -> str:
     head = (
         "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input's noise) | heading in → out (rad) "
-        "| along the frame in → out | hooked starts in → out | children's gap px in → out | directions L1 (input's concentration) | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
+        "| along the frame in → out | hooked starts in → out | children's gap px in → out | directions L1 (input's concentration) | contrast in → out (kept) | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
-    lines = [head, "|" + "---|" * 16]
+    lines = [head, "|" + "---|" * 17]
     for r in results:
         fails = ", ".join(k for k, ok in r.passed.items() if not ok) or "—"
         if r.error:
@@ -286,7 +294,7 @@ def table(results: list[Result]) -> str:
         lines.append(
             f"| {r.input} | {r.seed} | {size} | {_f(r.f1)} ({_f(r.precision)}/{_f(r.recall)}) "
             f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} ({_f(r.drift_noise)}) | {_f(r.heading_in)} → {_f(r.heading_out)} "
-            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.directions)} ({_f(r.concentration)}) | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
+            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
             f"| {_f(r.seconds, '.1f')} | {fails} |"
         )
     return "\n".join(lines)

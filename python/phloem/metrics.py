@@ -18,8 +18,8 @@ stroke measures of Luo et al.'s edits (coverage of the target strokes, width agr
 corresponding strokes; defined in :mod:`phloem.strokes.measures`), and the measures of whether a
 synthesised branching structure looks like its input's kind (re-trace agreement, largest-tree
 share, heading-change drift, two-level fraction, the share of the structure that runs along the frame,
-how much children turn where they start and how far apart they leave their parent, and which ways it
-runs on the image; defined in
+how much children turn where they start and how far apart they leave their parent, which ways it
+runs on the image, and how much it stands out from its surroundings; defined in
 :mod:`phloem.branching.measures`).
 """
 
@@ -54,6 +54,7 @@ from .branching.measures import (
     retrace_agreement,
     skeleton_agreement,
     start_turns,
+    structure_contrast,
     two_level_fraction,
 )
 from .strokes.measures import stroke_coverage, width_agreement
@@ -88,6 +89,7 @@ __all__ = [
     "skeleton_agreement",
     "start_turns",
     "stroke_coverage",
+    "structure_contrast",
     "thickness_histogram",
     "two_level_fraction",
     "width_agreement",

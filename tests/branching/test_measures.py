@@ -25,6 +25,7 @@ from phloem.branching.measures import (
     retrace_agreement,
     skeleton_agreement,
     start_turns,
+    structure_contrast,
     two_level_fraction,
 )
 
@@ -481,3 +482,37 @@ def test_orientation_distance_sees_a_turned_structure_that_the_turn_measures_do_
         orientation_distance(hanging, [1, 2])  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="^skeleton: the skeleton has no length"):
         direction_histogram(Skeleton([Branch([[3.0, 3.0], [3.0, 3.0]], 1.0)]))
+
+
+def test_structure_contrast_is_the_centre_lines_over_their_surroundings() -> None:
+    # brute force: every pixel against the exact distance to a straight bolt of thickness 2
+    rng = np.random.default_rng(0)
+    img = (0.2 + 0.02 * rng.standard_normal((60, 120))).astype(np.float32)
+    yy, xx = np.mgrid[:60, :120]
+    on = (np.abs(yy - 30) <= 2) & (xx >= 10) & (xx <= 109)
+    img[on] = 0.9
+    sk = Skeleton([Branch([[10, 30], [109, 30]], 2.0)], img.shape)
+    d = np.hypot(np.maximum(np.maximum(10 - xx, xx - 109), 0), yy - 30)
+    ring = (d >= 6) & (d < 8)
+    want = float(np.median(img[(yy == 30) & (xx >= 10) & (xx <= 109)]) - np.median(img[ring]))
+    assert structure_contrast(img, sk) == pytest.approx(want, abs=1e-6)
+    assert structure_contrast(img, sk) == pytest.approx(0.7, abs=0.01)
+    # a dark line is negative, and a glow round the bolt lowers its contrast
+    assert structure_contrast(1.0 - img, sk) == pytest.approx(-0.7, abs=0.01)
+    glow = img + np.where(on, 0.0, 0.3 * np.exp(-np.abs(yy - 30) / 6.0)).astype(np.float32)
+    assert structure_contrast(np.clip(glow, 0, 1), sk) < 0.7 - 0.08
+    # colour: the mean over channels
+    rgb = np.stack([img, img, np.full_like(img, 0.5)], axis=2)
+    assert structure_contrast(rgb, sk) == pytest.approx(2 / 3 * want, abs=1e-6)
+
+
+def test_structure_contrast_refuses_what_it_cannot_measure() -> None:
+    img = np.zeros((40, 80), np.float32)
+    sk = Skeleton([Branch([[10, 20], [69, 20]], 2.0)], (40, 80))
+    with pytest.raises(ValueError, match="^skeleton: made for a"):
+        structure_contrast(np.zeros((40, 81), np.float32), sk)
+    for bad in ((4.0, 3.0), (0.0, 2.0), (3.0,), (1.0, float("nan"))):
+        with pytest.raises(ValueError, match="^ring:"):
+            structure_contrast(img, sk, ring=bad)
+    with pytest.raises(ValueError, match="^image:"):
+        structure_contrast(np.full((40, 80), np.nan), sk)
