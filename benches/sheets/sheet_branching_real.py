@@ -9,8 +9,9 @@ re-traced skeleton. Skeletons are drawn as sheet_branching_trace draws them (roo
 children yellow, deeper cyan, the traced radii as a green outline). The captions carry the
 measures of benches/quality/branching_quality.py: largest-tree share of input and output,
 median heading change over 60 px and the drift L1, re-trace F1, two-level fraction (masks),
-the share of the length along the frame, the input's direction concentration ("one way") and the
-output's direction-histogram distance to it. ``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel`` and
+the share of the length along the frame, the input's direction concentration ("one way"), the
+output's direction-histogram distance to it and the share of the input's structure contrast it
+kept. ``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel`` and
 ``--gap-diversity`` are those of the quality script.
 """
 
@@ -71,7 +72,8 @@ def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[
                f"traced: tree {r.share_in:.2f}, turn {r.heading_in:.2f} rad, frame {r.border_in:.2f}, one way {r.concentration:.2f}"),
         _label(_fit(overlay(np.zeros(img.shape[:2], np.float32), res.target, w), interpolation=cv2.INTER_AREA),
                f"grown: tree {r.share_out:.2f}, turn {r.heading_out:.2f}, drift {r.drift:.2f} (noise {r.drift_noise:.2f}), frame {r.border_out:.2f}"),
-        _label(_fit(_show(res.image), interpolation=cv2.INTER_AREA), f"output{two}, directions L1 {r.directions:.2f}"),
+        _label(_fit(_show(res.image), interpolation=cv2.INTER_AREA),
+               f"output{two}, directions L1 {r.directions:.2f}, contrast kept {r.contrast_out / r.contrast_in if r.contrast_in else float('nan'):.2f}"),
         _label(_fit(retraced, interpolation=cv2.INTER_AREA),
                f"re-traced: F1 {r.f1:.2f} (P {r.precision:.2f} R {r.recall:.2f})"),
     ]  # fmt: skip
