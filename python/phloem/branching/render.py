@@ -465,14 +465,13 @@ def _near_frame(frs: list[Fragment], inside: NDArray[np.bool_] | None) -> NDArra
     (the image's own border does not count; None: no frame, none is near)."""
     if inside is None or inside.all():
         return np.zeros(len(frs), bool)
+    if not frs:
+        return np.zeros(0, bool)
     dist = euclidean_distance(np.pad(inside, 1, constant_values=True))[1:-1, 1:-1]
     h, w = inside.shape
-    near = np.zeros(len(frs), bool)
-    for i, f in enumerate(frs):
-        x = min(max(round(float(f.center[0])), 0), w - 1)
-        y = min(max(round(float(f.center[1])), 0), h - 1)
-        near[i] = dist[y, x] < 2.0 * f.radius
-    return near
+    centres = np.rint([f.center for f in frs]).astype(np.int64)
+    x, y = np.clip(centres[:, 0], 0, w - 1), np.clip(centres[:, 1], 0, h - 1)
+    return np.asarray(dist[y, x] < 2.0 * np.array([f.radius for f in frs]))
 
 
 def _channel_range(img: F32) -> tuple[F32, F32]:
