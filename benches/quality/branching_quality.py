@@ -28,6 +28,9 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
   hang down in the input and run sideways in the output);
 - the structure's contrast on the input and on the output (``structure_contrast``, not a pass
   mark: bolts and vessels fainter than the input's);
+- the share of the input's background grain that the output's completed gaps keep
+  (``background_grain`` of output over input, not a pass mark: a fill that settled on a few
+  smooth background patches);
 - two-level fraction of the output (two-level inputs only);
 - the angle and thickness histogram distances of the output to the input's model, with the
   spread between the input's two halves that the growth tests bound them by (1.5× and 1×);
@@ -70,6 +73,7 @@ from phloem.branching import (
 )
 from phloem.branching.measures import resolve_trace_options
 from phloem.metrics import (
+    background_grain,
     border_share,
     direction_concentration,
     drift,
@@ -116,6 +120,8 @@ class Result:
     concentration: float = math.nan
     contrast_in: float = math.nan
     contrast_out: float = math.nan
+    grain_in: float = math.nan
+    grain_out: float = math.nan
     two_level: float | None = None
     angle: float = math.nan
     angle_spread: float = math.nan
@@ -224,6 +230,12 @@ def measure(
     # nor this: how much the structure stands out from its surroundings (a faint copy re-traces)
     with contextlib.suppress(ValueError):
         r.contrast_in, r.contrast_out = structure_contrast(img, src), structure_contrast(res.image, tgt)
+    # nor this: how much of the background's grain the completed gaps keep (a fill that
+    # settled on a few smooth patches: an elevation model's relief as a flat plateau)
+    with contextlib.suppress(ValueError):
+        ok = valid_region(img)
+        r.grain_in = background_grain(img, src, valid=None if ok.all() else ok)
+        r.grain_out = background_grain(res.image, tgt, valid=retrace_options(img, res.image, trace_options)["valid"])
     for attr, sk in (("heading_in", src), ("heading_out", tgt)):
         with contextlib.suppress(ValueError):
             setattr(r, attr, median_heading_change(sk))
@@ -282,9 +294,9 @@ def _f(x: float | None, fmt: str = ".2f") -> str:
 def table(results: list[Result]) -> str:
     head = (
         "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input's noise) | heading in → out (rad) "
-        "| along the frame in → out | hooked starts in → out | children's gap px in → out | directions L1 (input's concentration) | contrast in → out (kept) | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
+        "| along the frame in → out | hooked starts in → out | children's gap px in → out | directions L1 (input's concentration) | contrast in → out (kept) | grain kept | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
-    lines = [head, "|" + "---|" * 17]
+    lines = [head, "|" + "---|" * 18]
     for r in results:
         fails = ", ".join(k for k, ok in r.passed.items() if not ok) or "—"
         if r.error:
@@ -294,7 +306,7 @@ def table(results: list[Result]) -> str:
         lines.append(
             f"| {r.input} | {r.seed} | {size} | {_f(r.f1)} ({_f(r.precision)}/{_f(r.recall)}) "
             f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} ({_f(r.drift_noise)}) | {_f(r.heading_in)} → {_f(r.heading_out)} "
-            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
+            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
             f"| {_f(r.seconds, '.1f')} | {fails} |"
         )
     return "\n".join(lines)

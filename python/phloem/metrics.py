@@ -19,7 +19,8 @@ corresponding strokes; defined in :mod:`phloem.strokes.measures`), and the measu
 synthesised branching structure looks like its input's kind (re-trace agreement, largest-tree
 share, heading-change drift, two-level fraction, the share of the structure that runs along the frame,
 how much children turn where they start and how far apart they leave their parent, which ways it
-runs on the image, and how much it stands out from its surroundings; defined in
+runs on the image, how much it stands out from its surroundings, and how much of the
+background's grain its completed gaps keep; defined in
 :mod:`phloem.branching.measures`).
 """
 
@@ -40,6 +41,7 @@ from ._validate import as_image, as_mask, check_patch_size
 from .branching.histograms import angle_histogram, histogram_distance, thickness_histogram
 from .branching.measures import (
     Agreement,
+    background_grain,
     border_share,
     direction_concentration,
     direction_histogram,
@@ -62,6 +64,7 @@ from .strokes.measures import stroke_coverage, width_agreement
 __all__ = [
     "Agreement",
     "angle_histogram",
+    "background_grain",
     "border_share",
     "chord_length",
     "coherence_map",

@@ -10,6 +10,7 @@ import pytest
 import phloem
 from phloem.branching import Branch, Skeleton, trace
 from phloem.branching.measures import (
+    background_grain,
     border_share,
     direction_concentration,
     direction_histogram,
@@ -39,7 +40,7 @@ def test_metrics_reexports_the_measures() -> None:
     for name in (
         "retrace_agreement", "skeleton_agreement", "largest_tree_share", "border_share", "drift", "drift_noise",
         "two_level_fraction", "start_turns", "furcation_gaps", "direction_histogram", "direction_concentration",
-        "orientation_distance",
+        "orientation_distance", "structure_contrast", "background_grain",
     ):  # fmt: skip
         assert getattr(phloem.metrics, name) is getattr(phloem.branching.measures, name)
         assert name in phloem.metrics.__all__
@@ -504,6 +505,60 @@ def test_structure_contrast_is_the_centre_lines_over_their_surroundings() -> Non
     # colour: the mean over channels
     rgb = np.stack([img, img, np.full_like(img, 0.5)], axis=2)
     assert structure_contrast(rgb, sk) == pytest.approx(2 / 3 * want, abs=1e-6)
+
+
+def test_background_grain_of_white_noise_is_the_analytic_median() -> None:
+    # noise of deviation s less its blur has variance s^2 * sum((delta - w)^2) over the 2-D
+    # kernel w; the median of |N(0, v)| is 0.6745 sqrt(v)
+    s = 0.05
+    img = (0.5 + s * np.random.default_rng(1).standard_normal((300, 300))).astype(np.float32)
+    sk = Skeleton([Branch([[20, 150], [279, 150]], 2.0)], img.shape)
+    k1 = cv2.getGaussianKernel(7, 1.0)[:, 0]  # the 7-tap kernel of sigma 1 (3 sigma a side)
+    w = np.outer(k1, k1)
+    delta = np.zeros_like(w)
+    delta[3, 3] = 1.0
+    want = 0.6745 * s * float(np.sqrt(((delta - w) ** 2).sum()))
+    assert background_grain(img, sk) == pytest.approx(want, rel=0.03)
+    # a flat fill has none (to float32 rounding), a smoothed one little
+    assert background_grain(np.full_like(img, 0.5), sk) < 1e-6
+    assert background_grain(cv2.GaussianBlur(img, (0, 0), 3.0), sk) < 0.2 * want
+
+
+def test_background_grain_counts_only_the_background_inside_the_picture() -> None:
+    rng = np.random.default_rng(2)
+    img = (0.5 + 0.05 * rng.standard_normal((120, 160))).astype(np.float32)
+    sk = Skeleton([Branch([[20, 60], [139, 60]], 3.0)], img.shape)
+    base = background_grain(img, sk)
+    # anything within reach (4 thicknesses = 12 px) of the centre line, less the blur's
+    # reach of 3 px, does not count
+    striped = img.copy()
+    striped[51:70, 20:140] = np.where(np.arange(120) % 2 == 0, 1.0, 0.0)[None, :]
+    assert background_grain(striped, sk) == base
+    assert background_grain(striped, sk, reach=0.5) > base
+    # a flat frame outside valid counts without it, and not with it
+    framed = img.copy()
+    framed[:, 120:] = 0.0
+    ok = np.zeros(img.shape, bool)
+    ok[:, :120] = True
+    assert background_grain(framed, sk) < 0.8 * base
+    assert background_grain(framed, sk, valid=ok) == background_grain(img, sk, valid=ok)
+
+
+def test_background_grain_refuses_what_it_cannot_measure() -> None:
+    img = np.zeros((40, 80), np.float32)
+    sk = Skeleton([Branch([[10, 20], [69, 20]], 2.0)], (40, 80))
+    with pytest.raises(ValueError, match="^skeleton: made for a"):
+        background_grain(np.zeros((40, 81), np.float32), sk)
+    with pytest.raises(ValueError, match="^skeleton: no background pixel"):
+        background_grain(img, sk, reach=50.0)
+    with pytest.raises(ValueError, match="^reach:"):
+        background_grain(img, sk, reach=-1.0)
+    with pytest.raises(ValueError, match="^sigma:"):
+        background_grain(img, sk, sigma=0.0)
+    with pytest.raises(ValueError, match="^valid:"):
+        background_grain(img, sk, valid=np.ones((40, 81), bool))
+    with pytest.raises(ValueError, match="^image:"):
+        background_grain(np.full((40, 80), np.nan), sk)
 
 
 def test_structure_contrast_refuses_what_it_cannot_measure() -> None:

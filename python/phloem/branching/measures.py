@@ -13,9 +13,11 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import cv2
 import numpy as np
+from numpy.typing import NDArray
 
-from .._validate import as_image, check_float, check_int
+from .._validate import as_image, as_mask, check_float, check_int
 from ._elements import F64, _abs_turn, _arc_lengths, _bin, _check_skeleton
 from .bending import ARC  # the arc the bending model matches, so that the two stay one
 from .histograms import _hist, histogram_distance
@@ -24,6 +26,7 @@ from .trace import DEFAULT_SIGMAS, _gray, _resolve_kind, _sigmas, trace
 
 __all__ = [
     "Agreement",
+    "background_grain",
     "border_share",
     "direction_concentration",
     "direction_histogram",
@@ -793,18 +796,36 @@ def structure_contrast(image: Any, skeleton: Skeleton, *, ring: tuple[float, flo
     >>> round(structure_contrast(img, sk), 3)
     0.7
     """
-    from scipy import ndimage  # type: ignore[import-untyped]
+    img, (H, W) = _image_of(image, skeleton)
+    vals = np.asarray(ring, np.float64).ravel() if np.size(ring) == 2 else np.zeros(0)
+    if vals.size != 2 or not (np.isfinite(vals).all() and 0 < vals[0] < vals[1]):
+        raise ValueError(f"ring: expected (inner, outer) with 0 < inner < outer, got {ring!r}")
+    inner, outer = float(vals[0]), float(vals[1])
+    drawn, dist, r = _thickness_distance(skeleton, (H, W))
+    around = (dist >= inner * r) & (dist < outer * r) & (dist >= 1.0)
+    if not around.any():
+        raise ValueError("skeleton: the surroundings of the structure lie outside the image")
+    light = img.mean(axis=2)
+    return float(np.median(light[drawn]) - np.median(light[around]))
 
+
+def _image_of(image: Any, skeleton: Skeleton) -> tuple[NDArray[np.float32], tuple[int, int]]:
+    """``image`` as (H, W, C) float32 and its size, checked against ``skeleton``'s."""
     img = as_image(image, "image")
     _check_skeleton(skeleton)
     H, W = img.shape[:2]
     if skeleton.shape is not None and skeleton.shape != (H, W):
         raise ValueError(f"skeleton: made for a {skeleton.shape} image, but image is {(H, W)}")
-    vals = np.asarray(ring, np.float64).ravel() if np.size(ring) == 2 else np.zeros(0)
-    if vals.size != 2 or not (np.isfinite(vals).all() and 0 < vals[0] < vals[1]):
-        raise ValueError(f"ring: expected (inner, outer) with 0 < inner < outer, got {ring!r}")
-    inner, outer = float(vals[0]), float(vals[1])
-    radius = np.zeros((H, W), np.float64)  # the centre lines, each pixel with its thickness
+    return img, (H, W)
+
+
+def _thickness_distance(skeleton: Skeleton, shape: tuple[int, int]) -> tuple[NDArray[np.bool_], F64, F64]:
+    """``skeleton``'s centre-line pixels on a ``shape`` image, every pixel's distance to the
+    nearest of them, and that one's thickness."""
+    from scipy import ndimage  # type: ignore[import-untyped]
+
+    H, W = shape
+    radius = np.zeros((H, W), np.float64)
     drawn = np.zeros((H, W), bool)
     for b in skeleton.branches:
         p, t, _ = _dense(b, 0.5)
@@ -815,9 +836,62 @@ def structure_contrast(image: Any, skeleton: Skeleton, *, ring: tuple[float, flo
     if not drawn.any():
         raise ValueError("skeleton: no centre-line point lies in the image")
     dist, (rows, cols) = ndimage.distance_transform_edt(~drawn, return_indices=True)
-    r = radius[rows, cols]
-    around = (dist >= inner * r) & (dist < outer * r) & (dist >= 1.0)
-    if not around.any():
-        raise ValueError("skeleton: the surroundings of the structure lie outside the image")
-    light = img.mean(axis=2)
-    return float(np.median(light[drawn]) - np.median(light[around]))
+    return drawn, np.asarray(dist, np.float64), radius[rows, cols]
+
+
+def background_grain(
+    image: Any, skeleton: Skeleton, *, reach: float = 4.0, sigma: float = 1.0, valid: Any = None
+) -> float:
+    """The fine grain of ``image`` away from its structure: the median absolute difference
+    between the brightness and its Gaussian blur of ``sigma`` px, over the pixels farther than
+    ``reach`` thicknesses from ``skeleton``'s centre lines (beyond its fragments' disks and
+    their surroundings).
+
+    Brightness is the mean over channels. A median, so that sparse edges (untraced structure,
+    the frame) do not count. An output's grain over its input's says how much of the
+    background's texture its completed gaps kept: a completion that settled on a few smooth
+    background patches (an elevation model's relief filled as a flat plateau) is well below 1.
+
+    Parameters
+    ----------
+    image : (H, W[, C]) array_like
+        The image the skeleton lies in.
+    skeleton : Skeleton
+        Its structure, with ``image``'s shape (or none).
+    reach : float, optional
+        How far from the centre lines the background starts, in thicknesses (default 4).
+    sigma : float, optional
+        Scale of the grain in px (default 1).
+    valid : (H, W) array_like of bool, optional
+        The pixels that belong to the picture (default: all); a frame's flat pixels would
+        otherwise count as background without grain.
+
+    Returns
+    -------
+    float
+        In [0, 1] for images in [0, 1].
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phloem.branching import Branch, Skeleton
+    >>> grain = np.random.default_rng(0).normal(0.5, 0.05, (60, 80)).astype(np.float32)
+    >>> sk = Skeleton([Branch([[10, 30], [69, 30]], 1.5)], (60, 80))
+    >>> background_grain(grain, sk) > 5 * background_grain(np.full((60, 80), 0.5), sk)
+    True
+    """
+    img, (H, W) = _image_of(image, skeleton)
+    reach = check_float(reach, "reach", 0.0)
+    sigma = check_float(sigma, "sigma", 0.0, inclusive=False)
+    _, dist, r = _thickness_distance(skeleton, (H, W))
+    away = dist > reach * r
+    k = 2 * math.ceil(3 * sigma) + 1  # the blur's kernel
+    if valid is not None:
+        # a pixel whose blur reaches beyond the picture would measure the frame's edge
+        ok = as_mask(valid, "valid", (H, W))
+        away &= cv2.erode(ok.astype(np.uint8), np.ones((k, k), np.uint8), borderType=cv2.BORDER_REPLICATE) > 0
+    if not away.any():
+        raise ValueError(f"skeleton: no background pixel lies farther than reach={reach} thicknesses from it")
+    light = img.mean(axis=2).astype(np.float32)
+    detail = light - cv2.GaussianBlur(light, (k, k), sigma, borderType=cv2.BORDER_REFLECT)
+    return float(np.median(np.abs(detail[away])))
