@@ -4,9 +4,18 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from phloem.branching import Branch, Skeleton
-from phloem.branching.gaps import _complete_background, _match_borders, _recolour, _relight, fill_gaps
+from phloem.branching.gaps import (
+    _complete_background,
+    _match_borders,
+    _nearest_structure,
+    _proximity_profile,
+    _recolour,
+    _relight,
+    fill_gaps,
+)
 
 
 def _texture(shape: tuple[int, int], seed: int) -> np.ndarray:
@@ -237,3 +246,30 @@ def test_gaps_with_diversity_leave_out_a_backdrop() -> None:
         )  # fmt: skip
         blue = out[..., 2] > out[..., 1]
         assert not blue[hole].any()
+
+
+def _around_a_line(light) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """A 200 x 240 image whose brightness is ``light(d)`` at distance ``d`` from a horizontal
+    line across it, the pixels beyond 3 px as background, and the line's nearest-pixel maps."""
+    sk = Skeleton([Branch([[0, 100], [239, 100]], 1.0)], (200, 240))
+    near = _nearest_structure(sk, (200, 240))
+    img = light(near[0].astype(np.float64)).astype(np.float32)[..., None]
+    return img, near[0] > 3, near
+
+
+def test_proximity_profile_falls_off_away_from_the_structure() -> None:
+    # a glow that falls off, with a brighter band farther out (a neighbour's light, a ridge)
+    img, allowed, near = _around_a_line(lambda d: 0.3 + 0.2 * np.exp(-d / 5) + 0.1 * ((d > 15) & (d < 21)))
+    centres, prof = _proximity_profile(img, allowed, near, reach=30.0)
+    assert (np.diff(prof) <= 1e-12).all() and (prof >= 0).all()
+    # near the line it is the glow over the ring at 30-45 px
+    k = int(np.searchsorted(centres, 7.0))
+    assert prof[k] == pytest.approx(0.2 * np.exp(-centres[k] / 5), abs=0.02)
+    # a terrain: flat by the valley, the next ridge farther out: no glow at all, so no rings
+    img, allowed, near = _around_a_line(lambda d: 0.3 + 0.1 * ((d > 12) & (d < 20)))
+    _, prof = _proximity_profile(img, allowed, near, reach=30.0)
+    assert not prof.any()
+    # a shadow keeps its sign; a brighter band beyond it does not flip it
+    img, allowed, near = _around_a_line(lambda d: 0.5 - 0.2 * np.exp(-d / 5) + 0.1 * ((d > 15) & (d < 21)))
+    _, prof = _proximity_profile(img, allowed, near, reach=30.0)
+    assert prof.min() < -0.05 and (prof <= 0).all() and (np.diff(prof) >= -1e-12).all()

@@ -206,9 +206,10 @@ def _proximity_profile(
     pixel nearest to each background pixel), against that cell's own ring, and a bin counts
     only where three quarters of the cells with at least ``min_count`` pixels in it and in
     their ring agree on its sign, at the value three quarters of them reach (a bin no cell
-    measures takes its farther neighbour's value). It fades to 0 over the second half of
-    ``reach`` (a cosine), so that no edge shows where it ends. Returns the bin centres and the
-    profile.
+    measures takes its farther neighbour's value). It keeps the sign of its nearest bin and a
+    magnitude that never grows outward (a glow or a shadow falls off), and fades to 0 over the
+    second half of ``reach`` (a cosine), so that no edge shows where it ends. Returns the bin
+    centres and the profile.
     """
     dist, rows, cols = near
     nb = max(1, math.ceil(reach / step))
@@ -236,6 +237,11 @@ def _proximity_profile(
             continue
         low, high = np.percentile(col, [25, 75])
         profile[i] = low if low > 0 else high if high < 0 else 0.0
+    # A structure's own light falls off away from it: the nearest bin's sign, a magnitude that
+    # never grows outward. Bumps farther out are the layout's (the next valley of a terrain)
+    # and, moved with the new structure, would draw rings round every branch.
+    same = np.sign(profile) == np.sign(profile[0])
+    profile = np.sign(profile[0]) * np.minimum.accumulate(np.where(same, np.abs(profile), 0.0))
     t = np.clip((centres - 0.5 * reach) / (0.5 * reach), 0.0, 1.0)
     return centres, profile * 0.5 * (1.0 + np.cos(np.pi * t))
 
