@@ -10,8 +10,8 @@ children yellow, deeper cyan, the traced radii as a green outline). The captions
 measures of benches/quality/branching_quality.py: largest-tree share of input and output,
 median heading change over 60 px and the drift L1, re-trace F1, two-level fraction (masks),
 the share of the length along the frame, the input's direction concentration ("one way"), the
-output's direction-histogram distance to it, the share of the input's structure contrast it
-kept and the share of its background grain kept. ``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel`` and
+output's direction-histogram distance to it ("dirs", beside the re-trace), and the shares of the
+input's structure contrast and background grain the output kept. ``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel`` and
 ``--gap-diversity`` are those of the quality script.
 """
 
@@ -73,9 +73,9 @@ def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[
         _label(_fit(overlay(np.zeros(img.shape[:2], np.float32), res.target, w), interpolation=cv2.INTER_AREA),
                f"grown: tree {r.share_out:.2f}, turn {r.heading_out:.2f}, drift {r.drift:.2f} (noise {r.drift_noise:.2f}), frame {r.border_out:.2f}"),
         _label(_fit(_show(res.image), interpolation=cv2.INTER_AREA),
-               f"output{two}, directions L1 {r.directions:.2f}, contrast kept {r.contrast_out / r.contrast_in if r.contrast_in else float('nan'):.2f}, grain kept {r.grain_out / r.grain_in if r.grain_in else float('nan'):.2f}"),
+               f"output{two}, kept: contrast {r.contrast_out / r.contrast_in if r.contrast_in else float('nan'):.2f}, grain {r.grain_out / r.grain_in if r.grain_in else float('nan'):.2f}"),
         _label(_fit(retraced, interpolation=cv2.INTER_AREA),
-               f"re-traced: F1 {r.f1:.2f} (P {r.precision:.2f} R {r.recall:.2f})"),
+               f"re-traced: F1 {r.f1:.2f} (P {r.precision:.2f} R {r.recall:.2f}), dirs {r.directions:.2f}"),
     ]  # fmt: skip
 
 
