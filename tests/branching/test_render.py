@@ -9,7 +9,16 @@ import pytest
 import phloem
 from phloem.branching import Branch, Skeleton, render
 from phloem.branching._pixels import two_level
-from phloem.branching.render import _branch_map, _channel_range, _displacement, _drop_foreign, _in_order, _pt
+from phloem.branching.measures import structure_contrast
+from phloem.branching.render import (
+    _branch_map,
+    _channel_range,
+    _displacement,
+    _drop_foreign,
+    _in_order,
+    _keep_contrast,
+    _pt,
+)
 from phloem.testing import channel_scene, longest_path, shared_file, wavy_branch
 
 
@@ -256,6 +265,36 @@ def test_a_glow_follows_the_new_structure_not_the_old() -> None:
     open_sky = float(res.image[gaps & (d_old > 40) & (d_new > 40)].mean())
     assert beside_new > open_sky + 0.1, (beside_new, open_sky)
     assert where_old_was < open_sky + 0.05, (where_old_was, open_sky)
+
+
+def test_the_structure_stands_out_from_the_gaps_as_much_as_the_input() -> None:
+    # issue 19: the whole-structure paste moved each fragment to the gaps' level at its rim,
+    # and the gaps do not continue a bolt's glow, so bolts came out grey (a third of the
+    # contrast lost on a lightning photo); vessels pale likewise
+    img, bolt = _glowing_bolt(50)
+    tgt = Skeleton([_glowing_bolt(150)[1]], img.shape)
+    src = Skeleton([bolt], img.shape)
+    for picture in (img, 1.0 - img):
+        want = structure_contrast(picture, src)
+        res = render(picture, src, tgt, seed=0, full_output=True)
+        assert structure_contrast(res.image, tgt) == pytest.approx(want, abs=0.02)
+
+
+def test_keep_contrast_lifts_the_structure_and_fades_out_at_the_fragments_rims() -> None:
+    # a bolt 0.7 over its sky in the input, pasted 0.3 over it: the lift is 0.4 on the bolt,
+    # nothing beyond the fragments (inside the ring that measures it), falling off between
+    sk = Skeleton([Branch([[10, 30], [109, 30]], 2.0)], (60, 120))
+    yy, xx = np.mgrid[:60, :120]
+    on = (np.abs(yy - 30) <= 2) & (xx >= 10) & (xx <= 109)
+    image = np.where(on, 0.9, 0.2).astype(np.float32)[..., None]
+    canvas = np.where(on, 0.5, 0.2).astype(np.float32)[..., None]
+    filled = (np.abs(yy - 30) <= 5) & (xx >= 5) & (xx <= 114)
+    lo, hi = np.float32([0.0]), np.float32([1.0])
+    out = _keep_contrast(canvas, filled, image, sk, sk, lo, hi, threads=1)
+    assert np.array_equal(out[~filled], canvas[~filled])
+    assert structure_contrast(out, sk) == pytest.approx(structure_contrast(image, sk), abs=1e-3)
+    column = out[30:40, 60, 0] - canvas[30:40, 60, 0]
+    assert column[0] == pytest.approx(0.4, abs=1e-6) and (np.diff(column) <= 1e-6).all() and column[-1] == 0.0
 
 
 def test_a_mask_renders_as_a_mask() -> None:

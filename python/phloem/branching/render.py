@@ -22,7 +22,9 @@ paints the target structure with disk-shaped fragments of the input:
 5. The whole structure is pasted into the completed gaps in the gradient domain
    (``paste_structure``, not two-level inputs): each fragment keeps its own gradients, with
    none between fragments or towards the gaps, so fragments from differently lit or high
-   parts of the input meet each other and the background without a disk-shaped step.
+   parts of the input meet each other and the background without a disk-shaped step. The
+   structure is then lifted (or lowered) until it stands out from the gaps as much as the
+   input's does, the lift fading to nothing at the fragments' rims.
 
 Beyond the paper (each needed for clean junctions, see the tests):
 
@@ -73,6 +75,7 @@ from ._pixels import F32, F64, _by_channels, _check_skeleton, _clip_channels, _p
 from .fragments import DEFAULT_SAMPLES, Fragment, FragmentLibrary, check_params, cover, foreign_fragments
 from .frame import _keep_frame, _kept_inside
 from .gaps import fill_gaps
+from .measures import structure_contrast
 from .skeleton import MAX_THICKNESS, Branch, Skeleton
 
 __all__ = ["RenderResult", "render"]
@@ -264,7 +267,10 @@ def render(
         border, with the completed gaps as boundary values. Fragments from differently lit
         parts of a photo or from different heights of a terrain then meet each other and the
         background without steps: no disks show, and the structure keeps its own relief.
-        The completion then fills the whole canvas from the background without the structure
+        The structure's contrast against the gaps is then set to the input's (see
+        :func:`phloem.metrics.structure_contrast`): a harmonic ramp from the structure to
+        the fragments' rims, so that bolts whose glow the gaps do not continue stay as
+        bright as the input's. The completion then fills the whole canvas from the background without the structure
         as context, so nothing structure-like is copied beside it.
         Default (None): on, except for two-level images (a mask has no ramps to blend and stays
         two-level). Needs ``photometric`` and ``complete``.
@@ -395,6 +401,7 @@ def render(
         if whole:
             _paste(canvas, painter.canvas, painter.filled)  # the structure over the completed background
             canvas = _paste_structure(canvas, painter.filled, painter.labels, painter.lo, painter.hi, threads=t)
+            canvas = _keep_contrast(canvas, painter.filled, img, src_sk, tgt_sk, painter.lo, painter.hi, threads=t)
     if mask_like:
         canvas = _drop_foreign(
             np.where(canvas >= 0.5 * (lo + hi), hi, lo).astype(np.float32), img, src_sk, tgt_sk, lo, hi
@@ -702,6 +709,42 @@ def _paste_structure(
     out = seamless(canvas, canvas, filled, (0, 0), labels=lab, tol=1e-4, threads=threads)
     res: F32 = canvas.copy()
     _paste(res, _clip_channels(out.reshape(canvas.shape), lo, hi), filled)
+    return res
+
+
+def _keep_contrast(
+    canvas: F32,
+    filled: NDArray[np.bool_],
+    image: F32,
+    source: Skeleton,
+    target: Skeleton,
+    lo: F32,
+    hi: F32,
+    *,
+    threads: int | None,
+) -> F32:
+    """``canvas`` with its structure standing out from the gaps as much as ``image``'s does.
+
+    The whole-structure paste moves every fragment to the gaps' level at its rim, so a bolt
+    whose glow the gaps do not continue comes out grey, a vessel pale. The difference between
+    the input's and the canvas's :func:`~phloem.branching.measures.structure_contrast` is
+    added to the target's structure (its tube at one thickness), the same in every channel,
+    and fades to nothing at the fragments' rims as the smoothest (harmonic) ramp between
+    them: a glow or a shadow round the structure, the gaps untouched.
+    """
+    try:
+        step = structure_contrast(image, source) - structure_contrast(canvas, target)
+    except ValueError:  # a structure with no surroundings in the image has no contrast to keep
+        return canvas
+    core = _tube(target, 1.0, 0.0) & filled
+    if step == 0.0 or not core.any():
+        return canvas
+    # Laplace's equation over the fragments less the core: the step on the core, 0 in the gaps.
+    ends = np.where(core, np.float32(step), np.float32(0.0))
+    ramp = seamless(np.zeros_like(ends), ends, filled & ~core, (0, 0), tol=1e-4, threads=threads)
+    res: F32 = canvas.copy()
+    lifted = canvas + np.asarray(ramp, np.float32).reshape(filled.shape)[..., None]
+    _paste(res, _clip_channels(lifted, lo, hi), filled)
     return res
 
 
