@@ -73,7 +73,8 @@ def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[
         _label(_fit(overlay(np.zeros(img.shape[:2], np.float32), res.target, w), interpolation=cv2.INTER_AREA),
                f"grown: tree {r.share_out:.2f}, turn {r.heading_out:.2f}, drift {r.drift:.2f} (noise {r.drift_noise:.2f}), frame {r.border_out:.2f}"),
         _label(_fit(_show(res.image), interpolation=cv2.INTER_AREA),
-               f"output{two}, kept: contrast {r.contrast_out / r.contrast_in if r.contrast_in else float('nan'):.2f}, grain {r.grain_out / r.grain_in if r.grain_in else float('nan'):.2f}"),
+               f"output{two}, kept: contrast {r.contrast_out / r.contrast_in if r.contrast_in else float('nan'):.2f}"
+               + (f", grain {r.grain_out / r.grain_in:.2f}" if r.grain_in > 0 else "")),
         _label(_fit(retraced, interpolation=cv2.INTER_AREA),
                f"re-traced: F1 {r.f1:.2f} (P {r.precision:.2f} R {r.recall:.2f}), dirs {r.directions:.2f}"),
     ]  # fmt: skip
