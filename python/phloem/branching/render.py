@@ -270,8 +270,9 @@ def render(
         The structure's contrast against the gaps is then set to the input's (see
         :func:`phloem.metrics.structure_contrast`): a harmonic ramp from the structure to
         the fragments' rims, so that bolts whose glow the gaps do not continue stay as
-        bright as the input's. The completion then fills the whole canvas from the background without the structure
-        as context, so nothing structure-like is copied beside it.
+        bright as the input's. The completion then fills the whole canvas from the
+        background without the structure as context, so nothing structure-like is copied
+        beside it.
         Default (None): on, except for two-level images (a mask has no ramps to blend and stays
         two-level). Needs ``photometric`` and ``complete``.
     valid : (H, W) array_like of bool, optional
