@@ -10,6 +10,7 @@ import numpy as np
 
 from .. import _json, branching, io
 from ..branching._fragment_map import fragment_map
+from ..branching.bending import STEM_THICKNESS
 from ..branching.measures import resolve_trace_options
 from ._common import (
     check_writable,
@@ -291,8 +292,8 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--stem-thickness",
-        type=float,
-        default=5.0,
+        type=non_negative,
+        default=STEM_THICKNESS,
         metavar="WEIGHT",
         help="weight of matching each tree's main branch against the thickness of the example's main branch at "
         "the same length, so that a trunk stays as thick as the example's and tapers as it does (default 5; 0: "
