@@ -15,6 +15,7 @@ from phloem.branching.render import (
     _channel_range,
     _displacement,
     _drop_foreign,
+    _fit_range,
     _in_order,
     _keep_contrast,
     _pt,
@@ -289,12 +290,57 @@ def test_keep_contrast_lifts_the_structure_and_fades_out_at_the_fragments_rims()
     image = np.where(on, 0.9, 0.2).astype(np.float32)[..., None]
     canvas = np.where(on, 0.5, 0.2).astype(np.float32)[..., None]
     filled = (np.abs(yy - 30) <= 5) & (xx >= 5) & (xx <= 114)
-    lo, hi = np.float32([0.0]), np.float32([1.0])
-    out = _keep_contrast(canvas, filled, image, sk, sk, lo, hi, threads=1)
+    out = _keep_contrast(canvas, filled, image, sk, sk, threads=1)
     assert np.array_equal(out[~filled], canvas[~filled])
     assert structure_contrast(out, sk) == pytest.approx(structure_contrast(image, sk), abs=1e-3)
     column = out[30:40, 60, 0] - canvas[30:40, 60, 0]
     assert column[0] == pytest.approx(0.4, abs=1e-6) and (np.diff(column) <= 1e-6).all() and column[-1] == 0.0
+
+
+def _valley_on_low_ground() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A terrain in [0.1, 0.9] whose gaps slope from 0.8 down to 0.2, and a valley 0.4 deep
+    (its fragments' relief) along them: on the low side its floor falls below 0.1."""
+    yy, xx = np.mgrid[:60, :120].astype(np.float32)
+    gaps = (0.8 - 0.6 * xx / 119.0)[..., None]
+    filled = (np.abs(yy - 30) <= 8) & (xx >= 10) & (xx <= 110)
+    ends = np.clip(np.minimum(xx - 10, 110 - xx) / 10.0, 0.0, 1.0)
+    depth = np.where(filled, 0.4 * np.clip(1.0 - np.abs(yy - 30) / 8.0, 0.0, 1.0) * ends, 0.0)
+    canvas = (gaps[..., 0] - depth).astype(np.float32)[..., None]
+    image = np.full((60, 120, 1), 0.5, np.float32)
+    image[0, :2, 0] = (0.1, 0.9)  # the input's range, reached by one pixel each: no saturation
+    return canvas, gaps.astype(np.float32), filled, image
+
+
+def test_fit_range_scales_a_valley_into_the_range_instead_of_clipping_it_flat() -> None:
+    # issue 19: deep valley fragments landing on the elevation model's low ground were clipped
+    # into black blots (1.7 % of the output at the input's minimum)
+    canvas, gaps, filled, image = _valley_on_low_ground()
+    lo, hi = np.float32([0.1]), np.float32([0.9])
+    clipped = np.clip(canvas, lo, hi)
+    assert (clipped[filled] <= lo + 1e-6).mean() > 0.1  # what a clip flattens
+    out = _fit_range(canvas, gaps, filled, image, lo, hi, reach=4.0, threads=1)
+    assert np.array_equal(out[~filled], canvas[~filled])  # the gaps are untouched
+    # (what is left at the bottom: where the blot starts it is narrower than BLOT_WIDTH)
+    assert (out[filled] <= lo + 1e-6).mean() < 0.02
+    # across the valley on the low ground its floor is a V again, where the clip left it flat
+    for picture, v_shaped in ((clipped, False), (out, True)):
+        down, up = np.diff(picture[22:31, 100, 0]), np.diff(picture[30:39, 100, 0])
+        assert bool((down < 0).all() and (up > 0).all()) == v_shaped
+    # on the high ground, farther than the reach from any blot, the relief is as painted
+    np.testing.assert_allclose(out[22:39, 15:40], canvas[22:39, 15:40], atol=1e-3)
+
+
+def test_fit_range_clips_where_the_input_saturates_or_the_excess_is_a_thin_line() -> None:
+    canvas, gaps, filled, image = _valley_on_low_ground()
+    lo, hi = np.float32([0.1]), np.float32([0.9])
+    saturated = image.copy()
+    saturated[:5] = lo  # 7 % of the input at its minimum: the output may sit there too
+    fit = _fit_range(canvas, gaps, filled, saturated, lo, hi, reach=4.0, threads=1)
+    assert np.array_equal(fit, np.clip(canvas, lo, hi))
+    line = np.maximum(canvas, np.float32(0.12))
+    line[29:31, 30:100, 0] = 0.0  # a core 2 px wide below the range: a line, not a blot
+    fit = _fit_range(line, gaps, filled, image, lo, hi, reach=4.0, threads=1)
+    assert np.array_equal(fit, np.clip(line, lo, hi))
 
 
 def test_a_mask_renders_as_a_mask() -> None:

@@ -24,7 +24,9 @@ paints the target structure with disk-shaped fragments of the input:
    none between fragments or towards the gaps, so fragments from differently lit or high
    parts of the input meet each other and the background without a disk-shaped step. The
    structure is then lifted (or lowered) until it stands out from the gaps as much as the
-   input's does, the lift fading to nothing at the fragments' rims.
+   input's does, the lift fading to nothing at the fragments' rims, and where it would leave
+   the input's range in a blot (a deep valley on low ground) its relief is scaled into the
+   range rather than clipped flat.
 
 Beyond the paper (each needed for clean junctions, see the tests):
 
@@ -270,7 +272,10 @@ def render(
         The structure's contrast against the gaps is then set to the input's (see
         :func:`phloem.metrics.structure_contrast`): a harmonic ramp from the structure to
         the fragments' rims, so that bolts whose glow the gaps do not continue stay as
-        bright as the input's. The completion then fills the whole canvas from the
+        bright as the input's. Where the structure would then leave the input's range over
+        an area (not a line, and not at an end the input itself saturates), its relief above
+        the gaps is scaled down locally until it fits, instead of being clipped into a flat
+        blot. The completion then fills the whole canvas from the
         background without the structure as context, so nothing structure-like is copied
         beside it.
         Default (None): on, except for two-level images (a mask has no ramps to blend and stays
@@ -400,9 +405,12 @@ def render(
             patch_size=p, iterations=c_iters, seed=s, threads=t, diversity=gap_div,
         )  # fmt: skip
         if whole:
+            gaps = canvas.copy()
             _paste(canvas, painter.canvas, painter.filled)  # the structure over the completed background
-            canvas = _paste_structure(canvas, painter.filled, painter.labels, painter.lo, painter.hi, threads=t)
-            canvas = _keep_contrast(canvas, painter.filled, img, src_sk, tgt_sk, painter.lo, painter.hi, threads=t)
+            canvas = _paste_structure(canvas, painter.filled, painter.labels, threads=t)
+            canvas = _keep_contrast(canvas, painter.filled, img, src_sk, tgt_sk, threads=t)
+            reach = float(np.median([g.radius for g in targets]))
+            canvas = _fit_range(canvas, gaps, painter.filled, img, painter.lo, painter.hi, reach=reach, threads=t)
     if mask_like:
         canvas = _drop_foreign(
             np.where(canvas >= 0.5 * (lo + hi), hi, lo).astype(np.float32), img, src_sk, tgt_sk, lo, hi
@@ -693,15 +701,14 @@ class _Painter:
         _paste(self.canvas[ys, xs][bx], res, new[bx])
 
 
-def _paste_structure(
-    canvas: F32, filled: NDArray[np.bool_], labels: NDArray[np.int32], lo: F32, hi: F32, *, threads: int | None
-) -> F32:
+def _paste_structure(canvas: F32, filled: NDArray[np.bool_], labels: NDArray[np.int32], *, threads: int | None) -> F32:
     """Gradient-domain paste of the whole structure into the completed gaps (``paste_structure``).
 
     A custom guidance field on the Poisson engine (:func:`phloem.blend.seamless` with
     ``labels``): each fragment's gradients inside it, none across fragments or towards the
     gaps, so every level difference between fragments and against the background is spread
-    over the fragments instead of showing as a step at a disk's rim.
+    over the fragments instead of showing as a step at a disk's rim. Not clipped to the
+    image's range: :func:`_fit_range` does that after the contrast step.
     """
     if not filled.any():
         return canvas
@@ -709,7 +716,7 @@ def _paste_structure(
     # tol 1e-4 as for the gaps: the levels move by up to the image's range, far above that.
     out = seamless(canvas, canvas, filled, (0, 0), labels=lab, tol=1e-4, threads=threads)
     res: F32 = canvas.copy()
-    _paste(res, _clip_channels(out.reshape(canvas.shape), lo, hi), filled)
+    _paste(res, np.asarray(out, np.float32).reshape(canvas.shape), filled)
     return res
 
 
@@ -719,8 +726,6 @@ def _keep_contrast(
     image: F32,
     source: Skeleton,
     target: Skeleton,
-    lo: F32,
-    hi: F32,
     *,
     threads: int | None,
 ) -> F32:
@@ -745,8 +750,94 @@ def _keep_contrast(
     ramp = seamless(np.zeros_like(ends), ends, filled & ~core, (0, 0), tol=1e-4, threads=threads)
     res: F32 = canvas.copy()
     lifted = canvas + np.asarray(ramp, np.float32).reshape(filled.shape)[..., None]
-    _paste(res, _clip_channels(lifted, lo, hi), filled)
+    _paste(res, lifted, filled)
     return res
+
+
+#: An end of the input's range counts as saturated (lightning's white cores, a sky's black)
+#: when at least this share of its pixels lie within 1/1000 of the range of it.
+SATURATED_SHARE = 1e-3
+
+#: The least share of its relief the structure keeps where it is fitted into the range; what
+#: is still out of range then is clipped (structure whose rim lies at the range's end has no
+#: room at all, and would otherwise lose its relief).
+MIN_RELIEF_SCALE = 0.25
+
+#: Out-of-range areas narrower than this (px) are clipped, not fitted: a bolt's saturated
+#: core is a line, an elevation model's flattened valley floor a blot.
+BLOT_WIDTH = 5
+
+
+def _fit_range(
+    canvas: F32,
+    gaps: F32,
+    filled: NDArray[np.bool_],
+    image: F32,
+    lo: F32,
+    hi: F32,
+    *,
+    reach: float,
+    threads: int | None,
+) -> F32:
+    """``canvas`` clipped to ``[lo, hi]``, the structure's relief first scaled into that range
+    where clipping would flatten it into a blot.
+
+    The structure's paste and contrast keep each fragment's depth below (or height above)
+    its surroundings, so a deep valley landing on low ground goes beyond the input's range,
+    and clipping flattened it into a blot of the extreme value. The relief is measured from
+    the membrane that the completed ``gaps`` span over the structure (the harmonic
+    interpolation of their values at its rim) and scaled, the same in every channel, by the
+    factor each out-of-range pixel needs to reach the range, spread over ``reach`` px (the
+    fragments' radius: the smallest factor within a square that far, then smoothed by a
+    Gaussian of half that) so the relief fades instead of stepping, at least
+    :data:`MIN_RELIEF_SCALE`. Only out-of-range areas at least
+    :data:`BLOT_WIDTH` px wide are fitted, and only at an end of the range the input itself
+    does not saturate (:data:`SATURATED_SHARE`): a bolt's white core and whatever the input
+    shows saturated are clipped as before.
+    """
+    res: F32 = canvas.copy()
+    if not filled.any():
+        return _clip_channels(res, lo, hi)
+    near = 1e-3 * np.maximum(hi - lo, 1e-12)
+    low_ok = np.array([(image[..., c] <= lo[c] + near[c]).mean() >= SATURATED_SHARE for c in range(len(lo))])
+    high_ok = np.array([(image[..., c] >= hi[c] - near[c]).mean() >= SATURATED_SHARE for c in range(len(hi))])
+    under = (canvas < lo) & ~low_ok
+    over = (canvas > hi) & ~high_ok
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (BLOT_WIDTH, BLOT_WIDTH))
+    out = ((under | over).any(axis=2) & filled).astype(np.uint8)
+    blots = cv2.morphologyEx(out, cv2.MORPH_OPEN, kernel).astype(bool)
+    if not blots.any():
+        return _clip_channels(res, lo, hi)
+    # the factor is 1 beyond reach + the blur's 4 sigma of every blot: work in their box only
+    r = max(1, round(reach))
+    box = _padded_box(blots, 3 * r + 2)
+    # The membrane on a box 2 reach wider still: where that box cuts the structure, the
+    # completed gaps under it stand in for the rim, and their effect fades within it.
+    wide = _padded_box(blots, 5 * r + 2)
+    spanned = seamless(np.zeros_like(gaps[wide]), gaps[wide], filled[wide], (0, 0), tol=1e-4, threads=threads)
+    inner = tuple(slice(b.start - w.start, b.stop - w.start) for b, w in zip(box, wide, strict=True))
+    base = np.asarray(spanned, np.float32).reshape(gaps[wide].shape)[inner]
+    relief = canvas[box] - base
+    with np.errstate(divide="ignore", invalid="ignore"):
+        room = np.where(under[box], (base - lo) / -relief, np.where(over[box], (hi - base) / relief, np.float32(1.0)))
+    need = np.clip(np.nan_to_num(room, nan=1.0), MIN_RELIEF_SCALE, 1.0).min(axis=2)
+    need = np.where(blots[box], need, np.float32(1.0)).astype(np.float32)
+    # a square's minimum (separable, so fast at large reach), then smoothed
+    spread = cv2.erode(need, np.ones((2 * r + 1, 2 * r + 1), np.uint8), borderType=cv2.BORDER_REPLICATE)
+    factor = cv2.GaussianBlur(spread, (0, 0), r / 2.0, borderType=cv2.BORDER_REPLICATE)
+    fitted = base + factor[..., None] * relief
+    _paste(res[box], fitted, filled[box] & (factor < 1.0))
+    return _clip_channels(res, lo, hi)
+
+
+def _padded_box(mask: NDArray[np.bool_], pad: int) -> tuple[slice, slice]:
+    """The bounding box of ``mask``'s pixels, ``pad`` px wider on every side (within the image)."""
+    ys, xs = np.nonzero(mask)
+    H, W = mask.shape
+    return (
+        slice(max(0, int(ys.min()) - pad), min(H, int(ys.max()) + pad + 1)),
+        slice(max(0, int(xs.min()) - pad), min(W, int(xs.max()) + pad + 1)),
+    )
 
 
 def _drop_foreign(canvas: F32, image: F32, source: Skeleton, target: Skeleton, lo: F32, hi: F32) -> F32:
