@@ -697,6 +697,38 @@ def test_forest_output_keeps_the_input_tree_sizes():
         assert abs(max(size.values()) / sum(size.values()) - want) < 0.15
 
 
+def _line(a, b, r: float, parent: tuple[int, int] | None = None) -> Branch:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    n = int(np.hypot(*(b - a)) // 2) + 1
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    return Branch(a + t * (b - a), np.full(n, r), parent)
+
+
+def test_a_tree_stops_at_its_templates_length():
+    # A stem with two children, one with six grandchildren and one with none, beside six small
+    # trees. Each grown child draws a template child with its number of children, so both may
+    # draw six: without a cap the first tree grew to 840-854 px from a 616 px template at some
+    # seeds and used up the input's length (the SinGAN bolts: five trees in, two out).
+    stem = _line((20, 120), (240, 120), 3.0)
+    a = _line(stem.points[30], stem.points[30] + (60, -90), 2.5, (0, 30))
+    b = _line(stem.points[80], stem.points[80] + (60, 90), 2.5, (0, 80))
+    kids = [_line(a.points[k], a.points[k] + (30, 5), 1.5, (1, k)) for k in (8, 14, 20, 26, 32, 38)]
+    small = [_line((20 + 45 * i, 10), (60 + 45 * i, 12), 2.0) for i in range(6)]
+    src = Skeleton([stem, a, b, *kids, *small], (260, 320))
+    bend, fur = BendingModel.fit(src, h=2.0), FurcationModel.fit(src, h=2.0)
+    template = input_trees(bend.source)[0]
+    # a child being grown when the tree reaches its length is finished: at most one child over
+    child = max(length for g, pool in template.branches.items() if g > 0 for length, _ in pool)
+    for seed in range(10):
+        out = grow(bend, fur, size=(520, 640), seed=seed, max_length="input")
+        tree: list[int] = []
+        size: dict[int, float] = {}
+        for i, br in enumerate(out.branches):
+            tree.append(i if br.parent is None else tree[br.parent[0]])
+            size[tree[i]] = size.get(tree[i], 0.0) + br.length()
+        assert max(size.values()) <= template.length + child, f"seed {seed}: {max(size.values()):.0f} px"
+
+
 def test_blocked_children_do_not_end_a_tree_short_of_its_template(monkeypatch):
     # Child starts fail in runs of 20 (as crossings or the border would block a crowded region),
     # so now and then a queued or topped-up child cannot start at any vertex: the tree must

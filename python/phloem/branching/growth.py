@@ -503,7 +503,9 @@ def grow(
     length, whose children are grown the same way, breadth first. A child that cannot start
     at its vertex (crossing, border, or within ``ρ`` of other structure over its first ``3 m h``)
     tries the parent's next-best vertices; a tree left short
-    of its template's length gets further furcations on its own branches.
+    of its template's length gets further furcations on its own branches, and a tree that
+    reaches it starts no further children (drawn with replacement, the template's numbers of
+    children compound).
 
     With ``roots`` above 1, or with ``max_length="input"`` (about as much structure as the
     input), further root trees follow once a tree is finished: one per input tree (an input
@@ -733,6 +735,10 @@ def grow(
         current.profile = bending.stem_profile(root) if bending.stem_thickness > 0 else None
         trees += 1
         first_branch, start_length, top_ups = len(out), world.total_length, 0
+        # Children drawn with their template branches' numbers of children compound: without a
+        # cap the first tree outgrew its template (the SinGAN bolts' 357 px tree grew to 577 px)
+        # and used up the input's length, so the output was one tree where the input had five.
+        full = tree.length if tree is not None and blen is None and d_fixed is None else None
         stalled: bool | None = None  # did the tree's main branch stop short without a single step?
         while current is not None:
             while not stop and current.length() * h < goal:
@@ -778,6 +784,9 @@ def grow(
                             queue.append((pi, v, gen, *template_branch(tree, gen)))
                             added = True
                 while not stop and current is None and qpos < len(queue):
+                    if full is not None and world.total_length - start_length >= full:
+                        qpos = len(queue)  # the tree is as long as its template: its queued children are left out
+                        break
                     pi, v, gen, goal, d = queue[qpos]
                     assert furcation is not None
                     pb = out[pi]
