@@ -330,6 +330,21 @@ def test_fit_range_scales_a_valley_into_the_range_instead_of_clipping_it_flat() 
     np.testing.assert_allclose(out[22:39, 15:40], canvas[22:39, 15:40], atol=1e-3)
 
 
+def test_fit_range_scales_every_channel_by_the_same_factor() -> None:
+    # only the red channel leaves the range; green and blue are scaled with it, so the
+    # structure keeps its hue instead of shifting towards the channels with room
+    canvas, gaps, filled, image = _valley_on_low_ground()
+    rgb = np.concatenate([canvas, 0.5 + 0.5 * (canvas - gaps), 0.6 + 0.25 * (canvas - gaps)], axis=2)
+    base = np.concatenate([gaps, np.full_like(gaps, 0.5), np.full_like(gaps, 0.6)], axis=2)
+    lo, hi = np.float32([0.1, 0.1, 0.1]), np.float32([0.9, 0.9, 0.9])
+    out = _fit_range(rgb, base, filled, np.repeat(image, 3, axis=2), lo, hi, reach=4.0, threads=1)
+    deep = filled & (rgb[..., 1] < 0.45) & (out[..., 0] > lo[0] + 1e-6)
+    ratio = (out - base)[deep] / (rgb - base)[deep]
+    assert float(ratio[:, 0].min()) < 0.9  # the valley was scaled
+    np.testing.assert_allclose(ratio[:, 1], ratio[:, 0], atol=5e-3)
+    np.testing.assert_allclose(ratio[:, 2], ratio[:, 0], atol=5e-3)
+
+
 def test_fit_range_clips_where_the_input_saturates_or_the_excess_is_a_thin_line() -> None:
     canvas, gaps, filled, image = _valley_on_low_ground()
     lo, hi = np.float32([0.1]), np.float32([0.9])
