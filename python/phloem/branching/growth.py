@@ -735,9 +735,8 @@ def grow(
         current.profile = bending.stem_profile(root) if bending.stem_thickness > 0 else None
         trees += 1
         first_branch, start_length, top_ups = len(out), world.total_length, 0
-        # Children drawn with their template branches' numbers of children compound: without a
-        # cap the first tree outgrew its template (the SinGAN bolts' 357 px tree grew to 577 px)
-        # and used up the input's length, so the output was one tree where the input had five.
+        # Children drawn with their template branches' numbers of children compound: uncapped,
+        # one tree can outgrow its template and use up the input's length (a forest as one tree).
         full = tree.length if tree is not None and blen is None and d_fixed is None else None
         stalled: bool | None = None  # did the tree's main branch stop short without a single step?
         while current is not None:

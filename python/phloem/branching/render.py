@@ -398,9 +398,10 @@ def render(
         # The structure is pasted afterwards, so the completion sees none of it: its patches are
         # background only, and partly known patches holding a bolt copied halos beside it.
         known = np.zeros_like(painter.filled) if whole else painter.filled
+        radius = float(np.median([g.radius for g in targets]))
         canvas = fill_gaps(
             canvas, known, img, src_sk, target_skeleton=tgt_sk, valid=ok, radius_factor=rf,
-            radius=float(np.median([g.radius for g in targets])), lo=painter.lo, hi=painter.hi,
+            radius=radius, lo=painter.lo, hi=painter.hi,
             match_borders=match_borders if match_borders is not None else not whole, photometric=photometric and not mask_like,
             patch_size=p, iterations=c_iters, seed=s, threads=t, diversity=gap_div,
         )  # fmt: skip
@@ -409,8 +410,7 @@ def render(
             _paste(canvas, painter.canvas, painter.filled)  # the structure over the completed background
             canvas = _paste_structure(canvas, painter.filled, painter.labels, threads=t)
             canvas = _keep_contrast(canvas, painter.filled, img, src_sk, tgt_sk, threads=t)
-            reach = float(np.median([g.radius for g in targets]))
-            canvas = _fit_range(canvas, gaps, painter.filled, img, painter.lo, painter.hi, reach=reach, threads=t)
+            canvas = _fit_range(canvas, gaps, painter.filled, img, painter.lo, painter.hi, reach=radius, threads=t)
     if mask_like:
         canvas = _drop_foreign(
             np.where(canvas >= 0.5 * (lo + hi), hi, lo).astype(np.float32), img, src_sk, tgt_sk, lo, hi
@@ -790,17 +790,17 @@ def _fit_range(
     factor each out-of-range pixel needs to reach the range, spread over ``reach`` px (the
     fragments' radius: the smallest factor within a square that far, then smoothed by a
     Gaussian of half that) so the relief fades instead of stepping, at least
-    :data:`MIN_RELIEF_SCALE`. Only out-of-range areas at least
-    :data:`BLOT_WIDTH` px wide are fitted, and only at an end of the range the input itself
-    does not saturate (:data:`SATURATED_SHARE`): a bolt's white core and whatever the input
-    shows saturated are clipped as before.
+    :data:`MIN_RELIEF_SCALE`. Only out-of-range areas at least :data:`BLOT_WIDTH` px wide are
+    fitted, and only at an end of the range the input itself does not saturate
+    (:data:`SATURATED_SHARE`): a bolt's white core and whatever the input shows saturated are
+    clipped as before.
     """
     res: F32 = canvas.copy()
     if not filled.any():
         return _clip_channels(res, lo, hi)
     near = 1e-3 * np.maximum(hi - lo, 1e-12)
-    low_ok = np.array([(image[..., c] <= lo[c] + near[c]).mean() >= SATURATED_SHARE for c in range(len(lo))])
-    high_ok = np.array([(image[..., c] >= hi[c] - near[c]).mean() >= SATURATED_SHARE for c in range(len(hi))])
+    low_ok = (image <= lo + near).mean(axis=(0, 1)) >= SATURATED_SHARE  # per channel
+    high_ok = (image >= hi - near).mean(axis=(0, 1)) >= SATURATED_SHARE
     under = (canvas < lo) & ~low_ok
     over = (canvas > hi) & ~high_ok
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (BLOT_WIDTH, BLOT_WIDTH))
