@@ -57,6 +57,14 @@ def _arc_lengths(branch: Branch) -> F64:
     return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(branch.points, axis=0), axis=1))])
 
 
+def _tree_roots(skeleton: Skeleton) -> list[int]:
+    """The index of each branch's root branch (parents come before their children)."""
+    root: list[int] = []
+    for i, b in enumerate(skeleton.branches):
+        root.append(i if b.parent is None else root[b.parent[0]])
+    return root
+
+
 def _generations(skeleton: Skeleton) -> list[int]:
     gen: list[int] = []
     for b in skeleton.branches:

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._elements import _generations
+from ._elements import _generations, _tree_roots
 from .skeleton import Skeleton
 
 
@@ -39,9 +39,7 @@ def input_trees(skeleton: Skeleton, *, min_vertices: int = 3) -> list[InputTree]
     """The trees of ``skeleton`` whose root branch has ``min_vertices`` or more, largest first."""
     gens = _generations(skeleton)
     kids = skeleton.children()
-    tree: list[int] = []
-    for i, b in enumerate(skeleton.branches):
-        tree.append(i if b.parent is None else tree[b.parent[0]])
+    tree = _tree_roots(skeleton)
     trees: dict[int, InputTree] = {}
     for i, b in enumerate(skeleton.branches):
         t = trees.setdefault(tree[i], InputTree(tree[i], 0.0))

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validate import as_image, as_mask, check_float, check_int
-from ._elements import F64, _abs_turn, _arc_lengths, _bin, _check_skeleton
+from ._elements import F64, _abs_turn, _arc_lengths, _bin, _check_skeleton, _tree_roots
 from .bending import ARC  # the arc the bending model matches, so that the two stay one
 from .histograms import _hist, histogram_distance
 from .skeleton import Branch, Skeleton
@@ -233,10 +233,7 @@ def largest_tree_share(skeleton: Skeleton) -> float:
     0.8
     """
     _check_skeleton(skeleton)
-    root: list[int] = []
-    for i, b in enumerate(skeleton.branches):
-        root.append(i if b.parent is None else root[b.parent[0]])
-    lengths = np.bincount(root, weights=[b.length() for b in skeleton.branches])
+    lengths = np.bincount(_tree_roots(skeleton), weights=[b.length() for b in skeleton.branches])
     total = float(lengths.sum())
     if total <= 0:
         raise ValueError("skeleton: the branches have no length")
