@@ -273,6 +273,63 @@ def test_subpixel_traces_a_thin_bolt_in_a_glow_whole(seed):
     assert sk.total_length() > 0.9 * length
 
 
+def _vessel_tree() -> np.ndarray:
+    """A dark vessel tree on a light ground with noise: a trunk 17 px wide, far wider than the
+    default ridge scales reach, forking at (150, 170) into two arms 5 px wide, with four twigs
+    3 px wide off the trunk."""
+    img = np.full((320, 300), 0.8, np.float32)
+    cv2.line(img, (150, 315), (150, 170), 0.2, thickness=17, lineType=cv2.LINE_AA)
+    for end in [(50, 40), (250, 40)]:
+        cv2.line(img, (150, 170), end, 0.2, thickness=5, lineType=cv2.LINE_AA)
+    for y, x in [(280, 70), (280, 230), (220, 80), (220, 220)]:
+        cv2.line(img, (150, y), (x, y - 40), 0.2, thickness=3, lineType=cv2.LINE_AA)
+    noise = np.random.default_rng(0).normal(0, 0.02, img.shape).astype(np.float32)
+    return cv2.GaussianBlur(img, (0, 0), 1.0) + noise
+
+
+def test_a_trunk_wider_than_the_ridge_scales_holds_its_tree_together():
+    # The fine scales answer only beside the trunk's edges, so without the wide filter the
+    # arms and twigs are six separate trees and the trunk none of them.
+    img = _vessel_tree()
+    assert len([b for b in trace(img, wide=False).branches if b.parent is None]) > 1
+    sk = trace(img)
+    assert [b.parent is None for b in sk.branches].count(True) == 1, "the tree fell apart"
+    main = sk.branches[0]
+    assert np.linalg.norm(main.points[0] - (150, 315)) < 8, f"rooted at {main.points[0]}, not the trunk's foot"
+    assert np.median(main.thickness[: len(main) // 3]) > 6.0
+    assert np.abs(main.points[: len(main) // 3, 0] - 150).max() < 6, "the main branch left the trunk's axis"
+
+
+def _forked_bolt_in_a_glow(seed: int) -> np.ndarray:
+    """A bright bolt 1 px wide with three forks in a glow of 6 px, on a dark sky with noise."""
+    core = np.zeros((200, 260), np.float32)
+    cv2.polylines(core, [np.array([(130, 5), (125, 60), (135, 100)], np.int32)], False, 1.0, 1, cv2.LINE_AA)
+    for a, b in [((135, 100), (70, 190)), ((135, 100), (200, 190)), ((125, 60), (60, 90))]:
+        cv2.line(core, a, b, 1.0, 1, cv2.LINE_AA)
+    glow = cv2.GaussianBlur(core, (0, 0), 6.0)
+    noise = np.random.default_rng(seed).normal(0, 0.02, core.shape)
+    return (0.1 + 0.5 * core + 0.5 * glow / glow.max() + noise).astype(np.float32)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_wide_leaves_a_bolt_in_a_glow_as_the_fine_scales_trace_it(seed):
+    # A glow is a wide ridge too, but its axis is the bolt's core, which the fine mask holds but
+    # for a few px where the glow swells at a fork: painting those would knot the forks.
+    img = _forked_bolt_in_a_glow(seed)
+    a, b = trace(img), trace(img, wide=False)
+    assert len(a.branches) == len(b.branches) == 3
+    assert all(np.array_equal(x.points, y.points) for x, y in zip(a.branches, b.branches, strict=True))
+
+
+def test_a_trunks_foot_is_a_root_candidate_though_its_arms_span_the_tree():
+    # A short thick trunk under two long thin arms: the foot is 0.7 of the diameter from the
+    # farthest end, the arms' ends 1.0; the thickest of the far ends is the foot.
+    tubes = Tubes((200, 440), [((220, 190), (220, 110), 6, "trunk"), ((220, 110), (20, 60), 2, "left"),
+                               ((220, 110), (420, 60), 2, "right")])  # fmt: skip
+    main = trace(tubes.mask(), kind="mask").branches[0]
+    assert np.linalg.norm(main.points[0] - (220, 190)) < 8, f"rooted at {main.points[0]}, not the trunk's foot"
+
+
 # -- thickness by maximum gradient ----------------------------------------------------------
 
 
@@ -323,6 +380,7 @@ def test_estimate_thickness_keeps_structure():
         (Y_SHAPE.mask(), {"thickness": "dt"}, ValueError, "thickness"),
         (Y_SHAPE.mask(), {"gap": -1.0}, ValueError, "gap"),
         (Y_SHAPE.mask(), {"subpixel": "yes"}, TypeError, "subpixel"),
+        (Y_SHAPE.mask(), {"wide": "yes"}, TypeError, "wide"),
         (Y_SHAPE.mask(), {"kind": "mask", "threshold": 2.0}, ValueError, "image: nothing to trace"),
     ],
 )

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from phloem import branching, io
 from phloem.cli import main
@@ -250,16 +251,20 @@ def test_branching_trace_leaves_a_photo_frame_out(tmp_path):
     assert lengths["none"] > lengths["auto"] + 200
 
 
-def test_branching_trace_subpixel_reaches_trace_and_the_sidecar(tmp_path, monkeypatch):
+@pytest.mark.parametrize(
+    ("flag", "kwarg", "key", "default"),
+    [("--subpixel", "subpixel", "subpixel", False), ("--no-wide", "wide", "no_wide", True)],
+)
+def test_branching_trace_switches_reach_trace_and_the_sidecar(tmp_path, monkeypatch, flag, kwarg, key, default):
     seen = []
     real = branching.trace
-    monkeypatch.setattr(branching, "trace", lambda *a, **k: seen.append(k.get("subpixel")) or real(*a, **k))
+    monkeypatch.setattr(branching, "trace", lambda *a, **k: seen.append(k.get(kwarg)) or real(*a, **k))
     _river_png(tmp_path / "river.png")
-    for flags in ([], ["--subpixel"]):
+    for flags in ([], [flag]):
         out = tmp_path / f"river{len(flags)}.json"
         assert main(["branching", "trace", str(tmp_path / "river.png"), "--out", str(out), *flags, "-q"]) == 0
-        assert json.loads(io.sidecar_path(out).read_text())["parameters"]["subpixel"] is bool(flags)
-    assert seen == [False, True]
+        assert json.loads(io.sidecar_path(out).read_text())["parameters"][key] is bool(flags)
+    assert seen == [default, not default]
 
 
 def test_grow_fits_once_per_skeleton_and_options_in_a_process(tmp_path, monkeypatch):

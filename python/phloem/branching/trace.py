@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 from .._distance import euclidean_distance
 from .._ridges import ridge_polarity, ridge_response
 from .._validate import as_image, as_mask, check_float, check_int
+from ._elements import _tree_roots
 from .skeleton import Branch, Skeleton
 
 __all__ = ["estimate_thickness", "trace"]
@@ -59,6 +60,17 @@ def _gray(image: Any, channel: int | None) -> F32:
 
 #: Scales (px) of the ridge filter when none are given.
 DEFAULT_SIGMAS = (1.0, 2.0, 3.0)
+
+#: A tree's root is one of its far ends: a leaf at least this share of the tree's diameter from
+#: its farthest pixel (step 5), the end of a long path rather than a side twig ...
+ROOT_ECCENTRICITY = 0.75
+
+#: ... or a leaf at least this share away that is :data:`ROOT_THICKER` times as thick as every
+#: far end: a trunk's foot, where the arms above it span the tree's diameter.
+TRUNK_ECCENTRICITY = 0.5
+
+#: See :data:`TRUNK_ECCENTRICITY`.
+ROOT_THICKER = 1.5
 
 
 def _sigmas(sigmas: Any) -> tuple[float, ...]:
@@ -404,6 +416,7 @@ def trace(
     valid: Any = None,
     blob: float | None = 8.0,
     subpixel: bool = False,
+    wide: bool = True,
 ) -> Skeleton:
     """Trace the skeleton of a branching structure in an image (beyond [1]_, its future work).
 
@@ -417,7 +430,13 @@ def trace(
        two-valued image is a mask, otherwise the polarity with the stronger 99th-percentile
        response is used. With ``subpixel`` the filter is evaluated on a twice finer grid, so
        that lines a pixel or two wide whose centre falls between pixel centres keep their
-       response.
+       response. With ``wide`` the structure wider than ``sigmas`` reach is added: the same
+       filter at 1.5 and 2.25 times the largest scale, hysteresis-thresholded between 0.3 and 1
+       times the larger of its Otsu threshold and its median positive response plus 6 robust
+       deviations; of its centre lines, the trees whose axis runs outside the fine mask for at
+       least 4 of its radii are drawn in at 0.8 of their thickness by
+       :func:`estimate_thickness` (a vessel tree's trunk, which the fine scales find only as
+       its two edges, so that its twigs fell apart into separate trees).
     2. **Cleaning.** Components and holes smaller than ``min_area`` pixels are removed / filled.
     3. **Skeleton.** :func:`skimage.morphology.skeletonize`, radius ``r`` = Euclidean distance
        transform of the mask minus 0.5 (the distance from a centre pixel to the nearest
@@ -428,7 +447,8 @@ def trace(
        loops) is cut at its thinnest place.
     5. **Branches.** Each tree is rooted at ``root`` (the nearest skeleton pixel) or, by
        default, at its thickest far end: among the leaves at least 3/4 of the tree's diameter
-       from their farthest pixel, the one with the largest radius over its first pixels (a
+       from their farthest pixel (or half of it, for one 1.5 times as thick as all those: a
+       trunk's foot below long arms), the one with the largest radius over its first pixels (a
        mask: the mean distance-transform radius over ``max(5, 4 r + 1)`` pixels; a photo: the
        median maximum-gradient thickness of 7. over ``2 ⌈max_radius⌉`` pixels, because a
        ridge mask is about as narrow along a trunk as along a twig). The
@@ -492,6 +512,10 @@ def trace(
         best of its four sub-positions (default False). Thin lines in a glow (lightning) are then
         traced whole instead of in pieces, but so are more of a textured surface's faint ridges
         (asphalt, bark); the trace takes about twice as long. See ``docs/pipelines/branching.md``.
+    wide : bool, optional
+        Also find structure wider than ``sigmas`` reach on a photo (default True; see 1.): a
+        trunk that would otherwise split its tree into the twigs beside it. False traces the
+        fine scales only.
 
     Returns
     -------
@@ -547,6 +571,8 @@ def trace(
         blob = check_float(blob, "blob", 1.0)
     if not isinstance(subpixel, (bool, np.bool_)):
         raise TypeError(f"subpixel: expected True or False, got {subpixel!r}")
+    if not isinstance(wide, (bool, np.bool_)):
+        raise TypeError(f"wide: expected True or False, got {wide!r}")
     if root is not None:
         try:
             rx, ry = (float(v) for v in root)
@@ -568,18 +594,24 @@ def trace(
         kind = _resolve_kind(gray, sig)  # type: ignore[assignment]
     if gap is None:
         gap = 0.0 if kind == "mask" else 2.0 * max(sig) + 3.0
+    wide_px = np.zeros(shape, np.bool_)
     if kind == "mask":
         mask = gray > (0.5 * (lo + hi) if threshold is None else threshold)
     else:
         resp = ridge_response(gray, sig, kind, subpixel=bool(subpixel))
+        inner = None
         if ok is not None:
             reach = 2 * math.ceil(3 * max(sig)) + 3
-            inner = cv2.erode(ok.astype(np.uint8), np.ones((reach, reach), np.uint8), borderType=cv2.BORDER_REPLICATE)
-            resp = np.where(inner.astype(bool), resp, 0.0)
+            kernel = np.ones((reach, reach), np.uint8)
+            inner = cv2.erode(ok.astype(np.uint8), kernel, borderType=cv2.BORDER_REPLICATE).astype(bool)
+            resp = np.where(inner, resp, 0.0)
         t = _otsu(resp) if threshold is None else threshold
         mask = _hysteresis(resp, 0.5 * t, t)
         # A ridge mask is ragged: close tiny gaps and round it so the skeleton has fewer spurs.
         mask = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)).astype(bool)
+        if wide:
+            wide_px = _wide_structure(gray, sig, kind, ok, min_area, mask)
+            mask |= wide_px
     if ok is not None:
         mask &= ok
     mask = _drop_small(mask, min_area)
@@ -590,7 +622,8 @@ def trace(
     radius = np.maximum(dist - 0.5, 0.5).astype(np.float32)
     skel = np.asarray(skeletonize(mask), dtype=np.bool_)  # type: ignore[no-untyped-call]
     if blob is not None and skel.any():
-        skel &= radius <= blob * float(np.median(radius[skel]))
+        # (a photo's wide structure has been measured by its edges: a trunk, not a lake)
+        skel &= (radius <= blob * float(np.median(radius[skel]))) | wide_px
     if gap > 0:
         skel = _bridge(skel, gap)
     xs, ys, r, tree = _pixel_forest(skel, radius)
@@ -648,11 +681,101 @@ def trace(
     return sk.resample(h) if h is not None else sk
 
 
+#: Scales of the wide ridge filter, in multiples of the largest of ``sigmas``.
+WIDE_SCALES = (1.5, 2.25)
+
+#: How far above the median positive response, in robust deviations (1.4826 MAD), the wide
+#: filter's strong threshold lies at least: at its scales grain merges into webs.
+WIDE_MADS = 6.0
+
+#: The wide filter's weak threshold as a share of its strong one: a trunk's response dips
+#: where it forks, and the band must run on into its arms.
+WIDE_LOW = 0.3
+
+#: Share of its measured thickness painted round the wide structure's centre line.
+WIDE_FILL = 0.8
+
+#: A wide tree is painted where its axis leaves the fine mask for at least this many of its
+#: radii (twice as long as wide).
+WIDE_RUN = 4.0
+
+
+def _wide_structure(
+    gray: F32,
+    sig: tuple[float, ...],
+    kind: str,
+    valid: NDArray[np.bool_] | None,
+    min_area: int,
+    fine: NDArray[np.bool_],
+) -> NDArray[np.bool_]:
+    """The structure wider than ``sig`` reaches, at the width of its edges (``trace``'s step 1).
+
+    A ridge filter at the fine scales answers beside a trunk's edges and not on its axis, so a
+    vessel tree fell apart at its trunk into the twigs on either side. A second filter at
+    :data:`WIDE_SCALES` keeps only what stands :data:`WIDE_MADS` robust deviations clear of its
+    typical response. Its centre lines are measured by :func:`estimate_thickness`, and the trees
+    among them whose axis leaves ``fine`` (the fine scales' mask) for :data:`WIDE_RUN` radii are
+    painted at :data:`WIDE_FILL` of that thickness, so that the twigs' ridges meet them and the
+    skeleton runs through the trunk's middle.
+    """
+    scales = tuple(f * max(sig) for f in WIDE_SCALES)
+    resp = ridge_response(gray, scales, kind)
+    # Near the image's border (or ``valid``'s) a dark margin reflected into the padding reads as
+    # a wide ridge along it; the fine filter's reach of it is left out, as for ``valid`` in ``trace``.
+    reach = 2 * math.ceil(3 * max(sig)) + 3
+    region = np.ones(gray.shape, np.uint8) if valid is None else valid.astype(np.uint8)
+    kernel = np.ones((reach, reach), np.uint8)
+    inside = cv2.erode(region, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(np.bool_)
+    resp = np.where(inside, resp, 0.0)
+    out = np.zeros(gray.shape, np.bool_)
+    pos = resp[resp > 0]
+    if pos.size < 2:
+        return out
+    med = float(np.median(pos))
+    strong = max(_otsu(resp), med + WIDE_MADS * 1.4826 * float(np.median(np.abs(pos - med))))
+    band = _drop_small(_hysteresis(resp, WIDE_LOW * strong, strong), min_area)
+    if not band.any():
+        return out
+    try:
+        centre = trace(band, kind="mask", gap=0.0, blob=None, min_area=min_area)
+    except ValueError:  # only stubs, shorter than a branch
+        return out
+    measured = estimate_thickness(gray, centre, max_radius=2.0 * max(scales) + 2.0)
+    # Only the band's trees whose axis the fine mask misses over a stretch longer than wide (a
+    # trunk, which the fine scales see as two edges); a bolt's core is in the fine mask already,
+    # and where its glow swells at a fork the band's axis leaves it for a few px only.
+    near = cv2.dilate(fine.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(np.bool_)
+    tree = _tree_roots(measured)
+    keep: set[int] = set()
+    for i, b in enumerate(measured.branches):
+        px = np.rint(b.points).astype(np.int64)
+        for run in _runs(~near[px[:, 1], px[:, 0]]):
+            if _arc(b.points[run]) >= WIDE_RUN * float(np.median(b.thickness[run])):
+                keep.add(tree[i])
+    paint = np.zeros(gray.shape, np.uint8)
+    for i, b in enumerate(measured.branches):
+        if tree[i] in keep:
+            for (x, y), t in zip(np.rint(b.points).astype(np.int64), b.thickness, strict=True):
+                cv2.circle(paint, (int(x), int(y)), max(1, round(WIDE_FILL * float(t))), 1, -1)
+    return paint.astype(np.bool_)
+
+
+def _runs(flags: NDArray[np.bool_]) -> list[NDArray[np.intp]]:
+    """Index arrays of the maximal runs of True in ``flags``."""
+    edges = np.diff(np.concatenate([[0], flags.astype(np.int8), [0]]))
+    return [np.arange(a, b) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True)]
+
+
+def _arc(points: F64) -> float:
+    return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum()) if len(points) > 1 else 0.0
+
+
 def _root_candidates(tree: Any, node: int, r: F64, reach: int) -> list[tuple[int, list[int], float]]:
     """The far ends of ``node``'s tree that may be its root: ``(leaf, its first pixels, eccentricity)``.
 
-    Candidates are the leaves whose farthest other node is at least 3/4 of the tree's diameter
-    away (the ends of long paths, not side twigs). Each comes with the pixels from it inward,
+    Candidates are the leaves whose farthest other node is at least :data:`TRUNK_ECCENTRICITY`
+    of the tree's diameter away (the ends of long paths, not side twigs; :func:`_pick_root`
+    tells the far ends among them). Each comes with the pixels from it inward,
     ``max(5, 4 r + 1)`` of them at its own mask radius ``r``, or ``reach`` where that is more.
     """
     order, _, _ = _reach(tree, node)
@@ -664,7 +787,7 @@ def _root_candidates(tree: Any, node: int, r: F64, reach: int) -> list[tuple[int
     leaves = np.sort(order_a[deg <= 1])
     ecc = np.maximum(da[leaves], db[leaves])
     out = []
-    for v in leaves[ecc >= 0.75 * da[end_b]].tolist():
+    for v in leaves[ecc >= TRUNK_ECCENTRICITY * da[end_b]].tolist():
         pred = pred_b if v == end_a else pred_a
         path = [v]
         want = max(5, int(4 * r[v]) + 1, reach)
@@ -675,14 +798,22 @@ def _root_candidates(tree: Any, node: int, r: F64, reach: int) -> list[tuple[int
 
 
 def _pick_root(candidates: list[tuple[int, list[int], float]], radius: list[float]) -> int:
-    """The thickest far end: the candidate of largest ``radius``; ties go to the more eccentric,
-    then the lower index."""
-    best, best_key = candidates[0][0], (-math.inf, -math.inf)
-    for (v, _, ecc), rad in zip(candidates, radius, strict=True):
-        key = (round(rad, 6), ecc)
-        if key > best_key:
-            best, best_key = v, key
-    return best
+    """The thickest far end (eccentricity at least :data:`ROOT_ECCENTRICITY` of the largest), or
+    a nearer candidate :data:`ROOT_THICKER` times as thick as that; ties go to the more
+    eccentric, then the lower index."""
+    diameter = max(ecc for _, _, ecc in candidates)
+
+    def thickest(far: bool) -> tuple[int, float]:
+        best, best_key = -1, (-math.inf, -math.inf)
+        for (v, _, ecc), rad in zip(candidates, radius, strict=True):
+            key = (round(rad, 6), ecc)
+            if (ecc >= ROOT_ECCENTRICITY * diameter or not far) and key > best_key:
+                best, best_key = v, key
+        return best, best_key[0]
+
+    far, far_r = thickest(True)
+    trunk, trunk_r = thickest(False)
+    return trunk if trunk_r >= ROOT_THICKER * far_r else far
 
 
 def _end_radii(

@@ -57,6 +57,12 @@ def _trace_options(p: argparse.ArgumentParser) -> None:
         help="evaluate the ridge filter on a twice finer grid (photos): thin lines in a glow, such as lightning, are "
         "traced whole instead of in pieces, but more of a textured surface's grain is traced too; off by default",
     )
+    g.add_argument(
+        "--no-wide",
+        action="store_true",
+        help="trace the ridge filter's scales only (photos): by default a structure wider than they reach, such as a "
+        "vessel tree's trunk, is found by a second, wider filter and traced through its middle",
+    )
 
 
 def _trace_kwargs(args: argparse.Namespace) -> dict[str, Any]:
@@ -66,6 +72,7 @@ def _trace_kwargs(args: argparse.Namespace) -> dict[str, Any]:
         "channel": args.channel,
         "min_length": args.min_length,
         "subpixel": args.subpixel,
+        "wide": not args.no_wide,
     }
 
 

@@ -935,7 +935,7 @@ $("br-upload").onchange = guard(kMsg, async () => {
 });
 $("br-trace").onclick = guard(kMsg, async () => {
   const req = { kind: "branching-trace", image: $("br-image").value, trace_kind: $("br-kind").value,
-    subpixel: $("br-subpixel").checked, out: $("br-file").value.trim() };
+    subpixel: $("br-subpixel").checked, wide: $("br-wide").checked, out: $("br-file").value.trim() };
   const s = await runJobReplacing(req, kUi);
   await loadSkeleton(s.outputs[0]);
   say(kMsg, `traced ${s.outputs[0]}: ${K.branches.length} branches; edit it with the mouse`);

@@ -60,6 +60,11 @@ class BranchingTraceJob(BaseModel):
         description="evaluate the ridge filter on a twice finer grid: thin lines in a glow (lightning) are traced "
         "whole, and more of a textured surface's grain too (the CLI's --subpixel)",
     )
+    wide: bool = Field(
+        True,
+        description="also find structure wider than the ridge filter's scales, such as a vessel tree's trunk, with a "
+        "second, wider filter (the CLI's --no-wide turns it off)",
+    )
     out: str | None = Field(
         None, description="project name of the skeleton (.json); default <image>_skeleton.json beside it"
     )
@@ -191,7 +196,8 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
             progress(0, 1)
             valid = branching.valid_region(img)
             sk = branching.trace(img, kind=req.trace_kind, sigmas=tuple(req.sigmas), min_length=req.min_length,
-                                 valid=None if valid.all() else valid, subpixel=req.subpixel)  # fmt: skip
+                                 valid=None if valid.all() else valid, subpixel=req.subpixel,
+                                 wide=req.wide)  # fmt: skip
             progress(1, 1)
             return [outputs.data(out, sk.to_json().encode(), command=req.kind, parameters=params, seed=None,
                                  overwrite=req.overwrite)]  # fmt: skip
