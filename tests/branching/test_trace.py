@@ -382,6 +382,8 @@ def test_estimate_thickness_keeps_structure():
         (Y_SHAPE.mask(), {"subpixel": "yes"}, TypeError, "subpixel"),
         (Y_SHAPE.mask(), {"wide": "yes"}, TypeError, "wide"),
         (Y_SHAPE.mask(), {"kind": "mask", "threshold": 2.0}, ValueError, "image: nothing to trace"),
+        (Y_SHAPE.mask(), {"kind": "mask", "threshold": -1.0}, ValueError, "foreground fills the whole image"),
+        (np.random.default_rng(0).random((3, 3)), {}, ValueError, "foreground fills the whole image"),
     ],
 )
 def test_bad_input_names_the_argument(image, kwargs, err, match):

@@ -617,6 +617,9 @@ def trace(
     mask = _drop_small(mask, min_area)
     if not mask.any():
         raise ValueError("image: nothing to trace, no foreground left (check kind, threshold, min_area)")
+    if mask.all():
+        # no background pixel: every radius would be infinite
+        raise ValueError("image: nothing to trace, the foreground fills the whole image (check kind, threshold)")
 
     dist = euclidean_distance(mask)
     radius = np.maximum(dist - 0.5, 0.5).astype(np.float32)
