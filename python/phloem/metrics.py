@@ -18,7 +18,8 @@ stroke measures of Luo et al.'s edits (coverage of the target strokes, width agr
 corresponding strokes; defined in :mod:`phloem.strokes.measures`), and the measures of whether a
 synthesised branching structure looks like its input's kind (re-trace agreement, largest-tree
 share, heading-change drift, two-level fraction, the share of the structure that runs along the frame,
-how much children turn where they start and how far apart they leave their parent, which ways it
+how much children turn where they start, how far apart they leave their parent and where along
+it the long ones leave, which ways it
 runs on the image, how much it stands out from its surroundings, and how much of the
 background's grain its completed gaps keep; defined in
 :mod:`phloem.branching.measures`).
@@ -54,6 +55,7 @@ from .branching.measures import (
     median_heading_change,
     orientation_distance,
     retrace_agreement,
+    sibling_order,
     skeleton_agreement,
     start_turns,
     structure_contrast,
@@ -89,6 +91,7 @@ __all__ = [
     "repetition",
     "retrace_agreement",
     "shape_similarity",
+    "sibling_order",
     "skeleton_agreement",
     "start_turns",
     "stroke_coverage",

@@ -10,6 +10,7 @@ import pytest
 import phloem
 from phloem.branching import Branch, Skeleton, trace
 from phloem.branching.measures import (
+    MIN_SIBLINGS,
     background_grain,
     border_share,
     direction_concentration,
@@ -24,6 +25,7 @@ from phloem.branching.measures import (
     orientation_distance,
     resolve_trace_options,
     retrace_agreement,
+    sibling_order,
     skeleton_agreement,
     start_turns,
     structure_contrast,
@@ -40,7 +42,7 @@ def test_metrics_reexports_the_measures() -> None:
     for name in (
         "retrace_agreement", "skeleton_agreement", "largest_tree_share", "border_share", "drift", "drift_noise",
         "two_level_fraction", "start_turns", "furcation_gaps", "direction_histogram", "direction_concentration",
-        "orientation_distance", "structure_contrast", "background_grain",
+        "orientation_distance", "structure_contrast", "background_grain", "sibling_order",
     ):  # fmt: skip
         assert getattr(phloem.metrics, name) is getattr(phloem.branching.measures, name)
         assert name in phloem.metrics.__all__
@@ -571,3 +573,34 @@ def test_structure_contrast_refuses_what_it_cannot_measure() -> None:
             structure_contrast(img, sk, ring=bad)
     with pytest.raises(ValueError, match="^image:"):
         structure_contrast(np.full((40, 80), np.nan), sk)
+
+
+def _stem_with_children(lengths: list[float]) -> Skeleton:
+    """A straight stem with a child every 20 px, of the given lengths from the stem's start on."""
+    stem = Branch(
+        np.c_[
+            np.linspace(0, 20.0 * (len(lengths) + 1), 10 * (len(lengths) + 1) + 1),
+            np.full(10 * (len(lengths) + 1) + 1, 200.0),
+        ],
+        1.0,
+    )
+    kids = [
+        Branch([[20.0 * (k + 1), 200.0], [20.0 * (k + 1), 200.0 - ln]], 1.0, parent=(0, 10 * (k + 1)))
+        for k, ln in enumerate(lengths)
+    ]
+    return Skeleton([stem, *kids])
+
+
+def test_sibling_order_is_the_rank_correlation_of_place_and_length():
+    falling = [150.0 - 10 * i for i in range(12)]
+    assert sibling_order(_stem_with_children(falling)) == pytest.approx(-1.0)
+    assert sibling_order(_stem_with_children(falling[::-1])) == pytest.approx(1.0)
+    mixed = [150.0, 40.0, 130.0, 60.0, 110.0, 20.0, 90.0, 80.0, 70.0, 100.0, 50.0, 120.0]
+    place, length = np.arange(12), np.asarray(mixed)
+    ranks = np.argsort(np.argsort(length))
+    assert sibling_order(_stem_with_children(mixed)) == pytest.approx(float(np.corrcoef(place, ranks)[0, 1]))
+
+
+def test_sibling_order_needs_enough_children():
+    assert sibling_order(_stem_with_children([150.0 - 10 * i for i in range(MIN_SIBLINGS - 1)])) == 0.0
+    assert sibling_order(_stem_with_children([50.0] * 12)) == 0.0  # no order among equal lengths

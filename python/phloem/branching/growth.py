@@ -14,6 +14,9 @@ Beyond the paper's text:
   statistics of one input tree (branch lengths and numbers of children per generation), so
   that a connected input gives a connected output and a forest a forest of the same tree
   sizes; ``max_length="input"`` grows about as much structure as the input.
+* **Siblings in order.** The children picked on one branch are dealt their template
+  branches so that length and place along the parent correlate as in the input
+  (:func:`~phloem.branching.measures.sibling_order`): long children near the parent's start.
 * **Course.** The bending model also matches each branch's heading against its course over
   ``8 m`` edges (:class:`.BendingModel`, ``course``), so branches keep a course at the scale
   of the structure.
@@ -38,6 +41,7 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass
+from statistics import NormalDist
 from typing import Any
 
 import numpy as np
@@ -52,6 +56,7 @@ from ._forest import InputTree, input_trees
 from ._world import _guide_map, _World
 from .bending import BendingModel, block_sums, course_deviation
 from .furcation import FurcationModel
+from .measures import sibling_order
 from .skeleton import Branch, Skeleton
 
 __all__ = ["extend", "grow"]
@@ -320,6 +325,27 @@ def _new_branch(
 def _finish(grower: _Grower, br: _Growing) -> Branch:
     grower.flush(br, final=True)
     return Branch(np.asarray(br.points), np.asarray(br.thickness), br.parent)
+
+
+def _ordered(
+    planned: list[tuple[float, int]], vertices: list[int], order: float, rng: np.random.Generator
+) -> list[tuple[float, int]]:
+    """Siblings' planned (length, children) given to their furcation vertices so that length and
+    place along the parent correlate as in the input (:func:`~.measures.sibling_order`, Spearman's
+    ``ρ_s``): a Gaussian copula of Pearson ``ρ = 2 sin(π ρ_s / 6)`` between the vertices' normal
+    scores and the keys by which the lengths are dealt, shortest to the lowest key."""
+    n = len(planned)
+    if n < 2 or order == 0.0:
+        return planned
+    rho = 2.0 * math.sin(math.pi * order / 6.0)
+    rank = np.argsort(np.argsort(np.asarray(vertices), kind="stable"), kind="stable")
+    score = np.array([NormalDist().inv_cdf((float(k) + 0.5) / n) for k in rank])
+    key = rho * score + math.sqrt(max(0.0, 1.0 - rho * rho)) * rng.standard_normal(n)
+    by_size = sorted(planned)
+    out: list[tuple[float, int]] = [planned[0]] * n
+    for size, i in zip(by_size, np.argsort(key, kind="stable").tolist(), strict=True):
+        out[i] = size
+    return out
 
 
 def _check_models(bending: Any, furcation: Any) -> None:
@@ -652,6 +678,7 @@ def grow(
 
     H, W = shape
     forest = input_trees(bending.source)
+    order = sibling_order(bending.source)
     # A connected input (its largest tree holds 90 % of the length, so a stray speck does not count)
     dominant = bool(forest) and forest[0].length >= 0.9 * sum(t.length for t in forest)
     if n_roots is None:
@@ -760,8 +787,10 @@ def grow(
                 and (generations is None or gen < generations)
                 and len(branch) >= 3
             ):
-                for v in furcation.pick(branch, d, min_spacing=min_spacing):
-                    queue.append((len(out) - 1, v, gen, *template_branch(tree, gen)))
+                picked = furcation.pick(branch, d, min_spacing=min_spacing)
+                planned = _ordered([template_branch(tree, gen) for _ in picked], picked, order, rng)
+                for v, (goal_c, d_c) in zip(picked, planned, strict=True):
+                    queue.append((len(out) - 1, v, gen, goal_c, d_c))
             if progress is not None:
                 progress(len(out), len(out) + len(queue) - qpos)
             current = None

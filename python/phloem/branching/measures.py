@@ -40,6 +40,7 @@ __all__ = [
     "orientation_distance",
     "resolve_trace_options",
     "retrace_agreement",
+    "sibling_order",
     "skeleton_agreement",
     "start_turns",
     "structure_contrast",
@@ -460,6 +461,74 @@ def furcation_gaps(skeleton: Skeleton) -> F64:
         s = _arc_lengths(skeleton.branches[i])
         out.append(np.diff(s[np.sort(np.asarray(at[i]))]))
     return np.concatenate(out) if out else np.zeros(0, np.float64)
+
+
+#: Fewest children (of parents with at least three) for :func:`sibling_order` to be measured.
+MIN_SIBLINGS = 10
+
+
+def sibling_order(skeleton: Skeleton) -> float:
+    """Where along their parent the long children leave: Spearman's rank correlation of place and length.
+
+    Pooled over the parents with at least three children: each child's attachment, as a share
+    of its parent's arc length, against the child's own length. Negative where the long
+    children leave near their parent's start and the short ones near its end, as in a tree's
+    crown or a river network (the traced real inputs measure -0.06 to -0.42); near 0 where
+    they are dealt along the parent at random.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        A traced input or a grown output; its ``parent`` links say which branch is whose child.
+
+    Returns
+    -------
+    float
+        In [-1, 1]; 0 with fewer than :data:`MIN_SIBLINGS` such children, or where the places
+        or the lengths are all equal.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phloem.branching import Branch, Skeleton
+    >>> stem = Branch(np.c_[np.linspace(0, 240, 121), np.full(121, 100.0)], 1.0)
+    >>> kids = [Branch([[20 * k, 100.0], [20 * k, 100.0 - 90 + 6 * k]], 1.0, parent=(0, 10 * k))
+    ...         for k in range(1, 12)]
+    >>> sibling_order(Skeleton([stem, *kids]))
+    -1.0
+    """
+    _check_skeleton(skeleton)
+    kids: dict[int, list[int]] = {}
+    for i, b in enumerate(skeleton.branches):
+        if b.parent is not None:
+            kids.setdefault(b.parent[0], []).append(i)
+    where: list[float] = []
+    length: list[float] = []
+    for p, ks in kids.items():
+        if len(ks) < 3:
+            continue
+        arc = _arc_lengths(skeleton.branches[p])
+        for k in ks:
+            at = skeleton.branches[k].parent
+            assert at is not None
+            where.append(float(arc[min(at[1], len(arc) - 1)] / max(float(arc[-1]), 1e-9)))
+            length.append(skeleton.branches[k].length())
+    if len(where) < MIN_SIBLINGS:
+        return 0.0
+    rw, rl = _ranks(np.asarray(where)), _ranks(np.asarray(length))
+    if rw.std() == 0 or rl.std() == 0:
+        return 0.0
+    return round(float(np.corrcoef(rw, rl)[0, 1]), 12)
+
+
+def _ranks(x: F64) -> F64:
+    """Ranks from 0, ties sharing their mean rank (as Spearman's correlation takes them)."""
+    order = np.argsort(x, kind="stable")
+    ranks = np.empty(len(x), np.float64)
+    ranks[order] = np.arange(len(x), dtype=np.float64)
+    _, inverse, counts = np.unique(x, return_inverse=True, return_counts=True)
+    sums = np.bincount(inverse, weights=ranks)
+    return np.asarray(sums[inverse] / counts[inverse], np.float64)
 
 
 def _edge_axes(skeleton: Skeleton, name: str) -> tuple[F64, F64]:
