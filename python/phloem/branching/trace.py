@@ -599,7 +599,6 @@ def trace(
         mask = gray > (0.5 * (lo + hi) if threshold is None else threshold)
     else:
         resp = ridge_response(gray, sig, kind, subpixel=bool(subpixel))
-        inner = None
         if ok is not None:
             reach = 2 * math.ceil(3 * max(sig)) + 3
             kernel = np.ones((reach, reach), np.uint8)
