@@ -23,6 +23,8 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
   than π/2 over their first ``3 m h`` px (``start_turns``, not a pass mark);
 - the median arc length between neighbouring children on one parent, input and output
   (``furcation_gaps``, not a pass mark: children packed along their parents);
+- the rank correlation of where children leave their parent and their length, input and output
+  (``sibling_order``, not a pass mark: long children near their parent's start);
 - the L1 distance of the output's histogram of directions on the image to the input's, and the
   input's ``direction_concentration`` (``orientation_distance``, not a pass mark: bolts that
   hang down in the input and run sideways in the output);
@@ -82,6 +84,7 @@ from phloem.metrics import (
     largest_tree_share,
     median_heading_change,
     orientation_distance,
+    sibling_order,
     skeleton_agreement,
     start_turns,
     structure_contrast,
@@ -116,6 +119,8 @@ class Result:
     hooks_out: float = math.nan
     gap_in: float = math.nan
     gap_out: float = math.nan
+    siblings_in: float = math.nan
+    siblings_out: float = math.nan
     directions: float = math.nan
     concentration: float = math.nan
     contrast_in: float = math.nan
@@ -224,6 +229,8 @@ def measure(
     r.hooks_in, r.hooks_out = (hooked_share(sk, 3.0 * res.bending.m * res.bending.h) for sk in (src, tgt))
     # nor this: children packed along their parents, combs where the input spaces them
     r.gap_in, r.gap_out = (median_gap(sk) for sk in (src, tgt))
+    # nor this: where along their parents the long children leave
+    r.siblings_in, r.siblings_out = sibling_order(src), sibling_order(tgt)
     # nor this: the ways the structure runs on the image, which the turn measures do not see
     with contextlib.suppress(ValueError):
         r.directions, r.concentration = orientation_distance(src, tgt), direction_concentration(src)
@@ -294,7 +301,7 @@ def _f(x: float | None, fmt: str = ".2f") -> str:
 def table(results: list[Result]) -> str:
     head = (
         "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input's noise) | heading in → out (rad) "
-        "| along the frame in → out | hooked starts in → out | children's gap px in → out | directions L1 (input's concentration) | contrast in → out (kept) | grain kept | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
+        "| along the frame in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | directions L1 (input's concentration) | contrast in → out (kept) | grain kept | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
     lines = [head, "|" + "---|" * 18]
     for r in results:
@@ -306,7 +313,7 @@ def table(results: list[Result]) -> str:
         lines.append(
             f"| {r.input} | {r.seed} | {size} | {_f(r.f1)} ({_f(r.precision)}/{_f(r.recall)}) "
             f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} ({_f(r.drift_noise)}) | {_f(r.heading_in)} → {_f(r.heading_out)} "
-            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
+            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
             f"| {_f(r.seconds, '.1f')} | {fails} |"
         )
     return "\n".join(lines)
