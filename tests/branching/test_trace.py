@@ -330,6 +330,18 @@ def test_a_trunks_foot_is_a_root_candidate_though_its_arms_span_the_tree():
     assert np.linalg.norm(main.points[0] - (220, 190)) < 8, f"rooted at {main.points[0]}, not the trunk's foot"
 
 
+@pytest.mark.parametrize("foot", [199, 180])
+def test_a_trunk_entering_at_the_frame_is_the_root(foot):
+    # A trunk an eighth thicker than its two long arms, 0.7 of the diameter from the farthest end:
+    # where it leaves the picture it is where the structure enters, and its foot is the root;
+    # ending inside the picture it is a nearer, only somewhat thicker end, and an arm's end is.
+    tubes = Tubes((200, 440), [((220, foot), (220, 110), 4.5, "trunk"), ((220, 110), (20, 60), 4, "left"),
+                               ((220, 110), (420, 60), 4, "right")])  # fmt: skip
+    start = trace(tubes.mask(), kind="mask").branches[0].points[0]
+    at_foot = np.linalg.norm(start - (220, foot)) < 10
+    assert at_foot == (foot == 199), f"rooted at {start}"
+
+
 # -- thickness by maximum gradient ----------------------------------------------------------
 
 

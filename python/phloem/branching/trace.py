@@ -66,7 +66,9 @@ DEFAULT_SIGMAS = (1.0, 2.0, 3.0)
 ROOT_ECCENTRICITY = 0.75
 
 #: ... or a leaf at least this share away that is :data:`ROOT_THICKER` times as thick as every
-#: far end: a trunk's foot, where the arms above it span the tree's diameter.
+#: far end: a trunk's foot, where the arms above it span the tree's diameter. A leaf this far
+#: out that ends at the frame (:func:`_at_frame`) counts as a far end: the structure enters the
+#: picture there.
 TRUNK_ECCENTRICITY = 0.5
 
 #: See :data:`TRUNK_ECCENTRICITY`.
@@ -447,8 +449,10 @@ def trace(
        loops) is cut at its thinnest place.
     5. **Branches.** Each tree is rooted at ``root`` (the nearest skeleton pixel) or, by
        default, at its thickest far end: among the leaves at least 3/4 of the tree's diameter
-       from their farthest pixel (or half of it, for one 1.5 times as thick as all those: a
-       trunk's foot below long arms), the one with the largest radius over its first pixels (a
+       from their farthest pixel, or half of it where they end at the frame (within their
+       radius plus 2 px of the image's or ``valid``'s border, on a photo plus the ridge
+       filters' reach: the structure enters the picture there), or half of it for one 1.5
+       times as thick as all those (a trunk's foot below long arms), the one with the largest radius over its first pixels (a
        mask: the mean distance-transform radius over ``max(5, 4 r + 1)`` pixels; a photo: the
        median maximum-gradient thickness of 7. over ``2 ⌈max_radius⌉`` pixels, because a
        ridge mask is about as narrow along a trunk as along a twig). The
@@ -645,7 +649,8 @@ def trace(
     picked = [c for c in comp_order if not (start is not None and labels[start] == c)]
     cands = [_root_candidates(tree, int(first[c]), r, 2 * math.ceil(max_radius) if photo else 0) for c in picked]
     radii = _end_radii(cands, xs, ys, r, gray if photo else None, shape, smooth, max_radius)
-    roots = {c: _pick_root(cs, rs) for c, cs, rs in zip(picked, cands, radii, strict=True)}
+    frame = _at_frame(cands, xs, ys, r, ok, shape, 2 * math.ceil(3 * max(sig)) + 3 if kind != "mask" else 0)
+    roots = {c: _pick_root(cs, rs, fs) for c, cs, rs, fs in zip(picked, cands, radii, frame, strict=True)}
     if start is not None:
         roots[int(labels[start])] = start
     branches: list[Branch] = []
@@ -799,17 +804,39 @@ def _root_candidates(tree: Any, node: int, r: F64, reach: int) -> list[tuple[int
     return out
 
 
-def _pick_root(candidates: list[tuple[int, list[int], float]], radius: list[float]) -> int:
-    """The thickest far end (eccentricity at least :data:`ROOT_ECCENTRICITY` of the largest), or
-    a nearer candidate :data:`ROOT_THICKER` times as thick as that; ties go to the more
-    eccentric, then the lower index."""
+def _at_frame(
+    candidates: list[list[tuple[int, list[int], float]]],
+    xs: NDArray[np.intp],
+    ys: NDArray[np.intp],
+    r: F64,
+    valid: NDArray[np.bool_] | None,
+    shape: tuple[int, int],
+    reach: int,
+) -> list[list[bool]]:
+    """Whether each candidate ends at the frame: within its own radius plus 2 px of the image's
+    border or ``valid``'s, and on a photo within the ridge filters' ``reach`` of it, where
+    nothing is traced (``trace``'s step 1)."""
+    inside = np.ones(shape, np.uint8) if valid is None else valid.astype(np.uint8)
+    inside[[0, -1], :] = 0
+    inside[:, [0, -1]] = 0
+    dist = cv2.distanceTransform(inside, cv2.DIST_L2, 5)
+    return [[bool(dist[ys[v], xs[v]] <= reach + r[v] + 2.0) for v, _, _ in cands] for cands in candidates]
+
+
+def _pick_root(
+    candidates: list[tuple[int, list[int], float]], radius: list[float], at_frame: list[bool] | None = None
+) -> int:
+    """The thickest far end (eccentricity at least :data:`ROOT_ECCENTRICITY` of the largest, or
+    ``at_frame``), or a nearer candidate :data:`ROOT_THICKER` times as thick as that; ties go to
+    the more eccentric, then the lower index."""
     diameter = max(ecc for _, _, ecc in candidates)
+    frame = [False] * len(candidates) if at_frame is None else at_frame
 
     def thickest(far: bool) -> tuple[int, float]:
         best, best_key = -1, (-math.inf, -math.inf)
-        for (v, _, ecc), rad in zip(candidates, radius, strict=True):
+        for (v, _, ecc), rad, edge in zip(candidates, radius, frame, strict=True):
             key = (round(rad, 6), ecc)
-            if (ecc >= ROOT_ECCENTRICITY * diameter or not far) and key > best_key:
+            if (ecc >= ROOT_ECCENTRICITY * diameter or edge or not far) and key > best_key:
                 best, best_key = v, key
         return best, best_key[0]
 
