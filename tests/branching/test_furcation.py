@@ -73,6 +73,11 @@ def test_default_spacing_ignores_the_input_s_closest_pair(walk_branch: Callable[
     assert gaps.min() <= 2
     fur = FurcationModel.fit(src, h=H)
     assert fur.min_spacing == int(np.floor(np.quantile(gaps, SPACING_QUANTILE))) >= 10
+    # n⁻, n⁺ weighted as §4.3 means them (keeping furcations apart): no spacing is drawn
+    assert (fur.weights[-2:] > 0).all()
+    stem, rng = src.resample(H).branches[0], np.random.default_rng(0)
+    assert fur.pick(stem, 6, rng=rng) == fur.pick(stem, 6)
+    assert rng.random() == np.random.default_rng(0).random()
     bend = BendingModel.fit(src, h=H)
     for seed in range(3):
         out = grow(bend, fur, size=(400, 480), seed=seed)
@@ -80,3 +85,37 @@ def test_default_spacing_ignores_the_input_s_closest_pair(walk_branch: Callable[
             if len(vs) > 1:
                 assert np.diff(sorted(v for v, _ in vs)).min() >= fur.min_spacing
         assert sum(len(vs) for vs in out.children().values()) >= 6
+
+
+def _bursts(walk: Callable[..., Branch], rng: np.random.Generator) -> Skeleton:
+    """Stems whose children come in a burst, 6 to 30 vertices apart, between long bare
+    stretches: heavy-tailed gaps, where most non-furcations lie far from any furcation."""
+    stems, kids = [], []
+    for s in range(6):
+        stem = walk(rng, 300, 0.05, start=(1000.0, 500.0 + 300.0 * s))
+        stems.append(stem)
+        v = int(rng.integers(20, 120))
+        for j in range(5):
+            t = stem.points[v + 1] - stem.points[v - 1]
+            heading = float(np.arctan2(-t[1], t[0])) + (1.0 if j % 2 else -1.0)
+            kid = walk(rng, 20, 0.1, start=tuple(stem.points[v]), heading=heading)
+            kids.append(Branch(kid.points, np.minimum(kid.thickness, 2.0), (s, v)))
+            v += int(rng.integers(6, 31))
+    return Skeleton([*stems, *kids], (3000, 3000))
+
+
+def test_picks_are_spaced_as_the_input_s_children(walk_branch: Callable[..., Branch]):
+    # On bursty gaps the SVM weights n⁻, n⁺ negatively (§4.3 means them to keep furcations
+    # apart): each pick draws the next to its side, and without a generator the picks pack a
+    # stretch at min_spacing. Drawing each furcation's spacing from the input's gaps spaces
+    # them as the input's children are.
+    fur = FurcationModel.fit(_bursts(walk_branch, np.random.default_rng(5)), h=H)
+    assert (fur.weights[-2:] < 0).any()
+    assert fur.gaps.min() >= 5 and np.median(fur.gaps) >= 12
+    stem = walk_branch(np.random.default_rng(9), 300, 0.05).resample(H)
+    packed = np.diff(sorted(fur.pick(stem, 6)))
+    assert np.median(packed) < np.median(fur.gaps), packed
+    for seed in range(4):
+        picks = fur.pick(stem, 6, rng=np.random.default_rng(seed))
+        assert picks == fur.pick(stem, 6, rng=np.random.default_rng(seed))
+        assert np.median(np.diff(sorted(picks))) >= np.median(fur.gaps), (picks, np.median(fur.gaps))

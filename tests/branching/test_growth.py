@@ -1149,15 +1149,17 @@ def _comb(lengths: list[float], step: float = 20.0) -> Skeleton:
 
 
 def test_grown_children_keep_their_templates_order_along_the_parent(monkeypatch):
-    # A stem whose twelve children shorten from its start to its end: grown with the order its
-    # children came out -0.60 to -0.96 at seeds 0-7; dealt at random, -0.13 to 0.17.
+    # A stem whose twelve children shorten from its start to its end, grown as one tree (further
+    # trees on the canvas may find no room, and their stunted children say nothing of the deal):
+    # with the order its children came out -0.93 to -0.99 at seeds 0-7; dealt at random, -0.52
+    # to +0.23, mean -0.09.
     from phloem.branching import growth as growth_module
 
     src = _comb([150.0 - 10 * i for i in range(12)])
     bend, fur = BendingModel.fit(src, h=2.0), FurcationModel.fit(src, h=2.0)
     assert sibling_order(bend.source) == pytest.approx(-1.0)
-    ordered = [sibling_order(grow(bend, fur, size=(500, 800), seed=s, max_length="input")) for s in range(4)]
+    ordered = [sibling_order(grow(bend, fur, size=(500, 800), seed=s)) for s in range(4)]
     monkeypatch.setattr(growth_module, "sibling_order", lambda skeleton: 0.0)
-    shuffled = [sibling_order(grow(bend, fur, size=(500, 800), seed=s, max_length="input")) for s in range(4)]
-    assert max(ordered) < -0.5
-    assert min(shuffled) > -0.3
+    shuffled = [sibling_order(grow(bend, fur, size=(500, 800), seed=s)) for s in range(8)]
+    assert max(ordered) < -0.8
+    assert np.mean(shuffled) > -0.3

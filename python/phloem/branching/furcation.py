@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -89,6 +89,9 @@ class FurcationModel:
         Number of children of each input branch, per generation (the distribution of ``d``).
     min_spacing : int
         Default minimum index distance between furcations picked on one branch.
+    gaps : ndarray of int64
+        Index distances between neighbouring furcations on one input branch: the spacing
+        :meth:`pick` draws from where the SVM weights ``n⁻`` or ``n⁺`` negatively.
     train_seconds : float
         Time spent training the SVM.
 
@@ -118,6 +121,7 @@ class FurcationModel:
     counts: dict[int, list[int]]
     min_spacing: int = 0
     train_seconds: float = 0.0
+    gaps: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
 
     @classmethod
     def fit(
@@ -173,9 +177,9 @@ class FurcationModel:
         svm_c = check_float(svm_c, "svm_c", 0.0, inclusive=False)
         src = skeleton.resample(h)
         kids = src.children()
+        gaps = np.array([int(g) for v in kids.values() for g in np.diff(sorted({i for i, _ in v}))], np.int64)
         if min_spacing is None:
-            gaps = [int(g) for v in kids.values() for g in np.diff(sorted({i for i, _ in v}))]
-            min_spacing = int(np.floor(np.quantile(gaps, SPACING_QUANTILE))) if gaps else 0
+            min_spacing = int(np.floor(np.quantile(gaps, SPACING_QUANTILE))) if len(gaps) else 0
         min_spacing = check_int(min_spacing, "min_spacing", 0)
         gens = _generations(src)
         if not any(kids.values()):
@@ -231,6 +235,7 @@ class FurcationModel:
             counts=counts,
             min_spacing=min_spacing,
             train_seconds=train,
+            gaps=gaps,
         )
 
     def features(self, branch: Branch, furcations: Sequence[int] = ()) -> F64:
@@ -263,12 +268,29 @@ class FurcationModel:
         return np.asarray(1.0 / (1.0 + np.exp(np.clip(A * self.decision(branch, furcations) + B, -500, 500))))
 
     def pick(
-        self, branch: Branch, d: int, *, existing: Sequence[int] = (), min_spacing: int | None = None
+        self,
+        branch: Branch,
+        d: int,
+        *,
+        existing: Sequence[int] = (),
+        min_spacing: int | None = None,
+        rng: np.random.Generator | None = None,
+        tried: Sequence[int] = (),
     ) -> list[int]:
         """Pick ``d`` furcation vertices of maximum probability, one after another (§4.3).
 
         Each pick updates ``n⁻, n⁺`` of the others; with ``min_spacing`` a pick also blocks the
         vertices closer than that. End points are never picked.
+
+        §4.3 counts on ``n⁻, n⁺`` to keep furcations apart. On an input whose gaps are
+        heavy-tailed (bursts of furcations between long bare stretches) the linear SVM weights
+        one or both negatively instead: each pick draws the next to its side, and the picks pack
+        a stretch at ``min_spacing`` (a comb; ``docs/pipelines/branching/quality.md``). For
+        such a model, given ``rng``, every furcation (``existing`` and picked) blocks the
+        vertices closer than a spacing drawn from the input's :attr:`gaps` (at least
+        ``min_spacing``), so that children are spaced along their parent as the input's are.
+        ``tried`` are vertices tried before where no child could start: they count as
+        furcations but block only ``min_spacing``, so that failed tries do not use up a branch.
 
         Examples
         --------
@@ -281,18 +303,26 @@ class FurcationModel:
         """
         d = check_int(d, "d", 0)
         spacing = self.min_spacing if min_spacing is None else check_int(min_spacing, "min_spacing", 0)
-        chosen = [int(e) for e in existing]
+
+        def blocked() -> int:
+            if rng is None or not len(self.gaps) or not (self.weights[-2:] < 0).any():
+                return spacing
+            return max(spacing, int(rng.choice(self.gaps)))
+
+        chosen = [int(e) for e in existing] + [int(e) for e in tried]
+        radius = [blocked() for _ in existing] + [spacing for _ in tried]
         out: list[int] = []
         n = len(branch)
         for _ in range(d):
             p = self.probabilities(branch, chosen)
             p[[0, n - 1]] = -1.0
-            for f in chosen:
-                p[max(0, f - max(spacing - 1, 0)) : f + max(spacing, 1)] = -1.0
+            for f, s in zip(chosen, radius, strict=True):
+                p[max(0, f - max(s - 1, 0)) : f + max(s, 1)] = -1.0
             i = int(np.argmax(p))
             if p[i] < 0:
                 break
             chosen.append(i)
+            radius.append(blocked())
             out.append(i)
         return out
 

@@ -420,7 +420,8 @@ def _top_up(
         i = ok[int(j)]
         pi = first + i
         kids = [b.parent[1] for b in out[first:] if b.parent is not None and b.parent[0] == pi]
-        picked = furcation.pick(out[pi], 1, existing=tried.get(pi, []) + kids, min_spacing=min_spacing)
+        failed = [v for v in tried.get(pi, []) if v not in kids]
+        picked = furcation.pick(out[pi], 1, existing=kids, tried=failed, min_spacing=min_spacing, rng=rng)
         if picked:
             return pi, picked[0], gens[i] + 1
     return None
@@ -787,7 +788,7 @@ def grow(
                 and (generations is None or gen < generations)
                 and len(branch) >= 3
             ):
-                picked = furcation.pick(branch, d, min_spacing=min_spacing)
+                picked = furcation.pick(branch, d, min_spacing=min_spacing, rng=rng)
                 planned = _ordered([template_branch(tree, gen) for _ in picked], picked, order, rng)
                 for v, (goal_c, d_c) in zip(picked, planned, strict=True):
                     queue.append((len(out) - 1, v, gen, goal_c, d_c))
@@ -843,7 +844,11 @@ def grow(
                         # blocked here (crossing, border, crowding): the same child from the parent's
                         # next-best vertex, kept apart from its siblings still queued as from those tried
                         queued = [e[1] for e in queue[qpos + 1 :] if e[0] == pi]
-                        alt = furcation.pick(pb, 1, existing=tried[pi] + queued, min_spacing=min_spacing)
+                        kids = [b.parent[1] for b in out if b.parent is not None and b.parent[0] == pi]
+                        failed = [u for u in tried[pi] if u not in kids]
+                        alt = furcation.pick(
+                            pb, 1, existing=kids + queued, tried=failed, min_spacing=min_spacing, rng=rng
+                        )
                         if alt:
                             queue[qpos] = (pi, alt[0], gen, goal, d)
                             retries += 1
