@@ -698,6 +698,7 @@ def grow(
     trees = 0
     turn = 0  # trees attempted: the template of the next one
     tried: dict[int, list[int]] = {}  # furcation vertices used or tried on each branch
+    started: dict[int, list[int]] = {}  # the vertices of each branch's children, in creation order
     failures = 0
 
     def plan(length: float, kids: int) -> tuple[float, int]:
@@ -779,6 +780,8 @@ def grow(
                 )
             branch = _finish(grower, current)
             out.append(branch)
+            if branch.parent is not None:
+                started.setdefault(branch.parent[0], []).append(branch.parent[1])
             stop = stop or world.total_length >= limit
             gen = current.generation + 1
             if (
@@ -844,7 +847,7 @@ def grow(
                         # blocked here (crossing, border, crowding): the same child from the parent's
                         # next-best vertex, kept apart from its siblings still queued as from those tried
                         queued = [e[1] for e in queue[qpos + 1 :] if e[0] == pi]
-                        kids = [b.parent[1] for b in out if b.parent is not None and b.parent[0] == pi]
+                        kids = started.get(pi, [])
                         failed = [u for u in tried[pi] if u not in kids]
                         alt = furcation.pick(
                             pb, 1, existing=kids + queued, tried=failed, min_spacing=min_spacing, rng=rng

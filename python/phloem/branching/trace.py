@@ -452,11 +452,11 @@ def trace(
        from their farthest pixel, or half of it where they end at the frame (within their
        radius plus 2 px of the image's or ``valid``'s border, on a photo plus the ridge
        filters' reach: the structure enters the picture there), or half of it for one 1.5
-       times as thick as all those (a trunk's foot below long arms), the one with the largest radius over its first pixels (a
-       mask: the mean distance-transform radius over ``max(5, 4 r + 1)`` pixels; a photo: the
-       median maximum-gradient thickness of 7. over ``2 ⌈max_radius⌉`` pixels, because a
-       ridge mask is about as narrow along a trunk as along a twig). The
-       longest path from the root is the main branch; every subtree hanging off a branch
+       times as thick as all those (a trunk's foot below long arms), the one with the largest
+       radius over its first pixels (a mask: the mean distance-transform radius over
+       ``max(5, 4 r + 1)`` pixels; a photo: the median maximum-gradient thickness of 7. over
+       ``2 ⌈max_radius⌉`` pixels, because a ridge mask is about as narrow along a trunk as
+       along a twig). The longest path from the root is the main branch; every subtree hanging off a branch
        becomes a child branch along its own longest path, attached at the branch pixel it grows
        from; recursively. Branches (roots too) shorter than ``spur`` times the largest radius
        along them, the attachment included, or than ``min_length`` are dropped with their
