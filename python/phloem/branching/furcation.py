@@ -304,10 +304,10 @@ class FurcationModel:
         d = check_int(d, "d", 0)
         spacing = self.min_spacing if min_spacing is None else check_int(min_spacing, "min_spacing", 0)
 
+        draw = rng is not None and len(self.gaps) > 0 and bool((self.weights[-2:] < 0).any())
+
         def blocked() -> int:
-            if rng is None or not len(self.gaps) or not (self.weights[-2:] < 0).any():
-                return spacing
-            return max(spacing, int(rng.choice(self.gaps)))
+            return max(spacing, int(rng.choice(self.gaps))) if draw and rng is not None else spacing
 
         chosen = [int(e) for e in existing] + [int(e) for e in tried]
         radius = [blocked() for _ in existing] + [spacing for _ in tried]

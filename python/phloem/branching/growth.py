@@ -393,6 +393,7 @@ def _top_up(
     tree: InputTree,
     furcation: FurcationModel,
     tried: dict[int, list[int]],
+    started: dict[int, list[int]],
     rng: np.random.Generator,
     generations: int | None,
     min_spacing: int | None,
@@ -419,7 +420,7 @@ def _top_up(
     for j in rng.choice(len(ok), size=len(ok), replace=False, p=w / w.sum()):
         i = ok[int(j)]
         pi = first + i
-        kids = [b.parent[1] for b in out[first:] if b.parent is not None and b.parent[0] == pi]
+        kids = started.get(pi, [])
         failed = [v for v in tried.get(pi, []) if v not in kids]
         picked = furcation.pick(out[pi], 1, existing=kids, tried=failed, min_spacing=min_spacing, rng=rng)
         if picked:
@@ -810,7 +811,9 @@ def grow(
                     short = tree.length - (world.total_length - start_length)
                     if not stop and short > 0.05 * tree.length:
                         top_ups += 1
-                        extra = _top_up(out, first_branch, tree, furcation, tried, rng, generations, min_spacing)
+                        extra = _top_up(
+                            out, first_branch, tree, furcation, tried, started, rng, generations, min_spacing
+                        )
                         if extra is not None:
                             pi, v, gen = extra
                             queue.append((pi, v, gen, *template_branch(tree, gen)))

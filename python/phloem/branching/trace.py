@@ -75,6 +75,11 @@ TRUNK_ECCENTRICITY = 0.5
 ROOT_THICKER = 1.5
 
 
+def _filter_reach(sig: tuple[float, ...]) -> int:
+    """How far (px) the ridge filter at scales ``sig`` reads: a border within it reads as a ridge."""
+    return 2 * math.ceil(3 * max(sig)) + 3
+
+
 def _sigmas(sigmas: Any) -> tuple[float, ...]:
     if isinstance(sigmas, numbers.Real):
         sigmas = (sigmas,)
@@ -456,9 +461,9 @@ def trace(
        radius over its first pixels (a mask: the mean distance-transform radius over
        ``max(5, 4 r + 1)`` pixels; a photo: the median maximum-gradient thickness of 7. over
        ``2 ⌈max_radius⌉`` pixels, because a ridge mask is about as narrow along a trunk as
-       along a twig). The longest path from the root is the main branch; every subtree hanging off a branch
-       becomes a child branch along its own longest path, attached at the branch pixel it grows
-       from; recursively. Branches (roots too) shorter than ``spur`` times the largest radius
+       along a twig). The longest path from the root is the main branch; every subtree hanging
+       off a branch becomes a child branch along its own longest path, attached at the branch
+       pixel it grows from; recursively. Branches (roots too) shorter than ``spur`` times the largest radius
        along them, the attachment included, or than ``min_length`` are dropped with their
        subtree: skeletonisation spurs, and the medial axes of blobs (a wide patch of water
        whose axis is shorter than its width is not a branch).
@@ -604,7 +609,7 @@ def trace(
     else:
         resp = ridge_response(gray, sig, kind, subpixel=bool(subpixel))
         if ok is not None:
-            reach = 2 * math.ceil(3 * max(sig)) + 3
+            reach = _filter_reach(sig)
             kernel = np.ones((reach, reach), np.uint8)
             inner = cv2.erode(ok.astype(np.uint8), kernel, borderType=cv2.BORDER_REPLICATE).astype(bool)
             resp = np.where(inner, resp, 0.0)
@@ -649,7 +654,7 @@ def trace(
     picked = [c for c in comp_order if not (start is not None and labels[start] == c)]
     cands = [_root_candidates(tree, int(first[c]), r, 2 * math.ceil(max_radius) if photo else 0) for c in picked]
     radii = _end_radii(cands, xs, ys, r, gray if photo else None, shape, smooth, max_radius)
-    frame = _at_frame(cands, xs, ys, r, ok, shape, 2 * math.ceil(3 * max(sig)) + 3 if kind != "mask" else 0)
+    frame = _at_frame(cands, xs, ys, r, ok, shape, _filter_reach(sig) if kind != "mask" else 0)
     roots = {c: _pick_root(cs, rs, fs) for c, cs, rs, fs in zip(picked, cands, radii, frame, strict=True)}
     if start is not None:
         roots[int(labels[start])] = start
@@ -729,7 +734,7 @@ def _wide_structure(
     resp = ridge_response(gray, scales, kind)
     # Near the image's border (or ``valid``'s) a dark margin reflected into the padding reads as
     # a wide ridge along it; the fine filter's reach of it is left out, as for ``valid`` in ``trace``.
-    reach = 2 * math.ceil(3 * max(sig)) + 3
+    reach = _filter_reach(sig)
     region = np.ones(gray.shape, np.uint8) if valid is None else valid.astype(np.uint8)
     kernel = np.ones((reach, reach), np.uint8)
     inside = cv2.erode(region, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(np.bool_)
@@ -823,18 +828,15 @@ def _at_frame(
     return [[bool(dist[ys[v], xs[v]] <= reach + r[v] + 2.0) for v, _, _ in cands] for cands in candidates]
 
 
-def _pick_root(
-    candidates: list[tuple[int, list[int], float]], radius: list[float], at_frame: list[bool] | None = None
-) -> int:
+def _pick_root(candidates: list[tuple[int, list[int], float]], radius: list[float], at_frame: list[bool]) -> int:
     """The thickest far end (eccentricity at least :data:`ROOT_ECCENTRICITY` of the largest, or
     ``at_frame``), or a nearer candidate :data:`ROOT_THICKER` times as thick as that; ties go to
     the more eccentric, then the lower index."""
     diameter = max(ecc for _, _, ecc in candidates)
-    frame = [False] * len(candidates) if at_frame is None else at_frame
 
     def thickest(far: bool) -> tuple[int, float]:
         best, best_key = -1, (-math.inf, -math.inf)
-        for (v, _, ecc), rad, edge in zip(candidates, radius, frame, strict=True):
+        for (v, _, ecc), rad, edge in zip(candidates, radius, at_frame, strict=True):
             key = (round(rad, 6), ecc)
             if (ecc >= ROOT_ECCENTRICITY * diameter or edge or not far) and key > best_key:
                 best, best_key = v, key
