@@ -303,7 +303,7 @@ def table(results: list[Result]) -> str:
         "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input's noise) | heading in → out (rad) "
         "| along the frame in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | directions L1 (input's concentration) | contrast in → out (kept) | grain kept | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
-    lines = [head, "|" + "---|" * 18]
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for r in results:
         fails = ", ".join(k for k, ok in r.passed.items() if not ok) or "—"
         if r.error:
