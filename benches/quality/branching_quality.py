@@ -25,6 +25,9 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
   (``furcation_gaps``, not a pass mark: children packed along their parents);
 - the rank correlation of where children leave their parent and their length, input and output
   (``sibling_order``, not a pass mark: long children near their parent's start);
+- the median turn of a parent across its children's attachments, signed positive away from
+  the child, input and output (``parent_turns``, not a pass mark: junctions that open as a
+  ``Y`` in the input and leave straight parents in the output);
 - the L1 distance of the output's histogram of directions on the image to the input's, and the
   input's ``direction_concentration`` (``orientation_distance``, not a pass mark: bolts that
   hang down in the input and run sideways in the output);
@@ -84,6 +87,7 @@ from phloem.metrics import (
     largest_tree_share,
     median_heading_change,
     orientation_distance,
+    parent_turns,
     sibling_order,
     skeleton_agreement,
     start_turns,
@@ -121,6 +125,8 @@ class Result:
     gap_out: float = math.nan
     siblings_in: float = math.nan
     siblings_out: float = math.nan
+    parent_turn_in: float = math.nan
+    parent_turn_out: float = math.nan
     directions: float = math.nan
     concentration: float = math.nan
     contrast_in: float = math.nan
@@ -231,6 +237,8 @@ def measure(
     r.gap_in, r.gap_out = (median_gap(sk) for sk in (src, tgt))
     # nor this: where along their parents the long children leave
     r.siblings_in, r.siblings_out = sibling_order(src), sibling_order(tgt)
+    # nor this: how the parent bends where a child leaves it (a Y, or a straight parent)
+    r.parent_turn_in, r.parent_turn_out = (median_parent_turn(sk) for sk in (src, tgt))
     # nor this: the ways the structure runs on the image, which the turn measures do not see
     with contextlib.suppress(ValueError):
         r.directions, r.concentration = orientation_distance(src, tgt), direction_concentration(src)
@@ -290,6 +298,12 @@ def median_gap(skeleton: Skeleton) -> float:
     return float(np.median(gaps)) if len(gaps) else math.nan
 
 
+def median_parent_turn(skeleton: Skeleton) -> float:
+    """The median of ``parent_turns`` (NaN: no child measured)."""
+    turns = parent_turns(skeleton)
+    return float(np.median(turns)) if len(turns) else math.nan
+
+
 def inputs(folder: Path) -> list[Path]:
     return sorted(p for p in folder.glob("*") if p.suffix.lower() in SUFFIXES)
 
@@ -301,7 +315,7 @@ def _f(x: float | None, fmt: str = ".2f") -> str:
 def table(results: list[Result]) -> str:
     head = (
         "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input's noise) | heading in → out (rad) "
-        "| along the frame in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | directions L1 (input's concentration) | contrast in → out (kept) | grain kept | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
+        "| along the frame in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | parent's turn at children in → out | directions L1 (input's concentration) | contrast in → out (kept) | grain kept | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for r in results:
@@ -313,7 +327,7 @@ def table(results: list[Result]) -> str:
         lines.append(
             f"| {r.input} | {r.seed} | {size} | {_f(r.f1)} ({_f(r.precision)}/{_f(r.recall)}) "
             f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} ({_f(r.drift_noise)}) | {_f(r.heading_in)} → {_f(r.heading_out)} "
-            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
+            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.parent_turn_in)} → {_f(r.parent_turn_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
             f"| {_f(r.seconds, '.1f')} | {fails} |"
         )
     return "\n".join(lines)

@@ -19,7 +19,7 @@ corresponding strokes; defined in :mod:`phloem.strokes.measures`), and the measu
 synthesised branching structure looks like its input's kind (re-trace agreement, largest-tree
 share, heading-change drift, two-level fraction, the share of the structure that runs along the frame,
 how much children turn where they start, how far apart they leave their parent and where along
-it the long ones leave, which ways it
+it the long ones leave, how the parent bends where a child leaves it, which ways it
 runs on the image, how much it stands out from its surroundings, and how much of the
 background's grain its completed gaps keep; defined in
 :mod:`phloem.branching.measures`).
@@ -54,6 +54,7 @@ from .branching.measures import (
     largest_tree_share,
     median_heading_change,
     orientation_distance,
+    parent_turns,
     retrace_agreement,
     sibling_order,
     skeleton_agreement,
@@ -87,6 +88,7 @@ __all__ = [
     "leaf_diversity",
     "median_heading_change",
     "orientation_distance",
+    "parent_turns",
     "patch_coherence",
     "repetition",
     "retrace_agreement",

@@ -23,6 +23,7 @@ from phloem.branching.measures import (
     largest_tree_share,
     median_heading_change,
     orientation_distance,
+    parent_turns,
     resolve_trace_options,
     retrace_agreement,
     sibling_order,
@@ -42,7 +43,7 @@ def test_metrics_reexports_the_measures() -> None:
     for name in (
         "retrace_agreement", "skeleton_agreement", "largest_tree_share", "border_share", "drift", "drift_noise",
         "two_level_fraction", "start_turns", "furcation_gaps", "direction_histogram", "direction_concentration",
-        "orientation_distance", "structure_contrast", "background_grain", "sibling_order",
+        "orientation_distance", "structure_contrast", "background_grain", "sibling_order", "parent_turns",
     ):  # fmt: skip
         assert getattr(phloem.metrics, name) is getattr(phloem.branching.measures, name)
         assert name in phloem.metrics.__all__
@@ -424,6 +425,38 @@ def test_furcation_gaps_are_arc_lengths_between_neighbouring_children() -> None:
     assert furcation_gaps(Skeleton([stem])).shape == (0,)
     with pytest.raises(TypeError, match="^skeleton:"):
         furcation_gaps([stem])  # type: ignore[arg-type]
+
+
+def _kinked_fork(kink: float, side: float, rotation: float, mirror: bool, child_length: float = 60.0) -> Skeleton:
+    """A parent that turns by ``kink`` at (100, 0) and a child leaving there on ``side`` (+1 / -1)."""
+    stem = np.array([[0.0, 0.0], [100.0, 0.0], [100.0 + 100.0 * np.cos(kink), 100.0 * np.sin(kink)]])
+    child = np.array([[100.0, 0.0], [100.0 + child_length * np.cos(side), child_length * np.sin(side)]])
+    c, s = np.cos(rotation), np.sin(rotation)
+    rot = np.array([[c, -s], [s, c]])
+    flip = np.array([1.0, -1.0 if mirror else 1.0])
+    place = lambda p: (p * flip) @ rot.T + 300.0  # noqa: E731
+    return Skeleton([Branch(place(stem), 1.0), Branch(place(child), 1.0, parent=(0, 1))])
+
+
+def test_parent_turns_is_the_parent_s_turn_signed_away_from_the_child() -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(8):
+        rotation, mirror = float(rng.uniform(-np.pi, np.pi)), bool(rng.integers(2))
+        # both chords lie on the straight legs, so the measured turn is the kink to rounding
+        away = _kinked_fork(0.3, -1.0, rotation, mirror)  # the parent turns one way, the child leaves the other
+        toward = _kinked_fork(0.3, 1.0, rotation, mirror)
+        straight = _kinked_fork(0.0, 1.0, rotation, mirror)
+        assert parent_turns(away, arc=40.0) == pytest.approx([0.3], abs=1e-9)
+        assert parent_turns(toward, arc=40.0) == pytest.approx([-0.3], abs=1e-9)
+        assert parent_turns(straight, arc=40.0) == pytest.approx([0.0], abs=1e-9)
+    # an attachment closer than (arc + w) / 2 to the parent's end, or a child shorter than arc / 2,
+    # gives no value; the root gives none either
+    assert parent_turns(_kinked_fork(0.3, -1.0, 0.0, False), arc=200.0).shape == (0,)
+    assert parent_turns(_kinked_fork(0.3, -1.0, 0.0, False, child_length=15.0), arc=40.0).shape == (0,)
+    with pytest.raises(ValueError, match="^arc:"):
+        parent_turns(_kinked_fork(0.3, -1.0, 0.0, False), arc=0.0)
+    with pytest.raises(TypeError, match="^skeleton:"):
+        parent_turns([Branch([[0.0, 0.0], [1.0, 0.0]], 1.0)], arc=20.0)  # type: ignore[arg-type]
 
 
 # -- directions on the image -------------------------------------------------------------------

@@ -38,6 +38,7 @@ __all__ = [
     "largest_tree_share",
     "median_heading_change",
     "orientation_distance",
+    "parent_turns",
     "resolve_trace_options",
     "retrace_agreement",
     "sibling_order",
@@ -461,6 +462,81 @@ def furcation_gaps(skeleton: Skeleton) -> F64:
         s = _arc_lengths(skeleton.branches[i])
         out.append(np.diff(s[np.sort(np.asarray(at[i]))]))
     return np.concatenate(out) if out else np.zeros(0, np.float64)
+
+
+def _chord_heading(pts: F64, s: F64, at: float, w: float) -> float:
+    """The direction of the chord from arc position ``at - w/2`` to ``at + w/2``, radians."""
+    x0, y0 = np.interp(at - w / 2, s, pts[:, 0]), np.interp(at - w / 2, s, pts[:, 1])
+    x1, y1 = np.interp(at + w / 2, s, pts[:, 0]), np.interp(at + w / 2, s, pts[:, 1])
+    return math.atan2(float(y1 - y0), float(x1 - x0))
+
+
+def parent_turns(skeleton: Skeleton, *, arc: float = 20.0) -> F64:
+    """How the parent turns where each child leaves it, positive when it turns away from the child.
+
+    At a child's attachment, at arc position ``s`` on its parent, the parent's heading at
+    ``s - arc/2`` and at ``s + arc/2`` (chords of ``w = arc / 6``, as in :func:`heading_changes`)
+    differ by the turn ``τ``, wrapped to ``(-π, π]``. The child's side is the side of the
+    parent's tangent at ``s`` on which the child's point ``arc / 2`` along it lies. The value is
+    ``τ`` signed so that it is positive when the parent turns away from that side. Real
+    junctions open as a ``Y``: the parent bends away from the child it gives off (a river at a
+    confluence, a vessel or a root at a fork), so an input's values lie mostly above 0 and
+    their median above its branches' typical turn over ``arc``; a structure whose children
+    leave straight parents at random places gives values spread round 0.
+
+    Children whose attachment lies less than ``(arc + w) / 2`` from either end of the parent,
+    and children shorter than ``arc / 2``, give no value.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    arc : float, optional
+        Arc length in px across the attachment (default 20).
+
+    Returns
+    -------
+    ndarray of float64
+        Radians, one per child measured, in branch order.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phloem.branching import Branch, Skeleton
+    >>> stem = Branch([[0.0, 100.0], [100.0, 100.0], [200.0, 80.0]], 1.0)  # bends up at x = 100
+    >>> below = Branch([[100.0, 100.0], [140.0, 140.0]], 1.0, parent=(0, 1))
+    >>> above = Branch([[100.0, 100.0], [140.0, 60.0]], 1.0, parent=(0, 1))
+    >>> t = parent_turns(Skeleton([stem, below, above]), arc=40)
+    >>> bool(t[0] > 0.1 and t[1] == -t[0])
+    True
+    """
+    _check_skeleton(skeleton)
+    a = _check_arc(arc)
+    w = a / 6
+    dense: dict[int, tuple[F64, F64, F64]] = {}
+    out = []
+    for b in skeleton.branches:
+        if b.parent is None:
+            continue
+        pi, v = b.parent
+        if pi not in dense:
+            pts, _, s = _dense(skeleton.branches[pi], 1.0)
+            dense[pi] = (pts, s, _arc_lengths(skeleton.branches[pi]))
+        pts, s, cum = dense[pi]
+        at = float(cum[v])
+        if at - (a + w) / 2 < 0 or at + (a + w) / 2 > s[-1]:
+            continue
+        cpts, _, cs = _dense(b, 1.0)
+        if cs[-1] < a / 2:
+            continue
+        turn = _chord_heading(pts, s, at + a / 2, w) - _chord_heading(pts, s, at - a / 2, w)
+        turn = (turn + math.pi) % (2 * math.pi) - math.pi
+        h = _chord_heading(pts, s, at, w)
+        # the child's side of the parent's tangent: the sign of their cross product
+        cx = float(np.interp(a / 2, cs, cpts[:, 0]) - b.points[0, 0])
+        cy = float(np.interp(a / 2, cs, cpts[:, 1]) - b.points[0, 1])
+        side = math.copysign(1.0, math.cos(h) * cy - math.sin(h) * cx)
+        out.append(-side * turn)
+    return np.asarray(out, dtype=np.float64)
 
 
 #: Fewest children (of parents with at least three) for :func:`sibling_order` to be measured.
