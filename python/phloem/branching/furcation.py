@@ -23,6 +23,10 @@ __all__ = ["FurcationModel"]
 #: The quantile of the input's furcation distances that ``FurcationModel.fit`` takes as its
 #: default ``min_spacing``: the closest pairs, a vertex or two apart, are children leaving one junction.
 SPACING_QUANTILE = 0.1
+#: Bins of the parent's net turn across a vertex (quantiles of the input's vertices) that the
+#: SVM sees, one indicator each: real parents bend where they fork, which signed angles alone
+#: cannot tell a linear classifier (a bend either way looks the same to it).
+TURN_BINS = 4
 
 
 def _noncausal(a_full: F64, r_full: F64, k: int, h: float) -> tuple[F64, F64]:
@@ -36,6 +40,17 @@ def _noncausal(a_full: F64, r_full: F64, k: int, h: float) -> tuple[F64, F64]:
     r = np.concatenate([np.full(k, r_full[0]), r_full, np.full(k, r_full[-1])]) / h
     idx = np.arange(n)[:, None] + np.arange(2 * k + 1)[None, :]
     return a[idx], r[idx]
+
+
+def _net_turns(na: F64) -> F64:
+    """``|Σ α|`` over each non-causal neighbourhood: how far the parent turns across each vertex."""
+    return np.asarray(np.abs(na.sum(axis=1)), dtype=np.float64)
+
+
+def _turn_bins(na: F64, edges: F64) -> F64:
+    """Indicators of the bin between ``edges`` that each vertex's net turn falls in, ``(n, len(edges) + 1)``."""
+    idx = np.searchsorted(edges, _net_turns(na))
+    return np.asarray(idx[:, None] == np.arange(len(edges) + 1)[None, :], dtype=np.float64)
 
 
 def _per_vertex(branch: Branch) -> tuple[F64, F64]:
@@ -72,7 +87,11 @@ class FurcationModel:
         first segment.
     weights, bias : ndarray, float
         The linear classifier ``L(x) = weights · x + bias`` on standardised features
-        ``(α_{i-k..i+k}, r_{i-k..i+k}/h, n⁻, n⁺)`` (``4k + 4`` values).
+        ``(α_{i-k..i+k}, r_{i-k..i+k}/h, b_1..b_B, n⁻, n⁺)`` (``4k + 4 + B`` values). The
+        paper's ``4k + 4`` are extended by ``B =`` :data:`TURN_BINS` indicators ``b`` of the
+        parent's net turn ``|Σ α|`` across the vertex: real parents bend where they fork,
+        away from the child (:func:`phloem.metrics.parent_turns`), and a linear classifier on
+        signed angles cannot see a bend that may go either way.
     mean, scale : ndarray
         Feature standardisation.
     platt : (float, float)
@@ -92,6 +111,8 @@ class FurcationModel:
     gaps : ndarray of int64
         Index distances between neighbouring furcations on one input branch: the spacing
         :meth:`pick` draws from where the SVM weights ``n⁻`` or ``n⁺`` negatively.
+    turn_edges : ndarray, shape (TURN_BINS - 1,)
+        Edges of the net-turn bins: quantiles of ``|Σ α|`` over the input's vertices.
     train_seconds : float
         Time spent training the SVM.
 
@@ -101,7 +122,7 @@ class FurcationModel:
     >>> sk = synthetic_skeleton(0)
     >>> fm = FurcationModel.fit(sk, h=2.0)
     >>> fm.weights.shape
-    (16,)
+    (20,)
     """
 
     h: float
@@ -122,6 +143,7 @@ class FurcationModel:
     min_spacing: int = 0
     train_seconds: float = 0.0
     gaps: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    turn_edges: F64 = field(default_factory=lambda: np.zeros(0))
 
     @classmethod
     def fit(
@@ -184,15 +206,17 @@ class FurcationModel:
         gens = _generations(src)
         if not any(kids.values()):
             raise ValueError("skeleton: has no child branches, so there are no furcations to learn from")
+        hoods = [_noncausal(*_per_vertex(b), k, h) for b in src.branches]
+        turns = np.concatenate([_net_turns(na) for na, _ in hoods])
+        turn_edges = np.quantile(turns, np.arange(1, TURN_BINS) / TURN_BINS)
         feats, labels = [], []
         ex_a, ex_r, offsets, ch_a, ch_r, ch_r0 = [], [], [], [], [], []
         counts: dict[int, list[int]] = {}
         for bi, b in enumerate(src.branches):
-            a_full, r_full = _per_vertex(b)
-            na, nr = _noncausal(a_full, r_full, k, h)
+            na, nr = hoods[bi]
             fur = sorted({v for v, _ in kids[bi]})
             nm, npl = _gaps(len(b), fur)
-            feats.append(np.hstack([na, nr, nm[:, None], npl[:, None]]))
+            feats.append(np.hstack([na, nr, _turn_bins(na, turn_edges), nm[:, None], npl[:, None]]))
             lab = -np.ones(len(b), np.int32)
             lab[fur] = 1
             labels.append(lab)
@@ -236,14 +260,15 @@ class FurcationModel:
             min_spacing=min_spacing,
             train_seconds=train,
             gaps=gaps,
+            turn_edges=turn_edges,
         )
 
     def features(self, branch: Branch, furcations: Sequence[int] = ()) -> F64:
-        """The ``4k + 4`` raw features of every vertex of a branch resampled to ``h``."""
+        """The ``4k + 4 + TURN_BINS`` raw features of every vertex of a branch resampled to ``h``."""
         a_full, r_full = _per_vertex(branch)
         na, nr = _noncausal(a_full, r_full, self.k, self.h)
         nm, npl = _gaps(len(branch), furcations)
-        return np.hstack([na, nr, nm[:, None], npl[:, None]])
+        return np.hstack([na, nr, _turn_bins(na, self.turn_edges), nm[:, None], npl[:, None]])
 
     def decision(self, branch: Branch, furcations: Sequence[int] = ()) -> F64:
         """The classifier value ``L(x)`` per vertex (positive: furcation side)."""
@@ -331,11 +356,17 @@ class FurcationModel:
 
         The first entry is drawn among the ``c`` best matches of the non-causal neighbourhood
         with probability proportional to quality; the rest follow by decreasing quality
-        (fallbacks when the first would cross the structure).
+        (fallbacks when the first would cross the structure). Besides the paper's angles and
+        thicknesses the match compares the neighbourhoods' net turns ``Σ α``, signed, so that the
+        child leaves on the side of the parent's bend that the input's children leave on (the
+        outer side: a junction opens as a ``Y``). Matched element by element alone, a grown
+        parent's bend, spread over other vertices than an input kink, finds examples of either
+        side about as often.
         """
         a_full, r_full = _per_vertex(branch)
         na, nr = _noncausal(a_full, r_full, self.k, self.h)
         q = _dist(self.examples_alpha, na[vertex][None, :]) * _dist(self.examples_r, nr[vertex][None, :])
+        q *= _dist(self.examples_alpha.sum(axis=1)[:, None], np.array([[na[vertex].sum()]]))
         order = np.argsort(-q, kind="stable")
         top = order[: self.c]
         first = int(rng.choice(top, p=q[top] / q[top].sum()))
