@@ -63,6 +63,28 @@ def test_course_defaults_of_inputs_with_much_and_with_little_long_branch():
         branching.course_defaults("not a skeleton")  # type: ignore[arg-type]
 
 
+def test_course_edges_default_switches_the_course_term_off_where_the_course_is_unknown():
+    # the same criterion as course_defaults: the bending model's 8 m edges (None) where the
+    # input's heading statistics are well determined, the paper's model (0) where not
+    assert branching.course_edges_default(_meanders(4)) is None
+    assert branching.course_edges_default(_meanders(1)) == 0
+    short = branching.Skeleton([branching.Branch(np.array([[5.0, 5.0], [40.0, 9.0]]), np.full(2, 2.0))], (50, 50))
+    assert branching.course_edges_default(short) == 0
+    assert branching.course_edges_default(_meanders(1), course=12) == 12
+    assert branching.course_edges_default(_meanders(4), course=0) == 0
+    with pytest.raises(TypeError, match="^skeleton: expected"):
+        branching.course_edges_default("not a skeleton")  # type: ignore[arg-type]
+    # synthesize fits with it: no course term on the short input, unless asked for
+    sk = _meanders(1)
+    img = np.full(sk.shape, 0.8, np.float32)
+    for b in sk.branches:
+        cv2.polylines(img, [np.round(b.points).astype(np.int32)], False, 0.1, 5)
+    auto = branching.synthesize(img, sk, seed=3)
+    asked = branching.synthesize(img, sk, seed=3, course=8 * auto.bending.m)
+    assert auto.bending.course == 0 and asked.bending.course == 8 * auto.bending.m
+    assert auto.target != asked.target
+
+
 def test_synthesize_resolves_total_turn_and_repel_border_from_the_source():
     sk = _meanders(4)
     img = np.full(sk.shape, 0.8, np.float32)
@@ -70,7 +92,7 @@ def test_synthesize_resolves_total_turn_and_repel_border_from_the_source():
         cv2.polylines(img, [np.round(b.points).astype(np.int32)], False, 0.1, 5)
     size = (120, 260)
     auto = branching.synthesize(img, sk, size=size, seed=3)
-    assert auto.bending.total_turn == 2.0
+    assert auto.bending.total_turn == 2.0 and auto.bending.course == 8 * auto.bending.m
     explicit = branching.synthesize(img, sk, size=size, seed=3, total_turn=2.0, repel_border=True)
     assert auto.target == explicit.target
     border_off = branching.synthesize(img, sk, size=size, seed=3, repel_border=False)

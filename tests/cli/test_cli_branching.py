@@ -224,6 +224,8 @@ def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
     # left at their defaults, both are resolved for the example and recorded as used
     default = branching.course_defaults(Skeleton.load(skel))
     assert (sidecar["32"]["total_turn"], sidecar["32"]["repel_border"]) == default
+    edges = branching.course_edges_default(Skeleton.load(skel))
+    assert sidecar["o0"]["course"] == (8 * sidecar["o0"]["m"] if edges is None else edges)
     heading = branching.orientation_default(Skeleton.load(skel))
     assert sidecar["32"]["orientation"] == heading
     assert grown["32"] == grown["o3" if heading > 0 else "o0"]

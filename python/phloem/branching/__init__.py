@@ -22,7 +22,14 @@ from .frame import valid_region
 from .furcation import FurcationModel
 from .growth import extend, grow
 from .histograms import angle_histogram, histogram_distance, thickness_histogram
-from .pipeline import SynthesisResult, course_defaults, fit_models, orientation_default, synthesize
+from .pipeline import (
+    SynthesisResult,
+    course_defaults,
+    course_edges_default,
+    fit_models,
+    orientation_default,
+    synthesize,
+)
 from .rectify import rectify, unrectify
 from .render import RenderResult, render
 from .skeleton import Branch, Skeleton, SkeletonError
@@ -40,6 +47,7 @@ __all__ = [
     "SynthesisResult",
     "angle_histogram",
     "course_defaults",
+    "course_edges_default",
     "default_h",
     "estimate_thickness",
     "extend",

@@ -21,7 +21,14 @@ from .render import RenderResult, render
 from .skeleton import Skeleton
 from .trace import trace
 
-__all__ = ["SynthesisResult", "course_defaults", "fit_models", "orientation_default", "synthesize"]
+__all__ = [
+    "SynthesisResult",
+    "course_defaults",
+    "course_edges_default",
+    "fit_models",
+    "orientation_default",
+    "synthesize",
+]
 
 #: The largest ``drift_noise`` at which an input's heading statistics count as well determined:
 #: half of issue 19's drift mark (0.25), so that the mark measures the synthesis, not the input.
@@ -170,16 +177,59 @@ def course_defaults(
     >>> course_defaults(synthetic_skeleton(0))
     (0.0, False)
     """
-    if not isinstance(skeleton, Skeleton):
-        raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
+    _check_source(skeleton)
     if total_turn is not None and repel_border is not None:
         return total_turn, repel_border
-    try:
-        known = drift_noise(skeleton) <= COURSE_NOISE
-    except ValueError:  # no branch long enough, or a single stretch: nothing to learn a course from
-        known = False
-    turn, border = (COURSE_TOTAL_TURN, True) if known else (0.0, False)
+    turn, border = (COURSE_TOTAL_TURN, True) if _course_known(skeleton) else (0.0, False)
     return (turn if total_turn is None else total_turn), (border if repel_border is None else repel_border)
+
+
+def course_edges_default(skeleton: Skeleton, *, course: int | None = None) -> int | None:
+    """:func:`synthesize`'s default of ``course`` for this source skeleton.
+
+    ``None`` (the bending model's ``8 m`` edges) where the input's heading statistics are well
+    determined, as :func:`course_defaults` decides; ``0`` otherwise, the paper's Markov model
+    without the course term. An input with little long branch does not say what course a
+    branch keeps over ``8 m`` edges, and matching its few branches' courses held the grown
+    ones straighter than the input's on most such inputs (an elevation model's valleys, a
+    crack mask, the roots photo, a bark photo; measured on
+    ``docs/pipelines/branching/quality.md``, "The course term where the course is unknown").
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        The example structure.
+    course : int, optional
+        A value chosen by the caller, returned as it is.
+
+    Returns
+    -------
+    int or None
+        ``course`` for :func:`fit_models`.
+
+    Examples
+    --------
+    >>> from phloem.branching import synthetic_skeleton
+    >>> course_edges_default(synthetic_skeleton(0)), course_edges_default(synthetic_skeleton(0), course=16)
+    (0, 16)
+    """
+    _check_source(skeleton)
+    if course is not None:
+        return course
+    return None if _course_known(skeleton) else 0
+
+
+def _check_source(skeleton: Any) -> None:
+    if not isinstance(skeleton, Skeleton):
+        raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
+
+
+def _course_known(skeleton: Skeleton) -> bool:
+    """Whether the input's heading statistics are well determined (its drift noise at most :data:`COURSE_NOISE`)."""
+    try:
+        return drift_noise(skeleton) <= COURSE_NOISE
+    except ValueError:  # no branch long enough, or a single stretch: nothing to learn a course from
+        return False
 
 
 def orientation_default(skeleton: Skeleton, *, orientation: float | None = None, guided: bool = False) -> float:
@@ -215,8 +265,7 @@ def orientation_default(skeleton: Skeleton, *, orientation: float | None = None,
     >>> orientation_default(Skeleton([Branch([[0, 0], [50, 0], [50, 50]], 1.0)]))
     0.0
     """
-    if not isinstance(skeleton, Skeleton):
-        raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
+    _check_source(skeleton)
     if orientation is not None:
         return orientation
     if guided:
@@ -284,6 +333,7 @@ def synthesize(
     h, order, m, n_best, course, coarse_history, total_turn, turn_bound, orientation, turn_histogram, stem_thickness : optional
         Model parameters, as in :func:`fit_models` (``k`` and ``c`` before, deprecated).
         ``total_turn`` defaults to :func:`course_defaults`'s for the source skeleton,
+        ``course`` to :func:`course_edges_default`'s (0 where the total turn is off),
         ``turn_bound`` to 5 where the total turn is matched, and ``orientation`` to
         :func:`orientation_default`'s (3 where the source runs one way on the image and no
         ``guide`` is given, else 0).
@@ -358,6 +408,7 @@ def synthesize(
         raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
     tick(1)
     total_turn, repel_border = course_defaults(source, total_turn=total_turn, repel_border=repel_border)
+    course = course_edges_default(source, course=course)
     orientation = orientation_default(source, orientation=orientation, guided=guide is not None)
     if models is None:
         bending, furcation = fit_models(

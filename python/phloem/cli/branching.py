@@ -94,10 +94,12 @@ def _resolve_models(args: argparse.Namespace, bend: Any) -> None:
 
 
 def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> None:
-    """``--total-turn``, ``--repel-border`` and ``--orientation`` left at their defaults, resolved for this example."""
+    """``--total-turn``, ``--repel-border``, ``--course`` and ``--orientation`` left at their defaults, resolved
+    for this example."""
     args.total_turn, args.repel_border = branching.course_defaults(
         source, total_turn=args.total_turn, repel_border=args.repel_border
     )
+    args.course = branching.course_edges_default(source, course=args.course)
     args.orientation = branching.orientation_default(
         source, orientation=args.orientation, guided=getattr(args, "guide", None) is not None
     )
@@ -250,7 +252,8 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
         type=int,
         default=None,
         metavar="EDGES",
-        help="edges over which a branch keeps its course (default 8 m; 0: the paper's Markov model alone)",
+        help="edges over which a branch keeps its course (default 8 m where the example's course is known, "
+        "as for --total-turn, else 0: the paper's Markov model alone)",
     )
     g.add_argument(
         "--coarse-history",

@@ -216,8 +216,11 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
         def grow(progress: Progress) -> list[str]:
             # the same course-keeping defaults as synthesize and the command line
             turn, border = branching.course_defaults(source)
+            course = branching.course_edges_default(source)
             heading = branching.orientation_default(source, guided=guide is not None)
-            bend, fur = branching.fit_models(source, h=req.h, n_best=req.n_best, total_turn=turn, orientation=heading)
+            bend, fur = branching.fit_models(
+                source, h=req.h, n_best=req.n_best, course=course, total_turn=turn, orientation=heading
+            )
             new = branching.grow(bend, fur, size=shape, seed=req.seed, max_length=req.max_length, guide=guide,
                                  repel_border=border, progress=progress, max_memory=project.max_memory)  # fmt: skip
             assert progress is not None
@@ -225,6 +228,7 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
             used = {
                 **params,
                 "h": bend.h,
+                "course": bend.course,
                 "total_turn": turn,
                 "turn_bound": bend.turn_bound,
                 "repel_border": border,
