@@ -115,6 +115,8 @@ def test_trace_then_grow_then_render_write_the_cli_s_files_with_sidecars(client,
     course = branching.course_defaults(branching.Skeleton.load(project.root / "channel.json"))
     assert (side["parameters"]["total_turn"], side["parameters"]["repel_border"]) == course
     assert side["parameters"]["turn_bound"] == (5.0 if course[0] > 0 else 0.0)
+    edges = branching.course_edges_default(branching.Skeleton.load(project.root / "channel.json"))
+    assert (side["parameters"]["course"] == 0) == (edges == 0)  # resolved for the example and recorded
     channel = branching.Skeleton.load(project.root / "channel.json")
     # a guide says which way the structure runs, so the heading on the image is not matched
     assert branching.orientation_default(channel) == 3.0 and side["parameters"]["orientation"] == 0.0
