@@ -301,6 +301,14 @@ def _check_arc(arc: Any) -> float:
     return check_float(arc, "arc", 0.0, inclusive=False)
 
 
+def _chord_headings(pts: F64, s: F64, at: F64, w: float) -> F64:
+    """Directions (radians) of the chords from arc positions ``at - w/2`` to ``at + w/2`` along
+    a polyline ``pts`` with arc positions ``s``: a tangent that pixel noise does not swing."""
+    x0, y0 = np.interp(at - w / 2, s, pts[:, 0]), np.interp(at - w / 2, s, pts[:, 1])
+    x1, y1 = np.interp(at + w / 2, s, pts[:, 0]), np.interp(at + w / 2, s, pts[:, 1])
+    return np.asarray(np.arctan2(y1 - y0, x1 - x0), dtype=np.float64)
+
+
 def heading_changes(skeleton: Skeleton, *, arc: float = ARC) -> F64:
     """Absolute change of heading over ``arc`` px of branch, at every px along every branch.
 
@@ -349,13 +357,7 @@ def _branch_changes(skeleton: Skeleton, a: float) -> list[F64]:
         if total < a + 2 * half:
             continue
         start = np.arange(half, total - a - half + 1e-9, 1.0)
-
-        def heading(at: F64, pts: F64 = pts, s: F64 = s) -> F64:
-            x0, y0 = np.interp(at - half, s, pts[:, 0]), np.interp(at - half, s, pts[:, 1])
-            x1, y1 = np.interp(at + half, s, pts[:, 0]), np.interp(at + half, s, pts[:, 1])
-            return np.arctan2(y1 - y0, x1 - x0)
-
-        turn = heading(start + a) - heading(start)
+        turn = _chord_headings(pts, s, start + a, 2 * half) - _chord_headings(pts, s, start, 2 * half)
         out.append(_abs_turn(turn))
     return out
 
@@ -417,9 +419,7 @@ def start_turns(skeleton: Skeleton, *, arc: float = 20.0) -> F64:
         if end < w + 1.0:
             continue
         at = np.linspace(w / 2, end - w / 2, math.ceil(end - w) + 1)
-        x0, y0 = np.interp(at - w / 2, s, pts[:, 0]), np.interp(at - w / 2, s, pts[:, 1])
-        x1, y1 = np.interp(at + w / 2, s, pts[:, 0]), np.interp(at + w / 2, s, pts[:, 1])
-        theta = np.unwrap(np.arctan2(y1 - y0, x1 - x0))
+        theta = np.unwrap(_chord_headings(pts, s, at, w))
         out.append(abs(float(theta[-1] - theta[0])))
     return np.asarray(out, dtype=np.float64)
 
@@ -462,13 +462,6 @@ def furcation_gaps(skeleton: Skeleton) -> F64:
         s = _arc_lengths(skeleton.branches[i])
         out.append(np.diff(s[np.sort(np.asarray(at[i]))]))
     return np.concatenate(out) if out else np.zeros(0, np.float64)
-
-
-def _chord_heading(pts: F64, s: F64, at: float, w: float) -> float:
-    """The direction of the chord from arc position ``at - w/2`` to ``at + w/2``, radians."""
-    x0, y0 = np.interp(at - w / 2, s, pts[:, 0]), np.interp(at - w / 2, s, pts[:, 1])
-    x1, y1 = np.interp(at + w / 2, s, pts[:, 0]), np.interp(at + w / 2, s, pts[:, 1])
-    return math.atan2(float(y1 - y0), float(x1 - x0))
 
 
 def parent_turns(skeleton: Skeleton, *, arc: float = 20.0) -> F64:
@@ -523,18 +516,15 @@ def parent_turns(skeleton: Skeleton, *, arc: float = 20.0) -> F64:
             dense[pi] = (pts, s, _arc_lengths(skeleton.branches[pi]))
         pts, s, cum = dense[pi]
         at = float(cum[v])
-        if at - (a + w) / 2 < 0 or at + (a + w) / 2 > s[-1]:
+        cs = _arc_lengths(b)
+        if at - (a + w) / 2 < 0 or at + (a + w) / 2 > s[-1] or cs[-1] < a / 2:
             continue
-        cpts, _, cs = _dense(b, 1.0)
-        if cs[-1] < a / 2:
-            continue
-        turn = _chord_heading(pts, s, at + a / 2, w) - _chord_heading(pts, s, at - a / 2, w)
-        turn = (turn + math.pi) % (2 * math.pi) - math.pi
-        h = _chord_heading(pts, s, at, w)
+        before, here, after = _chord_headings(pts, s, np.array([at - a / 2, at, at + a / 2]), w)
+        turn = (after - before + math.pi) % (2 * math.pi) - math.pi
         # the child's side of the parent's tangent: the sign of their cross product
-        cx = float(np.interp(a / 2, cs, cpts[:, 0]) - b.points[0, 0])
-        cy = float(np.interp(a / 2, cs, cpts[:, 1]) - b.points[0, 1])
-        side = math.copysign(1.0, math.cos(h) * cy - math.sin(h) * cx)
+        cx = float(np.interp(a / 2, cs, b.points[:, 0]) - b.points[0, 0])
+        cy = float(np.interp(a / 2, cs, b.points[:, 1]) - b.points[0, 1])
+        side = math.copysign(1.0, math.cos(here) * cy - math.sin(here) * cx)
         out.append(-side * turn)
     return np.asarray(out, dtype=np.float64)
 
