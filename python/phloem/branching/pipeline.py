@@ -190,10 +190,9 @@ def course_edges_default(skeleton: Skeleton, *, course: int | None = None) -> in
     ``None`` (the bending model's ``8 m`` edges) where the input's heading statistics are well
     determined, as :func:`course_defaults` decides; ``0`` otherwise, the paper's Markov model
     without the course term. An input with little long branch does not say what course a
-    branch keeps over ``8 m`` edges, and matching its few branches' courses held the grown
-    ones straighter than the input's on most such inputs (an elevation model's valleys, a
-    crack mask, the roots photo, a bark photo; measured on
-    ``docs/pipelines/branching/quality.md``, "The course term where the course is unknown").
+    branch keeps over ``8 m`` edges, and matching its few branches' courses holds the grown
+    ones straighter than the input's (``docs/pipelines/branching/quality.md``, "The course
+    term where the course is unknown").
 
     Parameters
     ----------
