@@ -65,11 +65,11 @@ def test_bench_grow_500(benchmark):
     assert sum(len(b) for b in out.branches) > 100
 
 
-def times(trees: int, nodes: int) -> dict[str, float]:
+def times(trees: int, nodes: int, direction_histogram: float = 0.0) -> dict[str, float]:
     src = example(trees)
     t: dict[str, float] = {}
     t0 = time.perf_counter()
-    bend = BendingModel.fit(src, h=H)
+    bend = BendingModel.fit(src, h=H, direction_histogram=direction_histogram)
     t["fit bending"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     fur = FurcationModel.fit(src, h=H)
@@ -127,12 +127,18 @@ def main() -> None:
     ap.add_argument("--trees", type=int, default=4, help="synthetic trees in the example (SVM training size)")
     ap.add_argument("--nodes", type=int, default=500)
     ap.add_argument("--no-real", action="store_true", help="skip the traced inputs of ../shared")
+    ap.add_argument(
+        "--direction-histogram", type=float, default=0.0, help="the bending model's direction histogram weight"
+    )
     args = ap.parse_args()
     src = example(args.trees)
     samples = sum(len(b) for b in src.resample(H).branches)
-    runs = [times(args.trees, args.nodes) for _ in range(args.runs)]
+    runs = [times(args.trees, args.nodes, args.direction_histogram) for _ in range(args.runs)]
     best = {k: min(r[k] for r in runs) for k in runs[0]}
-    print(f"example: {args.trees} trees, {len(src.branches)} branches, {samples} SVM samples (h = {H:g} px)")
+    print(
+        f"example: {args.trees} trees, {len(src.branches)} branches, {samples} SVM samples (h = {H:g} px), "
+        f"direction histogram {args.direction_histogram:g}"
+    )
     print(" ".join(f"{k:>14}" for k in best) + f"   (seconds, best of {args.runs})")
     print(" ".join(f"{v:>14.3f}" if v < 100 else f"{v:>14.0f}" for v in best.values()))
     rows = [] if args.no_real else real_rows()

@@ -166,6 +166,42 @@ def test_arc_delta_is_the_papers_delta_on_the_heading_change_histogram(walk_bran
     np.testing.assert_allclose(extra, model.omega_g * 3.0 * model.arc_delta(tail, counts) * counts.sum() / 4, rtol=1e-9)
 
 
+def test_direction_delta_is_the_papers_delta_on_the_direction_histogram(walk_branch: Callable[..., Branch]):
+    """Brute force: each candidate's continuation laid from the heading, its edges' axes binned
+    as phloem.metrics.direction_histogram bins them, and the input's histogram the same way."""
+    from phloem.metrics import direction_histogram
+
+    src = Skeleton([walk_branch(np.random.default_rng(s), 90, 0.4) for s in range(2)])
+    model = BendingModel.fit(src, h=H, m=4, direction_histogram=1.0)
+    np.testing.assert_allclose(model.hist_dir, direction_histogram(model.source, bins=16)[0], atol=1e-12)
+    rng = np.random.default_rng(5)
+    counts = rng.integers(0, 9, 16).astype(float)
+    n = counts.sum()
+    now = ((model.hist_dir - counts / n) ** 2).sum()
+    for heading in (0.3, -2.0, 3.1):
+        got = model.direction_delta(heading, counts)
+        want = []
+        for nxt in model.next_alpha:
+            heads = heading + np.cumsum(nxt)  # the m new edges' headings
+            pts = Branch.from_angles([0.0, 0.0], heads[0], np.diff(heads), 1.0, H).points
+            # the m edges, each h long: the length-weighted shares times m are their counts
+            after = counts + direction_histogram(Skeleton([Branch(pts, 1.0)]), bins=16)[0] * len(nxt)
+            want.append((now - ((model.hist_dir - after / (n + len(nxt))) ** 2).sum()) / 16)
+        np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
+    # in log Q: ω_G direction_histogram Δ n / m beside the other terms, only with a heading
+    alpha, r = model.cand_hist_alpha[0], model.cand_hist_r[0] * H
+    ca, cr = 10.0 * model.hist_alpha, 10.0 * model.hist_r
+    plain = model.log_quality(alpha, r, ca, cr)
+    extra = model.log_quality(alpha, r, ca, cr, heading=0.3, counts_dir=counts) - plain
+    np.testing.assert_allclose(extra, model.omega_g * model.direction_delta(0.3, counts) * n / 4, rtol=1e-9)
+    np.testing.assert_array_equal(model.log_quality(alpha, r, ca, cr, counts_dir=counts), plain)
+    off = BendingModel.fit(src, h=H, m=4)
+    assert off.direction_histogram == 0.0
+    np.testing.assert_array_equal(off.log_quality(alpha, r, ca, cr, heading=0.3, counts_dir=counts), plain)
+    with pytest.raises(ValueError, match="^direction_histogram:"):
+        BendingModel.fit(src, h=H, direction_histogram=-1.0)
+
+
 def test_bad_input_errors() -> None:
     tiny = Skeleton([Branch([[0, 0], [2, 0], [4, 0], [6, 0]], 1.0)])
     with pytest.raises(ValueError, match="skeleton: the skeleton has no branches"):

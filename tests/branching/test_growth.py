@@ -627,6 +627,14 @@ def test_turn_histogram_pulls_the_heading_change_towards_the_inputs_both_ways():
         assert np.median([drift(src, g) for g in on]) < 0.6 * np.median([drift(src, g) for g in off])
 
 
+def _wandering_down(rng: np.random.Generator, n: int, sigma: float) -> np.ndarray:
+    """``n`` headings about straight down on the image (an AR(1) process about -pi/2, as lightning falls)."""
+    x = np.zeros(n)
+    for t in range(1, n):
+        x[t] = 0.9 * x[t - 1] + sigma * rng.standard_normal()
+    return -np.pi / 2 + x
+
+
 def test_orientation_keeps_the_way_the_input_runs():
     # Branches that wander around straight down (headings an AR(1) process about -pi/2, as
     # lightning falls): the paper's model knows only turns, so a grown branch's heading walks
@@ -634,10 +642,7 @@ def test_orientation_keeps_the_way_the_input_runs():
     rng = np.random.default_rng(0)
     brs = []
     for j in range(4):
-        x = np.zeros(299)
-        for t in range(1, 299):
-            x[t] = 0.9 * x[t - 1] + 0.35 * rng.standard_normal()
-        head = -np.pi / 2 + x
+        head = _wandering_down(rng, 299, 0.35)
         brs.append(Branch.from_angles([60 + 60 * j, 10], head[0], np.diff(head), np.full(300, 2.0), 2.0))
     src = Skeleton(brs)
 
@@ -655,6 +660,40 @@ def test_orientation_keeps_the_way_the_input_runs():
     want = down(src)  # 0.69
     assert share(0.0) < want - 0.25  # 0.27
     assert abs(share(3.0) - want) < 0.15  # 0.75
+
+
+def test_the_direction_histogram_holds_the_ways_a_tree_runs():
+    # Stems that wander about straight down, with children that leave them sideways and fall
+    # again (lightning). The heading matched candidate by candidate keeps a branch running
+    # the way it runs; a child that left sideways finds few candidates running that way and
+    # none that steer it down. The direction histogram does.
+    from phloem.metrics import orientation_distance
+
+    rng = np.random.default_rng(0)
+    brs = []
+    for j in range(3):
+        head = _wandering_down(rng, 199, 0.3)
+        stem = len(brs)
+        brs.append(Branch.from_angles([110 + 160 * j, 10], head[0], np.diff(head), np.full(200, 2.0), 2.0))
+        for v in (40, 80, 120):
+            side = 1 if rng.random() < 0.5 else -1
+            fall = -side * 0.9 * (1 - np.exp(-np.arange(59) / 8.0))  # turning from sideways back down
+            heads = head[v] + side * 0.9 + np.concatenate([[0.0], np.diff(fall)]).cumsum()
+            brs.append(
+                Branch.from_angles(brs[stem].points[v], heads[0], np.diff(heads), np.full(60, 1.5), 2.0, (stem, v))
+            )
+    src = Skeleton(brs, (420, 580))
+    fur = FurcationModel.fit(src, h=2.0)
+
+    def distances(weight: float) -> list[float]:
+        bend = BendingModel.fit(src, h=2.0, orientation=3.0, direction_histogram=weight)
+        return [
+            orientation_distance(src, grow(bend, fur, size=src.shape, seed=s, max_length="input")) for s in range(6)
+        ]
+
+    without, with_ = distances(0.0), distances(1.0)  # mean 0.48, 0.26
+    assert np.mean(with_) < 0.7 * np.mean(without), (with_, without)
+    assert np.median(with_) < 0.7 * np.median(without)
 
 
 def test_connected_input_grows_one_connected_tree():

@@ -77,6 +77,13 @@ def _bin(values: F64, lo: float, hi: float, bins: int) -> I64:
     return np.clip(np.floor(np.nan_to_num(t)), 0, bins - 1).astype(np.int64)
 
 
+def _axis_bins(theta: F64, bins: int) -> I64:
+    """Bins of headings as axes (a heading and its reverse in one bin) on ``[0, π)``, centred on
+    ``0, π / bins, …``: a run along one of the image's axes that jitters stays in one bin."""
+    half = math.pi / (2 * bins)
+    return _bin(np.mod(np.asarray(theta, np.float64) + half, math.pi), 0.0, math.pi, bins)
+
+
 def _range(values: F64) -> tuple[float, float]:
     lo, hi = float(values.min()), float(values.max())
     if hi - lo < 1e-12:

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import _core
-from ._elements import F64, _bin, _direction
+from ._elements import F64, _axis_bins, _bin, _direction
 from .bending import BendingModel, arc_window_turns
 
 
@@ -61,6 +61,7 @@ class _World:
         self.counts_alpha = model.warm_start * model.hist_alpha
         self.counts_r = model.warm_start * model.hist_r
         self.counts_arc = model.warm_start * model.hist_arc  # the heading-change histogram's
+        self.counts_dir = model.warm_start * model.hist_dir  # the direction histogram's
         self.total_length = 0.0
 
     # -- bookkeeping ----------------------------------------------------------------------
@@ -82,10 +83,13 @@ class _World:
         self._nseg += n
         self.total_length += float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
 
-    def add_elements(self, alpha: F64, r: F64, windows: F64 | None) -> None:
+    def add_elements(self, alpha: F64, r: F64, windows: F64 | None, headings: F64 | None = None) -> None:
         """Count new elements in the histograms; ``windows``: the branch's angles from
-        ``arc_edges - 1`` before the first new one, for the heading-change histogram."""
+        ``arc_edges - 1`` before the first new one, for the heading-change histogram;
+        ``headings``: the new edges' headings on the image, for the direction histogram."""
         m = self.model
+        if headings is not None and m.direction_histogram > 0:
+            np.add.at(self.counts_dir, _axis_bins(headings, m.bins), 1.0)
         np.add.at(self.counts_alpha, _bin(alpha, *m.range_alpha, m.bins), 1.0)
         np.add.at(self.counts_r, _bin(r, *m.range_r, m.bins), 1.0)
         if windows is not None and m.turn_histogram > 0:

@@ -32,6 +32,7 @@ from ._elements import (
     F64,
     I64,
     _abs_turn,
+    _axis_bins,
     _bin,
     _check_k,
     _check_skeleton,
@@ -87,6 +88,23 @@ def _edge_heading(points: F64, tips: I64) -> F64:
 def _log_dist_angle(delta: F64) -> F64:
     """``log`` of the paper's ``dist`` on wrapped angle differences: ``log(1 / (|δ| + 1) + 1)``."""
     return np.asarray(np.log(1.0 / (np.abs(_angle(delta)) + 1.0) + 1.0), dtype=np.float64)
+
+
+def _histogram_moves(target: F64, counts: F64, b: I64) -> F64:
+    """§4.2's ``Δ`` for every candidate that adds one count to each of its bins ``b[i]`` (``(C, P)``):
+    ``(‖Ĥ − H/n₀‖² − ‖Ĥ − (H + h_i)/(n₀ + P)‖²) / bins``, ``Ĥ`` the ``target``, ``H`` the ``counts``."""
+    n0 = float(counts.sum())
+    n = n0 + b.shape[1]
+    now = float(((target - counts / n0) ** 2).sum())
+    # ‖u − h_i/n‖² with u = Ĥ − H/n, h_i sparse (P ones): ‖u‖² − 2 Σ_p u[b_ip]/n + Σ_b h_ib²/n²
+    u = target - counts / n
+    # Σ_b h_ib² = P + 2 × the pairs that share a bin (P is a handful: pairs beat a (C, P, P) cube)
+    same = np.full(len(b), float(b.shape[1]))
+    for p in range(b.shape[1]):
+        for q in range(p + 1, b.shape[1]):
+            same += 2.0 * (b[:, p] == b[:, q])
+    after = float(u @ u) - 2.0 * u[b].sum(axis=1) / n + same / (n * n)
+    return np.asarray((now - after) / len(target), dtype=np.float64)
 
 
 def block_sums(alpha: F64, k: int, m: int) -> F64 | None:
@@ -203,6 +221,11 @@ class BendingModel:
         Weight of the heading-change histogram's matching (0: off), see :meth:`fit`.
     stem_thickness : float
         Weight of a stem's thickness profile (0: off), see :meth:`fit`.
+    hist_dir : ndarray, shape (bins,)
+        The input's normalised histogram of its edges' directions on the image, as axes in
+        bins centred on the image's axes (:func:`phloem.metrics.direction_histogram`'s).
+    direction_histogram : float
+        Weight of the direction histogram's matching (0: off), see :meth:`fit`.
 
     Examples
     --------
@@ -256,6 +279,9 @@ class BendingModel:
     arc_edges: int = 0
     turn_histogram: float = 0.0
     stem_thickness: float = 0.0
+    # (bins,) the input's histogram of edge directions on the image, as axes (see _axis_bins)
+    hist_dir: F64 = field(default_factory=lambda: np.zeros(0), repr=False)
+    direction_histogram: float = 0.0
 
     @classmethod
     def fit(
@@ -278,6 +304,7 @@ class BendingModel:
         turn_histogram: float = 3.0,
         arc: float = ARC,
         stem_thickness: float = STEM_THICKNESS,
+        direction_histogram: float = 0.0,
     ) -> BendingModel:
         """Learn the bending model from an example skeleton.
 
@@ -378,6 +405,18 @@ class BendingModel:
             history hold a thickness for a few extensions only, and the thickness histogram
             pulls every extension towards the input's commonest thickness, so a thick trunk
             thinned to its children's thickness within its first extensions.
+        direction_histogram : float
+            Weight of the direction histogram (default 0: off). Beyond the paper: §4.2's
+            histogram matching applied to the directions the edges run on the image, as axes
+            (an edge and its reverse in one bin, ``bins`` bins centred on the image's axes).
+            Every candidate gains ``ω_G direction_histogram Δ n_t / m`` in ``log Q``, ``Δ`` the
+            histogram's move towards the input's if the candidate's ``m`` edges, turned from
+            the branch's heading, were added (:meth:`direction_delta`). ``orientation`` matches
+            each candidate's heading where it was taken from; it keeps a branch running the way
+            it runs, but a branch that has wandered off the input's ways finds few candidates
+            and none that steer it back. The histogram does, and it holds the whole
+            structure's share of each direction to the input's. :func:`synthesize` turns it
+            on where the input runs one way (:func:`direction_histogram_default`).
 
         Returns
         -------
@@ -418,6 +457,7 @@ class BendingModel:
         orientation = check_float(orientation, "orientation", 0.0)
         turn_histogram = check_float(turn_histogram, "turn_histogram", 0.0)
         stem_thickness = check_float(stem_thickness, "stem_thickness", 0.0)
+        direction_histogram = check_float(direction_histogram, "direction_histogram", 0.0)
         arc = check_float(arc, "arc", 0.0, inclusive=False)
         src = skeleton.resample(h)
         elems = [_elements(b) for b in src.branches]
@@ -470,6 +510,9 @@ class BendingModel:
         hist_arc = np.bincount(_bin(arc_all, 0.0, math.pi, bins), minlength=bins) / max(arc_all.size, 1)
         if not arc_all.size:
             turn_histogram = 0.0  # no input branch spans the arc: nothing to match
+        # every resampled edge is h long: counting edges weights the directions by length
+        axes = np.concatenate([_edge_heading(b.points, np.arange(1, len(b.points))) for b in src.branches])
+        hist_dir = np.bincount(_axis_bins(axes, bins), minlength=bins) / max(axes.size, 1)
         lengths: dict[int, list[float]] = {}
         for g, b in zip(gens.tolist(), src.branches):
             lengths.setdefault(g, []).append(b.length())
@@ -508,6 +551,8 @@ class BendingModel:
             arc_edges=arc_edges,
             turn_histogram=turn_histogram,
             stem_thickness=stem_thickness,
+            hist_dir=hist_dir.astype(np.float64),
+            direction_histogram=direction_histogram,
         )
 
     def log_quality(
@@ -524,6 +569,7 @@ class BendingModel:
         arc_tail: F64 | None = None,
         counts_arc: F64 | None = None,
         profile: F64 | None = None,
+        counts_dir: F64 | None = None,
     ) -> F64:
         """``log Q*_i`` of every candidate for a branch history (vectorised over candidates).
 
@@ -548,7 +594,8 @@ class BendingModel:
             Whether the branch is a root tree's main branch (the total turn's bound applies).
         heading : float, optional
             The branch's heading on the image (radians, counter-clockwise on screen); matched
-            against the candidates' when given and ``orientation > 0``.
+            against the candidates' when given and ``orientation > 0``, and the direction of
+            their continuations' edges when ``counts_dir`` is given too.
         arc_tail, counts_arc : ndarray, optional
             The branch's last angles and the structure's heading-change histogram counts;
             the histogram is matched (:meth:`arc_delta`) when both are given and
@@ -557,12 +604,16 @@ class BendingModel:
             The thickness (pixels) the branch's template has at the ``m`` vertices an
             extension writes (see :meth:`stem_profile`); matched against each candidate's
             following thicknesses when given, ``stem`` is true and ``stem_thickness > 0``.
+        counts_dir : ndarray, shape (bins,), optional
+            The structure's direction histogram counts; the histogram is matched
+            (:meth:`direction_delta`) when ``heading`` is given too and
+            ``direction_histogram > 0``.
 
         Returns
         -------
         ndarray of float64, shape (C,)
             ``log Q_i + ω_G (a Δ_α(i) + Δ_r(i)) n_t / m``, ``a`` the :attr:`angle_weight`,
-            plus the heading-change histogram's term.
+            plus the heading-change and direction histograms' terms.
         """
         L = len(alpha)
         if not 1 <= L <= self.k + 1 or len(r) != L:
@@ -598,6 +649,11 @@ class BendingModel:
             got = self.arc_delta(arc_tail, counts_arc)
             if got is not None:
                 q += self.omega_g * self.turn_histogram * got * (float(counts_arc.sum()) / self.m)
+        if heading is not None and counts_dir is not None and self.direction_histogram > 0 and self.omega_g > 0:
+            n_d = float(counts_dir.sum())
+            if n_d > 0:
+                delta_dir = self.direction_delta(float(heading), counts_dir)
+                q += self.omega_g * self.direction_histogram * delta_dir * (n_d / self.m)
         return q
 
     def arc_delta(self, tail: F64, counts: F64) -> F64 | None:
@@ -626,14 +682,33 @@ class BendingModel:
             return None
         back = np.concatenate([[0.0], np.cumsum(np.asarray(tail, np.float64)[::-1])])
         t = back[need[ok]][None, :] + self._next_cumsum()[:, ok]
-        b = _bin(_abs_turn(t), 0.0, math.pi, self.bins)
-        n = n0 + b.shape[1]
-        now = float(((self.hist_arc - counts / n0) ** 2).sum())
-        # ‖u − h_i/n‖² with u = Ĥ − H/n, h_i sparse (P ones): ‖u‖² − 2 Σ_p u[b_ip]/n + Σ_b h_ib²/n²
-        u = self.hist_arc - counts / n
-        same = (b[:, :, None] == b[:, None, :]).sum(axis=(1, 2))
-        after = float(u @ u) - 2.0 * u[b].sum(axis=1) / n + same / (n * n)
-        return np.asarray((now - after) / self.bins, dtype=np.float64)
+        return _histogram_moves(self.hist_arc, counts, _bin(_abs_turn(t), 0.0, math.pi, self.bins))
+
+    def direction_delta(self, heading: float, counts: F64) -> F64:
+        """``Δ`` of the direction histogram for every candidate (see ``direction_histogram``).
+
+        Parameters
+        ----------
+        heading : float
+            The branch's heading on the image (radians, counter-clockwise on screen).
+        counts : ndarray, shape (bins,)
+            The direction histogram's counts of the structure so far (with the warm start),
+            not all zero.
+
+        Returns
+        -------
+        ndarray of float64, shape (C,)
+            ``(‖Ĥ − H/n‖² − ‖Ĥ − (H + h_i)/(n + m)‖²) / bins``, ``h_i`` the counts of candidate
+            ``i``'s ``m`` edges, run from ``heading`` turned by its angles.
+        """
+        # _axis_bins of heading + the running turns, with the turns' scaling done once per model
+        got = self.__dict__.get("_next_cumsum_bins_of")
+        if got is None or got[0] is not self.next_alpha:
+            got = (self.next_alpha, self._next_cumsum() * (self.bins / math.pi))
+            self.__dict__["_next_cumsum_bins_of"] = got
+        shift = (float(heading) + math.pi / (2 * self.bins)) * (self.bins / math.pi)
+        b = np.floor(got[1] + shift).astype(np.int64) % self.bins
+        return _histogram_moves(self.hist_dir, counts, b)
 
     def _next_cumsum(self) -> F64:
         """``(C, m)`` the running turn along every candidate's continuation (cached)."""

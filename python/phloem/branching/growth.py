@@ -147,7 +147,7 @@ class _Grower:
         coarse = block_sums(np.asarray(br.alpha[-(m.k + 1) * m.m :]), m.k, m.m) if m.coarse_history > 0 else None
         turn = float(np.sum(br.alpha)) if m.total_turn > 0 or m.turn_bound > 0 else None
         alpha, r = np.asarray(br.alpha[-L:]), np.asarray(br.r[-L:])
-        head = br.heading if m.orientation > 0 else None
+        head = br.heading if m.orientation > 0 or m.direction_histogram > 0 else None
         recent = np.asarray(br.alpha[-(m.arc_edges - 1) :]) if m.turn_histogram > 0 else None
         want = None
         if br.profile is not None and m.stem_thickness > 0:
@@ -156,7 +156,7 @@ class _Grower:
             want = br.profile[np.minimum(np.arange(n, n + m.m), len(br.profile) - 1)]
         q = m.log_quality(
             alpha, r, w.counts_alpha, w.counts_r, dev, coarse, turn, stem=br.parent is None, heading=head,
-            arc_tail=recent, counts_arc=w.counts_arc, profile=want,
+            arc_tail=recent, counts_arc=w.counts_arc, profile=want, counts_dir=w.counts_dir,
         )  # fmt: skip
         tip = br.points[-1]
         H, W = w.shape
@@ -246,12 +246,13 @@ class _Grower:
             br.thickness.append(float(r[j]))
         br.alpha.extend(float(a) for a in alpha)
         br.r.extend(float(v) for v in r)
+        headings = br.heading + np.cumsum(np.asarray(alpha, dtype=np.float64))
         br.heading = _wrap(br.heading + float(np.sum(alpha)))
         # the windows of the heading-change histogram that end at the new elements
         windows = None
         if self.model.turn_histogram > 0:
             windows = np.asarray(br.alpha[-(len(alpha) + self.model.arc_edges - 1) :], dtype=np.float64)
-        w.add_elements(np.asarray(alpha, dtype=np.float64), np.asarray(r, dtype=np.float64), windows)
+        w.add_elements(np.asarray(alpha, dtype=np.float64), np.asarray(r, dtype=np.float64), windows, headings)
         pts = np.asarray(br.points[start:])
         w.add_segments(pts)
         self.flush(br, final=False)
@@ -947,9 +948,11 @@ def extend(
     grower = _Grower(world, bending)
     for b in skeleton.branches:
         world.add_segments(b.points)
-        a, r = _elements(b.resample(h))
+        rb = b.resample(h)
+        a, r = _elements(rb)
         if len(a):
-            world.add_elements(a, r, a)
+            d = np.diff(rb.points, axis=0)
+            world.add_elements(a, r, a, np.arctan2(-d[:, 1], d[:, 0]))
     target = skeleton.branches[bi]
     # resample from the tip backwards so that the tip stays exactly where it is
     tail = Branch(target.points[::-1].copy(), target.thickness[::-1].copy()).resample(h)

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validate import as_image, as_mask, check_float, check_int
-from ._elements import F64, _abs_turn, _arc_lengths, _bin, _check_skeleton, _tree_roots
+from ._elements import F64, _abs_turn, _arc_lengths, _axis_bins, _bin, _check_skeleton, _tree_roots
 from .bending import ARC  # the arc the bending model matches, so that the two stay one
 from .histograms import _hist, histogram_distance
 from .skeleton import Branch, Skeleton
@@ -630,9 +630,8 @@ def direction_histogram(skeleton: Skeleton, *, bins: int = 12) -> tuple[F64, F64
     """
     bins = check_int(bins, "bins", 1)
     axis, length = _edge_axes(skeleton, "skeleton")
-    # Bins centred on the image's axes, so that a jittering horizontal or vertical run stays in one.
+    counts = np.bincount(_axis_bins(axis, bins), weights=length, minlength=bins)
     half = math.pi / (2 * bins)
-    counts = np.bincount(_bin(np.mod(axis + half, math.pi), 0.0, math.pi, bins), weights=length, minlength=bins)
     return counts / counts.sum(), np.linspace(-half, math.pi - half, bins + 1)
 
 
