@@ -131,6 +131,19 @@ def test_orientation_default_turns_on_where_the_input_runs_one_way():
         branching.orientation_default("not a skeleton")  # type: ignore[arg-type]
 
 
+def test_direction_histogram_default_follows_the_orientation_default():
+    for jitter in (0.0, 4.0, 12.0):
+        sk = _hanging(5, jitter)
+        on = branching.orientation_default(sk) > 0
+        assert branching.direction_histogram_default(sk) == (1.0 if on else 0.0)
+    assert branching.direction_histogram_default(_hanging(5, 1.0)) == 1.0
+    assert branching.direction_histogram_default(_hanging(5, 12.0)) == 0.0
+    assert branching.direction_histogram_default(_hanging(5, 1.0), guided=True) == 0.0  # a guide sets the way
+    assert branching.direction_histogram_default(_hanging(5, 12.0), direction_histogram=2.0) == 2.0
+    with pytest.raises(TypeError, match="^skeleton: expected"):
+        branching.direction_histogram_default("not a skeleton")  # type: ignore[arg-type]
+
+
 def test_synthesize_resolves_orientation_from_the_source():
     for jitter, want in ((1.0, 3.0), (12.0, 0.0)):
         sk = _hanging(4, jitter)
@@ -139,13 +152,17 @@ def test_synthesize_resolves_orientation_from_the_source():
             cv2.polylines(img, [np.round(b.points).astype(np.int32)], False, 0.1, 3)
         auto = branching.synthesize(img, sk, seed=2)
         assert auto.bending.orientation == want
+        assert auto.bending.direction_histogram == want / 3.0  # on with the heading
         explicit = branching.synthesize(img, sk, seed=2, orientation=want)
         assert explicit.target == auto.target
         other = branching.synthesize(img, sk, seed=2, orientation=3.0 - want)
         assert other.bending.orientation == 3.0 - want and other.target != auto.target
     # a guide sets the way the new structure runs (§4.5)
     guided = branching.synthesize(img, _hanging(4, 1.0), seed=2, guide=np.array([[10.0, 100.0], [110.0, 100.0]]))
-    assert guided.bending.orientation == 0.0
+    assert guided.bending.orientation == 0.0 and guided.bending.direction_histogram == 0.0
+    alone = branching.synthesize(img, _hanging(4, 1.0), seed=2, direction_histogram=0.0)
+    assert alone.bending.orientation == 3.0 and alone.bending.direction_histogram == 0.0
+    assert alone.target != branching.synthesize(img, _hanging(4, 1.0), seed=2).target
 
 
 def test_the_output_keeps_the_input_s_frame_and_grows_inside_it():

@@ -203,7 +203,8 @@ def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
     assert Skeleton.load(outs["o0"]) != Skeleton.load(outs["o3"])
     assert json.loads(io.sidecar_path(outs["o3"]).read_text())["parameters"]["orientation"] == 3.0
     flag_sets = (["--total-turn", "0"], ["--total-turn", "4"], ["--total-turn", "4", "--turn-bound", "0"],
-                 ["--repel-border"], ["--no-repel-border"], ["--turn-histogram", "0"], ["--stem-thickness", "0"])  # fmt: skip
+                 ["--repel-border"], ["--no-repel-border"], ["--turn-histogram", "0"], ["--stem-thickness", "0"],
+                 ["--direction-histogram", "0"], ["--direction-histogram", "2"])  # fmt: skip
     for flags in flag_sets:
         out = tmp_path / ("grown" + "".join(flags) + ".json")
         assert main(["branching", "grow", str(skel), "--out", str(out), "--seed", "1", *flags, "-q"]) == 0
@@ -228,6 +229,11 @@ def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
     assert sidecar["o0"]["course"] == (8 * sidecar["o0"]["m"] if edges is None else edges)
     heading = branching.orientation_default(Skeleton.load(skel))
     assert sidecar["32"]["orientation"] == heading
+    directions = branching.direction_histogram_default(Skeleton.load(skel))
+    assert sidecar["32"]["direction_histogram"] == directions
+    assert sidecar["--direction-histogram 2"]["direction_histogram"] == 2.0
+    assert grown["--direction-histogram 0"] != grown["--direction-histogram 2"]
+    assert (grown["32"] == grown["--direction-histogram 0"]) == (directions == 0)
     assert grown["32"] == grown["o3" if heading > 0 else "o0"]
     assert grown["32"] == grown["--repel-border" if default[1] else "--no-repel-border"]
 

@@ -120,6 +120,7 @@ def test_trace_then_grow_then_render_write_the_cli_s_files_with_sidecars(client,
     channel = branching.Skeleton.load(project.root / "channel.json")
     # a guide says which way the structure runs, so the heading on the image is not matched
     assert branching.orientation_default(channel) == 3.0 and side["parameters"]["orientation"] == 0.0
+    assert side["parameters"]["direction_histogram"] == 0.0
     again = run_job(client, {**grow, "out": "grown2.json"})
     assert branching.Skeleton.load(project.root / again["outputs"][0]) == grown  # one seed, one structure
 

@@ -25,6 +25,7 @@ __all__ = [
     "SynthesisResult",
     "course_defaults",
     "course_edges_default",
+    "direction_histogram_default",
     "fit_models",
     "orientation_default",
     "synthesize",
@@ -41,6 +42,9 @@ COURSE_TOTAL_TURN = 2.0
 ORIENTATION_CONCENTRATION = 0.4
 #: The heading weight :func:`orientation_default` turns on there (the weight measured).
 ORIENTATION_WEIGHT = 3.0
+#: The direction histogram's weight :func:`direction_histogram_default` turns on there (the
+#: weight measured).
+DIRECTION_HISTOGRAM_WEIGHT = 1.0
 
 
 @dataclass
@@ -85,6 +89,7 @@ def fit_models(
     orientation: float = 0.0,
     turn_histogram: float = 3.0,
     stem_thickness: float = STEM_THICKNESS,
+    direction_histogram: float = 0.0,
 ) -> tuple[BendingModel, FurcationModel | None]:
     """The bending model (§4.2) and, if the skeleton branches at all, the furcation model (§4.3).
 
@@ -128,6 +133,10 @@ def fit_models(
         Weight of the match of each root tree's main branch against its template stem's
         thickness, so that a trunk stays as thick as the input's (default 5; 0: the paper's
         model; see :meth:`BendingModel.fit`).
+    direction_histogram : float, optional
+        Weight of the matching of the histogram of the directions the branches run on the
+        image, so that the structure runs each way as much as the input's (default 0: the
+        paper's orientation-independent model; see :meth:`BendingModel.fit`).
 
     Examples
     --------
@@ -139,6 +148,7 @@ def fit_models(
     bending = BendingModel.fit(
         skeleton, h=h, k=order, m=m, c=n_best, course=course, coarse_history=coarse_history, total_turn=total_turn,
         turn_bound=turn_bound, orientation=orientation, turn_histogram=turn_histogram, stem_thickness=stem_thickness,
+        direction_histogram=direction_histogram,
     )  # fmt: skip
     has_children = any(b.parent is not None for b in skeleton.branches)
     furcation = FurcationModel.fit(skeleton, h=bending.h, k=order, c=n_best) if has_children else None
@@ -276,6 +286,44 @@ def orientation_default(skeleton: Skeleton, *, orientation: float | None = None,
     return ORIENTATION_WEIGHT if directed else 0.0
 
 
+def direction_histogram_default(
+    skeleton: Skeleton, *, direction_histogram: float | None = None, guided: bool = False
+) -> float:
+    """:func:`synthesize`'s default of ``direction_histogram`` for this source skeleton.
+
+    ``1.0`` where :func:`orientation_default` turns the heading on (the input runs one way on
+    the image and no ``guide`` is given): the heading keeps a branch running the way it runs,
+    and the histogram steers back a branch that has wandered off the input's ways (a bolt
+    that turned sideways, a root that turned back). Otherwise ``0.0``, the paper's model.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        The example structure.
+    direction_histogram : float, optional
+        A weight chosen by the caller, returned as it is.
+    guided : bool, optional
+        Whether :func:`grow` is given a ``guide`` (default False).
+
+    Returns
+    -------
+    float
+        ``direction_histogram`` for :func:`fit_models`.
+
+    Examples
+    --------
+    >>> from phloem.branching import Branch, Skeleton
+    >>> direction_histogram_default(Skeleton([Branch([[10, 0], [12, 50], [9, 100]], 1.0)]))
+    1.0
+    >>> direction_histogram_default(Skeleton([Branch([[10, 0], [12, 50], [9, 100]], 1.0)]), guided=True)
+    0.0
+    """
+    _check_source(skeleton)
+    if direction_histogram is not None:
+        return direction_histogram
+    return DIRECTION_HISTOGRAM_WEIGHT if orientation_default(skeleton, guided=guided) > 0 else 0.0
+
+
 @renamed(k="order", c="n_best")
 def synthesize(
     image: Any,
@@ -295,6 +343,7 @@ def synthesize(
     orientation: float | None = None,
     turn_histogram: float = 3.0,
     stem_thickness: float = STEM_THICKNESS,
+    direction_histogram: float | None = None,
     generations: int | None = None,
     max_length: float | str | None = "input",
     colonize: bool = True,
@@ -329,13 +378,14 @@ def synthesize(
         Seed of the growth and of the fragment choices.
     trace_options : dict, optional
         Keyword arguments for :func:`trace` (e.g. ``{"kind": "dark", "sigmas": (1.5, 3, 5)}``).
-    h, order, m, n_best, course, coarse_history, total_turn, turn_bound, orientation, turn_histogram, stem_thickness : optional
+    h, order, m, n_best, course, coarse_history, total_turn, turn_bound, orientation, turn_histogram, stem_thickness, direction_histogram : optional
         Model parameters, as in :func:`fit_models` (``k`` and ``c`` before, deprecated).
         ``total_turn`` defaults to :func:`course_defaults`'s for the source skeleton,
         ``course`` to :func:`course_edges_default`'s (0 where the total turn is off),
-        ``turn_bound`` to 5 where the total turn is matched, and ``orientation`` to
+        ``turn_bound`` to 5 where the total turn is matched, ``orientation`` to
         :func:`orientation_default`'s (3 where the source runs one way on the image and no
-        ``guide`` is given, else 0).
+        ``guide`` is given, else 0) and ``direction_histogram`` to
+        :func:`direction_histogram_default`'s (1 where the orientation is on, else 0).
     generations, max_length, colonize, guide : optional
         See :func:`grow`.
     repel_border : bool, optional
@@ -362,7 +412,8 @@ def synthesize(
         Models fitted to ``skeleton`` before (an earlier result's ``bending`` and ``furcation``),
         used instead of fitting them again: many seeds of one input fit once. ``h``, ``order``,
         ``m``, ``n_best``, ``course``, ``coarse_history``, ``total_turn``, ``turn_bound``,
-        ``orientation``, ``turn_histogram`` and ``stem_thickness`` are then not used.
+        ``orientation``, ``turn_histogram``, ``stem_thickness`` and ``direction_histogram`` are
+        then not used.
 
     Returns
     -------
@@ -409,11 +460,14 @@ def synthesize(
     total_turn, repel_border = course_defaults(source, total_turn=total_turn, repel_border=repel_border)
     course = course_edges_default(source, course=course)
     orientation = orientation_default(source, orientation=orientation, guided=guide is not None)
+    direction_histogram = direction_histogram_default(
+        source, direction_histogram=direction_histogram, guided=guide is not None
+    )
     if models is None:
         bending, furcation = fit_models(
             source, h=h, order=order, m=m, n_best=n_best, course=course, coarse_history=coarse_history,
             total_turn=total_turn, turn_bound=turn_bound, orientation=orientation, turn_histogram=turn_histogram,
-            stem_thickness=stem_thickness,
+            stem_thickness=stem_thickness, direction_histogram=direction_histogram,
         )  # fmt: skip
     elif (
         isinstance(models, tuple)

@@ -94,14 +94,16 @@ def _resolve_models(args: argparse.Namespace, bend: Any) -> None:
 
 
 def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> None:
-    """``--total-turn``, ``--repel-border``, ``--course`` and ``--orientation`` left at their defaults, resolved
-    for this example."""
+    """``--total-turn``, ``--repel-border``, ``--course``, ``--orientation`` and ``--direction-histogram`` left at
+    their defaults, resolved for this example."""
     args.total_turn, args.repel_border = branching.course_defaults(
         source, total_turn=args.total_turn, repel_border=args.repel_border
     )
     args.course = branching.course_edges_default(source, course=args.course)
-    args.orientation = branching.orientation_default(
-        source, orientation=args.orientation, guided=getattr(args, "guide", None) is not None
+    guided = getattr(args, "guide", None) is not None
+    args.orientation = branching.orientation_default(source, orientation=args.orientation, guided=guided)
+    args.direction_histogram = branching.direction_histogram_default(
+        source, direction_histogram=args.direction_histogram, guided=guided
     )
 
 
@@ -301,6 +303,15 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
         "(default 3; 0: the paper's model)",
     )
     g.add_argument(
+        "--direction-histogram",
+        type=float,
+        default=None,
+        metavar="WEIGHT",
+        help="weight of matching the histogram of the directions the branches run on the image against the "
+        "example's, so that the structure runs each way as much as the example's and a branch that wandered off "
+        "its ways is steered back (default: 1 where --orientation defaults to 3, else 0, the paper's model)",
+    )
+    g.add_argument(
         "--stem-thickness",
         type=non_negative,
         default=STEM_THICKNESS,
@@ -353,11 +364,13 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     _resolve_course(args, source)
     # fitting takes seconds on real skeletons; a batch worker fits once per skeleton and options
     options = (args.h, args.order, args.m, args.n_best, args.course, args.coarse_history, args.total_turn,
-               args.turn_bound, args.orientation, args.turn_histogram, args.stem_thickness)  # fmt: skip
+               args.turn_bound, args.orientation, args.turn_histogram, args.stem_thickness,
+               args.direction_histogram)  # fmt: skip
     bend, fur = kept("branching models", [Path(args.skeleton)], options, lambda: branching.fit_models(
         source, h=args.h, order=args.order, m=args.m, n_best=args.n_best, course=args.course,
         coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound,
-        orientation=args.orientation, turn_histogram=args.turn_histogram, stem_thickness=args.stem_thickness))  # fmt: skip
+        orientation=args.orientation, turn_histogram=args.turn_histogram, stem_thickness=args.stem_thickness,
+        direction_histogram=args.direction_histogram))  # fmt: skip
     new = run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
     _resolve_models(args, bend)
     args.size = shape
@@ -409,13 +422,13 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
         read.append(Path(args.valid))
     key = stamp(read, (_trace_kwargs(args), args.valid, args.h, args.order, args.m, args.n_best, args.course,
                                args.coarse_history, args.total_turn, args.turn_bound, args.orientation,
-                               args.turn_histogram, args.stem_thickness))  # fmt: skip
+                               args.turn_histogram, args.stem_thickness, args.direction_histogram))  # fmt: skip
     prior = recall("branching run models", key)
     res = run(
         "branching run", args,
         lambda bar: branching.synthesize(
             img, source if prior is None else prior[0], models=None if prior is None else prior[1:], size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, order=args.order,
-            m=args.m, n_best=args.n_best, course=args.course, coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound, orientation=args.orientation, turn_histogram=args.turn_histogram, stem_thickness=args.stem_thickness, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize, repel_border=args.repel_border,
+            m=args.m, n_best=args.n_best, course=args.course, coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound, orientation=args.orientation, turn_histogram=args.turn_histogram, stem_thickness=args.stem_thickness, direction_histogram=args.direction_histogram, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize, repel_border=args.repel_border,
             guide=_guide(args.guide, args), valid=valid, render_options=_render_kwargs(args),
             threads=args.threads, progress=bar, max_memory=args.max_memory,
         ),

@@ -218,8 +218,15 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
             turn, border = branching.course_defaults(source)
             course = branching.course_edges_default(source)
             heading = branching.orientation_default(source, guided=guide is not None)
+            directions = branching.direction_histogram_default(source, guided=guide is not None)
             bend, fur = branching.fit_models(
-                source, h=req.h, n_best=req.n_best, course=course, total_turn=turn, orientation=heading
+                source,
+                h=req.h,
+                n_best=req.n_best,
+                course=course,
+                total_turn=turn,
+                orientation=heading,
+                direction_histogram=directions,
             )
             new = branching.grow(bend, fur, size=shape, seed=req.seed, max_length=req.max_length, guide=guide,
                                  repel_border=border, progress=progress, max_memory=project.max_memory)  # fmt: skip
@@ -233,6 +240,7 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
                 "turn_bound": bend.turn_bound,
                 "repel_border": border,
                 "orientation": heading,
+                "direction_histogram": directions,
             }
             return [outputs.data(out, new.to_json().encode(), command=req.kind, parameters=used,
                                  seed=req.seed, overwrite=req.overwrite)]  # fmt: skip
