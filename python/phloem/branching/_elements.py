@@ -77,6 +77,12 @@ def _bin(values: F64, lo: float, hi: float, bins: int) -> I64:
     return np.clip(np.floor(np.nan_to_num(t)), 0, bins - 1).astype(np.int64)
 
 
+def _edge_headings(points: F64) -> F64:
+    """The heading on the image of every edge of a polyline (radians, counter-clockwise on screen)."""
+    d = np.diff(np.asarray(points, np.float64), axis=0)
+    return np.asarray(np.arctan2(-d[:, 1], d[:, 0]), dtype=np.float64)
+
+
 def _axis_bins(theta: F64, bins: int) -> I64:
     """Bins of headings as axes (a heading and its reverse in one bin) on ``[0, π)``, centred on
     ``0, π / bins, …``: a run along one of the image's axes that jitters stays in one bin."""

@@ -37,6 +37,7 @@ from ._elements import (
     _check_k,
     _check_skeleton,
     _dist_columns,
+    _edge_headings,
     _elements,
     _generations,
     _range,
@@ -511,7 +512,7 @@ class BendingModel:
         if not arc_all.size:
             turn_histogram = 0.0  # no input branch spans the arc: nothing to match
         # every resampled edge is h long: counting edges weights the directions by length
-        axes = np.concatenate([_edge_heading(b.points, np.arange(1, len(b.points))) for b in src.branches])
+        axes = np.concatenate([_edge_headings(b.points) for b in src.branches])
         hist_dir = np.bincount(_axis_bins(axes, bins), minlength=bins) / max(axes.size, 1)
         lengths: dict[int, list[float]] = {}
         for g, b in zip(gens.tolist(), src.branches):

@@ -51,7 +51,7 @@ from .. import _core, _memory
 from .._api import Seed, Size, renamed
 from .._progress import Progress
 from .._validate import as_mask, check_float, check_int, check_seed
-from ._elements import F64, _check_skeleton, _direction, _elements, _tangent, _wrap
+from ._elements import F64, _check_skeleton, _direction, _edge_headings, _elements, _tangent, _wrap
 from ._forest import InputTree, input_trees
 from ._world import _guide_map, _World
 from .bending import BendingModel, block_sums, course_deviation
@@ -951,8 +951,7 @@ def extend(
         rb = b.resample(h)
         a, r = _elements(rb)
         if len(a):
-            d = np.diff(rb.points, axis=0)
-            world.add_elements(a, r, a, np.arctan2(-d[:, 1], d[:, 0]))
+            world.add_elements(a, r, a, _edge_headings(rb.points))
     target = skeleton.branches[bi]
     # resample from the tip backwards so that the tip stays exactly where it is
     tail = Branch(target.points[::-1].copy(), target.thickness[::-1].copy()).resample(h)
