@@ -144,6 +144,25 @@ def test_direction_histogram_default_follows_the_orientation_default():
         branching.direction_histogram_default("not a skeleton")  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize("guided", [False, True])
+@pytest.mark.parametrize("source", ["meanders", "hanging", "zigzag"])
+def test_source_defaults_are_the_four_resolvers_at_once(source, guided):
+    sk = {"meanders": _meanders(4), "hanging": _hanging(5, 1.0), "zigzag": _hanging(5, 12.0)}[source]
+    d = branching.source_defaults(sk, guided=guided)
+    assert (d.total_turn, d.repel_border) == branching.course_defaults(sk)
+    assert d.course == branching.course_edges_default(sk)
+    assert d.orientation == branching.orientation_default(sk, guided=guided)
+    assert d.direction_histogram == branching.direction_histogram_default(sk, guided=guided)
+    # a caller's values are kept, each on its own
+    chosen = {"total_turn": 0.5, "repel_border": True, "course": 12, "orientation": 0.25, "direction_histogram": 2.0}
+    got = branching.source_defaults(sk, guided=guided, **chosen)
+    assert {k: getattr(got, k) for k in chosen} == chosen
+    kept = branching.source_defaults(sk, guided=guided, course=12)
+    assert kept.course == 12 and kept.orientation == d.orientation and kept.total_turn == d.total_turn
+    with pytest.raises(TypeError, match="^skeleton: expected"):
+        branching.source_defaults("not a skeleton")  # type: ignore[arg-type]
+
+
 def test_synthesize_resolves_orientation_from_the_source():
     for jitter, want in ((1.0, 3.0), (12.0, 0.0)):
         sk = _hanging(4, jitter)

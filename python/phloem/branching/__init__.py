@@ -23,12 +23,14 @@ from .furcation import FurcationModel
 from .growth import extend, grow
 from .histograms import angle_histogram, histogram_distance, thickness_histogram
 from .pipeline import (
+    SourceDefaults,
     SynthesisResult,
     course_defaults,
     course_edges_default,
     direction_histogram_default,
     fit_models,
     orientation_default,
+    source_defaults,
     synthesize,
 )
 from .rectify import rectify, unrectify
@@ -45,6 +47,7 @@ __all__ = [
     "RenderResult",
     "Skeleton",
     "SkeletonError",
+    "SourceDefaults",
     "SynthesisResult",
     "angle_histogram",
     "course_defaults",
@@ -62,6 +65,7 @@ __all__ = [
     "rectify",
     "render",
     "rigid_align",
+    "source_defaults",
     "synthesize",
     "synthetic_skeleton",
     "thickness_histogram",

@@ -22,12 +22,14 @@ from .skeleton import Skeleton
 from .trace import trace
 
 __all__ = [
+    "SourceDefaults",
     "SynthesisResult",
     "course_defaults",
     "course_edges_default",
     "direction_histogram_default",
     "fit_models",
     "orientation_default",
+    "source_defaults",
     "synthesize",
 ]
 
@@ -324,6 +326,84 @@ def direction_histogram_default(
     return DIRECTION_HISTOGRAM_WEIGHT if orientation_default(skeleton, guided=guided) > 0 else 0.0
 
 
+@dataclass(frozen=True)
+class SourceDefaults:
+    """The options :func:`synthesize` resolves from its source skeleton (:func:`source_defaults`).
+
+    Attributes
+    ----------
+    total_turn : float
+        For :func:`fit_models` (:func:`course_defaults`).
+    repel_border : bool
+        For :func:`grow` (:func:`course_defaults`).
+    course : int or None
+        For :func:`fit_models` (:func:`course_edges_default`).
+    orientation : float
+        For :func:`fit_models` (:func:`orientation_default`).
+    direction_histogram : float
+        For :func:`fit_models` (:func:`direction_histogram_default`).
+    """
+
+    total_turn: float
+    repel_border: bool
+    course: int | None
+    orientation: float
+    direction_histogram: float
+
+
+def source_defaults(
+    skeleton: Skeleton,
+    *,
+    total_turn: float | None = None,
+    repel_border: bool | None = None,
+    course: int | None = None,
+    orientation: float | None = None,
+    direction_histogram: float | None = None,
+    guided: bool = False,
+) -> SourceDefaults:
+    """Every option that :func:`synthesize` defaults from its source skeleton, resolved at once.
+
+    :func:`synthesize`, ``phloem branching grow`` and the studio's growth all call this, so a
+    skeleton grows the same way from each of them. A value chosen by the caller is kept; those
+    left at None get :func:`course_defaults`' (``total_turn``, ``repel_border``),
+    :func:`course_edges_default`'s, :func:`orientation_default`'s and
+    :func:`direction_histogram_default`'s.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        The example structure.
+    total_turn, repel_border, course, orientation, direction_histogram : optional
+        Values chosen by the caller.
+    guided : bool, optional
+        Whether :func:`grow` is given a ``guide`` (default False): a guide sets the way the new
+        structure runs, so the heading terms stay off.
+
+    Returns
+    -------
+    SourceDefaults
+
+    Examples
+    --------
+    >>> from phloem.branching import Branch, Skeleton
+    >>> d = source_defaults(Skeleton([Branch([[10, 0], [12, 50], [9, 100]], 1.0)]))
+    >>> d.total_turn, d.repel_border, d.course, d.orientation, d.direction_histogram
+    (0.0, False, 0, 3.0, 1.0)
+    >>> source_defaults(Skeleton([Branch([[10, 0], [12, 50], [9, 100]], 1.0)]), guided=True, course=8).course
+    8
+    """
+    turn, border = course_defaults(skeleton, total_turn=total_turn, repel_border=repel_border)
+    return SourceDefaults(
+        total_turn=turn,
+        repel_border=border,
+        course=course_edges_default(skeleton, course=course),
+        orientation=orientation_default(skeleton, orientation=orientation, guided=guided),
+        direction_histogram=direction_histogram_default(
+            skeleton, direction_histogram=direction_histogram, guided=guided
+        ),
+    )
+
+
 @renamed(k="order", c="n_best")
 def synthesize(
     image: Any,
@@ -457,17 +537,15 @@ def synthesize(
     else:
         raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
     tick(1)
-    total_turn, repel_border = course_defaults(source, total_turn=total_turn, repel_border=repel_border)
-    course = course_edges_default(source, course=course)
-    orientation = orientation_default(source, orientation=orientation, guided=guide is not None)
-    direction_histogram = direction_histogram_default(
-        source, direction_histogram=direction_histogram, guided=guide is not None
-    )
+    d = source_defaults(
+        source, total_turn=total_turn, repel_border=repel_border, course=course, orientation=orientation,
+        direction_histogram=direction_histogram, guided=guide is not None,
+    )  # fmt: skip
     if models is None:
         bending, furcation = fit_models(
-            source, h=h, order=order, m=m, n_best=n_best, course=course, coarse_history=coarse_history,
-            total_turn=total_turn, turn_bound=turn_bound, orientation=orientation, turn_histogram=turn_histogram,
-            stem_thickness=stem_thickness, direction_histogram=direction_histogram,
+            source, h=h, order=order, m=m, n_best=n_best, course=d.course, coarse_history=coarse_history,
+            total_turn=d.total_turn, turn_bound=turn_bound, orientation=d.orientation, turn_histogram=turn_histogram,
+            stem_thickness=stem_thickness, direction_histogram=d.direction_histogram,
         )  # fmt: skip
     elif (
         isinstance(models, tuple)
@@ -481,7 +559,7 @@ def synthesize(
     tick(2)
     target = grow(
         bending, furcation, size=shape, seed=seed, generations=generations, max_length=max_length,
-        colonize=colonize, repel_border=repel_border, guide=guide,
+        colonize=colonize, repel_border=d.repel_border, guide=guide,
         domain=None if ok is None else _kept_inside(ok, shape),
     )  # fmt: skip
     tick(3)

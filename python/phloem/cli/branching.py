@@ -96,15 +96,17 @@ def _resolve_models(args: argparse.Namespace, bend: Any) -> None:
 def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> None:
     """``--total-turn``, ``--repel-border``, ``--course``, ``--orientation`` and ``--direction-histogram`` left at
     their defaults, resolved for this example."""
-    args.total_turn, args.repel_border = branching.course_defaults(
-        source, total_turn=args.total_turn, repel_border=args.repel_border
+    d = branching.source_defaults(
+        source,
+        total_turn=args.total_turn,
+        repel_border=args.repel_border,
+        course=args.course,
+        orientation=args.orientation,
+        direction_histogram=args.direction_histogram,
+        guided=getattr(args, "guide", None) is not None,
     )
-    args.course = branching.course_edges_default(source, course=args.course)
-    guided = getattr(args, "guide", None) is not None
-    args.orientation = branching.orientation_default(source, orientation=args.orientation, guided=guided)
-    args.direction_histogram = branching.direction_histogram_default(
-        source, direction_histogram=args.direction_histogram, guided=guided
-    )
+    args.total_turn, args.repel_border, args.course = d.total_turn, d.repel_border, d.course
+    args.orientation, args.direction_histogram = d.orientation, d.direction_histogram
 
 
 def _check_json_target(path: Path, args: argparse.Namespace) -> None:

@@ -215,32 +215,29 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
 
         def grow(progress: Progress) -> list[str]:
             # the same course-keeping defaults as synthesize and the command line
-            turn, border = branching.course_defaults(source)
-            course = branching.course_edges_default(source)
-            heading = branching.orientation_default(source, guided=guide is not None)
-            directions = branching.direction_histogram_default(source, guided=guide is not None)
+            d = branching.source_defaults(source, guided=guide is not None)
             bend, fur = branching.fit_models(
                 source,
                 h=req.h,
                 n_best=req.n_best,
-                course=course,
-                total_turn=turn,
-                orientation=heading,
-                direction_histogram=directions,
+                course=d.course,
+                total_turn=d.total_turn,
+                orientation=d.orientation,
+                direction_histogram=d.direction_histogram,
             )
             new = branching.grow(bend, fur, size=shape, seed=req.seed, max_length=req.max_length, guide=guide,
-                                 repel_border=border, progress=progress, max_memory=project.max_memory)  # fmt: skip
+                                 repel_border=d.repel_border, progress=progress, max_memory=project.max_memory)  # fmt: skip
             assert progress is not None
             progress(1, 1)  # a cancel during the last step writes nothing
             used = {
                 **params,
                 "h": bend.h,
                 "course": bend.course,
-                "total_turn": turn,
+                "total_turn": d.total_turn,
                 "turn_bound": bend.turn_bound,
-                "repel_border": border,
-                "orientation": heading,
-                "direction_histogram": directions,
+                "repel_border": d.repel_border,
+                "orientation": d.orientation,
+                "direction_histogram": d.direction_histogram,
             }
             return [outputs.data(out, new.to_json().encode(), command=req.kind, parameters=used,
                                  seed=req.seed, overwrite=req.overwrite)]  # fmt: skip
