@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import math
 import time
 
 import cv2
@@ -319,6 +320,47 @@ def test_wide_leaves_a_bolt_in_a_glow_as_the_fine_scales_trace_it(seed):
     a, b = trace(img), trace(img, wide=False)
     assert len(a.branches) == len(b.branches) == 3
     assert all(np.array_equal(x.points, y.points) for x, y in zip(a.branches, b.branches, strict=True))
+
+
+def _crack_on(background: np.ndarray) -> tuple[np.ndarray, Skeleton]:
+    """A dark wavy crack 2 px wide drawn across ``background`` (240x320), and its centre line."""
+    x = np.arange(10, 310, dtype=np.float64)
+    pts = np.c_[x, 120 + 30 * np.sin(x / 50)]
+    img = background.astype(np.float32)
+    cv2.polylines(img, [np.round(pts).astype(np.int32)], False, 0.40, 2)
+    return np.clip(img, 0, 1), Skeleton([Branch(pts, 1.0)], (240, 320))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_crack_on_grain_is_traced_without_the_grain(seed):
+    # asphalt-like grain answers the ridge filter everywhere; Otsu's threshold takes it for
+    # structure, the default climbs to where the grain is shed and the crack is left
+    from phloem._ridges import ridge_response
+    from phloem.branching.trace import DEFAULT_SIGMAS, GRAIN_STEP, GRAIN_STEPS, _otsu, _stable_threshold
+    from phloem.metrics import skeleton_agreement
+
+    rng = np.random.default_rng(seed)
+    grain = cv2.GaussianBlur(rng.normal(0, 1, (240, 320)).astype(np.float32), (0, 0), 1.2)
+    img, truth = _crack_on(0.55 + 0.05 * grain / grain.std())
+    resp = ridge_response(img, DEFAULT_SIGMAS, "dark")
+    otsu, t = _otsu(resp), _stable_threshold(resp, 30)
+    steps = math.log(t / otsu) / math.log(GRAIN_STEP)
+    assert 1 <= round(steps) <= GRAIN_STEPS and abs(steps - round(steps)) < 1e-9
+    new = skeleton_agreement(truth, trace(img, kind="dark"))
+    old = skeleton_agreement(truth, trace(img, kind="dark", threshold=otsu))
+    assert new.recall >= 0.95 and new.precision >= 0.8
+    assert old.precision < 0.3  # the grain traced as cracks
+
+
+def test_a_crack_on_a_smooth_surface_keeps_otsus_threshold():
+    from phloem._ridges import ridge_response
+    from phloem.branching.trace import DEFAULT_SIGMAS, _otsu, _stable_threshold
+
+    rng = np.random.default_rng(0)
+    img, _ = _crack_on(0.55 + 0.005 * rng.normal(0, 1, (240, 320)))
+    resp = ridge_response(img, DEFAULT_SIGMAS, "dark")
+    assert _stable_threshold(resp, 30) == _otsu(resp)
+    assert trace(img, kind="dark") == trace(img, kind="dark", threshold=_otsu(resp))
 
 
 def test_a_trunks_foot_is_a_root_candidate_though_its_arms_span_the_tree():

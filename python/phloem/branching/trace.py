@@ -74,6 +74,23 @@ TRUNK_ECCENTRICITY = 0.5
 #: See :data:`TRUNK_ECCENTRICITY`.
 ROOT_THICKER = 1.5
 
+#: The factor by which ``trace``'s default ridge threshold climbs above Otsu's on a grainy
+#: surface (:func:`_stable_threshold`) ...
+GRAIN_STEP = 1.25
+
+#: ... where a first step keeps less than this share of the mask (a structure's keeps 0.71 or
+#: more on every photo measured, asphalt grain 0.4 to 0.65: docs/pipelines/branching/quality.md) ...
+GRAIN_KEEP = 0.65
+
+#: ... until a step keeps at least this share ...
+STABLE_KEEP = 0.75
+
+#: ... and keeps more than this share (a step that keeps less cuts into the structure) ...
+GRAIN_FLOOR = 0.25
+
+#: ... for at most this many steps (about 2.4 times Otsu's threshold).
+GRAIN_STEPS = 4
+
 
 def _filter_reach(sig: tuple[float, ...]) -> int:
     """How far (px) the ridge filter at scales ``sig`` reads: a border within it reads as a ridge."""
@@ -226,6 +243,54 @@ def _hysteresis(resp: F32, low: float, high: float) -> NDArray[np.bool_]:
     strong[lab[resp > high]] = True
     strong[0] = False
     return np.asarray(strong[lab], dtype=np.bool_)
+
+
+def _photo_response(
+    gray: F32, sig: tuple[float, ...], kind: str, valid: NDArray[np.bool_] | None, *, subpixel: bool = False
+) -> F32:
+    """The ridge response ``trace`` thresholds on a photo: 0 within the filter's reach of ``valid``'s border."""
+    resp = ridge_response(gray, sig, kind, subpixel=subpixel)
+    if valid is not None:
+        reach = _filter_reach(sig)
+        kernel = np.ones((reach, reach), np.uint8)
+        inner = cv2.erode(valid.astype(np.uint8), kernel, borderType=cv2.BORDER_REPLICATE).astype(bool)
+        resp = np.where(inner, resp, 0.0).astype(np.float32)
+    return resp
+
+
+def _ridge_mask(resp: F32, t: float) -> NDArray[np.bool_]:
+    """The hysteresis mask of a ridge response at ``threshold = t`` (``trace``'s step 1)."""
+    mask = _hysteresis(resp, 0.5 * t, t)
+    # A ridge mask is ragged: close tiny gaps and round it so the skeleton has fewer spurs.
+    return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)).astype(bool)
+
+
+def _stable_threshold(resp: F32, min_area: int) -> float:
+    """The ridge threshold ``trace`` uses by default: Otsu's, or above it on a grainy surface.
+
+    A structure's ridges stand clear of their surroundings, so a :data:`GRAIN_STEP` times higher
+    threshold keeps most of its mask. A textured surface (asphalt, stone) answers the ridge
+    filter everywhere with a response that falls off smoothly around Otsu's threshold, and the
+    same step sheds its grain by the half. Where the first step keeps less than
+    :data:`GRAIN_KEEP` of the mask, the threshold climbs by that step until one keeps at least
+    :data:`STABLE_KEEP` (at most :data:`GRAIN_STEPS` steps): the level at which what is left
+    no longer melts away, the structure. A step that would keep less than :data:`GRAIN_FLOOR`
+    is not taken: grain sheds about half its mask a step, so one that sheds three quarters
+    cuts into a faint structure itself.
+    """
+    t = _otsu(resp)
+    if not math.isfinite(t):
+        return t
+    area = int(_drop_small(_ridge_mask(resp, t), min_area).sum())
+    for i in range(GRAIN_STEPS):
+        if area == 0:
+            break
+        up = t * GRAIN_STEP
+        kept = int(_drop_small(_ridge_mask(resp, up), min_area).sum())
+        if kept >= (GRAIN_KEEP if i == 0 else STABLE_KEEP) * area or kept < GRAIN_FLOOR * area:
+            break
+        t, area = up, kept
+    return t
 
 
 # -- mask cleaning ---------------------------------------------------------------------------
@@ -433,7 +498,11 @@ def trace(
        bright (dark) ridge minus twice the scale-normalised gradient magnitude (which removes
        the responses beside step edges), maximum over scales; hysteresis thresholding keeps
        the pixels above ``threshold / 2`` that are connected to one above ``threshold``
-       (default: Otsu's threshold of the positive responses). ``"auto"``: a
+       (default: Otsu's threshold of the positive responses, raised on a grainy surface:
+       where 1.25 times that threshold sheds more than a third of the mask, as asphalt's or
+       stone's grain does and a structure's ridges do not, it climbs by that factor until a
+       step keeps three quarters of the mask, for at most four steps and none that keeps
+       under a quarter; see ``docs/pipelines/branching.md``). ``"auto"``: a
        two-valued image is a mask, otherwise the polarity with the stronger 99th-percentile
        response is used. With ``subpixel`` the filter is evaluated on a twice finer grid, so
        that lines a pixel or two wide whose centre falls between pixel centres keep their
@@ -607,16 +676,9 @@ def trace(
     if kind == "mask":
         mask = gray > (0.5 * (lo + hi) if threshold is None else threshold)
     else:
-        resp = ridge_response(gray, sig, kind, subpixel=bool(subpixel))
-        if ok is not None:
-            reach = _filter_reach(sig)
-            kernel = np.ones((reach, reach), np.uint8)
-            inner = cv2.erode(ok.astype(np.uint8), kernel, borderType=cv2.BORDER_REPLICATE).astype(bool)
-            resp = np.where(inner, resp, 0.0)
-        t = _otsu(resp) if threshold is None else threshold
-        mask = _hysteresis(resp, 0.5 * t, t)
-        # A ridge mask is ragged: close tiny gaps and round it so the skeleton has fewer spurs.
-        mask = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)).astype(bool)
+        resp = _photo_response(gray, sig, kind, ok, subpixel=bool(subpixel))
+        t = _stable_threshold(resp, min_area) if threshold is None else threshold
+        mask = _ridge_mask(resp, t)
         if wide:
             wide_px = _wide_structure(gray, sig, kind, ok, min_area, mask)
             mask |= wide_px
