@@ -7,6 +7,7 @@ starts with the parameter's name, so a user knows which argument to fix.
 from __future__ import annotations
 
 import hashlib
+import math
 import numbers
 from typing import Any
 
@@ -137,7 +138,8 @@ def check_float(value: Any, name: str, minimum: float, *, inclusive: bool = True
         raise TypeError(f"{name}: expected a number, got {value!r}")
     v = float(value)
     if not np.isfinite(v) or v < minimum or (not inclusive and v == minimum):
-        raise ValueError(f"{name}: expected a finite value {'>=' if inclusive else '>'} {minimum}, got {value}")
+        bound = "" if minimum == -math.inf else f" {'>=' if inclusive else '>'} {minimum}"
+        raise ValueError(f"{name}: expected a finite value{bound}, got {value}")
     return v
 
 

@@ -275,6 +275,24 @@ def test_branching_trace_switches_reach_trace_and_the_sidecar(tmp_path, monkeypa
     assert seen == [default, not default]
 
 
+def test_branching_trace_threshold_reaches_trace_and_the_sidecar(tmp_path, monkeypatch, capsys):
+    seen = []
+    real = branching.trace
+    monkeypatch.setattr(branching, "trace", lambda *a, **k: seen.append(k.get("threshold")) or real(*a, **k))
+    _dark_river_png(tmp_path / "river.png")
+    for flags in ([], ["--threshold", "0.12"]):
+        out = tmp_path / f"river{len(flags)}.json"
+        assert main(["branching", "trace", str(tmp_path / "river.png"), "--out", str(out), *flags, "-q"]) == 0
+        side = json.loads(io.sidecar_path(out).read_text())["parameters"]
+        assert side["threshold"] == (0.12 if flags else None)
+    assert seen == [None, 0.12]
+    args = ["branching", "trace", str(tmp_path / "river.png"), "--out", str(tmp_path / "x.json"), "-q"]
+    assert main([*args, "--threshold", "nan"]) == 2
+    err = capsys.readouterr().err
+    assert "--threshold: expected a finite value, got nan" in err and len(err.strip().splitlines()) == 1
+    assert not list(tmp_path.glob("x.*"))
+
+
 def test_grow_fits_once_per_skeleton_and_options_in_a_process(tmp_path, monkeypatch):
     # a batch worker grows many seeds of one skeleton: the models are fitted once and shared,
     # and sharing them changes no output

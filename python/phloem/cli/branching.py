@@ -49,6 +49,15 @@ def _trace_options(p: argparse.ArgumentParser) -> None:
         help="trace this channel of a colour image (e.g. 1 = green for retinas; default: luminance)",
     )
     g.add_argument(
+        "--threshold",
+        type=float,
+        default=None,
+        metavar="T",
+        help="ridge-filter response (photos) or level (masks) that counts as structure; default: Otsu's threshold of "
+        "the response, raised on a grainy surface (asphalt) until the grain is shed, and halfway between the image's "
+        "extremes for a mask. Lower it to keep more of a faint structure, grain included",
+    )
+    g.add_argument(
         "--min-length", type=float, default=8.0, help="drop traced branches shorter than this many pixels (default 8)"
     )
     g.add_argument(
@@ -70,6 +79,7 @@ def _trace_kwargs(args: argparse.Namespace) -> dict[str, Any]:
         "kind": args.kind,
         "sigmas": tuple(args.sigmas),
         "channel": args.channel,
+        "threshold": args.threshold,
         "min_length": args.min_length,
         "subpixel": args.subpixel,
         "wide": not args.no_wide,
