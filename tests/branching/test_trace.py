@@ -343,13 +343,33 @@ def test_a_crack_on_grain_is_traced_without_the_grain(seed):
     grain = cv2.GaussianBlur(rng.normal(0, 1, (240, 320)).astype(np.float32), (0, 0), 1.2)
     img, truth = _crack_on(0.55 + 0.05 * grain / grain.std())
     resp = ridge_response(img, DEFAULT_SIGMAS, "dark")
-    otsu, t = _otsu(resp), _stable_threshold(resp, 30)
-    steps = math.log(t / otsu) / math.log(GRAIN_STEP)
+    otsu, (t, climb) = _otsu(resp), _stable_threshold(resp, 30)
+    steps = math.log(climb) / math.log(GRAIN_STEP)
     assert 1 <= round(steps) <= GRAIN_STEPS and abs(steps - round(steps)) < 1e-9
+    assert t == pytest.approx(otsu * climb, rel=1e-12)
     new = skeleton_agreement(truth, trace(img, kind="dark"))
     old = skeleton_agreement(truth, trace(img, kind="dark", threshold=otsu))
     assert new.recall >= 0.95 and new.precision >= 0.8
     assert old.precision < 0.3  # the grain traced as cracks
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_crack_broken_by_grain_is_joined_as_far_as_the_threshold_climbed(seed):
+    # the crack's faint stretches fall below a raised threshold; the default gap grows with it
+    rng = np.random.default_rng(seed)
+    grain = cv2.GaussianBlur(rng.normal(0, 1, (240, 320)).astype(np.float32), (0, 0), 1.2)
+    img = 0.55 + 0.05 * grain / grain.std()
+    x = np.arange(10, 310, dtype=np.float64)
+    pts = np.c_[x, 120 + 30 * np.sin(x / 50)]
+    for a, b in ((0, 85), (95, 190), (200, 300)):  # two breaks of 10 px
+        cv2.polylines(img, [np.round(pts[a:b]).astype(np.int32)], False, 0.40, 2)
+    img = np.clip(img, 0, 1).astype(np.float32)
+
+    def longest(sk: Skeleton) -> float:
+        return max(b.length() for b in sk.branches)
+
+    assert longest(trace(img, kind="dark")) > 200
+    assert longest(trace(img, kind="dark", gap=9.0)) < 120  # the photos' gap before the climb: three pieces
 
 
 def test_a_crack_on_a_smooth_surface_keeps_otsus_threshold():
@@ -359,7 +379,7 @@ def test_a_crack_on_a_smooth_surface_keeps_otsus_threshold():
     rng = np.random.default_rng(0)
     img, _ = _crack_on(0.55 + 0.005 * rng.normal(0, 1, (240, 320)))
     resp = ridge_response(img, DEFAULT_SIGMAS, "dark")
-    assert _stable_threshold(resp, 30) == _otsu(resp)
+    assert _stable_threshold(resp, 30) == (_otsu(resp), 1.0)
     assert trace(img, kind="dark") == trace(img, kind="dark", threshold=_otsu(resp))
 
 

@@ -265,8 +265,8 @@ def _ridge_mask(resp: F32, t: float) -> NDArray[np.bool_]:
     return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)).astype(bool)
 
 
-def _stable_threshold(resp: F32, min_area: int) -> float:
-    """The ridge threshold ``trace`` uses by default: Otsu's, or above it on a grainy surface.
+def _stable_threshold(resp: F32, min_area: int) -> tuple[float, float]:
+    """The ridge threshold ``trace`` uses by default, and the factor by which it climbed above Otsu's.
 
     A structure's ridges stand clear of their surroundings, so a :data:`GRAIN_STEP` times higher
     threshold keeps most of its mask. A textured surface (asphalt, stone) answers the ridge
@@ -280,17 +280,17 @@ def _stable_threshold(resp: F32, min_area: int) -> float:
     """
     t = _otsu(resp)
     if not math.isfinite(t):
-        return t
+        return t, 1.0
     area = int(_drop_small(_ridge_mask(resp, t), min_area).sum())
+    climb = 1.0
     for i in range(GRAIN_STEPS):
         if area == 0:
             break
-        up = t * GRAIN_STEP
-        kept = int(_drop_small(_ridge_mask(resp, up), min_area).sum())
+        kept = int(_drop_small(_ridge_mask(resp, t * climb * GRAIN_STEP), min_area).sum())
         if kept >= (GRAIN_KEEP if i == 0 else STABLE_KEEP) * area or kept < GRAIN_FLOOR * area:
             break
-        t, area = up, kept
-    return t
+        climb, area = climb * GRAIN_STEP, kept
+    return t * climb, climb
 
 
 # -- mask cleaning ---------------------------------------------------------------------------
@@ -572,7 +572,9 @@ def trace(
     gap : float, optional
         Join skeleton ends to another piece up to this far ahead (px; see ``_bridge``):
         ridge filters break vessels where they cross or fork. Default ``2 max(sigmas) + 3`` for
-        photos, 0 (off) for masks.
+        photos, times the factor by which the default threshold climbed on a grainy surface
+        (see 1.: a faint crack breaks where its response dips below the raised threshold), and
+        0 (off) for masks.
     thickness : {"auto", "mask", "gradient"}
         Where the radii come from, see 7.
     valid : (H, W) array_like of bool, optional
@@ -670,6 +672,7 @@ def trace(
 
     if kind == "auto":
         kind = _resolve_kind(gray, sig)  # type: ignore[assignment]
+    auto_gap = gap is None
     if gap is None:
         gap = 0.0 if kind == "mask" else 2.0 * max(sig) + 3.0
     wide_px = np.zeros(shape, np.bool_)
@@ -677,7 +680,13 @@ def trace(
         mask = gray > (0.5 * (lo + hi) if threshold is None else threshold)
     else:
         resp = _photo_response(gray, sig, kind, ok, subpixel=bool(subpixel))
-        t = _stable_threshold(resp, min_area) if threshold is None else threshold
+        if threshold is None:
+            t, climb = _stable_threshold(resp, min_area)
+            if auto_gap:
+                # a structure's faint stretches fall below a raised threshold, so its breaks grow with it
+                gap *= climb
+        else:
+            t = threshold
         mask = _ridge_mask(resp, t)
         if wide:
             wide_px = _wide_structure(gray, sig, kind, ok, min_area, mask)
