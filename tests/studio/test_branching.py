@@ -155,6 +155,16 @@ def test_trace_wide_reaches_trace_and_the_sidecar(client, project, scene, monkey
     assert json.loads((project.root / "fine.sidecar.json").read_text())["parameters"]["wide"] is False
 
 
+def test_trace_threshold_reaches_trace_and_the_sidecar(client, project, scene, monkeypatch):
+    seen = []
+    real = branching.trace
+    monkeypatch.setattr(branching, "trace", lambda *a, **k: seen.append(k.get("threshold")) or real(*a, **k))
+    run_job(client, {"kind": "branching-trace", "image": "photos/channel.png", "out": "auto.json"})
+    run_job(client, {"kind": "branching-trace", "image": "photos/channel.png", "threshold": 0.05, "out": "set.json"})
+    assert seen == [None, 0.05]
+    assert json.loads((project.root / "set.sidecar.json").read_text())["parameters"]["threshold"] == 0.05
+
+
 def test_several_guide_paths_are_a_mask_the_structure_follows(client, project, scene):
     """The page saves two or more guide paths as a mask (PUT /api/mask), which --guide also takes."""
     mask = np.zeros((128, 224), np.uint8)
@@ -188,6 +198,7 @@ def test_several_guide_paths_are_a_mask_the_structure_follows(client, project, s
         ({"kind": "branching-trace", "image": "photos/bar.png", "sigmas": []}, 422, "sigmas"),
         ({"kind": "branching-trace", "image": "photos/bar.png", "subpixel": "maybe"}, 422, "subpixel"),
         ({"kind": "branching-trace", "image": "photos/bar.png", "wide": "maybe"}, 422, "wide"),
+        ({"kind": "branching-trace", "image": "photos/bar.png", "threshold": "high"}, 422, "threshold"),
         ({"kind": "branching-trace", "image": "../bar.png"}, 400, "image:"),
         ({"kind": "branching-grow", "skeleton": "none.json"}, 404, "skeleton: no file"),
         ({"kind": "branching-grow", "skeleton": "channel.json", "guide": "none.json"}, 404, "guide: no file"),

@@ -934,7 +934,9 @@ $("br-upload").onchange = guard(kMsg, async () => {
   say(kMsg, `saved ${saved.path} (${saved.width}×${saved.height})`);
 });
 $("br-trace").onclick = guard(kMsg, async () => {
+  const threshold = $("br-threshold").value.trim();
   const req = { kind: "branching-trace", image: $("br-image").value, trace_kind: $("br-kind").value,
+    threshold: threshold === "" ? null : Number(threshold),
     subpixel: $("br-subpixel").checked, wide: $("br-wide").checked, out: $("br-file").value.trim() };
   const s = await runJobReplacing(req, kUi);
   await loadSkeleton(s.outputs[0]);

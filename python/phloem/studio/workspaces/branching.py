@@ -55,6 +55,12 @@ class BranchingTraceJob(BaseModel):
         [1.0, 2.0, 3.0], min_length=1, max_length=8, description="ridge-filter scales in pixels"
     )
     min_length: float = Field(8.0, ge=0, le=100_000, description="drop traced branches shorter than this (px)")
+    threshold: float | None = Field(
+        None,
+        allow_inf_nan=False,
+        description="ridge-filter response that counts as structure (the CLI's --threshold); default Otsu's, "
+        "raised on a grainy surface until the grain is shed",
+    )
     subpixel: bool = Field(
         False,
         description="evaluate the ridge filter on a twice finer grid: thin lines in a glow (lightning) are traced "
@@ -196,8 +202,8 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
             progress(0, 1)
             valid = branching.valid_region(img)
             sk = branching.trace(img, kind=req.trace_kind, sigmas=tuple(req.sigmas), min_length=req.min_length,
-                                 valid=None if valid.all() else valid, subpixel=req.subpixel,
-                                 wide=req.wide)  # fmt: skip
+                                 threshold=req.threshold, valid=None if valid.all() else valid,
+                                 subpixel=req.subpixel, wide=req.wide)  # fmt: skip
             progress(1, 1)
             return [outputs.data(out, sk.to_json().encode(), command=req.kind, parameters=params, seed=None,
                                  overwrite=req.overwrite)]  # fmt: skip
