@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import itertools
-import math
 import time
 
 import cv2
@@ -336,17 +335,21 @@ def test_a_crack_on_grain_is_traced_without_the_grain(seed):
     # asphalt-like grain answers the ridge filter everywhere; Otsu's threshold takes it for
     # structure, the default climbs to where the grain is shed and the crack is left
     from phloem._ridges import ridge_response
-    from phloem.branching.trace import DEFAULT_SIGMAS, GRAIN_STEP, GRAIN_STEPS, _otsu, _stable_threshold
+    from phloem.branching.trace import DEFAULT_SIGMAS, _otsu, _ridge_mask, _stable_threshold
     from phloem.metrics import skeleton_agreement
 
     rng = np.random.default_rng(seed)
     grain = cv2.GaussianBlur(rng.normal(0, 1, (240, 320)).astype(np.float32), (0, 0), 1.2)
     img, truth = _crack_on(0.55 + 0.05 * grain / grain.std())
     resp = ridge_response(img, DEFAULT_SIGMAS, "dark")
-    otsu, (t, climb) = _otsu(resp), _stable_threshold(resp, 30)
-    steps = math.log(climb) / math.log(GRAIN_STEP)
-    assert 1 <= round(steps) <= GRAIN_STEPS and abs(steps - round(steps)) < 1e-9
-    assert t == pytest.approx(otsu * climb, rel=1e-12)
+    otsu, (t, climb, mask) = _otsu(resp), _stable_threshold(resp, 30)
+    assert climb > 1.0 and t > otsu
+    assert np.array_equal(mask, _ridge_mask(resp, t))
+    # the climb sheds most of the grain's mask and keeps the crack's
+    assert mask.sum() < 0.5 * _ridge_mask(resp, otsu).sum()
+    near = cv2.dilate(mask.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    px = np.round(truth.branches[0].points).astype(int)
+    assert near[px[:, 1], px[:, 0]].mean() >= 0.95
     new = skeleton_agreement(truth, trace(img, kind="dark"))
     old = skeleton_agreement(truth, trace(img, kind="dark", threshold=otsu))
     assert new.recall >= 0.95 and new.precision >= 0.8
@@ -374,12 +377,13 @@ def test_a_crack_broken_by_grain_is_joined_as_far_as_the_threshold_climbed(seed)
 
 def test_a_crack_on_a_smooth_surface_keeps_otsus_threshold():
     from phloem._ridges import ridge_response
-    from phloem.branching.trace import DEFAULT_SIGMAS, _otsu, _stable_threshold
+    from phloem.branching.trace import DEFAULT_SIGMAS, _otsu, _ridge_mask, _stable_threshold
 
     rng = np.random.default_rng(0)
     img, _ = _crack_on(0.55 + 0.005 * rng.normal(0, 1, (240, 320)))
     resp = ridge_response(img, DEFAULT_SIGMAS, "dark")
-    assert _stable_threshold(resp, 30) == (_otsu(resp), 1.0)
+    t, climb, mask = _stable_threshold(resp, 30)
+    assert (t, climb) == (_otsu(resp), 1.0) and np.array_equal(mask, _ridge_mask(resp, t))
     assert trace(img, kind="dark") == trace(img, kind="dark", threshold=_otsu(resp))
 
 

@@ -78,8 +78,8 @@ ROOT_THICKER = 1.5
 #: surface (:func:`_stable_threshold`) ...
 GRAIN_STEP = 1.25
 
-#: ... where a first step keeps less than this share of the mask (a structure's keeps 0.71 or
-#: more on every photo measured, asphalt grain 0.4 to 0.65: docs/pipelines/branching/quality.md) ...
+#: ... where a first step keeps less than this share of the mask (between grain's and a
+#: structure's shares: docs/pipelines/branching/quality.md) ...
 GRAIN_KEEP = 0.65
 
 #: ... until a step keeps at least this share ...
@@ -265,8 +265,9 @@ def _ridge_mask(resp: F32, t: float) -> NDArray[np.bool_]:
     return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)).astype(bool)
 
 
-def _stable_threshold(resp: F32, min_area: int) -> tuple[float, float]:
-    """The ridge threshold ``trace`` uses by default, and the factor by which it climbed above Otsu's.
+def _stable_threshold(resp: F32, min_area: int) -> tuple[float, float, NDArray[np.bool_]]:
+    """The ridge threshold ``trace`` uses by default, the factor by which it climbed above
+    Otsu's, and its :func:`_ridge_mask`.
 
     A structure's ridges stand clear of their surroundings, so a :data:`GRAIN_STEP` times higher
     threshold keeps most of its mask. A textured surface (asphalt, stone) answers the ridge
@@ -279,18 +280,20 @@ def _stable_threshold(resp: F32, min_area: int) -> tuple[float, float]:
     cuts into a faint structure itself.
     """
     t = _otsu(resp)
+    mask = _ridge_mask(resp, t)
     if not math.isfinite(t):
-        return t, 1.0
-    area = int(_drop_small(_ridge_mask(resp, t), min_area).sum())
+        return t, 1.0, mask
+    area = int(_drop_small(mask, min_area).sum())
     climb = 1.0
     for i in range(GRAIN_STEPS):
         if area == 0:
             break
-        kept = int(_drop_small(_ridge_mask(resp, t * climb * GRAIN_STEP), min_area).sum())
+        up = _ridge_mask(resp, t * climb * GRAIN_STEP)
+        kept = int(_drop_small(up, min_area).sum())
         if kept >= (GRAIN_KEEP if i == 0 else STABLE_KEEP) * area or kept < GRAIN_FLOOR * area:
             break
-        climb, area = climb * GRAIN_STEP, kept
-    return t * climb, climb
+        climb, area, mask = climb * GRAIN_STEP, kept, up
+    return t * climb, climb, mask
 
 
 # -- mask cleaning ---------------------------------------------------------------------------
@@ -681,13 +684,12 @@ def trace(
     else:
         resp = _photo_response(gray, sig, kind, ok, subpixel=bool(subpixel))
         if threshold is None:
-            t, climb = _stable_threshold(resp, min_area)
+            _, climb, mask = _stable_threshold(resp, min_area)
             if auto_gap:
                 # a structure's faint stretches fall below a raised threshold, so its breaks grow with it
                 gap *= climb
         else:
-            t = threshold
-        mask = _ridge_mask(resp, t)
+            mask = _ridge_mask(resp, threshold)
         if wide:
             wide_px = _wide_structure(gray, sig, kind, ok, min_area, mask)
             mask |= wide_px
