@@ -2,6 +2,7 @@
 
     python benches/quality/branching_trace_truth.py [--crackforest REPO] [--deepcrack REPO]
         [--crack500 REPO] [--drive REPO] [--chase REPO] [--every N]
+        [--fractions F ...] [--kinds bright|dark ...]
 
 Public segmentation datasets pair photos of cracks and retinas with masks drawn by hand. Each
 photo is traced with ``trace``'s defaults (``valid`` from ``valid_region``, as ``synthesize``
@@ -10,23 +11,35 @@ the grain rule, ``docs/pipelines/branching.md``); each mask is traced with ``kin
 the two skeletons are scored by ``phloem.metrics.skeleton_agreement`` (precision: traced
 points near the drawn structure; recall: drawn points near the trace). Each ``REPO`` is a clone
 (a bare one will do) of the repository named below, read at its commit with ``git show``;
-nothing is written. ``--every N`` scores every N-th pair.
+nothing is written. ``--every N`` scores every N-th pair. ``--fractions`` also scores the trace
+at those fractions of the default threshold (with the default gap), ``--kinds`` with that
+polarity forced; each row counts the photos it scores better or worse than the default.
 """
 
 from __future__ import annotations
 
 import argparse
+import inspect
 import io
 import subprocess
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from PIL import Image
 from scipy.io import loadmat
 
 from phloem.branching import trace, valid_region
-from phloem.branching.trace import DEFAULT_SIGMAS, _gray, _otsu, _photo_response, _resolve_kind
+from phloem.branching.trace import (
+    DEFAULT_SIGMAS,
+    _default_gap,
+    _gray,
+    _otsu,
+    _photo_response,
+    _resolve_kind,
+    _stable_threshold,
+)
 from phloem.metrics import skeleton_agreement
 
 # name: (repository, commit, description)
@@ -90,28 +103,49 @@ def pairs(name: str, repo: Path) -> Iterator[tuple[str, np.ndarray, np.ndarray]]
                 yield Path(p).stem, _image(show(p)), _mask(show(p[:-4] + "_1stHO.png"))
 
 
-def otsu_threshold(img: np.ndarray, valid: np.ndarray | None) -> float:
-    """Otsu's threshold of the ridge response ``trace`` computes for ``img`` with its defaults."""
+MIN_AREA = inspect.signature(trace).parameters["min_area"].default
+
+
+def thresholds(img: np.ndarray, valid: np.ndarray | None) -> tuple[float, float, float]:
+    """Otsu's threshold of the ridge response ``trace`` computes for ``img`` with its defaults,
+    the default threshold (the grain rule's) and its default gap."""
     gray = _gray(img, None)
-    return _otsu(_photo_response(gray, DEFAULT_SIGMAS, _resolve_kind(gray, DEFAULT_SIGMAS), valid))
+    kind = _resolve_kind(gray, DEFAULT_SIGMAS)
+    resp = _photo_response(gray, DEFAULT_SIGMAS, kind, valid)
+    t, climb, _ = _stable_threshold(resp, MIN_AREA)
+    return _otsu(resp), t, _default_gap(DEFAULT_SIGMAS, kind) * climb
 
 
-def score(img: np.ndarray, drawn: np.ndarray) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
-    """``(precision, recall, F1)`` of the default trace and of Otsu's threshold; None: nothing drawn."""
+def variants(fractions: Sequence[float], kinds: Sequence[str]) -> list[str]:
+    """The names of the traces scored per photo: the default, Otsu's threshold, then ``fractions``
+    of the default threshold (with the default gap) and ``kinds`` forced."""
+    return ["default", "Otsu's threshold", *(f"{f:g} x default threshold" for f in fractions)] + [
+        f"kind={k}" for k in kinds
+    ]
+
+
+def score(
+    img: np.ndarray, drawn: np.ndarray, fractions: Sequence[float] = (), kinds: Sequence[str] = ()
+) -> list[tuple[float, float, float]] | None:
+    """``(precision, recall, F1)`` of each of :func:`variants`' traces; None: nothing drawn."""
     try:
         truth = trace(drawn, kind="mask")
     except ValueError:  # an empty or all-structure mask
         return None
     ok = valid_region(img)
     valid = None if ok.all() else ok
+    otsu, t, gap = thresholds(img, valid)
+    options: list[dict[str, Any]] = [{}, {"threshold": otsu}]
+    options += [{"threshold": f * t, "gap": gap} for f in fractions]
+    options += [{"kind": k} for k in kinds]
     out = []
-    for threshold in (None, otsu_threshold(img, valid)):
+    for opts in options:
         try:
-            a = skeleton_agreement(truth, trace(img, valid=valid, threshold=threshold))
+            a = skeleton_agreement(truth, trace(img, valid=valid, **opts))
             out.append((a.precision, a.recall, a.f1))
         except ValueError:  # nothing traced
             out.append((0.0, 0.0, 0.0))
-    return out[0], out[1]
+    return out
 
 
 def main() -> None:
@@ -119,26 +153,37 @@ def main() -> None:
     for name, (repo, commit, what) in SOURCES.items():
         ap.add_argument(f"--{name}", type=Path, help=f"clone of github.com/{repo} (read at {commit}): {what}")
     ap.add_argument("--every", type=int, default=1, help="score every N-th pair (default 1: all)")
+    ap.add_argument(
+        "--fractions", type=float, nargs="+", default=[], help="also trace at these fractions of the default threshold"
+    )
+    ap.add_argument(
+        "--kinds", choices=("bright", "dark"), nargs="+", default=[], help="also trace with this ridge polarity forced"
+    )
     args = ap.parse_args()
-    print("| dataset | pairs | default P / R / F1 | Otsu's threshold P / R / F1 | F1 >= 0.8 (Otsu) | F1 +/- 0.05 |")
+    names = variants(args.fractions, args.kinds)
+    print("| dataset | pairs | trace | P / R / F1 | F1 >= 0.8 | F1 vs the default's, +/- 0.05 |")
     print("|---|---|---|---|---|---|")
     for name in SOURCES:
         repo = getattr(args, name)
         if repo is None:
             continue
         rows = [
-            s for i, (_, img, drawn) in enumerate(pairs(name, repo)) if i % args.every == 0 and (s := score(img, drawn))
+            s
+            for i, (_, img, drawn) in enumerate(pairs(name, repo))
+            if i % args.every == 0 and (s := score(img, drawn, args.fractions, args.kinds))
         ]
         if not rows:
             continue
-        r = np.asarray(rows)  # (pairs, [default, otsu], [P, R, F1])
-        d, o = r[:, 0].mean(0), r[:, 1].mean(0)
-        better, worse = int((r[:, 0, 2] > r[:, 1, 2] + 0.05).sum()), int((r[:, 0, 2] < r[:, 1, 2] - 0.05).sum())
-        print(
-            f"| {name} | {len(r)} | {d[0]:.3f} / {d[1]:.3f} / {d[2]:.3f} | {o[0]:.3f} / {o[1]:.3f} / {o[2]:.3f} "
-            f"| {int((r[:, 0, 2] >= 0.8).sum())} ({int((r[:, 1, 2] >= 0.8).sum())}) | +{better} / -{worse} |",
-            flush=True,
-        )
+        r = np.asarray(rows)  # (pairs, variants, [P, R, F1])
+        for j, label in enumerate(names):
+            m = r[:, j].mean(0)
+            better = int((r[:, j, 2] > r[:, 0, 2] + 0.05).sum())
+            worse = int((r[:, j, 2] < r[:, 0, 2] - 0.05).sum())
+            print(
+                f"| {name} | {len(r)} | {label} | {m[0]:.3f} / {m[1]:.3f} / {m[2]:.3f} "
+                f"| {int((r[:, j, 2] >= 0.8).sum())} | {'' if j == 0 else f'+{better} / -{worse}'} |",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

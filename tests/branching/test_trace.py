@@ -356,17 +356,22 @@ def test_a_crack_on_grain_is_traced_without_the_grain(seed):
     assert old.precision < 0.3  # the grain traced as cracks
 
 
-@pytest.mark.parametrize("seed", range(5))
-def test_a_crack_broken_by_grain_is_joined_as_far_as_the_threshold_climbed(seed):
-    # the crack's faint stretches fall below a raised threshold; the default gap grows with it
+def _broken_crack_on_grain(seed: int) -> tuple[np.ndarray, Skeleton]:
+    """:func:`_crack_on`'s crack with two 10-px breaks, on grain, and its whole centre line."""
     rng = np.random.default_rng(seed)
     grain = cv2.GaussianBlur(rng.normal(0, 1, (240, 320)).astype(np.float32), (0, 0), 1.2)
     img = 0.55 + 0.05 * grain / grain.std()
     x = np.arange(10, 310, dtype=np.float64)
     pts = np.c_[x, 120 + 30 * np.sin(x / 50)]
-    for a, b in ((0, 85), (95, 190), (200, 300)):  # two breaks of 10 px
+    for a, b in ((0, 85), (95, 190), (200, 300)):
         cv2.polylines(img, [np.round(pts[a:b]).astype(np.int32)], False, 0.40, 2)
-    img = np.clip(img, 0, 1).astype(np.float32)
+    return np.clip(img, 0, 1).astype(np.float32), Skeleton([Branch(pts, 1.0)], (240, 320))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_crack_broken_by_grain_is_joined_as_far_as_the_threshold_climbed(seed):
+    # the crack's faint stretches fall below a raised threshold; the default gap grows with it
+    img, _ = _broken_crack_on_grain(seed)
 
     def longest(sk: Skeleton) -> float:
         return max(b.length() for b in sk.branches)
@@ -385,6 +390,30 @@ def test_a_crack_on_a_smooth_surface_keeps_otsus_threshold():
     t, climb, mask = _stable_threshold(resp, 30)
     assert (t, climb) == (_otsu(resp), 1.0) and np.array_equal(mask, _ridge_mask(resp, t))
     assert trace(img, kind="dark") == trace(img, kind="dark", threshold=_otsu(resp))
+
+
+def test_the_truth_bench_rescores_the_default_trace_at_one_times_its_threshold():
+    # benches/quality/branching_trace_truth.py passes the default threshold and gap explicitly
+    # for its --fractions; at 1x they must give the default trace, or its rows compare unlike
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "benches" / "quality" / "branching_trace_truth.py"
+    spec = importlib.util.spec_from_file_location("_branching_trace_truth", path)
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+
+    img, truth = _broken_crack_on_grain(0)  # a climb, so the gap grows and joins the breaks
+    drawn = truth.mask()
+    rows = bench.score(img, drawn, fractions=(1.0, 0.5), kinds=("dark", "bright"))
+    names = bench.variants((1.0, 0.5), ("dark", "bright"))
+    assert len(rows) == len(names) == 6
+    default, otsu, one, half, dark, bright = rows
+    assert one == default and dark == default  # auto resolves this crack to dark
+    assert default[0] >= 0.8 and otsu[0] < 0.3  # precision: the grain rule's climb against Otsu's
+    assert half[0] < default[0] and bright[2] < 0.3
+    assert bench.score(img, np.zeros_like(drawn)) is None  # nothing drawn
 
 
 def test_a_trunks_foot_is_a_root_candidate_though_its_arms_span_the_tree():

@@ -467,6 +467,11 @@ def _smooth_path(pts: F64, sigma: float) -> F64:
     return np.asarray(sm, dtype=np.float64)
 
 
+def _default_gap(sig: tuple[float, ...], kind: str) -> float:
+    """``trace``'s default bridging gap at Otsu's threshold: none for a mask, else the filter's reach."""
+    return 0.0 if kind == "mask" else 2.0 * max(sig) + 3.0
+
+
 def _resolve_kind(gray: F32, sigmas: tuple[float, ...]) -> str:
     """What ``kind="auto"`` means for a gray image: a two-valued image is a mask, otherwise the
     polarity with the stronger ridge response at ``sigmas``."""
@@ -677,7 +682,7 @@ def trace(
         kind = _resolve_kind(gray, sig)  # type: ignore[assignment]
     auto_gap = gap is None
     if gap is None:
-        gap = 0.0 if kind == "mask" else 2.0 * max(sig) + 3.0
+        gap = _default_gap(sig, kind)
     wide_px = np.zeros(shape, np.bool_)
     if kind == "mask":
         mask = gray > (0.5 * (lo + hi) if threshold is None else threshold)
