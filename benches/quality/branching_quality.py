@@ -36,6 +36,9 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
 - the share of the input's background grain that the output's completed gaps keep
   (``background_grain`` of output over input, not a pass mark: a fill that settled on a few
   smooth background patches);
+- the repetition of the input's and the output's fine grain (``phloem.metrics.repetition`` of
+  the image less a Gaussian blur of ``REPETITION_DETAIL`` px, not a pass mark: a fill that
+  copies one small patch over and over, a lattice on asphalt);
 - two-level fraction of the output (two-level inputs only);
 - the angle and thickness histogram distances of the output to the input's model, with the
   spread between the input's two halves that the growth tests bound them by (1.5× and 1×);
@@ -88,6 +91,7 @@ from phloem.metrics import (
     median_heading_change,
     orientation_distance,
     parent_turns,
+    repetition,
     sibling_order,
     skeleton_agreement,
     start_turns,
@@ -98,6 +102,8 @@ from phloem.testing import TRACE_SETTINGS, input_halves, shared_path
 
 SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
 F1_MIN, SHARE_TOL, DRIFT_MAX, TWO_LEVEL_MIN = 0.8, 0.15, 0.25, 0.98
+#: The Gaussian (px) whose blur ``repetition`` takes off: a photo's grain, not its lighting.
+REPETITION_DETAIL = 4.0
 
 
 @dataclass
@@ -133,6 +139,8 @@ class Result:
     contrast_out: float = math.nan
     grain_in: float = math.nan
     grain_out: float = math.nan
+    repetition_in: float = math.nan
+    repetition_out: float = math.nan
     two_level: float | None = None
     angle: float = math.nan
     angle_spread: float = math.nan
@@ -251,6 +259,10 @@ def measure(
         ok = valid_region(img)
         r.grain_in = background_grain(img, src, valid=None if ok.all() else ok)
         r.grain_out = background_grain(res.image, tgt, valid=retrace_options(img, res.image, trace_options)["valid"])
+    # nor this: whether the fine grain repeats (the fill's one patch copied in a lattice)
+    with contextlib.suppress(ValueError):  # an image under twice min_shift a side
+        r.repetition_in = repetition(img, detail=REPETITION_DETAIL)
+        r.repetition_out = repetition(res.image, detail=REPETITION_DETAIL)
     for attr, sk in (("heading_in", src), ("heading_out", tgt)):
         with contextlib.suppress(ValueError):
             setattr(r, attr, median_heading_change(sk))
@@ -315,7 +327,7 @@ def _f(x: float | None, fmt: str = ".2f") -> str:
 def table(results: list[Result]) -> str:
     head = (
         "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input's noise) | heading in → out (rad) "
-        "| along the frame in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | parent's turn at children in → out | directions L1 (input's concentration) | contrast in → out (kept) | grain kept | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
+        "| along the frame in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | parent's turn at children in → out | directions L1 (input's concentration) | contrast in → out (kept) | grain kept | grain repetition in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for r in results:
@@ -327,7 +339,7 @@ def table(results: list[Result]) -> str:
         lines.append(
             f"| {r.input} | {r.seed} | {size} | {_f(r.f1)} ({_f(r.precision)}/{_f(r.recall)}) "
             f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} ({_f(r.drift_noise)}) | {_f(r.heading_in)} → {_f(r.heading_out)} "
-            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.parent_turn_in)} → {_f(r.parent_turn_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
+            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.parent_turn_in)} → {_f(r.parent_turn_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {_f(r.repetition_in)} → {_f(r.repetition_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
             f"| {_f(r.seconds, '.1f')} | {fails} |"
         )
     return "\n".join(lines)

@@ -30,6 +30,7 @@ from __future__ import annotations
 import numbers
 from typing import Any, Literal
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -38,7 +39,7 @@ from . import patch as _patch
 from . import shapes as _shapes
 from ._api import Seed
 from ._color import check_denoise, denoised_lab, rgb8
-from ._validate import as_image, as_mask, check_patch_size
+from ._validate import as_image, as_mask, check_float, check_patch_size
 from .branching.histograms import angle_histogram, histogram_distance, thickness_histogram
 from .branching.measures import (
     Agreement,
@@ -177,7 +178,7 @@ def patch_coherence(image: Any, exemplar: Any, **kwargs: Any) -> float:
     return float(np.nanmean(coherence_map(image, exemplar, **kwargs)))
 
 
-def repetition(image: Any, *, min_shift: int = 16) -> float:
+def repetition(image: Any, *, min_shift: int = 16, detail: float | None = None) -> float:
     """Strongest self-similarity of ``image`` at shifts of at least ``min_shift`` pixels.
 
     The maximum, over all shifts ``(dy, dx)`` with ``max(|dy|, |dx|) >= min_shift``, of the
@@ -193,6 +194,11 @@ def repetition(image: Any, *, min_shift: int = 16) -> float:
     min_shift : int, optional
         Shifts closer than this are ignored (default 16), since every image resembles itself
         shifted by a pixel.
+    detail : float, optional
+        Measure the image's fine grain only: the gray image less its Gaussian blur of this
+        sigma (px). A photo's lighting and large shapes resemble themselves over long shifts
+        and outweigh a grain that repeats; a fill that copies one small patch over and over
+        shows here (default: the whole image).
 
     Returns
     -------
@@ -207,6 +213,9 @@ def repetition(image: Any, *, min_shift: int = 16) -> float:
     1.0
     """
     g = as_image(image, "image").mean(axis=2).astype(np.float64)
+    if detail is not None:
+        sigma = check_float(detail, "detail", 0.0, inclusive=False)
+        g -= cv2.GaussianBlur(g, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
     h, w = g.shape
     m = int(min_shift)
     if m < 1 or m >= max(h, w) // 2:
