@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import inspect
 import io
+import math
 import subprocess
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -106,12 +107,14 @@ def pairs(name: str, repo: Path) -> Iterator[tuple[str, np.ndarray, np.ndarray]]
 MIN_AREA = inspect.signature(trace).parameters["min_area"].default
 
 
-def thresholds(img: np.ndarray, valid: np.ndarray | None) -> tuple[float, float, float]:
+def thresholds(img: np.ndarray, valid: np.ndarray | None, *, default: bool) -> tuple[float, float, float]:
     """Otsu's threshold of the ridge response ``trace`` computes for ``img`` with its defaults,
-    the default threshold (the grain rule's) and its default gap."""
+    and with ``default`` the default threshold (the grain rule's) and its default gap (else NaN)."""
     gray = _gray(img, None)
     kind = _resolve_kind(gray, DEFAULT_SIGMAS)
     resp = _photo_response(gray, DEFAULT_SIGMAS, kind, valid)
+    if not default:  # the grain rule's climb costs a few more masks; only the fractions need it
+        return _otsu(resp), math.nan, math.nan
     t, climb, _ = _stable_threshold(resp, MIN_AREA)
     return _otsu(resp), t, _default_gap(DEFAULT_SIGMAS, kind) * climb
 
@@ -134,7 +137,7 @@ def score(
         return None
     ok = valid_region(img)
     valid = None if ok.all() else ok
-    otsu, t, gap = thresholds(img, valid)
+    otsu, t, gap = thresholds(img, valid, default=bool(fractions))
     options: list[dict[str, Any]] = [{}, {"threshold": otsu}]
     options += [{"threshold": f * t, "gap": gap} for f in fractions]
     options += [{"kind": k} for k in kinds]
