@@ -203,3 +203,45 @@ def test_the_output_keeps_the_input_s_frame_and_grows_inside_it():
     assert np.all(big.image[:36] == 0.0) and float(big.image[60:-60, 60:-60].mean()) > 0.5
     free = branching.synthesize(img, trace_options={"kind": "dark", "sigmas": (1.5, 2.5)}, seed=1, valid=None)
     assert not np.array_equal(free.image[~ok], img[~ok])
+
+
+def _growth_bench():
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "benches" / "quality" / "branching_growth_drift.py"
+    spec = importlib.util.spec_from_file_location("_branching_growth_drift", path)
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = bench  # its dataclass looks its module up by name
+    spec.loader.exec_module(bench)
+    return bench
+
+
+@pytest.mark.parametrize("framed", [False, True])
+@pytest.mark.parametrize(
+    "options", [{}, {"n_best": 4, "turn_histogram": 10.0}, {"total_turn": 2.0, "course": 0}, {"repel_border": True}]
+)
+def test_the_growth_bench_grows_what_synthesize_grows(options, framed):
+    # benches/quality/branching_growth_drift.py skips the rendering; its skeletons must be
+    # synthesize's targets, or its drift tables measure something no user gets
+    img = _river()
+    if framed:  # a flat frame round the picture: the trace's valid region and growth's domain
+        img = np.pad(img, 12, constant_values=0.0)
+    bench = _growth_bench()
+    source, grown, _ = bench.grown(img, [1, 2], options)
+    for seed, target in zip([1, 2], grown):
+        res = branching.synthesize(img, seed=seed, **options)
+        assert res.source == source and res.target == target
+    row = bench.measure("river", img, [1, 2], options)
+    assert len(row.drifts) == len(row.shares) == 2 and 0 <= row.histograms <= 2
+
+
+def test_the_growth_bench_reads_its_overrides():
+    bench = _growth_bench()
+    got = bench.parse_set(["course=0", "turn_histogram=6.5", "colonize=false", "generations=none", "max_length=input"])
+    assert got == {"course": 0, "turn_histogram": 6.5, "colonize": False, "generations": None, "max_length": "input"}
+    for bad in ("foo=1", "course", "=3"):
+        with pytest.raises(SystemExit, match="^--set: "):
+            bench.parse_set([bad])
