@@ -163,7 +163,9 @@ def test_arc_delta_is_the_papers_delta_on_the_heading_change_histogram(walk_bran
     ca, cr = 10.0 * model.hist_alpha, 10.0 * model.hist_r
     tail = rng.normal(0, 0.4, 20)
     extra = model.log_quality(alpha, r, ca, cr, arc_tail=tail, counts_arc=counts) - model.log_quality(alpha, r, ca, cr)
-    np.testing.assert_allclose(extra, model.omega_g * 3.0 * model.arc_delta(tail, counts) * counts.sum() / 4, rtol=1e-9)
+    np.testing.assert_allclose(
+        extra, model.omega_g * model.turn_histogram * model.arc_delta(tail, counts) * counts.sum() / 4, rtol=1e-9
+    )
 
 
 def test_direction_delta_is_the_papers_delta_on_the_direction_histogram(walk_branch: Callable[..., Branch]):

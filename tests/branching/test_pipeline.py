@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from phloem import branching
+from phloem.branching.bending import TURN_HISTOGRAM
+from phloem.branching.pipeline import GUIDED_TURN_HISTOGRAM, N_BEST
 
 
 def _river() -> np.ndarray:
@@ -153,8 +155,14 @@ def test_source_defaults_are_the_four_resolvers_at_once(source, guided):
     assert d.course == branching.course_edges_default(sk)
     assert d.orientation == branching.orientation_default(sk, guided=guided)
     assert d.direction_histogram == branching.direction_histogram_default(sk, guided=guided)
+    # a guide's path sets the turns: the heading-change histogram steps back to its weaker weight
+    assert (
+        d.turn_histogram == (GUIDED_TURN_HISTOGRAM if guided else TURN_HISTOGRAM)
+        and GUIDED_TURN_HISTOGRAM < TURN_HISTOGRAM
+    )
     # a caller's values are kept, each on its own
-    chosen = {"total_turn": 0.5, "repel_border": True, "course": 12, "orientation": 0.25, "direction_histogram": 2.0}
+    chosen = {"total_turn": 0.5, "repel_border": True, "course": 12, "orientation": 0.25, "direction_histogram": 2.0,
+              "turn_histogram": 7.0}  # fmt: skip
     got = branching.source_defaults(sk, guided=guided, **chosen)
     assert {k: getattr(got, k) for k in chosen} == chosen
     kept = branching.source_defaults(sk, guided=guided, course=12)
@@ -179,6 +187,9 @@ def test_synthesize_resolves_orientation_from_the_source():
     # a guide sets the way the new structure runs (§4.5)
     guided = branching.synthesize(img, _hanging(4, 1.0), seed=2, guide=np.array([[10.0, 100.0], [110.0, 100.0]]))
     assert guided.bending.orientation == 0.0 and guided.bending.direction_histogram == 0.0
+    # and its path sets the turns: the heading-change histogram steps back; both draw from N_BEST
+    assert guided.bending.turn_histogram == GUIDED_TURN_HISTOGRAM and auto.bending.turn_histogram == TURN_HISTOGRAM
+    assert guided.bending.c == auto.bending.c == N_BEST
     alone = branching.synthesize(img, _hanging(4, 1.0), seed=2, direction_histogram=0.0)
     assert alone.bending.orientation == 3.0 and alone.bending.direction_histogram == 0.0
     assert alone.target != branching.synthesize(img, _hanging(4, 1.0), seed=2).target

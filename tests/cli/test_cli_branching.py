@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from phloem import branching, io
+from phloem.branching.bending import TURN_HISTOGRAM
 from phloem.cli import main
 
 
@@ -214,7 +215,7 @@ def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
     assert grown["--repel-border"] != grown["--no-repel-border"]
     assert grown["--turn-histogram 0"] != grown["32"]
     sidecar = {k: json.loads(io.sidecar_path(v).read_text())["parameters"] for k, v in outs.items()}
-    assert sidecar["--turn-histogram 0"]["turn_histogram"] == 0.0 and sidecar["32"]["turn_histogram"] == 3.0
+    assert sidecar["--turn-histogram 0"]["turn_histogram"] == 0.0 and sidecar["32"]["turn_histogram"] == TURN_HISTOGRAM
     assert grown["--stem-thickness 0"] != grown["32"]
     assert sidecar["--stem-thickness 0"]["stem_thickness"] == 0.0 and sidecar["32"]["stem_thickness"] == 5.0
     assert sidecar["--total-turn 4"]["total_turn"] == 4.0

@@ -48,6 +48,7 @@ __all__ = [
     "ARC",
     "STEM_THICKNESS",
     "TURN_BOUND",
+    "TURN_HISTOGRAM",
     "BendingModel",
     "arc_window_turns",
     "block_sums",
@@ -64,6 +65,10 @@ STEM_THICKNESS = 5.0
 #: Weight of the bound on the total turn where the total turn is matched (measured in
 #: ``docs/pipelines/branching/quality.md``).
 TURN_BOUND = 5.0
+
+#: Weight of the heading-change histogram's matching (measured in
+#: ``docs/pipelines/branching/quality.md``, "The heading terms over many seeds").
+TURN_HISTOGRAM = 10.0
 
 
 def course_deviation(points: F64, tips: I64, edges: int) -> F64:
@@ -302,7 +307,7 @@ class BendingModel:
         total_turn: float = 0.0,
         turn_bound: float | None = None,
         orientation: float = 0.0,
-        turn_histogram: float = 3.0,
+        turn_histogram: float = TURN_HISTOGRAM,
         arc: float = ARC,
         stem_thickness: float = STEM_THICKNESS,
         direction_histogram: float = 0.0,
@@ -384,15 +389,15 @@ class BendingModel:
             :func:`synthesize` turns it on where the input runs one way
             (:func:`orientation_default`).
         turn_histogram : float
-            Weight of the heading-change histogram (default 3; 0 switches it off). Beyond the
-            paper: §4.2's histogram matching applied to a third histogram, of the absolute
-            heading change over ``arc`` px (:func:`arc_window_turns` over ``round(arc / h)``
-            elements, at least ``m + 1``). Every candidate gains ``ω_G turn_histogram Δ n_t / m``
-            in ``log Q``, ``Δ`` the histogram's move towards the input's if the candidate's
-            continuation were taken (:meth:`arc_delta`). The Markov chain's ``k + 1`` elements
-            and the coarse history correlate turns over a few extensions only, and grown
-            branches turned more than smooth inputs and less than jagged ones over 60 px;
-            the histogram pulls both ways.
+            Weight of the heading-change histogram (default :data:`TURN_HISTOGRAM`; 0 switches
+            it off). Beyond the paper: §4.2's histogram matching applied to a third histogram,
+            of the absolute heading change over ``arc`` px (:func:`arc_window_turns` over
+            ``round(arc / h)`` elements, at least ``m + 1``). Every candidate gains
+            ``ω_G turn_histogram Δ n_t / m`` in ``log Q``, ``Δ`` the histogram's move towards
+            the input's if the candidate's continuation were taken (:meth:`arc_delta`). The
+            Markov chain's ``k + 1`` elements and the coarse history correlate turns over a few
+            extensions only, and grown branches turned more than smooth inputs and less than
+            jagged ones over 60 px; the histogram pulls both ways.
         arc : float
             Arc of the heading-change histogram in px (default 60, the arc of
             :func:`phloem.metrics.drift`).

@@ -12,7 +12,7 @@ from .. import _memory
 from .._api import Seed, Size, renamed
 from .._progress import Progress
 from .._validate import as_image, as_mask, check_size
-from .bending import STEM_THICKNESS, BendingModel
+from .bending import STEM_THICKNESS, TURN_HISTOGRAM, BendingModel
 from .frame import _kept_inside, valid_region
 from .furcation import FurcationModel
 from .growth import grow
@@ -42,6 +42,14 @@ COURSE_TOTAL_TURN = 2.0
 #: way: for axes drawn from a von Mises law, its most common direction is then about six times
 #: as frequent as its least common.
 ORIENTATION_CONCENTRATION = 0.4
+#: Candidates the pipeline draws each extension and furcation from (the paper's ``c`` is 2):
+#: with the heading-change histogram matched, two leave it little to choose between
+#: (measured in ``docs/pipelines/branching/quality.md``, "The heading terms over many seeds").
+N_BEST = 4
+#: The heading-change histogram's weight under a guide: the path sets how branches turn, and at
+#: :data:`~phloem.branching.bending.TURN_HISTOGRAM` the histogram pulls them off it (the weight
+#: before the thirty-eighth session, ``docs/pipelines/branching/quality.md``).
+GUIDED_TURN_HISTOGRAM = 3.0
 #: The heading weight :func:`orientation_default` turns on there (the weight measured).
 ORIENTATION_WEIGHT = 3.0
 #: The direction histogram's weight :func:`direction_histogram_default` turns on there (the
@@ -83,13 +91,13 @@ def fit_models(
     h: float | None = None,
     order: int = 3,
     m: int | None = None,
-    n_best: int = 2,
+    n_best: int = N_BEST,
     course: int | None = None,
     coarse_history: float = 2.0,
     total_turn: float = 0.0,
     turn_bound: float | None = None,
     orientation: float = 0.0,
-    turn_histogram: float = 3.0,
+    turn_histogram: float = TURN_HISTOGRAM,
     stem_thickness: float = STEM_THICKNESS,
     direction_histogram: float = 0.0,
 ) -> tuple[BendingModel, FurcationModel | None]:
@@ -109,8 +117,9 @@ def fit_models(
     m : int, optional
         Elements appended per step (see :meth:`BendingModel.fit`).
     n_best : int, optional
-        Candidates to draw from, the paper's ``c`` (default 2; 1 follows the input exactly).
-        ``c`` before (deprecated).
+        Candidates to draw from, the paper's ``c`` (default :data:`N_BEST`, 4; the paper's 2
+        leaves the heading-change histogram little to choose between; 1 follows the input
+        exactly). ``c`` before (deprecated).
     course : int, optional
         Edges over which the bending model matches a branch's course (default ``8 m``; 0: the
         paper's model; see :meth:`BendingModel.fit`).
@@ -129,7 +138,7 @@ def fit_models(
         :meth:`BendingModel.fit`).
     turn_histogram : float, optional
         Weight of the matching of the histogram of heading changes over 60 px, so that
-        branches turn over that arc as the input's do (default 3; 0: the paper's model; see
+        branches turn over that arc as the input's do (default 10; 0: the paper's model; see
         :meth:`BendingModel.fit`).
     stem_thickness : float, optional
         Weight of the match of each root tree's main branch against its template stem's
@@ -342,6 +351,9 @@ class SourceDefaults:
         For :func:`fit_models` (:func:`orientation_default`).
     direction_histogram : float
         For :func:`fit_models` (:func:`direction_histogram_default`).
+    turn_histogram : float
+        For :func:`fit_models`: :data:`~phloem.branching.bending.TURN_HISTOGRAM`, or
+        :data:`GUIDED_TURN_HISTOGRAM` with a guide.
     """
 
     total_turn: float
@@ -349,6 +361,7 @@ class SourceDefaults:
     course: int | None
     orientation: float
     direction_histogram: float
+    turn_histogram: float
 
 
 def source_defaults(
@@ -359,6 +372,7 @@ def source_defaults(
     course: int | None = None,
     orientation: float | None = None,
     direction_histogram: float | None = None,
+    turn_histogram: float | None = None,
     guided: bool = False,
 ) -> SourceDefaults:
     """Every option that :func:`synthesize` defaults from its source skeleton, resolved at once.
@@ -367,17 +381,20 @@ def source_defaults(
     skeleton grows the same way from each of them. A value chosen by the caller is kept; those
     left at None get :func:`course_defaults`' (``total_turn``, ``repel_border``),
     :func:`course_edges_default`'s, :func:`orientation_default`'s and
-    :func:`direction_histogram_default`'s.
+    :func:`direction_histogram_default`'s; ``turn_histogram`` gets
+    :data:`~phloem.branching.bending.TURN_HISTOGRAM`, or :data:`GUIDED_TURN_HISTOGRAM` with a
+    guide.
 
     Parameters
     ----------
     skeleton : Skeleton
         The example structure.
-    total_turn, repel_border, course, orientation, direction_histogram : optional
+    total_turn, repel_border, course, orientation, direction_histogram, turn_histogram : optional
         Values chosen by the caller.
     guided : bool, optional
         Whether :func:`grow` is given a ``guide`` (default False): a guide sets the way the new
-        structure runs, so the heading terms stay off.
+        structure runs, so the heading terms stay off and the heading-change histogram is
+        matched more weakly.
 
     Returns
     -------
@@ -391,6 +408,8 @@ def source_defaults(
     (0.0, False, 0, 3.0, 1.0)
     >>> source_defaults(Skeleton([Branch([[10, 0], [12, 50], [9, 100]], 1.0)]), guided=True, course=8).course
     8
+    >>> d.turn_histogram, source_defaults(Skeleton([Branch([[10, 0], [12, 50], [9, 100]], 1.0)]), guided=True).turn_histogram
+    (10.0, 3.0)
     """
     turn, border = course_defaults(skeleton, total_turn=total_turn, repel_border=repel_border)
     return SourceDefaults(
@@ -401,6 +420,9 @@ def source_defaults(
         direction_histogram=direction_histogram_default(
             skeleton, direction_histogram=direction_histogram, guided=guided
         ),
+        turn_histogram=(GUIDED_TURN_HISTOGRAM if guided else TURN_HISTOGRAM)
+        if turn_histogram is None
+        else turn_histogram,
     )
 
 
@@ -415,13 +437,13 @@ def synthesize(
     h: float | None = None,
     order: int = 3,
     m: int | None = None,
-    n_best: int = 2,
+    n_best: int = N_BEST,
     course: int | None = None,
     coarse_history: float = 2.0,
     total_turn: float | None = None,
     turn_bound: float | None = None,
     orientation: float | None = None,
-    turn_histogram: float = 3.0,
+    turn_histogram: float | None = None,
     stem_thickness: float = STEM_THICKNESS,
     direction_histogram: float | None = None,
     generations: int | None = None,
@@ -465,7 +487,9 @@ def synthesize(
         ``turn_bound`` to 5 where the total turn is matched, ``orientation`` to
         :func:`orientation_default`'s (3 where the source runs one way on the image and no
         ``guide`` is given, else 0) and ``direction_histogram`` to
-        :func:`direction_histogram_default`'s (1 where the orientation is on, else 0).
+        :func:`direction_histogram_default`'s (1 where the orientation is on, else 0),
+        ``turn_histogram`` to :data:`~phloem.branching.bending.TURN_HISTOGRAM` (10; 3 with a
+        ``guide``, :data:`GUIDED_TURN_HISTOGRAM`).
     generations, max_length, colonize, guide : optional
         See :func:`grow`.
     repel_border : bool, optional
@@ -539,12 +563,12 @@ def synthesize(
     tick(1)
     d = source_defaults(
         source, total_turn=total_turn, repel_border=repel_border, course=course, orientation=orientation,
-        direction_histogram=direction_histogram, guided=guide is not None,
+        direction_histogram=direction_histogram, turn_histogram=turn_histogram, guided=guide is not None,
     )  # fmt: skip
     if models is None:
         bending, furcation = fit_models(
             source, h=h, order=order, m=m, n_best=n_best, course=d.course, coarse_history=coarse_history,
-            total_turn=d.total_turn, turn_bound=turn_bound, orientation=d.orientation, turn_histogram=turn_histogram,
+            total_turn=d.total_turn, turn_bound=turn_bound, orientation=d.orientation, turn_histogram=d.turn_histogram,
             stem_thickness=stem_thickness, direction_histogram=d.direction_histogram,
         )  # fmt: skip
     elif (

@@ -10,8 +10,9 @@ import numpy as np
 
 from .. import _json, branching, io
 from ..branching._fragment_map import fragment_map
-from ..branching.bending import STEM_THICKNESS
+from ..branching.bending import STEM_THICKNESS, TURN_HISTOGRAM
 from ..branching.measures import resolve_trace_options
+from ..branching.pipeline import GUIDED_TURN_HISTOGRAM, N_BEST
 from ._common import (
     check_writable,
     common_options,
@@ -104,8 +105,8 @@ def _resolve_models(args: argparse.Namespace, bend: Any) -> None:
 
 
 def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> None:
-    """``--total-turn``, ``--repel-border``, ``--course``, ``--orientation`` and ``--direction-histogram`` left at
-    their defaults, resolved for this example."""
+    """``--total-turn``, ``--repel-border``, ``--course``, ``--orientation``, ``--direction-histogram`` and
+    ``--turn-histogram`` left at their defaults, resolved for this example."""
     d = branching.source_defaults(
         source,
         total_turn=args.total_turn,
@@ -113,10 +114,15 @@ def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> Non
         course=args.course,
         orientation=args.orientation,
         direction_histogram=args.direction_histogram,
+        turn_histogram=args.turn_histogram,
         guided=getattr(args, "guide", None) is not None,
     )
     args.total_turn, args.repel_border, args.course = d.total_turn, d.repel_border, d.course
-    args.orientation, args.direction_histogram = d.orientation, d.direction_histogram
+    args.orientation, args.direction_histogram, args.turn_histogram = (
+        d.orientation,
+        d.direction_histogram,
+        d.turn_histogram,
+    )
 
 
 def _check_json_target(path: Path, args: argparse.Namespace) -> None:
@@ -257,8 +263,9 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--n-best",
         type=positive,
-        default=2,
-        help="candidates to draw from (the paper's c): 1 follows the input exactly, more gives more variety (paper: 2)",
+        default=N_BEST,
+        help="candidates to draw from (the paper's c): 1 follows the input exactly, more gives more variety and the "
+        "--turn-histogram more to choose between (default %(default)s; paper: 2)",
     )
     deprecated_alias(g, "--c", "--n-best", dest="n_best", type=positive)
     g.add_argument(
@@ -308,11 +315,12 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--turn-histogram",
         type=float,
-        default=3.0,
+        default=None,
         metavar="WEIGHT",
         help="weight of matching the histogram of heading changes over 60 px of branch against the example's, "
         "so that branches curl and zigzag as much as the example's over that arc, no more and no less "
-        "(default 3; 0: the paper's model)",
+        f"(default {TURN_HISTOGRAM:g}, or {GUIDED_TURN_HISTOGRAM:g} with --guide, whose path sets the turns; 0: the "
+        "paper's model)",
     )
     g.add_argument(
         "--direction-histogram",

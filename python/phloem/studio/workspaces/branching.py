@@ -21,6 +21,7 @@ from pydantic import BaseModel, Field, TypeAdapter, ValidationError
 from ... import _files, _json, branching
 from ..._progress import Progress
 from ...branching._fragment_map import fragment_map
+from ...branching.pipeline import N_BEST
 from ..files import JSON_SUFFIXES, Project, name_pattern
 from ..jobs import Work
 from ..outputs import Outputs, Side
@@ -96,7 +97,7 @@ class BranchingGrowJob(BaseModel):
     h: float | None = Field(
         None, gt=0, le=1000, description="resampling step (px); default the example's median thickness"
     )
-    n_best: int = Field(2, ge=1, le=64, description="candidates drawn from at each step (the paper's c)")
+    n_best: int = Field(N_BEST, ge=1, le=64, description="candidates drawn from at each step (the paper's c: 2)")
     out: str | None = Field(
         None, description="project name of the new skeleton (.json); default results/grown-<id>.json"
     )
@@ -230,6 +231,7 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
                 total_turn=d.total_turn,
                 orientation=d.orientation,
                 direction_histogram=d.direction_histogram,
+                turn_histogram=d.turn_histogram,
             )
             new = branching.grow(bend, fur, size=shape, seed=req.seed, max_length=req.max_length, guide=guide,
                                  repel_border=d.repel_border, progress=progress, max_memory=project.max_memory)  # fmt: skip
