@@ -412,6 +412,8 @@ def source_defaults(
     (10.0, 3.0)
     """
     turn, border = course_defaults(skeleton, total_turn=total_turn, repel_border=repel_border)
+    if turn_histogram is None:
+        turn_histogram = GUIDED_TURN_HISTOGRAM if guided else TURN_HISTOGRAM
     return SourceDefaults(
         total_turn=turn,
         repel_border=border,
@@ -420,9 +422,7 @@ def source_defaults(
         direction_histogram=direction_histogram_default(
             skeleton, direction_histogram=direction_histogram, guided=guided
         ),
-        turn_histogram=(GUIDED_TURN_HISTOGRAM if guided else TURN_HISTOGRAM)
-        if turn_histogram is None
-        else turn_histogram,
+        turn_histogram=turn_histogram,
     )
 
 
