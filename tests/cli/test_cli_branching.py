@@ -356,3 +356,22 @@ def test_run_traces_and_fits_once_per_input_and_options_in_a_process(tmp_path, m
             assert got.pop("out") != want.pop("out") and got == want, name  # all but the folder
         else:
             assert d[name] == b[name], name
+
+
+def test_a_guided_grow_records_the_weaker_turn_histogram(tmp_path):
+    # a guide's path sets the turns: --turn-histogram left out resolves to the guided weight,
+    # and the sidecar records it so that a replay grows the same
+    from phloem.branching import synthetic_skeleton
+    from phloem.branching.pipeline import GUIDED_TURN_HISTOGRAM
+
+    sk = tmp_path / "sk.json"
+    synthetic_skeleton(0).save(sk)
+    guide = tmp_path / "g.json"
+    guide.write_text("[[10, 100], [250, 100]]", encoding="utf-8")
+    got = {}
+    for name, flags in (("guided", ["--guide", str(guide)]), ("chosen", ["--guide", str(guide), "--turn-histogram", "7"]),
+                        ("free", [])):  # fmt: skip
+        out = tmp_path / f"{name}.json"
+        assert main(["branching", "grow", str(sk), "--out", str(out), "--seed", "1", *flags, "-q"]) == 0
+        got[name] = json.loads(io.sidecar_path(out).read_text())["parameters"]["turn_histogram"]
+    assert got == {"guided": GUIDED_TURN_HISTOGRAM, "chosen": 7.0, "free": TURN_HISTOGRAM}
