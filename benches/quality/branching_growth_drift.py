@@ -26,7 +26,7 @@ import inspect
 import math
 import sys
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -45,7 +45,7 @@ sys.modules[_spec.name] = quality  # its dataclasses look their module up by nam
 _spec.loader.exec_module(quality)
 
 #: ``source_defaults``' options: an override of one of these is resolved as ``synthesize`` does.
-_DEFAULTED = ("total_turn", "repel_border", "course", "orientation", "direction_histogram")
+_DEFAULTED = set(inspect.signature(source_defaults).parameters) - {"skeleton", "guided"}
 _FIT = set(inspect.signature(fit_models).parameters) - {"skeleton"}
 _GROW = {"generations", "max_length", "colonize", "repel_border"}
 
@@ -103,10 +103,8 @@ def grown(image: np.ndarray, seeds: Sequence[int], options: dict[str, Any]) -> t
     ok = None if ok.all() else ok
     source = trace(image, valid=ok)
     d = source_defaults(source, **{k: options[k] for k in _DEFAULTED if k in options})
-    fit = {k: v for k, v in options.items() if k in _FIT}
-    fit.update(
-        course=d.course, total_turn=d.total_turn, orientation=d.orientation, direction_histogram=d.direction_histogram
-    )
+    # every resolved option but repel_border is fit_models'
+    fit = {k: v for k, v in options.items() if k in _FIT} | {k: v for k, v in asdict(d).items() if k in _FIT}
     bending, furcation = fit_models(source, **fit)
     kw = {"max_length": "input"} | {k: v for k, v in options.items() if k in _GROW} | {"repel_border": d.repel_border}
     shape = image.shape[:2]

@@ -118,11 +118,8 @@ def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> Non
         guided=getattr(args, "guide", None) is not None,
     )
     args.total_turn, args.repel_border, args.course = d.total_turn, d.repel_border, d.course
-    args.orientation, args.direction_histogram, args.turn_histogram = (
-        d.orientation,
-        d.direction_histogram,
-        d.turn_histogram,
-    )
+    args.orientation, args.direction_histogram = d.orientation, d.direction_histogram
+    args.turn_histogram = d.turn_histogram
 
 
 def _check_json_target(path: Path, args: argparse.Namespace) -> None:
