@@ -1,7 +1,7 @@
 """Rebuild the held-out inputs of issue 19's quality runs from their public sources.
 
     python benches/quality/branching_heldout.py --out DIR --crackforest REPO --hazards REPO
-        --fracdim REPO --singan REPO --minirhizotron REPO [--shared DIR]
+        --fracdim REPO --singan REPO --minirhizotron REPO [--pysheds REPO] [--shared DIR]
 
 None of these images is in the repository (their licences differ, and nobody may tune on
 them here), so each session that scores ``synthesize`` on images nobody tuned on makes them
@@ -10,7 +10,8 @@ are read at the commits the quality notes name, with ``git show``. ``--shared`` 
 real-image collection (default: ``PHLOEM_SHARED_DATA``), for the two stand-ins cut from it.
 Writes ``DIR/heldout`` (8 inputs), ``DIR/heldout2`` (2), ``DIR/heldout3`` (4) and
 ``DIR/heldout4`` (1): the four folders of docs/pipelines/branching/quality.md, twenty-second
-session on, scored with ``branching_quality.py --inputs DIR/heldoutN``. File names do not
+session on, scored with ``branching_quality.py --inputs DIR/heldoutN``; with ``--pysheds``
+also ``DIR/heldout5`` (1, a second elevation model, thirty-ninth session on). File names do not
 matter to the quality script; a derived image is a lossless PNG, a repository's JPEG is copied
 byte for byte.
 """
@@ -32,6 +33,7 @@ HAZARDS = "e335f2e"  # github.com/Emperoremman/Hydrometeorological-Hazards (ligh
 FRACDIM = "1366db5"  # github.com/stevecrampton/fracdim
 SINGAN = "4863640"  # github.com/jonasgrebe/pt-singan-single-image-gan
 MINIRHIZOTRON = "9abedb1"  # github.com/loreguerra/minirhizotron
+PYSHEDS = "f55659b"  # github.com/mdbartos/pysheds (data/dem.tif's last change)
 
 
 def _show(repo: Path, commit: str, path: str) -> bytes:
@@ -50,10 +52,13 @@ def _crack_mask(mat: bytes) -> Image.Image:
 
 
 def build(out: Path, shared: Path, *, crackforest: Path, hazards: Path, fracdim: Path, singan: Path,
-          minirhizotron: Path) -> list[Path]:  # fmt: skip
-    """Write the four folders under ``out``; returns the files written."""
-    h1, h2, h3, h4 = (out / n for n in ("heldout", "heldout2", "heldout3", "heldout4"))
-    for d in (h1, h2, h3, h4):
+          minirhizotron: Path, pysheds: Path | None = None) -> list[Path]:  # fmt: skip
+    """Write the four folders under ``out`` (five with ``pysheds``); returns the files written."""
+    dirs = [out / n for n in ("heldout", "heldout2", "heldout3", "heldout4")]
+    if pysheds is not None:
+        dirs.append(out / "heldout5")
+    h1, h2, h3, h4 = dirs[:4]
+    for d in dirs:
         d.mkdir(parents=True, exist_ok=True)
     # Road cracks, photos and masks (480x320).
     for n in ("001", "042", "087"):
@@ -80,7 +85,12 @@ def build(out: Path, shared: Path, *, crackforest: Path, hazards: Path, fracdim:
     _copy(_show(singan, SINGAN, "data/lightning.jpg"), h3 / "singan_lightning.jpg")
     # Roots seen through a minirhizotron tube (600x502).
     _copy(_show(minirhizotron, MINIRHIZOTRON, "images/roots.jpg"), h4 / "minirhizotron_roots.jpg")
-    return sorted(p for d in (h1, h2, h3, h4) for p in d.iterdir())
+    if pysheds is not None:
+        # An elevation model (367x359, int16 heights), its range stretched to a 16-bit PNG.
+        dem = np.asarray(Image.open(io.BytesIO(_show(pysheds, PYSHEDS, "data/dem.tif"))), np.float64)
+        u16 = np.round((dem - dem.min()) / (dem.max() - dem.min()) * 65535).astype(np.uint16)
+        Image.fromarray(u16).save(dirs[4] / "pysheds_dem_u16.png")
+    return sorted(p for d in dirs for p in d.iterdir())
 
 
 def main() -> None:
@@ -88,12 +98,13 @@ def main() -> None:
     ap.add_argument("--out", type=Path, required=True, help="folder that receives heldout, heldout2, ...")
     for name in ("crackforest", "hazards", "fracdim", "singan", "minirhizotron"):
         ap.add_argument(f"--{name}", type=Path, required=True, help="a clone of the repository named in the docstring")
+    ap.add_argument("--pysheds", type=Path, default=None, help="a clone of pysheds: also write heldout5")
     ap.add_argument("--shared", type=Path, default=None, help="the shared real-image collection")
     args = ap.parse_args()
     shared = args.shared or Path(os.environ.get("PHLOEM_SHARED_DATA", "../shared/data"))
     files = build(
         args.out, shared, crackforest=args.crackforest, hazards=args.hazards, fracdim=args.fracdim,
-        singan=args.singan, minirhizotron=args.minirhizotron,
+        singan=args.singan, minirhizotron=args.minirhizotron, pysheds=args.pysheds,
     )  # fmt: skip
     for p in files:
         with Image.open(p) as im:
