@@ -47,8 +47,8 @@ ORIENTATION_CONCENTRATION = 0.4
 #: (measured in ``docs/pipelines/branching/quality.md``, "The heading terms over many seeds").
 N_BEST = 4
 #: The heading-change histogram's weight under a guide: the path sets how branches turn, and at
-#: :data:`~phloem.branching.bending.TURN_HISTOGRAM` the histogram pulls them off it (the weight
-#: before the thirty-eighth session, ``docs/pipelines/branching/quality.md``).
+#: :data:`~phloem.branching.bending.TURN_HISTOGRAM` the histogram pulls them off it
+#: (``docs/pipelines/branching/quality.md``).
 GUIDED_TURN_HISTOGRAM = 3.0
 #: The heading weight :func:`orientation_default` turns on there (the weight measured).
 ORIENTATION_WEIGHT = 3.0
