@@ -19,6 +19,9 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
   block-bootstrap resamples of its 60-px stretches of branch);
 - the share of the input's and the output's length that runs along the frame (``border_share``,
   not a pass mark);
+- how far the emptiest tenth of the input's and the output's picture lies from the structure
+  (``empty_space``, px, not a pass mark: one tree grown into a knot that leaves half the
+  picture empty);
 - the share of the input's and the output's children that hook where they start, turning by more
   than π/2 over their first ``3 m h`` px (``start_turns``, not a pass mark);
 - the median arc length between neighbouring children on one parent, input and output
@@ -86,6 +89,7 @@ from phloem.metrics import (
     direction_concentration,
     drift,
     drift_noise,
+    empty_space,
     furcation_gaps,
     largest_tree_share,
     median_heading_change,
@@ -125,6 +129,8 @@ class Result:
     heading_out: float = math.nan
     border_in: float = math.nan
     border_out: float = math.nan
+    empty_in: float = math.nan
+    empty_out: float = math.nan
     hooks_in: float = math.nan
     hooks_out: float = math.nan
     gap_in: float = math.nan
@@ -239,6 +245,12 @@ def measure(
     r.share_in, r.share_out = largest_tree_share(src), largest_tree_share(tgt)
     # not a mark of the issue: stems that the frame stops and that run along it (the contact sheets)
     r.border_in, r.border_out = border_share(src), border_share(tgt)
+    # nor this: how far the picture's emptiest tenth lies from the structure (a tree grown
+    # into a knot that leaves half the picture empty passes every mark)
+    with contextlib.suppress(ValueError):
+        ok_in, ok_out = valid_region(img), retrace_options(img, res.image, trace_options)["valid"]
+        r.empty_in = empty_space(src, valid=None if ok_in.all() else ok_in)
+        r.empty_out = empty_space(tgt, valid=ok_out)
     # not a mark either: children that hook back where they leave their parent (the contact sheets)
     r.hooks_in, r.hooks_out = (hooked_share(sk, 3.0 * res.bending.m * res.bending.h) for sk in (src, tgt))
     # nor this: children packed along their parents, combs where the input spaces them
@@ -327,7 +339,7 @@ def _f(x: float | None, fmt: str = ".2f") -> str:
 def table(results: list[Result]) -> str:
     head = (
         "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input's noise) | heading in → out (rad) "
-        "| along the frame in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | parent's turn at children in → out | directions L1 (input's concentration) | contrast in → out (kept) | grain kept | grain repetition in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
+        "| along the frame in → out | empty space px in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | parent's turn at children in → out | directions L1 (input's concentration) | contrast in → out (kept) | grain kept | grain repetition in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for r in results:
@@ -339,7 +351,7 @@ def table(results: list[Result]) -> str:
         lines.append(
             f"| {r.input} | {r.seed} | {size} | {_f(r.f1)} ({_f(r.precision)}/{_f(r.recall)}) "
             f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} ({_f(r.drift_noise)}) | {_f(r.heading_in)} → {_f(r.heading_out)} "
-            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.parent_turn_in)} → {_f(r.parent_turn_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {_f(r.repetition_in)} → {_f(r.repetition_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
+            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.empty_in, '.0f')} → {_f(r.empty_out, '.0f')} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.parent_turn_in)} → {_f(r.parent_turn_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {_f(r.repetition_in)} → {_f(r.repetition_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
             f"| {_f(r.seconds, '.1f')} | {fails} |"
         )
     return "\n".join(lines)

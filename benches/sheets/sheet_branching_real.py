@@ -68,7 +68,7 @@ def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[
     two = "" if r.two_level is None else f", 2-level {100 * r.two_level:.1f}%"
     print(
         f"{path.name}: F1 {r.f1:.2f}, share {r.share_in:.2f}->{r.share_out:.2f}, drift {r.drift:.2f}{two}, "
-        f"grain repetition {r.repetition_in:.3f}->{r.repetition_out:.3f}"
+        f"grain repetition {r.repetition_in:.3f}->{r.repetition_out:.3f}, empty space {r.empty_in:.0f}->{r.empty_out:.0f} px"
     )
     return [
         _label(_fit(_show(img), interpolation=cv2.INTER_AREA), f"{name} seed {seed}, {seconds:.0f} s"),

@@ -20,8 +20,8 @@ synthesised branching structure looks like its input's kind (re-trace agreement,
 share, heading-change drift, two-level fraction, the share of the structure that runs along the frame,
 how much children turn where they start, how far apart they leave their parent and where along
 it the long ones leave, how the parent bends where a child leaves it, which ways it
-runs on the image, how much it stands out from its surroundings, and how much of the
-background's grain its completed gaps keep; defined in
+runs on the image, how much it stands out from its surroundings, how much of the
+background's grain its completed gaps keep, and how far the picture's emptiest places lie from it; defined in
 :mod:`phloem.branching.measures`).
 """
 
@@ -49,6 +49,7 @@ from .branching.measures import (
     direction_histogram,
     drift,
     drift_noise,
+    empty_space,
     furcation_gaps,
     heading_change_histogram,
     heading_changes,
@@ -77,6 +78,7 @@ __all__ = [
     "drift",
     "drift_noise",
     "emd",
+    "empty_space",
     "furcation_gaps",
     "heading_change_histogram",
     "heading_changes",

@@ -17,6 +17,7 @@ from phloem.branching.measures import (
     direction_histogram,
     drift,
     drift_noise,
+    empty_space,
     furcation_gaps,
     heading_change_histogram,
     heading_changes,
@@ -44,6 +45,7 @@ def test_metrics_reexports_the_measures() -> None:
         "retrace_agreement", "skeleton_agreement", "largest_tree_share", "border_share", "drift", "drift_noise",
         "two_level_fraction", "start_turns", "furcation_gaps", "direction_histogram", "direction_concentration",
         "orientation_distance", "structure_contrast", "background_grain", "sibling_order", "parent_turns",
+        "empty_space",
     ):  # fmt: skip
         assert getattr(phloem.metrics, name) is getattr(phloem.branching.measures, name)
         assert name in phloem.metrics.__all__
@@ -229,6 +231,53 @@ def test_border_share_refuses_what_it_cannot_measure() -> None:
             border_share(sk, band=band)
     with pytest.raises(ValueError, match="^skeleton: the branches have no length"):
         border_share(Skeleton([Branch([[1, 1], [1, 1]], 1.0)], shape=(10, 10)))
+
+
+# -- empty space ------------------------------------------------------------------------------
+
+
+def test_empty_space_is_the_quantile_of_the_brute_force_distance_to_the_centre_lines() -> None:
+    rng = np.random.default_rng(3)
+    shape = (70, 90)
+    branches = [Branch(rng.uniform([0, 0], [89, 69], size=(4, 2)), 1.0) for _ in range(3)]
+    branches.append(Branch([[-0.5, 10.0], [89.5, 10.0]], 1.0))  # from edge to edge of the pixels
+    sk = Skeleton(branches, shape=shape)
+    # the 1-px samples of every branch, rounded to the nearest pixel
+    pts = []
+    for b in branches:
+        seg = np.linalg.norm(np.diff(b.points, axis=0), axis=1)
+        cum = np.r_[0.0, np.cumsum(seg)]
+        s = np.linspace(0.0, cum[-1], max(2, int(np.ceil(cum[-1])) + 1))
+        pts.append(np.c_[np.interp(s, cum, b.points[:, 0]), np.interp(s, cum, b.points[:, 1])])
+    ij = np.rint(np.concatenate(pts)).astype(int)
+    ij = np.clip(ij, 0, [89, 69])
+    yy, xx = np.mgrid[:70, :90]
+    d = np.sqrt((xx[..., None] - ij[:, 0]) ** 2 + (yy[..., None] - ij[:, 1]) ** 2).min(axis=-1)
+    valid = xx < 60
+    for q in (0.0, 0.5, 0.9, 1.0):
+        assert empty_space(sk, quantile=q) == pytest.approx(np.quantile(d, q), abs=1e-3)
+        assert empty_space(sk, quantile=q, valid=valid) == pytest.approx(np.quantile(d[valid], q), abs=1e-3)
+
+
+def test_a_knot_leaves_more_empty_space_than_the_same_length_spread_out() -> None:
+    shape = (200, 200)
+    spread = Skeleton([Branch([[x, 0], [x, 199]], 1.0) for x in (25, 75, 125, 175)], shape=shape)
+    knot = Skeleton([Branch([[x, 0], [x, 199]], 1.0) for x in (10, 20, 30, 40)], shape=shape)
+    assert empty_space(spread) == pytest.approx(22.0, abs=1.0)  # no place 25 px from a line
+    assert empty_space(knot) > 5 * empty_space(spread)  # the right three quarters are empty
+
+
+def test_empty_space_refuses_what_it_cannot_measure() -> None:
+    sk = Skeleton([Branch([[0, 5], [30, 5]], 1.0)], shape=(10, 40))
+    with pytest.raises(ValueError, match="^skeleton: has no shape"):
+        empty_space(Skeleton([Branch([[0, 0], [30, 0]], 1.0)]))
+    for q in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="^quantile:"):
+            empty_space(sk, quantile=q)
+    with pytest.raises(ValueError, match="^valid: expected at least one pixel"):
+        empty_space(sk, valid=np.zeros((10, 40), bool))
+    with pytest.raises(ValueError, match="^valid:"):
+        empty_space(sk, valid=np.ones((11, 40), bool))
 
 
 # -- agreement --------------------------------------------------------------------------------
