@@ -958,8 +958,10 @@ def _unusual_surroundings(
 
 
 def _sample(img: F32, mapx: F32, mapy: F32) -> F32:
+    # Bicubic: a vessel or a crack a pixel or two wide keeps its sharpness in a rotated fragment,
+    # where bilinear sampling spreads it over its neighbours (docs/pipelines/branching/quality.md).
     out = _by_channels(
-        lambda part: cv2.remap(part, mapx, mapy, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101),
+        lambda part: cv2.remap(part, mapx, mapy, interpolation=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT_101),
         img,
     )
     return np.ascontiguousarray(out, dtype=np.float32)
