@@ -235,8 +235,13 @@ def measure(
     """The measures of one synthesis from ``img`` (traced with ``trace_options``)."""
     r = Result(name, seed, tuple(img.shape), mask, seconds=seconds)
     src, tgt = res.source, res.target
+    # the output is traced with these; their valid region (and the input's) also bounds the
+    # background measures below
+    rt_options = retrace_options(img, res.image, trace_options)
+    ok_in = valid_region(img)
+    valid_in = None if ok_in.all() else ok_in
     try:
-        agree = skeleton_agreement(tgt, trace(res.image, **retrace_options(img, res.image, trace_options)))
+        agree = skeleton_agreement(tgt, trace(res.image, **rt_options))
         r.f1, r.precision, r.recall = agree.f1, agree.precision, agree.recall
     except ValueError as e:
         if not str(e).startswith("image: nothing to trace"):
@@ -248,9 +253,8 @@ def measure(
     # nor this: how far the picture's emptiest tenth lies from the structure (a tree grown
     # into a knot that leaves half the picture empty passes every mark)
     with contextlib.suppress(ValueError):
-        ok_in, ok_out = valid_region(img), retrace_options(img, res.image, trace_options)["valid"]
-        r.empty_in = empty_space(src, valid=None if ok_in.all() else ok_in)
-        r.empty_out = empty_space(tgt, valid=ok_out)
+        r.empty_in = empty_space(src, valid=valid_in)
+        r.empty_out = empty_space(tgt, valid=rt_options["valid"])
     # not a mark either: children that hook back where they leave their parent (the contact sheets)
     r.hooks_in, r.hooks_out = (hooked_share(sk, 3.0 * res.bending.m * res.bending.h) for sk in (src, tgt))
     # nor this: children packed along their parents, combs where the input spaces them
@@ -268,9 +272,8 @@ def measure(
     # nor this: how much of the background's grain the completed gaps keep (a fill that
     # settled on a few smooth patches: an elevation model's relief as a flat plateau)
     with contextlib.suppress(ValueError):
-        ok = valid_region(img)
-        r.grain_in = background_grain(img, src, valid=None if ok.all() else ok)
-        r.grain_out = background_grain(res.image, tgt, valid=retrace_options(img, res.image, trace_options)["valid"])
+        r.grain_in = background_grain(img, src, valid=valid_in)
+        r.grain_out = background_grain(res.image, tgt, valid=rt_options["valid"])
     # nor this: whether the fine grain repeats (the fill's one patch copied in a lattice)
     with contextlib.suppress(ValueError):  # an image under twice min_shift a side
         r.repetition_in = repetition(img, detail=REPETITION_DETAIL)

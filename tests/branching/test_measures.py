@@ -242,15 +242,15 @@ def test_empty_space_is_the_quantile_of_the_brute_force_distance_to_the_centre_l
     branches = [Branch(rng.uniform([0, 0], [89, 69], size=(4, 2)), 1.0) for _ in range(3)]
     branches.append(Branch([[-0.5, 10.0], [89.5, 10.0]], 1.0))  # from edge to edge of the pixels
     sk = Skeleton(branches, shape=shape)
-    # the 1-px samples of every branch, rounded to the nearest pixel
+    # the half-pixel samples of every branch, rounded to the nearest pixel inside the image
     pts = []
     for b in branches:
         seg = np.linalg.norm(np.diff(b.points, axis=0), axis=1)
         cum = np.r_[0.0, np.cumsum(seg)]
-        s = np.linspace(0.0, cum[-1], max(2, int(np.ceil(cum[-1])) + 1))
+        s = np.linspace(0.0, cum[-1], max(2, int(np.ceil(2 * cum[-1])) + 1))
         pts.append(np.c_[np.interp(s, cum, b.points[:, 0]), np.interp(s, cum, b.points[:, 1])])
     ij = np.rint(np.concatenate(pts)).astype(int)
-    ij = np.clip(ij, 0, [89, 69])
+    ij = ij[(ij[:, 0] >= 0) & (ij[:, 0] < 90) & (ij[:, 1] >= 0) & (ij[:, 1] < 70)]
     yy, xx = np.mgrid[:70, :90]
     d = np.sqrt((xx[..., None] - ij[:, 0]) ** 2 + (yy[..., None] - ij[:, 1]) ** 2).min(axis=-1)
     valid = xx < 60

@@ -283,9 +283,7 @@ def test_the_structure_stands_out_from_the_gaps_as_much_as_the_input() -> None:
 
 @pytest.mark.parametrize("angle", [0.3, 0.5])
 def test_a_line_one_pixel_wide_stays_sharp_in_rotated_fragments(angle: float) -> None:
-    # issue 19: bilinear sampling of a rotated fragment spread a vessel or crack a pixel wide over
-    # its neighbours (its curvature across the line fell to 0.51-0.61 of the input's; 0.82-0.88
-    # with the bicubic sampling)
+    # issue 19: bilinear sampling of a rotated fragment spread a vessel or crack a pixel wide over its neighbours
     rng = np.random.default_rng(0)
     img = np.full((120, 200), 0.8, np.float32) + rng.normal(0, 0.01, (120, 200)).astype(np.float32)
     img[60, 10:190] = 0.2

@@ -306,7 +306,7 @@ def empty_space(skeleton: Skeleton, *, valid: Any = None, quantile: float = 0.9)
     The empty-space function of spatial statistics at one level. A structure that spreads over
     its picture as the input's does leaves no place far from it; one grown into a knot leaves
     half the picture empty, whatever its histograms, drift and re-trace agreement say. Compare
-    an output's value with its input's at the same picture size. Branches are sampled at 1 px.
+    an output's value with its input's at the same picture size. Branches are sampled every half pixel.
 
     Parameters
     ----------
@@ -342,12 +342,7 @@ def empty_space(skeleton: Skeleton, *, valid: Any = None, quantile: float = 0.9)
     ok = None if valid is None else as_mask(valid, "valid", shape)
     if ok is not None and not ok.any():
         raise ValueError("valid: expected at least one pixel set, got an empty mask")
-    pts, _ = _sample(skeleton)
-    # (a vertex may lie up to half a pixel outside the pixel centres)
-    ij = np.clip(np.rint(pts).astype(np.int64), 0, [shape[1] - 1, shape[0] - 1])
-    free = np.ones(shape, np.uint8)
-    free[ij[:, 1], ij[:, 0]] = 0
-    dist = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    _, dist, _ = _thickness_distance(skeleton, shape)
     return float(np.quantile(dist if ok is None else dist[ok], q))
 
 
