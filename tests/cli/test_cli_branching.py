@@ -294,6 +294,69 @@ def test_branching_trace_threshold_reaches_trace_and_the_sidecar(tmp_path, monke
     assert not list(tmp_path.glob("x.*"))
 
 
+def _broken_line_png(path) -> None:
+    import cv2
+
+    img = np.zeros((60, 200), np.uint8)
+    cv2.line(img, (10, 30), (90, 30), 255, 5)
+    cv2.line(img, (102, 30), (190, 30), 255, 5)  # 12 px beyond the first piece's end
+    io.write_image(path, img.astype(np.float32) / 255)
+
+
+def test_branching_trace_gap_joins_pieces_and_is_recorded(tmp_path, capsys):
+    from phloem.branching import Skeleton
+    from phloem.metrics import largest_tree_share
+
+    _broken_line_png(tmp_path / "line.png")
+    shares = {}
+    for flags in ([], ["--gap", "20"]):
+        out = tmp_path / f"line{len(flags)}.json"
+        assert (
+            main(["branching", "trace", str(tmp_path / "line.png"), "--kind", "mask", "--out", str(out), *flags, "-q"])
+            == 0
+        )
+        shares[len(flags)] = largest_tree_share(Skeleton.load(out))
+        assert json.loads(io.sidecar_path(out).read_text())["parameters"]["gap"] == (20.0 if flags else None)
+    # a mask is not bridged by default: two trees of about equal length; bridged, one
+    assert shares[0] < 0.6 and shares[2] == 1.0
+    assert (
+        main(["branching", "trace", str(tmp_path / "line.png"), "--out", str(tmp_path / "x.json"), "--gap", "-1", "-q"])
+        == 2
+    )
+    err = capsys.readouterr().err
+    assert "--gap: expected a finite value >= 0.0, got -1.0" in err
+    assert len(err.strip().splitlines()) == 1 and not list(tmp_path.glob("x.*"))
+
+
+def test_branching_trace_root_starts_the_main_branch_there_and_replays(tmp_path, capsys):
+    from phloem.branching import Skeleton
+
+    _river_png(tmp_path / "river.png")
+    firsts = {}
+    for flags in ([], ["--root", "190", "20"]):
+        out = tmp_path / f"river{len(flags)}.json"
+        assert (
+            main(["branching", "trace", str(tmp_path / "river.png"), "--kind", "mask", "--out", str(out), *flags, "-q"])
+            == 0
+        )
+        firsts[len(flags)] = Skeleton.load(out).branches[0].points[0]
+    # by default the thickest far end (the 9-px stroke's, lower left) is the root
+    assert np.hypot(*(firsts[0] - (10, 150))) < 10
+    assert np.hypot(*(firsts[3] - (190, 20))) < 10
+    side = tmp_path / "river3.sidecar.json"
+    assert json.loads(side.read_text())["parameters"]["root"] == [190.0, 20.0]
+    again = tmp_path / "again.json"
+    assert main(["replay", str(side), "--out", str(again), "-q"]) == 0
+    assert np.allclose(
+        Skeleton.load(again).branches[0].points, Skeleton.load(tmp_path / "river3.json").branches[0].points
+    )
+    args = ["branching", "trace", str(tmp_path / "river.png"), "--out", str(tmp_path / "x.json"), "-q"]
+    assert main([*args, "--root", "500", "20"]) == 2
+    err = capsys.readouterr().err
+    assert "--root: (500.0, 20.0) is outside the 200x160 image" in err and len(err.strip().splitlines()) == 1
+    assert not list(tmp_path.glob("x.*"))
+
+
 def test_grow_fits_once_per_skeleton_and_options_in_a_process(tmp_path, monkeypatch):
     # a batch worker grows many seeds of one skeleton: the models are fitted once and shared,
     # and sharing them changes no output

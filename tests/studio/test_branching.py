@@ -165,6 +165,18 @@ def test_trace_threshold_reaches_trace_and_the_sidecar(client, project, scene, m
     assert json.loads((project.root / "set.sidecar.json").read_text())["parameters"]["threshold"] == 0.05
 
 
+def test_trace_gap_and_root_reach_trace_and_the_sidecar(client, project, scene, monkeypatch):
+    seen = []
+    real = branching.trace
+    monkeypatch.setattr(branching, "trace", lambda *a, **k: seen.append((k.get("gap"), k.get("root"))) or real(*a, **k))
+    run_job(client, {"kind": "branching-trace", "image": "photos/channel.png", "out": "auto.json"})
+    body = {"kind": "branching-trace", "image": "photos/channel.png", "gap": 12.5, "root": [3, 40], "out": "set.json"}
+    run_job(client, body)
+    assert seen[0] == (None, None) and seen[1][0] == 12.5 and tuple(seen[1][1]) == (3, 40)
+    params = json.loads((project.root / "set.sidecar.json").read_text())["parameters"]
+    assert params["gap"] == 12.5 and params["root"] == [3, 40]
+
+
 def test_several_guide_paths_are_a_mask_the_structure_follows(client, project, scene):
     """The page saves two or more guide paths as a mask (PUT /api/mask), which --guide also takes."""
     mask = np.zeros((128, 224), np.uint8)
@@ -199,6 +211,8 @@ def test_several_guide_paths_are_a_mask_the_structure_follows(client, project, s
         ({"kind": "branching-trace", "image": "photos/bar.png", "subpixel": "maybe"}, 422, "subpixel"),
         ({"kind": "branching-trace", "image": "photos/bar.png", "wide": "maybe"}, 422, "wide"),
         ({"kind": "branching-trace", "image": "photos/bar.png", "threshold": "high"}, 422, "threshold"),
+        ({"kind": "branching-trace", "image": "photos/bar.png", "gap": -1}, 422, "gap"),
+        ({"kind": "branching-trace", "image": "photos/bar.png", "root": [1]}, 422, "root"),
         ({"kind": "branching-trace", "image": "../bar.png"}, 400, "image:"),
         ({"kind": "branching-grow", "skeleton": "none.json"}, 404, "skeleton: no file"),
         ({"kind": "branching-grow", "skeleton": "channel.json", "guide": "none.json"}, 404, "guide: no file"),

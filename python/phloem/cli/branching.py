@@ -62,6 +62,24 @@ def _trace_options(p: argparse.ArgumentParser) -> None:
         "--min-length", type=float, default=8.0, help="drop traced branches shorter than this many pixels (default 8)"
     )
     g.add_argument(
+        "--gap",
+        type=float,
+        default=None,
+        metavar="PX",
+        help="join the end of a traced piece to other structure at most PX ahead of it: a ridge filter breaks "
+        "vessels where they cross or fork. Default 2 x the largest of --sigmas + 3 for photos (more on a grainy "
+        "surface), 0 for masks. A larger gap (e.g. 30 on a fundus photo) traces a vessel network as one tree",
+    )
+    g.add_argument(
+        "--root",
+        type=float,
+        nargs=2,
+        default=None,
+        metavar=("X", "Y"),
+        help="start the traced structure there (its tree is rooted at the nearest skeleton pixel: a vessel tree at "
+        "its optic disc, a river at its source). Default: each tree at its thickest far end",
+    )
+    g.add_argument(
         "--subpixel",
         action="store_true",
         help="evaluate the ridge filter on a twice finer grid (photos): thin lines in a glow, such as lightning, are "
@@ -82,6 +100,8 @@ def _trace_kwargs(args: argparse.Namespace) -> dict[str, Any]:
         "channel": args.channel,
         "threshold": args.threshold,
         "min_length": args.min_length,
+        "gap": args.gap,
+        "root": None if args.root is None else tuple(args.root),
         "subpixel": args.subpixel,
         "wide": not args.no_wide,
     }
