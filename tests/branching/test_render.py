@@ -661,6 +661,50 @@ def test_fragments_in_unusual_surroundings_are_left_out() -> None:
     assert not _unusual_surroundings(img, span, sk, frs, ~inside, keep=3).any()
 
 
+def _blur_scene() -> tuple[np.ndarray, Skeleton]:
+    """Two crisp dark lines that wave, and a straight one out of focus (a dish's blurred rim
+    beside the vessels, blurred little enough that its surroundings stay usual), all traced
+    2.5 px thick."""
+    rng = np.random.default_rng(0)
+    img = 0.5 + 0.01 * rng.standard_normal((220, 400)).astype(np.float32)
+    x = np.arange(10.0, 391.0, 2.0)
+    branches = []
+    for y0 in (40.0, 100.0):
+        pts = np.stack([x, y0 + 8.0 * np.sin(x / 8.0)], axis=1)
+        cv2.polylines(img, [np.rint(pts * 16).astype(np.int32)], False, 0.2, 5, cv2.LINE_AA, shift=4)
+        branches.append(Branch(pts, 2.5))
+    band = img[140:200].copy()
+    cv2.line(band, (10, 30), (390, 30), 0.2, 5, cv2.LINE_AA)
+    img[140:200] = cv2.GaussianBlur(band, (0, 0), 1.5)
+    branches.append(Branch([[10.0, 170.0], [390.0, 170.0]], 2.5))
+    return img, Skeleton(branches, img.shape)
+
+
+def test_fragments_of_blurred_structure_are_left_out() -> None:
+    from phloem.branching.fragments import cover
+    from phloem.branching.render import _blurred_structure
+
+    img, sk = _blur_scene()
+    frs = cover(sk, 0.75, 3.0, 9, order=False)
+    blurred = np.array([f.branch == 2 for f in frs])
+    out = _blurred_structure(img[..., None], frs, np.zeros(len(frs), bool), keep=3)
+    assert blurred.sum() >= 8
+    np.testing.assert_array_equal(out, blurred)
+    # never all of them: with too few left, none is left out
+    assert not _blurred_structure(img[..., None], frs, ~blurred, keep=3).any()
+
+
+def test_a_straight_target_is_not_painted_from_blurred_structure() -> None:
+    # The blurred line is the best shape for a straight target (without the rule it paints 31
+    # of its 32 fragments); so the brain's grown trunk was painted from the dish's
+    # out-of-focus rim, as smears.
+    img, sk = _blur_scene()
+    tgt = Skeleton([Branch([[20.0, 60.0], [380.0, 60.0]], 2.5)], img.shape)
+    res = render(img, sk, tgt, seed=0, full_output=True, complete=False)
+    used = {res.sources[c].branch for c in res.choice}
+    assert used and 2 not in used
+
+
 def _rim_scene(start_thickness: float) -> tuple[np.ndarray, Skeleton, Skeleton, np.ndarray]:
     """A grey photo with a flat black frame along its left side, a vessel that starts 11 px from
     the frame and one that starts in the middle ``start_thickness`` thick; the target is one

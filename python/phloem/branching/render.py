@@ -463,6 +463,7 @@ def _cover_both(
         raise ValueError("valid: every source branch fragment reaches outside it; nothing is left to paint with")
     if lighting is not None:
         outside |= _unusual_surroundings(image, lighting, source, sources, outside, keep=keep)
+        outside |= _blurred_structure(image, sources, outside, keep=keep)
     # Without furcation fragments in the source a target furcation is painted by branch fragments.
     furcations = any(f.furcation and not out for f, out in zip(sources, outside, strict=True))
     targets = cover(target, lam, rf, k, order=True, furcations=furcations)
@@ -952,6 +953,56 @@ def _unusual_surroundings(
     floor = 0.01 * (hi - lo).astype(np.float64)
     z_level, z_slope = _robust_z(level, floor), _robust_z(slope, floor)
     out = np.asarray((np.abs(z_level).max(axis=1) > SURROUNDINGS_Z) | (z_slope.max(axis=1) > SURROUNDINGS_Z))
+    if sum(1 for f, o in zip(frs, out | excluded, strict=True) if not (o or f.furcation)) < keep:
+        out[:] = False
+    return out
+
+
+#: How far past a fragment's thickness its cross-sections reach, in px: the background either
+#: side of its edges.
+EDGE_MARGIN = 4.0
+#: Edge widths within this many pixels of each other are alike, however uniform the rest.
+EDGE_FLOOR = 0.25
+
+
+def _blurred_structure(image: F32, frs: list[Fragment], excluded: NDArray[np.bool_], *, keep: int) -> NDArray[np.bool_]:
+    """Source fragments whose structure is far blurrier than the structure's usual.
+
+    Across each sample of a fragment's own centre line, the profile from ``thickness +
+    EDGE_MARGIN`` px on one side to as far on the other gives the structure's depth (the ends'
+    mean against the middle) and its steepest slope; their ratio is the edge's width in pixels.
+    A fragment whose median width is an outlier upwards (modified z-score over
+    ``SURROUNDINGS_Z``, the spread at least ``EDGE_FLOOR`` px) shows something out of focus
+    that the trace took for structure (a dish's blurred rim beside crisp vessels): pasted
+    where the new structure is thick, it paints a smear. None are excluded if fewer than
+    ``keep`` branch fragments would remain beside those ``excluded`` already.
+    """
+    if not frs:
+        return np.zeros(0, bool)
+    gray = np.ascontiguousarray(image.mean(axis=2), dtype=np.float32)
+    width = np.full(len(frs), np.nan)
+    for i, f in enumerate(frs):
+        n = len(f.points) // 2 if f.furcation else len(f.points)  # its own segment, not the child's
+        if n < 3:
+            continue
+        p = f.points[:n] + f.center
+        tan = np.gradient(p, axis=0)
+        tan /= np.maximum(np.linalg.norm(tan, axis=1, keepdims=True), 1e-12)
+        normal = np.stack([-tan[:, 1], tan[:, 0]], axis=1)
+        reach = float(f.thickness[:n].max()) + EDGE_MARGIN
+        steps = np.arange(-reach, reach + 1e-9, 0.5)
+        pts = p[:, None, :] + steps[None, :, None] * normal[:, None, :]
+        prof = cv2.remap(gray, pts[..., 0].astype(np.float32), pts[..., 1].astype(np.float32),
+                         cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)  # fmt: skip
+        depth = np.abs((prof[:, 0] + prof[:, -1]) / 2 - prof[:, len(steps) // 2])
+        slope = np.abs(np.diff(prof, axis=1)).max(axis=1) / 0.5
+        ok = slope > 0
+        if ok.any():
+            width[i] = float(np.median(depth[ok] / slope[ok]))
+    known = np.isfinite(width)
+    out = np.zeros(len(frs), bool)
+    if known.sum() >= 3:
+        out[known] = _robust_z(width[known], EDGE_FLOOR) > SURROUNDINGS_Z
     if sum(1 for f, o in zip(frs, out | excluded, strict=True) if not (o or f.furcation)) < keep:
         out[:] = False
     return out
