@@ -43,6 +43,9 @@ Beyond the paper (each needed for clean junctions, see the tests):
   slope, a modified z-score over 3.5) are not used, photos and fields only: a branch start or
   end has no painted neighbour to hold its colour, and stamped the place its source lay in
   (a fundus photo's optic disc, its rim's shading) into the output;
+- nor are source fragments whose structure is far blurrier than the rest (its edge width an
+  outlier, the same z-score): a dish's out-of-focus rim, traced as the thickest vessel,
+  painted the brain's thick branches as smears;
 - the structure is pasted into the completed gaps as a whole (``paste_structure``, step 5):
   §5.3's per-fragment paste keeps each fragment's level where it borders the unpainted gaps,
   so on a terrain or an unevenly lit photo every disk showed; without the structure paste the
