@@ -41,7 +41,10 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
   smooth background patches);
 - the repetition of the input's and the output's fine grain (``phloem.metrics.repetition`` of
   the image less a Gaussian blur of ``REPETITION_DETAIL`` px, not a pass mark: a fill that
-  copies one small patch over and over, a lattice on asphalt);
+  copies one small patch over and over, a lattice on asphalt), over the whole image and over
+  the background alone (``repetition(mask=)``: the input's background and the output's gaps,
+  beyond the structure's fragments and the blur's reach, where bright structure does not
+  outweigh a lattice);
 - two-level fraction of the output (two-level inputs only);
 - the angle and thickness histogram distances of the output to the input's model, with the
   spread between the input's two halves that the growth tests bound them by (1.5× and 1×);
@@ -147,6 +150,8 @@ class Result:
     grain_out: float = math.nan
     repetition_in: float = math.nan
     repetition_out: float = math.nan
+    gap_repetition_in: float = math.nan
+    gap_repetition_out: float = math.nan
     two_level: float | None = None
     angle: float = math.nan
     angle_spread: float = math.nan
@@ -222,6 +227,18 @@ def evaluate(
     return measure(name, img, mask, seed, res, seconds, trace_options=trace_options)
 
 
+def _background(skeleton: Skeleton, valid: np.ndarray | None) -> np.ndarray:
+    """The pixels beyond the structure's fragments (3 thicknesses, the render's disks) and the
+    reach of the grain's blur (3 ``REPETITION_DETAIL``), inside ``valid``."""
+    tube = skeleton.mask()
+    far = cv2.distanceTransform((~tube).astype(np.uint8), cv2.DIST_L2, 5)
+    thick = float(np.median(np.concatenate([b.thickness for b in skeleton.branches])))
+    out = far > 2.0 * thick + 3.0 * REPETITION_DETAIL
+    if valid is not None:
+        out &= valid
+    return np.asarray(out)
+
+
 def measure(
     name: str,
     img: np.ndarray,
@@ -278,6 +295,11 @@ def measure(
     with contextlib.suppress(ValueError):  # an image under twice min_shift a side
         r.repetition_in = repetition(img, detail=REPETITION_DETAIL)
         r.repetition_out = repetition(res.image, detail=REPETITION_DETAIL)
+    with contextlib.suppress(ValueError):  # no background left, or too little of it
+        r.gap_repetition_in = repetition(img, detail=REPETITION_DETAIL, mask=_background(src, valid_in))
+        r.gap_repetition_out = repetition(
+            res.image, detail=REPETITION_DETAIL, mask=_background(tgt, rt_options["valid"])
+        )
     for attr, sk in (("heading_in", src), ("heading_out", tgt)):
         with contextlib.suppress(ValueError):
             setattr(r, attr, median_heading_change(sk))
@@ -342,7 +364,7 @@ def _f(x: float | None, fmt: str = ".2f") -> str:
 def table(results: list[Result]) -> str:
     head = (
         "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input's noise) | heading in → out (rad) "
-        "| along the frame in → out | empty space px in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | parent's turn at children in → out | directions L1 (input's concentration) | contrast in → out (kept) | grain kept | grain repetition in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
+        "| along the frame in → out | empty space px in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | parent's turn at children in → out | directions L1 (input's concentration) | contrast in → out (kept) | grain kept | grain repetition in → out | gaps' grain repetition in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for r in results:
@@ -354,7 +376,7 @@ def table(results: list[Result]) -> str:
         lines.append(
             f"| {r.input} | {r.seed} | {size} | {_f(r.f1)} ({_f(r.precision)}/{_f(r.recall)}) "
             f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} ({_f(r.drift_noise)}) | {_f(r.heading_in)} → {_f(r.heading_out)} "
-            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.empty_in, '.0f')} → {_f(r.empty_out, '.0f')} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.parent_turn_in)} → {_f(r.parent_turn_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {_f(r.repetition_in)} → {_f(r.repetition_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
+            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.empty_in, '.0f')} → {_f(r.empty_out, '.0f')} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.parent_turn_in)} → {_f(r.parent_turn_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {_f(r.repetition_in)} → {_f(r.repetition_out)} | {_f(r.gap_repetition_in)} → {_f(r.gap_repetition_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
             f"| {_f(r.seconds, '.1f')} | {fails} |"
         )
     return "\n".join(lines)

@@ -180,7 +180,7 @@ def patch_coherence(image: Any, exemplar: Any, **kwargs: Any) -> float:
     return float(np.nanmean(coherence_map(image, exemplar, **kwargs)))
 
 
-def repetition(image: Any, *, min_shift: int = 16, detail: float | None = None) -> float:
+def repetition(image: Any, *, min_shift: int = 16, detail: float | None = None, mask: Any = None) -> float:
     """Strongest self-similarity of ``image`` at shifts of at least ``min_shift`` pixels.
 
     The maximum, over all shifts ``(dy, dx)`` with ``max(|dy|, |dx|) >= min_shift``, of the
@@ -201,6 +201,11 @@ def repetition(image: Any, *, min_shift: int = 16, detail: float | None = None) 
         sigma (px). A photo's lighting and large shapes resemble themselves over long shifts
         and outweigh a grain that repeats; a fill that copies one small patch over and over
         shows here (default: the whole image).
+    mask : (M, N) array_like of bool, optional
+        Measure only these pixels (a synthesis' completed gaps, an input's background): each
+        shift is compared over the pixels set on both sides, and counts where that overlap
+        holds at least a quarter of the mask. Bright structure elsewhere outweighs a lattice
+        in the gaps otherwise. The blur of ``detail`` is taken over the whole image first.
 
     Returns
     -------
@@ -222,11 +227,16 @@ def repetition(image: Any, *, min_shift: int = 16, detail: float | None = None) 
     m = int(min_shift)
     if m < 1 or m >= max(h, w) // 2:
         raise ValueError(f"min_shift: expected 1 <= min_shift < {max(h, w) // 2} for a {h}×{w} image, got {min_shift}")
-    g -= g.mean()
+    inside = np.ones((h, w)) if mask is None else as_mask(mask, "mask", (h, w)).astype(np.float64)
+    count = float(inside.sum())
+    if count == 0:
+        raise ValueError("mask: expected at least one pixel set, got an empty mask")
+    g -= float((g * inside).sum()) / count
+    g *= inside
     shape = (2 * h, 2 * w)
     f = np.fft.rfft2(g, shape)
     ac = np.fft.irfft2(f * np.conj(f), shape)
-    ones = np.fft.rfft2(np.ones_like(g), shape)
+    ones = np.fft.rfft2(inside, shape)
     sq = np.fft.rfft2(g * g, shape)
     # Overlap count and the energy of each side of the overlap, per shift.
     n = np.fft.irfft2(ones * np.conj(ones), shape)
@@ -235,8 +245,8 @@ def repetition(image: Any, *, min_shift: int = 16, detail: float | None = None) 
     dy = np.minimum(np.arange(2 * h), 2 * h - np.arange(2 * h))
     dx = np.minimum(np.arange(2 * w), 2 * w - np.arange(2 * w))
     far = np.maximum(dy[:, None], dx[None, :]) >= m
-    # Keep shifts whose overlap is at least a quarter of the image, so tiny corners don't count.
-    valid = far & (n > 0.25 * h * w)
+    # Keep shifts whose overlap is at least a quarter of the measured pixels, so tiny corners don't count.
+    valid = far & (n > 0.25 * count)
     corr = ac[valid] / np.sqrt(np.maximum(e1[valid] * e2[valid], 1e-24))
     return float(corr.max()) if corr.size else 0.0
 

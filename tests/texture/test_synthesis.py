@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -88,6 +89,53 @@ def test_repetition_of_the_detail_sees_a_repeated_grain_under_lighting():
     for bad in (0, -1.0, float("nan")):
         with pytest.raises(ValueError, match="detail"):
             repetition(fresh, detail=bad)
+
+
+def _brute_repetition(g: np.ndarray, mask: np.ndarray, m: int) -> float:
+    g = np.where(mask, g - g[mask].mean(), 0.0)
+    h, w = g.shape
+    best = -np.inf
+    for dy in range(-h + 1, h):
+        for dx in range(-w + 1, w):
+            if max(abs(dy), abs(dx)) < m:
+                continue
+            a = (slice(max(0, -dy), h - max(0, dy)), slice(max(0, -dx), w - max(0, dx)))
+            b = (slice(max(0, dy), h - max(0, -dy)), slice(max(0, dx), w - max(0, -dx)))
+            both = mask[a] & mask[b]
+            if both.sum() <= 0.25 * mask.sum():
+                continue
+            x, y = g[a][both], g[b][both]
+            best = max(best, float((x * y).sum() / np.sqrt(max((x * x).sum() * (y * y).sum(), 1e-24))))
+    return best
+
+
+def test_repetition_in_a_mask_agrees_with_brute_force():
+    rng = np.random.default_rng(3)
+    g = rng.random((18, 22))
+    mask = rng.random((18, 22)) < 0.7
+    for m in (3, 6):
+        assert repetition(g, mask=mask, min_shift=m) == pytest.approx(_brute_repetition(g, mask, m), abs=1e-6)
+        assert repetition(g, min_shift=m) == pytest.approx(_brute_repetition(g, np.ones_like(mask), m), abs=1e-6)
+
+
+def test_repetition_in_a_mask_sees_a_lattice_beside_bright_structure():
+    # a completed gap that repeats one small patch, beside bright structure that does not
+    # repeat: over the whole image the structure outweighs the lattice, in the gap it shows
+    rng = np.random.default_rng(0)
+    img = np.tile(0.02 * rng.random((16, 16)), (9, 9))
+    structure = np.zeros(img.shape, bool)
+    for _ in range(40):
+        y, x = rng.integers(0, 144, 2)
+        structure[max(0, y - 1) : y + 2, max(0, x - 20) : x + 20] = True
+    img[structure] = 1.0 + rng.random(int(structure.sum()))
+    # the gaps beyond the reach of the detail's blur round the structure
+    gaps = cv2.dilate(structure.astype(np.uint8), np.ones((13, 13), np.uint8)) == 0
+    assert repetition(img, detail=2.0) < 0.6
+    assert repetition(img, detail=2.0, mask=gaps) > 0.9
+    with pytest.raises(ValueError, match="mask: expected at least one pixel"):
+        repetition(img, mask=np.zeros(img.shape, bool))
+    with pytest.raises(ValueError, match="mask: expected shape"):
+        repetition(img, mask=gaps[:, :10])
 
 
 def test_synthesis_deterministic_across_threads(exemplar):
