@@ -12,7 +12,8 @@ median heading change over 60 px and the drift L1, re-trace F1, two-level fracti
 the share of the length along the frame, the input's direction concentration ("one way"), the
 output's direction-histogram distance to it ("dirs", beside the re-trace), and the shares of the
 input's structure contrast and background grain the output kept, and the repetition of the
-output's fine grain as a multiple of the input's ("rep"; both on the printed line). ``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel`` and
+output's fine grain in the gaps as a multiple of the input background's ("gaps' rep"; over the
+whole image and the gaps on the printed line). ``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel`` and
 ``--gap-diversity`` are those of the quality script.
 """
 
@@ -68,7 +69,8 @@ def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[
     two = "" if r.two_level is None else f", 2-level {100 * r.two_level:.1f}%"
     print(
         f"{path.name}: F1 {r.f1:.2f}, share {r.share_in:.2f}->{r.share_out:.2f}, drift {r.drift:.2f}{two}, "
-        f"grain repetition {r.repetition_in:.3f}->{r.repetition_out:.3f}, empty space {r.empty_in:.0f}->{r.empty_out:.0f} px"
+        f"grain repetition {r.repetition_in:.3f}->{r.repetition_out:.3f} (gaps {r.gap_repetition_in:.3f}->"
+        f"{r.gap_repetition_out:.3f}), empty space {r.empty_in:.0f}->{r.empty_out:.0f} px"
     )
     return [
         _label(_fit(_show(img), interpolation=cv2.INTER_AREA), f"{name} seed {seed}, {seconds:.0f} s"),
@@ -79,7 +81,7 @@ def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[
         _label(_fit(_show(res.image), interpolation=cv2.INTER_AREA),
                f"output{two}, kept: contrast {r.contrast_out / r.contrast_in if r.contrast_in else float('nan'):.2f}"
                + (f", grain {r.grain_out / r.grain_in:.2f}" if r.grain_in > 0 else "")
-               + (f", rep ×{r.repetition_out / r.repetition_in:.1f}" if r.repetition_in > 0 else "")),
+               + (f", gaps' rep ×{r.gap_repetition_out / r.gap_repetition_in:.1f}" if r.gap_repetition_in > 0 else "")),
         _label(_fit(retraced, interpolation=cv2.INTER_AREA),
                f"re-traced: F1 {r.f1:.2f} (P {r.precision:.2f} R {r.recall:.2f}), dirs {r.directions:.2f}"),
     ]  # fmt: skip
