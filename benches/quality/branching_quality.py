@@ -228,8 +228,9 @@ def evaluate(
 
 
 def _background(skeleton: Skeleton, valid: np.ndarray | None) -> np.ndarray:
-    """The pixels beyond the structure's fragments (3 thicknesses, the render's disks) and the
-    reach of the grain's blur (3 ``REPETITION_DETAIL``), inside ``valid``."""
+    """The pixels inside ``valid`` farther from the structure's tube than 2 median thicknesses
+    (the render's disks reach 3 thicknesses from a centre line) plus the reach of the grain's
+    blur (3 ``REPETITION_DETAIL``)."""
     tube = skeleton.mask()
     far = cv2.distanceTransform((~tube).astype(np.uint8), cv2.DIST_L2, 5)
     thick = float(np.median(np.concatenate([b.thickness for b in skeleton.branches])))

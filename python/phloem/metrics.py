@@ -236,12 +236,12 @@ def repetition(image: Any, *, min_shift: int = 16, detail: float | None = None, 
     shape = (2 * h, 2 * w)
     f = np.fft.rfft2(g, shape)
     ac = np.fft.irfft2(f * np.conj(f), shape)
-    ones = np.fft.rfft2(inside, shape)
+    fm = np.fft.rfft2(inside, shape)
     sq = np.fft.rfft2(g * g, shape)
     # Overlap count and the energy of each side of the overlap, per shift.
-    n = np.fft.irfft2(ones * np.conj(ones), shape)
-    e1 = np.fft.irfft2(sq * np.conj(ones), shape)
-    e2 = np.fft.irfft2(ones * np.conj(sq), shape)
+    n = np.fft.irfft2(fm * np.conj(fm), shape)
+    e1 = np.fft.irfft2(sq * np.conj(fm), shape)
+    e2 = np.fft.irfft2(fm * np.conj(sq), shape)
     dy = np.minimum(np.arange(2 * h), 2 * h - np.arange(2 * h))
     dx = np.minimum(np.arange(2 * w), 2 * w - np.arange(2 * w))
     far = np.maximum(dy[:, None], dx[None, :]) >= m

@@ -695,9 +695,8 @@ def test_fragments_of_blurred_structure_are_left_out() -> None:
 
 
 def test_a_straight_target_is_not_painted_from_blurred_structure() -> None:
-    # The blurred line is the best shape for a straight target (without the rule it paints 31
-    # of its 32 fragments); so the brain's grown trunk was painted from the dish's
-    # out-of-focus rim, as smears.
+    # The blurred line is the best shape for a straight target, as the brain's dish rim was for
+    # its grown trunk, which it painted as smears (docs/pipelines/branching/quality.md).
     img, sk = _blur_scene()
     tgt = Skeleton([Branch([[20.0, 60.0], [380.0, 60.0]], 2.5)], img.shape)
     res = render(img, sk, tgt, seed=0, full_output=True, complete=False)
