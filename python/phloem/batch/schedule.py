@@ -15,6 +15,7 @@ import logging
 import os
 import re
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -227,6 +228,33 @@ def _interrupts_held() -> Iterator[None]:
                 signal.raise_signal(signal.SIGINT)
 
 
+@contextlib.contextmanager
+def _interrupts_latched() -> Iterator[Callable[[], bool]]:
+    """A Ctrl-C that Python swallows meanwhile, kept: yields ``interrupted()``, and raises
+    KeyboardInterrupt on leaving if one was swallowed.
+
+    Python raises a Ctrl-C in whatever the main thread runs at that moment. In a garbage
+    collector callback (Dask's GC diagnosis), a ``__del__`` or a weakref callback it is only
+    printed as "Exception ignored" and the batch would run on to the end with status 0.
+    """
+    swallowed: list[BaseException] = []
+    previous = sys.unraisablehook
+
+    def hook(unraisable: Any) -> None:
+        if isinstance(unraisable.exc_value, KeyboardInterrupt):
+            swallowed.append(unraisable.exc_value)
+        else:
+            previous(unraisable)
+
+    sys.unraisablehook = hook
+    try:
+        yield lambda: bool(swallowed)
+    finally:
+        sys.unraisablehook = previous
+    if swallowed:
+        raise KeyboardInterrupt
+
+
 def _local_share(cluster: Any) -> tuple[int, int]:
     """Threads and memory of each task on a :func:`local_cluster`."""
     n = max(1, len(cluster.workers))
@@ -345,7 +373,7 @@ def run(
 
     report()
     if todo:
-        with _client(client, workers) as (c, threads, memory):
+        with _interrupts_latched() as interrupted, _client(client, workers) as (c, threads, memory):
             _schedule(
                 c,
                 todo,
@@ -358,6 +386,7 @@ def run(
                 report,
                 # a cache made before (a stale one is remade, by every worker at worst)
                 alone_first=cache is not None and not (cache.is_dir() and any(cache.iterdir())),
+                interrupted=interrupted,
             )
     _sweep(root)
     summary.seconds = time.perf_counter() - t0
@@ -413,6 +442,7 @@ def _schedule(
     report: Callable[[], None],
     *,
     alone_first: bool,
+    interrupted: Callable[[], bool],
 ) -> None:
     from distributed import as_completed
 
@@ -441,6 +471,8 @@ def _schedule(
     probe_left = n_probe
     seconds: list[float] = []
     for fut in futures:
+        if interrupted():  # a Ctrl-C swallowed while waiting: stop here, not at the batch's end
+            raise KeyboardInterrupt
         names = names_of.pop(fut.key)
         try:
             recs = fut.result()
