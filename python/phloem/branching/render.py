@@ -982,7 +982,6 @@ def _blurred_structure(image: F32, frs: list[Fragment], excluded: NDArray[np.boo
     """
     if not frs:
         return np.zeros(0, bool)
-    gray = np.ascontiguousarray(image.mean(axis=2), dtype=np.float32)
     width = np.full(len(frs), np.nan)
     for i, f in enumerate(frs):
         n = len(f.points) // 2 if f.furcation else len(f.points)  # its own segment, not the child's
@@ -995,8 +994,10 @@ def _blurred_structure(image: F32, frs: list[Fragment], excluded: NDArray[np.boo
         reach = float(f.thickness[:n].max()) + EDGE_MARGIN
         steps = np.arange(-reach, reach + 1e-9, 0.5)
         pts = p[:, None, :] + steps[None, :, None] * normal[:, None, :]
-        prof = cv2.remap(gray, pts[..., 0].astype(np.float32), pts[..., 1].astype(np.float32),
+        # the profiles' own channels averaged: a grey copy of the whole image costs more than this loop
+        prof = cv2.remap(image, pts[..., 0].astype(np.float32), pts[..., 1].astype(np.float32),
                          cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)  # fmt: skip
+        prof = prof.reshape(*pts.shape[:2], -1).mean(axis=2)
         depth = np.abs((prof[:, 0] + prof[:, -1]) / 2 - prof[:, len(steps) // 2])
         slope = np.abs(np.diff(prof, axis=1)).max(axis=1) / 0.5
         ok = slope > 0
