@@ -56,10 +56,15 @@ def _clip_channels(x: F32, lo: F32, hi: F32) -> F32:
 
 
 def _paste(dst: F32, src: F32, mask: NDArray[np.bool_]) -> None:
-    """``dst[mask] = src[mask]`` for (H, W, C) images, through a mask repeated over the
-    channels so the copy runs along whole rows (faster than either masked indexing or a
-    broadcast ``where``)."""
-    np.copyto(dst, src, where=np.repeat(mask[..., None], dst.shape[2], axis=2))
+    """``dst[mask] = src[mask]`` for (H, W, C) images, in place (``dst`` may be a view).
+
+    OpenCV's masked copy takes one mask for all channels and releases the GIL: several times
+    faster than NumPy's ``copyto`` through a mask repeated over the channels.
+    """
+    m = np.asarray(mask, dtype=bool)
+    out = cv2.copyTo(np.asarray(src, dtype=dst.dtype), m.view(np.uint8), dst)
+    if out is not dst:  # OpenCV could not write through this view: copy its result back
+        np.copyto(dst, out.reshape(dst.shape))
 
 
 def _rot(theta: float) -> F64:
