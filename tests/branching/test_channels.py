@@ -52,3 +52,18 @@ def test_a_2d_image_gives_a_2d_result():
     res = branching.render(gray, sk, sk, seed=0, full_output=True)
     assert res.image.shape == res.structure.shape == (120, 160)
     assert branching.synthesize(gray, sk, seed=0).image.shape == (120, 160)
+
+
+@pytest.mark.parametrize("c", [1, 3, 5])
+def test_paste_writes_through_a_view_in_every_channel(c):
+    from phloem.branching._pixels import _paste
+
+    rng = np.random.default_rng(c)
+    canvas = rng.random((40, 50, c), dtype=np.float32)
+    src = rng.random((30, 60, c), dtype=np.float32)[::2, 10:40]  # a strided source
+    mask = rng.random((30, 30)) > 0.5
+    mask = mask[::2]  # and a strided mask
+    want = canvas.copy()
+    want[5:20, 12:42][mask] = src[mask]
+    _paste(canvas[5:20, 12:42], src, mask)
+    assert np.array_equal(canvas, want)
