@@ -42,6 +42,7 @@ from ._elements import (
     _generations,
     _range,
 )
+from ._layout import DirectionLayout
 from .skeleton import Skeleton
 
 __all__ = [
@@ -288,6 +289,9 @@ class BendingModel:
     # (bins,) the input's histogram of edge directions on the image, as axes (see _axis_bins)
     hist_dir: F64 = field(default_factory=lambda: np.zeros(0), repr=False)
     direction_histogram: float = 0.0
+    # where the input's branches run which way (None where layout is 0)
+    direction_layout: DirectionLayout | None = field(default=None, repr=False)
+    layout: float = 0.0
 
     @classmethod
     def fit(
@@ -311,6 +315,7 @@ class BendingModel:
         arc: float = ARC,
         stem_thickness: float = STEM_THICKNESS,
         direction_histogram: float = 0.0,
+        layout: float = 0.0,
     ) -> BendingModel:
         """Learn the bending model from an example skeleton.
 
@@ -423,6 +428,17 @@ class BendingModel:
             and none that steer it back. The histogram does, and it holds the whole
             structure's share of each direction to the input's. :func:`synthesize` turns it
             on where the input runs one way (:func:`direction_histogram_default`).
+        layout : float
+            Weight of the input's layout of directions (default 0: off, the paper's model,
+            the same everywhere in the picture). Beyond the paper: a von Mises distribution of
+            the edges' axes fitted at each place of the input to its different branches near
+            there (:class:`~phloem.branching._layout.DirectionLayout`), laid over the new
+            picture. A candidate gains ``layout · κ cos 2(θ − φ)`` in ``log Q``, ``θ`` its
+            mean direction and ``κ``, ``φ`` the distribution at the branch's tip: its
+            log-density there. Where the input's branches do not agree on a way (a crack
+            network, bark) ``κ`` is 0 and nothing changes; a fundus's vessels, a delta's
+            channels or roots sweeping one way are grown along the input's ways
+            (``docs/pipelines/branching.md``, "The input's layout").
 
         Returns
         -------
@@ -464,6 +480,7 @@ class BendingModel:
         turn_histogram = check_float(turn_histogram, "turn_histogram", 0.0)
         stem_thickness = check_float(stem_thickness, "stem_thickness", 0.0)
         direction_histogram = check_float(direction_histogram, "direction_histogram", 0.0)
+        layout = check_float(layout, "layout", 0.0)
         arc = check_float(arc, "arc", 0.0, inclusive=False)
         src = skeleton.resample(h)
         elems = [_elements(b) for b in src.branches]
@@ -559,6 +576,8 @@ class BendingModel:
             stem_thickness=stem_thickness,
             hist_dir=hist_dir.astype(np.float64),
             direction_histogram=direction_histogram,
+            direction_layout=DirectionLayout.fit(skeleton) if layout > 0 else None,
+            layout=layout,
         )
 
     def log_quality(

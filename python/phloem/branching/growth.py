@@ -160,6 +160,11 @@ class _Grower:
         )  # fmt: skip
         tip = br.points[-1]
         H, W = w.shape
+        if m.layout > 0 and m.direction_layout is not None:
+            # the log-density of each candidate's mean direction under the input's layout at the tip
+            kappa, phi = m.direction_layout.at(float(tip[0]), float(tip[1]), w.shape)
+            if kappa > 0:
+                q = q + (m.layout * kappa) * np.cos(2.0 * (br.heading + self.ray_psi - phi))[self.ray_of]
         cos, sin = math.cos(br.heading), math.sin(br.heading)
         density = None
         if w.colonize and w.dens is not None and w.owner_branch is not None and w.owner_vertex is not None:

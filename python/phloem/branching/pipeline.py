@@ -100,6 +100,7 @@ def fit_models(
     turn_histogram: float = TURN_HISTOGRAM,
     stem_thickness: float = STEM_THICKNESS,
     direction_histogram: float = 0.0,
+    layout: float = 0.0,
 ) -> tuple[BendingModel, FurcationModel | None]:
     """The bending model (§4.2) and, if the skeleton branches at all, the furcation model (§4.3).
 
@@ -148,6 +149,10 @@ def fit_models(
         Weight of the matching of the histogram of the directions the branches run on the
         image, so that the structure runs each way as much as the input's (default 0: the
         paper's orientation-independent model; see :meth:`BendingModel.fit`).
+    layout : float, optional
+        Weight of the input's layout of directions, so that branches run the way the input's
+        run at the same place of the picture (default 0: the paper's model, the same
+        everywhere; see :meth:`BendingModel.fit`).
 
     Examples
     --------
@@ -159,7 +164,7 @@ def fit_models(
     bending = BendingModel.fit(
         skeleton, h=h, k=order, m=m, c=n_best, course=course, coarse_history=coarse_history, total_turn=total_turn,
         turn_bound=turn_bound, orientation=orientation, turn_histogram=turn_histogram, stem_thickness=stem_thickness,
-        direction_histogram=direction_histogram,
+        direction_histogram=direction_histogram, layout=layout,
     )  # fmt: skip
     has_children = any(b.parent is not None for b in skeleton.branches)
     furcation = FurcationModel.fit(skeleton, h=bending.h, k=order, c=n_best) if has_children else None
@@ -446,6 +451,7 @@ def synthesize(
     turn_histogram: float | None = None,
     stem_thickness: float = STEM_THICKNESS,
     direction_histogram: float | None = None,
+    layout: float = 0.0,
     generations: int | None = None,
     max_length: float | str | None = "input",
     colonize: bool = True,
@@ -480,7 +486,7 @@ def synthesize(
         Seed of the growth and of the fragment choices.
     trace_options : dict, optional
         Keyword arguments for :func:`trace` (e.g. ``{"kind": "dark", "sigmas": (1.5, 3, 5)}``).
-    h, order, m, n_best, course, coarse_history, total_turn, turn_bound, orientation, turn_histogram, stem_thickness, direction_histogram : optional
+    h, order, m, n_best, course, coarse_history, total_turn, turn_bound, orientation, turn_histogram, stem_thickness, direction_histogram, layout : optional
         Model parameters, as in :func:`fit_models` (``k`` and ``c`` before, deprecated).
         ``total_turn`` defaults to :func:`course_defaults`'s for the source skeleton,
         ``course`` to :func:`course_edges_default`'s (0 where the total turn is off),
@@ -489,7 +495,9 @@ def synthesize(
         ``guide`` is given, else 0) and ``direction_histogram`` to
         :func:`direction_histogram_default`'s (1 where the orientation is on, else 0),
         ``turn_histogram`` to :data:`~phloem.branching.bending.TURN_HISTOGRAM` (10; 3 with a
-        ``guide``, :data:`GUIDED_TURN_HISTOGRAM`).
+        ``guide``, :data:`GUIDED_TURN_HISTOGRAM`). ``layout`` is off by default; 1 grows a
+        laid-out input's branches (a fundus's vessels, a delta's channels) along its ways at
+        the same places of the picture.
     generations, max_length, colonize, guide : optional
         See :func:`grow`.
     repel_border : bool, optional
@@ -516,8 +524,8 @@ def synthesize(
         Models fitted to ``skeleton`` before (an earlier result's ``bending`` and ``furcation``),
         used instead of fitting them again: many seeds of one input fit once. ``h``, ``order``,
         ``m``, ``n_best``, ``course``, ``coarse_history``, ``total_turn``, ``turn_bound``,
-        ``orientation``, ``turn_histogram``, ``stem_thickness`` and ``direction_histogram`` are
-        then not used.
+        ``orientation``, ``turn_histogram``, ``stem_thickness``, ``direction_histogram`` and
+        ``layout`` are then not used.
 
     Returns
     -------
@@ -569,7 +577,7 @@ def synthesize(
         bending, furcation = fit_models(
             source, h=h, order=order, m=m, n_best=n_best, course=d.course, coarse_history=coarse_history,
             total_turn=d.total_turn, turn_bound=turn_bound, orientation=d.orientation, turn_histogram=d.turn_histogram,
-            stem_thickness=stem_thickness, direction_histogram=d.direction_histogram,
+            stem_thickness=stem_thickness, direction_histogram=d.direction_histogram, layout=layout,
         )  # fmt: skip
     elif (
         isinstance(models, tuple)
