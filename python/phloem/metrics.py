@@ -21,7 +21,8 @@ share, heading-change drift, two-level fraction, the share of the structure that
 how much children turn where they start, how far apart they leave their parent and where along
 it the long ones leave, how the parent bends where a child leaves it, which ways it
 runs on the image, how much it stands out from its surroundings, how much of the
-background's grain its completed gaps keep, and how far the picture's emptiest places lie from it; defined in
+background's grain its completed gaps keep, how far the picture's emptiest places lie from it, and
+how much it runs the way the input's branches run at the same places; defined in
 :mod:`phloem.branching.measures`).
 """
 
@@ -54,6 +55,7 @@ from .branching.measures import (
     heading_change_histogram,
     heading_changes,
     largest_tree_share,
+    layout_agreement,
     median_heading_change,
     orientation_distance,
     parent_turns,
@@ -88,6 +90,7 @@ __all__ = [
     "largest_tree_share",
     "layer_iou",
     "layer_objective",
+    "layout_agreement",
     "leaf_diversity",
     "median_heading_change",
     "orientation_distance",

@@ -3,6 +3,8 @@ against analytic references and brute force."""
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 import pytest
@@ -22,6 +24,7 @@ from phloem.branching.measures import (
     heading_change_histogram,
     heading_changes,
     largest_tree_share,
+    layout_agreement,
     median_heading_change,
     orientation_distance,
     parent_turns,
@@ -45,7 +48,7 @@ def test_metrics_reexports_the_measures() -> None:
         "retrace_agreement", "skeleton_agreement", "largest_tree_share", "border_share", "drift", "drift_noise",
         "two_level_fraction", "start_turns", "furcation_gaps", "direction_histogram", "direction_concentration",
         "orientation_distance", "structure_contrast", "background_grain", "sibling_order", "parent_turns",
-        "empty_space",
+        "empty_space", "layout_agreement",
     ):  # fmt: skip
         assert getattr(phloem.metrics, name) is getattr(phloem.branching.measures, name)
         assert name in phloem.metrics.__all__
@@ -686,3 +689,28 @@ def test_sibling_order_is_the_rank_correlation_of_place_and_length():
 def test_sibling_order_needs_enough_children():
     assert sibling_order(_stem_with_children([150.0 - 10 * i for i in range(MIN_SIBLINGS - 1)])) == 0.0
     assert sibling_order(_stem_with_children([50.0] * 12)) == 0.0  # no order among equal lengths
+
+
+def test_layout_agreement_is_the_mean_log_density_under_the_inputs_layout() -> None:
+    from phloem.branching._layout import DirectionLayout
+
+    src = Skeleton([Branch([[20, y], [280, y + 8]], 1.0) for y in range(60, 241, 20)], shape=(300, 300))
+    lay = DirectionLayout.fit(src)
+    kappa, phi = lay.at(150, 150, (300, 300))
+    # one short edge at the middle: exactly kappa cos 2(theta - phi) there
+    for theta in (0.0, 0.7, math.pi / 2):
+        d = 2.0 * np.array([math.cos(theta), -math.sin(theta)])
+        edge = Skeleton([Branch([[150, 150] - d / 2, [150, 150] + d / 2], 1.0)], shape=(300, 300))
+        assert layout_agreement(src, edge) == pytest.approx(kappa * math.cos(2 * (theta - phi)), abs=1e-9)
+    # the same picture twice the size: the layout is laid over it
+    big = Skeleton([Branch([[100, 300], [500, 300]], 1.0)], shape=(600, 600))
+    assert layout_agreement(src, big) > 2.0
+    # an input whose branches run every way has no layout: nothing agrees or disagrees
+    mesh = [Branch([[20, y], [280, y]], 1.0) for y in (100, 200)] + [
+        Branch([[x, 20], [x, 280]], 1.0) for x in (100, 200)
+    ]
+    assert layout_agreement(Skeleton(mesh, shape=(300, 300)), src) == pytest.approx(0.0, abs=0.05)
+    with pytest.raises(ValueError, match="^source:"):
+        layout_agreement(Skeleton([], shape=(300, 300)), src)
+    with pytest.raises(TypeError, match="^skeleton:"):
+        layout_agreement(src, None)  # type: ignore[arg-type]

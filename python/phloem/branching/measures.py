@@ -19,7 +19,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validate import as_image, as_mask, check_float, check_int
-from ._elements import F64, _abs_turn, _arc_lengths, _axis_bins, _bin, _check_skeleton, _tree_roots
+from ._elements import F64, _abs_turn, _arc_lengths, _axis_bins, _bin, _check_skeleton, _edge_headings, _tree_roots
+from ._layout import DirectionLayout
 from .bending import ARC  # the arc the bending model matches, so that the two stay one
 from .histograms import _hist, histogram_distance
 from .skeleton import Branch, Skeleton
@@ -38,6 +39,7 @@ __all__ = [
     "heading_change_histogram",
     "heading_changes",
     "largest_tree_share",
+    "layout_agreement",
     "median_heading_change",
     "orientation_distance",
     "parent_turns",
@@ -297,6 +299,59 @@ def border_share(skeleton: Skeleton, *, band: float | None = None) -> float:
     if total <= 0:
         raise ValueError("skeleton: the branches have no length")
     return float(np.concatenate(near).sum()) / total
+
+
+def layout_agreement(source: Skeleton, skeleton: Skeleton) -> float:
+    """How much ``skeleton`` runs the way ``source``'s branches run at the same places of the picture.
+
+    The length-weighted mean, over ``skeleton``'s edges, of ``κ cos 2(θ − φ)``: ``θ`` the
+    edge's axis, ``κ`` and ``φ`` the von Mises distribution of axes that ``source``'s
+    different branches near there follow (``DirectionLayout``, the ``layout`` growth term's),
+    laid over ``skeleton``'s picture. The log-density of the edges under the input's layout,
+    less that of directions drawn at random. 0 where the source has no layout (its branches
+    agree on no way: cracks, bark) or where the structure runs every way; negative where it
+    runs across the input's ways. Compare an output's value with the input's own
+    (``layout_agreement(source, source)``): a fundus's vessels grown without the layout give
+    about a quarter of it.
+
+    Parameters
+    ----------
+    source : Skeleton
+        The input's structure (its ``shape`` gives its picture; else its bounds).
+    skeleton : Skeleton
+        The structure measured; its ``shape`` gives its picture (else ``source``'s).
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    Ten parallel lines: a line along them agrees, one across them disagrees.
+
+    >>> from phloem.branching import Branch, Skeleton
+    >>> src = Skeleton([Branch([[20, y], [280, y]], 1.0) for y in range(60, 241, 20)], shape=(300, 300))
+    >>> along = Skeleton([Branch([[50, 150], [250, 150]], 1.0)], shape=(300, 300))
+    >>> across = Skeleton([Branch([[150, 50], [150, 250]], 1.0)], shape=(300, 300))
+    >>> layout_agreement(src, along) > 2, layout_agreement(src, across) < -2
+    (True, True)
+    """
+    _check_skeleton(source, "source")
+    _check_skeleton(skeleton)
+    lay = DirectionLayout.fit(source)
+    shape = skeleton.shape if skeleton.shape is not None else lay.shape
+    num = den = 0.0
+    for b in skeleton.branches:
+        p = np.asarray(b.points, np.float64)
+        if len(p) < 2:
+            continue
+        length = np.hypot(*np.diff(p, axis=0).T)
+        kappa, phi = lay.sample(0.5 * (p[1:] + p[:-1]), shape)
+        num += float(np.sum(length * kappa * np.cos(2.0 * (_edge_headings(p) - phi))))
+        den += float(length.sum())
+    if den <= 0:
+        raise ValueError("skeleton: has no length to measure")
+    return num / den
 
 
 def empty_space(skeleton: Skeleton, *, valid: Any = None, quantile: float = 0.9) -> float:
