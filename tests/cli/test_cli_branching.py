@@ -172,19 +172,22 @@ def test_branching_valid_flag(tmp_path, capsys):
     assert json.loads((tmp_path / "b.png.json").read_text())["parameters"]["valid"].endswith("half.png")
 
 
+def _grown(skel, folder, flag: str, values: tuple[str, ...]) -> dict:
+    """``phloem branching grow SKEL --seed 1 FLAG V`` for each value: the output file of each."""
+    outs = {}
+    for v in values:
+        outs[v] = folder / f"grown{flag}{v}.json"
+        assert main(["branching", "grow", str(skel), "--out", str(outs[v]), "--seed", "1", flag, v, "-q"]) == 0
+    return outs
+
+
 def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
     from phloem.branching import Skeleton
 
     _dark_river_png(tmp_path / "river.png")
     skel = tmp_path / "river.json"
     assert main(["branching", "trace", str(tmp_path / "river.png"), "--kind", "dark", "--out", str(skel), "-q"]) == 0
-    outs = {}
-    for course in ("0", "32"):
-        outs[course] = tmp_path / f"grown{course}.json"
-        assert (
-            main(["branching", "grow", str(skel), "--out", str(outs[course]), "--seed", "1", "--course", course, "-q"])
-            == 0
-        )
+    outs = _grown(skel, tmp_path, "--course", ("0", "32"))
     assert Skeleton.load(outs["0"]) != Skeleton.load(outs["32"])
     for weight in ("0", "4"):
         out = tmp_path / f"coarse{weight}.json"
@@ -438,3 +441,26 @@ def test_a_guided_grow_records_the_weaker_turn_histogram(tmp_path):
         assert main(["branching", "grow", str(sk), "--out", str(out), "--seed", "1", *flags, "-q"]) == 0
         got[name] = json.loads(io.sidecar_path(out).read_text())["parameters"]["turn_histogram"]
     assert got == {"guided": GUIDED_TURN_HISTOGRAM, "chosen": 7.0, "free": TURN_HISTOGRAM}
+
+
+def test_branching_layout_flag_reaches_the_growth_and_a_bad_one_is_refused(tmp_path, capsys):
+    from phloem.branching import Branch, Skeleton
+
+    # wavy branches leaving a centre every way: a layout (a single river has none, so it would not show)
+    rng = np.random.default_rng(0)
+    brs = []
+    for j in range(16):
+        a = 2 * np.pi * j / 16
+        brs.append(Branch.from_angles([100 + 15 * np.cos(a), 100 - 15 * np.sin(a)], a, rng.normal(0, 0.1, 30),
+                                      np.full(32, 1.5), 2.0))  # fmt: skip
+    skel = tmp_path / "fan.json"
+    Skeleton(brs, (200, 200)).save(skel)
+    outs = _grown(skel, tmp_path, "--layout", ("0", "1"))
+    assert Skeleton.load(outs["0"]) != Skeleton.load(outs["1"])
+    assert json.loads(io.sidecar_path(outs["1"]).read_text())["parameters"]["layout"] == 1.0
+    capsys.readouterr()
+    bad = tmp_path / "bad.json"
+    assert main(["branching", "grow", str(skel), "--out", str(bad), "--layout", "-1", "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--layout" in err[0], err
+    assert not list(tmp_path.glob("bad*"))

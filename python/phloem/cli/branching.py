@@ -349,6 +349,16 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
         "its ways is steered back (default: 1 where --orientation defaults to 3, else 0, the paper's model)",
     )
     g.add_argument(
+        "--layout",
+        type=float,
+        default=0.0,
+        metavar="WEIGHT",
+        help="weight of the example's layout of directions: branches grow the way the example's branches run "
+        "at the same place of the picture (a fundus's vessels round its disc, a delta's channels fanning out); "
+        "where the example's branches agree on no way (cracks, bark) it changes nothing (default 0: off, the "
+        "paper's model, the same everywhere; 1: on)",
+    )
+    g.add_argument(
         "--stem-thickness",
         type=non_negative,
         default=STEM_THICKNESS,
@@ -402,12 +412,12 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     # fitting takes seconds on real skeletons; a batch worker fits once per skeleton and options
     options = (args.h, args.order, args.m, args.n_best, args.course, args.coarse_history, args.total_turn,
                args.turn_bound, args.orientation, args.turn_histogram, args.stem_thickness,
-               args.direction_histogram)  # fmt: skip
+               args.direction_histogram, args.layout)  # fmt: skip
     bend, fur = kept("branching models", [Path(args.skeleton)], options, lambda: branching.fit_models(
         source, h=args.h, order=args.order, m=args.m, n_best=args.n_best, course=args.course,
         coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound,
         orientation=args.orientation, turn_histogram=args.turn_histogram, stem_thickness=args.stem_thickness,
-        direction_histogram=args.direction_histogram))  # fmt: skip
+        direction_histogram=args.direction_histogram, layout=args.layout))  # fmt: skip
     new = run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
     _resolve_models(args, bend)
     args.size = shape
@@ -459,13 +469,14 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
         read.append(Path(args.valid))
     key = stamp(read, (_trace_kwargs(args), args.valid, args.h, args.order, args.m, args.n_best, args.course,
                                args.coarse_history, args.total_turn, args.turn_bound, args.orientation,
-                               args.turn_histogram, args.stem_thickness, args.direction_histogram))  # fmt: skip
+                               args.turn_histogram, args.stem_thickness, args.direction_histogram,
+                               args.layout))  # fmt: skip
     prior = recall("branching run models", key)
     res = run(
         "branching run", args,
         lambda bar: branching.synthesize(
             img, source if prior is None else prior[0], models=None if prior is None else prior[1:], size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, order=args.order,
-            m=args.m, n_best=args.n_best, course=args.course, coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound, orientation=args.orientation, turn_histogram=args.turn_histogram, stem_thickness=args.stem_thickness, direction_histogram=args.direction_histogram, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize, repel_border=args.repel_border,
+            m=args.m, n_best=args.n_best, course=args.course, coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound, orientation=args.orientation, turn_histogram=args.turn_histogram, stem_thickness=args.stem_thickness, direction_histogram=args.direction_histogram, layout=args.layout, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize, repel_border=args.repel_border,
             guide=_guide(args.guide, args), valid=valid, render_options=_render_kwargs(args),
             threads=args.threads, progress=bar, max_memory=args.max_memory,
         ),
