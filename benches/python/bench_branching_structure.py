@@ -12,6 +12,7 @@ histograms to the input's.
 
 Run for figures:   pytest benches/python/bench_branching_structure.py --benchmark-enable --benchmark-only
 Table:             python benches/python/bench_branching_structure.py [--runs N] [--trees T] [--nodes N] [--no-real]
+                   [--direction-histogram W] [--layout W]
 In the default test run the benchmark executes once (``--benchmark-disable``).
 """
 
@@ -65,11 +66,11 @@ def test_bench_grow_500(benchmark):
     assert sum(len(b) for b in out.branches) > 100
 
 
-def times(trees: int, nodes: int, direction_histogram: float = 0.0) -> dict[str, float]:
+def times(trees: int, nodes: int, direction_histogram: float = 0.0, layout: float = 0.0) -> dict[str, float]:
     src = example(trees)
     t: dict[str, float] = {}
     t0 = time.perf_counter()
-    bend = BendingModel.fit(src, h=H, direction_histogram=direction_histogram)
+    bend = BendingModel.fit(src, h=H, direction_histogram=direction_histogram, layout=layout)
     t["fit bending"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     fur = FurcationModel.fit(src, h=H)
@@ -92,7 +93,7 @@ REAL = {
 }
 
 
-def real_rows() -> list[str]:
+def real_rows(layout: float = 0.0) -> list[str]:
     """Input-sized growth from the traced real inputs (empty without ../shared)."""
     from phloem import io
     from phloem.branching import trace
@@ -104,7 +105,7 @@ def real_rows() -> list[str]:
             continue
         img = io.read_image(path)
         src = trace(img, **kw)  # type: ignore[arg-type]
-        bend = BendingModel.fit(src)
+        bend = BendingModel.fit(src, layout=layout)
         fur = FurcationModel.fit(src, h=bend.h)
         t0 = time.perf_counter()
         out = grow(bend, fur, size=img.shape[:2], seed=1, max_length="input")
@@ -130,18 +131,19 @@ def main() -> None:
     ap.add_argument(
         "--direction-histogram", type=float, default=0.0, help="the bending model's direction histogram weight"
     )
+    ap.add_argument("--layout", type=float, default=0.0, help="the bending model's layout weight")
     args = ap.parse_args()
     src = example(args.trees)
     samples = sum(len(b) for b in src.resample(H).branches)
-    runs = [times(args.trees, args.nodes, args.direction_histogram) for _ in range(args.runs)]
+    runs = [times(args.trees, args.nodes, args.direction_histogram, args.layout) for _ in range(args.runs)]
     best = {k: min(r[k] for r in runs) for k in runs[0]}
     print(
         f"example: {args.trees} trees, {len(src.branches)} branches, {samples} SVM samples (h = {H:g} px), "
-        f"direction histogram {args.direction_histogram:g}"
+        f"direction histogram {args.direction_histogram:g}, layout {args.layout:g}"
     )
     print(" ".join(f"{k:>14}" for k in best) + f"   (seconds, best of {args.runs})")
     print(" ".join(f"{v:>14.3f}" if v < 100 else f"{v:>14.0f}" for v in best.values()))
-    rows = [] if args.no_real else real_rows()
+    rows = [] if args.no_real else real_rows(args.layout)
     if rows:
         print('\ninput-sized structures (max_length="input", seed 1; L1 of normalised histograms vs the input)')
         head = ("input", "in br", "roots", "branches", "nodes", "length/L", "seconds", "angle L1", "thick L1")

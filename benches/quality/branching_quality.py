@@ -1,7 +1,7 @@
 """Quality of ``phloem.branching.synthesize`` with its defaults on real inputs (issue 19's acceptance check).
 
     PYTHONPATH=python python benches/quality/branching_quality.py [--inputs DIR] [--seeds 0 1 2]
-        [--max-side N] [--threads 2] [--tuned-trace] [--sigmas S ...] [--gap G] [--subpixel] [--gap-diversity L]
+        [--max-side N] [--threads 2] [--tuned-trace] [--sigmas S ...] [--gap G] [--subpixel] [--gap-diversity L] [--layout W]
         [--only NAME ...] [--json OUT]
 
 For every image of ``--inputs`` (default: ``branching`` of the real-image collection,
@@ -22,6 +22,8 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
 - how far the emptiest tenth of the input's and the output's picture lies from the structure
   (``empty_space``, px, not a pass mark: one tree grown into a knot that leaves half the
   picture empty);
+- how much the input and the output run the way the input's branches run at the same places
+  (``layout_agreement``, not a pass mark: 0 where the input has no layout);
 - the share of the input's and the output's children that hook where they start, turning by more
   than π/2 over their first ``3 m h`` px (``start_turns``, not a pass mark);
 - the median arc length between neighbouring children on one parent, input and output
@@ -95,6 +97,7 @@ from phloem.metrics import (
     empty_space,
     furcation_gaps,
     largest_tree_share,
+    layout_agreement,
     median_heading_change,
     orientation_distance,
     parent_turns,
@@ -134,6 +137,8 @@ class Result:
     border_out: float = math.nan
     empty_in: float = math.nan
     empty_out: float = math.nan
+    layout_in: float = math.nan
+    layout_out: float = math.nan
     hooks_in: float = math.nan
     hooks_out: float = math.nan
     gap_in: float = math.nan
@@ -200,11 +205,14 @@ def run(
     trace_options: dict[str, Any] | None = None,
     threads: int | None = None,
     render_options: dict[str, Any] | None = None,
+    layout: float = 0.0,
 ) -> tuple[SynthesisResult | None, float, str]:
-    """``synthesize`` with the defaults (and ``trace_options``, ``render_options``): the result, its time and any error."""
+    """``synthesize`` with the defaults (and ``trace_options``, ``render_options``, ``layout``): the result, its time and any error."""
     t0 = time.perf_counter()
     try:
-        res = synthesize(img, seed=seed, trace_options=trace_options, threads=threads, render_options=render_options)
+        res = synthesize(
+            img, seed=seed, trace_options=trace_options, threads=threads, render_options=render_options, layout=layout
+        )
     except Exception as e:  # a failure is a result too
         return None, math.nan, f"synthesize: {type(e).__name__}: {e}"
     return res, time.perf_counter() - t0, ""
@@ -219,9 +227,12 @@ def evaluate(
     trace_options: dict[str, Any] | None = None,
     threads: int | None = None,
     render_options: dict[str, Any] | None = None,
+    layout: float = 0.0,
 ) -> Result:
-    """Synthesise from ``img`` with the defaults (and ``trace_options``, ``render_options``) and measure the output."""
-    res, seconds, error = run(img, seed, trace_options=trace_options, threads=threads, render_options=render_options)
+    """Synthesise from ``img`` with the defaults (and ``trace_options``, ``render_options``, ``layout``) and measure the output."""
+    res, seconds, error = run(
+        img, seed, trace_options=trace_options, threads=threads, render_options=render_options, layout=layout
+    )
     if res is None:
         return Result(name, seed, tuple(img.shape), mask, error=error, passed={"ok": False})
     return measure(name, img, mask, seed, res, seconds, trace_options=trace_options)
@@ -273,6 +284,8 @@ def measure(
     with contextlib.suppress(ValueError):
         r.empty_in = empty_space(src, valid=valid_in)
         r.empty_out = empty_space(tgt, valid=rt_options["valid"])
+    # nor this: whether the output runs the input's ways at the same places (the layout term)
+    r.layout_in, r.layout_out = layout_agreement(src, src), layout_agreement(src, tgt)
     # not a mark either: children that hook back where they leave their parent (the contact sheets)
     r.hooks_in, r.hooks_out = (hooked_share(sk, 3.0 * res.bending.m * res.bending.h) for sk in (src, tgt))
     # nor this: children packed along their parents, combs where the input spaces them
@@ -365,7 +378,7 @@ def _f(x: float | None, fmt: str = ".2f") -> str:
 def table(results: list[Result]) -> str:
     head = (
         "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input's noise) | heading in → out (rad) "
-        "| along the frame in → out | empty space px in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | parent's turn at children in → out | directions L1 (input's concentration) | contrast in → out (kept) | grain kept | grain repetition in → out | gaps' grain repetition in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
+        "| along the frame in → out | empty space px in → out | layout in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | parent's turn at children in → out | directions L1 (input's concentration) | contrast in → out (kept) | grain kept | grain repetition in → out | gaps' grain repetition in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for r in results:
@@ -377,7 +390,7 @@ def table(results: list[Result]) -> str:
         lines.append(
             f"| {r.input} | {r.seed} | {size} | {_f(r.f1)} ({_f(r.precision)}/{_f(r.recall)}) "
             f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} ({_f(r.drift_noise)}) | {_f(r.heading_in)} → {_f(r.heading_out)} "
-            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.empty_in, '.0f')} → {_f(r.empty_out, '.0f')} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.parent_turn_in)} → {_f(r.parent_turn_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {_f(r.repetition_in)} → {_f(r.repetition_out)} | {_f(r.gap_repetition_in)} → {_f(r.gap_repetition_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
+            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.empty_in, '.0f')} → {_f(r.empty_out, '.0f')} | {_f(r.layout_in)} → {_f(r.layout_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.parent_turn_in)} → {_f(r.parent_turn_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {_f(r.repetition_in)} → {_f(r.repetition_out)} | {_f(r.gap_repetition_in)} → {_f(r.gap_repetition_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
             f"| {_f(r.seconds, '.1f')} | {fails} |"
         )
     return "\n".join(lines)
@@ -415,7 +428,7 @@ def photo_trace_options(
 
 
 def add_run_arguments(ap: argparse.ArgumentParser) -> None:
-    """``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel`` and ``--gap-diversity`` (shared with the contact sheet)."""
+    """``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel``, ``--gap-diversity`` and ``--layout`` (shared with the contact sheet)."""
     ap.add_argument("--tuned-trace", action="store_true", help="trace with phloem.testing.TRACE_SETTINGS")
     ap.add_argument("--sigmas", type=float, nargs="+", default=None, help="trace photos with these ridge scales")
     ap.add_argument("--gap", type=float, default=None, help="trace photos with this bridging gap (px)")
@@ -423,6 +436,7 @@ def add_run_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument(
         "--gap-diversity", type=float, default=None, help="render's gap_diversity (default: synthesize's, 0)"
     )
+    ap.add_argument("--layout", type=float, default=0.0, help="synthesize's layout weight (default 0: off)")
 
 
 def render_options_of(args: argparse.Namespace) -> dict[str, Any] | None:
@@ -457,8 +471,9 @@ def main(argv: list[str] | None = None) -> int:
         )
         for seed in args.seeds:
             r = evaluate(
-                p.name, img, mask, seed, trace_options=opts, threads=args.threads, render_options=render_options
-            )
+                p.name, img, mask, seed, trace_options=opts, threads=args.threads, render_options=render_options,
+                layout=args.layout,
+            )  # fmt: skip
             results.append(r)
             print(table([r]).splitlines()[-1], flush=True)
     print()

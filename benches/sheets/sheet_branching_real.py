@@ -1,7 +1,7 @@
 """Contact sheet of ``phloem.branching.synthesize`` with its defaults on real inputs (issue 19).
 
     PYTHONPATH=python python -m benches.sheets.sheet_branching_real --out OUT.png [--inputs DIR] [--seed 0]
-        [--max-side N] [--tuned-trace] [--sigmas S ...] [--gap G] [--subpixel] [--gap-diversity L] [--only NAME ...]
+        [--max-side N] [--tuned-trace] [--sigmas S ...] [--gap G] [--subpixel] [--gap-diversity L] [--layout W] [--only NAME ...]
 
 One row per image of ``--inputs`` (default: ``branching`` of the real-image collection):
 input | input with its traced skeleton | grown skeleton | output image | output with its own
@@ -13,8 +13,8 @@ the share of the length along the frame, the input's direction concentration ("o
 output's direction-histogram distance to it ("dirs", beside the re-trace), and the shares of the
 input's structure contrast and background grain the output kept, and the repetition of the
 output's fine grain in the gaps as a multiple of the input background's ("gaps' rep"; over the
-whole image and the gaps on the printed line). ``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel`` and
-``--gap-diversity`` are those of the quality script.
+whole image and the gaps on the printed line). ``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel``,
+``--gap-diversity`` and ``--layout`` are those of the quality script.
 """
 
 from __future__ import annotations
@@ -55,7 +55,9 @@ def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[
         path.name, mask, tuned=args.tuned_trace, sigmas=args.sigmas, gap=args.gap, subpixel=args.subpixel
     )
     name = path.stem[:22]
-    res, seconds, error = run(img, seed, trace_options=opts, threads=2, render_options=render_options_of(args))
+    res, seconds, error = run(
+        img, seed, trace_options=opts, threads=2, render_options=render_options_of(args), layout=args.layout
+    )
     if res is None:
         print(f"{path.name}: {error}")
         blank = np.ones((TILE, TILE, 3), np.float32)
@@ -70,7 +72,8 @@ def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[
     print(
         f"{path.name}: F1 {r.f1:.2f}, share {r.share_in:.2f}->{r.share_out:.2f}, drift {r.drift:.2f}{two}, "
         f"grain repetition {r.repetition_in:.3f}->{r.repetition_out:.3f} (gaps {r.gap_repetition_in:.3f}->"
-        f"{r.gap_repetition_out:.3f}), empty space {r.empty_in:.0f}->{r.empty_out:.0f} px"
+        f"{r.gap_repetition_out:.3f}), empty space {r.empty_in:.0f}->{r.empty_out:.0f} px, "
+        f"layout {r.layout_in:.2f}->{r.layout_out:.2f}"
     )
     return [
         _label(_fit(_show(img), interpolation=cv2.INTER_AREA), f"{name} seed {seed}, {seconds:.0f} s"),
