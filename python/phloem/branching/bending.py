@@ -438,7 +438,7 @@ class BendingModel:
             log-density there. Where the input's branches do not agree on a way (a crack
             network, bark) ``κ`` is 0 and nothing changes; a fundus's vessels, a delta's
             channels or roots sweeping one way are grown along the input's ways
-            (``docs/pipelines/branching.md``, "The input's layout").
+            (``docs/pipelines/branching.md``, ``layout``).
 
         Returns
         -------
