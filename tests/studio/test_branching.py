@@ -217,6 +217,7 @@ def test_several_guide_paths_are_a_mask_the_structure_follows(client, project, s
         ({"kind": "branching-grow", "skeleton": "none.json"}, 404, "skeleton: no file"),
         ({"kind": "branching-grow", "skeleton": "channel.json", "guide": "none.json"}, 404, "guide: no file"),
         ({"kind": "branching-grow", "skeleton": "channel.json", "size": [0, 10]}, 422, "size"),
+        ({"kind": "branching-grow", "skeleton": "channel.json", "layout": -1}, 422, "layout"),
         ({"kind": "branching-grow", "skeleton": "photos/bar.png"}, 400, "skeleton:"),
         ({"kind": "branching-grow", "skeleton": "channel.json", "size": [8000, 8000]}, 422, "over the pixel limit"),
         (
@@ -280,3 +281,21 @@ def test_histograms_compare_the_example_and_the_grown_skeleton(client, project, 
         client.get("/api/histograms", params={"source": "channel.json", "result": "thin.json", "bins": 0}).status_code
         == 422
     )
+
+
+def test_grow_takes_the_examples_layout_and_records_it(client, project):
+    # wavy branches leaving a centre every way: a layout (the channel scene's one river has none)
+    rng = np.random.default_rng(0)
+    brs = []
+    for j in range(16):
+        a = 2 * np.pi * j / 16
+        brs.append(branching.Branch.from_angles([100 + 15 * np.cos(a), 100 - 15 * np.sin(a)], a,
+                                                rng.normal(0, 0.1, 30), np.full(32, 1.5), 2.0))  # fmt: skip
+    branching.Skeleton(brs, (200, 200)).save(project.root / "fan.json")
+    grown = {}
+    for weight in (0.0, 1.0):
+        end = run_job(client, {"kind": "branching-grow", "skeleton": "fan.json", "seed": 1, "layout": weight,
+                               "out": f"fan{weight:g}.json"})  # fmt: skip
+        grown[weight] = branching.Skeleton.load(project.root / end["outputs"][0])
+    assert grown[0.0] != grown[1.0]
+    assert json.loads((project.root / "fan1.sidecar.json").read_text())["parameters"]["layout"] == 1.0

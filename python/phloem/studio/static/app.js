@@ -988,6 +988,8 @@ function drawHistograms(h) {
 async function grow() {
   const skeleton = await saveSkeleton();
   const req = { kind: "branching-grow", skeleton, seed: +$("br-seed").value };
+  const layout = +$("br-layout").value;
+  if (layout) req.layout = layout;
   if (K.guides.length) req.guide = await saveGuide();
   const s = await runJobReplacing(req, kUi);
   K.example = skeleton;

@@ -109,6 +109,13 @@ class BranchingGrowJob(BaseModel):
         None, gt=0, le=1000, description="resampling step (px); default the example's median thickness"
     )
     n_best: int = Field(N_BEST, ge=1, le=64, description="candidates drawn from at each step (the paper's c: 2)")
+    layout: float = Field(
+        0.0,
+        ge=0,
+        le=100,
+        description="weight of the example's layout of directions: branches grow the way the example's run at the "
+        "same places of the picture (0: off, the paper's model)",
+    )
     out: str | None = Field(
         None, description="project name of the new skeleton (.json); default results/grown-<id>.json"
     )
@@ -244,6 +251,7 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
                 orientation=d.orientation,
                 direction_histogram=d.direction_histogram,
                 turn_histogram=d.turn_histogram,
+                layout=req.layout,
             )
             new = branching.grow(bend, fur, size=shape, seed=req.seed, max_length=req.max_length, guide=guide,
                                  repel_border=d.repel_border, progress=progress, max_memory=project.max_memory)  # fmt: skip
