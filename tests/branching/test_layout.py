@@ -19,8 +19,8 @@ def _line(a: tuple[float, float], b: tuple[float, float], n: int = 40) -> Branch
 
 
 def test_parallel_branches_have_a_layout_and_one_branch_has_none():
-    rows = [Skeleton([_line((20, y), (280, y + 8)) for y in range(60, 241, 20)], (300, 300))]
-    lay = DirectionLayout.fit(rows[0])
+    rows = Skeleton([_line((20, y), (280, y + 8)) for y in range(60, 241, 20)], (300, 300))
+    lay = DirectionLayout.fit(rows)
     kappa, phi = lay.at(150, 150, (300, 300))
     # ten parallel branches agree: a sharp distribution along their axis (slope 8/260, up-right on screen)
     assert kappa > 3.0
@@ -90,7 +90,7 @@ def test_growth_follows_the_inputs_layout():
         bend = BendingModel.fit(src, h=2.0, layout=weight)
         return [_radial_agreement(grow(bend, None, size=src.shape, seed=s, max_length="input")) for s in range(4)]
 
-    without, with_ = agreements(0.0), agreements(1.0)  # means 0.41 and 0.69
+    without, with_ = agreements(0.0), agreements(1.0)
     assert np.mean(with_) > np.mean(without) + 0.15, (with_, without)
     assert min(with_) > np.median(without), (with_, without)
 

@@ -133,9 +133,5 @@ class DirectionLayout:
 
     def at(self, x: float, y: float, shape: tuple[int, int]) -> tuple[float, float]:
         """``(kappa, phi)`` at ``(x, y)`` of a picture of ``shape``, laid over the input's frame."""
-        h, w = self.shape
-        sx = x / max(shape[1] - 1, 1) * (w - 1)
-        sy = y / max(shape[0] - 1, 1) * (h - 1)
-        i = min(max(round(sy / self.cell), 0), self.kappa.shape[0] - 1)
-        j = min(max(round(sx / self.cell), 0), self.kappa.shape[1] - 1)
-        return float(self.kappa[i, j]), float(self.phi[i, j])
+        kappa, phi = self.sample(np.array([x, y], np.float64), shape)
+        return float(kappa[0]), float(phi[0])

@@ -160,7 +160,7 @@ class _Grower:
         )  # fmt: skip
         tip = br.points[-1]
         H, W = w.shape
-        if m.layout > 0 and m.direction_layout is not None:
+        if m.direction_layout is not None:  # fitted only where layout > 0
             # the log-density of each candidate's mean direction under the input's layout at the tip
             kappa, phi = m.direction_layout.at(float(tip[0]), float(tip[1]), w.shape)
             if kappa > 0:
