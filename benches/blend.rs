@@ -1,6 +1,7 @@
 //! Criterion benches of the gradient-domain solvers: Poisson blending of 256² and 511² bark
 //! squares and a 511² disk into a 1024² water photo (the issues' workloads, RGB, tol 1e-6) on 1
-//! and 2 threads, and smooth field interpolation over a 128² disk.
+//! and 2 threads, smooth field interpolation over a 128² disk, and the sampling maps of one
+//! deformed river-sized fragment (radius 67 px, the branching render's per-fragment warp).
 //!
 //! `cargo bench -p phloem-core --bench blend`. Throughput is in region pixels per second;
 //! iterations and residuals are printed once per workload.
@@ -11,6 +12,7 @@ use std::hint::black_box;
 
 use common::{load, pool};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use phloem_core::deform::{fragment_maps, Placement};
 use phloem_core::field::{interpolate_field, FieldParams};
 use phloem_core::image::Image;
 use phloem_core::poisson::{seamless, BlendInput, BlendParams};
@@ -95,5 +97,41 @@ fn field(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, poisson, field);
+fn deform(c: &mut Criterion) {
+    let r = 67.0f64;
+    let n = 2 * r as usize + 1;
+    let disk: Vec<bool> = (0..n * n)
+        .map(|i| ((i / n) as f64 - r).powi(2) + ((i % n) as f64 - r).powi(2) <= r * r)
+        .collect();
+    // A bent skeleton across the fragment, pulled onto a straight one by up to 4 px.
+    let (cx, cy) = (500.0 + r, 300.0 + r);
+    let points: Vec<[f64; 2]> = (0..60)
+        .map(|k| {
+            let t = (k as f64 / 59.0 - 0.5) * 1.8 * r;
+            [cx + t, cy + 6.0 * (t / 20.0).sin()]
+        })
+        .collect();
+    let displacement: Vec<[f64; 2]> = points.iter().map(|p| [0.0, -0.6 * (p[1] - cy)]).collect();
+    let (c0, s0) = (0.4f64.cos(), 0.4f64.sin());
+    let placement = Placement {
+        shape: (n, n),
+        origin: (300, 500),
+        centre: [cx, cy],
+        points: &points,
+        displacement: &displacement,
+        radius: r,
+        rigid: [[c0, -s0], [s0, c0]],
+        source_centre: [120.0, 140.0],
+        disk: &disk,
+    };
+    let mut g = c.benchmark_group(format!("fragment_maps_{n}x{n}"));
+    g.sample_size(20)
+        .throughput(Throughput::Elements((n * n) as u64));
+    g.bench_function("radius_67", |b| {
+        b.iter(|| black_box(fragment_maps(&placement).unwrap()));
+    });
+    g.finish();
+}
+
+criterion_group!(benches, poisson, field, deform);
 criterion_main!(benches);

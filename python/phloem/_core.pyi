@@ -15,6 +15,7 @@ __all__ = [
     "density_stamp",
     "emd",
     "emd_map",
+    "fragment_maps",
     "grid_maxflow",
     "growth_choose",
     "guided_quilt",
@@ -140,6 +141,16 @@ def interpolate_field(
     max_iterations: int,
     threads: int | None,
 ) -> tuple[NDArray[np.float32], int, float]: ...
+def fragment_maps(
+    disk: NDArray[np.bool_],
+    origin: tuple[int, int],
+    centre: tuple[float, float],
+    points: NDArray[np.float64],
+    displacement: NDArray[np.float64],
+    radius: float,
+    rigid: NDArray[np.float64],
+    source_centre: tuple[float, float],
+) -> tuple[NDArray[np.float32], NDArray[np.float32], float]: ...
 def mvc_weights(
     polygon: NDArray[np.float64], points: NDArray[np.float64], *, threads: int | None
 ) -> NDArray[np.float64]: ...

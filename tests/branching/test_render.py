@@ -5,15 +5,17 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from scipy.ndimage import map_coordinates
 
 import phloem
+from phloem import _core
+from phloem.blend import interpolate_field
 from phloem.branching import Branch, Skeleton, render
 from phloem.branching._pixels import two_level
 from phloem.branching.measures import structure_contrast
 from phloem.branching.render import (
     _branch_map,
     _channel_range,
-    _displacement,
     _drop_foreign,
     _fit_range,
     _in_order,
@@ -549,19 +551,100 @@ def test_branch_map_is_each_branch_drawn_over_the_earlier_ones() -> None:
     np.testing.assert_array_equal(got, want)
 
 
+def _field(shape: tuple[int, int], q: np.ndarray, d: np.ndarray, radius: float) -> tuple[np.ndarray, float]:
+    """The deformation alone: ``fragment_maps`` with no rigid motion, less each pixel's own position."""
+    mx, my, alpha = _core.fragment_maps(np.ones(shape, bool), (0, 0), (0.0, 0.0), q, d, radius, np.eye(2), (0.0, 0.0))
+    gy, gx = np.mgrid[: shape[0], : shape[1]]
+    return np.stack([mx - gx, my - gy], axis=-1) / max(alpha, 1e-12), alpha
+
+
 def test_displacement_field_hits_its_constraints() -> None:
     """The §5.3 field over a fragment's crop: at full resolution (radius ≤ 8) it takes the
     given displacements at the skeleton samples and is smooth between them; on the coarsened
     grid of a large fragment a constant displacement stays exactly constant."""
     rng = np.random.default_rng(1)
     q = np.stack([np.linspace(2, 14, 7), 8 + 2 * np.sin(np.linspace(0, 3, 7))], axis=1)  # (x, y)
-    d = rng.normal(size=(7, 2))
-    field = _displacement((17, 17), 0, 0, q, d, 8.0)
+    d = rng.normal(size=(7, 2)) * 0.3
+    field, alpha = _field((17, 17), q, d, 8.0)
+    assert alpha == 1.0
     r, c = np.round(q[:, 1]).astype(int), np.round(q[:, 0]).astype(int)
-    assert np.allclose(field[r, c], d, atol=1e-5)
+    assert np.allclose(field[r, c], d, atol=1e-4)
     assert np.abs(np.diff(field, axis=0)).max() < 2 * np.abs(d).max()
-    const = _displacement((135, 135), 0, 0, q * 8, np.tile([[3.0, -1.5]], (7, 1)), 67.0)
-    assert np.allclose(const, [3.0, -1.5], atol=1e-5)
+    const, alpha = _field((135, 135), q * 8, np.tile([[3.0, -1.5]], (7, 1)), 67.0)
+    assert alpha == 1.0
+    assert np.allclose(const, [3.0, -1.5], atol=1e-4)
+
+
+def _reference_maps(
+    disk: np.ndarray, y0: int, x0: int, centre: tuple[float, float], q_abs: np.ndarray, d: np.ndarray, r: float,
+    rigid: np.ndarray, source_centre: tuple[float, float],
+) -> tuple[np.ndarray, np.ndarray, float]:  # fmt: skip
+    """NumPy and OpenCV version of ``fragment_maps`` (the render's own before the core did it)."""
+    h, w = disk.shape
+    f = max(1, int(np.ceil(r / 8)))
+    ch, cw = max(2, -(-h // f)), max(2, -(-w // f))
+    rows = np.clip(np.round((q_abs[:, 1] - y0) / f).astype(np.int64), 0, ch - 1)
+    cols = np.clip(np.round((q_abs[:, 0] - x0) / f).astype(np.int64), 0, cw - 1)
+    uniq, inv = np.unique(rows * cw + cols, return_inverse=True)
+    vals = np.zeros((len(uniq), 2))
+    np.add.at(vals, inv, d)
+    vals /= np.bincount(inv, minlength=len(uniq))[:, None]
+    coarse = interpolate_field(np.ones((ch, cw), bool), np.stack([uniq // cw, uniq % cw], axis=1), vals, threads=1)
+    if f == 1:
+        field = coarse[:h, :w]
+    else:
+        # exact bilinear weights (OpenCV's remap rounds positions to 1/32 of a cell), held beyond the last cell
+        at = np.mgrid[:h, :w].astype(np.float64) / f
+        field = np.stack([map_coordinates(coarse[..., k], at, order=1, mode="nearest") for k in (0, 1)], axis=-1)
+    ux, uy = np.gradient(field[..., 0], axis=1), np.gradient(field[..., 0], axis=0)
+    vx, vy = np.gradient(field[..., 1], axis=1), np.gradient(field[..., 1], axis=0)
+    a1, a2 = (ux + vy)[disk], (ux * vy - uy * vx)[disk]
+    alpha = next((a for a in (1.0, 0.75, 0.5, 0.25) if float((1 + a * a1 + a * a * a2).min()) >= 0.5), 0.0)
+    gy, gx = np.mgrid[y0 : y0 + h, x0 : x0 + w].astype(np.float64)
+    px = gx - centre[0] + alpha * field[..., 0]
+    py = gy - centre[1] + alpha * field[..., 1]
+    mapx = rigid[0, 0] * px + rigid[0, 1] * py + source_centre[0]
+    mapy = rigid[1, 0] * px + rigid[1, 1] * py + source_centre[1]
+    return mapx, mapy, alpha
+
+
+@pytest.mark.parametrize("radius", [6.0, 23.0, 67.0])
+def test_fragment_maps_agree_with_a_numpy_reference(radius: float) -> None:
+    """The core's maps against the NumPy and OpenCV reference over fragments whose skeletons are
+    bent by small fields and by fields that fold (scaled down), rotated and moved: the same
+    scale and the same source positions."""
+    rng = np.random.default_rng(int(radius))
+    n = int(2 * radius) + 1
+    yy, xx = np.mgrid[:n, :n]
+    disk = (xx - radius) ** 2 + (yy - radius) ** 2 <= radius**2
+    y0, x0 = 40, 70
+    centre = (x0 + radius, y0 + radius)
+    alphas = set()
+    for trial in range(8):
+        t = np.linspace(-0.9, 0.9, 12) * radius
+        q = np.stack([centre[0] + t, centre[1] + 0.2 * radius * np.sin(t / radius * 3 + trial)], axis=1)
+        scale = (0.05, 0.3, 1.0, 2.0)[trial % 4] * radius
+        d = rng.normal(size=q.shape) * scale / 4
+        a = rng.uniform(-np.pi, np.pi)
+        rigid = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+        src = (rng.uniform(0, 300), rng.uniform(0, 300))
+        mx, my, alpha = _core.fragment_maps(disk, (y0, x0), centre, q, d, radius, rigid, src)
+        rx, ry, ralpha = _reference_maps(disk, y0, x0, centre, q, d, radius, rigid, src)
+        assert alpha == ralpha
+        alphas.add(alpha)
+        assert np.abs(mx - rx).max() < 1e-3 and np.abs(my - ry).max() < 1e-3, (trial, np.abs(mx - rx).max())
+    assert 1.0 in alphas and min(alphas) < 1.0, alphas  # both kinds of field were tried
+
+
+def test_fragment_maps_refuse_bad_input() -> None:
+    disk = np.ones((9, 9), bool)
+    q = np.array([[4.0, 4.0], [5.0, 4.0]])
+    with pytest.raises(ValueError, match="^displacement:"):
+        _core.fragment_maps(disk, (0, 0), (4.0, 4.0), q, q[:1], 4.0, np.eye(2), (4.0, 4.0))
+    with pytest.raises(ValueError, match="^points:"):
+        _core.fragment_maps(disk, (0, 0), (4.0, 4.0), q, np.full((2, 2), np.nan), 4.0, np.eye(2), (4.0, 4.0))
+    with pytest.raises(ValueError, match="^rigid:"):
+        _core.fragment_maps(disk, (0, 0), (4.0, 4.0), q, q, 4.0, np.eye(3), (4.0, 4.0))
 
 
 def test_bad_inputs_name_the_argument() -> None:

@@ -12,7 +12,7 @@ paints the target structure with disk-shaped fragments of the input:
 3. The chosen fragment is deformed by the smooth displacement field that carries its skeleton
    samples onto the target's (the energy of :func:`phloem.blend.interpolate_field`, solved
    directly on a grid of ~8 cells per radius and upsampled; scaled down where it would fold
-   the fragment), cut against the painted pixels along a minimum-cost seam
+   the fragment; the sampling maps come from the core, ``phloem_core::deform``), cut against the painted pixels along a minimum-cost seam
    (:func:`phloem.seams.seam`) and pasted in the gradient domain with its colours held fixed
    where it borders unpainted pixels (:func:`phloem.blend.seamless` with ``fixed``, §5.3).
    Before a sub-branch starts, the disk of its furcation fragment is deleted from the output
@@ -74,7 +74,7 @@ from .._api import Seed, renamed
 from .._distance import euclidean_distance
 from .._progress import Progress
 from .._validate import as_image, as_mask, check_float, check_int, check_patch_size, check_seed, check_threads
-from ..blend import interpolate_field, seamless
+from ..blend import seamless
 from ..seams import seam
 from ._pixels import F32, F64, _by_channels, _check_skeleton, _clip_channels, _paste, _pt, _robust_z, _rot, two_level
 from .fragments import DEFAULT_SAMPLES, Fragment, FragmentLibrary, check_params, cover, foreign_fragments
@@ -636,15 +636,18 @@ class _Painter:
         R = _rot(theta)
         M = lib.to_source(e, theta)  # target offsets → source offsets
         # Target pixel → source position: rigid inverse of (p + d(p)), d the displacement field.
+        if self.opts.deform:
+            # The displacement field, its fold-free scale and the maps in the core, without the GIL.
+            d = lib.points[e] @ R.T - g.points
+            mapx, mapy, _ = _core.fragment_maps(
+                np.ascontiguousarray(disk), (y0, x0), (float(g.center[0]), float(g.center[1])),
+                np.ascontiguousarray(g.points + g.center, np.float64), np.ascontiguousarray(d, np.float64),
+                float(g.radius), np.ascontiguousarray(M, np.float64), (float(f.center[0]), float(f.center[1])),
+            )  # fmt: skip
+            return _sample(self.image, mapx, mapy)
         hh, ww = disk.shape
         gy, gx = np.mgrid[y0 : y0 + hh, x0 : x0 + ww].astype(np.float64)
         px, py = gx - g.center[0], gy - g.center[1]
-        if self.opts.deform:
-            d = lib.points[e] @ R.T - g.points
-            dfield = _displacement((hh, ww), y0, x0, g.points + g.center, d, g.radius)
-            alpha = _fold_free(dfield, disk)
-            px = px + alpha * dfield[..., 0]
-            py = py + alpha * dfield[..., 1]
         mapx = (M[0, 0] * px + M[0, 1] * py + f.center[0]).astype(np.float32)
         mapy = (M[1, 0] * px + M[1, 1] * py + f.center[1]).astype(np.float32)
         return _sample(self.image, mapx, mapy)
@@ -1020,54 +1023,6 @@ def _sample(img: F32, mapx: F32, mapy: F32) -> F32:
         img,
     )
     return np.ascontiguousarray(out, dtype=np.float32)
-
-
-def _displacement(disk_shape: tuple[int, int], y0: int, x0: int, q_abs: F64, d: F64, r: float) -> F32:
-    """The smooth displacement field over a crop that takes the values ``d`` at ``q_abs``
-    (§5.3, :func:`phloem.blend.interpolate_field`), solved on a grid coarsened to at most ~8
-    cells per radius and upsampled bilinearly: the field is smooth by construction, and the
-    full-resolution solve costs far more."""
-    h, w = disk_shape
-    f = max(1, math.ceil(r / 8))
-    ch, cw = max(2, -(-h // f)), max(2, -(-w // f))
-    rows = np.clip(np.round((q_abs[:, 1] - y0) / f).astype(np.int64), 0, ch - 1)
-    cols = np.clip(np.round((q_abs[:, 0] - x0) / f).astype(np.int64), 0, cw - 1)
-    key = rows * cw + cols
-    uniq, inv = np.unique(key, return_inverse=True)
-    vals = np.zeros((len(uniq), 2))
-    np.add.at(vals, inv, d)
-    vals /= np.bincount(inv, minlength=len(uniq))[:, None]
-    pts = np.stack([uniq // cw, uniq % cw], axis=1)
-    # The field engine factors grids this small directly (a banded Cholesky, one CG step).
-    coarse = interpolate_field(np.ones((ch, cw), bool), pts, vals, threads=1)
-    if f == 1:
-        return np.ascontiguousarray(coarse[:h, :w])
-    # Coarse cell (i, j) sits at fine pixel (i f, j f): map fine pixels back to coarse coordinates.
-    ys = (np.arange(h, dtype=np.float32) / f)[:, None] * np.ones((1, w), np.float32)
-    xs = np.ones((h, 1), np.float32) * (np.arange(w, dtype=np.float32) / f)[None, :]
-    out = cv2.remap(coarse, xs, ys, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    return np.ascontiguousarray(out, dtype=np.float32)
-
-
-def _fold_free(dfield: F32, disk: NDArray[np.bool_], *, min_det: float = 0.5) -> float:
-    """Largest of 1, ¾, ½, ¼, 0 by which the field can be scaled so that ``p ↦ p + α d(p)``
-    stays injective over the disk (Jacobian determinant at least ``min_det``).
-
-    §5.3 assumes the deviation left after the rigid alignment is small; it is not at a target
-    furcation whose angle no source furcation has, and there the full field folds the fragment
-    onto its skeleton. The field is linear in the constraints, so scaling it is the field of
-    the scaled constraints: the skeleton is then only partly straightened, without folding.
-    """
-    dux = np.gradient(dfield[..., 0], axis=1)
-    duy = np.gradient(dfield[..., 0], axis=0)
-    dvx = np.gradient(dfield[..., 1], axis=1)
-    dvy = np.gradient(dfield[..., 1], axis=0)
-    a1 = (dux + dvy)[disk]
-    a2 = (dux * dvy - duy * dvx)[disk]
-    for alpha in (1.0, 0.75, 0.5, 0.25):
-        if a1.size == 0 or float((1.0 + alpha * a1 + alpha * alpha * a2).min()) >= min_det:
-            return alpha
-    return 0.0
 
 
 def _in_order(boxes: NDArray[np.int64], work: Callable[[int], None], *, workers: int, progress: Progress) -> None:

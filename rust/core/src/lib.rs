@@ -38,6 +38,7 @@
 //!   density and guidance maxima along rays (Sibbing et al. 2010, §4.4–4.5).
 //! - [`growth`]: the choice of a growth step's best valid candidates from their bending
 //!   quality, density, guidance, the frame and the planarity test (Sibbing et al. 2010, §4.4).
+//! - [`deform`]: where each pixel of a deformed fragment comes from (Sibbing et al. 2010, §5.3).
 //! - [`correction`]: guided quilting, the start of texture correction after a warp (Assa &
 //!   Cohen-Or §3, after Fang & Hart 2007).
 
@@ -45,6 +46,7 @@ pub mod cancel;
 pub mod colonisation;
 pub mod correction;
 pub mod crossings;
+pub mod deform;
 pub mod distance;
 pub mod emd;
 pub mod error;

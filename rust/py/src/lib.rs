@@ -15,6 +15,7 @@ mod colonisation;
 mod convert;
 mod correction;
 mod crossings;
+mod deform;
 mod emd;
 mod errors;
 mod growth;
@@ -39,6 +40,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(seams::seam_py, m)?)?;
     m.add_function(wrap_pyfunction!(blend::seamless_py, m)?)?;
     m.add_function(wrap_pyfunction!(blend::interpolate_field_py, m)?)?;
+    m.add_function(wrap_pyfunction!(deform::fragment_maps_py, m)?)?;
     m.add_function(wrap_pyfunction!(tbn::by_numbers_py, m)?)?;
     m.add_function(wrap_pyfunction!(tbn::tbn_upsample_py, m)?)?;
     m.add_function(wrap_pyfunction!(tbn::tbn_downsample_py, m)?)?;
