@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from phloem.branching import Branch, Skeleton, fragments, rigid_align
-from phloem.branching.fragments import _dense
+from phloem.branching.fragments import Fragment, _dense, foreign_fragments
+from phloem.branching.synthetic import synthetic_skeleton
 from phloem.testing import channel_scene
 
 
@@ -92,3 +93,30 @@ def test_a_library_without_any_usable_furcation_fragment_still_matches_branch_fr
     entries, S, _ = lib.shape_distance(plain, 2.0)
     assert len(entries) == int((~furc).sum()) and not lib.flip.any()
     assert float(S.min()) == pytest.approx(0.0, abs=1e-9)  # itself
+
+
+def _foreign_by_brute_force(sk: Skeleton, frs: list[Fragment]) -> np.ndarray:
+    """Every plain fragment against every other branch's points, as ``foreign_fragments`` defines it."""
+    dense = [_dense(b, 1.0) for b in sk.branches]
+    return np.array(
+        [
+            not f.furcation
+            and any(
+                bi != f.branch and bool((np.linalg.norm(pts - f.center, axis=1) - th < f.radius).any())
+                for bi, (_, pts, th) in enumerate(dense)
+            )
+            for f in frs
+        ]
+    )
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_foreign_fragments_are_those_whose_disk_holds_another_branch(seed: int) -> None:
+    sk = synthetic_skeleton(seed, length=300.0, furcations=6)
+    frs = fragments(None, sk)
+    want = _foreign_by_brute_force(sk, frs)
+    # the fragments where a child leaves its parent, and those beside the child's first stretch
+    assert 0 < want.sum() < sum(not f.furcation for f in frs)
+    np.testing.assert_array_equal(foreign_fragments(sk, frs, keep=0), want)
+    # too few plain fragments would remain: none is left out
+    assert not foreign_fragments(sk, frs, keep=len(frs)).any()

@@ -341,15 +341,25 @@ def foreign_fragments(skeleton: Skeleton, frs: list[Fragment], *, keep: int) -> 
     or the parent next to a child's first fragment). Pasted along a plain target branch they
     leave a stub of a branch that is not there, so they are left out, unless fewer than
     ``keep`` branch fragments would remain; furcations have their own fragments."""
+    from scipy.spatial import cKDTree  # type: ignore[import-untyped]
+
     dense = [_dense(b, 1.0) for b in skeleton.branches]
+    pts = np.concatenate([d[1] for d in dense])
+    th = np.concatenate([d[2] for d in dense])
+    owner = np.concatenate([np.full(len(d[1]), bi) for bi, d in enumerate(dense)])
     out = np.zeros(len(frs), bool)
-    for i, f in enumerate(frs):
-        if f.furcation:
-            continue
-        for bi, (_, pts, th) in enumerate(dense):
-            if bi != f.branch and (np.linalg.norm(pts - f.center, axis=1) - th < f.radius).any():
-                out[i] = True
-                break
+    plain_ids = [i for i, f in enumerate(frs) if not f.furcation]
+    if plain_ids:
+        # Only points within the radius plus the thickest branch's can be inside a disk: a
+        # tree over all of them instead of every branch against every fragment (seconds on
+        # a few hundred branches).
+        centres = np.array([frs[i].center for i in plain_ids], np.float64)
+        reach = np.array([frs[i].radius for i in plain_ids]) + float(th.max())
+        for i, near in zip(plain_ids, cKDTree(pts).query_ball_point(centres, reach), strict=True):
+            f = frs[i]
+            idx = np.asarray(near, np.int64)
+            idx = idx[owner[idx] != f.branch]
+            out[i] = bool((np.linalg.norm(pts[idx] - f.center, axis=1) - th[idx] < f.radius).any())
     plain = sum(1 for f in frs if not f.furcation)
     if plain - int(out.sum()) < keep:
         out[:] = False
