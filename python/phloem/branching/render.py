@@ -12,9 +12,10 @@ paints the target structure with disk-shaped fragments of the input:
 3. The chosen fragment is deformed by the smooth displacement field that carries its skeleton
    samples onto the target's (the energy of :func:`phloem.blend.interpolate_field`, solved
    directly on a grid of ~8 cells per radius and upsampled; scaled down where it would fold
-   the fragment; the sampling maps come from the core, ``phloem_core::deform``), cut against the painted pixels along a minimum-cost seam
-   (:func:`phloem.seams.seam`) and pasted in the gradient domain with its colours held fixed
-   where it borders unpainted pixels (:func:`phloem.blend.seamless` with ``fixed``, §5.3).
+   the fragment; the sampling maps come from the core, ``phloem_core::deform``), cut against
+   the painted pixels along a minimum-cost seam (:func:`phloem.seams.seam`) and pasted in the
+   gradient domain with its colours held fixed where it borders unpainted pixels
+   (:func:`phloem.blend.seamless` with ``fixed``, §5.3).
    Before a sub-branch starts, the disk of its furcation fragment is deleted from the output
    and repainted by a furcation fragment (Fig. 6).
 4. The gaps between the branches are completed (§5.4, :mod:`.gaps`); where step 5 follows,
