@@ -350,9 +350,8 @@ def foreign_fragments(skeleton: Skeleton, frs: list[Fragment], *, keep: int) -> 
     out = np.zeros(len(frs), bool)
     plain_ids = [i for i, f in enumerate(frs) if not f.furcation]
     if plain_ids:
-        # Only points within the radius plus the thickest branch's can be inside a disk: a
-        # tree over all of them instead of every branch against every fragment (seconds on
-        # a few hundred branches).
+        # Only points within the radius plus the thickest branch's can be inside a disk: one
+        # tree query per fragment instead of every branch against every fragment.
         centres = np.array([frs[i].center for i in plain_ids], np.float64)
         reach = np.array([frs[i].radius for i in plain_ids]) + float(th.max())
         for i, near in zip(plain_ids, cKDTree(pts).query_ball_point(centres, reach), strict=True):
@@ -360,7 +359,6 @@ def foreign_fragments(skeleton: Skeleton, frs: list[Fragment], *, keep: int) -> 
             idx = np.asarray(near, np.int64)
             idx = idx[owner[idx] != f.branch]
             out[i] = bool((np.linalg.norm(pts[idx] - f.center, axis=1) - th[idx] < f.radius).any())
-    plain = sum(1 for f in frs if not f.furcation)
-    if plain - int(out.sum()) < keep:
+    if len(plain_ids) - int(out.sum()) < keep:
         out[:] = False
     return out

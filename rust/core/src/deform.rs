@@ -82,8 +82,8 @@ pub fn fragment_maps(p: &Placement<'_>) -> Result<Maps> {
             format!("expected a positive radius, got {}", p.radius),
         ));
     }
-    let flat = p.points.iter().chain(p.displacement).flatten();
-    if let Some(v) = flat.clone().find(|v| !v.is_finite()) {
+    let mut values = p.points.iter().chain(p.displacement).flatten();
+    if let Some(v) = values.find(|v| !v.is_finite()) {
         return Err(invalid(
             "points",
             format!("expected finite points and displacements, found {v}"),
