@@ -11,8 +11,9 @@ real-image collection (default: ``PHLOEM_SHARED_DATA``), for the two stand-ins c
 Writes ``DIR/heldout`` (8 inputs), ``DIR/heldout2`` (2), ``DIR/heldout3`` (4) and
 ``DIR/heldout4`` (1): the four folders of docs/pipelines/branching/quality.md, twenty-second
 session on, scored with ``branching_quality.py --inputs DIR/heldoutN``; with ``--pysheds``
-also ``DIR/heldout5`` (1, a second elevation model, thirty-ninth session on). File names do not
-matter to the quality script; a derived image is a lossless PNG, a repository's JPEG is copied
+also ``DIR/heldout5`` (1, a second elevation model, thirty-ninth session on) and ``DIR/heldout6``
+(14: six more CrackForest photos with their masks, and two river-network figures of pysheds'
+examples, forty-fourth session on). File names do not matter to the quality script; a derived image is a lossless PNG, a repository's JPEG is copied
 byte for byte.
 """
 
@@ -53,7 +54,7 @@ def _crack_mask(mat: bytes) -> Image.Image:
 
 def build(out: Path, shared: Path, *, crackforest: Path, hazards: Path, fracdim: Path, singan: Path,
           minirhizotron: Path, pysheds: Path | None = None) -> list[Path]:  # fmt: skip
-    """Write the four folders under ``out`` (five with ``pysheds``); returns the files written."""
+    """Write the four folders under ``out`` (six with ``pysheds``); returns the files written."""
     dirs = [out / n for n in ("heldout", "heldout2", "heldout3", "heldout4")]
     if pysheds is not None:
         dirs.append(out / "heldout5")
@@ -90,6 +91,17 @@ def build(out: Path, shared: Path, *, crackforest: Path, hazards: Path, fracdim:
         dem = np.asarray(Image.open(io.BytesIO(_show(pysheds, PYSHEDS, "data/dem.tif"))), np.float64)
         u16 = np.round((dem - dem.min()) / (dem.max() - dem.min()) * 65535).astype(np.uint16)
         Image.fromarray(u16).save(dirs[4] / "pysheds_dem_u16.png")
+        # Inputs nobody had tuned on by the forty-fourth session: more road cracks, and two
+        # figures of a river network (the plots' insides, without titles and colour bar).
+        h6 = out / "heldout6"
+        h6.mkdir(parents=True, exist_ok=True)
+        dirs.append(h6)
+        for n in ("015", "033", "058", "071", "099", "112"):
+            _copy(_show(crackforest, CRACKFOREST, f"image/{n}.jpg"), h6 / f"crack_photo_{n}.jpg")
+            _crack_mask(_show(crackforest, CRACKFOREST, f"groundTruth/{n}.mat")).save(h6 / f"crack_mask_{n}.png")
+        for name, box in (("flow_accumulation", (42, 18, 395, 330)), ("river_network", (58, 20, 415, 365))):
+            fig = Image.open(io.BytesIO(_show(pysheds, PYSHEDS, f"examples/img/{name}.png"))).convert("RGB")
+            fig.crop(box).save(h6 / f"pysheds_{name}_crop.png")
     return sorted(p for d in dirs for p in d.iterdir())
 
 
@@ -98,7 +110,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, required=True, help="folder that receives heldout, heldout2, ...")
     for name in ("crackforest", "hazards", "fracdim", "singan", "minirhizotron"):
         ap.add_argument(f"--{name}", type=Path, required=True, help="a clone of the repository named in the docstring")
-    ap.add_argument("--pysheds", type=Path, default=None, help="a clone of pysheds: also write heldout5")
+    ap.add_argument("--pysheds", type=Path, default=None, help="a clone of pysheds: also write heldout5 and heldout6")
     ap.add_argument("--shared", type=Path, default=None, help="the shared real-image collection")
     args = ap.parse_args()
     shared = args.shared or Path(os.environ.get("PHLOEM_SHARED_DATA", "../shared/data"))
