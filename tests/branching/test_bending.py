@@ -2,13 +2,25 @@
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 
 import numpy as np
 import pytest
 
-from phloem.branching import BendingModel, Branch, Skeleton, SkeletonError, fit_models, grow
-from phloem.branching.bending import STEM_THICKNESS, TURN_BOUND
+from phloem.branching import (
+    BendingModel,
+    Branch,
+    Skeleton,
+    SkeletonError,
+    denoise_default,
+    fit_models,
+    grow,
+    source_defaults,
+    synthesize,
+)
+from phloem.branching.bending import DENOISE, STEM_THICKNESS, TURN_BOUND
+from phloem.metrics import drift
 
 H = 2.0
 
@@ -222,6 +234,9 @@ def test_bad_input_errors() -> None:
         BendingModel.fit(tiny, h=1.0, k=1, m=1, turn_histogram=-1.0)
     with pytest.raises(ValueError, match="^arc:"):
         BendingModel.fit(tiny, h=1.0, k=1, m=1, arc=0.0)
+    for bad in (-1.0, float("nan")):
+        with pytest.raises(ValueError, match="^denoise:"):
+            BendingModel.fit(tiny, h=1.0, k=1, m=1, denoise=bad)
 
 
 def test_course_deviation_of_a_line_and_a_regular_polygon():
@@ -459,3 +474,74 @@ def test_the_column_dist_is_the_papers_dist_to_the_bit():
         table = rng.normal(0.0, 1.0, (4000, L)) * rng.choice([1e-3, 1.0, 30.0], (4000, 1))
         y = rng.normal(0.0, 1.0, L)
         assert np.array_equal(_dist_columns(np.ascontiguousarray(table.T), y), _dist(table, y[None, :]))
+
+
+def _digitised(points: np.ndarray) -> Branch:
+    """A centre line as a trace leaves it: every point on its pixel, repeats dropped."""
+    p = np.rint(points)
+    keep = np.r_[True, np.any(np.diff(p, axis=0) != 0, axis=1)]
+    return Branch(p[keep], np.full(int(keep.sum()), 1.5))
+
+
+def _staircase_lines() -> Skeleton:
+    t = np.arange(0.0, 330.0)
+    lines = []
+    for i in range(6):
+        heading = 0.9 + 0.15 * i
+        lines.append(_digitised(np.stack([20 + 40 * i + t * np.cos(heading), 380 - t * np.sin(heading)], axis=1)))
+    return Skeleton(lines, (400, 400))
+
+
+def test_denoise_takes_the_pixel_staircase_out_and_keeps_the_bends():
+    # Straight lines on the pixel grid turn by 0.19 rad a step at h = 3 (their staircase); a
+    # circle of radius 60 turns by h / R = 0.05 a step under as much noise.
+    lines = _staircase_lines()
+    t = np.arange(0.0, 5.0, 1 / 60)
+    circle = Skeleton([_digitised(np.stack([200 + 60 * np.cos(t), 200 - 60 * np.sin(t)], axis=1))], (400, 400))
+
+    def angles(sk: Skeleton, denoise: float) -> np.ndarray:
+        model = BendingModel.fit(sk, h=3.0, k=2, m=2, denoise=denoise)
+        assert model.denoise == denoise
+        for b, given in zip(model.source.branches, sk.branches, strict=True):
+            np.testing.assert_array_equal(b.points[0], given.points[0])  # children would stay put
+            np.testing.assert_allclose(b.thickness, 1.5)
+        return np.concatenate([b.angles()[5:-5] for b in model.source.branches])
+
+    assert np.std(angles(lines, 0.0)) > 0.15
+    assert np.std(angles(lines, DENOISE)) < 0.05
+    assert np.std(angles(circle, 0.0)) > 0.15
+    bent = angles(circle, DENOISE)
+    assert abs(np.mean(bent) - 3.0 / 60) < 0.002 and np.std(bent) < 0.03
+
+
+def test_denoise_keeps_branches_grown_from_staircase_lines_straight():
+    # The Markov chain copies the staircase's turns but not their return to the line: grown
+    # branches wander off it unless the staircase is taken out first (the pipeline's default).
+    lines = _staircase_lines()
+
+    def mean_drift(denoise: float) -> float:
+        bend, fur = fit_models(lines, h=3.0, denoise=denoise)
+        assert bend.denoise == denoise
+        return float(
+            np.mean([drift(lines, grow(bend, fur, size=(400, 400), seed=s, max_length="input")) for s in range(3)])
+        )
+
+    assert source_defaults(lines).denoise == DENOISE  # lines keep a course
+    assert mean_drift(0.0) > 0.06
+    assert mean_drift(DENOISE) < 0.03
+
+
+def test_denoise_is_defaulted_where_the_input_keeps_a_course():
+    # Branches that keep a course get the staircase taken out; a zigzag of right angles every
+    # 50 px turns by a right angle over 60 px, for real, and is taken as given.
+    lines = _staircase_lines()
+    assert denoise_default(lines) == DENOISE and denoise_default(lines, denoise=1.5) == 1.5
+    steps = np.array([[0, 0], [50, 0], [50, 50], [100, 50], [100, 100], [150, 100], [150, 150]], float)
+    zigzag = Skeleton([_digitised(np.concatenate([np.linspace(a, b, 60)[:-1] for a, b in itertools.pairwise(steps)]))])
+    assert denoise_default(zigzag) == 0.0
+    short = Skeleton([_digitised(np.stack([np.arange(40.0), np.zeros(40)], axis=1))])
+    assert denoise_default(short) == 0.0  # nothing as long as the arc: the paper's model
+    img = np.where(lines.mask(), 0.1, 0.8).astype(np.float32)
+    res = synthesize(img, lines, seed=0, render_options={"complete": False})
+    assert res.bending.denoise == DENOISE
+    assert synthesize(img, lines, seed=0, denoise=0.0, render_options={"complete": False}).bending.denoise == 0.0

@@ -107,12 +107,12 @@ def test_synthesize_keeps_the_frame_out_of_the_picture() -> None:
 
     # Without `valid` the frame is part of the background: the rim is traced as a branch (its
     # fragments, half black frame, are outliers of the fragments' surroundings and not pasted),
-    # and the gaps' large-scale layout darkens the corners where the input's frame is, but no
-    # black reaches the disc. With `valid="auto"` the rim is not traced, the gaps come from the
-    # disc only (no black inside) and the output keeps the input's frame around it.
+    # no black reaches the disc, and the frame is not kept as one (the gaps' large-scale layout
+    # only darkens some of the corners). With `valid="auto"` the rim is not traced, the gaps
+    # come from the disc only (no black inside) and the output keeps the input's frame around it.
     for s in range(3):
         inside, outside, rim = run(None, s)
-        assert rim > 20 and inside < 0.001 and outside > 0.005
+        assert rim > 20 and inside < 0.001 and outside < 0.1
         inside, outside, rim = run("auto", s)
         assert inside == 0.0 and rim == 0 and outside > 0.9  # black but for the fade at its rim
     with pytest.raises(ValueError, match="^valid:"):

@@ -208,7 +208,8 @@ def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
     assert json.loads(io.sidecar_path(outs["o3"]).read_text())["parameters"]["orientation"] == 3.0
     flag_sets = (["--total-turn", "0"], ["--total-turn", "4"], ["--total-turn", "4", "--turn-bound", "0"],
                  ["--repel-border"], ["--no-repel-border"], ["--turn-histogram", "0"], ["--stem-thickness", "0"],
-                 ["--direction-histogram", "0"], ["--direction-histogram", "2"])  # fmt: skip
+                 ["--denoise", "0"], ["--direction-histogram", "0", "--denoise", "0"],
+                 ["--direction-histogram", "2", "--denoise", "0"])  # fmt: skip
     for flags in flag_sets:
         out = tmp_path / ("grown" + "".join(flags) + ".json")
         assert main(["branching", "grow", str(skel), "--out", str(out), "--seed", "1", *flags, "-q"]) == 0
@@ -221,6 +222,9 @@ def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
     assert sidecar["--turn-histogram 0"]["turn_histogram"] == 0.0 and sidecar["32"]["turn_histogram"] == TURN_HISTOGRAM
     assert grown["--stem-thickness 0"] != grown["32"]
     assert sidecar["--stem-thickness 0"]["stem_thickness"] == 0.0 and sidecar["32"]["stem_thickness"] == 5.0
+    assert grown["--denoise 0"] != grown["32"]
+    assert sidecar["--denoise 0"]["denoise"] == 0.0
+    assert sidecar["32"]["denoise"] == branching.denoise_default(Skeleton.load(skel)) > 0
     assert sidecar["--total-turn 4"]["total_turn"] == 4.0
     # the bound on the stems' turn follows the total turn unless it is given
     assert sidecar["--total-turn 4"]["turn_bound"] == 5.0 and sidecar["--total-turn 0"]["turn_bound"] == 0.0
@@ -235,9 +239,10 @@ def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
     assert sidecar["32"]["orientation"] == heading
     directions = branching.direction_histogram_default(Skeleton.load(skel))
     assert sidecar["32"]["direction_histogram"] == directions
-    assert sidecar["--direction-histogram 2"]["direction_histogram"] == 2.0
-    assert grown["--direction-histogram 0"] != grown["--direction-histogram 2"]
-    assert (grown["32"] == grown["--direction-histogram 0"]) == (directions == 0)
+    # checked without the default --denoise, under which this seed grows the same at weights 0 and 2
+    assert sidecar["--direction-histogram 2 --denoise 0"]["direction_histogram"] == 2.0
+    assert grown["--direction-histogram 0 --denoise 0"] != grown["--direction-histogram 2 --denoise 0"]
+    assert (grown["--denoise 0"] == grown["--direction-histogram 0 --denoise 0"]) == (directions == 0)
     assert grown["32"] == grown["o3" if heading > 0 else "o0"]
     assert grown["32"] == grown["--repel-border" if default[1] else "--no-repel-border"]
 

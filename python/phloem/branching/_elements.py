@@ -6,13 +6,14 @@ histogram binning, headings, and the argument check of the model-fitting functio
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .._validate import check_int
-from .skeleton import Branch, Skeleton
+from .skeleton import MAX_VERTICES, Branch, Skeleton
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -24,6 +25,44 @@ def _check_skeleton(skeleton: Any, name: str = "skeleton") -> Skeleton:
     if not skeleton.branches:
         raise ValueError(f"{name}: the skeleton has no branches")
     return skeleton
+
+
+def _smooth_path(pts: F64, sigma: float) -> F64:
+    """Gaussian smoothing along a polyline, point-reflected at the ends so the ends stay put."""
+    from scipy import ndimage  # type: ignore[import-untyped]
+
+    if sigma <= 0 or len(pts) < 3:
+        return pts
+    pad = min(len(pts) - 1, math.ceil(3 * sigma))
+    head = 2 * pts[0] - pts[pad:0:-1]
+    tail = 2 * pts[-1] - pts[-2 : -pad - 2 : -1]
+    ext = np.vstack([head, pts, tail])
+    sm = ndimage.gaussian_filter1d(ext, sigma, axis=0, mode="nearest")[pad : pad + len(pts)]
+    sm[0] = pts[0]
+    return np.asarray(sm, dtype=np.float64)
+
+
+def _denoised(skeleton: Skeleton, sigma: float, h: float) -> Skeleton:
+    """``skeleton`` resampled finely with each branch's points smoothed by a Gaussian of ``sigma``
+    px along it, for resampling at ``h`` after; ``skeleton`` itself for ``sigma = 0``. A branch
+    keeps its first point, so a child still starts where it did, within a pixel of its smoothed
+    parent."""
+    if sigma <= 0:
+        return skeleton
+    # 1 px (or h, if finer), unless that passes the vertex limit where h does not: the limit's
+    # error then names the h the caller chose
+    step = min(1.0, h)
+    if sum(b.length() / step + 2 for b in skeleton.branches) > MAX_VERTICES:
+        step = h
+    fine = skeleton.resample(step)
+    hi = None if fine.shape is None else [fine.shape[1] - 1, fine.shape[0] - 1]
+    branches = []
+    for b in fine.branches:
+        pts = _smooth_path(b.points, sigma / step)
+        if hi is not None:  # the end reflection can push a bent end a little outside the picture
+            np.clip(pts, 0.0, hi, out=pts)
+        branches.append(replace(b, points=pts))
+    return replace(fine, branches=branches)
 
 
 def _dist(x: F64, y: F64) -> F64:

@@ -36,6 +36,7 @@ from ._elements import (
     _bin,
     _check_k,
     _check_skeleton,
+    _denoised,
     _dist_columns,
     _edge_headings,
     _elements,
@@ -47,6 +48,7 @@ from .skeleton import Skeleton
 
 __all__ = [
     "ARC",
+    "DENOISE",
     "STEM_THICKNESS",
     "TURN_BOUND",
     "TURN_HISTOGRAM",
@@ -59,6 +61,11 @@ __all__ = [
 
 #: Arc of the heading-change histogram, px: the arc over which issue 19 measures drift.
 ARC = 60.0
+
+#: Gaussian along each example branch, px, before its angles are taken: a traced centre line
+#: keeps a pixel staircase that the Markov chain would copy as turning (measured in
+#: ``docs/pipelines/branching/quality.md``, "The trace's pixel staircase taken for turning").
+DENOISE = 3.0
 
 #: Weight of a stem's thickness profile (measured in ``docs/pipelines/branching/quality.md``).
 STEM_THICKNESS = 5.0
@@ -198,7 +205,7 @@ class BendingModel:
         Weight ``ω_G`` of the histogram matching (of the angle histogram times
         :attr:`angle_weight`).
     source : Skeleton
-        The input resampled to ``h``.
+        The input, smoothed by :attr:`denoise` and resampled to ``h``.
     hist_alpha, hist_r : ndarray, shape (bins,)
         The input's normalised angle and thickness histograms ``Ĥ_α``, ``Ĥ_r``.
     range_alpha, range_r : (float, float)
@@ -233,6 +240,9 @@ class BendingModel:
         bins centred on the image's axes (:func:`phloem.metrics.direction_histogram`'s).
     direction_histogram : float
         Weight of the direction histogram's matching (0: off), see :meth:`fit`.
+    denoise : float
+        Standard deviation (px) of the Gaussian the input's branches were smoothed by along
+        their length before fitting (0: none), see :meth:`fit`.
 
     Examples
     --------
@@ -293,6 +303,8 @@ class BendingModel:
     direction_layout: DirectionLayout | None = field(default=None, repr=False)
     layout: float = 0.0
 
+    denoise: float = 0.0
+
     @classmethod
     def fit(
         cls,
@@ -316,6 +328,7 @@ class BendingModel:
         stem_thickness: float = STEM_THICKNESS,
         direction_histogram: float = 0.0,
         layout: float = 0.0,
+        denoise: float = 0.0,
     ) -> BendingModel:
         """Learn the bending model from an example skeleton.
 
@@ -439,6 +452,17 @@ class BendingModel:
             network, bark) ``κ`` is 0 and nothing changes; a fundus's vessels, a delta's
             channels or roots sweeping one way are grown along the input's ways
             (``docs/pipelines/branching.md``, ``layout``).
+        denoise : float
+            Standard deviation in px of a Gaussian along each branch of ``skeleton`` before
+            it is resampled and its angles taken (default 0: the skeleton as given, the
+            paper's model; :func:`~phloem.branching.synthesize` uses :data:`DENOISE`, 3,
+            where the input's branches keep a course,
+            :func:`~phloem.branching.denoise_default`). Beyond the paper: a traced centre line keeps the
+            pixel grid's staircase, which at a step of a few pixels is most of a straight
+            vein's turning angle and reverts over tens of elements. The Markov chain copies
+            the turns but not their return to the line, so grown branches wandered off their
+            course. Only the angles and the points of :attr:`source` change; the
+            thicknesses are the skeleton's.
 
         Returns
         -------
@@ -482,7 +506,8 @@ class BendingModel:
         direction_histogram = check_float(direction_histogram, "direction_histogram", 0.0)
         layout = check_float(layout, "layout", 0.0)
         arc = check_float(arc, "arc", 0.0, inclusive=False)
-        src = skeleton.resample(h)
+        denoise = check_float(denoise, "denoise", 0.0)
+        src = _denoised(skeleton, denoise, h).resample(h)
         elems = [_elements(b) for b in src.branches]
         all_a = np.concatenate([a for a, _ in elems])
         all_r = np.concatenate([r for _, r in elems])
@@ -578,6 +603,7 @@ class BendingModel:
             direction_histogram=direction_histogram,
             direction_layout=DirectionLayout.fit(skeleton) if layout > 0 else None,
             layout=layout,
+            denoise=denoise,
         )
 
     def log_quality(

@@ -12,11 +12,11 @@ from .. import _memory
 from .._api import Seed, Size, renamed
 from .._progress import Progress
 from .._validate import as_image, as_mask, check_size
-from .bending import STEM_THICKNESS, TURN_HISTOGRAM, BendingModel
+from .bending import DENOISE, STEM_THICKNESS, TURN_HISTOGRAM, BendingModel
 from .frame import _kept_inside, valid_region
 from .furcation import FurcationModel
 from .growth import grow
-from .measures import direction_concentration, drift_noise
+from .measures import direction_concentration, drift_noise, median_heading_change
 from .render import RenderResult, render
 from .skeleton import Skeleton
 from .trace import trace
@@ -26,6 +26,7 @@ __all__ = [
     "SynthesisResult",
     "course_defaults",
     "course_edges_default",
+    "denoise_default",
     "direction_histogram_default",
     "fit_models",
     "orientation_default",
@@ -55,6 +56,11 @@ ORIENTATION_WEIGHT = 3.0
 #: The direction histogram's weight :func:`direction_histogram_default` turns on there (the
 #: weight measured).
 DIRECTION_HISTOGRAM_WEIGHT = 1.0
+#: The largest median heading change over 60 px (radians, about 23°) at which an input's
+#: branches count as keeping a course, so that :func:`denoise_default` smooths them: their
+#: turning at the resampling step is then mostly the trace's pixel staircase (measured in
+#: ``docs/pipelines/branching/quality.md``, "The trace's pixel staircase taken for turning").
+DENOISE_COURSE = 0.4
 
 
 @dataclass
@@ -101,6 +107,7 @@ def fit_models(
     stem_thickness: float = STEM_THICKNESS,
     direction_histogram: float = 0.0,
     layout: float = 0.0,
+    denoise: float = 0.0,
 ) -> tuple[BendingModel, FurcationModel | None]:
     """The bending model (§4.2) and, if the skeleton branches at all, the furcation model (§4.3).
 
@@ -153,6 +160,12 @@ def fit_models(
         Weight of the input's layout of directions, so that branches run the way the input's
         run at the same place of the picture (default 0: the paper's model, the same
         everywhere; see :meth:`BendingModel.fit`).
+    denoise : float, optional
+        Standard deviation in px of the Gaussian that smooths the skeleton's branches along
+        their length before the bending model takes their angles, so that a traced centre
+        line's pixel staircase is not grown as turning (default 0: the skeleton as given, the
+        paper's model; :func:`synthesize` defaults it by :func:`denoise_default`; see
+        :meth:`BendingModel.fit`). The furcation model uses the skeleton as given.
 
     Examples
     --------
@@ -164,7 +177,7 @@ def fit_models(
     bending = BendingModel.fit(
         skeleton, h=h, k=order, m=m, c=n_best, course=course, coarse_history=coarse_history, total_turn=total_turn,
         turn_bound=turn_bound, orientation=orientation, turn_histogram=turn_histogram, stem_thickness=stem_thickness,
-        direction_histogram=direction_histogram, layout=layout,
+        direction_histogram=direction_histogram, layout=layout, denoise=denoise,
     )  # fmt: skip
     has_children = any(b.parent is not None for b in skeleton.branches)
     furcation = FurcationModel.fit(skeleton, h=bending.h, k=order, c=n_best) if has_children else None
@@ -242,6 +255,48 @@ def course_edges_default(skeleton: Skeleton, *, course: int | None = None) -> in
     if course is not None:
         return course
     return None if _course_known(skeleton) else 0
+
+
+def denoise_default(skeleton: Skeleton, *, denoise: float | None = None) -> float:
+    """:func:`synthesize`'s default of ``denoise`` for this source skeleton.
+
+    :data:`~phloem.branching.bending.DENOISE` (3 px) where the input's branches keep a course,
+    that is where their :func:`phloem.metrics.median_heading_change` over 60 px is at most
+    :data:`DENOISE_COURSE` (0.4 rad): the turning angles of such branches at the resampling
+    step are mostly the pixel staircase of their traced centre lines, which the Markov chain
+    would grow as wander (veins, cracks, roots, vessels). Otherwise ``0.0``, the skeleton as
+    given: branches that bend sharply within 60 px (valleys of an elevation model, zigzag
+    bolts, braided channels) turn for real at the step, and smoothing rounds their bends. Also
+    ``0.0`` where no branch is long enough to measure (the paper's model).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        The example structure.
+    denoise : float, optional
+        A value chosen by the caller, returned as it is.
+
+    Returns
+    -------
+    float
+        ``denoise`` for :func:`fit_models`.
+
+    Examples
+    --------
+    >>> from phloem.branching import Branch, Skeleton
+    >>> denoise_default(Skeleton([Branch([[10, 0], [12, 50], [9, 100]], 1.0)]))
+    3.0
+    >>> denoise_default(Skeleton([Branch([[0, 0], [50, 0], [50, 50], [100, 50], [100, 100]], 1.0)]))
+    0.0
+    """
+    _check_source(skeleton)
+    if denoise is not None:
+        return denoise
+    try:
+        keeps_course = median_heading_change(skeleton) <= DENOISE_COURSE
+    except ValueError:  # no branch as long as the arc: nothing to tell a course from
+        return 0.0
+    return DENOISE if keeps_course else 0.0
 
 
 def _check_source(skeleton: Any) -> None:
@@ -359,6 +414,8 @@ class SourceDefaults:
     turn_histogram : float
         For :func:`fit_models`: :data:`~phloem.branching.bending.TURN_HISTOGRAM`, or
         :data:`GUIDED_TURN_HISTOGRAM` with a guide.
+    denoise : float
+        For :func:`fit_models` (:func:`denoise_default`).
     """
 
     total_turn: float
@@ -367,6 +424,7 @@ class SourceDefaults:
     orientation: float
     direction_histogram: float
     turn_histogram: float
+    denoise: float
 
 
 def source_defaults(
@@ -378,6 +436,7 @@ def source_defaults(
     orientation: float | None = None,
     direction_histogram: float | None = None,
     turn_histogram: float | None = None,
+    denoise: float | None = None,
     guided: bool = False,
 ) -> SourceDefaults:
     """Every option that :func:`synthesize` defaults from its source skeleton, resolved at once.
@@ -385,8 +444,8 @@ def source_defaults(
     :func:`synthesize`, ``phloem branching grow`` and the studio's growth all call this, so a
     skeleton grows the same way from each of them. A value chosen by the caller is kept; those
     left at None get :func:`course_defaults`' (``total_turn``, ``repel_border``),
-    :func:`course_edges_default`'s, :func:`orientation_default`'s and
-    :func:`direction_histogram_default`'s; ``turn_histogram`` gets
+    :func:`course_edges_default`'s, :func:`orientation_default`'s,
+    :func:`direction_histogram_default`'s and :func:`denoise_default`'s; ``turn_histogram`` gets
     :data:`~phloem.branching.bending.TURN_HISTOGRAM`, or :data:`GUIDED_TURN_HISTOGRAM` with a
     guide.
 
@@ -394,7 +453,7 @@ def source_defaults(
     ----------
     skeleton : Skeleton
         The example structure.
-    total_turn, repel_border, course, orientation, direction_histogram, turn_histogram : optional
+    total_turn, repel_border, course, orientation, direction_histogram, turn_histogram, denoise : optional
         Values chosen by the caller.
     guided : bool, optional
         Whether :func:`grow` is given a ``guide`` (default False): a guide sets the way the new
@@ -428,6 +487,7 @@ def source_defaults(
             skeleton, direction_histogram=direction_histogram, guided=guided
         ),
         turn_histogram=turn_histogram,
+        denoise=denoise_default(skeleton, denoise=denoise),
     )
 
 
@@ -452,6 +512,7 @@ def synthesize(
     stem_thickness: float = STEM_THICKNESS,
     direction_histogram: float | None = None,
     layout: float = 0.0,
+    denoise: float | None = None,
     generations: int | None = None,
     max_length: float | str | None = "input",
     colonize: bool = True,
@@ -486,7 +547,7 @@ def synthesize(
         Seed of the growth and of the fragment choices.
     trace_options : dict, optional
         Keyword arguments for :func:`trace` (e.g. ``{"kind": "dark", "sigmas": (1.5, 3, 5)}``).
-    h, order, m, n_best, course, coarse_history, total_turn, turn_bound, orientation, turn_histogram, stem_thickness, direction_histogram, layout : optional
+    h, order, m, n_best, course, coarse_history, total_turn, turn_bound, orientation, turn_histogram, stem_thickness, direction_histogram, layout, denoise : optional
         Model parameters, as in :func:`fit_models` (``k`` and ``c`` before, deprecated).
         ``total_turn`` defaults to :func:`course_defaults`'s for the source skeleton,
         ``course`` to :func:`course_edges_default`'s (0 where the total turn is off),
@@ -497,7 +558,10 @@ def synthesize(
         ``turn_histogram`` to :data:`~phloem.branching.bending.TURN_HISTOGRAM` (10; 3 with a
         ``guide``, :data:`GUIDED_TURN_HISTOGRAM`). ``layout`` is off by default; 1 grows a
         laid-out input's branches (a fundus's vessels, a delta's channels) along its ways at
-        the same places of the picture.
+        the same places of the picture. ``denoise`` defaults to :func:`denoise_default`'s
+        (3 px where the source's branches keep a course, else 0): the source's branches are
+        smoothed before their angles are taken, so that a traced centre line's pixel
+        staircase is not grown as wander.
     generations, max_length, colonize, guide : optional
         See :func:`grow`.
     repel_border : bool, optional
@@ -524,8 +588,8 @@ def synthesize(
         Models fitted to ``skeleton`` before (an earlier result's ``bending`` and ``furcation``),
         used instead of fitting them again: many seeds of one input fit once. ``h``, ``order``,
         ``m``, ``n_best``, ``course``, ``coarse_history``, ``total_turn``, ``turn_bound``,
-        ``orientation``, ``turn_histogram``, ``stem_thickness``, ``direction_histogram`` and
-        ``layout`` are then not used.
+        ``orientation``, ``turn_histogram``, ``stem_thickness``, ``direction_histogram``,
+        ``layout`` and ``denoise`` are then not used.
 
     Returns
     -------
@@ -571,13 +635,14 @@ def synthesize(
     tick(1)
     d = source_defaults(
         source, total_turn=total_turn, repel_border=repel_border, course=course, orientation=orientation,
-        direction_histogram=direction_histogram, turn_histogram=turn_histogram, guided=guide is not None,
+        direction_histogram=direction_histogram, turn_histogram=turn_histogram, denoise=denoise,
+        guided=guide is not None,
     )  # fmt: skip
     if models is None:
         bending, furcation = fit_models(
             source, h=h, order=order, m=m, n_best=n_best, course=d.course, coarse_history=coarse_history,
             total_turn=d.total_turn, turn_bound=turn_bound, orientation=d.orientation, turn_histogram=d.turn_histogram,
-            stem_thickness=stem_thickness, direction_histogram=d.direction_histogram, layout=layout,
+            stem_thickness=stem_thickness, direction_histogram=d.direction_histogram, layout=layout, denoise=d.denoise,
         )  # fmt: skip
     elif (
         isinstance(models, tuple)

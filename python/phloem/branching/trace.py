@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from .._distance import euclidean_distance
 from .._ridges import ridge_polarity, ridge_response
 from .._validate import as_image, as_mask, check_float, check_int
-from ._elements import _tree_roots
+from ._elements import _smooth_path, _tree_roots
 from .skeleton import Branch, Skeleton
 
 __all__ = ["estimate_thickness", "trace"]
@@ -450,21 +450,6 @@ def _decompose(tree: Any, root: int) -> list[tuple[list[int], int | None, int]]:
 
 
 # -- trace -----------------------------------------------------------------------------------
-
-
-def _smooth_path(pts: F64, sigma: float) -> F64:
-    """Gaussian smoothing along a polyline, point-reflected at the ends so the ends stay put."""
-    from scipy import ndimage
-
-    if sigma <= 0 or len(pts) < 3:
-        return pts
-    pad = min(len(pts) - 1, math.ceil(3 * sigma))
-    head = 2 * pts[0] - pts[pad:0:-1]
-    tail = 2 * pts[-1] - pts[-2 : -pad - 2 : -1]
-    ext = np.vstack([head, pts, tail])
-    sm = ndimage.gaussian_filter1d(ext, sigma, axis=0, mode="nearest")[pad : pad + len(pts)]
-    sm[0] = pts[0]
-    return np.asarray(sm, dtype=np.float64)
 
 
 def _default_gap(sig: tuple[float, ...], kind: str) -> float:

@@ -10,9 +10,9 @@ import numpy as np
 
 from .. import _json, branching, io
 from ..branching._fragment_map import fragment_map
-from ..branching.bending import STEM_THICKNESS, TURN_HISTOGRAM
+from ..branching.bending import DENOISE, STEM_THICKNESS, TURN_HISTOGRAM
 from ..branching.measures import resolve_trace_options
-from ..branching.pipeline import GUIDED_TURN_HISTOGRAM, N_BEST
+from ..branching.pipeline import DENOISE_COURSE, GUIDED_TURN_HISTOGRAM, N_BEST
 from ._common import (
     check_writable,
     common_options,
@@ -125,8 +125,8 @@ def _resolve_models(args: argparse.Namespace, bend: Any) -> None:
 
 
 def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> None:
-    """``--total-turn``, ``--repel-border``, ``--course``, ``--orientation``, ``--direction-histogram`` and
-    ``--turn-histogram`` left at their defaults, resolved for this example."""
+    """``--total-turn``, ``--repel-border``, ``--course``, ``--orientation``, ``--direction-histogram``,
+    ``--turn-histogram`` and ``--denoise`` left at their defaults, resolved for this example."""
     d = branching.source_defaults(
         source,
         total_turn=args.total_turn,
@@ -135,11 +135,12 @@ def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> Non
         orientation=args.orientation,
         direction_histogram=args.direction_histogram,
         turn_histogram=args.turn_histogram,
+        denoise=args.denoise,
         guided=getattr(args, "guide", None) is not None,
     )
     args.total_turn, args.repel_border, args.course = d.total_turn, d.repel_border, d.course
     args.orientation, args.direction_histogram = d.orientation, d.direction_histogram
-    args.turn_histogram = d.turn_histogram
+    args.turn_histogram, args.denoise = d.turn_histogram, d.denoise
 
 
 def _check_json_target(path: Path, args: argparse.Namespace) -> None:
@@ -368,6 +369,17 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
         "the paper's model, where a trunk thins to its children's thickness)",
     )
     g.add_argument(
+        "--denoise",
+        type=non_negative,
+        default=None,
+        metavar="PX",
+        help="smooth the example's branches along their length by a Gaussian of this many pixels before the bending "
+        "model takes their angles, so that a traced centre line's pixel staircase is not grown as wandering "
+        f"(default: {DENOISE:g} where the example's branches keep a course, i.e. their median heading change over "
+        f"60 px is at most {DENOISE_COURSE:g} rad, else 0: the skeleton as given, the paper's model, which keeps "
+        "sharp bends)",
+    )
+    g.add_argument(
         "--generations",
         type=positive,
         default=None,
@@ -412,12 +424,12 @@ def _cmd_branching_grow(args: argparse.Namespace) -> None:
     # fitting takes seconds on real skeletons; a batch worker fits once per skeleton and options
     options = (args.h, args.order, args.m, args.n_best, args.course, args.coarse_history, args.total_turn,
                args.turn_bound, args.orientation, args.turn_histogram, args.stem_thickness,
-               args.direction_histogram, args.layout)  # fmt: skip
+               args.direction_histogram, args.layout, args.denoise)  # fmt: skip
     bend, fur = kept("branching models", [Path(args.skeleton)], options, lambda: branching.fit_models(
         source, h=args.h, order=args.order, m=args.m, n_best=args.n_best, course=args.course,
         coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound,
         orientation=args.orientation, turn_histogram=args.turn_histogram, stem_thickness=args.stem_thickness,
-        direction_histogram=args.direction_histogram, layout=args.layout))  # fmt: skip
+        direction_histogram=args.direction_histogram, layout=args.layout, denoise=args.denoise))  # fmt: skip
     new = run("branching grow", args, lambda bar: _grow(args, bend, fur, shape, bar))
     _resolve_models(args, bend)
     args.size = shape
@@ -470,13 +482,13 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
     key = stamp(read, (_trace_kwargs(args), args.valid, args.h, args.order, args.m, args.n_best, args.course,
                                args.coarse_history, args.total_turn, args.turn_bound, args.orientation,
                                args.turn_histogram, args.stem_thickness, args.direction_histogram,
-                               args.layout))  # fmt: skip
+                               args.layout, args.denoise))  # fmt: skip
     prior = recall("branching run models", key)
     res = run(
         "branching run", args,
         lambda bar: branching.synthesize(
             img, source if prior is None else prior[0], models=None if prior is None else prior[1:], size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, order=args.order,
-            m=args.m, n_best=args.n_best, course=args.course, coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound, orientation=args.orientation, turn_histogram=args.turn_histogram, stem_thickness=args.stem_thickness, direction_histogram=args.direction_histogram, layout=args.layout, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize, repel_border=args.repel_border,
+            m=args.m, n_best=args.n_best, course=args.course, coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound, orientation=args.orientation, turn_histogram=args.turn_histogram, stem_thickness=args.stem_thickness, direction_histogram=args.direction_histogram, layout=args.layout, denoise=args.denoise, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize, repel_border=args.repel_border,
             guide=_guide(args.guide, args), valid=valid, render_options=_render_kwargs(args),
             threads=args.threads, progress=bar, max_memory=args.max_memory,
         ),

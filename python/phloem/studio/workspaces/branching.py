@@ -252,6 +252,7 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
                 direction_histogram=d.direction_histogram,
                 turn_histogram=d.turn_histogram,
                 layout=req.layout,
+                denoise=d.denoise,
             )
             new = branching.grow(bend, fur, size=shape, seed=req.seed, max_length=req.max_length, guide=guide,
                                  repel_border=d.repel_border, progress=progress, max_memory=project.max_memory)  # fmt: skip
@@ -266,6 +267,7 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
                 "repel_border": d.repel_border,
                 "orientation": d.orientation,
                 "direction_histogram": d.direction_histogram,
+                "denoise": d.denoise,
             }
             return [outputs.data(out, new.to_json().encode(), command=req.kind, parameters=used,
                                  seed=req.seed, overwrite=req.overwrite)]  # fmt: skip
