@@ -162,6 +162,9 @@ class Result:
     angle_spread: float = math.nan
     thickness: float = math.nan
     thickness_spread: float = math.nan
+    # the bending model's staircase smoothing (px) as synthesize defaulted it: the angle
+    # histogram above is the smoothed input's where it is above 0
+    denoise: float = math.nan
     seconds: float = math.nan
     error: str = ""
     passed: dict[str, bool] = field(default_factory=dict)
@@ -326,6 +329,7 @@ def measure(
     if mask:
         r.two_level = two_level_fraction(res.image, img)
     r.angle, r.angle_spread, r.thickness, r.thickness_spread = _hist_distances(res.bending, tgt)
+    r.denoise = res.bending.denoise
     r.passed = {
         "f1": r.f1 >= F1_MIN,
         "tree": abs(r.share_out - r.share_in) <= SHARE_TOL,
