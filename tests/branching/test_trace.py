@@ -596,3 +596,15 @@ def test_a_blob_is_not_a_branch_but_a_short_thin_branch_is() -> None:
     assert len(trace(mask, kind="mask", spur=12.0).branches) == 1
     kept = trace(mask, kind="mask", spur=0.0)
     assert np.concatenate([b.points for b in kept.branches])[:, 1].min() < 100
+
+
+def test_a_smoothing_wider_than_any_branch_is_cut_to_the_branch():
+    # Before: smooth=1e9 asked SciPy for a kernel of 8e9 taps (a MemoryError traceback).
+    img = np.full((96, 128), 0.8, np.float32)
+    cv2.line(img, (5, 90), (70, 40), 0.1, 5)
+    cv2.line(img, (70, 40), (125, 5), 0.1, 4)
+    sk = trace(img, kind="dark", sigmas=(1.5, 2.5), smooth=1e9)
+    assert sk.branches and all(np.isfinite(b.points).all() and np.isfinite(b.thickness).all() for b in sk.branches)
+    # the widest Gaussian leaves each branch about as thick as its mean along it
+    for b in sk.branches:
+        assert np.ptp(b.thickness) < 0.25 * np.mean(b.thickness)

@@ -28,11 +28,16 @@ def _check_skeleton(skeleton: Any, name: str = "skeleton") -> Skeleton:
 
 
 def _smooth_path(pts: F64, sigma: float) -> F64:
-    """Gaussian smoothing along a polyline, point-reflected at the ends so the ends stay put."""
+    """Gaussian smoothing along a polyline, point-reflected at the ends so the ends stay put.
+
+    ``sigma`` is in vertices; one wider than the polyline is taken as wide as it (the kernel,
+    4 ``sigma`` each side, would otherwise grow without bound for no different result).
+    """
     from scipy import ndimage  # type: ignore[import-untyped]
 
     if sigma <= 0 or len(pts) < 3:
         return pts
+    sigma = min(sigma, float(len(pts)))
     pad = min(len(pts) - 1, math.ceil(3 * sigma))
     head = 2 * pts[0] - pts[pad:0:-1]
     tail = 2 * pts[-1] - pts[-2 : -pad - 2 : -1]

@@ -457,12 +457,12 @@ class BendingModel:
             it is resampled and its angles taken (default 0: the skeleton as given, the
             paper's model; :func:`~phloem.branching.synthesize` uses :data:`DENOISE`, 3,
             where the input's branches keep a course,
-            :func:`~phloem.branching.denoise_default`). Beyond the paper: a traced centre line keeps the
-            pixel grid's staircase, which at a step of a few pixels is most of a straight
-            vein's turning angle and reverts over tens of elements. The Markov chain copies
-            the turns but not their return to the line, so grown branches wandered off their
-            course. Only the angles and the points of :attr:`source` change; the
-            thicknesses are the skeleton's.
+            :func:`~phloem.branching.denoise_default`). Beyond the paper: a traced centre
+            line keeps the pixel grid's staircase, which at a step of a few pixels is most of
+            a straight vein's turning angle and reverts over tens of elements. The Markov
+            chain copies the turns but not their return to the line, so grown branches
+            wandered off their course. Only the angles and the points of :attr:`source`
+            change; the thicknesses are the skeleton's.
 
         Returns
         -------

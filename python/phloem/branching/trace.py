@@ -740,7 +740,8 @@ def trace(
             # the end reflection can push a bent chain at the border a little outside the image
             np.clip(pts, 0.0, [shape[1] - 1, shape[0] - 1], out=pts)
             if smooth > 0 and len(thick) > 2:
-                thick = ndimage.gaussian_filter1d(thick, smooth, mode="nearest")
+                # (a Gaussian wider than the chain is cut to it, as _smooth_path does)
+                thick = ndimage.gaussian_filter1d(thick, min(smooth, len(thick)), mode="nearest")
             par = None if parent is None else (new_index[parent], at)
             new_index[i] = len(branches)
             branches.append(Branch(pts, thick, par))
@@ -752,7 +753,7 @@ def trace(
         for b in sk.branches:
             if len(b) > 2:
                 t = ndimage.median_filter(b.thickness, size=5, mode="nearest")
-                b.thickness = ndimage.gaussian_filter1d(t, smooth, mode="nearest") if smooth > 0 else t
+                b.thickness = ndimage.gaussian_filter1d(t, min(smooth, len(t)), mode="nearest") if smooth > 0 else t
     return sk.resample(h) if h is not None else sk
 
 
