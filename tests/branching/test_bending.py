@@ -452,7 +452,7 @@ def test_turn_limit_is_the_stems():
 
 
 def test_course_is_an_option_of_the_pipeline():
-    from phloem.branching import synthesize, synthetic_skeleton
+    from phloem.branching import synthetic_skeleton
 
     src = synthetic_skeleton(0)
     assert fit_models(src, h=2.0)[0].course == 8 * 4
