@@ -21,10 +21,12 @@ from __future__ import annotations
 import argparse
 import time
 
+import numpy as np
 import pytest
 
 from phloem.branching import (
     BendingModel,
+    Branch,
     FurcationModel,
     Skeleton,
     angle_histogram,
@@ -64,6 +66,15 @@ def test_bench_grow_500(benchmark):
     bend, fur = BendingModel.fit(src, h=H), FurcationModel.fit(src, h=H)
     out = benchmark(lambda: grow_nodes(bend, fur, 500))
     assert sum(len(b) for b in out.branches) > 100
+
+
+def test_bench_resample_staircase(benchmark):
+    # a traced centre line of 4000 pixels at the measures' step (benches/resample.rs in Rust)
+    rng = np.random.default_rng(0)
+    steps = np.array([[1, 0], [1, 1], [0, 1], [1, -1]], np.float64)[rng.integers(0, 4, 4000)]
+    b = Branch(np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)]), 2.0)
+    out = benchmark(lambda: b.resample(1.0))
+    assert len(out) > 3000
 
 
 def times(trees: int, nodes: int, direction_histogram: float = 0.0, layout: float = 0.0) -> dict[str, float]:

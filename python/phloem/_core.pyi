@@ -26,6 +26,7 @@ __all__ = [
     "mvc_weights",
     "nearest_colour",
     "nnf",
+    "polyline_resample",
     "polylines_crossing",
     "seam",
     "seamless",
@@ -181,6 +182,9 @@ def emd_map(
     window: int,
     threads: int | None,
 ) -> NDArray[np.float32]: ...
+def polyline_resample(
+    points: NDArray[np.float64], cum: NDArray[np.float64], count: int, h: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
 def polylines_crossing(paths: NDArray[np.float64], segments: NDArray[np.float64]) -> NDArray[np.bool_]: ...
 def growth_choose(
     quality: NDArray[np.float64],

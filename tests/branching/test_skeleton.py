@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -35,6 +36,71 @@ def test_resample_has_constant_edges_and_angles_round_trip(seed, h):
     np.testing.assert_allclose(back.points, r.points, atol=1e-7)
     assert np.all(np.abs(r.angles()) <= np.pi)
     assert r.thickness.min() >= b.thickness.min() - 1e-9 and r.thickness.max() <= b.thickness.max() + 1e-9
+
+
+def _reference_resample(points: np.ndarray, count: int, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """The NumPy implementation ``Branch.resample`` had before ``phloem_core::resample``."""
+    out = [points[0].copy()]
+    seg = 0
+    while len(out) < count and seg < len(points) - 1:
+        a, d = points[seg], points[seg + 1] - points[seg]
+        f = a - out[-1]
+        qa = float(d @ d)
+        if qa == 0.0:
+            seg += 1
+            continue
+        qb = float(f @ d)
+        t = (-qb + math.sqrt(max(qb * qb - qa * (float(f @ f) - h * h), 0.0))) / qa
+        if t <= 1.0:
+            out.append(a + t * d)
+        else:
+            seg += 1
+    pts = np.asarray(out) if len(out) > 1 else points[[0, -1]].copy()
+    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    s = np.empty(len(pts))
+    seg = 0
+    for i, q in enumerate(pts):
+        best, best_s, best_seg = math.inf, 0.0, seg
+        for j in range(seg, len(points) - 1):
+            a, d = points[j], points[j + 1] - points[j]
+            qa = float(d @ d)
+            t = 0.0 if qa == 0.0 else min(max(float((q - a) @ d) / qa, 0.0), 1.0)
+            e = a + t * d - q
+            dist = float(e @ e)
+            if dist < best - 1e-12:
+                best, best_s, best_seg = dist, float(cum[j] + t * (cum[j + 1] - cum[j])), j
+            if dist < 1e-12:
+                break
+        s[i], seg = best_s, best_seg
+    return pts, np.interp(s, cum, np.asarray(range(len(points)), np.float64))
+
+
+# Whether NumPy's 2-vector dot product is fused here, as phloem_core::resample's is (0.66 unfused).
+_BLAS_FUSES = float(np.array([0.1, 0.7]) @ np.array([0.3, 0.9])) == 0.6599999999999999
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_resample_gives_the_bits_of_its_numpy_reference(seed):
+    # Pixel staircases with repeated points (a trace's centre lines) and smooth wiggles; the
+    # thickness is the vertex index, so the arc position of every new vertex is compared too.
+    rng = np.random.default_rng(seed)
+    if seed % 2:
+        pts = _wiggle(seed, 60).points
+    else:
+        pts = np.cumsum(rng.integers(-1, 2, (80, 2)), axis=0).astype(np.float64) + 40.0
+    b = Branch(pts, np.arange(len(pts), dtype=np.float64))
+    for h in (1.0, 2.7, 3.0, 7.5):
+        count = math.floor(b.length() / h + 1e-9) + 1
+        if count < 2:
+            continue
+        want_pts, want_thick = _reference_resample(pts, count, h)
+        r = b.resample(h)
+        if _BLAS_FUSES:
+            np.testing.assert_array_equal(r.points, want_pts)
+            np.testing.assert_array_equal(r.thickness, want_thick)
+        else:  # the reference rounds its dot products otherwise on this machine
+            np.testing.assert_allclose(r.points, want_pts, rtol=0, atol=1e-9)
+            np.testing.assert_allclose(r.thickness, want_thick, rtol=0, atol=1e-6)
 
 
 def test_angles_sign_and_straight_line():

@@ -32,6 +32,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import _core
 from .._api import Size, renamed
 from .._json import JsonFile, is_number, short_repr
 from .._validate import as_image, check_float, check_size
@@ -213,63 +214,12 @@ class Branch:
         if count < 2:
             return Branch(self.points[[0, -1]].copy(), self.thickness[[0, -1]].copy(), self.parent)
         # Points at arc lengths k*h would leave chords shorter than h where the polyline turns;
-        # walk by chords instead so that every edge has length exactly h (fewer vertices where
-        # the polyline is very curved).
-        pts = _chord_walk(self.points, count, h)
-        if len(pts) < 2:
-            pts = self.points[[0, -1]].copy()
-        # Thickness by the arc length of each new vertex's projection on the old polyline.
-        s = _arc_positions(self.points, cum, pts)
+        # the walk goes by chords instead so that every edge has length exactly h (fewer
+        # vertices where the polyline is very curved). Thickness follows the arc length of each
+        # new vertex's nearest point on the old polyline (phloem_core::resample).
+        pts, s = _core.polyline_resample(np.ascontiguousarray(self.points), cum, count, float(h))
         thick = np.interp(s, cum, self.thickness)
         return Branch(pts, thick, self.parent)
-
-
-def _chord_walk(points: F64, count: int, h: float) -> F64:
-    """Up to ``count`` vertices along the polyline with consecutive distance exactly ``h``.
-
-    From the current vertex ``c`` the next one is where the polyline first leaves the circle of
-    radius ``h`` around ``c``: on the current segment that is the larger root of
-    ``|a + t d - c|^2 = h^2``; if it lies beyond the segment's end, the end is still inside
-    the circle and the search moves on to the next segment.
-    """
-    out = [points[0].copy()]
-    seg = 0
-    n = len(points)
-    while len(out) < count and seg < n - 1:
-        a, d = points[seg], points[seg + 1] - points[seg]
-        f = a - out[-1]
-        qa = float(d @ d)
-        if qa == 0.0:
-            seg += 1
-            continue
-        qb = float(f @ d)
-        disc = qb * qb - qa * (float(f @ f) - h * h)
-        t = (-qb + math.sqrt(max(disc, 0.0))) / qa
-        if t <= 1.0:
-            out.append(a + t * d)
-        else:
-            seg += 1
-    return np.asarray(out)
-
-
-def _arc_positions(points: F64, cum: F64, query: F64) -> F64:
-    """Arc length of each query point's nearest point on the polyline, monotone along it."""
-    out = np.empty(len(query))
-    seg = 0
-    for i, q in enumerate(query):
-        best, best_s, best_seg = math.inf, 0.0, seg
-        for j in range(seg, len(points) - 1):
-            a, d = points[j], points[j + 1] - points[j]
-            qa = float(d @ d)
-            t = 0.0 if qa == 0.0 else min(max(float((q - a) @ d) / qa, 0.0), 1.0)
-            e = a + t * d - q
-            dist = float(e @ e)
-            if dist < best - 1e-12:
-                best, best_s, best_seg = dist, float(cum[j] + t * (cum[j + 1] - cum[j])), j
-            if dist < 1e-12:
-                break
-        out[i], seg = best_s, best_seg
-    return out
 
 
 @dataclass

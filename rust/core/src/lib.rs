@@ -36,6 +36,8 @@
 //!   planarity test of branching growth (Sibbing et al. 2010, §4.4).
 //! - [`colonisation`]: the density map of branching growth, its local update, and the
 //!   density and guidance maxima along rays (Sibbing et al. 2010, §4.4–4.5).
+//! - [`resample`]: polylines resampled to a constant edge length, the first step of branching
+//!   synthesis (Sibbing et al. 2010, §4.1).
 //! - [`growth`]: the choice of a growth step's best valid candidates from their bending
 //!   quality, density, guidance, the frame and the planarity test (Sibbing et al. 2010, §4.4).
 //! - [`deform`]: where each pixel of a deformed fragment comes from (Sibbing et al. 2010, §5.3).
@@ -59,6 +61,7 @@ pub mod maxflow;
 pub mod mvc;
 pub mod patch;
 pub mod poisson;
+pub mod resample;
 pub mod rng;
 pub mod seams;
 pub mod shapes;

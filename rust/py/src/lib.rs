@@ -21,6 +21,7 @@ mod errors;
 mod growth;
 mod patch;
 mod progress;
+mod resample;
 mod seams;
 mod shapes;
 mod strokes;
@@ -60,6 +61,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(strokes::stroke_pieces_py, m)?)?;
     m.add_function(wrap_pyfunction!(strokes::stroke_pair_energies_py, m)?)?;
     m.add_function(wrap_pyfunction!(crossings::polylines_crossing_py, m)?)?;
+    m.add_function(wrap_pyfunction!(resample::polyline_resample_py, m)?)?;
     m.add_function(wrap_pyfunction!(colonisation::density_stamp_py, m)?)?;
     m.add_function(wrap_pyfunction!(growth::growth_choose_py, m)?)?;
     m.add_function(wrap_pyfunction!(threads::default_threads_py, m)?)?;
