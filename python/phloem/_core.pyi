@@ -13,12 +13,14 @@ __all__ = [
     "coherence_candidates",
     "default_threads",
     "density_stamp",
+    "dist_columns",
     "emd",
     "emd_map",
     "fragment_maps",
     "grid_maxflow",
     "growth_choose",
     "guided_quilt",
+    "histogram_moves",
     "interpolate_field",
     "knn",
     "mvc_combine",
@@ -40,6 +42,7 @@ __all__ = [
     "tbn_upsample",
     "tps_register",
     "tps_sample",
+    "turn_bins",
     "vote",
 ]
 
@@ -182,6 +185,11 @@ def emd_map(
     window: int,
     threads: int | None,
 ) -> NDArray[np.float32]: ...
+def dist_columns(cols: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]: ...
+def histogram_moves(
+    u: NDArray[np.float64], uu: float, now: float, n: float, bins: NDArray[np.int64]
+) -> NDArray[np.float64]: ...
+def turn_bins(turns: NDArray[np.float64], bins: int) -> NDArray[np.int64]: ...
 def polyline_resample(
     points: NDArray[np.float64], cum: NDArray[np.float64], count: int, h: float
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...

@@ -476,6 +476,52 @@ def test_the_column_dist_is_the_papers_dist_to_the_bit():
         assert np.array_equal(_dist_columns(np.ascontiguousarray(table.T), y), _dist(table, y[None, :]))
 
 
+def _reference_histogram_moves(target: np.ndarray, counts: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The NumPy ``_histogram_moves`` had before ``phloem_core::bending``."""
+    n0 = float(counts.sum())
+    n = n0 + b.shape[1]
+    now = float(((target - counts / n0) ** 2).sum())
+    u = target - counts / n
+    same = np.full(len(b), float(b.shape[1]))
+    for p in range(b.shape[1]):
+        for q in range(p + 1, b.shape[1]):
+            same += 2.0 * (b[:, p] == b[:, q])
+    after = float(u @ u) - 2.0 * u[b].sum(axis=1) / n + same / (n * n)
+    return np.asarray((now - after) / len(target), dtype=np.float64)
+
+
+def test_the_growth_step_kernels_give_the_bits_of_their_numpy_reference():
+    # phloem_core::bending replaces NumPy passes in every growth step; the growth must not
+    # change by a bit for it
+    import math
+
+    from phloem import _core
+    from phloem.branching._elements import _abs_turn, _bin
+    from phloem.branching.bending import _angle, _histogram_moves
+
+    rng = np.random.default_rng(5)
+    turns = rng.normal(0.0, 4.0, (5000, 3)) * rng.choice([1e-9, 1.0, 100.0], (5000, 1))
+    turns[:4] = [
+        [np.nan, np.inf, -np.inf],
+        [math.pi, -math.pi, 3 * math.pi],
+        [0.0, -0.0, 2 * math.pi],
+        [1e300, -1e300, 7.0],
+    ]
+    with np.errstate(invalid="ignore"):
+        want_abs = np.abs(math.pi - (math.pi - turns) % (2 * math.pi))
+        want_angle = (turns + np.pi) % (2 * np.pi) - np.pi
+        want_bins = np.clip(np.floor(np.nan_to_num(want_abs / math.pi * 16)), 0, 15).astype(np.int64)
+        assert np.array_equal(_abs_turn(turns), want_abs, equal_nan=True)
+        assert np.array_equal(_angle(turns), want_angle, equal_nan=True)
+        assert np.array_equal(_bin(want_abs, 0.0, math.pi, 16), want_bins)
+        assert np.array_equal(_core.turn_bins(turns, 16), want_bins)
+    for P in (1, 2, 4):
+        target = rng.dirichlet(np.ones(16))
+        counts = rng.integers(0, 50, 16).astype(np.float64)
+        b = rng.integers(0, 16, (3000, P))
+        assert np.array_equal(_histogram_moves(target, counts, b), _reference_histogram_moves(target, counts, b))
+
+
 def _digitised(points: np.ndarray) -> Branch:
     """A centre line as a trace leaves it: every point on its pixel, repeats dropped."""
     p = np.rint(points)

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import _core
 from .._validate import check_float, check_int
 from ._elements import (
     F64,
@@ -110,15 +111,10 @@ def _histogram_moves(target: F64, counts: F64, b: I64) -> F64:
     n0 = float(counts.sum())
     n = n0 + b.shape[1]
     now = float(((target - counts / n0) ** 2).sum())
-    # ‖u − h_i/n‖² with u = Ĥ − H/n, h_i sparse (P ones): ‖u‖² − 2 Σ_p u[b_ip]/n + Σ_b h_ib²/n²
+    # ‖u − h_i/n‖² with u = Ĥ − H/n, h_i sparse (P ones): ‖u‖² − 2 Σ_p u[b_ip]/n + Σ_b h_ib²/n²,
+    # one pass over the candidates in phloem_core::bending (‖u‖² and the rest stay NumPy's sums)
     u = target - counts / n
-    # Σ_b h_ib² = P + 2 × the pairs that share a bin (P is a handful: pairs beat a (C, P, P) cube)
-    same = np.full(len(b), float(b.shape[1]))
-    for p in range(b.shape[1]):
-        for q in range(p + 1, b.shape[1]):
-            same += 2.0 * (b[:, p] == b[:, q])
-    after = float(u @ u) - 2.0 * u[b].sum(axis=1) / n + same / (n * n)
-    return np.asarray((now - after) / len(target), dtype=np.float64)
+    return _core.histogram_moves(u, float(u @ u), now, n, np.ascontiguousarray(b, np.int64))
 
 
 def block_sums(alpha: F64, k: int, m: int) -> F64 | None:
@@ -160,7 +156,9 @@ def arc_window_turns(alpha: F64, edges: int) -> F64:
 
 
 def _angle(a: F64) -> F64:
-    return np.asarray((a + np.pi) % (2 * np.pi) - np.pi, dtype=np.float64)
+    # (a + π) % 2π − π, with NumPy's float % as fmod moved into [0, 2π) (half its time)
+    r = np.fmod(np.asarray(a, np.float64) + np.pi, 2 * np.pi)
+    return np.asarray(r + np.where(r < 0, 2 * np.pi, 0.0) - np.pi, dtype=np.float64)
 
 
 def default_h(skeleton: Skeleton) -> float:
@@ -733,7 +731,7 @@ class BendingModel:
             return None
         back = np.concatenate([[0.0], np.cumsum(np.asarray(tail, np.float64)[::-1])])
         t = back[need[ok]][None, :] + self._next_cumsum()[:, ok]
-        return _histogram_moves(self.hist_arc, counts, _bin(_abs_turn(t), 0.0, math.pi, self.bins))
+        return _histogram_moves(self.hist_arc, counts, _core.turn_bins(np.ascontiguousarray(t), self.bins))
 
     def direction_delta(self, heading: float, counts: F64) -> F64:
         """``Δ`` of the direction histogram for every candidate (see ``direction_histogram``).

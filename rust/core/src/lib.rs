@@ -38,12 +38,15 @@
 //!   density and guidance maxima along rays (Sibbing et al. 2010, §4.4–4.5).
 //! - [`resample`]: polylines resampled to a constant edge length, the first step of branching
 //!   synthesis (Sibbing et al. 2010, §4.1).
+//! - [`bending`]: the bending model's history distances and heading-change bins over every
+//!   candidate of a growth step (Sibbing et al. 2010, §4.2).
 //! - [`growth`]: the choice of a growth step's best valid candidates from their bending
 //!   quality, density, guidance, the frame and the planarity test (Sibbing et al. 2010, §4.4).
 //! - [`deform`]: where each pixel of a deformed fragment comes from (Sibbing et al. 2010, §5.3).
 //! - [`correction`]: guided quilting, the start of texture correction after a warp (Assa &
 //!   Cohen-Or §3, after Fang & Hart 2007).
 
+pub mod bending;
 pub mod cancel;
 pub mod colonisation;
 pub mod correction;

@@ -9,6 +9,7 @@
 
 use pyo3::prelude::*;
 
+mod bending;
 mod blend;
 mod call;
 mod colonisation;
@@ -61,6 +62,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(strokes::stroke_pieces_py, m)?)?;
     m.add_function(wrap_pyfunction!(strokes::stroke_pair_energies_py, m)?)?;
     m.add_function(wrap_pyfunction!(crossings::polylines_crossing_py, m)?)?;
+    m.add_function(wrap_pyfunction!(bending::dist_columns_py, m)?)?;
+    m.add_function(wrap_pyfunction!(bending::turn_bins_py, m)?)?;
+    m.add_function(wrap_pyfunction!(bending::histogram_moves_py, m)?)?;
     m.add_function(wrap_pyfunction!(resample::polyline_resample_py, m)?)?;
     m.add_function(wrap_pyfunction!(colonisation::density_stamp_py, m)?)?;
     m.add_function(wrap_pyfunction!(growth::growth_choose_py, m)?)?;
