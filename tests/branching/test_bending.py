@@ -13,13 +13,16 @@ from phloem.branching import (
     Branch,
     Skeleton,
     SkeletonError,
+    default_h,
     denoise_default,
     fit_models,
     grow,
+    h_default,
     source_defaults,
     synthesize,
 )
 from phloem.branching.bending import DENOISE, STEM_THICKNESS, TURN_BOUND
+from phloem.branching.pipeline import MIN_H
 from phloem.metrics import drift
 
 H = 2.0
@@ -578,6 +581,29 @@ def test_denoise_keeps_branches_grown_from_staircase_lines_straight():
     assert source_defaults(lines).denoise == DENOISE  # lines keep a course
     assert mean_drift(0.0) > 0.06
     assert mean_drift(DENOISE) < 0.03
+
+
+def test_the_default_step_is_at_least_two_pixels():
+    # At a step under 2 px a traced centre line's turns are its pixel staircase: grown from
+    # them unsmoothed, thin lines wander off at once; synthesize's default step keeps them.
+    lines = _staircase_lines()
+    thin = Skeleton([Branch(b.points, 0.7) for b in lines.branches], lines.shape)
+    thick = Skeleton([Branch(b.points, 3.5) for b in lines.branches], lines.shape)
+    assert default_h(thin) == 0.7 and h_default(thin) == MIN_H == 2.0
+    assert h_default(thick) == 3.5 and h_default(thin, h=0.5) == 0.5
+    assert source_defaults(thin).h == 2.0 and source_defaults(thin, h=1.0).h == 1.0
+
+    def mean_drift(h: float) -> float:
+        bend, fur = fit_models(thin, h=h, denoise=0.0)
+        return float(
+            np.mean([drift(thin, grow(bend, fur, size=(400, 400), seed=s, max_length="input")) for s in range(3)])
+        )
+
+    assert mean_drift(0.7) > 0.6
+    assert mean_drift(h_default(thin)) < 0.45
+    img = np.where(thin.mask(), 0.1, 0.8).astype(np.float32)
+    assert synthesize(img, thin, seed=0, render_options={"complete": False}).bending.h == 2.0
+    assert synthesize(img, thin, seed=0, h=1.0, render_options={"complete": False}).bending.h == 1.0
 
 
 def test_denoise_is_defaulted_where_the_input_keeps_a_course():

@@ -225,6 +225,7 @@ def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
     assert grown["--denoise 0"] != grown["32"]
     assert sidecar["--denoise 0"]["denoise"] == 0.0
     assert sidecar["32"]["denoise"] == branching.denoise_default(Skeleton.load(skel)) > 0
+    assert sidecar["32"]["h"] == branching.h_default(Skeleton.load(skel)) >= 2.0
     assert sidecar["--total-turn 4"]["total_turn"] == 4.0
     # the bound on the stems' turn follows the total turn unless it is given
     assert sidecar["--total-turn 4"]["turn_bound"] == 5.0 and sidecar["--total-turn 0"]["turn_bound"] == 0.0

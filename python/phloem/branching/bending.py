@@ -166,7 +166,8 @@ def default_h(skeleton: Skeleton) -> float:
 
     A step of about one branch radius keeps the turning angles at the scale of the branch's
     own width (finer steps would sample the hand-drawn polyline's noise). For skeletons
-    without thickness (all zero) it falls back to 1/100 of the total length.
+    without thickness (all zero) it falls back to 1/100 of the total length. :func:`synthesize`
+    takes at least 2 px (:func:`~phloem.branching.h_default`), for traced centre lines.
 
     Examples
     --------

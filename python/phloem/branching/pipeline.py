@@ -12,7 +12,7 @@ from .. import _memory
 from .._api import Seed, Size, renamed
 from .._progress import Progress
 from .._validate import as_image, as_mask, check_size
-from .bending import DENOISE, STEM_THICKNESS, TURN_HISTOGRAM, BendingModel
+from .bending import DENOISE, STEM_THICKNESS, TURN_HISTOGRAM, BendingModel, default_h
 from .frame import _kept_inside, valid_region
 from .furcation import FurcationModel
 from .growth import grow
@@ -29,6 +29,7 @@ __all__ = [
     "denoise_default",
     "direction_histogram_default",
     "fit_models",
+    "h_default",
     "orientation_default",
     "source_defaults",
     "synthesize",
@@ -61,6 +62,11 @@ DIRECTION_HISTOGRAM_WEIGHT = 1.0
 #: turning at the resampling step is then mostly the trace's pixel staircase (measured in
 #: ``docs/pipelines/branching/quality.md``, "The trace's pixel staircase taken for turning").
 DENOISE_COURSE = 0.4
+#: The shortest resampling step :func:`h_default` gives, in pixels: a traced centre line keeps
+#: the pixel grid's staircase, and a step of a pixel or less samples it rather than the
+#: branch's course (measured in ``docs/pipelines/branching/quality.md``, "A step of at least
+#: two pixels").
+MIN_H = 2.0
 
 
 @dataclass
@@ -299,6 +305,38 @@ def denoise_default(skeleton: Skeleton, *, denoise: float | None = None) -> floa
     return DENOISE if keeps_course else 0.0
 
 
+def h_default(skeleton: Skeleton, *, h: float | None = None) -> float:
+    """:func:`synthesize`'s default of the resampling step ``h`` for this source skeleton.
+
+    The paper's :func:`~phloem.branching.default_h` (the median thickness, about one branch
+    radius), but at least :data:`MIN_H` (2 px): below that, the steps of a traced centre line
+    sample the pixel grid's staircase, and the Markov chain, which remembers ``order`` steps,
+    holds a course over only a few pixels (cracks, thin bolts and vessels a pixel or two wide).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        The example structure.
+    h : float, optional
+        A value chosen by the caller, returned as it is.
+
+    Returns
+    -------
+    float
+        ``h`` for :func:`fit_models`.
+
+    Examples
+    --------
+    >>> from phloem.branching import Branch, Skeleton
+    >>> h_default(Skeleton([Branch([[0, 0], [100, 0]], 0.8)])), h_default(Skeleton([Branch([[0, 0], [100, 0]], 3.5)]))
+    (2.0, 3.5)
+    """
+    _check_source(skeleton)
+    if h is not None:
+        return h
+    return max(default_h(skeleton), MIN_H)
+
+
 def _check_source(skeleton: Any) -> None:
     if not isinstance(skeleton, Skeleton):
         raise TypeError(f"skeleton: expected a phloem.branching.Skeleton, got {type(skeleton).__name__}")
@@ -416,6 +454,8 @@ class SourceDefaults:
         :data:`GUIDED_TURN_HISTOGRAM` with a guide.
     denoise : float
         For :func:`fit_models` (:func:`denoise_default`).
+    h : float
+        For :func:`fit_models` (:func:`h_default`).
     """
 
     total_turn: float
@@ -425,6 +465,7 @@ class SourceDefaults:
     direction_histogram: float
     turn_histogram: float
     denoise: float
+    h: float
 
 
 def source_defaults(
@@ -437,6 +478,7 @@ def source_defaults(
     direction_histogram: float | None = None,
     turn_histogram: float | None = None,
     denoise: float | None = None,
+    h: float | None = None,
     guided: bool = False,
 ) -> SourceDefaults:
     """Every option that :func:`synthesize` defaults from its source skeleton, resolved at once.
@@ -445,15 +487,15 @@ def source_defaults(
     skeleton grows the same way from each of them. A value chosen by the caller is kept; those
     left at None get :func:`course_defaults`' (``total_turn``, ``repel_border``),
     :func:`course_edges_default`'s, :func:`orientation_default`'s,
-    :func:`direction_histogram_default`'s and :func:`denoise_default`'s; ``turn_histogram`` gets
-    :data:`~phloem.branching.bending.TURN_HISTOGRAM`, or :data:`GUIDED_TURN_HISTOGRAM` with a
-    guide.
+    :func:`direction_histogram_default`'s, :func:`denoise_default`'s and :func:`h_default`'s;
+    ``turn_histogram`` gets :data:`~phloem.branching.bending.TURN_HISTOGRAM`, or
+    :data:`GUIDED_TURN_HISTOGRAM` with a guide.
 
     Parameters
     ----------
     skeleton : Skeleton
         The example structure.
-    total_turn, repel_border, course, orientation, direction_histogram, turn_histogram, denoise : optional
+    total_turn, repel_border, course, orientation, direction_histogram, turn_histogram, denoise, h : optional
         Values chosen by the caller.
     guided : bool, optional
         Whether :func:`grow` is given a ``guide`` (default False): a guide sets the way the new
@@ -488,6 +530,7 @@ def source_defaults(
         ),
         turn_histogram=turn_histogram,
         denoise=denoise_default(skeleton, denoise=denoise),
+        h=h_default(skeleton, h=h),
     )
 
 
@@ -561,7 +604,8 @@ def synthesize(
         the same places of the picture. ``denoise`` defaults to :func:`denoise_default`'s
         (3 px where the source's branches keep a course, else 0): the source's branches are
         smoothed before their angles are taken, so that a traced centre line's pixel
-        staircase is not grown as wander.
+        staircase is not grown as wander. ``h`` defaults to :func:`h_default`'s (the median
+        thickness, at least 2 px).
     generations, max_length, colonize, guide : optional
         See :func:`grow`.
     repel_border : bool, optional
@@ -635,12 +679,12 @@ def synthesize(
     tick(1)
     d = source_defaults(
         source, total_turn=total_turn, repel_border=repel_border, course=course, orientation=orientation,
-        direction_histogram=direction_histogram, turn_histogram=turn_histogram, denoise=denoise,
+        direction_histogram=direction_histogram, turn_histogram=turn_histogram, denoise=denoise, h=h,
         guided=guide is not None,
     )  # fmt: skip
     if models is None:
         bending, furcation = fit_models(
-            source, h=h, order=order, m=m, n_best=n_best, course=d.course, coarse_history=coarse_history,
+            source, h=d.h, order=order, m=m, n_best=n_best, course=d.course, coarse_history=coarse_history,
             total_turn=d.total_turn, turn_bound=turn_bound, orientation=d.orientation, turn_histogram=d.turn_histogram,
             stem_thickness=stem_thickness, direction_histogram=d.direction_histogram, layout=layout, denoise=d.denoise,
         )  # fmt: skip

@@ -126,7 +126,7 @@ def _resolve_models(args: argparse.Namespace, bend: Any) -> None:
 
 def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> None:
     """``--total-turn``, ``--repel-border``, ``--course``, ``--orientation``, ``--direction-histogram``,
-    ``--turn-histogram`` and ``--denoise`` left at their defaults, resolved for this example."""
+    ``--turn-histogram``, ``--denoise`` and ``--h`` left at their defaults, resolved for this example."""
     d = branching.source_defaults(
         source,
         total_turn=args.total_turn,
@@ -136,11 +136,12 @@ def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> Non
         direction_histogram=args.direction_histogram,
         turn_histogram=args.turn_histogram,
         denoise=args.denoise,
+        h=args.h,
         guided=getattr(args, "guide", None) is not None,
     )
     args.total_turn, args.repel_border, args.course = d.total_turn, d.repel_border, d.course
     args.orientation, args.direction_histogram = d.orientation, d.direction_histogram
-    args.turn_histogram, args.denoise = d.turn_histogram, d.denoise
+    args.turn_histogram, args.denoise, args.h = d.turn_histogram, d.denoise, d.h
 
 
 def _check_json_target(path: Path, args: argparse.Namespace) -> None:
@@ -271,7 +272,7 @@ def _valid(args: argparse.Namespace, img: np.ndarray) -> Any:
 def _grow_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("structure synthesis (§4)")
     g.add_argument("--h", type=float, default=None,
-                   help="resampling step in pixels (default: the input's median thickness). The model remembers --order steps, so "
+                   help="resampling step in pixels (default: the input's median thickness, at least 2 px). The model remembers --order steps, so "
                         "a larger h (e.g. 10 on a traced river) keeps long branches on course instead of curling")  # fmt: skip
     g.add_argument("--order", type=positive, default=3, help="order of the Markov bending model (the paper's k: 3)")
     deprecated_alias(g, "--k", "--order", dest="order", type=positive)

@@ -106,7 +106,7 @@ class BranchingGrowJob(BaseModel):
         "input", description="'input': about as much structure as the example; null: one tree"
     )
     h: float | None = Field(
-        None, gt=0, le=1000, description="resampling step (px); default the example's median thickness"
+        None, gt=0, le=1000, description="resampling step (px); default the example's median thickness, at least 2 px"
     )
     n_best: int = Field(N_BEST, ge=1, le=64, description="candidates drawn from at each step (the paper's c: 2)")
     layout: float = Field(
@@ -241,10 +241,10 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
 
         def grow(progress: Progress) -> list[str]:
             # the same course-keeping defaults as synthesize and the command line
-            d = branching.source_defaults(source, guided=guide is not None)
+            d = branching.source_defaults(source, h=req.h, guided=guide is not None)
             bend, fur = branching.fit_models(
                 source,
-                h=req.h,
+                h=d.h,
                 n_best=req.n_best,
                 course=d.course,
                 total_turn=d.total_turn,
