@@ -254,6 +254,13 @@ def test_branch_refuses_huge_coordinates_and_thickness():
         Branch([[0, 0], [0, 1]], [1.0, 40000.0])
 
 
+@pytest.mark.parametrize("h", [0, -1.0, float("nan"), float("inf"), "2", 1e-300, 1e-4])
+def test_branch_resample_refuses_a_bad_or_tiny_step(h):
+    # a step of 1e-4 px on a 200-px branch would be 2 million vertices: refused, not a hang
+    with pytest.raises((ValueError, TypeError), match="^h: "):
+        Branch([[0, 0], [200, 0]], 1.0).resample(h)
+
+
 def test_resample_bounds_the_vertex_count():
     sk = Skeleton([Branch([[0, 0], [1_000_000, 0]], 1.0)])
     with pytest.raises(

@@ -207,9 +207,15 @@ class Branch:
         the end is dropped (a branch shorter than ``h`` keeps its two end points). Thickness is
         interpolated linearly by arc length.
         """
+        h = check_float(h, "h", 0.0, inclusive=False)
         seg = np.linalg.norm(np.diff(self.points, axis=0), axis=1)
         cum = np.concatenate([[0.0], np.cumsum(seg)])
         total = float(cum[-1])
+        if total / h + 2 > MAX_VERTICES:
+            raise ValueError(
+                f"h: resampling a {total:.3g}-px branch at h={h:g} would make about {total / h:.3g} vertices,"
+                f" more than the limit of {MAX_VERTICES}; pass a larger h"
+            )
         count = math.floor(total / h + 1e-9) + 1
         if count < 2:
             return Branch(self.points[[0, -1]].copy(), self.thickness[[0, -1]].copy(), self.parent)
