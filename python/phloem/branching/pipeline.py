@@ -63,7 +63,7 @@ DIRECTION_HISTOGRAM_WEIGHT = 1.0
 #: ``docs/pipelines/branching/quality.md``, "The trace's pixel staircase taken for turning").
 DENOISE_COURSE = 0.4
 #: The shortest resampling step :func:`h_default` gives, in pixels: a traced centre line keeps
-#: the pixel grid's staircase, and a step of a pixel or less samples it rather than the
+#: the pixel grid's staircase, and a step under two pixels samples it rather than the
 #: branch's course (measured in ``docs/pipelines/branching/quality.md``, "A step of at least
 #: two pixels").
 MIN_H = 2.0
