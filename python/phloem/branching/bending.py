@@ -42,6 +42,7 @@ from ._elements import (
     _edge_headings,
     _elements,
     _generations,
+    _mod_2pi,
     _range,
 )
 from ._layout import DirectionLayout
@@ -156,9 +157,7 @@ def arc_window_turns(alpha: F64, edges: int) -> F64:
 
 
 def _angle(a: F64) -> F64:
-    # (a + π) % 2π − π, with NumPy's float % as fmod moved into [0, 2π) (half its time)
-    r = np.fmod(np.asarray(a, np.float64) + np.pi, 2 * np.pi)
-    return np.asarray(r + np.where(r < 0, 2 * np.pi, 0.0) - np.pi, dtype=np.float64)
+    return np.asarray(_mod_2pi(np.asarray(a, np.float64) + np.pi) - np.pi, dtype=np.float64)
 
 
 def default_h(skeleton: Skeleton) -> float:

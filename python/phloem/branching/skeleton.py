@@ -352,13 +352,17 @@ class Skeleton(JsonFile):
         """Sum of all branch lengths in pixels."""
         return float(sum(b.length() for b in self.branches))
 
+    def vertex_bound(self, h: float) -> float:
+        """At most how many vertices :meth:`resample` at ``h`` makes (two more per branch than its length over ``h``)."""
+        return float(sum(b.length() / h + 2 for b in self.branches))
+
     def resample(self, h: float) -> Skeleton:
         """Every branch resampled to constant edge length ``h`` (§4.1); attachments remapped.
 
         A child's parent vertex becomes the resampled parent vertex nearest to the old one.
         """
         h = check_float(h, "h", 0.0, inclusive=False)
-        count = sum(b.length() / h + 2 for b in self.branches)
+        count = self.vertex_bound(h)
         if count > MAX_VERTICES:
             raise ValueError(
                 f"h: resampling {self.total_length():.3g} px of branches at h={h:g} would make about {count:.3g} vertices,"

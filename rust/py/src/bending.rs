@@ -2,6 +2,7 @@
 
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use phloem_core::bending;
+use phloem_core::error::invalid;
 use pyo3::prelude::*;
 
 use crate::convert::array;
@@ -15,16 +16,15 @@ pub fn dist_columns_py<'py>(
     cols: PyReadonlyArray2<'py, f64>,
     y: PyReadonlyArray1<'py, f64>,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-    let c = cols.as_array().dim().1;
+    let (rows, c) = cols.as_array().dim();
     let cs = cols.as_slice().map_err(not_contiguous("cols"))?;
     let ys = y.as_slice().map_err(not_contiguous("y"))?;
-    if cols.as_array().dim().0 != ys.len() {
-        return Err(to_py(phloem_core::error::invalid(
+    if rows != ys.len() {
+        return Err(to_py(invalid(
             "cols",
             format!(
-                "expected one row per history element ({}), got {}",
-                ys.len(),
-                cols.as_array().dim().0
+                "expected one row per history element ({}), got {rows}",
+                ys.len()
             ),
         )));
     }
