@@ -52,6 +52,15 @@ def test_bench_trace_synthetic_1024(benchmark):
     assert len(sk.branches) > 50
 
 
+def test_bench_threshold_climb_grain_1024(benchmark):
+    # render's default gap_diversity asks this of every photo: one ridge filtering and the climb
+    from phloem.branching import threshold_climb
+
+    rng = np.random.default_rng(0)
+    grain = cv2.GaussianBlur(rng.normal(0.5, 0.1, (1024, 1024)).astype(np.float32), (0, 0), 0.7)
+    assert benchmark(lambda: threshold_climb(grain, kind="dark")) > 1.0
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=3)

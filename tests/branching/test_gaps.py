@@ -153,6 +153,45 @@ def test_gap_diversity_keeps_more_of_the_backgrounds_grain() -> None:
         assert fine(1.0, seed) > 1.2 * fine(0.0, seed)
 
 
+def _crack_on_grain(grain_contrast: float) -> tuple[np.ndarray, Skeleton]:
+    """A dark wavy crack across asphalt-like grain of ``grain_contrast`` (240x320), and its skeleton."""
+    rng = np.random.default_rng(0)
+    grain = cv2.GaussianBlur(rng.normal(0, 1, (240, 320)).astype(np.float32), (0, 0), 1.2)
+    img = (0.55 + grain_contrast * grain / grain.std()).astype(np.float32)
+    x = np.arange(10, 310, dtype=np.float64)
+    pts = np.c_[x, 120 + 30 * np.sin(x / 50)]
+    cv2.polylines(img, [np.round(pts).astype(np.int32)], False, 0.40, 2)
+    return np.clip(img, 0, 1), Skeleton([Branch(pts, 1.0)], (240, 320))
+
+
+def test_the_gaps_of_a_grainy_surface_get_the_spread_fill_by_default(monkeypatch: pytest.MonkeyPatch) -> None:
+    from phloem.branching import gap_diversity_default, pipeline, render, synthesize, threshold_climb
+
+    grainy, sk = _crack_on_grain(0.05)
+    smooth, _ = _crack_on_grain(0.002)
+    assert threshold_climb(grainy) > 1.0 and threshold_climb(smooth) == 1.0
+    assert gap_diversity_default(grainy) == 1.0 and gap_diversity_default(smooth) == 0.0
+    assert gap_diversity_default(grainy, gap_diversity=0.25) == 0.25  # the caller's value
+    assert gap_diversity_default(grainy, trace_options={"kind": "mask", "gap": 3.0}) == 0.0
+    # render's default is the resolved value: on grain the spread fill, elsewhere the plain one
+    for img, value, other in ((grainy, 1.0, 0.0), (smooth, 0.0, 1.0)):
+        auto = render(img, sk, sk, seed=0, threads=1)
+        assert np.array_equal(auto, render(img, sk, sk, seed=0, threads=1, gap_diversity=value))
+        assert not np.array_equal(auto, render(img, sk, sk, seed=0, threads=1, gap_diversity=other))
+    # and synthesize resolves it with its trace options
+    asked: list[dict[str, object]] = []
+
+    def spy(*args: object, **kwargs: object) -> float:
+        asked.append(kwargs)
+        return gap_diversity_default(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(pipeline, "gap_diversity_default", spy)
+    a = synthesize(grainy, seed=0, threads=1, trace_options={"kind": "dark"})
+    assert [k["trace_options"] for k in asked] == [{"kind": "dark"}]
+    b = synthesize(grainy, seed=0, threads=1, trace_options={"kind": "dark"}, render_options={"gap_diversity": 1.0})
+    assert np.array_equal(a.image, b.image)
+
+
 def test_completed_gaps_are_background_pixels_with_their_grain() -> None:
     # The gaps are filled with pixels of the input's background itself (the finest level
     # copies its field, no vote averages them), so a grainy background stays grainy.

@@ -392,6 +392,49 @@ def test_a_crack_on_a_smooth_surface_keeps_otsus_threshold():
     assert trace(img, kind="dark") == trace(img, kind="dark", threshold=_otsu(resp))
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_threshold_climb_is_how_far_the_default_trace_climbed(seed):
+    # the public measure is the trace's own: on grain its threshold and gap climbed this far
+    from phloem._ridges import ridge_response
+    from phloem.branching import threshold_climb
+    from phloem.branching.trace import DEFAULT_SIGMAS, GRAIN_STEP, GRAIN_STEPS, _default_gap, _otsu
+
+    rng = np.random.default_rng(seed)
+    grain = cv2.GaussianBlur(rng.normal(0, 1, (240, 320)).astype(np.float32), (0, 0), 1.2)
+    grainy, _ = _crack_on(0.55 + 0.05 * grain / grain.std())
+    smooth, _ = _crack_on(0.55 + 0.005 * rng.normal(0, 1, (240, 320)))
+    c = threshold_climb(grainy, kind="dark")
+    assert c in {GRAIN_STEP**k for k in range(1, GRAIN_STEPS + 1)}
+    otsu = _otsu(ridge_response(grainy, DEFAULT_SIGMAS, "dark"))
+    gap = _default_gap(DEFAULT_SIGMAS, "dark") * c
+    assert trace(grainy, kind="dark") == trace(grainy, kind="dark", threshold=otsu * c, gap=gap)
+    assert threshold_climb(smooth) == threshold_climb(smooth, kind="dark") == 1.0
+    # a mask has no grain, whatever its kind says or auto finds
+    assert threshold_climb(grainy, kind="mask") == 1.0
+    assert threshold_climb((smooth < 0.5).astype(np.float32)) == 1.0
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "err", "match"),
+    [
+        ({"image": np.full((10, 10), 0.3)}, ValueError, "^image: nothing to trace"),
+        ({"image": np.zeros((2, 10))}, ValueError, "^image: nothing to trace"),
+        ({"kind": "ridges"}, ValueError, "^kind: "),
+        ({"sigmas": -1.0}, ValueError, "^sigmas: "),
+        ({"min_area": -1}, ValueError, "^min_area: "),
+        ({"channel": 2}, ValueError, "^channel: "),
+        ({"subpixel": "yes"}, TypeError, "^subpixel: "),
+        ({"valid": np.ones((3, 3), bool)}, ValueError, "^valid: "),
+    ],
+)
+def test_threshold_climb_names_a_bad_argument(kwargs, err, match):
+    from phloem.branching import threshold_climb
+
+    image = kwargs.pop("image", Y_SHAPE.mask().astype(np.float32) * 0.5 + 0.25)
+    with pytest.raises(err, match=match):
+        threshold_climb(image, **kwargs)
+
+
 def test_the_truth_bench_rescores_the_default_trace_at_one_times_its_threshold():
     # benches/quality/branching_trace_truth.py passes the default threshold and gap explicitly
     # for its --fractions; at 1x they must give the default trace, or its rows compare unlike

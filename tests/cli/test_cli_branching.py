@@ -102,6 +102,7 @@ def test_branching_run_writes_image_skeleton_histograms_and_sidecar(tmp_path):
     assert io.read_image(tmp_path / "new_histograms.png").shape[2] == 3
     meta = json.loads((tmp_path / "new.png.json").read_text())
     assert meta["seed"] == 2 and meta["parameters"]["max_length"] == "input"
+    assert meta["parameters"]["gap_diversity"] == 0.0  # resolved: the river's land is not grainy
     # The painted structure is dark like the input's river; the rest keeps the land's colour.
     river = target.mask()
     assert img[river].mean() < img[~river].mean() - 0.1
@@ -129,6 +130,7 @@ def test_branching_run_writes_image_skeleton_histograms_and_sidecar(tmp_path):
     assert main(["branching", "render", str(tmp_path / "river.png"), str(sk), str(tmp_path / "new_skeleton.json"),
                  "--out", str(again), "--seed", "2", "-q"]) == 0  # fmt: skip
     assert np.abs(io.read_image(again) - img).max() <= 1 / 255 + 1e-6
+    assert json.loads(io.sidecar_path(again).read_text())["parameters"]["gap_diversity"] == 0.0
     varied = tmp_path / "varied.png"
     assert main(["branching", "render", str(tmp_path / "river.png"), str(sk), str(tmp_path / "new_skeleton.json"),
                  "--out", str(varied), "--seed", "2", "--gap-diversity", "1", "-q"]) == 0  # fmt: skip

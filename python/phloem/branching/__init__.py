@@ -20,6 +20,7 @@ from .figures import histogram_figure
 from .fragments import Fragment, fragments, rigid_align
 from .frame import valid_region
 from .furcation import FurcationModel
+from .gaps import gap_diversity_default
 from .growth import extend, grow
 from .histograms import angle_histogram, histogram_distance, thickness_histogram
 from .pipeline import (
@@ -39,7 +40,7 @@ from .rectify import rectify, unrectify
 from .render import RenderResult, render
 from .skeleton import Branch, Skeleton, SkeletonError
 from .synthetic import synthetic_skeleton
-from .trace import estimate_thickness, trace
+from .trace import estimate_thickness, threshold_climb, trace
 
 __all__ = [
     "BendingModel",
@@ -61,6 +62,7 @@ __all__ = [
     "extend",
     "fit_models",
     "fragments",
+    "gap_diversity_default",
     "grow",
     "h_default",
     "histogram_distance",
@@ -73,6 +75,7 @@ __all__ = [
     "synthesize",
     "synthetic_skeleton",
     "thickness_histogram",
+    "threshold_climb",
     "trace",
     "unrectify",
     "valid_region",

@@ -16,6 +16,7 @@ they meet the structure without a colour step, as §5.3 does for the fragments.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import cv2
 import numpy as np
@@ -26,8 +27,15 @@ from ..blend import seamless
 from ._pixels import F32, F64, _by_channels, _clip_channels, _paste, _pt, _robust_z, two_level
 from .fragments import MIN_RADIUS
 from .skeleton import Skeleton
+from .trace import threshold_climb
 
-__all__ = ["fill_gaps"]
+__all__ = ["GRAINY_GAP_DIVERSITY", "fill_gaps", "gap_diversity_default"]
+
+#: The gaps' ``gap_diversity`` on a grainy surface (:func:`gap_diversity_default`).
+GRAINY_GAP_DIVERSITY = 1.0
+
+#: The :func:`~phloem.branching.trace` options that :func:`gap_diversity_default` reads.
+_CLIMB_OPTIONS = ("kind", "sigmas", "min_area", "channel", "subpixel")
 
 #: Background detail farther than this many robust deviations from the typical is no source
 #: for a spread fill (``gap_diversity > 0``): the leaf crop's blue backdrop, not its grain.
@@ -40,6 +48,49 @@ GLOW_REACH = 10.0
 #: Search-and-copy iterations of the gaps' full-resolution level (where there are coarser
 #: ones) on photos and fields; a two-level mask's flat background needs none.
 FINEST_ITERATIONS = 1
+
+
+def gap_diversity_default(
+    image: Any, *, valid: Any = None, trace_options: dict[str, Any] | None = None, gap_diversity: float | None = None
+) -> float:
+    """:func:`~phloem.branching.render`'s default ``gap_diversity`` for this input image.
+
+    :data:`GRAINY_GAP_DIVERSITY` (1) on a grainy surface, where :func:`~phloem.branching.trace`'s
+    default threshold climbs above Otsu's (:func:`~phloem.branching.threshold_climb`: asphalt,
+    stone), else 0, the paper's plain completion. Plain completion of a grainy surface settles
+    on a few of its patches and repeats them in a lattice; the spread fill keeps the grain, and
+    there the grain is texture, not faint structure that the fill would carry into the gaps
+    (a leaf's veinlets, a bark's fissures, a bolt's faint branches), as it is on the inputs
+    where the threshold stays.
+
+    Parameters
+    ----------
+    image : array, shape (H, W) or (H, W, C)
+        The input image.
+    valid : (H, W) array_like of bool, optional
+        Where it shows content, as for :func:`~phloem.branching.render`.
+    trace_options : dict, optional
+        The options the structure was traced with; ``kind``, ``sigmas``, ``min_area``,
+        ``channel`` and ``subpixel`` are used.
+    gap_diversity : float, optional
+        A value chosen by the caller, returned as it is.
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> import numpy as np, cv2
+    >>> rng = np.random.default_rng(0)
+    >>> asphalt = cv2.GaussianBlur(rng.normal(0.5, 0.1, (96, 128)).astype(np.float32), (0, 0), 0.7)
+    >>> gap_diversity_default(asphalt), gap_diversity_default(np.eye(64, dtype=np.float32))
+    (1.0, 0.0)
+    """
+    if gap_diversity is not None:
+        return gap_diversity
+    opts = {k: v for k, v in (trace_options or {}).items() if k in _CLIMB_OPTIONS}
+    return GRAINY_GAP_DIVERSITY if threshold_climb(image, valid=valid, **opts) > 1.0 else 0.0
 
 
 def _complete_background(

@@ -15,6 +15,7 @@ from .._validate import as_image, as_mask, check_size
 from .bending import DENOISE, STEM_THICKNESS, TURN_HISTOGRAM, BendingModel, default_h
 from .frame import _kept_inside, valid_region
 from .furcation import FurcationModel
+from .gaps import gap_diversity_default
 from .growth import grow
 from .measures import direction_concentration, drift_noise, median_heading_change
 from .render import RenderResult, render
@@ -620,7 +621,9 @@ def synthesize(
         runs along at least a sixth of the border (:func:`render`'s ``keep_frame``), and the
         new structure then grows inside it (:func:`grow`'s ``domain``).
     render_options : dict, optional
-        Keyword arguments for :func:`render`.
+        Keyword arguments for :func:`render`. Its ``gap_diversity`` defaults to
+        :func:`gap_diversity_default`'s for ``image`` with ``trace_options`` (1 on a grainy
+        surface such as asphalt, else 0).
     threads : int, optional
         Worker threads for the pixel work.
     progress : callable, optional
@@ -704,6 +707,12 @@ def synthesize(
         domain=None if ok is None else _kept_inside(ok, shape),
     )  # fmt: skip
     tick(3)
+    ropts = {"valid": ok} | (render_options or {})
+    if ropts.get("complete", True):
+        # resolved with the trace's options, which render does not know
+        ropts["gap_diversity"] = gap_diversity_default(
+            img, valid=ropts["valid"], trace_options=trace_options, gap_diversity=ropts.get("gap_diversity")
+        )
     # A 2-D input goes to render as 2-D, so that the new image is 2-D as well.
     res = render(
         img[..., 0] if np.ndim(image) == 2 else img,
@@ -713,7 +722,7 @@ def synthesize(
         threads=threads,
         full_output=True,
         max_memory=max_memory,
-        **({"valid": ok} | (render_options or {})),
+        **ropts,
     )
     tick(4)
     return SynthesisResult(res.image, source, target, bending, furcation, res)

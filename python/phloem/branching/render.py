@@ -80,7 +80,7 @@ from ..seams import seam
 from ._pixels import F32, F64, _by_channels, _check_skeleton, _clip_channels, _paste, _pt, _robust_z, _rot, two_level
 from .fragments import DEFAULT_SAMPLES, Fragment, FragmentLibrary, check_params, cover, foreign_fragments
 from .frame import _keep_frame, _kept_inside
-from .gaps import fill_gaps
+from .gaps import fill_gaps, gap_diversity_default
 from .measures import structure_contrast
 from .skeleton import MAX_THICKNESS, Branch, Skeleton
 
@@ -141,7 +141,7 @@ def render(
     keep_frame: bool = ...,
     patch_size: int = ...,
     completion_iterations: int = ...,
-    gap_diversity: float = ...,
+    gap_diversity: float | None = ...,
     threads: int | None = ...,
     progress: Progress = ...,
     max_memory: int | None = ...,
@@ -171,7 +171,7 @@ def render(
     keep_frame: bool = ...,
     patch_size: int = ...,
     completion_iterations: int = ...,
-    gap_diversity: float = ...,
+    gap_diversity: float | None = ...,
     threads: int | None = ...,
     progress: Progress = ...,
     max_memory: int | None = ...,
@@ -203,7 +203,7 @@ def render(
     keep_frame: bool = True,
     patch_size: int = 7,
     completion_iterations: int = 4,
-    gap_diversity: float = 0.0,
+    gap_diversity: float | None = None,
     threads: int | None = None,
     progress: Progress = None,
     max_memory: int | None = None,
@@ -304,8 +304,10 @@ def render(
         full-resolution level searches once and copies each pixel from its match (a
         two-level mask's only copies the upsampled half-resolution field).
     gap_diversity : float, optional
-        Weight of Kaspar et al.'s occurrence penalty in the gap completion (default 0, plain
-        completion; see ``diversity`` of :func:`phloem.texture.complete`). Large gaps filled
+        Weight of Kaspar et al.'s occurrence penalty in the gap completion (see ``diversity``
+        of :func:`phloem.texture.complete`). Default: :func:`gap_diversity_default`, 1 on a
+        grainy surface (asphalt: where :func:`trace`'s default threshold climbs above Otsu's,
+        :func:`threshold_climb`) and 0 elsewhere (plain completion, the paper's). Large gaps filled
         from a small background settle on its smoothest patches and read as a blurred photo
         or a smoothed terrain; 1 keeps about twice the background's fine grain there. The
         grain may hold faint structure the trace left out, so the painted branches stand out
@@ -367,13 +369,15 @@ def render(
     w_c = check_float(omega_c, "omega_c", 0.0)
     p = check_patch_size(patch_size)
     c_iters = check_int(completion_iterations, "completion_iterations", 1)
-    gap_div = check_float(gap_diversity, "gap_diversity", 0.0)
+    gap_div = None if gap_diversity is None else check_float(gap_diversity, "gap_diversity", 0.0)
     s = check_seed(seed)
     t = check_threads(threads)
     rng = np.random.default_rng(s)
     opts = _Options(c_n, w_s, w_c, k, deform, photometric, seams, n_eval=max(4 * c_n, 8))
 
     ok = None if valid is None else as_mask(valid, "valid", (H0, W0))
+    if gap_div is None:
+        gap_div = gap_diversity_default(img, valid=ok) if complete else 0.0
     lo, hi = _channel_range(img)
     # A mask stays a mask: no gradient-domain paste (its ramps are grey), levels snapped at the end.
     mask_like = two_level(img, lo, hi)

@@ -32,7 +32,7 @@ from .._validate import as_image, as_mask, check_float, check_int
 from ._elements import _smooth_path, _tree_roots
 from .skeleton import Branch, Skeleton
 
-__all__ = ["estimate_thickness", "trace"]
+__all__ = ["estimate_thickness", "threshold_climb", "trace"]
 
 F64 = NDArray[np.float64]
 F32 = NDArray[np.float32]
@@ -90,6 +90,19 @@ GRAIN_FLOOR = 0.25
 
 #: ... for at most this many steps (about 2.4 times Otsu's threshold).
 GRAIN_STEPS = 4
+
+
+def _range_to_trace(gray: F32) -> tuple[float, float]:
+    """The gray image's minimum and maximum, or a ValueError where there is nothing to trace."""
+    lo, hi = float(gray.min()), float(gray.max())
+    if hi - lo <= 1e-12:
+        raise ValueError(f"image: nothing to trace, the image is constant ({lo})")
+    if min(gray.shape) < 3:
+        # The ridge filter's derivatives need 3 pixels a side (numpy's gradient would say "Shape of array too small").
+        raise ValueError(
+            f"image: nothing to trace in a {gray.shape[1]}x{gray.shape[0]} image; it needs at least 3x3 pixels"
+        )
+    return lo, hi
 
 
 def _filter_reach(sig: tuple[float, ...]) -> int:
@@ -656,12 +669,7 @@ def trace(
         ):
             raise ValueError(f"root: ({rx}, {ry}) is outside the {shape[1]}x{shape[0]} image")
     ok = None if valid is None else as_mask(valid, "valid", shape)
-    lo, hi = float(gray.min()), float(gray.max())
-    if hi - lo <= 1e-12:
-        raise ValueError(f"image: nothing to trace, the image is constant ({lo})")
-    if min(shape) < 3:
-        # The ridge filter's derivatives need 3 pixels a side (numpy's gradient would say "Shape of array too small").
-        raise ValueError(f"image: nothing to trace in a {shape[1]}x{shape[0]} image; it needs at least 3x3 pixels")
+    lo, hi = _range_to_trace(gray)
 
     if kind == "auto":
         kind = _resolve_kind(gray, sig)  # type: ignore[assignment]
@@ -755,6 +763,71 @@ def trace(
                 t = ndimage.median_filter(b.thickness, size=5, mode="nearest")
                 b.thickness = ndimage.gaussian_filter1d(t, min(smooth, len(t)), mode="nearest") if smooth > 0 else t
     return sk.resample(h) if h is not None else sk
+
+
+def threshold_climb(
+    image: Any,
+    *,
+    kind: Kind = "auto",
+    sigmas: float | Sequence[float] = DEFAULT_SIGMAS,
+    min_area: int = 30,
+    channel: int | None = None,
+    valid: Any = None,
+    subpixel: bool = False,
+) -> float:
+    """The factor by which :func:`trace`'s default ridge threshold climbs above Otsu's on ``image``.
+
+    1 on a clean surface, whose ridges are its structure, and on a mask; above 1 (at most
+    ``1.25 ** 4``, about 2.4) on a grainy surface (asphalt, stone), whose grain answers the
+    ridge filter everywhere and sheds its mask as the threshold rises (step 1 of
+    :func:`trace`). :func:`render` completes the gaps of such a surface with a spread fill
+    (:func:`gap_diversity_default`), since plain patch completion repeats a few of its patches.
+
+    Parameters
+    ----------
+    image : array, shape (H, W) or (H, W, C)
+        A photo or a mask.
+    kind, sigmas, min_area, channel, valid, subpixel : optional
+        As for :func:`trace`.
+
+    Returns
+    -------
+    float
+        At least 1.
+
+    Raises
+    ------
+    ValueError
+        For a constant image and bad arguments (each message names the argument).
+
+    Examples
+    --------
+    >>> import cv2
+    >>> rng = np.random.default_rng(0)
+    >>> grain = cv2.GaussianBlur(rng.normal(0.5, 0.1, (96, 128)).astype(np.float32), (0, 0), 0.7)
+    >>> bool(threshold_climb(grain) > 1)
+    True
+    >>> clean = np.full((96, 128), 0.8, np.float32)
+    >>> _ = cv2.line(clean, (5, 60), (120, 40), 0.5, 2)
+    >>> threshold_climb(clean + rng.normal(0, 0.01, clean.shape).astype(np.float32))
+    1.0
+    """
+    if kind not in _KINDS:
+        raise ValueError(f"kind: expected one of {_KINDS}, got {kind!r}")
+    if not isinstance(subpixel, (bool, np.bool_)):
+        raise TypeError(f"subpixel: expected True or False, got {subpixel!r}")
+    if kind == "mask":
+        return 1.0
+    gray = _gray(image, channel)
+    sig = _sigmas(sigmas)
+    min_area = check_int(min_area, "min_area", 0)
+    ok = None if valid is None else as_mask(valid, "valid", gray.shape)
+    _range_to_trace(gray)
+    resolved = _resolve_kind(gray, sig) if kind == "auto" else kind
+    if resolved == "mask":
+        return 1.0
+    resp = _photo_response(gray, sig, resolved, ok, subpixel=bool(subpixel))
+    return _stable_threshold(resp, min_area)[1]
 
 
 #: Scales of the wide ridge filter, in multiples of the largest of ``sigmas``.

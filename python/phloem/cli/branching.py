@@ -222,10 +222,11 @@ def _render_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--gap-diversity",
         type=non_negative,
-        default=0.0,
+        default=None,
         help="weight of the occurrence penalty in the completion of the gaps; above 0 the gaps are also started "
-        "from random background blocks, so a grainy background (asphalt, bark, a leaf) keeps its grain instead of "
-        "repeating a few of its patches, at some contrast of the branches (default 0)",
+        "from random background blocks, so a grainy background keeps its grain instead of repeating a few of its "
+        "patches, at some contrast of the branches (default: 1 on a grainy surface such as asphalt, where the "
+        "trace's threshold climbs above Otsu's, else 0)",
     )
     g.add_argument(
         "--fragment-map", metavar="PNG", default=None, help="also write the map of which fragment painted each pixel"
@@ -240,6 +241,14 @@ def _render_kwargs(args: argparse.Namespace) -> dict[str, Any]:
         "complete": not args.no_complete,
         "gap_diversity": args.gap_diversity,
     }
+
+
+def _resolve_gap_diversity(args: argparse.Namespace, img: np.ndarray, valid: Any, trace_options: Any = None) -> None:
+    """``--gap-diversity`` left at its default, resolved for this example (and recorded so)."""
+    if not args.no_complete:
+        args.gap_diversity = branching.gap_diversity_default(
+            img, valid=valid, trace_options=trace_options, gap_diversity=args.gap_diversity
+        )
 
 
 def _valid_option(g: Any) -> None:
@@ -450,6 +459,7 @@ def _cmd_branching_render(args: argparse.Namespace) -> None:
     if target.shape is None:
         raise ValueError(f"target: {args.target} has no shape; the new image's size comes from it")
     valid = _valid(args, img)
+    _resolve_gap_diversity(args, img, valid)
     res = run(
         "branching render", args,
         lambda bar: branching.render(img, source, target, seed=args.seed, threads=args.threads, progress=bar,
@@ -485,6 +495,7 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
                                args.turn_histogram, args.stem_thickness, args.direction_histogram,
                                args.layout, args.denoise))  # fmt: skip
     prior = recall("branching run models", key)
+    _resolve_gap_diversity(args, img, valid, _trace_kwargs(args))
     res = run(
         "branching run", args,
         lambda bar: branching.synthesize(
