@@ -435,6 +435,35 @@ def test_threshold_climb_names_a_bad_argument(kwargs, err, match):
         threshold_climb(image, **kwargs)
 
 
+def _dish(edge: bool) -> np.ndarray:
+    """A vessel tree, two vessel pieces and a thick dark band above them: the rim of a dish
+    with its bright outside above it (``edge``), or a thick vessel with tissue on both sides."""
+    rng = np.random.default_rng(0)
+    img = np.full((220, 280), 0.6, np.float32)
+    if edge:
+        img[:40, :] = 0.95
+    cv2.line(img, (80, 46), (200, 46), 0.25, 9)
+    cv2.line(img, (140, 215), (140, 140), 0.3, 4)
+    cv2.line(img, (140, 140), (60, 75), 0.3, 3)
+    cv2.line(img, (140, 140), (225, 80), 0.3, 3)
+    for x in (30, 250):
+        cv2.line(img, (x, 120), (x + 10, 200), 0.3, 3)
+    return np.clip(img + rng.normal(0, 0.01, img.shape).astype(np.float32), 0, 1)
+
+
+def test_a_thick_edge_between_two_regions_is_not_traced_as_a_tree():
+    def bands(sk: Skeleton) -> list[Branch]:
+        return [b for b in sk.branches if b.parent is None and abs(np.median(b.points[:, 1]) - 46) < 3]
+
+    vessel = trace(_dish(False), kind="dark")
+    assert len(bands(vessel)) == 1 and np.median(bands(vessel)[0].thickness) > 4  # a thick vessel stays
+    rim = trace(_dish(True), kind="dark")
+    assert bands(rim) == []  # the rim between the bright outside and the tissue is an edge
+    assert len(rim.branches) == len(vessel.branches) - 1  # and nothing else went with it
+    # the caller's root says what the structure is: its tree stays
+    assert len(bands(trace(_dish(True), kind="dark", root=(140, 46)))) == 1
+
+
 def test_the_truth_bench_rescores_the_default_trace_at_one_times_its_threshold():
     # benches/quality/branching_trace_truth.py passes the default threshold and gap explicitly
     # for its --fractions; at 1x they must give the default trace, or its rows compare unlike

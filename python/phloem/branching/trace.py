@@ -550,6 +550,12 @@ def trace(
        structure) replaces it by :func:`estimate_thickness` on the gray image with
        ``max_radius = 2 max(sigmas) + 2``, median-filtered over 5 vertices and smoothed like
        the points (before the resampling of 6.).
+    8. **Edges.** On a photo, a further tree (not the main one, nor ``root``'s) whose median
+       thickness is over the 90th percentile of the main tree's and whose two sides differ in
+       brightness (at its radius plus 3 px) by over 3 times as much, relative to its depth, as
+       the median tree's sides do (and by over 0.3 of its depth) is dropped: it is an edge
+       between two regions, such as a dish's rim beside a tissue section, not a ridge, and
+       grown it would become the new structure's thickest branches.
 
     Parameters
     ----------
@@ -730,8 +736,11 @@ def trace(
     if start is not None:
         roots[int(labels[start])] = start
     branches: list[Branch] = []
+    given: int | None = None  # the tree of the caller's root, which is never an edge
     for c in comp_order:
         croot = roots[c]
+        if start is not None and c == int(labels[start]):
+            given = len(branches)
         new_index: dict[int, int] = {}
         for i, (path, parent, at) in enumerate(_decompose(tree, croot)):
             if parent is not None and parent not in new_index:
@@ -762,6 +771,8 @@ def trace(
             if len(b) > 2:
                 t = ndimage.median_filter(b.thickness, size=5, mode="nearest")
                 b.thickness = ndimage.gaussian_filter1d(t, min(smooth, len(t)), mode="nearest") if smooth > 0 else t
+        if kind != "mask":
+            sk = _without_edges(gray, sk, given)
     return sk.resample(h) if h is not None else sk
 
 
@@ -828,6 +839,81 @@ def threshold_climb(
         return 1.0
     resp = _photo_response(gray, sig, resolved, ok, subpixel=bool(subpixel))
     return _stable_threshold(resp, min_area)[1]
+
+
+#: A further tree on a photo is an edge between two regions (a dish's or a frame's rim), not a
+#: ridge, where the brightness on its two sides differs by more than this many times the
+#: median tree's (sides at its radius plus :data:`EDGE_REACH` px, over its depth below them) ...
+EDGE_SIDEDNESS = 3.0
+
+#: ... and by more than this share of its depth in any case (a trace whose trees all have flat sides) ...
+EDGE_SIDEDNESS_FLOOR = 0.3
+
+#: ... and it is thicker (median) than the 90th percentile of the main tree's thickness: grown,
+#: it would be the thickest branch of the new structure.
+EDGE_THICKNESS_QUANTILE = 0.9
+
+#: How far beyond its radius (px) a branch's two sides are sampled.
+EDGE_REACH = 3.0
+
+
+def _sidedness(gray: F32, skeleton: Skeleton, tree: list[int]) -> float:
+    """Median brightness difference between the two sides of ``tree``'s branches over the
+    median depth of their centre line below (or above) the sides' mean: about 0 for a ridge,
+    large for a step between two regions."""
+    side, depth = [], []
+    for i in tree:
+        b = skeleton.branches[i].resample(1.0)
+        p = b.points
+        t = np.gradient(p, axis=0) if len(p) > 1 else np.array([[1.0, 0.0]])
+        t = t / np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-9)
+        off = (b.thickness + EDGE_REACH)[:, None] * np.stack([-t[:, 1], t[:, 0]], axis=1)
+
+        def at(q: F64) -> F64:
+            xy = np.asarray(q, np.float32).reshape(-1, 1, 2)
+            v = cv2.remap(gray, xy[..., 0], xy[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            return np.asarray(v, np.float64).ravel()
+
+        a, c, z = at(p + off), at(p), at(p - off)
+        side.append(np.abs(a - z))
+        depth.append(np.abs(0.5 * (a + z) - c))
+    return float(np.median(np.concatenate(side)) / max(float(np.median(np.concatenate(depth))), 1e-9))
+
+
+def _without_edges(gray: F32, skeleton: Skeleton, given: int | None) -> Skeleton:
+    """``skeleton`` less its further trees that are edges between two regions (:data:`EDGE_SIDEDNESS`).
+
+    A dish's rim beside a tissue section answers the ridge filter as a long thick vessel;
+    grown, it becomes the thickest branches of the new structure. The main tree (branch 0's)
+    and the tree of the caller's ``root`` (branch ``given``) are kept.
+    """
+    roots = _tree_roots(skeleton)
+    trees: dict[int, list[int]] = {}
+    for i, r in enumerate(roots):
+        trees.setdefault(int(r), []).append(i)
+    if len(trees) < 2:
+        return skeleton
+    main = np.concatenate([skeleton.branches[i].thickness for i in trees[int(roots[0])]])
+    thick = float(np.quantile(main, EDGE_THICKNESS_QUANTILE))
+    candidates = [
+        r for r, t in trees.items()
+        if r != roots[0] and r != given and float(np.median(np.concatenate([skeleton.branches[i].thickness for i in t]))) > thick
+    ]  # fmt: skip
+    if not candidates:
+        return skeleton
+    sided = {r: _sidedness(gray, skeleton, t) for r, t in trees.items()}
+    bound = max(EDGE_SIDEDNESS * float(np.median(list(sided.values()))), EDGE_SIDEDNESS_FLOOR)
+    drop = {r for r in candidates if sided[r] > bound}
+    if not drop:
+        return skeleton
+    kept = [i for i, r in enumerate(roots) if int(r) not in drop]
+    index = {old: new for new, old in enumerate(kept)}
+    branches = []
+    for i in kept:
+        b = skeleton.branches[i]
+        parent = None if b.parent is None else (index[b.parent[0]], b.parent[1])
+        branches.append(Branch(b.points, b.thickness, parent))
+    return Skeleton(branches, skeleton.shape)
 
 
 #: Scales of the wide ridge filter, in multiples of the largest of ``sigmas``.
