@@ -460,8 +460,9 @@ def test_a_thick_edge_between_two_regions_is_not_traced_as_a_tree():
     rim = trace(_dish(True), kind="dark")
     assert bands(rim) == []  # the rim between the bright outside and the tissue is an edge
     assert len(rim.branches) == len(vessel.branches) - 1  # and nothing else went with it
-    # the caller's root says what the structure is: its tree stays
+    # the caller's root says what the structure is: its tree stays; edges=False keeps every tree
     assert len(bands(trace(_dish(True), kind="dark", root=(140, 46)))) == 1
+    assert len(bands(trace(_dish(True), kind="dark", edges=False))) == 1
 
 
 def test_the_truth_bench_rescores_the_default_trace_at_one_times_its_threshold():
@@ -560,6 +561,7 @@ def test_estimate_thickness_keeps_structure():
         (Y_SHAPE.mask(), {"gap": -1.0}, ValueError, "gap"),
         (Y_SHAPE.mask(), {"subpixel": "yes"}, TypeError, "subpixel"),
         (Y_SHAPE.mask(), {"wide": "yes"}, TypeError, "wide"),
+        (Y_SHAPE.mask(), {"edges": "yes"}, TypeError, "edges"),
         (Y_SHAPE.mask(), {"kind": "mask", "threshold": 2.0}, ValueError, "image: nothing to trace"),
         (Y_SHAPE.mask(), {"kind": "mask", "threshold": -1.0}, ValueError, "foreground fills the whole image"),
         (np.random.default_rng(0).random((3, 3)), {}, ValueError, "foreground fills the whole image"),

@@ -273,7 +273,11 @@ def test_branching_trace_leaves_a_photo_frame_out(tmp_path):
 
 @pytest.mark.parametrize(
     ("flag", "kwarg", "key", "default"),
-    [("--subpixel", "subpixel", "subpixel", False), ("--no-wide", "wide", "no_wide", True)],
+    [
+        ("--subpixel", "subpixel", "subpixel", False),
+        ("--no-wide", "wide", "no_wide", True),
+        ("--keep-edges", "edges", "keep_edges", True),
+    ],
 )
 def test_branching_trace_switches_reach_trace_and_the_sidecar(tmp_path, monkeypatch, flag, kwarg, key, default):
     seen = []

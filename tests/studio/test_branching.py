@@ -155,6 +155,16 @@ def test_trace_wide_reaches_trace_and_the_sidecar(client, project, scene, monkey
     assert json.loads((project.root / "fine.sidecar.json").read_text())["parameters"]["wide"] is False
 
 
+def test_trace_edges_reaches_trace_and_the_sidecar(client, project, scene, monkeypatch):
+    seen = []
+    real = branching.trace
+    monkeypatch.setattr(branching, "trace", lambda *a, **k: seen.append(k.get("edges")) or real(*a, **k))
+    run_job(client, {"kind": "branching-trace", "image": "photos/channel.png", "out": "edges.json"})
+    run_job(client, {"kind": "branching-trace", "image": "photos/channel.png", "edges": False, "out": "all.json"})
+    assert seen == [True, False]
+    assert json.loads((project.root / "all.sidecar.json").read_text())["parameters"]["edges"] is False
+
+
 def test_trace_threshold_reaches_trace_and_the_sidecar(client, project, scene, monkeypatch):
     seen = []
     real = branching.trace
@@ -210,6 +220,7 @@ def test_several_guide_paths_are_a_mask_the_structure_follows(client, project, s
         ({"kind": "branching-trace", "image": "photos/bar.png", "sigmas": []}, 422, "sigmas"),
         ({"kind": "branching-trace", "image": "photos/bar.png", "subpixel": "maybe"}, 422, "subpixel"),
         ({"kind": "branching-trace", "image": "photos/bar.png", "wide": "maybe"}, 422, "wide"),
+        ({"kind": "branching-trace", "image": "photos/bar.png", "edges": "maybe"}, 422, "edges"),
         ({"kind": "branching-trace", "image": "photos/bar.png", "threshold": "high"}, 422, "threshold"),
         ({"kind": "branching-trace", "image": "photos/bar.png", "gap": -1}, 422, "gap"),
         ({"kind": "branching-trace", "image": "photos/bar.png", "root": [1]}, 422, "root"),

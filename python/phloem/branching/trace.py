@@ -495,6 +495,7 @@ def trace(
     blob: float | None = 8.0,
     subpixel: bool = False,
     wide: bool = True,
+    edges: bool = True,
 ) -> Skeleton:
     """Trace the skeleton of a branching structure in an image (beyond [1]_, its future work).
 
@@ -608,6 +609,9 @@ def trace(
         Also find structure wider than ``sigmas`` reach on a photo (default True; see 1.): a
         trunk that would otherwise split its tree into the twigs beside it. False traces the
         fine scales only.
+    edges : bool, optional
+        Drop the thick further trees that are edges between two regions on a photo (default
+        True; see 8.). False keeps every tree.
 
     Returns
     -------
@@ -665,6 +669,8 @@ def trace(
         raise TypeError(f"subpixel: expected True or False, got {subpixel!r}")
     if not isinstance(wide, (bool, np.bool_)):
         raise TypeError(f"wide: expected True or False, got {wide!r}")
+    if not isinstance(edges, (bool, np.bool_)):
+        raise TypeError(f"edges: expected True or False, got {edges!r}")
     if root is not None:
         try:
             rx, ry = (float(v) for v in root)
@@ -771,7 +777,7 @@ def trace(
             if len(b) > 2:
                 t = ndimage.median_filter(b.thickness, size=5, mode="nearest")
                 b.thickness = ndimage.gaussian_filter1d(t, min(smooth, len(t)), mode="nearest") if smooth > 0 else t
-        if kind != "mask":
+        if kind != "mask" and edges:
             sk = _without_edges(gray, sk, given)
     return sk.resample(h) if h is not None else sk
 

@@ -91,6 +91,12 @@ def _trace_options(p: argparse.ArgumentParser) -> None:
         help="trace the ridge filter's scales only (photos): by default a structure wider than they reach, such as a "
         "vessel tree's trunk, is found by a second, wider filter and traced through its middle",
     )
+    g.add_argument(
+        "--keep-edges",
+        action="store_true",
+        help="keep every traced tree (photos): by default a further tree thicker than the main one's branches whose "
+        "two sides differ, an edge between two regions such as a dish's rim beside a tissue section, is dropped",
+    )
 
 
 def _trace_kwargs(args: argparse.Namespace) -> dict[str, Any]:
@@ -104,6 +110,7 @@ def _trace_kwargs(args: argparse.Namespace) -> dict[str, Any]:
         "root": None if args.root is None else tuple(args.root),
         "subpixel": args.subpixel,
         "wide": not args.no_wide,
+        "edges": not args.keep_edges,
     }
 
 

@@ -938,7 +938,7 @@ $("br-trace").onclick = guard(kMsg, async () => {
   const gap = $("br-gap").value.trim();
   const req = { kind: "branching-trace", image: $("br-image").value, trace_kind: $("br-kind").value,
     threshold: threshold === "" ? null : Number(threshold), gap: gap === "" ? null : Number(gap),
-    subpixel: $("br-subpixel").checked, wide: $("br-wide").checked, out: $("br-file").value.trim() };
+    subpixel: $("br-subpixel").checked, wide: $("br-wide").checked, edges: $("br-edges").checked, out: $("br-file").value.trim() };
   const s = await runJobReplacing(req, kUi);
   await loadSkeleton(s.outputs[0]);
   say(kMsg, `traced ${s.outputs[0]}: ${K.branches.length} branches; edit it with the mouse`);

@@ -83,6 +83,11 @@ class BranchingTraceJob(BaseModel):
         description="also find structure wider than the ridge filter's scales, such as a vessel tree's trunk, with a "
         "second, wider filter (the CLI's --no-wide turns it off)",
     )
+    edges: bool = Field(
+        True,
+        description="drop a further tree thicker than the main one's branches whose two sides differ, an edge "
+        "between two regions such as a dish's rim (the CLI's --keep-edges turns it off)",
+    )
     out: str | None = Field(
         None, description="project name of the skeleton (.json); default <image>_skeleton.json beside it"
     )
@@ -223,7 +228,7 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
             sk = branching.trace(img, kind=req.trace_kind, sigmas=tuple(req.sigmas), min_length=req.min_length,
                                  threshold=req.threshold, gap=req.gap, root=req.root,
                                  valid=None if valid.all() else valid,
-                                 subpixel=req.subpixel, wide=req.wide)  # fmt: skip
+                                 subpixel=req.subpixel, wide=req.wide, edges=req.edges)  # fmt: skip
             progress(1, 1)
             return [outputs.data(out, sk.to_json().encode(), command=req.kind, parameters=params, seed=None,
                                  overwrite=req.overwrite)]  # fmt: skip
