@@ -425,6 +425,7 @@ def test_threshold_climb_is_how_far_the_default_trace_climbed(seed):
         ({"channel": 2}, ValueError, "^channel: "),
         ({"subpixel": "yes"}, TypeError, "^subpixel: "),
         ({"valid": np.ones((3, 3), bool)}, ValueError, "^valid: "),
+        ({"image": np.full((10, 10), np.nan), "kind": "mask"}, ValueError, "^image: "),
     ],
 )
 def test_threshold_climb_names_a_bad_argument(kwargs, err, match):

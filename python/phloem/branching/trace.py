@@ -833,9 +833,9 @@ def threshold_climb(
         raise ValueError(f"kind: expected one of {_KINDS}, got {kind!r}")
     if not isinstance(subpixel, (bool, np.bool_)):
         raise TypeError(f"subpixel: expected True or False, got {subpixel!r}")
-    if kind == "mask":
-        return 1.0
-    gray = _gray(image, channel)
+    gray = _gray(
+        np.asarray(image, np.float32) if kind == "mask" and np.asarray(image).dtype == np.bool_ else image, channel
+    )
     sig = _sigmas(sigmas)
     min_area = check_int(min_area, "min_area", 0)
     ok = None if valid is None else as_mask(valid, "valid", gray.shape)
