@@ -145,24 +145,15 @@ def test_trace_subpixel_reaches_trace_and_the_sidecar(client, project, scene, mo
     assert json.loads((project.root / "fine.sidecar.json").read_text())["parameters"]["subpixel"] is True
 
 
-def test_trace_wide_reaches_trace_and_the_sidecar(client, project, scene, monkeypatch):
+@pytest.mark.parametrize("switch", ["wide", "edges"])
+def test_trace_on_by_default_switches_reach_trace_and_the_sidecar(client, project, scene, monkeypatch, switch):
     seen = []
     real = branching.trace
-    monkeypatch.setattr(branching, "trace", lambda *a, **k: seen.append(k.get("wide")) or real(*a, **k))
-    run_job(client, {"kind": "branching-trace", "image": "photos/channel.png", "out": "wide.json"})
-    run_job(client, {"kind": "branching-trace", "image": "photos/channel.png", "wide": False, "out": "fine.json"})
+    monkeypatch.setattr(branching, "trace", lambda *a, **k: seen.append(k.get(switch)) or real(*a, **k))
+    run_job(client, {"kind": "branching-trace", "image": "photos/channel.png", "out": "on.json"})
+    run_job(client, {"kind": "branching-trace", "image": "photos/channel.png", switch: False, "out": "off.json"})
     assert seen == [True, False]
-    assert json.loads((project.root / "fine.sidecar.json").read_text())["parameters"]["wide"] is False
-
-
-def test_trace_edges_reaches_trace_and_the_sidecar(client, project, scene, monkeypatch):
-    seen = []
-    real = branching.trace
-    monkeypatch.setattr(branching, "trace", lambda *a, **k: seen.append(k.get("edges")) or real(*a, **k))
-    run_job(client, {"kind": "branching-trace", "image": "photos/channel.png", "out": "edges.json"})
-    run_job(client, {"kind": "branching-trace", "image": "photos/channel.png", "edges": False, "out": "all.json"})
-    assert seen == [True, False]
-    assert json.loads((project.root / "all.sidecar.json").read_text())["parameters"]["edges"] is False
+    assert json.loads((project.root / "off.sidecar.json").read_text())["parameters"][switch] is False
 
 
 def test_trace_threshold_reaches_trace_and_the_sidecar(client, project, scene, monkeypatch):

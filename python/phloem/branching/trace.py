@@ -58,6 +58,13 @@ def _gray(image: Any, channel: int | None) -> F32:
     return np.ascontiguousarray(img[:, :, 0])
 
 
+def _traced_gray(image: Any, kind: str, channel: int | None) -> F32:
+    """:func:`_gray` of what :func:`trace` reads: a bool image with ``kind="mask"`` is True = structure."""
+    if kind == "mask" and np.asarray(image).dtype == np.bool_:
+        image = np.asarray(image, np.float32)
+    return _gray(image, channel)
+
+
 #: Scales (px) of the ridge filter when none are given.
 DEFAULT_SIGMAS = (1.0, 2.0, 3.0)
 
@@ -648,9 +655,7 @@ def trace(
         raise ValueError(f"kind: expected one of {_KINDS}, got {kind!r}")
     if thickness not in ("auto", "mask", "gradient"):
         raise ValueError(f"thickness: expected 'auto', 'mask' or 'gradient', got {thickness!r}")
-    if kind == "mask" and np.asarray(image).dtype == np.bool_:
-        image = np.asarray(image, np.float32)  # True = structure
-    gray = _gray(image, channel)
+    gray = _traced_gray(image, kind, channel)
     shape = (int(gray.shape[0]), int(gray.shape[1]))
     sig = _sigmas(sigmas)
     min_area = check_int(min_area, "min_area", 0)
@@ -833,9 +838,7 @@ def threshold_climb(
         raise ValueError(f"kind: expected one of {_KINDS}, got {kind!r}")
     if not isinstance(subpixel, (bool, np.bool_)):
         raise TypeError(f"subpixel: expected True or False, got {subpixel!r}")
-    gray = _gray(
-        np.asarray(image, np.float32) if kind == "mask" and np.asarray(image).dtype == np.bool_ else image, channel
-    )
+    gray = _traced_gray(image, kind, channel)
     sig = _sigmas(sigmas)
     min_area = check_int(min_area, "min_area", 0)
     ok = None if valid is None else as_mask(valid, "valid", gray.shape)
@@ -870,19 +873,12 @@ def _sidedness(gray: F32, skeleton: Skeleton, tree: list[int]) -> float:
     side, depth = [], []
     for i in tree:
         b = skeleton.branches[i].resample(1.0)
-        p = b.points
-        t = np.gradient(p, axis=0) if len(p) > 1 else np.array([[1.0, 0.0]])
-        t = t / np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-9)
+        t = _tangents(b.points)
         off = (b.thickness + EDGE_REACH)[:, None] * np.stack([-t[:, 1], t[:, 0]], axis=1)
-
-        def at(q: F64) -> F64:
-            xy = np.asarray(q, np.float32).reshape(-1, 1, 2)
-            v = cv2.remap(gray, xy[..., 0], xy[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-            return np.asarray(v, np.float64).ravel()
-
-        a, c, z = at(p + off), at(p), at(p - off)
-        side.append(np.abs(a - z))
-        depth.append(np.abs(0.5 * (a + z) - c))
+        xy = np.stack([b.points + off, b.points, b.points - off]).astype(np.float32)  # one side, centre, other
+        a, c, z = cv2.remap(gray, xy[..., 0], xy[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        side.append(np.abs(a - z).astype(np.float64))
+        depth.append(np.abs(0.5 * (a + z) - c).astype(np.float64))
     return float(np.median(np.concatenate(side)) / max(float(np.median(np.concatenate(depth))), 1e-9))
 
 
