@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from phloem.branching import synthesize, trace, valid_region
-from phloem.branching.frame import MIN_SOLIDITY, _solidity
+from phloem.branching.frame import MIN_SOLIDITY, _keep_frame, _solidity
 
 
 def _fundus(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -117,3 +117,28 @@ def test_synthesize_keeps_the_frame_out_of_the_picture() -> None:
         assert inside == 0.0 and rim == 0 and outside > 0.9  # black but for the fade at its rim
     with pytest.raises(ValueError, match="^valid:"):
         synthesize(img, valid="frame")
+
+
+def test_a_kept_frame_s_rim_is_put_back_smooth() -> None:
+    # A JPEG's noise makes the flat-frame test follow a staircase of teeth along a disc's rim;
+    # the new picture's rim follows the disc, not the teeth. The radius at which the kept frame
+    # begins, per direction, varies by a fraction of a pixel around the circle, where the teeth
+    # vary by two pixels (by 0.9 px in the fade's middle without the smoothing).
+    rng = np.random.default_rng(0)
+    yy, xx = np.mgrid[:200, :200]
+    radius = np.hypot(yy - 100.0, xx - 100.0)
+    teeth = rng.integers(-2, 3, size=360)[(np.degrees(np.arctan2(yy - 100.0, xx - 100.0)).astype(int) + 360) % 360]
+    valid = radius < 80 + teeth
+    image = np.where(valid, 0.6, 0.0).astype(np.float32)[..., None]
+    canvas = np.full((200, 200, 1), 0.6, np.float32)
+
+    def rim_spread(inside: np.ndarray) -> float:
+        angle = np.degrees(np.arctan2(yy - 100.0, xx - 100.0)).astype(int) % 360
+        first = np.full(360, np.inf)
+        np.minimum.at(first, angle[~inside], radius[~inside])
+        return float(np.std(first))
+
+    _keep_frame(canvas, image, valid)
+    assert rim_spread(valid) > 1.0
+    assert rim_spread(canvas[..., 0] > 0.3) < 0.65
+    assert float(canvas[radius > 90].max()) == 0.0 and float(canvas[radius < 70].min()) == pytest.approx(0.6)

@@ -28,6 +28,9 @@ MIN_SOLIDITY = 0.75
 KEEP_MIN_BORDER = 1 / 6
 #: Pixels over which a kept frame fades in from the new picture's side (see ``_keep_frame``).
 FEATHER = 4.0
+#: Gaussian scale (px) over which a kept frame's rim is smoothed before it is put back: the
+#: flat-region test follows a JPEG's noise, a staircase of 1-3 px teeth along a disc's rim.
+RIM_SMOOTH = 3.0
 
 
 def valid_region(image: Any, *, tolerance: float = 0.01, min_share: float = 0.01, margin: int = 2) -> NDArray[np.bool_]:
@@ -152,6 +155,7 @@ def _keep_frame(canvas: NDArray[np.float32], image: NDArray[np.float32], valid: 
     inside = _kept_inside(valid, (H, W))
     if inside is None:
         return
+    inside = cv2.GaussianBlur(inside.astype(np.float32), (0, 0), RIM_SMOOTH, borderType=cv2.BORDER_REPLICATE) >= 0.5
     frame = image
     if image.shape[:2] != (H, W):
         frame = np.asarray(cv2.resize(image, (W, H), interpolation=cv2.INTER_LINEAR), np.float32).reshape(H, W, -1)

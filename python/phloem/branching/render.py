@@ -296,7 +296,8 @@ def render(
         stretched to its size (default True), so a fundus photo stays a disc in its black
         frame and a lightning photo keeps its tree line. Only a frame that runs along at
         least a sixth of the image's border is kept (a side's worth; a flat patch of dark
-        ground is not). False: the gaps fill it too.
+        ground is not). Its rim is smoothed over 3 px (a JPEG's noise leaves teeth along it)
+        and faded in over 4 px. False: the gaps fill it too.
     patch_size : int, optional
         Patch side of the gap completion (default 7, odd).
     completion_iterations : int, optional
