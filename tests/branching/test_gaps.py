@@ -9,6 +9,7 @@ import pytest
 from phloem.branching import Branch, Skeleton
 from phloem.branching.gaps import (
     _complete_background,
+    _layout,
     _match_borders,
     _nearest_structure,
     _proximity_profile,
@@ -76,6 +77,31 @@ def test_gaps_of_a_field_keep_its_large_scale_layout() -> None:
     assert np.array_equal(out[filled], image[filled])
     rise = float(out[:, -60:].mean() - out[:, :60].mean())
     assert 0.3 < rise < 0.5  # the field's outer quarters differ by 0.45
+
+
+def test_the_layout_keeps_the_backgrounds_edges_and_not_its_detail() -> None:
+    # A background dark on the left and bright on the right (a scarp, a macula's rim) with
+    # grain and a thin dark pole on it, and a vessel band the layout must not see. At 10 px
+    # from the step the layout keeps most of it, where a Gaussian of the same scale keeps a
+    # quarter; the grain and the pole leave no trace.
+    rng = np.random.default_rng(2)
+    H, W = 160, 240
+    step = np.where(np.arange(W) < 120, 0.3, 0.7).astype(np.float32)[None, :] * np.ones((H, 1), np.float32)
+    grain = 0.03 * cv2.GaussianBlur(rng.normal(size=(H, W)).astype(np.float32), (0, 0), 1.0) / 0.28
+    image = (step + grain)[..., None].astype(np.float32)
+    image[:, 60:62] -= 0.3  # the pole
+    allowed = np.ones((H, W), bool)
+    allowed[75:86] = False  # the structure's band
+    image[75:86] = 0.0
+    lay = _layout(image, allowed, 40.0, (H, W))[..., 0]
+    gauss = cv2.GaussianBlur(step, (0, 0), 40.0)
+    assert float(gauss[:, 130].mean() - gauss[:, 109].mean()) < 0.1  # of the 0.4 step
+    assert float(lay[:, 130].mean() - lay[:, 109].mean()) > 0.3
+    outside = np.ones(H, bool)
+    outside[55:106] = False  # (the band and the reach of its smoother layout)
+    assert float(np.abs(lay[outside, :90] - 0.3).max()) < 0.02  # no grain, no pole
+    assert float(np.abs(lay[outside, 150:] - 0.7).max()) < 0.02
+    assert float(np.abs(lay[75:86, :80] - 0.3).max()) < 0.02  # the band from its surroundings
 
 
 def test_relight_moves_brightness_and_not_hue() -> None:

@@ -6,8 +6,8 @@ against the painted structure.
 :func:`_complete_background` runs :func:`phloem.texture.complete` with patches only from the
 ``allowed`` pixels of the input (the source structure, dilated to the fragment radius, is
 excluded, so no pseudo-branches appear); on photos and fields :func:`_relight` gives the
-completed gaps the input background's large-scale layout, which patches copied into large gaps
-average away (the light that surrounds the whole structure, :func:`_proximity_profile`, laid
+completed gaps the input background's large-scale layout with its regions' edges
+(:func:`_with_edges`), which patches copied into large gaps average away (the light that surrounds the whole structure, :func:`_proximity_profile`, laid
 round the new structure), and :func:`_recolour` its colour cast, which a fill settled on a few patches
 can lose; :func:`_match_borders` shifts the completed gaps in the gradient domain so that
 they meet the structure without a colour step, as §5.3 does for the fragments.
@@ -45,6 +45,13 @@ OUTLIER_MADS = 6.0
 #: layout's scale): farther out the profile measures the lighting where the structure lies.
 GLOW_REACH = 10.0
 
+#: The gaps' layout keeps a step of the background's brightness where it varies by more than
+#: this share of its 1-99 % range over half the layout's scale (``_with_edges``); finer
+#: variation is averaged (docs/pipelines/branching/quality.md, forty-seventh session).
+LAYOUT_EDGE = 0.15
+#: Detail finer than this share of the layout's scale is smoothed before the edges are kept:
+#: a pole or a wire in the background would otherwise stand as its ghost.
+LAYOUT_DETAIL = 0.15
 #: Search-and-copy iterations of the gaps' full-resolution level (where there are coarser
 #: ones) on photos and fields; a two-level mask's flat background needs none.
 FINEST_ITERATIONS = 1
@@ -335,13 +342,44 @@ def _outlying(detail: F32, allowed: NDArray[np.bool_]) -> NDArray[np.bool_]:
 
 def _layout(source: F32, allowed: NDArray[np.bool_], sigma: float, shape: tuple[int, int]) -> F32:
     """The large-scale brightness of ``source``'s ``allowed`` pixels (a Gaussian of ``sigma``
-    source pixels; their median where none is near), stretched to ``shape``."""
+    source pixels; their median where none is near) with the background's edges kept
+    (:func:`_with_edges`), stretched to ``shape``."""
     layout, dens = _smooth_masked(source, allowed.astype(np.float32), sigma)
     layout[dens <= 1e-6] = np.median(source[allowed], axis=0)
+    layout = _with_edges(layout, source, allowed, sigma)
     H, W = shape
     if layout.shape[:2] != (H, W):  # the input's layout, stretched to the output
         layout = np.asarray(cv2.resize(layout, (W, H), interpolation=cv2.INTER_LINEAR), np.float32).reshape(H, W, -1)
     return layout
+
+
+def _with_edges(layout: F32, source: F32, allowed: NDArray[np.bool_], sigma: float) -> F32:
+    """``layout`` (the background's brightness smoothed by a Gaussian of ``sigma``) with the
+    background's edges put back: the steps between its regions, a fundus's macula and optic
+    disc, a terrain's scarp, a bark's plates, which the Gaussian smooths away.
+
+    A self-guided filter (He, Sun and Tang, "Guided Image Filtering", 2013) of the
+    background's brightness (the structure's pixels taken from ``layout``), in boxes of
+    ``sigma / 2``: where the brightness varies by more than :data:`LAYOUT_EDGE` of its 1–99 %
+    range it is kept, where less it is averaged. Detail finer than :data:`LAYOUT_DETAIL`
+    times ``sigma`` (grain, a pole, a wire) is smoothed first, so that only regions' edges
+    stand. Only the brightness moves, as in :func:`_relight`.
+    """
+    smooth = layout.mean(axis=2)
+    gray = np.where(allowed, source.mean(axis=2), smooth).astype(np.float32)
+    gray = cv2.GaussianBlur(gray, (0, 0), LAYOUT_DETAIL * sigma)
+    lo, hi = np.percentile(source.mean(axis=2)[allowed], [1, 99])
+    eps = (LAYOUT_EDGE * max(float(hi - lo), 1e-6)) ** 2
+    k = 2 * max(1, int(sigma / 2)) + 1
+
+    def box(x: F32) -> F32:
+        return np.asarray(cv2.boxFilter(x, -1, (k, k), borderType=cv2.BORDER_REFLECT), np.float32)
+
+    mean = box(gray)
+    var = box(gray * gray) - mean * mean
+    a = np.asarray(var / (var + eps), np.float32)
+    edged = box(a) * gray + box(mean - a * mean)
+    return np.asarray(layout + (edged - smooth)[..., None], np.float32)
 
 
 def _smooth_masked(vals: F32, w: F32, sigma: float) -> tuple[F32, F32]:

@@ -256,7 +256,8 @@ def render(
         Fill the gaps between the branches (§5.4, default True); without it they stay 0.
         On photos and fields (not two-level masks) the filled gaps then take the input
         background's large-scale brightness, where the input has it (an eighth of its
-        shorter side and coarser; a terrain's plateau, a photo's lighting), except the light
+        shorter side and coarser; a terrain's plateau, a photo's lighting), with the steps
+        between its regions kept (a fundus's macula, a terrain's scarp), except the light
         that surrounds the whole structure (a lightning bolt's glow, within ten of its median
         radii), which is laid round the new structure instead.
     match_borders : bool, optional
