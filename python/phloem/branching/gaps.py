@@ -7,9 +7,9 @@ against the painted structure.
 ``allowed`` pixels of the input (the source structure, dilated to the fragment radius, is
 excluded, so no pseudo-branches appear); on photos and fields :func:`_relight` gives the
 completed gaps the input background's large-scale layout with its regions' edges
-(:func:`_with_edges`), which patches copied into large gaps average away (the light that surrounds the whole structure, :func:`_proximity_profile`, laid
-round the new structure), and :func:`_recolour` its colour cast, which a fill settled on a few patches
-can lose; :func:`_match_borders` shifts the completed gaps in the gradient domain so that
+(:func:`_with_edges`), which patches copied into large gaps average away (the light that
+surrounds the whole structure, :func:`_proximity_profile`, laid round the new structure), and
+:func:`_recolour` its colour cast, which a fill settled on a few patches can lose; :func:`_match_borders` shifts the completed gaps in the gradient domain so that
 they meet the structure without a colour step, as §5.3 does for the fragments.
 """
 
@@ -366,9 +366,9 @@ def _with_edges(layout: F32, source: F32, allowed: NDArray[np.bool_], sigma: flo
     stand. Only the brightness moves, as in :func:`_relight`.
     """
     smooth = layout.mean(axis=2)
-    gray = np.where(allowed, source.mean(axis=2), smooth).astype(np.float32)
-    gray = cv2.GaussianBlur(gray, (0, 0), LAYOUT_DETAIL * sigma)
-    lo, hi = np.percentile(source.mean(axis=2)[allowed], [1, 99])
+    bright = source.mean(axis=2)
+    lo, hi = np.percentile(bright[allowed], [1, 99])
+    gray = cv2.GaussianBlur(np.where(allowed, bright, smooth).astype(np.float32), (0, 0), LAYOUT_DETAIL * sigma)
     eps = (LAYOUT_EDGE * max(float(hi - lo), 1e-6)) ** 2
     k = 2 * max(1, int(sigma / 2)) + 1
 

@@ -892,10 +892,10 @@ def _without_edges(gray: F32, skeleton: Skeleton, given: int | None) -> Skeleton
     roots = _tree_roots(skeleton)
     trees: dict[int, list[int]] = {}
     for i, r in enumerate(roots):
-        trees.setdefault(int(r), []).append(i)
+        trees.setdefault(r, []).append(i)
     if len(trees) < 2:
         return skeleton
-    main = np.concatenate([skeleton.branches[i].thickness for i in trees[int(roots[0])]])
+    main = np.concatenate([skeleton.branches[i].thickness for i in trees[roots[0]]])
     thick = float(np.quantile(main, EDGE_THICKNESS_QUANTILE))
     candidates = [
         r for r, t in trees.items()
@@ -908,7 +908,7 @@ def _without_edges(gray: F32, skeleton: Skeleton, given: int | None) -> Skeleton
     drop = {r for r in candidates if sided[r] > bound}
     if not drop:
         return skeleton
-    kept = [i for i, r in enumerate(roots) if int(r) not in drop]
+    kept = [i for i, r in enumerate(roots) if r not in drop]
     index = {old: new for new, old in enumerate(kept)}
     branches = []
     for i in kept:
