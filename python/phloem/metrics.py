@@ -21,8 +21,9 @@ share, heading-change drift, two-level fraction, the share of the structure that
 how much children turn where they start, how far apart they leave their parent and where along
 it the long ones leave, how the parent bends where a child leaves it, which ways it
 runs on the image, how much it stands out from its surroundings, how much of the
-background's grain its completed gaps keep, how far the picture's emptiest places lie from it, and
-how much it runs the way the input's branches run at the same places; defined in
+background's grain its completed gaps keep, how far the picture's emptiest places lie from it,
+how much it runs the way the input's branches run at the same places, and what stands out
+past its branches' ends; defined in
 :mod:`phloem.branching.measures`).
 """
 
@@ -59,6 +60,7 @@ from .branching.measures import (
     median_heading_change,
     orientation_distance,
     parent_turns,
+    past_end_share,
     retrace_agreement,
     sibling_order,
     skeleton_agreement,
@@ -95,6 +97,7 @@ __all__ = [
     "median_heading_change",
     "orientation_distance",
     "parent_turns",
+    "past_end_share",
     "patch_coherence",
     "repetition",
     "retrace_agreement",

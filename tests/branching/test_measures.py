@@ -28,6 +28,7 @@ from phloem.branching.measures import (
     median_heading_change,
     orientation_distance,
     parent_turns,
+    past_end_share,
     resolve_trace_options,
     retrace_agreement,
     sibling_order,
@@ -658,6 +659,48 @@ def test_structure_contrast_refuses_what_it_cannot_measure() -> None:
             structure_contrast(img, sk, ring=bad)
     with pytest.raises(ValueError, match="^image:"):
         structure_contrast(np.full((40, 80), np.nan), sk)
+
+
+def _line_with_ends(dark_at: tuple[tuple[float, float], ...]) -> tuple[np.ndarray, Skeleton]:
+    """A dark line of thickness 3 from x = 20 to 99 across a light 60 x 120 field, with the
+    disk of a fragment (9 px) around each point of ``dark_at`` dark as well."""
+    img = np.full((60, 120), 0.8, np.float32)
+    yy, xx = np.mgrid[:60, :120]
+    img[(np.abs(yy - 30) <= 3) & (xx >= 20) & (xx <= 99)] = 0.1
+    for x, y in dark_at:
+        img[np.hypot(xx - x, yy - y) <= 9.0] = 0.1
+    return img, Skeleton([Branch([[20, 30], [99, 30]], 3.0)], img.shape)
+
+
+def test_past_end_share_counts_what_stands_out_past_the_free_ends() -> None:
+    img, sk = _line_with_ends(())
+    assert past_end_share(img, sk) == 0.0
+    # everything past the tip stands out, nothing past the start: the two ends are mirror
+    # images, so half of the pixels counted
+    img, sk = _line_with_ends(((99, 30),))
+    assert past_end_share(img, sk) == pytest.approx(0.5, abs=1e-9)
+    img, sk = _line_with_ends(((99, 30), (20, 30)))
+    assert past_end_share(img, sk) == 1.0
+    # bright structure on a dark field alike
+    assert past_end_share(1.0 - img, sk) == 1.0
+    # structure beside the branch away from its ends is not past an end
+    img, sk = _line_with_ends(((60, 45),))
+    assert past_end_share(img, sk) == 0.0
+    # a child's start lies on its parent: only its tip counts
+    child = Branch([[60, 30], [60, 55]], 3.0, parent=(0, 1))
+    img, _ = _line_with_ends(((60, 30 + 25),))
+    fam = Skeleton([sk.branches[0], child], img.shape)
+    assert 0.2 < past_end_share(img, fam) < 0.45
+
+
+def test_past_end_share_refuses_what_it_cannot_measure() -> None:
+    img, sk = _line_with_ends(())
+    with pytest.raises(ValueError, match="^skeleton: made for a"):
+        past_end_share(img[:, :-1], sk)
+    with pytest.raises(ValueError, match="^image: the structure does not stand out"):
+        past_end_share(np.full_like(img, 0.5), sk)
+    with pytest.raises(ValueError, match="^image:"):
+        past_end_share(np.full(img.shape, np.nan), sk)
 
 
 def _stem_with_children(lengths: list[float]) -> Skeleton:

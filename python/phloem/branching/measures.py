@@ -4,8 +4,9 @@ does the rendered image show the skeleton it was asked to show (re-trace agreeme
 structure hold together (largest-tree share), do branches keep a course at the scale of the
 structure (heading change over a fixed arc and its histogram distance, "drift"), does a
 mask stay a mask (two-level fraction), does the structure stand out from its surroundings
-as much as the input's (structure contrast), and does it spread over its picture as the input's
-does (empty space). Re-exported by :mod:`phloem.metrics`.
+as much as the input's (structure contrast), does it spread over its picture as the input's
+does (empty space), and do its branches end where the skeleton's do (what stands out past
+their ends). Re-exported by :mod:`phloem.metrics`.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ __all__ = [
     "median_heading_change",
     "orientation_distance",
     "parent_turns",
+    "past_end_share",
     "resolve_trace_options",
     "retrace_agreement",
     "sibling_order",
@@ -1034,6 +1036,86 @@ def structure_contrast(image: Any, skeleton: Skeleton, *, ring: tuple[float, flo
         raise ValueError("skeleton: the surroundings of the structure lie outside the image")
     light = img.mean(axis=2)
     return float(np.median(light[drawn]) - np.median(light[around]))
+
+
+def past_end_share(image: Any, skeleton: Skeleton) -> float:
+    """The share of the pixels just past ``skeleton``'s free ends that stand out on ``image`` as
+    its structure does: pieces of structure that the skeleton does not hold, where its branches
+    end (issue 19: "branch ends never paste pieces of other structure").
+
+    A free end is every branch's last point and a root branch's first. Past an end of
+    thickness ``t`` are the pixels within ``3 t`` of it (a fragment's disk, at least 2 px) that
+    lie off the structure: farther from every centre line than 1.5 times that point's
+    thickness plus 2 px (the tube a branch's end paints in :func:`~phloem.branching.render`).
+    Such a pixel stands out if it differs from the median of the end's surroundings (off the
+    structure, ``3 t`` to ``3 t + max(t, 2)`` px from the end) by more than half of
+    :func:`structure_contrast`, towards the structure's side. Brightness is the mean over
+    channels. On an input, past its traced ends lies whatever stopped the trace (a crossing, a
+    tangle of finer structure, a fading tip), so its share is not 0; on an output of
+    :func:`~phloem.branching.render` with its target skeleton it should be near 0.
+
+    Parameters
+    ----------
+    image : (H, W[, C]) array_like
+        The image the skeleton lies in.
+    skeleton : Skeleton
+        Its structure, with ``image``'s shape (or none).
+
+    Returns
+    -------
+    float
+        In [0, 1].
+
+    Raises
+    ------
+    ValueError
+        If the structure does not stand out from its surroundings, or no pixel past an end
+        lies in the image.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phloem.branching import Branch, Skeleton
+    >>> img = np.full((40, 80), 0.8, np.float32); img[18:23, 10:50] = 0.1
+    >>> sk = Skeleton([Branch([[10, 20], [49, 20]], 2.0)], (40, 80))
+    >>> past_end_share(img, sk)
+    0.0
+    >>> img[18:23, 50:56] = 0.1  # the dark line goes on past the skeleton's end
+    >>> round(past_end_share(img, sk), 2)
+    0.15
+    """
+    img, (H, W) = _image_of(image, skeleton)
+    contrast = structure_contrast(img, skeleton)
+    if contrast == 0.0:
+        raise ValueError("image: the structure does not stand out from its surroundings")
+    light = img.mean(axis=2) * np.float32(math.copysign(1.0, contrast))  # the structure's side up
+    _, dist, r = _thickness_distance(skeleton, (H, W))
+    off = dist > 1.5 * r + 2.0
+    hit = total = 0
+    for b in skeleton.branches:
+        ends = [(b.points[-1], b.thickness[-1])]
+        if b.parent is None:
+            ends.append((b.points[0], b.thickness[0]))
+        for (x, y), t in ends:
+            near, outer = max(3.0 * float(t), 2.0), max(3.0 * float(t), 2.0) + max(float(t), 2.0)
+            x0, x1 = max(0, math.floor(x - outer)), min(W, math.ceil(x + outer) + 1)
+            y0, y1 = max(0, math.floor(y - outer)), min(H, math.ceil(y + outer) + 1)
+            if x0 >= x1 or y0 >= y1:
+                continue
+            yy, xx = np.mgrid[y0:y1, x0:x1]
+            d = np.hypot(xx - x, yy - y)
+            here, ring = off[y0:y1, x0:x1] & (d <= near), off[y0:y1, x0:x1] & (d > near) & (d <= outer)
+            if not (here.any() and ring.any()):
+                continue
+            level = float(np.median(light[y0:y1, x0:x1][ring]))
+            hit += int((light[y0:y1, x0:x1][here] - level > 0.5 * abs(contrast)).sum())
+            total += int(here.sum())
+    if total == 0:
+        raise ValueError(
+            "skeleton: no pixel within 3 thicknesses of its ends lies in the image and off its tube "
+            "(1.5 thicknesses + 2 px; ends under 1.4 px thick have none)"
+        )
+    return hit / total
 
 
 def _image_of(image: Any, skeleton: Skeleton) -> tuple[NDArray[np.float32], tuple[int, int]]:
