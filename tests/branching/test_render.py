@@ -838,3 +838,37 @@ def test_a_frame_along_less_than_a_sixth_of_the_border_is_not_kept() -> None:
     valid[-30:, :120] = False
     out = render(img, sk, tgt, seed=1, valid=valid)
     assert np.all(out[-25:, :115] == 0.0)
+
+
+def _vessel_ending_in_a_tangle() -> tuple[np.ndarray, Skeleton]:
+    """A dark vessel 3 px in radius across a light 120 x 160 field, and at each of its ends,
+    8-10 px past it, thin dark strokes the skeleton does not hold (finer vessels, as where a
+    traced vessel dissolves into a tangle)."""
+    img = np.full((120, 160), 0.8, np.float32)
+    cv2.line(img, (20, 60), (110, 60), 0.15, 6)
+    for x in (10, 120):  # a bar across each end, and a stroke slanting off it
+        cv2.line(img, (x, 50), (x, 70), 0.2, 2)
+        cv2.line(img, (x, 60), (x + (6 if x > 60 else -6), 52), 0.2, 1)
+    img += np.random.default_rng(0).normal(0.0, 0.01, img.shape).astype(np.float32)
+    sk = Skeleton([Branch(np.array([[20.0 + 2 * i, 60.0] for i in range(46)]), 3.0)], img.shape)
+    return img, sk
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_branch_end_paints_no_structure_past_it(seed: int) -> None:
+    # issue 19: an end fragment is taken from a source branch's end, and what lies past that
+    # end is whatever stopped the trace (on the mouse brain, a tangle of finer vessels). Pasted
+    # whole at a target's tip, where the target has nothing, it stamped a star there.
+    img, sk = _vessel_ending_in_a_tangle()
+    tgt = Skeleton([Branch(np.array([[40.0 + 2 * i, 40.0] for i in range(31)]), 3.0)], img.shape)
+    res = render(img, sk, tgt, seed=seed, full_output=True)
+    yy, xx = np.mgrid[: img.shape[0], : img.shape[1]]
+    for tip in ((100, 40), (40, 40)):
+        d = np.hypot(xx - tip[0], yy - tip[1])
+        past = (d > 3.0 * 1.5 + 2.0 + 1.0) & (d <= 9.0) & (np.abs(xx - 70) > 30)
+        # the end fragment leaves everything past the branch's tube to the gap completion
+        assert not (res.labels[past] >= 0).any()
+        # which fills it with the field, not with the strokes past the source's end
+        assert float(res.image[past].min()) > 0.55, (tip, float(res.image[past].min()))
+    # and the vessel itself is painted to its ends
+    assert float(res.image[40, 42:99].max()) < 0.4

@@ -54,7 +54,12 @@ Beyond the paper (each needed for clean junctions, see the tests):
   large steps alone;
 - before that paste the background is completed blind to the structure: its patches come
   from the input's background only, and partly known patches holding a bolt or a valley
-  matched the background's few high-contrast places, copied beside the structure as halos.
+  matched the background's few high-contrast places, copied beside the structure as halos;
+- a fragment whose disk holds a free end of its branch (a tip, or a root's start) paints
+  only the branch's tube, 1.5 times its thickness plus 2 px (photos and fields; a mask's
+  foreign pieces are dropped at the end). Such a fragment is taken from a source branch's
+  end, and what lies past that end is whatever stopped the trace: on the mouse brain a
+  tangle of finer vessels, stamped at every tip as a star.
 """
 
 from __future__ import annotations
@@ -399,7 +404,10 @@ def render(
         # or not this call keeps it, which only puts it back at the end); else none at all
         assert tgt_sk.shape is not None  # checked above
         frame_near = (_near_frame(sources, ok), _near_frame(targets, _kept_inside(ok, tgt_sk.shape)))
-    painter = _Painter(img, (lo, hi), tgt_sk, targets, lib, opts, draws=rng.random(len(targets)), frame_near=frame_near)
+    painter = _Painter(
+        img, (lo, hi), tgt_sk, targets, lib, opts, draws=rng.random(len(targets)), frame_near=frame_near,
+        trim_ends=not mask_like,
+    )  # fmt: skip
     _in_order(painter.boxes, painter.paint, workers=t if t is not None else _core.default_threads(), progress=progress)
 
     canvas = painter.canvas
@@ -528,6 +536,7 @@ class _Painter:
         opts: _Options,
         draws: F64,
         frame_near: tuple[NDArray[np.bool_], NDArray[np.bool_]] | None = None,
+        trim_ends: bool = False,
     ) -> None:
         assert target.shape is not None
         H, W = target.shape
@@ -559,6 +568,9 @@ class _Painter:
         self.boxes = np.zeros((len(targets), 4), np.int64)
         for j, g in enumerate(targets):
             crop = _disk((H, W), g.center, g.radius)
+            if trim_ends and not g.furcation and _past_free_end(target, g):
+                ys, xs, disk, y0, x0 = crop
+                crop = ys, xs, disk & _own_tube(target.branches[g.branch], disk.shape, (x0, y0)), y0, x0
             self.crops.append(crop)
             self.boxes[j] = crop[0].start, crop[0].stop, crop[1].start, crop[1].stop
 
@@ -884,6 +896,40 @@ def _drop_foreign(canvas: F32, image: F32, source: Skeleton, target: Skeleton, l
 # Structure beyond 1.25 target radii (+1 px) is a neighbour's; the tube at 0.8 radii is the
 # target's own (docs/pipelines/branching/quality.md: re-trace F1 on the river masks).
 _BAND, _CORE = 1.25, 0.8
+
+
+#: A fragment whose disk reaches past a free end paints only its branch's tube, this many times
+#: its thickness plus ``END_TUBE_ADD`` px; the rest of its disk is left to the gap completion.
+END_TUBE, END_TUBE_ADD = 1.5, 2.0
+
+
+def _past_free_end(target: Skeleton, g: Fragment) -> bool:
+    """Whether target fragment ``g``'s disk holds its branch's tip, or its start where the
+    branch is a root (a child starts on its parent)."""
+    b = target.branches[g.branch]
+    ends = [b.points[-1]] if b.parent is not None else [b.points[0], b.points[-1]]
+    return any(float(np.hypot(*(e - g.center))) < g.radius for e in ends)
+
+
+def _own_tube(b: Branch, shape: tuple[int, int], origin: tuple[int, int]) -> NDArray[np.bool_]:
+    """Branch ``b``'s tube (:data:`END_TUBE` times its thickness plus :data:`END_TUBE_ADD`) in
+    the ``shape`` crop whose top-left pixel is ``origin`` (x, y).
+
+    What lies past a source branch's end is whatever stopped its trace (a tangle of finer
+    vessels, a crossing, the image's border); pasted at a target end, where the target has
+    nothing, it stamped a star or a blob there.
+    """
+    h, w = shape
+    off = np.asarray(origin, np.float64)
+    r = np.minimum(END_TUBE * 0.5 * (b.thickness[:-1] + b.thickness[1:]) + END_TUBE_ADD, MAX_THICKNESS)
+    p = b.points - off
+    # Only the segments that can reach the crop: a branch is often far longer than a disk.
+    lo, hi = np.minimum(p[:-1], p[1:]) - r[:, None], np.maximum(p[:-1], p[1:]) + r[:, None]
+    near = np.nonzero((hi[:, 0] >= 0) & (hi[:, 1] >= 0) & (lo[:, 0] <= w) & (lo[:, 1] <= h))[0]
+    m = np.zeros((h, w), np.uint8)
+    for i in near:
+        cv2.line(m, _pt(p[i]), _pt(p[i + 1]), 1, thickness=max(1, round(2 * r[i])), lineType=cv2.LINE_8, shift=4)
+    return m.astype(bool)
 
 
 def _tube(skeleton: Skeleton, factor: float, add: float) -> NDArray[np.bool_]:
