@@ -13,7 +13,8 @@ the share of the length along the frame, the input's direction concentration ("o
 output's direction-histogram distance to it ("dirs", beside the re-trace), and the shares of the
 input's structure contrast and background grain the output kept, and the repetition of the
 output's fine grain in the gaps as a multiple of the input background's ("gaps' rep"; over the
-whole image and the gaps on the printed line). ``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel``,
+whole image and the gaps on the printed line, with what stands out past the branches' free
+ends, ``past_end_share``). ``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel``,
 ``--gap-diversity`` and ``--layout`` are those of the quality script.
 """
 
@@ -73,7 +74,7 @@ def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[
         f"{path.name}: F1 {r.f1:.2f}, share {r.share_in:.2f}->{r.share_out:.2f}, drift {r.drift:.2f}{two}, "
         f"grain repetition {r.repetition_in:.3f}->{r.repetition_out:.3f} (gaps {r.gap_repetition_in:.3f}->"
         f"{r.gap_repetition_out:.3f}), empty space {r.empty_in:.0f}->{r.empty_out:.0f} px, "
-        f"layout {r.layout_in:.2f}->{r.layout_out:.2f}"
+        f"layout {r.layout_in:.2f}->{r.layout_out:.2f}, past ends {r.past_end_in:.3f}->{r.past_end_out:.3f}"
     )
     return [
         _label(_fit(_show(img), interpolation=cv2.INTER_AREA), f"{name} seed {seed}, {seconds:.0f} s"),
