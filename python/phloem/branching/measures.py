@@ -1052,7 +1052,9 @@ def past_end_share(image: Any, skeleton: Skeleton) -> float:
     :func:`structure_contrast`, towards the structure's side. Brightness is the mean over
     channels. On an input, past its traced ends lies whatever stopped the trace (a crossing, a
     tangle of finer structure, a fading tip), so its share is not 0; on an output of
-    :func:`~phloem.branching.render` with its target skeleton it should be near 0.
+    :func:`~phloem.branching.render` with its target skeleton it is near 0 wherever the
+    structure stands out from the background's grain (on a faint crack in asphalt, whose
+    contrast is about the grain's, a share of the grain counts too).
 
     Parameters
     ----------
