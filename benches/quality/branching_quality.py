@@ -58,8 +58,8 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
 Pass marks (issue 19): F1 ≥ 0.8, tree share within 0.15 of the input's, drift ≤ 0.25, masks
 two-level on ≥ 98 % of pixels; histograms as the growth tests require. ``--max-side`` scales
 inputs down first (masks are re-thresholded so they stay two-level); the default 0 keeps them
-at full size (the shared set takes about 100 s per seed on one thread). ``--sigmas`` and
-``--gap`` (and ``--subpixel``) trace the photos (not the masks) with those ``trace`` options instead of the
+at full size (the shared set takes about 100 s per seed on one thread). ``--sigmas``,
+``--gap`` (and ``--subpixel``, ``--threshold-scale``) trace the photos (not the masks) with those ``trace`` options instead of the
 defaults, on top of ``--tuned-trace``; the output is re-traced with the same options.
 """
 
@@ -425,10 +425,17 @@ def summary(results: list[Result]) -> str:
 
 
 def photo_trace_options(
-    name: str, mask: bool, *, tuned: bool, sigmas: list[float] | None, gap: float | None, subpixel: bool = False
+    name: str,
+    mask: bool,
+    *,
+    tuned: bool,
+    sigmas: list[float] | None,
+    gap: float | None,
+    subpixel: bool = False,
+    threshold_scale: float = 1.0,
 ) -> dict[str, Any] | None:
     """The trace options of one input: ``TRACE_SETTINGS`` when ``tuned``, then ``sigmas``,
-    ``gap`` and ``subpixel`` for photos."""
+    ``gap``, ``subpixel`` and ``threshold_scale`` for photos."""
     opts = dict(TRACE_SETTINGS.get(name) or {}) if tuned else {}
     if not mask:
         if sigmas:
@@ -437,19 +444,33 @@ def photo_trace_options(
             opts["gap"] = gap
         if subpixel:
             opts["subpixel"] = True
+        if threshold_scale != 1.0:
+            opts["threshold_scale"] = threshold_scale
     return opts or None
 
 
 def add_run_arguments(ap: argparse.ArgumentParser) -> None:
-    """``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel``, ``--gap-diversity`` and ``--layout`` (shared with the contact sheet)."""
+    """``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel``, ``--threshold-scale``, ``--gap-diversity`` and
+    ``--layout`` (shared with the contact sheet)."""
     ap.add_argument("--tuned-trace", action="store_true", help="trace with phloem.testing.TRACE_SETTINGS")
     ap.add_argument("--sigmas", type=float, nargs="+", default=None, help="trace photos with these ridge scales")
     ap.add_argument("--gap", type=float, default=None, help="trace photos with this bridging gap (px)")
     ap.add_argument("--subpixel", action="store_true", help="trace photos with trace(subpixel=True)")
     ap.add_argument(
+        "--threshold-scale", type=float, default=1.0, help="trace photos with this factor on the default threshold"
+    )
+    ap.add_argument(
         "--gap-diversity", type=float, default=None, help="render's gap_diversity (default: synthesize's, 0)"
     )
     ap.add_argument("--layout", type=float, default=0.0, help="synthesize's layout weight (default 0: off)")
+
+
+def trace_options_of(args: argparse.Namespace, name: str, mask: bool) -> dict[str, Any] | None:
+    """The trace options that :func:`add_run_arguments`' flags ask for on input ``name``."""
+    return photo_trace_options(
+        name, mask, tuned=args.tuned_trace, sigmas=args.sigmas, gap=args.gap, subpixel=args.subpixel,
+        threshold_scale=args.threshold_scale,
+    )  # fmt: skip
 
 
 def render_options_of(args: argparse.Namespace) -> dict[str, Any] | None:
@@ -479,9 +500,7 @@ def main(argv: list[str] | None = None) -> int:
     results = []
     for p in paths:
         img, mask = load(p, args.max_side)
-        opts = photo_trace_options(
-            p.name, mask, tuned=args.tuned_trace, sigmas=args.sigmas, gap=args.gap, subpixel=args.subpixel
-        )
+        opts = trace_options_of(args, p.name, mask)
         for seed in args.seeds:
             r = evaluate(
                 p.name, img, mask, seed, trace_options=opts, threads=args.threads, render_options=render_options,

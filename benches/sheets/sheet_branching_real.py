@@ -1,7 +1,7 @@
 """Contact sheet of ``phloem.branching.synthesize`` with its defaults on real inputs (issue 19).
 
     PYTHONPATH=python python -m benches.sheets.sheet_branching_real --out OUT.png [--inputs DIR] [--seed 0]
-        [--max-side N] [--tuned-trace] [--sigmas S ...] [--gap G] [--subpixel] [--gap-diversity L] [--layout W] [--only NAME ...]
+        [--max-side N] [--tuned-trace] [--sigmas S ...] [--gap G] [--subpixel] [--threshold-scale F] [--gap-diversity L] [--layout W] [--only NAME ...]
 
 One row per image of ``--inputs`` (default: ``branching`` of the real-image collection):
 input | input with its traced skeleton | grown skeleton | output image | output with its own
@@ -14,7 +14,7 @@ output's direction-histogram distance to it ("dirs", beside the re-trace), and t
 input's structure contrast and background grain the output kept, and the repetition of the
 output's fine grain in the gaps as a multiple of the input background's ("gaps' rep"; over the
 whole image and the gaps on the printed line, with what stands out past the branches' free
-ends, ``past_end_share``). ``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel``,
+ends, ``past_end_share``). ``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel``, ``--threshold-scale``,
 ``--gap-diversity`` and ``--layout`` are those of the quality script.
 """
 
@@ -32,10 +32,10 @@ from benches.quality.branching_quality import (
     inputs,
     load,
     measure,
-    photo_trace_options,
     render_options_of,
     retrace_options,
     run,
+    trace_options_of,
 )
 from phloem.branching import trace
 from phloem.testing import shared_path
@@ -52,9 +52,7 @@ def _show(img: np.ndarray) -> np.ndarray:
 
 def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[np.ndarray]:
     img, mask = load(path, max_side)
-    opts = photo_trace_options(
-        path.name, mask, tuned=args.tuned_trace, sigmas=args.sigmas, gap=args.gap, subpixel=args.subpixel
-    )
+    opts = trace_options_of(args, path.name, mask)
     name = path.stem[:22]
     res, seconds, error = run(
         img, seed, trace_options=opts, threads=2, render_options=render_options_of(args), layout=args.layout

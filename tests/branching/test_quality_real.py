@@ -60,6 +60,10 @@ def test_photo_trace_options_leave_masks_to_their_threshold() -> None:
         "gap": 12.0,
     }
     assert bench.photo_trace_options("a.jpg", False, tuned=False, sigmas=None, gap=None) is None
+    assert bench.photo_trace_options("a.jpg", False, tuned=False, sigmas=None, gap=None, threshold_scale=0.5) == {
+        "threshold_scale": 0.5
+    }
+    assert bench.photo_trace_options("a.png", True, tuned=False, sigmas=None, gap=None, threshold_scale=0.5) is None
     name = sorted(TRACE_SETTINGS)[0]
     tuned = bench.photo_trace_options(name, False, tuned=True, sigmas=[2.0], gap=None)
     assert tuned is not None and tuned["sigmas"] == (2.0,)

@@ -393,6 +393,34 @@ def test_a_crack_on_a_smooth_surface_keeps_otsus_threshold():
 
 
 @pytest.mark.parametrize("seed", range(3))
+def test_threshold_scale_multiplies_the_default_threshold(seed):
+    # the default threshold (climbed on grain) times the factor, in no unit the user must know
+    from phloem._ridges import ridge_response
+    from phloem.branching.trace import DEFAULT_SIGMAS, _stable_threshold
+
+    rng = np.random.default_rng(seed)
+    grain = cv2.GaussianBlur(rng.normal(0, 1, (240, 320)).astype(np.float32), (0, 0), 1.2)
+    img, _ = _crack_on(0.55 + 0.05 * grain / grain.std())
+    t, _, _ = _stable_threshold(ridge_response(img, DEFAULT_SIGMAS, "dark"), 30)
+    default = trace(img, kind="dark")
+    assert trace(img, kind="dark", threshold_scale=1.0) == default
+    for f in (0.6, 1.5):
+        # the same gap as the default's: the climb still sets it
+        assert trace(img, kind="dark", threshold_scale=f) == trace(img, kind="dark", threshold=f * t, gap=_gap(img))
+    # lower keeps more (grain included), higher less
+    assert trace(img, kind="dark", threshold_scale=0.6).total_length() > default.total_length()
+    assert trace(img, kind="dark", threshold_scale=1.5).total_length() < default.total_length()
+
+
+def _gap(img: np.ndarray) -> float:
+    """The default trace's bridging gap on ``img`` (dark, default scales), climb included."""
+    from phloem.branching import threshold_climb
+    from phloem.branching.trace import DEFAULT_SIGMAS, _default_gap
+
+    return _default_gap(DEFAULT_SIGMAS, "dark") * threshold_climb(img, kind="dark")
+
+
+@pytest.mark.parametrize("seed", range(3))
 def test_threshold_climb_is_how_far_the_default_trace_climbed(seed):
     # the public measure is the trace's own: on grain its threshold and gap climbed this far
     from phloem._ridges import ridge_response
@@ -563,6 +591,10 @@ def test_estimate_thickness_keeps_structure():
         (Y_SHAPE.mask(), {"subpixel": "yes"}, TypeError, "subpixel"),
         (Y_SHAPE.mask(), {"wide": "yes"}, TypeError, "wide"),
         (Y_SHAPE.mask(), {"edges": "yes"}, TypeError, "edges"),
+        (Y_SHAPE.mask(), {"threshold_scale": 0.0}, ValueError, "threshold_scale"),
+        (Y_SHAPE.mask(), {"threshold_scale": float("nan")}, ValueError, "threshold_scale"),
+        (Y_SHAPE.mask(), {"kind": "mask", "threshold_scale": 0.5}, ValueError, "threshold_scale: a mask"),
+        (Y_SHAPE.mask(), {"threshold": 0.5, "threshold_scale": 0.5}, ValueError, "threshold_scale: scales"),
         (Y_SHAPE.mask(), {"kind": "mask", "threshold": 2.0}, ValueError, "image: nothing to trace"),
         (Y_SHAPE.mask(), {"kind": "mask", "threshold": -1.0}, ValueError, "foreground fills the whole image"),
         (np.random.default_rng(0).random((3, 3)), {}, ValueError, "foreground fills the whole image"),

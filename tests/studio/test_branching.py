@@ -166,6 +166,17 @@ def test_trace_threshold_reaches_trace_and_the_sidecar(client, project, scene, m
     assert json.loads((project.root / "set.sidecar.json").read_text())["parameters"]["threshold"] == 0.05
 
 
+def test_trace_threshold_scale_reaches_trace_and_the_sidecar(client, project, scene, monkeypatch):
+    seen = []
+    real = branching.trace
+    monkeypatch.setattr(branching, "trace", lambda *a, **k: seen.append(k.get("threshold_scale")) or real(*a, **k))
+    run_job(client, {"kind": "branching-trace", "image": "photos/channel.png", "out": "auto.json"})
+    body = {"kind": "branching-trace", "image": "photos/channel.png", "threshold_scale": 0.5, "out": "set.json"}
+    run_job(client, body)
+    assert seen == [1.0, 0.5]
+    assert json.loads((project.root / "set.sidecar.json").read_text())["parameters"]["threshold_scale"] == 0.5
+
+
 def test_trace_gap_and_root_reach_trace_and_the_sidecar(client, project, scene, monkeypatch):
     seen = []
     real = branching.trace
@@ -213,6 +224,7 @@ def test_several_guide_paths_are_a_mask_the_structure_follows(client, project, s
         ({"kind": "branching-trace", "image": "photos/bar.png", "wide": "maybe"}, 422, "wide"),
         ({"kind": "branching-trace", "image": "photos/bar.png", "edges": "maybe"}, 422, "edges"),
         ({"kind": "branching-trace", "image": "photos/bar.png", "threshold": "high"}, 422, "threshold"),
+        ({"kind": "branching-trace", "image": "photos/bar.png", "threshold_scale": 0}, 422, "threshold_scale"),
         ({"kind": "branching-trace", "image": "photos/bar.png", "gap": -1}, 422, "gap"),
         ({"kind": "branching-trace", "image": "photos/bar.png", "root": [1]}, 422, "root"),
         ({"kind": "branching-trace", "image": "../bar.png"}, 400, "image:"),

@@ -489,6 +489,7 @@ def trace(
     kind: Kind = "auto",
     sigmas: float | Sequence[float] = DEFAULT_SIGMAS,
     threshold: float | None = None,
+    threshold_scale: float = 1.0,
     min_area: int = 30,
     min_length: float = 8.0,
     spur: float = 2.5,
@@ -516,7 +517,8 @@ def trace(
        where 1.25 times that threshold sheds more than a third of the mask, as asphalt's or
        stone's grain does and a structure's ridges do not, it climbs by that factor until a
        step keeps three quarters of the mask, for at most four steps and none that keeps
-       under a quarter; see ``docs/pipelines/branching.md``). ``"auto"``: a
+       under a quarter; see ``docs/pipelines/branching.md``), times ``threshold_scale``.
+       ``"auto"``: a
        two-valued image is a mask, otherwise the polarity with the stronger 99th-percentile
        response is used. With ``subpixel`` the filter is evaluated on a twice finer grid, so
        that lines a pixel or two wide whose centre falls between pixel centres keep their
@@ -575,6 +577,12 @@ def trace(
         Scales (px) of the ridge filter; about the branch radii to find / 1.5.
     threshold : float, optional
         Foreground threshold, see 1.
+    threshold_scale : float
+        Factor on the default threshold of a photo's ridge response (default 1; see 1.):
+        below 1 keeps fainter structure, grain included (0.5 traces the shared elevation
+        model's smaller valleys too), above 1 only the clearest. It needs no knowledge of the
+        response's units, which ``threshold`` does; the two cannot be combined, nor is a mask's
+        level scaled.
     min_area : int
         Smallest component kept and largest hole filled, in pixels.
     min_length : float
@@ -666,6 +674,9 @@ def trace(
         h = check_float(h, "h", 0.0, inclusive=False)
     if threshold is not None:
         threshold = check_float(threshold, "threshold", -math.inf)
+    scale = check_float(threshold_scale, "threshold_scale", 0.0, inclusive=False)
+    if scale != 1.0 and threshold is not None:
+        raise ValueError("threshold_scale: scales the default threshold; with threshold given, set that instead")
     if gap is not None:
         gap = check_float(gap, "gap", 0.0)
     if blob is not None:
@@ -695,11 +706,15 @@ def trace(
         gap = _default_gap(sig, kind)
     wide_px = np.zeros(shape, np.bool_)
     if kind == "mask":
+        if scale != 1.0:
+            raise ValueError("threshold_scale: a mask is thresholded at a level (threshold), not a ridge response")
         mask = gray > (0.5 * (lo + hi) if threshold is None else threshold)
     else:
         resp = _photo_response(gray, sig, kind, ok, subpixel=bool(subpixel))
         if threshold is None:
-            _, climb, mask = _stable_threshold(resp, min_area)
+            t, climb, mask = _stable_threshold(resp, min_area)
+            if scale != 1.0:
+                mask = _ridge_mask(resp, t * scale)
             if auto_gap:
                 # a structure's faint stretches fall below a raised threshold, so its breaks grow with it
                 gap *= climb

@@ -59,6 +59,16 @@ def _trace_options(p: argparse.ArgumentParser) -> None:
         "extremes for a mask. Lower it to keep more of a faint structure, grain included",
     )
     g.add_argument(
+        "--threshold-scale",
+        type=float,
+        default=1.0,
+        metavar="F",
+        help="multiply the default ridge threshold of a photo by F instead of giving --threshold in the filter's "
+        "units: below 1 keeps fainter structure, grain included (0.5 on an elevation model traces its smaller "
+        "valleys too, and the new image's ground between the valleys comes out as dissected as the input's); "
+        "default 1",
+    )
+    g.add_argument(
         "--min-length", type=float, default=8.0, help="drop traced branches shorter than this many pixels (default 8)"
     )
     g.add_argument(
@@ -105,6 +115,7 @@ def _trace_kwargs(args: argparse.Namespace) -> dict[str, Any]:
         "sigmas": tuple(args.sigmas),
         "channel": args.channel,
         "threshold": args.threshold,
+        "threshold_scale": args.threshold_scale,
         "min_length": args.min_length,
         "gap": args.gap,
         "root": None if args.root is None else tuple(args.root),

@@ -935,9 +935,11 @@ $("br-upload").onchange = guard(kMsg, async () => {
 });
 $("br-trace").onclick = guard(kMsg, async () => {
   const threshold = $("br-threshold").value.trim();
+  const scale = $("br-threshold-scale").value.trim();
   const gap = $("br-gap").value.trim();
   const req = { kind: "branching-trace", image: $("br-image").value, trace_kind: $("br-kind").value,
-    threshold: threshold === "" ? null : Number(threshold), gap: gap === "" ? null : Number(gap),
+    threshold: threshold === "" ? null : Number(threshold), threshold_scale: scale === "" ? 1 : Number(scale),
+    gap: gap === "" ? null : Number(gap),
     subpixel: $("br-subpixel").checked, wide: $("br-wide").checked, edges: $("br-edges").checked, out: $("br-file").value.trim() };
   const s = await runJobReplacing(req, kUi);
   await loadSkeleton(s.outputs[0]);

@@ -62,6 +62,14 @@ class BranchingTraceJob(BaseModel):
         description="ridge-filter response that counts as structure (the CLI's --threshold); default Otsu's, "
         "raised on a grainy surface until the grain is shed",
     )
+    threshold_scale: float = Field(
+        1.0,
+        gt=0,
+        le=100,
+        allow_inf_nan=False,
+        description="factor on the default threshold of a photo (the CLI's --threshold-scale): below 1 keeps "
+        "fainter structure, grain included; not with threshold, nor on a mask",
+    )
     gap: float | None = Field(
         None,
         ge=0,
@@ -226,7 +234,8 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
             progress(0, 1)
             valid = branching.valid_region(img)
             sk = branching.trace(img, kind=req.trace_kind, sigmas=tuple(req.sigmas), min_length=req.min_length,
-                                 threshold=req.threshold, gap=req.gap, root=req.root,
+                                 threshold=req.threshold, threshold_scale=req.threshold_scale, gap=req.gap,
+                                 root=req.root,
                                  valid=None if valid.all() else valid,
                                  subpixel=req.subpixel, wide=req.wide, edges=req.edges)  # fmt: skip
             progress(1, 1)
