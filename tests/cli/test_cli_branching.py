@@ -291,39 +291,44 @@ def test_branching_trace_switches_reach_trace_and_the_sidecar(tmp_path, monkeypa
     assert seen == [default, not default]
 
 
-def test_branching_trace_threshold_scale_reaches_trace_and_the_sidecar(tmp_path, monkeypatch, capsys):
+@pytest.mark.parametrize(
+    ("flag", "key", "value", "default", "bad", "error"),
+    [
+        (
+            "--threshold",
+            "threshold",
+            0.12,
+            None,
+            ["--threshold", "nan"],
+            "--threshold: expected a finite value, got nan",
+        ),
+        (
+            "--threshold-scale",
+            "threshold_scale",
+            0.5,
+            1.0,
+            ["--threshold-scale", "0.5", "--threshold", "0.1"],
+            "--threshold-scale: scales the default threshold",
+        ),
+    ],
+)
+def test_branching_trace_threshold_reaches_trace_and_the_sidecar(
+    tmp_path, monkeypatch, capsys, flag, key, value, default, bad, error
+):
     seen = []
     real = branching.trace
-    monkeypatch.setattr(branching, "trace", lambda *a, **k: seen.append(k.get("threshold_scale")) or real(*a, **k))
+    monkeypatch.setattr(branching, "trace", lambda *a, **k: seen.append(k.get(key)) or real(*a, **k))
     _dark_river_png(tmp_path / "river.png")
-    for flags in ([], ["--threshold-scale", "0.5"]):
+    for flags in ([], [flag, str(value)]):
         out = tmp_path / f"river{len(flags)}.json"
         assert main(["branching", "trace", str(tmp_path / "river.png"), "--out", str(out), *flags, "-q"]) == 0
         side = json.loads(io.sidecar_path(out).read_text())["parameters"]
-        assert side["threshold_scale"] == (0.5 if flags else 1.0)
-    assert seen == [1.0, 0.5]
+        assert side[key] == (value if flags else default)
+    assert seen == [default, value]
     args = ["branching", "trace", str(tmp_path / "river.png"), "--out", str(tmp_path / "x.json"), "-q"]
-    assert main([*args, "--threshold-scale", "0.5", "--threshold", "0.1"]) == 2
+    assert main([*args, *bad]) == 2
     err = capsys.readouterr().err
-    assert "--threshold-scale: scales the default threshold" in err and len(err.strip().splitlines()) == 1
-    assert not list(tmp_path.glob("x.*"))
-
-
-def test_branching_trace_threshold_reaches_trace_and_the_sidecar(tmp_path, monkeypatch, capsys):
-    seen = []
-    real = branching.trace
-    monkeypatch.setattr(branching, "trace", lambda *a, **k: seen.append(k.get("threshold")) or real(*a, **k))
-    _dark_river_png(tmp_path / "river.png")
-    for flags in ([], ["--threshold", "0.12"]):
-        out = tmp_path / f"river{len(flags)}.json"
-        assert main(["branching", "trace", str(tmp_path / "river.png"), "--out", str(out), *flags, "-q"]) == 0
-        side = json.loads(io.sidecar_path(out).read_text())["parameters"]
-        assert side["threshold"] == (0.12 if flags else None)
-    assert seen == [None, 0.12]
-    args = ["branching", "trace", str(tmp_path / "river.png"), "--out", str(tmp_path / "x.json"), "-q"]
-    assert main([*args, "--threshold", "nan"]) == 2
-    err = capsys.readouterr().err
-    assert "--threshold: expected a finite value, got nan" in err and len(err.strip().splitlines()) == 1
+    assert error in err and len(err.strip().splitlines()) == 1
     assert not list(tmp_path.glob("x.*"))
 
 

@@ -1038,6 +1038,12 @@ def structure_contrast(image: Any, skeleton: Skeleton, *, ring: tuple[float, flo
     return float(np.median(light[drawn]) - np.median(light[around]))
 
 
+#: A branch's tube past its free ends: this many times its thickness plus ``END_TUBE_ADD`` px.
+#: :func:`past_end_share` counts beyond it, and :func:`~phloem.branching.render` paints an end
+#: fragment only inside it, so that the measure and the rule agree.
+END_TUBE, END_TUBE_ADD = 1.5, 2.0
+
+
 def past_end_share(image: Any, skeleton: Skeleton) -> float:
     """The share of the pixels just past ``skeleton``'s free ends that stand out on ``image`` as
     its structure does: pieces of structure that the skeleton does not hold, where its branches
@@ -1092,7 +1098,7 @@ def past_end_share(image: Any, skeleton: Skeleton) -> float:
         raise ValueError("image: the structure does not stand out from its surroundings")
     light = img.mean(axis=2) * np.float32(math.copysign(1.0, contrast))  # the structure's side up
     _, dist, r = _thickness_distance(skeleton, (H, W))
-    off = dist > 1.5 * r + 2.0
+    off = dist > END_TUBE * r + END_TUBE_ADD
     hit = total = 0
     for b in skeleton.branches:
         ends = [(b.points[-1], b.thickness[-1])]

@@ -86,7 +86,7 @@ from ._pixels import F32, F64, _by_channels, _check_skeleton, _clip_channels, _p
 from .fragments import DEFAULT_SAMPLES, Fragment, FragmentLibrary, check_params, cover, foreign_fragments
 from .frame import _keep_frame, _kept_inside
 from .gaps import fill_gaps, gap_diversity_default
-from .measures import structure_contrast
+from .measures import END_TUBE, END_TUBE_ADD, structure_contrast
 from .skeleton import MAX_THICKNESS, Branch, Skeleton
 
 __all__ = ["RenderResult", "render"]
@@ -896,11 +896,6 @@ def _drop_foreign(canvas: F32, image: F32, source: Skeleton, target: Skeleton, l
 # Structure beyond 1.25 target radii (+1 px) is a neighbour's; the tube at 0.8 radii is the
 # target's own (docs/pipelines/branching/quality.md: re-trace F1 on the river masks).
 _BAND, _CORE = 1.25, 0.8
-
-
-#: A fragment whose disk reaches past a free end paints only its branch's tube, this many times
-#: its thickness plus ``END_TUBE_ADD`` px; the rest of its disk is left to the gap completion.
-END_TUBE, END_TUBE_ADD = 1.5, 2.0
 
 
 def _past_free_end(target: Skeleton, g: Fragment) -> bool:
