@@ -97,6 +97,13 @@ def _arc_lengths(branch: Branch) -> F64:
     return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(branch.points, axis=0), axis=1))])
 
 
+def _free_ends(branch: Branch) -> list[int]:
+    """The vertices where ``branch`` ends free: its last, and its first where it is a root
+    (a child starts on its parent)."""
+    n = len(branch.points) - 1
+    return [n] if branch.parent is not None else [0, n]
+
+
 def _tree_roots(skeleton: Skeleton) -> list[int]:
     """The index of each branch's root branch (parents come before their children)."""
     root: list[int] = []

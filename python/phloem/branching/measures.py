@@ -20,7 +20,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validate import as_image, as_mask, check_float, check_int
-from ._elements import F64, _abs_turn, _arc_lengths, _axis_bins, _bin, _check_skeleton, _edge_headings, _tree_roots
+from ._elements import (
+    F64,
+    _abs_turn,
+    _arc_lengths,
+    _axis_bins,
+    _bin,
+    _check_skeleton,
+    _edge_headings,
+    _free_ends,
+    _tree_roots,
+)
 from ._layout import DirectionLayout
 from .bending import ARC  # the arc the bending model matches, so that the two stay one
 from .histograms import _hist, histogram_distance
@@ -1101,11 +1111,10 @@ def past_end_share(image: Any, skeleton: Skeleton) -> float:
     off = dist > END_TUBE * r + END_TUBE_ADD
     hit = total = 0
     for b in skeleton.branches:
-        ends = [(b.points[-1], b.thickness[-1])]
-        if b.parent is None:
-            ends.append((b.points[0], b.thickness[0]))
-        for (x, y), t in ends:
-            near, outer = max(3.0 * float(t), 2.0), max(3.0 * float(t), 2.0) + max(float(t), 2.0)
+        for v in _free_ends(b):
+            (x, y), t = b.points[v], float(b.thickness[v])
+            near = max(3.0 * t, 2.0)
+            outer = near + max(t, 2.0)
             x0, x1 = max(0, math.floor(x - outer)), min(W, math.ceil(x + outer) + 1)
             y0, y1 = max(0, math.floor(y - outer)), min(H, math.ceil(y + outer) + 1)
             if x0 >= x1 or y0 >= y1:

@@ -82,6 +82,7 @@ from .._progress import Progress
 from .._validate import as_image, as_mask, check_float, check_int, check_patch_size, check_seed, check_threads
 from ..blend import seamless
 from ..seams import seam
+from ._elements import _free_ends
 from ._pixels import F32, F64, _by_channels, _check_skeleton, _clip_channels, _paste, _pt, _robust_z, _rot, two_level
 from .fragments import DEFAULT_SAMPLES, Fragment, FragmentLibrary, check_params, cover, foreign_fragments
 from .frame import _keep_frame, _kept_inside
@@ -902,8 +903,7 @@ def _past_free_end(target: Skeleton, g: Fragment) -> bool:
     """Whether target fragment ``g``'s disk holds its branch's tip, or its start where the
     branch is a root (a child starts on its parent)."""
     b = target.branches[g.branch]
-    ends = [b.points[-1]] if b.parent is not None else [b.points[0], b.points[-1]]
-    return any(float(np.hypot(*(e - g.center))) < g.radius for e in ends)
+    return any(float(np.hypot(*(b.points[v] - g.center))) < g.radius for v in _free_ends(b))
 
 
 def _own_tube(b: Branch, shape: tuple[int, int], origin: tuple[int, int]) -> NDArray[np.bool_]:
