@@ -3,7 +3,8 @@
 The workload: a synthetic example structure (``phloem.branching.synthetic_skeleton``, several
 random-walk trees side by side, step h = 2 px); fit the bending model and the furcation
 model (linear SVM; the paper reports "about one minute" of training), then grow a structure of
-about 500 nodes in a 512x512 image with space colonisation, three generations.
+about 500 nodes in a 512x512 image with space colonisation, three generations, and carry its
+branch ends on to structure ahead (``join_ends``, beyond the paper) until half of them end on it.
 
 When ``../shared/data/branching`` is present the table also grows input-sized structures
 (``grow(..., max_length="input")``, seed 1) from the traced retina, Colville delta mask and
@@ -32,6 +33,7 @@ from phloem.branching import (
     angle_histogram,
     grow,
     histogram_distance,
+    join_ends,
     synthetic_skeleton,
     thickness_histogram,
 )
@@ -68,6 +70,14 @@ def test_bench_grow_500(benchmark):
     assert sum(len(b) for b in out.branches) > 100
 
 
+def test_bench_join_ends_500(benchmark):
+    src = example()
+    bend, fur = BendingModel.fit(src, h=H), FurcationModel.fit(src, h=H)
+    grown = grow_nodes(bend, fur, 500)
+    out = benchmark(lambda: join_ends(grown, 0.5, reach=3 * bend.m * H, step=H))
+    assert len(out.branches) == len(grown.branches)
+
+
 def test_bench_resample_staircase(benchmark):
     # a traced centre line of 4000 pixels at the measures' step (benches/resample.rs in Rust)
     rng = np.random.default_rng(0)
@@ -90,6 +100,9 @@ def times(trees: int, nodes: int, direction_histogram: float = 0.0, layout: floa
     t0 = time.perf_counter()
     out = grow_nodes(bend, fur, nodes)
     t[f"grow {nodes}"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    join_ends(out, 0.5, reach=3 * bend.m * H, step=H)
+    t["join ends"] = time.perf_counter() - t0
     t["nodes"] = float(sum(len(b) for b in out.branches))
     t["branches"] = float(len(out.branches))
     return t

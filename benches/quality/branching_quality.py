@@ -41,6 +41,9 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
 - the share of the pixels just past the branches' free ends that stand out as structure, on the
   input with its traced skeleton and on the output with its target (``past_end_share``, not a
   pass mark: stars and blobs that end fragments paste past a branch's tip);
+- the share of the branches that end on other structure, input and output
+  (``joined_end_share``, not a pass mark: a braided river's channels that rejoin round islands,
+  where a grown tree's stop short);
 - the share of the input's background grain that the output's completed gaps keep
   (``background_grain`` of output over input, not a pass mark: a fill that settled on a few
   smooth background patches);
@@ -99,6 +102,7 @@ from phloem.metrics import (
     drift_noise,
     empty_space,
     furcation_gaps,
+    joined_end_share,
     largest_tree_share,
     layout_agreement,
     median_heading_change,
@@ -157,6 +161,8 @@ class Result:
     contrast_out: float = math.nan
     past_end_in: float = math.nan
     past_end_out: float = math.nan
+    joined_in: float = math.nan
+    joined_out: float = math.nan
     grain_in: float = math.nan
     grain_out: float = math.nan
     repetition_in: float = math.nan
@@ -312,6 +318,8 @@ def measure(
     # nor this: what stands out past the branches' ends (a tangle pasted with an end fragment)
     with contextlib.suppress(ValueError):
         r.past_end_in, r.past_end_out = past_end_share(img, src), past_end_share(res.image, tgt)
+    # nor this: how many branches end on other structure (channels that rejoin round islands)
+    r.joined_in, r.joined_out = joined_end_share(src), joined_end_share(tgt)
     # nor this: how much of the background's grain the completed gaps keep (a fill that
     # settled on a few smooth patches: an elevation model's relief as a flat plateau)
     with contextlib.suppress(ValueError):
@@ -391,7 +399,7 @@ def _f(x: float | None, fmt: str = ".2f") -> str:
 def table(results: list[Result]) -> str:
     head = (
         "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input's noise) | heading in → out (rad) "
-        "| along the frame in → out | empty space px in → out | layout in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | parent's turn at children in → out | directions L1 (input's concentration) | contrast in → out (kept) | past ends in → out | grain kept | grain repetition in → out | gaps' grain repetition in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
+        "| along the frame in → out | empty space px in → out | layout in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | parent's turn at children in → out | directions L1 (input's concentration) | contrast in → out (kept) | past ends in → out | joined ends in → out | grain kept | grain repetition in → out | gaps' grain repetition in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for r in results:
@@ -403,7 +411,7 @@ def table(results: list[Result]) -> str:
         lines.append(
             f"| {r.input} | {r.seed} | {size} | {_f(r.f1)} ({_f(r.precision)}/{_f(r.recall)}) "
             f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} ({_f(r.drift_noise)}) | {_f(r.heading_in)} → {_f(r.heading_out)} "
-            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.empty_in, '.0f')} → {_f(r.empty_out, '.0f')} | {_f(r.layout_in)} → {_f(r.layout_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.parent_turn_in)} → {_f(r.parent_turn_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.past_end_in)} → {_f(r.past_end_out)} | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {_f(r.repetition_in)} → {_f(r.repetition_out)} | {_f(r.gap_repetition_in)} → {_f(r.gap_repetition_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
+            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.empty_in, '.0f')} → {_f(r.empty_out, '.0f')} | {_f(r.layout_in)} → {_f(r.layout_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.parent_turn_in)} → {_f(r.parent_turn_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.past_end_in)} → {_f(r.past_end_out)} | {_f(r.joined_in)} → {_f(r.joined_out)} | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {_f(r.repetition_in)} → {_f(r.repetition_out)} | {_f(r.gap_repetition_in)} → {_f(r.gap_repetition_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
             f"| {_f(r.seconds, '.1f')} | {fails} |"
         )
     return "\n".join(lines)

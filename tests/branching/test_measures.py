@@ -49,7 +49,7 @@ def test_metrics_reexports_the_measures() -> None:
         "retrace_agreement", "skeleton_agreement", "largest_tree_share", "border_share", "drift", "drift_noise",
         "two_level_fraction", "start_turns", "furcation_gaps", "direction_histogram", "direction_concentration",
         "orientation_distance", "structure_contrast", "background_grain", "sibling_order", "parent_turns",
-        "empty_space", "layout_agreement",
+        "empty_space", "layout_agreement", "joined_end_share",
     ):  # fmt: skip
         assert getattr(phloem.metrics, name) is getattr(phloem.branching.measures, name)
         assert name in phloem.metrics.__all__

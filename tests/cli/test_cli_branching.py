@@ -73,6 +73,13 @@ def test_branching_errors_name_the_problem(tmp_path, capsys):
     assert "nothing to trace" in capsys.readouterr().err
     assert main(["branching", "trace", str(tmp_path / "blank.png"), "--out", str(tmp_path / "y.png"), "-q"]) == 2
     assert "expected a .json file" in capsys.readouterr().err
+    good = tmp_path / "good.json"
+    good.write_text('{"branches": [{"points": [[1, 2], [30, 2]], "thickness": [1, 1]}]}')
+    with pytest.raises(SystemExit):
+        main(
+            ["branching", "grow", str(good), "--size", "40x40", "--joined-ends", "2", "--out", str(tmp_path / "x.json")]
+        )
+    assert "--joined-ends: expected a share between 0 and 1, got 2" in capsys.readouterr().err
     assert not list(tmp_path.glob("x.json*")) and not list(tmp_path.glob("y.*"))
 
 
@@ -103,6 +110,7 @@ def test_branching_run_writes_image_skeleton_histograms_and_sidecar(tmp_path):
     meta = json.loads((tmp_path / "new.png.json").read_text())
     assert meta["seed"] == 2 and meta["parameters"]["max_length"] == "input"
     assert meta["parameters"]["gap_diversity"] == 0.0  # resolved: the river's land is not grainy
+    assert 0 <= meta["parameters"]["joined_ends"] <= 1  # resolved from the traced river
     # The painted structure is dark like the input's river; the rest keeps the land's colour.
     river = target.mask()
     assert img[river].mean() < img[~river].mean() - 0.1

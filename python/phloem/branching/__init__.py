@@ -4,7 +4,7 @@ Learn the bending and branching of rivers, cracks, lightning, ridges or vessels 
 example image with its skeleton, grow new skeletons with the same character, and compose a new
 image from fragments of the input. One module per stage, named after what it holds:
 ``skeleton`` and ``trace`` (§3, §4.1), ``histograms``, ``bending`` (§4.2), ``furcation`` (§4.3),
-``growth`` (§4.4, §4.5), ``fragments`` (§5.1), ``render`` (§5.2, §5.3), ``gaps`` (§5.4),
+``growth`` (§4.4, §4.5), ``joins`` (ends that rejoin, beyond the paper), ``fragments`` (§5.1), ``render`` (§5.2, §5.3), ``gaps`` (§5.4),
 ``rectify`` (Fig. 8), ``frame`` (a photo's frame), ``pipeline`` (all of it); see ``docs/pipelines/branching.md``.
 
 References
@@ -23,6 +23,7 @@ from .furcation import FurcationModel
 from .gaps import gap_diversity_default
 from .growth import extend, grow
 from .histograms import angle_histogram, histogram_distance, thickness_histogram
+from .joins import join_ends
 from .pipeline import (
     SourceDefaults,
     SynthesisResult,
@@ -67,6 +68,7 @@ __all__ = [
     "h_default",
     "histogram_distance",
     "histogram_figure",
+    "join_ends",
     "orientation_default",
     "rectify",
     "render",

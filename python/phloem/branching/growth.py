@@ -56,6 +56,7 @@ from ._forest import InputTree, input_trees
 from ._world import _guide_map, _World
 from .bending import BendingModel, block_sums, course_deviation
 from .furcation import FurcationModel
+from .joins import join_ends
 from .measures import sibling_order
 from .skeleton import Branch, Skeleton
 
@@ -524,6 +525,7 @@ def grow(
     guide_width: float | None = None,
     min_spacing: int | None = None,
     domain: Any = None,
+    joined_ends: float = 0.0,
     progress: Progress = None,
     max_memory: int | None = None,
 ) -> Skeleton:
@@ -618,6 +620,14 @@ def grow(
         ``d`` from it, 1 in it), so branches turn away before they meet it and children do not
         start towards it. Further roots start inside only, and the first root, when its
         default start lies outside, at the nearest pixel inside.
+    joined_ends : float, optional
+        Share of the branches that should end on other structure, in ``[0, 1]`` (default 0:
+        the paper's trees, whose branches stop short of structure ahead). Beyond the paper:
+        once the structure is grown, ends are carried on to structure within the density's
+        look-ahead ``3 m h`` ahead of them by :func:`~phloem.branching.joins.join_ends`, the
+        shortest ways first, until that share of the branches end on it, so that channels
+        rejoin round islands as a braided river's do. :func:`synthesize` takes the input's
+        :func:`~phloem.metrics.joined_end_share`.
     progress : callable, optional
         ``progress(done, total)`` in finished branches.
     max_memory : int, optional
@@ -676,6 +686,9 @@ def grow(
     if not isinstance(repel_border, (bool, np.bool_)):
         raise TypeError(f"repel_border: expected True or False, got {repel_border!r}")
     inside = None if domain is None else as_mask(domain, "domain", shape)
+    joined_ends = check_float(joined_ends, "joined_ends", 0.0)
+    if joined_ends > 1:
+        raise ValueError(f"joined_ends: expected a share in [0, 1], got {joined_ends}")
     if inside is not None and not inside.any():
         raise ValueError("domain: expected some pixels where the structure may grow, got none")
     world = _World(
@@ -876,7 +889,10 @@ def grow(
         failures = failures + 1 if stalled else 0
         if failures >= 8:
             break
-    return Skeleton(out, shape)
+    grown = Skeleton(out, shape)
+    if joined_ends > 0 and out:
+        grown = join_ends(grown, joined_ends, reach=3.0 * m * h, step=h, domain=inside)
+    return grown
 
 
 @renamed(shape="size")

@@ -5,8 +5,8 @@ structure hold together (largest-tree share), do branches keep a course at the s
 structure (heading change over a fixed arc and its histogram distance, "drift"), does a
 mask stay a mask (two-level fraction), does the structure stand out from its surroundings
 as much as the input's (structure contrast), does it spread over its picture as the input's
-does (empty space), and do its branches end where the skeleton's do (what stands out past
-their ends). Re-exported by :mod:`phloem.metrics`.
+does (empty space), do its branches end where the skeleton's do (what stands out past
+their ends), and do as many of them end on other structure (joined ends). Re-exported by :mod:`phloem.metrics`.
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ from ._elements import (
     _free_ends,
     _tree_roots,
 )
+from ._ends import _Lines, _on_structure
 from ._layout import DirectionLayout
 from .bending import ARC  # the arc the bending model matches, so that the two stay one
 from .histograms import _hist, histogram_distance
@@ -49,6 +50,7 @@ __all__ = [
     "furcation_gaps",
     "heading_change_histogram",
     "heading_changes",
+    "joined_end_share",
     "largest_tree_share",
     "layout_agreement",
     "median_heading_change",
@@ -256,6 +258,46 @@ def largest_tree_share(skeleton: Skeleton) -> float:
     if total <= 0:
         raise ValueError("skeleton: the branches have no length")
     return float(lengths.max()) / total
+
+
+def joined_end_share(skeleton: Skeleton) -> float:
+    """Share of the branches whose end lies on other structure.
+
+    A branch's end is its last vertex. It lies on other structure where it is within
+    :data:`~phloem.branching._ends.END_SLACK` px (2, or half the end's thickness where that
+    is more) of another branch's surface (its centre line, widened by its thickness there). Not
+    counted as other structure: the branch itself, its children that start at its end, and its
+    parent where the two still overlap at the branch's start (within twice their thicknesses
+    plus 4 px of it along the parent): a short stub ends beside its parent without closing a
+    loop, while an end further along the parent closes one.
+
+    In a braided river, a delta or a crack network many ends lie on other structure: the
+    channels rejoin round islands and the trace cuts each loop open at one end. A tree grown
+    by the paper's growth stops short of structure ahead, so its ends are free
+    (:func:`~phloem.branching.joins.join_ends` joins them).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+
+    Returns
+    -------
+    float
+        In [0, 1].
+
+    Examples
+    --------
+    >>> from phloem.branching import Branch, Skeleton
+    >>> stem = Branch([[0, 50], [20, 50], [100, 50]], 3.0)
+    >>> loop = Branch([[20, 50], [40, 30], [70, 30], [80, 46]], 2.0, parent=(0, 1))
+    >>> joined_end_share(Skeleton([stem, loop]))
+    0.5
+    >>> short = Branch([[20, 50], [40, 30], [70, 30], [80, 38]], 2.0, parent=(0, 1))
+    >>> joined_end_share(Skeleton([stem, short]))
+    0.0
+    """
+    _check_skeleton(skeleton)
+    return float(_on_structure(skeleton, _Lines.of(skeleton)).mean())
 
 
 def border_share(skeleton: Skeleton, *, band: float | None = None) -> float:

@@ -17,7 +17,7 @@ from .frame import _kept_inside, valid_region
 from .furcation import FurcationModel
 from .gaps import gap_diversity_default
 from .growth import grow
-from .measures import direction_concentration, drift_noise, median_heading_change
+from .measures import direction_concentration, drift_noise, joined_end_share, median_heading_change
 from .render import RenderResult, render
 from .skeleton import Skeleton
 from .trace import trace
@@ -457,6 +457,9 @@ class SourceDefaults:
         For :func:`fit_models` (:func:`denoise_default`).
     h : float
         For :func:`fit_models` (:func:`h_default`).
+    joined_ends : float
+        For :func:`grow`: the share of the source's branches that end on other structure
+        (:func:`~phloem.metrics.joined_end_share`).
     """
 
     total_turn: float
@@ -467,6 +470,7 @@ class SourceDefaults:
     turn_histogram: float
     denoise: float
     h: float
+    joined_ends: float = 0.0
 
 
 def source_defaults(
@@ -480,6 +484,7 @@ def source_defaults(
     turn_histogram: float | None = None,
     denoise: float | None = None,
     h: float | None = None,
+    joined_ends: float | None = None,
     guided: bool = False,
 ) -> SourceDefaults:
     """Every option that :func:`synthesize` defaults from its source skeleton, resolved at once.
@@ -488,7 +493,8 @@ def source_defaults(
     skeleton grows the same way from each of them. A value chosen by the caller is kept; those
     left at None get :func:`course_defaults`' (``total_turn``, ``repel_border``),
     :func:`course_edges_default`'s, :func:`orientation_default`'s,
-    :func:`direction_histogram_default`'s, :func:`denoise_default`'s and :func:`h_default`'s;
+    :func:`direction_histogram_default`'s, :func:`denoise_default`'s and :func:`h_default`'s,
+    ``joined_ends`` the source's :func:`~phloem.metrics.joined_end_share`;
     ``turn_histogram`` gets :data:`~phloem.branching.bending.TURN_HISTOGRAM`, or
     :data:`GUIDED_TURN_HISTOGRAM` with a guide.
 
@@ -496,7 +502,7 @@ def source_defaults(
     ----------
     skeleton : Skeleton
         The example structure.
-    total_turn, repel_border, course, orientation, direction_histogram, turn_histogram, denoise, h : optional
+    total_turn, repel_border, course, orientation, direction_histogram, turn_histogram, denoise, h, joined_ends : optional
         Values chosen by the caller.
     guided : bool, optional
         Whether :func:`grow` is given a ``guide`` (default False): a guide sets the way the new
@@ -532,6 +538,7 @@ def source_defaults(
         turn_histogram=turn_histogram,
         denoise=denoise_default(skeleton, denoise=denoise),
         h=h_default(skeleton, h=h),
+        joined_ends=joined_end_share(skeleton) if joined_ends is None else float(joined_ends),
     )
 
 
@@ -561,6 +568,7 @@ def synthesize(
     max_length: float | str | None = "input",
     colonize: bool = True,
     repel_border: bool | None = None,
+    joined_ends: float | None = None,
     guide: Any = None,
     valid: Any = "auto",
     render_options: dict[str, Any] | None = None,
@@ -612,6 +620,10 @@ def synthesize(
     repel_border : bool, optional
         See :func:`grow`; default :func:`course_defaults`'s for the source skeleton (on with
         ``total_turn``).
+    joined_ends : float, optional
+        See :func:`grow`; default the source's :func:`~phloem.metrics.joined_end_share`, so
+        that as many of the new branches end on other structure as the input's do (channels
+        that rejoin round islands; a tree's ends stay free). 0: the paper's trees.
     valid : (H, W) array_like of bool, "auto" or None, optional
         Where ``image`` shows content: structure is traced there only (when ``skeleton`` is
         not given), fragments are taken from inside it and the gaps completed from it.
@@ -683,7 +695,7 @@ def synthesize(
     d = source_defaults(
         source, total_turn=total_turn, repel_border=repel_border, course=course, orientation=orientation,
         direction_histogram=direction_histogram, turn_histogram=turn_histogram, denoise=denoise, h=h,
-        guided=guide is not None,
+        joined_ends=joined_ends, guided=guide is not None,
     )  # fmt: skip
     if models is None:
         bending, furcation = fit_models(
@@ -704,7 +716,7 @@ def synthesize(
     target = grow(
         bending, furcation, size=shape, seed=seed, generations=generations, max_length=max_length,
         colonize=colonize, repel_border=d.repel_border, guide=guide,
-        domain=None if ok is None else _kept_inside(ok, shape),
+        domain=None if ok is None else _kept_inside(ok, shape), joined_ends=d.joined_ends,
     )  # fmt: skip
     tick(3)
     ropts = {"valid": ok} | (render_options or {})

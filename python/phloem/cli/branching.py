@@ -144,7 +144,7 @@ def _resolve_models(args: argparse.Namespace, bend: Any) -> None:
 
 def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> None:
     """``--total-turn``, ``--repel-border``, ``--course``, ``--orientation``, ``--direction-histogram``,
-    ``--turn-histogram``, ``--denoise`` and ``--h`` left at their defaults, resolved for this example."""
+    ``--turn-histogram``, ``--denoise``, ``--h`` and ``--joined-ends`` left at their defaults, resolved for this example."""
     d = branching.source_defaults(
         source,
         total_turn=args.total_turn,
@@ -155,9 +155,11 @@ def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> Non
         turn_histogram=args.turn_histogram,
         denoise=args.denoise,
         h=args.h,
+        joined_ends=args.joined_ends,
         guided=getattr(args, "guide", None) is not None,
     )
     args.total_turn, args.repel_border, args.course = d.total_turn, d.repel_border, d.course
+    args.joined_ends = d.joined_ends
     args.orientation, args.direction_histogram = d.orientation, d.direction_histogram
     args.turn_histogram, args.denoise, args.h = d.turn_histogram, d.denoise, d.h
 
@@ -204,6 +206,16 @@ def _guide(path: str | None, args: argparse.Namespace) -> Any:
         return np.asarray(data, dtype=np.float64)
     g = io.read_image(p, max_pixels=args.max_pixels)
     return (g.mean(axis=2) if g.ndim == 3 else g) > 0.5
+
+
+def _share(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a share between 0 and 1, got {text!r}") from None
+    if not 0 <= v <= 1:
+        raise argparse.ArgumentTypeError(f"expected a share between 0 and 1, got {text}")
+    return v
 
 
 def _length(text: str) -> float | str:
@@ -426,6 +438,10 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
         help="count the image's border as structure in the colonisation density, so that stems do not run "
         "along it (default: on with the default --total-turn 2, else off: the border is empty space, as in the paper)",
     )
+    g.add_argument("--joined-ends", type=_share, default=None, metavar="SHARE",
+                   help="share of the branches that end on other structure, 0-1: ends are carried on to structure "
+                        "ahead of them, so that channels rejoin round islands (default: the example's share; "
+                        "0: the paper's trees)")  # fmt: skip
     g.add_argument("--guide", metavar="PATH", default=None,
                    help="guided synthesis (§4.5): a JSON list of [x, y] points or a mask image the structure should follow")  # fmt: skip
 
@@ -434,7 +450,7 @@ def _grow(args: argparse.Namespace, bend: Any, fur: Any, shape: tuple[int, int],
     return branching.grow(
         bend, fur, size=shape, seed=args.seed, generations=args.generations, max_length=args.max_length,
         colonize=not args.no_colonize, repel_border=args.repel_border, guide=_guide(args.guide, args),
-        progress=bar, max_memory=args.max_memory,
+        joined_ends=args.joined_ends, progress=bar, max_memory=args.max_memory,
     )  # fmt: skip
 
 
@@ -519,7 +535,7 @@ def _cmd_branching_run(args: argparse.Namespace) -> None:
         lambda bar: branching.synthesize(
             img, source if prior is None else prior[0], models=None if prior is None else prior[1:], size=args.size, seed=args.seed, trace_options=_trace_kwargs(args), h=args.h, order=args.order,
             m=args.m, n_best=args.n_best, course=args.course, coarse_history=args.coarse_history, total_turn=args.total_turn, turn_bound=args.turn_bound, orientation=args.orientation, turn_histogram=args.turn_histogram, stem_thickness=args.stem_thickness, direction_histogram=args.direction_histogram, layout=args.layout, denoise=args.denoise, generations=args.generations, max_length=args.max_length, colonize=not args.no_colonize, repel_border=args.repel_border,
-            guide=_guide(args.guide, args), valid=valid, render_options=_render_kwargs(args),
+            joined_ends=args.joined_ends, guide=_guide(args.guide, args), valid=valid, render_options=_render_kwargs(args),
             threads=args.threads, progress=bar, max_memory=args.max_memory,
         ),
     )  # fmt: skip

@@ -269,7 +269,8 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
                 denoise=d.denoise,
             )
             new = branching.grow(bend, fur, size=shape, seed=req.seed, max_length=req.max_length, guide=guide,
-                                 repel_border=d.repel_border, progress=progress, max_memory=project.max_memory)  # fmt: skip
+                                 repel_border=d.repel_border, joined_ends=d.joined_ends, progress=progress,
+                                 max_memory=project.max_memory)  # fmt: skip
             assert progress is not None
             progress(1, 1)  # a cancel during the last step writes nothing
             used = {
@@ -279,6 +280,7 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
                 "total_turn": d.total_turn,
                 "turn_bound": bend.turn_bound,
                 "repel_border": d.repel_border,
+                "joined_ends": d.joined_ends,
                 "orientation": d.orientation,
                 "direction_histogram": d.direction_histogram,
                 "denoise": d.denoise,
