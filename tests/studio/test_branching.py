@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from phloem import branching, io
+from phloem.metrics import joined_end_share
 from phloem.testing import channel_scene
 
 from .conftest import run_job
@@ -121,6 +122,7 @@ def test_trace_then_grow_then_render_write_the_cli_s_files_with_sidecars(client,
     # a guide says which way the structure runs, so the heading on the image is not matched
     assert branching.orientation_default(channel) == 3.0 and side["parameters"]["orientation"] == 0.0
     assert side["parameters"]["direction_histogram"] == 0.0
+    assert side["parameters"]["joined_ends"] == joined_end_share(channel)
     again = run_job(client, {**grow, "out": "grown2.json"})
     assert branching.Skeleton.load(project.root / again["outputs"][0]) == grown  # one seed, one structure
 
