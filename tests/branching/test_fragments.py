@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from phloem.branching import Branch, Skeleton, fragments, rigid_align
-from phloem.branching.fragments import Fragment, _dense, foreign_fragments
+from phloem.branching._elements import _dense
+from phloem.branching.fragments import Fragment, foreign_fragments
 from phloem.branching.synthetic import synthetic_skeleton
 from phloem.testing import channel_scene
 
@@ -56,7 +57,7 @@ def test_fragments_cover_the_skeleton_with_lambda_spacing() -> None:
             d = float(np.linalg.norm(f1.center - f0.center))
             assert d == pytest.approx(0.75 * (f0.radius + f1.radius), abs=0.6)
         # Every point of the skeleton lies in some disk.
-        _, pts, _ = _dense(b)
+        pts, _, _ = _dense(b, 0.5)
         cen = np.stack([f.center for f in own])
         rad = np.array([f.radius for f in own])
         assert (np.linalg.norm(pts[:, None] - cen[None], axis=2) <= rad[None]).any(axis=1).all()
@@ -103,7 +104,7 @@ def _foreign_by_brute_force(sk: Skeleton, frs: list[Fragment]) -> np.ndarray:
             not f.furcation
             and any(
                 bi != f.branch and bool((np.linalg.norm(pts - f.center, axis=1) - th < f.radius).any())
-                for bi, (_, pts, th) in enumerate(dense)
+                for bi, (pts, th, _) in enumerate(dense)
             )
             for f in frs
         ]

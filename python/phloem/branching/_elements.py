@@ -97,6 +97,15 @@ def _arc_lengths(branch: Branch) -> F64:
     return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(branch.points, axis=0), axis=1))])
 
 
+def _dense(branch: Branch, spacing: float) -> tuple[F64, F64, F64]:
+    """Points, thicknesses and arc positions along ``branch`` at most ``spacing`` px apart (ends included)."""
+    cum = _arc_lengths(branch)
+    n = max(2, math.ceil(cum[-1] / spacing) + 1)
+    s = np.linspace(0.0, float(cum[-1]), n)
+    pts = np.stack([np.interp(s, cum, branch.points[:, 0]), np.interp(s, cum, branch.points[:, 1])], axis=1)
+    return pts, np.interp(s, cum, branch.thickness), s
+
+
 def _free_ends(branch: Branch) -> list[int]:
     """The vertices where ``branch`` ends free: its last, and its first where it is a root
     (a child starts on its parent)."""

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree  # type: ignore[import-untyped]
 
-from ._elements import F64, I64, _arc_lengths
+from ._elements import F64, I64, _arc_lengths, _dense
 from .skeleton import Skeleton
 
 #: How far past the other structure's surface an end still counts as on it, px (at least;
@@ -25,26 +25,32 @@ END_SLACK = 2.0
 
 @dataclass(frozen=True)
 class _Lines:
-    """The skeleton's centre lines sampled every pixel, with a k-d tree over them."""
+    """The skeleton's centre lines sampled at most a pixel apart, with a k-d tree over them,
+    and each branch's children with the vertex they start at."""
 
     points: F64  # (N, 2) x, y
     radius: F64  # (N,) the branch's thickness there
     branch: I64  # (N,) which branch
     arc: F64  # (N,) arc length along that branch
     tree: cKDTree
+    children: dict[int, list[tuple[int, int]]]  # branch -> [(child, vertex)]
 
     @classmethod
     def of(cls, skeleton: Skeleton) -> _Lines:
-        pts, rad, br, arc = [], [], [], []
-        for i, b in enumerate(skeleton.branches):
-            s = _arc_lengths(b)
-            t = np.arange(0.0, s[-1] + 1e-9, 1.0) if s[-1] > 0 else np.zeros(1)
-            pts.append(np.stack([np.interp(t, s, b.points[:, 0]), np.interp(t, s, b.points[:, 1])], axis=1))
-            rad.append(np.interp(t, s, b.thickness))
-            br.append(np.full(len(t), i, np.int64))
-            arc.append(t)
-        p = np.vstack(pts)
-        return cls(p, np.concatenate(rad), np.concatenate(br), np.concatenate(arc), cKDTree(p))
+        dense = [_dense(b, 1.0) for b in skeleton.branches]
+        p = np.vstack([d[0] for d in dense])
+        children: dict[int, list[tuple[int, int]]] = {}
+        for j, c in enumerate(skeleton.branches):
+            if c.parent is not None:
+                children.setdefault(c.parent[0], []).append((j, c.parent[1]))
+        return cls(
+            p,
+            np.concatenate([d[1] for d in dense]),
+            np.concatenate([np.full(len(d[0]), i, np.int64) for i, d in enumerate(dense)]),
+            np.concatenate([d[2] for d in dense]),
+            cKDTree(p),
+            children,
+        )
 
     @property
     def max_radius(self) -> float:
@@ -65,11 +71,7 @@ def _others(skeleton: Skeleton, lines: _Lines, i: int, ids: I64) -> NDArray[np.b
     """
     b = skeleton.branches[i]
     end, r = b.points[-1], float(b.thickness[-1])
-    near_end = [
-        j
-        for j, c in enumerate(skeleton.branches)
-        if c.parent is not None and c.parent[0] == i and np.hypot(*(b.points[c.parent[1]] - end)) <= 2 * r + END_SLACK
-    ]
+    near_end = [j for j, v in lines.children.get(i, []) if np.hypot(*(b.points[v] - end)) <= 2 * r + END_SLACK]
     out = (lines.branch[ids] != i) & ~np.isin(lines.branch[ids], near_end)
     if b.parent is not None:
         pb, pv = b.parent

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validate import as_image, check_float, check_int
-from ._elements import _arc_lengths
+from ._elements import _arc_lengths, _dense
 from ._pixels import F64, _check_skeleton, _rot
 from .skeleton import Branch, Skeleton
 
@@ -141,16 +141,6 @@ def _best_angles(P: F64, Q: F64) -> F64:
     return np.asarray(np.arctan2(cross, dot), dtype=np.float64)
 
 
-def _dense(branch: Branch, step: float = 0.5) -> tuple[F64, F64, F64]:
-    """The branch sampled every ``step`` pixels of arc: arc lengths, points, thicknesses."""
-    seg = np.linalg.norm(np.diff(branch.points, axis=0), axis=1)
-    cum = np.concatenate([[0.0], np.cumsum(seg)])
-    total = float(cum[-1])
-    s = np.linspace(0.0, total, max(2, math.ceil(total / step) + 1))
-    pts = np.stack([np.interp(s, cum, branch.points[:, 0]), np.interp(s, cum, branch.points[:, 1])], axis=1)
-    return s, pts, np.interp(s, cum, branch.thickness)
-
-
 def _at(branch: Branch, cum: F64, arcs: F64) -> tuple[F64, F64]:
     a = np.clip(arcs, 0.0, cum[-1])
     pts = np.stack([np.interp(a, cum, branch.points[:, 0]), np.interp(a, cum, branch.points[:, 1])], axis=1)
@@ -169,7 +159,7 @@ def _radius_cap(skeleton: Skeleton, rf: float) -> float:
 
 def _centres(branch: Branch, lam: float, rf: float, rmax: float = np.inf) -> list[float]:
     """Arc lengths of the fragment centres: consecutive Euclidean distance ``λ (s_i + s_(i+1))``."""
-    s, pts, th = _dense(branch)
+    pts, th, s = _dense(branch, 0.5)
     rad = np.clip(rf * th, MIN_RADIUS, max(rmax, MIN_RADIUS))
     out = [0]
     i = 0
@@ -344,9 +334,9 @@ def foreign_fragments(skeleton: Skeleton, frs: list[Fragment], *, keep: int) -> 
     from scipy.spatial import cKDTree  # type: ignore[import-untyped]
 
     dense = [_dense(b, 1.0) for b in skeleton.branches]
-    pts = np.concatenate([d[1] for d in dense])
-    th = np.concatenate([d[2] for d in dense])
-    owner = np.concatenate([np.full(len(d[1]), bi) for bi, d in enumerate(dense)])
+    pts = np.concatenate([d[0] for d in dense])
+    th = np.concatenate([d[1] for d in dense])
+    owner = np.concatenate([np.full(len(d[0]), bi) for bi, d in enumerate(dense)])
     out = np.zeros(len(frs), bool)
     plain_ids = [i for i, f in enumerate(frs) if not f.furcation]
     if plain_ids:

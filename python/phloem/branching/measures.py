@@ -27,6 +27,7 @@ from ._elements import (
     _axis_bins,
     _bin,
     _check_skeleton,
+    _dense,
     _edge_headings,
     _free_ends,
     _tree_roots,
@@ -35,7 +36,7 @@ from ._ends import _Lines, _on_structure
 from ._layout import DirectionLayout
 from .bending import ARC  # the arc the bending model matches, so that the two stay one
 from .histograms import _hist, histogram_distance
-from .skeleton import Branch, Skeleton
+from .skeleton import Skeleton
 from .trace import DEFAULT_SIGMAS, _gray, _resolve_kind, _sigmas, trace
 
 __all__ = [
@@ -87,15 +88,6 @@ class Agreement:
     recall: float
     f1: float
     tolerance: float
-
-
-def _dense(branch: Branch, spacing: float) -> tuple[F64, F64, F64]:
-    """Points, thicknesses and arc positions along ``branch`` at most ``spacing`` px apart (ends included)."""
-    cum = _arc_lengths(branch)
-    n = max(2, math.ceil(cum[-1] / spacing) + 1)
-    s = np.linspace(0.0, float(cum[-1]), n)
-    pts = np.stack([np.interp(s, cum, branch.points[:, 0]), np.interp(s, cum, branch.points[:, 1])], axis=1)
-    return pts, np.interp(s, cum, branch.thickness), s
 
 
 def _sample(skeleton: Skeleton) -> tuple[F64, F64]:
