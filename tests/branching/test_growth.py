@@ -25,7 +25,7 @@ from phloem.branching import (
 )
 from phloem.branching._forest import input_trees
 from phloem.branching.bending import STEM_THICKNESS
-from phloem.branching.growth import _ordered
+from phloem.branching.growth import _joined_untapered, _ordered
 from phloem.branching.measures import sibling_order
 from phloem.testing import input_halves, shared_file
 
@@ -1208,3 +1208,59 @@ def test_grown_children_keep_their_templates_order_along_the_parent(monkeypatch)
     shuffled = [sibling_order(grow(bend, fur, size=(500, 800), seed=s)) for s in range(8)]
     assert max(ordered) < -0.8
     assert np.mean(shuffled) > -0.3
+
+
+# -- ends that taper ---------------------------------------------------------------------------
+
+
+def with_ends(sk: Skeleton, tail: np.ndarray) -> Skeleton:
+    """``sk`` with every branch 3 px thick and its last vertices ``tail`` times that."""
+    out = []
+    for b in sk.branches:
+        t = np.full(len(b), 3.0)
+        n = min(len(tail), len(b) - 1)
+        t[len(b) - n :] *= tail[len(tail) - n :]
+        out.append(Branch(b.points, t, b.parent))
+    return Skeleton(out, sk.shape)
+
+
+def end_ratios(sk: Skeleton, n: int) -> np.ndarray:
+    """Median over the long branches of their last ``n`` thicknesses over their level before."""
+    rows = [b.thickness[-n:] / np.median(b.thickness[-16:-10]) for b in sk.branches if len(b) >= 16]
+    return np.median(np.vstack(rows), axis=0)
+
+
+@pytest.fixture(scope="module")
+def tapering() -> Skeleton:
+    src = Skeleton.stack([synthetic_skeleton(10 + i, length=260.0) for i in range(3)]).resample(H)
+    return with_ends(src, np.array([0.8, 0.6, 0.4, 0.2]))
+
+
+def test_grown_branches_end_as_the_inputs_taper(tapering: Skeleton) -> None:
+    bend = BendingModel.fit(tapering, h=H, denoise=0.0)
+    # the model's view of the input (resampled to h) ends 0.8, 0.6, 0.4 of the level
+    taper = bend.end_taper
+    assert 3 <= len(taper) <= 4 and np.all(np.diff(taper) < 0) and taper[-1] <= 0.45
+    assert np.allclose(end_ratios(bend.source, len(taper)), taper, atol=1e-9)
+    grown = grow(bend, FurcationModel.fit(tapering, h=H), size=tapering.shape, seed=0, max_length="input")
+    assert np.allclose(end_ratios(grown, len(taper)), taper, atol=0.05)
+    # the same input without the taper: level ends in, level ends out
+    level = with_ends(tapering, np.ones(0))
+    flat = BendingModel.fit(level, h=H, denoise=0.0)
+    assert flat.end_taper.size == 0
+    grown = grow(flat, FurcationModel.fit(level, h=H), size=level.shape, seed=0, max_length="input")
+    assert np.allclose(end_ratios(grown, 3), 1.0, atol=0.02)
+
+
+def test_a_joined_end_keeps_its_thickness_to_the_junction() -> None:
+    grown = [
+        Branch([[10, 50], [30, 50], [50, 50], [70, 50]], [4.0, 4.0, 2.0, 1.0]),
+        Branch([[30, 50], [30, 40], [30, 30]], [3.0, 1.5, 0.75], parent=(0, 1)),
+    ]
+    levels = {0: np.array([4.0, 4.0]), 1: np.array([3.0, 3.0])}
+    # branch 1 ran on to (40, 20); branch 0 did not join anything
+    joined = Skeleton([grown[0], Branch([[30, 50], [30, 40], [30, 30], [40, 20]], [3.0, 1.5, 0.75, 0.75], (0, 1))])
+    out = _joined_untapered(joined, grown, levels)
+    assert np.array_equal(out.branches[1].thickness, [3.0, 3.0, 3.0, 3.0])
+    assert np.array_equal(out.branches[1].points, joined.branches[1].points)
+    assert out.branches[0] == grown[0]

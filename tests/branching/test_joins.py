@@ -138,22 +138,26 @@ def test_grown_structure_ends_on_structure_about_as_often_as_its_input() -> None
     assert share > 0.5
     assert source_defaults(src).joined_ends == share
     bend, fur = fit_models(src, h=H)
-    for seed in (0, 1, 2):
+    shares = []
+    for seed in range(6):
         plain = grow(bend, fur, size=src.shape, seed=seed, max_length="input")
         joined = grow(bend, fur, size=src.shape, seed=seed, max_length="input", joined_ends=share)
         n = len(joined.branches)
         # towards the input's share, and not past it by more than a way's side effects
         assert joined_end_share(plain) < joined_end_share(joined) <= share + 2.0 / n
-        if seed != 1:  # at seed 1 too few grown ends stop within reach of structure ahead
-            assert joined_end_share(plain) < share - 0.3 and joined_end_share(joined) >= share - 1.0 / n
+        shares.append((joined_end_share(plain), joined_end_share(joined)))
         # joining only appends to the paper's branches, and stays in the image
         assert len(plain.branches) == n
         for a, b in zip(plain.branches, joined.branches, strict=True):
             assert np.array_equal(b.points[: len(a.points)], a.points) and a.parent == b.parent
         pts = np.vstack([b.points for b in joined.branches])
         assert pts.min() >= 0 and (pts.max(axis=0) <= np.array(src.shape[::-1]) - 1).all()
+    # over the seeds, near the input's share where growth alone ends far below it (a seed
+    # whose grown ends stop out of reach of structure ahead falls short)
+    plain_mean, joined_mean = np.mean(shares, axis=0)
+    assert plain_mean < share - 0.3 and joined_mean >= share - 0.15
     # the same seed, the same structure
-    assert grow(bend, fur, size=src.shape, seed=2, max_length="input", joined_ends=share) == joined
+    assert grow(bend, fur, size=src.shape, seed=5, max_length="input", joined_ends=share) == joined
 
 
 def test_grow_names_a_bad_joined_ends() -> None:

@@ -96,6 +96,12 @@ class _World:
             turns = arc_window_turns(windows, m.arc_edges)
             np.add.at(self.counts_arc, _bin(turns, 0.0, math.pi, m.bins), 1.0)
 
+    def recount_r(self, before: F64, after: F64) -> None:
+        """Move counted elements' thicknesses from ``before`` to ``after`` in the thickness histogram."""
+        m = self.model
+        np.add.at(self.counts_r, _bin(before, *m.range_r, m.bins), -1.0)
+        np.add.at(self.counts_r, _bin(after, *m.range_r, m.bins), 1.0)
+
     def stamp(self, pts: F64, thick: F64, branch: int, first: int) -> None:
         """Write segments into the density map, only within ``3ρ`` of them (§4.4 local update).
 

@@ -52,6 +52,7 @@ __all__ = [
     "ARC",
     "DENOISE",
     "STEM_THICKNESS",
+    "TAPER_VERTICES",
     "TURN_BOUND",
     "TURN_HISTOGRAM",
     "BendingModel",
@@ -79,6 +80,14 @@ TURN_BOUND = 5.0
 #: Weight of the heading-change histogram's matching (measured in
 #: ``docs/pipelines/branching/quality.md``, "The heading terms over many seeds").
 TURN_HISTOGRAM = 10.0
+
+#: Vertices at a branch's end over which :attr:`BendingModel.end_taper` is measured; the
+#: ``_TAPER_LEVEL`` vertices before them give the thickness the end tapers from.
+TAPER_VERTICES = 10
+_TAPER_LEVEL = 6
+#: An end vertex at least this share of the level (median over the input's branches) does
+#: not taper: a traced photo's thickness estimate stays level to the tip.
+_TAPER_MIN = 0.95
 
 
 def course_deviation(points: F64, tips: I64, edges: int) -> F64:
@@ -158,6 +167,32 @@ def arc_window_turns(alpha: F64, edges: int) -> F64:
 
 def _angle(a: F64) -> F64:
     return np.asarray(_mod_2pi(np.asarray(a, np.float64) + np.pi) - np.pi, dtype=np.float64)
+
+
+def _end_taper(source: Skeleton) -> F64:
+    """The input's thickness at its branches' last vertices over the level before them.
+
+    Per vertex from ``TAPER_VERTICES`` before the end to the end, the median over the
+    branches long enough to have a level (``TAPER_VERTICES + _TAPER_LEVEL`` vertices, at
+    least three of them) of its thickness over the median of the ``_TAPER_LEVEL`` before;
+    capped at 1 and cut to the vertices from the last one below ``_TAPER_MIN`` onwards.
+    Empty where the ends do not taper.
+    """
+    need = TAPER_VERTICES + _TAPER_LEVEL
+    rows = []
+    for b in source.branches:
+        if len(b) >= need:
+            t = np.asarray(b.thickness, np.float64)
+            level = float(np.median(t[-need:-TAPER_VERTICES]))
+            if level > 0:
+                rows.append(t[-TAPER_VERTICES:] / level)
+    if len(rows) < 3:
+        return np.zeros(0)
+    ratio = np.minimum(np.median(np.vstack(rows), axis=0), 1.0)
+    # the tapered run is the one that ends at the tip
+    kept = np.flatnonzero(ratio >= _TAPER_MIN)
+    first = 0 if not len(kept) else int(kept[-1]) + 1
+    return np.asarray(ratio[first:], np.float64)
 
 
 def default_h(skeleton: Skeleton) -> float:
@@ -241,6 +276,12 @@ class BendingModel:
     denoise : float
         Standard deviation (px) of the Gaussian the input's branches were smoothed by along
         their length before fitting (0: none), see :meth:`fit`.
+    end_taper : ndarray, shape (T,)
+        How the input's branches taper at their ends: the thickness of a branch's last ``T``
+        vertices (``T`` at most :data:`TAPER_VERTICES`) over its level before them, the
+        median over the input's branches. Grown branches end with it
+        (:func:`~phloem.branching.grow`). Empty where the input's ends keep their thickness,
+        as a traced photo's do.
 
     Examples
     --------
@@ -302,6 +343,9 @@ class BendingModel:
     layout: float = 0.0
 
     denoise: float = 0.0
+    # (T,) the input's thickness over the last T vertices of a branch, over its level before
+    # them (empty: the input's ends do not taper)
+    end_taper: F64 = field(default_factory=lambda: np.zeros(0), repr=False)
 
     @classmethod
     def fit(
@@ -602,6 +646,7 @@ class BendingModel:
             direction_layout=DirectionLayout.fit(skeleton) if layout > 0 else None,
             layout=layout,
             denoise=denoise,
+            end_taper=_end_taper(src),
         )
 
     def log_quality(

@@ -94,6 +94,8 @@ class _Growing:
     parent_near: tuple[F64, F64] | None = None
     # a stem's template thickness per vertex (:meth:`BendingModel.stem_profile`), or None
     profile: F64 | None = None
+    # the thickness of the last vertices before the end tapered them (see ``_Grower.taper``)
+    level: F64 | None = None
 
     def length(self) -> float:
         return float(len(self.points) - 1)
@@ -263,6 +265,30 @@ class _Grower:
         w.add_segments(pts)
         self.flush(br, final=False)
 
+    def taper(self, br: _Growing) -> None:
+        """End ``br`` as the input's branches end: its last vertices' thickness times
+        :attr:`BendingModel.end_taper` (all but the first vertex on a shorter branch).
+
+        The elements' thicknesses and the structure's thickness histogram follow, so that
+        the histogram matching sees the tapered ends; ``br.level`` keeps what was there.
+        """
+        prof = self.model.end_taper
+        n = min(len(prof), len(br.thickness) - 1)
+        if n <= 0:
+            return
+        first = len(br.thickness) - n
+        old = np.asarray(br.thickness[first:], np.float64)
+        new = old * prof[len(prof) - n :]
+        br.level = old
+        br.thickness[first:] = new.tolist()
+        # elements are the interior vertices: vertex v holds element v - 1 (the tip holds none)
+        inner = [v for v in range(first, len(br.thickness) - 1) if 0 <= v - 1 < len(br.r)]
+        if inner:
+            before = np.array([br.r[v - 1] for v in inner])
+            for v in inner:
+                br.r[v - 1] = br.thickness[v]
+            self.world.recount_r(before, np.array([br.r[v - 1] for v in inner]))
+
     def flush(self, br: _Growing, *, final: bool) -> None:
         """Write the branch's segments into the density map, holding back the last ``3ρ`` of arc
         length while it grows so that a tip does not repel itself."""
@@ -330,6 +356,7 @@ def _new_branch(
 
 
 def _finish(grower: _Grower, br: _Growing) -> Branch:
+    grower.taper(br)
     grower.flush(br, final=True)
     return Branch(np.asarray(br.points), np.asarray(br.thickness), br.parent)
 
@@ -502,6 +529,20 @@ def _place_root(
         if br is not None:
             return br
     return None
+
+
+def _joined_untapered(joined: Skeleton, grown: list[Branch], levels: dict[int, F64]) -> Skeleton:
+    """``joined`` with each joined end's taper taken back: a channel that runs on into another
+    keeps its thickness to the junction, as the input's joined ends do."""
+    branches = list(joined.branches)
+    for i, level in levels.items():
+        n0 = len(grown[i])
+        if len(branches[i]) > n0:
+            t = branches[i].thickness.copy()
+            t[n0 - len(level) : n0] = level
+            t[n0:] = level[-1]
+            branches[i] = Branch(branches[i].points, t, branches[i].parent)
+    return Skeleton(branches, joined.shape)
 
 
 @renamed(shape="size")
@@ -718,6 +759,7 @@ def grow(
     trees = 0
     turn = 0  # trees attempted: the template of the next one
     tried: dict[int, list[int]] = {}  # furcation vertices used or tried on each branch
+    levels: dict[int, F64] = {}  # each branch's end thickness before it tapered
     started: dict[int, list[int]] = {}  # the vertices of each branch's children, in creation order
     failures = 0
 
@@ -799,6 +841,8 @@ def grow(
                     bending.start_elements(root)[1]
                 )
             branch = _finish(grower, current)
+            if current.level is not None:
+                levels[len(out)] = current.level
             out.append(branch)
             if branch.parent is not None:
                 started.setdefault(branch.parent[0], []).append(branch.parent[1])
@@ -891,7 +935,7 @@ def grow(
             break
     grown = Skeleton(out, shape)
     if joined_ends > 0 and out:
-        grown = join_ends(grown, joined_ends, reach=3.0 * m * h, step=h, domain=inside)
+        grown = _joined_untapered(join_ends(grown, joined_ends, reach=3.0 * m * h, step=h, domain=inside), out, levels)
     return grown
 
 
