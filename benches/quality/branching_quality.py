@@ -44,6 +44,9 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
 - the share of the branches that end on other structure, input and output
   (``joined_end_share``, not a pass mark: a braided river's channels that rejoin round islands,
   where a grown tree's stop short);
+- how far the branches' ends thin, input (resampled to the bending model's step) and output:
+  the last ratio of ``end_taper``, 1 where the ends do not taper (not a pass mark: blunt ends
+  where the input's channels thin out);
 - the share of the input's background grain that the output's completed gaps keep
   (``background_grain`` of output over input, not a pass mark: a fill that settled on a few
   smooth background patches);
@@ -93,6 +96,7 @@ from phloem.branching import (
     trace,
     valid_region,
 )
+from phloem.branching.bending import TAPER_VERTICES
 from phloem.branching.measures import resolve_trace_options
 from phloem.metrics import (
     background_grain,
@@ -101,6 +105,7 @@ from phloem.metrics import (
     drift,
     drift_noise,
     empty_space,
+    end_taper,
     furcation_gaps,
     joined_end_share,
     largest_tree_share,
@@ -163,6 +168,8 @@ class Result:
     past_end_out: float = math.nan
     joined_in: float = math.nan
     joined_out: float = math.nan
+    taper_in: float = math.nan
+    taper_out: float = math.nan
     grain_in: float = math.nan
     grain_out: float = math.nan
     repetition_in: float = math.nan
@@ -320,6 +327,8 @@ def measure(
         r.past_end_in, r.past_end_out = past_end_share(img, src), past_end_share(res.image, tgt)
     # nor this: how many branches end on other structure (channels that rejoin round islands)
     r.joined_in, r.joined_out = joined_end_share(src), joined_end_share(tgt)
+    # nor this: how far the ends thin (blunt grown ends where the input's channels thin out)
+    r.taper_in, r.taper_out = (tip_taper(sk) for sk in (src.resample(res.bending.h), tgt))
     # nor this: how much of the background's grain the completed gaps keep (a fill that
     # settled on a few smooth patches: an elevation model's relief as a flat plateau)
     with contextlib.suppress(ValueError):
@@ -382,6 +391,15 @@ def median_gap(skeleton: Skeleton) -> float:
     return float(np.median(gaps)) if len(gaps) else math.nan
 
 
+def tip_taper(skeleton: Skeleton) -> float:
+    """The last ratio of ``end_taper``: the tip's thickness over its level (1: the ends do not
+    taper; NaN: fewer than three branches long enough to tell, ``TAPER_VERTICES`` + 6 vertices)."""
+    if sum(len(b) >= TAPER_VERTICES + 6 for b in skeleton.branches) < 3:
+        return math.nan
+    taper = end_taper(skeleton)
+    return float(taper[-1]) if len(taper) else 1.0
+
+
 def median_parent_turn(skeleton: Skeleton) -> float:
     """The median of ``parent_turns`` (NaN: no child measured)."""
     turns = parent_turns(skeleton)
@@ -399,7 +417,7 @@ def _f(x: float | None, fmt: str = ".2f") -> str:
 def table(results: list[Result]) -> str:
     head = (
         "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input's noise) | heading in → out (rad) "
-        "| along the frame in → out | empty space px in → out | layout in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | parent's turn at children in → out | directions L1 (input's concentration) | contrast in → out (kept) | past ends in → out | joined ends in → out | grain kept | grain repetition in → out | gaps' grain repetition in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
+        "| along the frame in → out | empty space px in → out | layout in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | parent's turn at children in → out | directions L1 (input's concentration) | contrast in → out (kept) | past ends in → out | joined ends in → out | ends' taper in → out | grain kept | grain repetition in → out | gaps' grain repetition in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for r in results:
@@ -411,7 +429,7 @@ def table(results: list[Result]) -> str:
         lines.append(
             f"| {r.input} | {r.seed} | {size} | {_f(r.f1)} ({_f(r.precision)}/{_f(r.recall)}) "
             f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} ({_f(r.drift_noise)}) | {_f(r.heading_in)} → {_f(r.heading_out)} "
-            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.empty_in, '.0f')} → {_f(r.empty_out, '.0f')} | {_f(r.layout_in)} → {_f(r.layout_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.parent_turn_in)} → {_f(r.parent_turn_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.past_end_in)} → {_f(r.past_end_out)} | {_f(r.joined_in)} → {_f(r.joined_out)} | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {_f(r.repetition_in)} → {_f(r.repetition_out)} | {_f(r.gap_repetition_in)} → {_f(r.gap_repetition_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
+            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.empty_in, '.0f')} → {_f(r.empty_out, '.0f')} | {_f(r.layout_in)} → {_f(r.layout_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.parent_turn_in)} → {_f(r.parent_turn_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.past_end_in)} → {_f(r.past_end_out)} | {_f(r.joined_in)} → {_f(r.joined_out)} | {_f(r.taper_in)} → {_f(r.taper_out)} | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {_f(r.repetition_in)} → {_f(r.repetition_out)} | {_f(r.gap_repetition_in)} → {_f(r.gap_repetition_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
             f"| {_f(r.seconds, '.1f')} | {fails} |"
         )
     return "\n".join(lines)

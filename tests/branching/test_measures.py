@@ -20,6 +20,7 @@ from phloem.branching.measures import (
     drift,
     drift_noise,
     empty_space,
+    end_taper,
     furcation_gaps,
     heading_change_histogram,
     heading_changes,
@@ -49,7 +50,7 @@ def test_metrics_reexports_the_measures() -> None:
         "retrace_agreement", "skeleton_agreement", "largest_tree_share", "border_share", "drift", "drift_noise",
         "two_level_fraction", "start_turns", "furcation_gaps", "direction_histogram", "direction_concentration",
         "orientation_distance", "structure_contrast", "background_grain", "sibling_order", "parent_turns",
-        "empty_space", "layout_agreement", "joined_end_share",
+        "empty_space", "layout_agreement", "joined_end_share", "end_taper",
     ):  # fmt: skip
         assert getattr(phloem.metrics, name) is getattr(phloem.branching.measures, name)
         assert name in phloem.metrics.__all__
@@ -757,3 +758,31 @@ def test_layout_agreement_is_the_mean_log_density_under_the_inputs_layout() -> N
         layout_agreement(Skeleton([], shape=(300, 300)), src)
     with pytest.raises(TypeError, match="^skeleton:"):
         layout_agreement(src, None)  # type: ignore[arg-type]
+
+
+# -- end taper ----------------------------------------------------------------------------------
+
+
+def test_end_taper_is_the_median_end_over_the_level_before() -> None:
+    rng = np.random.default_rng(0)
+    branches = []
+    for i in range(5):
+        n = 20 + 3 * i
+        level = 2.0 + i
+        # the level with some noise, then an end that thins to a third over four vertices
+        t = level * (1 + 0.02 * rng.standard_normal(n))
+        t[-4:] = level * np.array([0.8, 0.6, 0.45, 0.33])
+        branches.append(Branch(np.c_[np.arange(n, dtype=float), np.full(n, 10.0 * i)], t))
+    taper = end_taper(Skeleton(branches))
+    assert taper.shape == (4,)
+    assert np.allclose(taper, [0.8, 0.6, 0.45, 0.33], atol=0.02)
+    # level ends, too few long branches, or only short ones: no taper
+    level = Skeleton([Branch(b.points, float(np.median(b.thickness))) for b in branches])
+    assert end_taper(level).size == 0
+    assert end_taper(Skeleton(branches[:2])).size == 0
+    assert end_taper(Skeleton([Branch(b.points[:15], b.thickness[:15]) for b in branches])).size == 0
+    # an end that thickens (a blob) is capped at the level, not a taper
+    blob = Skeleton([Branch(b.points, np.r_[b.thickness[:-3], 3 * b.thickness[-3:]]) for b in level.branches])
+    assert end_taper(blob).size == 0
+    with pytest.raises(TypeError, match="skeleton"):
+        end_taper([[0, 0], [1, 1]])  # type: ignore[arg-type]

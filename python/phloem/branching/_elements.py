@@ -185,3 +185,38 @@ def _tangent(branch: Branch, v: int) -> float:
     i0, i1 = max(v - 1, 0), min(v + 1, len(p) - 1)
     d = p[i1] - p[i0]
     return float(math.atan2(-d[1], d[0]))
+
+
+#: Vertices at a branch's end over which ``BendingModel.end_taper`` is measured; the
+#: ``_TAPER_LEVEL`` vertices before them give the thickness the end tapers from.
+TAPER_VERTICES = 10
+_TAPER_LEVEL = 6
+#: An end vertex at least this share of the level (median over the input's branches) does
+#: not taper: a traced photo's thickness estimate stays level to the tip.
+_TAPER_MIN = 0.95
+
+
+def _end_taper(source: Skeleton) -> F64:
+    """The input's thickness at its branches' last vertices over the level before them.
+
+    Per vertex from ``TAPER_VERTICES`` before the end to the end, the median over the
+    branches long enough to have a level (``TAPER_VERTICES + _TAPER_LEVEL`` vertices, at
+    least three of them) of its thickness over the median of the ``_TAPER_LEVEL`` before;
+    capped at 1 and cut to the vertices from the last one below ``_TAPER_MIN`` onwards.
+    Empty where the ends do not taper.
+    """
+    need = TAPER_VERTICES + _TAPER_LEVEL
+    rows = []
+    for b in source.branches:
+        if len(b) >= need:
+            t = np.asarray(b.thickness, np.float64)
+            level = float(np.median(t[-need:-TAPER_VERTICES]))
+            if level > 0:
+                rows.append(t[-TAPER_VERTICES:] / level)
+    if len(rows) < 3:
+        return np.zeros(0)
+    ratio = np.minimum(np.median(np.vstack(rows), axis=0), 1.0)
+    # the tapered run is the one that ends at the tip
+    kept = np.flatnonzero(ratio >= _TAPER_MIN)
+    first = 0 if not len(kept) else int(kept[-1]) + 1
+    return np.asarray(ratio[first:], np.float64)

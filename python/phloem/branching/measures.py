@@ -6,7 +6,8 @@ structure (heading change over a fixed arc and its histogram distance, "drift"),
 mask stay a mask (two-level fraction), does the structure stand out from its surroundings
 as much as the input's (structure contrast), does it spread over its picture as the input's
 does (empty space), do its branches end where the skeleton's do (what stands out past
-their ends), and do as many of them end on other structure (joined ends). Re-exported by :mod:`phloem.metrics`.
+their ends), do as many of them end on other structure (joined ends), and do their ends
+thin as the input's do (end taper). Re-exported by :mod:`phloem.metrics`.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from ._elements import (
     _check_skeleton,
     _dense,
     _edge_headings,
+    _end_taper,
     _free_ends,
     _tree_roots,
 )
@@ -48,6 +50,7 @@ __all__ = [
     "drift",
     "drift_noise",
     "empty_space",
+    "end_taper",
     "furcation_gaps",
     "heading_change_histogram",
     "heading_changes",
@@ -290,6 +293,44 @@ def joined_end_share(skeleton: Skeleton) -> float:
     """
     _check_skeleton(skeleton)
     return float(_on_structure(skeleton, _Lines.of(skeleton)).mean())
+
+
+def end_taper(skeleton: Skeleton) -> F64:
+    """How the branches thin towards their ends: thickness over the level before, per vertex.
+
+    For each of a branch's last :data:`~phloem.branching.bending.TAPER_VERTICES` (10)
+    vertices, the median over the branches with 6 more vertices before those of its
+    thickness over the median of those 6 (the level the end tapers from). Capped at 1 and cut
+    to the run below 0.95 that ends at the tip; empty where the ends keep their thickness
+    (as a traced photo's do) or fewer than three branches are long enough.
+
+    A traced mask's channels and cracks thin to their ends, and
+    :attr:`~phloem.branching.BendingModel.end_taper` is this measure of the input, which a
+    grown branch ends with. The measure counts vertices, so compare skeletons resampled to
+    the same step (:meth:`~phloem.branching.Skeleton.resample`).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+
+    Returns
+    -------
+    ndarray of float64, shape (T,)
+        ``T <= 10`` ratios in ``(0, 0.95)``, the last at the tip.
+
+    Examples
+    --------
+    >>> from phloem.branching import Branch, Skeleton
+    >>> ends = [0.9, 0.6, 0.3]
+    >>> sk = Skeleton([Branch([[0, 10 * i], [4, 10 * i]], 2.0).resample(0.25) for i in range(3)])
+    >>> sk = Skeleton([Branch(b.points, [2.0] * (len(b) - 3) + [2 * e for e in ends]) for b in sk.branches])
+    >>> end_taper(sk).round(2).tolist()
+    [0.9, 0.6, 0.3]
+    >>> end_taper(Skeleton([Branch(b.points, 2.0) for b in sk.branches])).size
+    0
+    """
+    _check_skeleton(skeleton)
+    return _end_taper(skeleton)
 
 
 def border_share(skeleton: Skeleton, *, band: float | None = None) -> float:
