@@ -197,12 +197,12 @@ _TAPER_MIN = 0.95
 
 
 def _end_taper(source: Skeleton) -> F64:
-    """The input's thickness at its branches' last vertices over the level before them.
+    """The thickness at a skeleton's branch ends over the level before them (``end_taper``).
 
     Per vertex from ``TAPER_VERTICES`` before the end to the end, the median over the
     branches long enough to have a level (``TAPER_VERTICES + _TAPER_LEVEL`` vertices, at
     least three of them) of its thickness over the median of the ``_TAPER_LEVEL`` before;
-    capped at 1 and cut to the vertices from the last one below ``_TAPER_MIN`` onwards.
+    capped at 1 and cut to the vertices after the last one at ``_TAPER_MIN`` or more.
     Empty where the ends do not taper.
     """
     need = TAPER_VERTICES + _TAPER_LEVEL
