@@ -282,12 +282,11 @@ class _Grower:
         br.level = old
         br.thickness[first:] = new.tolist()
         # elements are the interior vertices: vertex v holds element v - 1 (the tip holds none)
-        inner = [v for v in range(first, len(br.thickness) - 1) if 0 <= v - 1 < len(br.r)]
-        if inner:
-            before = np.array([br.r[v - 1] for v in inner])
-            for v in inner:
-                br.r[v - 1] = br.thickness[v]
-            self.world.recount_r(before, np.array([br.r[v - 1] for v in inner]))
+        lo, hi = max(first - 1, 0), min(len(br.thickness) - 2, len(br.r))
+        if lo < hi:
+            before = np.array(br.r[lo:hi])
+            br.r[lo:hi] = br.thickness[lo + 1 : hi + 1]
+            self.world.recount_r(before, np.array(br.r[lo:hi]))
 
     def flush(self, br: _Growing, *, final: bool) -> None:
         """Write the branch's segments into the density map, holding back the last ``3ρ`` of arc
