@@ -23,6 +23,7 @@ ends, ``past_end_share``, the share of branches that end on other structure,
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -70,12 +71,14 @@ def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[
     except ValueError:  # nothing to trace
         retraced = _show(res.image)
     two = "" if r.two_level is None else f", 2-level {100 * r.two_level:.1f}%"
+    # the measure needs three branches of 16 vertices; say so only where it could not be taken
+    short = " (nan: too few long branches)" if math.isnan(r.taper_in) or math.isnan(r.taper_out) else ""
     print(
         f"{path.name}: F1 {r.f1:.2f}, share {r.share_in:.2f}->{r.share_out:.2f}, drift {r.drift:.2f}{two}, "
         f"grain repetition {r.repetition_in:.3f}->{r.repetition_out:.3f} (gaps {r.gap_repetition_in:.3f}->"
         f"{r.gap_repetition_out:.3f}), empty space {r.empty_in:.0f}->{r.empty_out:.0f} px, "
         f"layout {r.layout_in:.2f}->{r.layout_out:.2f}, past ends {r.past_end_in:.3f}->{r.past_end_out:.3f}, "
-        f"joined ends {r.joined_in:.2f}->{r.joined_out:.2f}, ends' taper {r.taper_in:.2f}->{r.taper_out:.2f} (nan: too few long branches)"
+        f"joined ends {r.joined_in:.2f}->{r.joined_out:.2f}, ends' taper {r.taper_in:.2f}->{r.taper_out:.2f}{short}"
     )
     return [
         _label(_fit(_show(img), interpolation=cv2.INTER_AREA), f"{name} seed {seed}, {seconds:.0f} s"),
