@@ -47,6 +47,9 @@ seed=seed)`` with nothing else set, then the measures of :mod:`phloem.branching.
 - how far the branches' ends thin, input (resampled to the bending model's step) and output:
   the last ratio of ``end_taper``, 1 where the ends do not taper (not a pass mark: blunt ends
   where the input's channels thin out);
+- the share of the children that grow wider than 1.5 times their parent at the attachment,
+  input and output (``wider_children``, not a pass mark: side channels that swell into
+  fingers and blobs where the input's stay narrower than the channel they leave);
 - the share of the input's background grain that the output's completed gaps keep
   (``background_grain`` of output over input, not a pass mark: a fill that settled on a few
   smooth background patches);
@@ -120,6 +123,7 @@ from phloem.metrics import (
     start_turns,
     structure_contrast,
     two_level_fraction,
+    wider_children,
 )
 from phloem.testing import TRACE_SETTINGS, input_halves, shared_path
 
@@ -170,6 +174,8 @@ class Result:
     joined_out: float = math.nan
     taper_in: float = math.nan
     taper_out: float = math.nan
+    wider_in: float = math.nan
+    wider_out: float = math.nan
     grain_in: float = math.nan
     grain_out: float = math.nan
     repetition_in: float = math.nan
@@ -329,6 +335,8 @@ def measure(
     r.joined_in, r.joined_out = joined_end_share(src), joined_end_share(tgt)
     # nor this: how far the ends thin (blunt grown ends where the input's channels thin out)
     r.taper_in, r.taper_out = (tip_taper(sk) for sk in (src.resample(res.bending.h), tgt))
+    # nor this: how many children swell past their parent (fingers and blobs on a river)
+    r.wider_in, r.wider_out = wider_children(src), wider_children(tgt)
     # nor this: how much of the background's grain the completed gaps keep (a fill that
     # settled on a few smooth patches: an elevation model's relief as a flat plateau)
     with contextlib.suppress(ValueError):
@@ -417,7 +425,7 @@ def _f(x: float | None, fmt: str = ".2f") -> str:
 def table(results: list[Result]) -> str:
     head = (
         "| input | seed | size | re-trace F1 (P/R) | tree share in → out | drift L1 (input's noise) | heading in → out (rad) "
-        "| along the frame in → out | empty space px in → out | layout in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | parent's turn at children in → out | directions L1 (input's concentration) | contrast in → out (kept) | past ends in → out | joined ends in → out | ends' taper in → out | grain kept | grain repetition in → out | gaps' grain repetition in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
+        "| along the frame in → out | empty space px in → out | layout in → out | hooked starts in → out | children's gap px in → out | siblings' order in → out | parent's turn at children in → out | directions L1 (input's concentration) | contrast in → out (kept) | past ends in → out | joined ends in → out | ends' taper in → out | wider children in → out | grain kept | grain repetition in → out | gaps' grain repetition in → out | two-level | angle d (spread) | thickness d (spread) | time s | fails |"
     )
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for r in results:
@@ -429,7 +437,7 @@ def table(results: list[Result]) -> str:
         lines.append(
             f"| {r.input} | {r.seed} | {size} | {_f(r.f1)} ({_f(r.precision)}/{_f(r.recall)}) "
             f"| {_f(r.share_in)} → {_f(r.share_out)} | {_f(r.drift)} ({_f(r.drift_noise)}) | {_f(r.heading_in)} → {_f(r.heading_out)} "
-            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.empty_in, '.0f')} → {_f(r.empty_out, '.0f')} | {_f(r.layout_in)} → {_f(r.layout_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.parent_turn_in)} → {_f(r.parent_turn_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.past_end_in)} → {_f(r.past_end_out)} | {_f(r.joined_in)} → {_f(r.joined_out)} | {_f(r.taper_in)} → {_f(r.taper_out)} | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {_f(r.repetition_in)} → {_f(r.repetition_out)} | {_f(r.gap_repetition_in)} → {_f(r.gap_repetition_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
+            f"| {_f(r.border_in)} → {_f(r.border_out)} | {_f(r.empty_in, '.0f')} → {_f(r.empty_out, '.0f')} | {_f(r.layout_in)} → {_f(r.layout_out)} | {_f(r.hooks_in)} → {_f(r.hooks_out)} | {_f(r.gap_in, '.0f')} → {_f(r.gap_out, '.0f')} | {_f(r.siblings_in)} → {_f(r.siblings_out)} | {_f(r.parent_turn_in)} → {_f(r.parent_turn_out)} | {_f(r.directions)} ({_f(r.concentration)}) | {_f(r.contrast_in)} → {_f(r.contrast_out)} ({_f(r.contrast_out / r.contrast_in if r.contrast_in else math.nan)}) | {_f(r.past_end_in)} → {_f(r.past_end_out)} | {_f(r.joined_in)} → {_f(r.joined_out)} | {_f(r.taper_in)} → {_f(r.taper_out)} | {_f(r.wider_in)} → {_f(r.wider_out)} | {_f(r.grain_out / r.grain_in if r.grain_in else math.nan)} | {_f(r.repetition_in)} → {_f(r.repetition_out)} | {_f(r.gap_repetition_in)} → {_f(r.gap_repetition_out)} | {tl} | {_f(r.angle)} ({_f(r.angle_spread)}) | {_f(r.thickness)} ({_f(r.thickness_spread)}) "
             f"| {_f(r.seconds, '.1f')} | {fails} |"
         )
     return "\n".join(lines)

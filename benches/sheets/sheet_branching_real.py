@@ -15,7 +15,8 @@ input's structure contrast and background grain the output kept, and the repetit
 output's fine grain in the gaps as a multiple of the input background's ("gaps' rep"; over the
 whole image and the gaps on the printed line, with what stands out past the branches' free
 ends, ``past_end_share``, the share of branches that end on other structure,
-``joined_end_share``, and how far the ends thin, the last ratio of ``end_taper``).
+``joined_end_share``, how far the ends thin, the last ratio of ``end_taper``, and the share
+of children wider than their parent, ``wider_children``).
 ``--tuned-trace``, ``--sigmas``, ``--gap``, ``--subpixel``, ``--threshold-scale``,
 ``--gap-diversity`` and ``--layout`` are those of the quality script.
 """
@@ -78,7 +79,8 @@ def row(path: Path, seed: int, max_side: int, args: argparse.Namespace) -> list[
         f"grain repetition {r.repetition_in:.3f}->{r.repetition_out:.3f} (gaps {r.gap_repetition_in:.3f}->"
         f"{r.gap_repetition_out:.3f}), empty space {r.empty_in:.0f}->{r.empty_out:.0f} px, "
         f"layout {r.layout_in:.2f}->{r.layout_out:.2f}, past ends {r.past_end_in:.3f}->{r.past_end_out:.3f}, "
-        f"joined ends {r.joined_in:.2f}->{r.joined_out:.2f}, ends' taper {r.taper_in:.2f}->{r.taper_out:.2f}{short}"
+        f"joined ends {r.joined_in:.2f}->{r.joined_out:.2f}, ends' taper {r.taper_in:.2f}->{r.taper_out:.2f}{short}, "
+        f"wider children {r.wider_in:.2f}->{r.wider_out:.2f}"
     )
     return [
         _label(_fit(_show(img), interpolation=cv2.INTER_AREA), f"{name} seed {seed}, {seconds:.0f} s"),

@@ -22,8 +22,9 @@ how much children turn where they start, how far apart they leave their parent a
 it the long ones leave, how the parent bends where a child leaves it, which ways it
 runs on the image, how much it stands out from its surroundings, how much of the
 background's grain its completed gaps keep, how far the picture's emptiest places lie from it,
-how much it runs the way the input's branches run at the same places, and what stands out
-past its branches' ends; defined in
+how much it runs the way the input's branches run at the same places, what stands out
+past its branches' ends, how many of them end on other structure, how they thin towards
+those ends, and how many side branches grow wider than the branch they leave; defined in
 :mod:`phloem.branching.measures`).
 """
 
@@ -69,6 +70,7 @@ from .branching.measures import (
     start_turns,
     structure_contrast,
     two_level_fraction,
+    wider_children,
 )
 from .strokes.measures import stroke_coverage, width_agreement
 
@@ -113,6 +115,7 @@ __all__ = [
     "structure_contrast",
     "thickness_histogram",
     "two_level_fraction",
+    "wider_children",
     "width_agreement",
     "wrap_seam",
 ]

@@ -37,6 +37,7 @@ from phloem.branching.measures import (
     start_turns,
     structure_contrast,
     two_level_fraction,
+    wider_children,
 )
 
 
@@ -786,3 +787,23 @@ def test_end_taper_is_the_median_end_over_the_level_before() -> None:
     assert end_taper(blob).size == 0
     with pytest.raises(TypeError, match="skeleton"):
         end_taper([[0, 0], [1, 1]])  # type: ignore[arg-type]
+
+
+def test_wider_children_counts_children_past_their_parent_at_the_attachment() -> None:
+    stem = Branch([[0.0, 50.0], [200.0, 50.0]], np.linspace(8.0, 2.0, 2)).resample(10.0)
+    at = [4, 10, 16]  # 6.8, 5.0 and 3.2 px thick there
+    kids = [
+        Branch([[10.0 * v, 50.0], [10.0 * v, 90.0]], [3.0, 3.0], (0, v)) for v in at
+    ]  # narrower than every attachment
+    assert wider_children(Skeleton([stem, *kids])) == 0.0
+    # the same width on a thinner stretch of the parent: wider than 1.5 x only at 3.2 px
+    swell = [Branch(k.points, [3.0, 5.0], k.parent) for k in kids]
+    assert wider_children(Skeleton([stem, *swell])) == pytest.approx(1 / 3)
+    # a child that swells anywhere along it counts, not only at its start
+    bulb = Branch([[100.0, 50.0], [100.0, 70.0], [100.0, 90.0]], [1.0, 12.0, 1.0], (0, 10))
+    assert wider_children(Skeleton([stem, *kids, bulb])) == 0.25
+    assert wider_children(Skeleton([stem, *kids, bulb]), factor=3.0) == 0.0
+    assert math.isnan(wider_children(Skeleton([stem])))
+    for bad in (0.5, math.nan, "wide"):
+        with pytest.raises((ValueError, TypeError), match="^factor"):
+            wider_children(Skeleton([stem, *kids]), factor=bad)  # type: ignore[arg-type]

@@ -6,8 +6,9 @@ structure (heading change over a fixed arc and its histogram distance, "drift"),
 mask stay a mask (two-level fraction), does the structure stand out from its surroundings
 as much as the input's (structure contrast), does it spread over its picture as the input's
 does (empty space), do its branches end where the skeleton's do (what stands out past
-their ends), do as many of them end on other structure (joined ends), and do their ends
-thin as the input's do (end taper). Re-exported by :mod:`phloem.metrics`.
+their ends), do as many of them end on other structure (joined ends), do their ends
+thin as the input's do (end taper), and do side branches stay no wider than the branch they
+leave (wider children). Re-exported by :mod:`phloem.metrics`.
 """
 
 from __future__ import annotations
@@ -68,6 +69,7 @@ __all__ = [
     "start_turns",
     "structure_contrast",
     "two_level_fraction",
+    "wider_children",
 ]
 
 
@@ -331,6 +333,52 @@ def end_taper(skeleton: Skeleton) -> F64:
     """
     _check_skeleton(skeleton)
     return _end_taper(skeleton)
+
+
+def wider_children(skeleton: Skeleton, *, factor: float = 1.5) -> float:
+    """Share of the child branches that grow wider than ``factor`` times their parent.
+
+    A child's largest thickness against its parent's thickness at the attachment vertex. A
+    traced river's or crack's side branches are narrower than the channel they leave (the
+    braided river: 0.009 of its children at the default factor, the delta 0.07), and a
+    grown child that swells into a wide finger or a round blob counts (issue 19; the rivers'
+    grown children 0.16–0.31 before the fifty-first session). A traced photo's thickness is
+    noisier (the brain vessels 0.35), so compare an output with its own input's value.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    factor : float
+        How much wider than the parent a child must grow to count (at least 1).
+
+    Returns
+    -------
+    float
+        In ``[0, 1]``; NaN where no branch has a parent.
+
+    Raises
+    ------
+    ValueError
+        If ``factor`` is under 1 or not finite.
+
+    Examples
+    --------
+    >>> from phloem.branching import Branch, Skeleton
+    >>> stem = Branch([[0, 0], [100, 0]], 4.0).resample(10)
+    >>> thin = Branch([[50, 0], [50, 40]], 2.0, (0, 5))
+    >>> blob = Branch([[80, 0], [80, 40]], [2.0, 8.0], (0, 8))
+    >>> wider_children(Skeleton([stem, thin, blob]))
+    0.5
+    """
+    _check_skeleton(skeleton)
+    f = check_float(factor, "factor", 1.0)
+    br = skeleton.branches
+    ratio = [
+        float(np.max(b.thickness)) > f * float(br[b.parent[0]].thickness[b.parent[1]])
+        for b in br
+        if b.parent is not None
+    ]
+    return float(np.mean(ratio)) if ratio else math.nan
 
 
 def border_share(skeleton: Skeleton, *, band: float | None = None) -> float:
