@@ -341,9 +341,10 @@ def wider_children(skeleton: Skeleton, *, factor: float = 1.5) -> float:
     A child's largest thickness against its parent's thickness at the attachment vertex. A
     traced river's or crack's side branches are narrower than the channel they leave (the
     braided river: 0.009 of its children at the default factor, the delta 0.07), and a
-    grown child that swells into a wide finger or a round blob counts (issue 19; the rivers'
-    grown children 0.16–0.31 before the fifty-first session). A traced photo's thickness is
-    noisier (the brain vessels 0.35), so compare an output with its own input's value.
+    grown child that swells into a wide finger or a round blob counts (issue 19: the rivers'
+    grown children 0.16–0.25 at seeds 0–2 in the fifty-second session). A traced photo's
+    thickness is noisier (the brain vessels 0.35), so compare an output with its own
+    input's value.
 
     Parameters
     ----------
@@ -373,12 +374,12 @@ def wider_children(skeleton: Skeleton, *, factor: float = 1.5) -> float:
     _check_skeleton(skeleton)
     f = check_float(factor, "factor", 1.0)
     br = skeleton.branches
-    ratio = [
+    wider = [
         float(np.max(b.thickness)) > f * float(br[b.parent[0]].thickness[b.parent[1]])
         for b in br
         if b.parent is not None
     ]
-    return float(np.mean(ratio)) if ratio else math.nan
+    return float(np.mean(wider)) if wider else math.nan
 
 
 def border_share(skeleton: Skeleton, *, band: float | None = None) -> float:
