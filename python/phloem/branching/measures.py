@@ -339,12 +339,10 @@ def wider_children(skeleton: Skeleton, *, factor: float = 1.5) -> float:
     """Share of the child branches that grow wider than ``factor`` times their parent.
 
     A child's largest thickness against its parent's thickness at the attachment vertex. A
-    traced river's or crack's side branches are narrower than the channel they leave (the
-    braided river: 0.009 of its children at the default factor, the delta 0.07), and a
-    grown child that swells into a wide finger or a round blob counts (issue 19: the rivers'
-    grown children 0.16–0.25 at seeds 0–2 in the fifty-second session). A traced photo's
-    thickness is noisier (the brain vessels 0.35), so compare an output with its own
-    input's value.
+    traced river's or crack's side branches are narrower than the channel they leave, so
+    its value is near 0, and a grown child that swells into a wide finger or a round blob
+    counts (issue 19; values per input in ``docs/pipelines/branching/quality.md``). A traced
+    photo's thickness is noisier, so compare an output with its own input's value.
 
     Parameters
     ----------
