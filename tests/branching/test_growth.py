@@ -776,6 +776,38 @@ def test_a_tree_stops_at_its_templates_length():
         assert max(size.values()) <= template.length + child, f"seed {seed}: {max(size.values()):.0f} px"
 
 
+def test_a_trees_branches_are_dealt_once_each_before_any_comes_round_again():
+    stem = _line((20, 120), (240, 120), 3.0)
+    kids = [_line(stem.points[k], stem.points[k] + (5 + k // 3, 40), 1.5, (0, k)) for k in (10, 30, 50, 70, 90)]
+    template = input_trees(Skeleton([stem, *kids], (260, 320)))[0]
+    pool = sorted(template.branches[1])
+    rng = np.random.default_rng(0)
+    first = [template.draw(1, rng) for _ in range(len(pool))]
+    second = [template.draw(1, rng) for _ in range(len(pool))]
+    assert sorted(first) == pool and sorted(second) == pool
+    assert first != second  # each round in its own order
+    assert template.draw(7, rng) is None
+
+
+def test_a_grown_tree_has_its_templates_long_arm_at_every_seed():
+    # A stem with ten children, one of them a long arm among short twigs. Drawn with
+    # replacement, a copy of the tree misses the arm a third of the time (0.9^10); dealt, every
+    # copy has it, so the grown tree's lengths per generation are the template's.
+    stem = _line((40, 300), (440, 300), 3.0)
+    kids = []
+    for j, k in enumerate(range(15, 195, 18)):
+        up = -1 if j % 2 else 1
+        reach = (0, 160 * up) if j == 5 else (8, 24 * up)
+        kids.append(_line(stem.points[k], stem.points[k] + reach, 1.5, (0, k)))
+    src = Skeleton([stem, *kids], (600, 480))
+    bend, fur = BendingModel.fit(src, h=2.0), FurcationModel.fit(src, h=2.0)
+    arm = max(length for length, _ in input_trees(bend.source)[0].branches[1])
+    for seed in range(6):
+        out = grow(bend, fur, size=(600, 480), seed=seed, max_length="input")
+        first = [b.length() for b in out.branches if b.parent is not None and out.branches[b.parent[0]].parent is None]
+        assert max(first) > 0.8 * arm, f"seed {seed}: the longest first-generation branch is {max(first):.0f} px"
+
+
 def test_blocked_children_do_not_end_a_tree_short_of_its_template(monkeypatch):
     # Child starts fail in runs of 20 (as crossings or the border would block a crowded region),
     # so now and then a queued or topped-up child cannot start at any vertex: the tree must

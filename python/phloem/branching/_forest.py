@@ -5,7 +5,8 @@ topology statistics of one input tree (its root branch, and per generation the l
 branches together with their numbers of children), so that a large connected input gives a
 large connected output and a forest of fragments a forest. Trees are used largest first, each
 once, then again from the largest: an output of the input's size repeats the input's tree
-sizes, and the largest trees get the most room.
+sizes, and the largest trees get the most room. Within a tree, each generation's branches are
+dealt like cards: every one once, in a random order, before any comes round again.
 """
 
 from __future__ import annotations
@@ -26,13 +27,26 @@ class InputTree:
     length: float  # total length in pixels
     # per generation: (length in pixels, number of children) of each of its branches
     branches: dict[int, list[tuple[float, int]]] = field(default_factory=dict)
+    # per generation: the indices into ``branches`` not dealt yet in the current round
+    deck: dict[int, list[int]] = field(default_factory=dict, repr=False)
 
     def draw(self, generation: int, rng: np.random.Generator) -> tuple[float, int] | None:
-        """A branch of this tree at ``generation`` (length, children), or None if it has none."""
+        """A branch of this tree at ``generation`` (length, children), or None if it has none.
+
+        Dealt without replacement: each of the generation's branches once, in an order drawn
+        from ``rng``, then a new round. Drawn with replacement, a copy of a tree missed about a
+        third of its template's branches (a few long arms among many short ones) and repeated
+        others, so its lengths per generation varied from seed to seed far more than the
+        input's own (``docs/pipelines/branching/quality.md``, fifty-third session).
+        """
         pool = self.branches.get(generation)
         if not pool:
             return None
-        return pool[int(rng.integers(len(pool)))]
+        left = self.deck.get(generation)
+        if not left:
+            left = rng.permutation(len(pool)).tolist()
+            self.deck[generation] = left
+        return pool[left.pop()]
 
 
 def input_trees(skeleton: Skeleton, *, min_vertices: int = 3) -> list[InputTree]:
