@@ -34,10 +34,10 @@ class InputTree:
         """A branch of this tree at ``generation`` (length, children), or None if it has none.
 
         Dealt without replacement: each of the generation's branches once, in an order drawn
-        from ``rng``, then a new round. Drawn with replacement, a copy of a tree missed about a
-        third of its template's branches (a few long arms among many short ones) and repeated
-        others, so its lengths per generation varied from seed to seed far more than the
-        input's own (``docs/pipelines/branching/quality.md``, fifty-third session).
+        from ``rng``, then a new round. Drawn with replacement, a copy of a tree missed some of
+        its template's branches (its few long arms among them) and repeated others, so its
+        lengths per generation strayed from the input's
+        (``docs/pipelines/branching/quality.md``, fifty-third session).
         """
         pool = self.branches.get(generation)
         if not pool:
