@@ -808,12 +808,48 @@ def test_a_grown_tree_has_its_templates_long_arm_at_every_seed():
         assert max(first) > 0.8 * arm, f"seed {seed}: the longest first-generation branch is {max(first):.0f} px"
 
 
+def test_a_tree_cut_at_its_templates_length_loses_grandchildren_all_over(monkeypatch):
+    # A stem with twelve children of two grandchildren each, its template's length cut to 70 %
+    # so that the tree stops a few grandchildren into its last generation. Taken in the order
+    # their parents finished, the grandchildren grown were those of the children grown first,
+    # and the children grown last kept none (a braided river's stem bare towards its end).
+    from phloem.branching import growth as growth_module
+
+    stem = _line((40, 300), (440, 300), 3.0)
+    branches = [stem]
+    for j, k in enumerate(range(12, 200, 16)):
+        up = -1 if j % 2 else 1
+        kid = _line(stem.points[k], stem.points[k] + (6, 50 * up), 1.8, (0, k))
+        branches.append(kid)
+        at = len(branches) - 1
+        for v in (8, 16):
+            branches.append(_line(kid.points[v], kid.points[v] + (24, 6 * up), 1.2, (at, v)))
+    src = Skeleton(branches, (600, 480))
+    bend, fur = BendingModel.fit(src, h=2.0), FurcationModel.fit(src, h=2.0)
+
+    def cut(skeleton, **kwargs):
+        trees = input_trees(skeleton, **kwargs)
+        trees[0].length *= 0.7
+        return trees
+
+    monkeypatch.setattr(growth_module, "input_trees", cut)
+    late = []
+    for seed in range(6):
+        out = grow(bend, fur, size=(600, 480), seed=seed, roots=1)
+        kids = [i for i, b in enumerate(out.branches) if b.parent is not None and b.parent[0] == 0]
+        grown_last = set(kids[len(kids) // 2 :])
+        grand = [b.length() for b in out.branches if b.parent is not None and b.parent[0] in kids]
+        assert 0 < len(grand) < 24, f"seed {seed}: the cut should fall in the last generation"
+        late.append(sum(b.length() for b in out.branches if b.parent is not None and b.parent[0] in grown_last))
+    assert sum(x > 0 for x in late) >= 4, f"grandchildren on the children grown last: {late}"
+
+
 def test_blocked_children_do_not_end_a_tree_short_of_its_template(monkeypatch):
     # Child starts fail in runs of 20 (as crossings or the border would block a crowded region),
     # so now and then a queued or topped-up child cannot start at any vertex: the tree must
-    # keep topping up its own branches until it has its template's length, not end at the first
-    # child that could not start once its queue was empty (a traced delta came out as a few large
-    # trees instead of one).
+    # keep topping up its own branches until it has its template's length or no branch has a
+    # free vertex left, not end at the first child that could not start once its queue was empty
+    # (a traced delta came out as a few large trees instead of one).
     from phloem.branching import growth as growth_module
 
     src = synthetic_skeleton(1, length=500.0, furcations=12)  # 13 branches, a fifth of the length in the stem
@@ -832,11 +868,17 @@ def test_blocked_children_do_not_end_a_tree_short_of_its_template(monkeypatch):
     # only the schedule above blocks: on this small canvas the crowding check would also end a
     # tree where no branch has room left, which is not what this test is about
     monkeypatch.setattr(growth_module, "_CROWDED_START", math.inf)
+    top_up = growth_module._top_up
+    found: list[object] = []
+    monkeypatch.setattr(growth_module, "_top_up", lambda *a, **k: found.append(top_up(*a, **k)) or found[-1])
     template = input_trees(bend.source)[0].length
-    for seed in range(4):
+    for seed in range(8):
+        found.clear()
         out = grow(bend, fur, size=src.shape, seed=seed, max_length="input")
         assert sum(b.parent is None for b in out.branches) == 1
-        assert out.total_length() > 0.9 * template
+        # the long children fill this small canvas, so the stem can run out of free vertices
+        room_left = not found or found[-1] is not None
+        assert out.total_length() > 0.9 * template or not room_left, f"seed {seed}: {out.total_length():.0f} px"
 
 
 def test_the_planarity_test_agrees_with_every_pair_tested():

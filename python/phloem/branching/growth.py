@@ -461,6 +461,28 @@ def _top_up(
     return None
 
 
+def _deal_next(
+    queue: list[tuple[int, int, int, float, int]], qpos: int, block_end: int, rng: np.random.Generator
+) -> int:
+    """Swap into ``queue[qpos]`` a child drawn uniformly from those still queued of its generation.
+
+    The queue holds one generation after the other, in the order their parents finished, i.e.
+    along each parent from its start. A tree that reaches its template's length leaves the rest
+    of the queue out, so taken in that order the children left out would all be on the parts
+    grown last: a braided river's stem kept its side channels near its root and bare stubs
+    towards its end. Returns the end of the generation's block (``block_end`` while ``qpos`` is
+    inside it: children appended meanwhile are of the next generation).
+    """
+    if qpos >= block_end:
+        gen = queue[qpos][2]
+        block_end = qpos + 1
+        while block_end < len(queue) and queue[block_end][2] == gen:
+            block_end += 1
+    k = qpos + int(rng.integers(block_end - qpos))
+    queue[qpos], queue[k] = queue[k], queue[qpos]
+    return block_end
+
+
 def _input_length(bending: BendingModel, shape: tuple[int, int]) -> float:
     """The input's total length scaled by the ratio of the image areas (same structure density)."""
     src = bending.source
@@ -576,12 +598,13 @@ def grow(
     root branch and is extended by the bending model ``m`` elements at a time up to that
     root's length; each finished branch gets as many furcations from the furcation model as a
     branch of the template of the same generation has, drawn together with that branch's
-    length, whose children are grown the same way, breadth first. A child that cannot start
+    length, whose children are grown the same way, breadth first (within a generation in an
+    order drawn from the seed). A child that cannot start
     at its vertex (crossing, border, or within ``ρ`` of other structure over its first ``3 m h``)
     tries the parent's next-best vertices; a tree left short
     of its template's length gets further furcations on its own branches, and a tree that
-    reaches it starts no further children (drawn with replacement, the template's numbers of
-    children compound).
+    reaches it starts no further children (in further rounds of the deal a prolific template
+    branch can come twice, and the numbers of children compound).
 
     With ``roots`` above 1, or with ``max_length="input"`` (about as much structure as the
     input), further root trees follow once a tree is finished: one per input tree (an input
@@ -751,9 +774,11 @@ def grow(
             1 if not input_sized else (max(1, math.ceil(len(forest) * area_ratio - 1e-9)) if dominant else 1_000_000)
         )
     out: list[Branch] = []
-    # (parent branch, vertex, generation, planned length, planned children) in creation order
+    # (parent branch, vertex, generation, planned length, planned children), one generation
+    # after the other (breadth first); within a generation taken in a random order, see _deal_next
     queue: list[tuple[int, int, int, float, int]] = []
     qpos = 0
+    block_end = 0  # end of the queued block of the generation being grown
     stop = False
     trees = 0
     turn = 0  # trees attempted: the template of the next one
@@ -884,6 +909,8 @@ def grow(
                     if full is not None and world.total_length - start_length >= full:
                         qpos = len(queue)  # the tree is as long as its template: its queued children are left out
                         break
+                    if retries == 0:
+                        block_end = _deal_next(queue, qpos, block_end, rng)
                     pi, v, gen, goal, d = queue[qpos]
                     assert furcation is not None
                     pb = out[pi]
