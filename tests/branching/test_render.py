@@ -533,6 +533,27 @@ def test_a_soft_mask_is_two_level_and_renders_as_one() -> None:
     assert not two_level(glow[..., None].astype(np.float32), lo, hi)
 
 
+def test_a_mask_with_channels_thinner_than_a_pixel_is_two_level_and_synthesizes_as_one() -> None:
+    # A delta's mask scaled down (a screenshot of one, held out): its fine distributaries become
+    # grey lines with no pixel at the water's level, and a sixth of its pixels lie between the
+    # levels. It was taken for a photo, and its output was a grey haze.
+    from phloem.branching import synthesize
+
+    rng = np.random.default_rng(3)
+    big = np.zeros((480, 640), np.uint8)
+    cv2.line(big, (0, 400), (640, 80), 255, 40)
+    for _ in range(70):
+        x0, y0, a = int(rng.integers(0, 640)), int(rng.integers(0, 480)), rng.uniform(0, np.pi)
+        end = (int(x0 + 200 * np.cos(a)), int(y0 + 200 * np.sin(a)))
+        cv2.line(big, (x0, y0), end, 255, int(rng.integers(1, 4)))
+    small = cv2.resize(big.astype(np.float32) / 255, (160, 120), interpolation=cv2.INTER_AREA)
+    lo, hi = _channel_range(small[..., None])
+    assert float(((small > 0.1) & (small < 0.9)).mean()) > 0.15
+    assert two_level(small[..., None], lo, hi)
+    out = synthesize(small, seed=0).image
+    assert set(np.unique(out).tolist()) <= {float(lo[0]), float(hi[0])}
+
+
 def test_branch_map_is_each_branch_drawn_over_the_earlier_ones() -> None:
     """The map drawn in each branch's box equals drawing every branch on the whole image."""
     main = wavy_branch((3, 40), 0.1, 150, (9.0, 4.0), amp=0.5)
@@ -843,8 +864,9 @@ def test_a_frame_along_less_than_a_sixth_of_the_border_is_not_kept() -> None:
 def _vessel_ending_in_a_tangle() -> tuple[np.ndarray, Skeleton]:
     """A dark vessel 3 px in radius across a light 120 x 160 field, and at each of its ends,
     8-10 px past it, thin dark strokes the skeleton does not hold (finer vessels, as where a
-    traced vessel dissolves into a tangle)."""
-    img = np.full((120, 160), 0.8, np.float32)
+    traced vessel dissolves into a tangle). The field is lit unevenly, as a photo's is: a flat
+    one would make the picture a drawing in three tones, which reads as a soft mask."""
+    img = np.broadcast_to(np.linspace(0.7, 0.9, 160, dtype=np.float32), (120, 160)).copy()
     cv2.line(img, (20, 60), (110, 60), 0.15, 6)
     for x in (10, 120):  # a bar across each end, and a stroke slanting off it
         cv2.line(img, (x, 50), (x, 70), 0.2, 2)

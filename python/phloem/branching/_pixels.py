@@ -88,11 +88,17 @@ def _robust_z(v: NDArray[Any], floor: Any = 0.0) -> NDArray[Any]:
 
 #: A soft mask (a mask anti-aliased, scaled or saved as a JPEG): at least this share of its
 #: pixels within :data:`SOFT_TOLERANCE` of the channel range from a level in every channel...
-SOFT_NEAR = 0.85
+SOFT_NEAR = 0.5
 SOFT_TOLERANCE = 0.1
-#: ... and at least this share of the others within 2 px of pixels near each level: edges, not
-#: shading. A photo of thin bright structure on a black sky has its glow away from both.
+#: ... and at least this share of the others on a transition between the levels: within 2 px
+#: of pixels near each level (an edge), or, in a piece of at least :data:`SOFT_LINE` such
+#: pixels, beside a pixel near a level with a step of :data:`SOFT_STEP` of the range to a
+#: neighbour (a channel thinner than a pixel once scaled down, grey where it covers part of
+#: one). Not shading: a photo of thin bright structure on a black sky has its glow away from
+#: both levels and smooth; and not specks of noise.
 SOFT_EDGES = 0.8
+SOFT_STEP = 0.25
+SOFT_LINE = 6
 
 
 def two_level(img: F32, lo: F32, hi: F32) -> bool:
@@ -113,7 +119,7 @@ def two_level(img: F32, lo: F32, hi: F32) -> bool:
 
 def _soft_two_level(img: F32, lo: F32, hi: F32) -> bool:
     """Whether ``img`` is a soft mask: :data:`SOFT_NEAR` of its pixels near one of the two levels
-    in every channel, and :data:`SOFT_EDGES` of the rest on an edge between the two."""
+    in every channel, and :data:`SOFT_EDGES` of the rest on a transition between the two."""
     H, W = img.shape[:2]
     tol = SOFT_TOLERANCE * np.maximum(hi - lo, 1e-12)
     near_lo = np.ones((H, W), bool)
@@ -129,4 +135,14 @@ def _soft_two_level(img: F32, lo: F32, hi: F32) -> bool:
         return bool(near_lo.any() and near_hi.any())
     k = np.ones((5, 5), np.uint8)
     edge = (cv2.dilate(near_lo.view(np.uint8), k) > 0) & (cv2.dilate(near_hi.view(np.uint8), k) > 0)
-    return bool(np.count_nonzero(rest & edge) >= SOFT_EDGES * np.count_nonzero(rest))
+    k3 = np.ones((3, 3), np.uint8)
+    step = np.zeros((H, W), bool)
+    for c in range(img.shape[2]):
+        ch = np.ascontiguousarray(img[..., c])
+        s = SOFT_STEP * max(float(hi[c] - lo[c]), 1e-12)
+        step |= (cv2.dilate(ch, k3) - ch >= s) | (ch - cv2.erode(ch, k3) >= s)
+    beside = cv2.dilate((near_lo | near_hi).view(np.uint8), k3) > 0
+    # a line, not a speck: noise on a mask leaves isolated in-between pixels
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(rest.view(np.uint8), connectivity=8)
+    line = (stats[:, cv2.CC_STAT_AREA] >= SOFT_LINE)[labels]
+    return bool(np.count_nonzero(rest & (edge | (step & beside & line))) >= SOFT_EDGES * np.count_nonzero(rest))
