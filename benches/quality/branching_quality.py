@@ -233,7 +233,7 @@ def run(
     trace_options: dict[str, Any] | None = None,
     threads: int | None = None,
     render_options: dict[str, Any] | None = None,
-    layout: float = 0.0,
+    layout: float | None = None,
 ) -> tuple[SynthesisResult | None, float, str]:
     """``synthesize`` with the defaults (and ``trace_options``, ``render_options``, ``layout``): the result, its time and any error."""
     t0 = time.perf_counter()
@@ -255,7 +255,7 @@ def evaluate(
     trace_options: dict[str, Any] | None = None,
     threads: int | None = None,
     render_options: dict[str, Any] | None = None,
-    layout: float = 0.0,
+    layout: float | None = None,
 ) -> Result:
     """Synthesise from ``img`` with the defaults (and ``trace_options``, ``render_options``, ``layout``) and measure the output."""
     res, seconds, error = run(
@@ -496,7 +496,9 @@ def add_run_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument(
         "--gap-diversity", type=float, default=None, help="render's gap_diversity (default: synthesize's, 0)"
     )
-    ap.add_argument("--layout", type=float, default=0.0, help="synthesize's layout weight (default 0: off)")
+    ap.add_argument(
+        "--layout", type=float, default=None, help="synthesize's layout weight (default: synthesize's, layout_default)"
+    )
 
 
 def trace_options_of(args: argparse.Namespace, name: str, mask: bool) -> dict[str, Any] | None:

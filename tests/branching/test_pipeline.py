@@ -133,6 +133,43 @@ def test_orientation_default_turns_on_where_the_input_runs_one_way():
         branching.orientation_default("not a skeleton")  # type: ignore[arg-type]
 
 
+def test_layout_default_turns_on_for_one_connected_structure():
+    # a stem with four children is one structure across its picture; the same branches apart
+    # are a forest of pieces, whose trees the layout term packed into a knot (the brain)
+    pieces = _hanging(5, 4.0)
+    stem = branching.Branch(np.c_[np.arange(10.0, 150.0, 4.0), np.full(35, 100.0)], 3.0)
+    kids = [
+        branching.Branch(b.points[:15] + [0.0, 0.0], 2.0, parent=(0, 5 + 6 * i))
+        for i, b in enumerate(pieces.branches[1:])
+    ]
+    for kid in kids:  # each child leaves from its parent vertex
+        kid.points = kid.points - kid.points[0] + stem.points[kid.parent[1]]
+    tree = branching.Skeleton([stem, *kids], (200, 165))
+    assert branching.layout_default(tree) == 1.0
+    assert branching.layout_default(pieces) == 0.0
+    assert branching.layout_default(tree, guided=True) == 0.0  # a guide sets the way
+    assert branching.layout_default(pieces, layout=0.5) == 0.5
+    assert branching.source_defaults(tree).layout == 1.0 and branching.source_defaults(pieces).layout == 0.0
+    # a speck beside one structure does not make it a forest; a second structure does
+    speck = branching.Branch(np.array([[150.0, 20.0], [152.0, 22.0], [154.0, 24.0]]), 1.0)
+    assert branching.layout_default(branching.Skeleton([stem, *kids, speck], (200, 165))) == 1.0
+    other = branching.Branch(np.c_[np.full(30, 155.0), np.arange(20.0, 140.0, 4.0)], 2.0)
+    assert branching.layout_default(branching.Skeleton([stem, *kids, other], (200, 165))) == 0.0
+    with pytest.raises(TypeError, match="^skeleton: expected"):
+        branching.layout_default("not a skeleton")  # type: ignore[arg-type]
+
+
+def test_synthesize_fits_the_layout_of_a_connected_input():
+    from phloem.testing import channel_scene
+
+    img, sk = channel_scene()
+    assert branching.layout_default(sk) == 1.0
+    res = branching.synthesize(img, sk, seed=0)
+    assert res.bending.layout == 1.0 and res.bending.direction_layout is not None
+    off = branching.synthesize(img, sk, seed=0, layout=0.0)
+    assert off.bending.layout == 0.0 and off.bending.direction_layout is None
+
+
 def test_direction_histogram_default_follows_the_orientation_default():
     for jitter in (0.0, 4.0, 12.0):
         sk = _hanging(5, jitter)

@@ -250,6 +250,7 @@ def test_branching_model_and_growth_flags_reach_the_model(tmp_path):
     assert sidecar["32"]["orientation"] == heading
     directions = branching.direction_histogram_default(Skeleton.load(skel))
     assert sidecar["32"]["direction_histogram"] == directions
+    assert sidecar["32"]["layout"] == branching.layout_default(Skeleton.load(skel))
     # checked without the default --denoise, under which this seed grows the same at weights 0 and 2
     assert sidecar["--direction-histogram 2 --denoise 0"]["direction_histogram"] == 2.0
     assert grown["--direction-histogram 0 --denoise 0"] != grown["--direction-histogram 2 --denoise 0"]

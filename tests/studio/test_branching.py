@@ -299,7 +299,7 @@ def test_histograms_compare_the_example_and_the_grown_skeleton(client, project, 
     )
 
 
-def test_grow_takes_the_examples_layout_and_records_it(client, project):
+def test_grow_takes_the_examples_layout_and_records_it(client, project, scene):
     # wavy branches leaving a centre every way: a layout (the channel scene's one river has none)
     rng = np.random.default_rng(0)
     brs = []
@@ -315,3 +315,8 @@ def test_grow_takes_the_examples_layout_and_records_it(client, project):
         grown[weight] = branching.Skeleton.load(project.root / end["outputs"][0])
     assert grown[0.0] != grown[1.0]
     assert json.loads((project.root / "fan1.sidecar.json").read_text())["parameters"]["layout"] == 1.0
+    # left out, the example decides: sixteen separate branches are a forest (off), the
+    # channel scene's one river a connected structure (on); the sidecar records the weight used
+    for name, used in (("fan", 0.0), ("channel", 1.0)):
+        run_job(client, {"kind": "branching-grow", "skeleton": f"{name}.json", "seed": 1, "out": f"{name}-auto.json"})
+        assert json.loads((project.root / f"{name}-auto.sidecar.json").read_text())["parameters"]["layout"] == used

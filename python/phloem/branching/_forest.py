@@ -18,6 +18,10 @@ import numpy as np
 from ._elements import _generations, _tree_roots
 from .skeleton import Skeleton
 
+#: An input is connected, one structure across its picture with stray specks beside it, when
+#: its largest tree holds at least this share of its length.
+CONNECTED_SHARE = 0.9
+
 
 @dataclass
 class InputTree:
@@ -62,3 +66,9 @@ def input_trees(skeleton: Skeleton, *, min_vertices: int = 3) -> list[InputTree]
     kept = [t for t in trees.values() if len(skeleton.branches[t.root]) >= min_vertices]
     # stable for equal lengths, so the order (and the output) depends on the input only
     return sorted(kept, key=lambda t: (-t.length, t.root))
+
+
+def connected(trees: list[InputTree]) -> bool:
+    """Whether the largest of ``trees`` (:func:`input_trees`, largest first) holds
+    :data:`CONNECTED_SHARE` of their length."""
+    return bool(trees) and trees[0].length >= CONNECTED_SHARE * sum(t.length for t in trees)

@@ -52,7 +52,7 @@ from .._api import Seed, Size, renamed
 from .._progress import Progress
 from .._validate import as_mask, check_float, check_int, check_seed
 from ._elements import F64, _check_skeleton, _direction, _edge_headings, _elements, _tangent, _wrap
-from ._forest import InputTree, input_trees
+from ._forest import InputTree, connected, input_trees
 from ._world import _guide_map, _World
 from .bending import BendingModel, block_sums, course_deviation
 from .furcation import FurcationModel
@@ -764,7 +764,7 @@ def grow(
     forest = input_trees(bending.source)
     order = sibling_order(bending.source)
     # A connected input (its largest tree holds 90 % of the length, so a stray speck does not count)
-    dominant = bool(forest) and forest[0].length >= 0.9 * sum(t.length for t in forest)
+    dominant = connected(forest)
     if n_roots is None:
         # A connected input stays connected: its trees once per input area, a tree cut short by
         # the room it finds topped up (see ``_top_up``). A forest takes as many trees as the

@@ -144,7 +144,8 @@ def _resolve_models(args: argparse.Namespace, bend: Any) -> None:
 
 def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> None:
     """``--total-turn``, ``--repel-border``, ``--course``, ``--orientation``, ``--direction-histogram``,
-    ``--turn-histogram``, ``--denoise``, ``--h`` and ``--joined-ends`` left at their defaults, resolved for this example."""
+    ``--turn-histogram``, ``--denoise``, ``--h``, ``--joined-ends`` and ``--layout`` left at their defaults,
+    resolved for this example."""
     d = branching.source_defaults(
         source,
         total_turn=args.total_turn,
@@ -156,12 +157,14 @@ def _resolve_course(args: argparse.Namespace, source: branching.Skeleton) -> Non
         denoise=args.denoise,
         h=args.h,
         joined_ends=args.joined_ends,
+        layout=args.layout,
         guided=getattr(args, "guide", None) is not None,
     )
     args.total_turn, args.repel_border, args.course = d.total_turn, d.repel_border, d.course
     args.joined_ends = d.joined_ends
     args.orientation, args.direction_histogram = d.orientation, d.direction_histogram
     args.turn_histogram, args.denoise, args.h = d.turn_histogram, d.denoise, d.h
+    args.layout = d.layout
 
 
 def _check_json_target(path: Path, args: argparse.Namespace) -> None:
@@ -392,12 +395,13 @@ def _grow_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--layout",
         type=float,
-        default=0.0,
+        default=None,
         metavar="WEIGHT",
         help="weight of the example's layout of directions: branches grow the way the example's branches run "
         "at the same place of the picture (a fundus's vessels round its disc, a delta's channels fanning out); "
-        "where the example's branches agree on no way (cracks, bark) it changes nothing (default 0: off, the "
-        "paper's model, the same everywhere; 1: on)",
+        "where the example's branches agree on no way (cracks, bark) it changes little (default: 1 where the "
+        "example is one connected structure and no --guide is given, else 0, the paper's model, the same "
+        "everywhere)",
     )
     g.add_argument(
         "--stem-thickness",

@@ -990,8 +990,8 @@ function drawHistograms(h) {
 async function grow() {
   const skeleton = await saveSkeleton();
   const req = { kind: "branching-grow", skeleton, seed: +$("br-seed").value };
-  const layout = +$("br-layout").value;
-  if (layout) req.layout = layout;
+  const layout = $("br-layout").value; // empty: the example decides (on for one connected structure)
+  if (layout !== "") req.layout = +layout;
   if (K.guides.length) req.guide = await saveGuide();
   const s = await runJobReplacing(req, kUi);
   K.example = skeleton;

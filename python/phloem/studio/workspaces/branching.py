@@ -122,12 +122,13 @@ class BranchingGrowJob(BaseModel):
         None, gt=0, le=1000, description="resampling step (px); default the example's median thickness, at least 2 px"
     )
     n_best: int = Field(N_BEST, ge=1, le=64, description="candidates drawn from at each step (the paper's c: 2)")
-    layout: float = Field(
-        0.0,
+    layout: float | None = Field(
+        None,
         ge=0,
         le=100,
         description="weight of the example's layout of directions: branches grow the way the example's run at the "
-        "same places of the picture (0: off, the paper's model)",
+        "same places of the picture (0: off, the paper's model; null: 1 where the example is one connected "
+        "structure and no guide is given, else 0)",
     )
     out: str | None = Field(
         None, description="project name of the new skeleton (.json); default results/grown-<id>.json"
@@ -255,7 +256,7 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
 
         def grow(progress: Progress) -> list[str]:
             # the same course-keeping defaults as synthesize and the command line
-            d = branching.source_defaults(source, h=req.h, guided=guide is not None)
+            d = branching.source_defaults(source, h=req.h, layout=req.layout, guided=guide is not None)
             bend, fur = branching.fit_models(
                 source,
                 h=d.h,
@@ -265,7 +266,7 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
                 orientation=d.orientation,
                 direction_histogram=d.direction_histogram,
                 turn_histogram=d.turn_histogram,
-                layout=req.layout,
+                layout=d.layout,
                 denoise=d.denoise,
             )
             new = branching.grow(bend, fur, size=shape, seed=req.seed, max_length=req.max_length, guide=guide,
@@ -284,6 +285,7 @@ def plan(req: BranchingTraceJob | BranchingGrowJob | BranchingRenderJob, outputs
                 "orientation": d.orientation,
                 "direction_histogram": d.direction_histogram,
                 "denoise": d.denoise,
+                "layout": d.layout,
             }
             return [outputs.data(out, new.to_json().encode(), command=req.kind, parameters=used,
                                  seed=req.seed, overwrite=req.overwrite)]  # fmt: skip
