@@ -461,7 +461,8 @@ class BendingModel:
             log-density there. Where the input's branches do not agree on a way (a crack
             network, bark) ``κ`` is 0 and nothing changes; a fundus's vessels, a delta's
             channels or roots sweeping one way are grown along the input's ways
-            (``docs/pipelines/branching.md``, ``layout``).
+            (``docs/pipelines/branching.md``, ``layout``). :func:`synthesize` turns it on
+            where the input is one connected structure (:func:`layout_default`).
         denoise : float
             Standard deviation in px of a Gaussian along each branch of ``skeleton`` before
             it is resampled and its angles taken (default 0: the skeleton as given, the

@@ -169,7 +169,8 @@ def fit_models(
     layout : float, optional
         Weight of the input's layout of directions, so that branches run the way the input's
         run at the same place of the picture (default 0: the paper's model, the same
-        everywhere; see :meth:`BendingModel.fit`).
+        everywhere; see :meth:`BendingModel.fit`). :func:`synthesize` turns it on where the
+        input is one connected structure (:func:`layout_default`).
     denoise : float, optional
         Standard deviation in px of the Gaussian that smooths the skeleton's branches along
         their length before the bending model takes their angles, so that a traced centre
