@@ -133,16 +133,21 @@ def _soft_two_level(img: F32, lo: F32, hi: F32) -> bool:
     rest = ~(near_lo | near_hi)
     if not rest.any():
         return bool(near_lo.any() and near_hi.any())
+    need = SOFT_EDGES * np.count_nonzero(rest)
     k = np.ones((5, 5), np.uint8)
     edge = (cv2.dilate(near_lo.view(np.uint8), k) > 0) & (cv2.dilate(near_hi.view(np.uint8), k) > 0)
+    if np.count_nonzero(rest & edge) >= need:
+        return True
     k3 = np.ones((3, 3), np.uint8)
+    beside = cv2.dilate((near_lo | near_hi).view(np.uint8), k3) > 0
+    if np.count_nonzero(rest & (edge | beside)) < need:  # a photo's shading: the costlier tests cannot help
+        return False
     step = np.zeros((H, W), bool)
     for c in range(img.shape[2]):
         ch = np.ascontiguousarray(img[..., c])
         s = SOFT_STEP * max(float(hi[c] - lo[c]), 1e-12)
         step |= (cv2.dilate(ch, k3) - ch >= s) | (ch - cv2.erode(ch, k3) >= s)
-    beside = cv2.dilate((near_lo | near_hi).view(np.uint8), k3) > 0
     # a line, not a speck: noise on a mask leaves isolated in-between pixels
     _, labels, stats, _ = cv2.connectedComponentsWithStats(rest.view(np.uint8), connectivity=8)
     line = (stats[:, cv2.CC_STAT_AREA] >= SOFT_LINE)[labels]
-    return bool(np.count_nonzero(rest & (edge | (step & beside & line))) >= SOFT_EDGES * np.count_nonzero(rest))
+    return bool(np.count_nonzero(rest & (edge | (step & beside & line))) >= need)
