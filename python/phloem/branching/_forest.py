@@ -38,10 +38,8 @@ class InputTree:
         """A branch of this tree at ``generation`` (length, children), or None if it has none.
 
         Dealt without replacement: each of the generation's branches once, in an order drawn
-        from ``rng``, then a new round. Drawn with replacement, a copy of a tree missed some of
-        its template's branches (its few long arms among them) and repeated others, so its
-        lengths per generation strayed from the input's
-        (``docs/pipelines/branching/quality.md``, fifty-third session).
+        from ``rng``, then a new round, so that a copy of a tree keeps its template's few long
+        arms (``docs/pipelines/branching/quality.md``, fifty-third session).
         """
         pool = self.branches.get(generation)
         if not pool:

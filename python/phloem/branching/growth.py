@@ -762,7 +762,7 @@ def grow(
     H, W = shape
     forest = input_trees(bending.source)
     order = sibling_order(bending.source)
-    # A connected input (its largest tree holds 90 % of the length, so a stray speck does not count)
+    # a connected input: one structure, stray specks beside it (``_forest.CONNECTED_SHARE``)
     dominant = connected(forest)
     if n_roots is None:
         # A connected input stays connected: its trees once per input area, a tree cut short by
