@@ -120,6 +120,20 @@ def test_y_shape_two_branches_on_the_centre_line_with_the_right_thickness():
     _assert_thickness(sk, Y_SHAPE, away=[(50, 60), (50, 100), (20, 15), (82, 18)])
 
 
+# a thin side channel leaving at 45° and at 90°, and a T of two channels as wide
+@pytest.mark.parametrize(("tip", "radius"), [((145, 55), 2.5), ((100, 35), 2.5), ((100, 35), 9.0)])
+def test_a_channel_starts_at_its_own_width_and_does_not_widen_the_one_it_leaves(tip, radius):
+    # Within a junction's disk the distance transform measures the junction: the thin side
+    # channel started at 9 px, and at the T the river swelled to 11 px.
+    tubes = Tubes((200, 200), [((10, 100), (190, 100), 9, "river"), ((100, 100), tip, radius, "side")])
+    sk = trace(tubes.mask(), kind="mask")
+    assert len(sk.branches) == 2
+    river, side = sk.branches
+    assert side.parent is not None and side.parent[0] == 0
+    assert np.abs(side.thickness[:3] - radius).max() < 1.5, side.thickness[:6]
+    assert np.abs(river.thickness[20:-20] - 9).max() < 1.5, river.thickness.max()
+
+
 def test_three_level_tree_parents_point_to_the_right_branch():
     sk = trace(TREE.mask(), kind="mask")
     assert len(sk.branches) == 4

@@ -34,6 +34,11 @@ from .skeleton import Branch, Skeleton
 
 __all__ = ["estimate_thickness", "threshold_climb", "trace"]
 
+#: How far from its junction, in the junction's radii, a traced child's own radius begins: the
+#: child's centre line leaves its parent's channel at ``1 / sin θ`` of that radius, 1.5 for a
+#: child leaving at about 40° (docs/pipelines/branching/quality.md, fifty-fifth session).
+JUNCTION_REACH = 1.5
+
 F64 = NDArray[np.float64]
 F32 = NDArray[np.float32]
 Kind = Literal["auto", "bright", "dark", "mask"]
@@ -469,6 +474,58 @@ def _decompose(tree: Any, root: int) -> list[tuple[list[int], int | None, int]]:
     return out
 
 
+def _beyond_junction(points: F64, thick: F64, radius: float) -> F64:
+    """A child's radii near its junction (of ``radius``) replaced by its first one beyond :data:`JUNCTION_REACH`.
+
+    A child's pixel chain starts at the junction and crosses the parent's channel before it
+    leaves it, so the distance transform there measures the junction and the parent (a river
+    mask's children start at 4 times their own radius, median), not the child.
+    """
+    d = np.hypot(*(points - points[0]).T)
+    beyond = np.flatnonzero(d >= JUNCTION_REACH * radius)
+    if len(beyond) == 0 or beyond[0] == 0:
+        return thick
+    out: F64 = thick.copy()
+    out[: beyond[0]] = thick[beyond[0]]
+    return out
+
+
+def _across_junction(points: F64, thick: F64, at: int, radius: float) -> F64:
+    """A parent's radii inside the disk of a junction at vertex ``at`` interpolated across it.
+
+    The distance transform swells where a child leaves (the inscribed disk of a T reaches into
+    the child's mouth), so a mask's parents are 1.3 times as wide at their junctions as beside
+    them (median, rivers).
+    """
+    inside = np.hypot(*(points - points[at]).T) < radius
+    lo, hi = at, at
+    while lo > 0 and inside[lo - 1]:
+        lo -= 1
+    while hi < len(points) - 1 and inside[hi + 1]:
+        hi += 1
+    if lo == 0 and hi == len(points) - 1:
+        return thick
+    out: F64 = thick.copy()
+    if lo == 0:
+        out[: hi + 1] = thick[hi + 1]
+    elif hi == len(points) - 1:
+        out[lo:] = thick[lo - 1]
+    else:
+        out[lo : hi + 1] = np.interp(np.arange(lo, hi + 1), [lo - 1, hi + 1], [thick[lo - 1], thick[hi + 1]])
+    return out
+
+
+def _unswollen(branches: list[Branch]) -> None:
+    """:func:`_beyond_junction` on every child and :func:`_across_junction` on its parent, in place."""
+    given = [b.thickness.copy() for b in branches]
+    for b in branches:
+        if b.parent is not None:
+            pi, at = b.parent
+            radius = float(given[pi][at])
+            b.thickness = _beyond_junction(b.points, b.thickness, radius)
+            branches[pi].thickness = _across_junction(branches[pi].points, branches[pi].thickness, at, radius)
+
+
 # -- trace -----------------------------------------------------------------------------------
 
 
@@ -559,7 +616,10 @@ def trace(
        masks). ``"gradient"`` (default for photos, whose ridge masks are narrower than the
        structure) replaces it by :func:`estimate_thickness` on the gray image with
        ``max_radius = 2 max(sigmas) + 2``, median-filtered over 5 vertices and smoothed like
-       the points (before the resampling of 6.).
+       the points (before the resampling of 6.). The distance transform's radii are taken
+       without the junctions' own width: a child's radii within :data:`JUNCTION_REACH`
+       junction radii of its junction become its first radius beyond, and its parent's within
+       the junction's radius are interpolated across it.
     8. **Edges.** On a photo, a further tree (not the main one, nor ``root``'s) whose median
        thickness is over the 90th percentile of the main tree's and whose two sides differ in
        brightness (at its radius plus 3 px) by over 3 times as much, relative to its depth, as
@@ -762,11 +822,12 @@ def trace(
     if start is not None:
         roots[int(labels[start])] = start
     branches: list[Branch] = []
+    chains: list[Branch] = []  # pixel chains and their radii, smoothed once their junctions are corrected
     given: int | None = None  # the tree of the caller's root, which is never an edge
     for c in comp_order:
         croot = roots[c]
         if start is not None and c == int(labels[start]):
-            given = len(branches)
+            given = len(chains)
         new_index: dict[int, int] = {}
         for i, (path, parent, at) in enumerate(_decompose(tree, croot)):
             if parent is not None and parent not in new_index:
@@ -779,15 +840,19 @@ def trace(
             if seg < max(min_length, spur * attach_r):
                 continue
             thick = r[path].astype(np.float64)
-            pts = _smooth_path(p, smooth)
-            # the end reflection can push a bent chain at the border a little outside the image
-            np.clip(pts, 0.0, [shape[1] - 1, shape[0] - 1], out=pts)
-            if smooth > 0 and len(thick) > 2:
-                # (a Gaussian wider than the chain is cut to it, as _smooth_path does)
-                thick = ndimage.gaussian_filter1d(thick, min(smooth, len(thick)), mode="nearest")
             par = None if parent is None else (new_index[parent], at)
-            new_index[i] = len(branches)
-            branches.append(Branch(pts, thick, par))
+            new_index[i] = len(chains)
+            chains.append(Branch(p, thick, par))
+    _unswollen(chains)
+    for ch in chains:
+        pts = _smooth_path(ch.points, smooth)
+        # the end reflection can push a bent chain at the border a little outside the image
+        np.clip(pts, 0.0, [shape[1] - 1, shape[0] - 1], out=pts)
+        thick = ch.thickness
+        if smooth > 0 and len(thick) > 2:
+            # (a Gaussian wider than the chain is cut to it, as _smooth_path does)
+            thick = ndimage.gaussian_filter1d(thick, min(smooth, len(thick)), mode="nearest")
+        branches.append(Branch(pts, thick, ch.parent))
     if not branches:
         raise ValueError(f"image: nothing to trace, every branch is shorter than min_length={min_length}")
     sk = Skeleton(branches, shape)
