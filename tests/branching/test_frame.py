@@ -102,7 +102,8 @@ def test_synthesize_keeps_the_frame_out_of_the_picture() -> None:
         res = synthesize(img, seed=seed, trace_options=opts, valid=valid, render_options={"paste_structure": False})
         pts = np.concatenate([b.points for b in res.source.branches])
         rim = int(ring[np.rint(pts[:, 1]).astype(int), np.rint(pts[:, 0]).astype(int)].sum())
-        black = res.image.max(axis=2) < 0.1
+        # the frame is 0; a vessel (0.25 in the input) matched to darker surroundings reaches 0.1
+        black = res.image.max(axis=2) < 0.05
         return float(black[inner].mean()), float(black[~disc].mean()), rim
 
     # Without `valid` the frame is part of the background: the rim is traced as a branch (its

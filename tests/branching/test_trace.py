@@ -134,6 +134,16 @@ def test_a_channel_starts_at_its_own_width_and_does_not_widen_the_one_it_leaves(
     assert np.abs(river.thickness[20:-20] - 9).max() < 1.5, river.thickness.max()
 
 
+def test_a_photos_side_channel_starts_at_its_own_width():
+    # estimate_thickness measures a child's first vertices across its parent's channel: a
+    # 2.5-px channel leaving a 6-px one at 45° started at 3.5 px.
+    tubes = Tubes((200, 200), [((10, 100), (190, 100), 6, "river"), ((100, 100), (145, 55), 2.5, "side")])
+    photo = cv2.GaussianBlur(np.where(tubes.mask() > 0, 0.2, 0.8).astype(np.float32), (0, 0), 1.0)
+    sk = trace(photo)
+    assert len(sk.branches) == 2 and sk.branches[1].parent is not None
+    assert np.abs(sk.branches[1].thickness[:3] - 2.5).max() < 0.5, sk.branches[1].thickness[:6]
+
+
 def test_three_level_tree_parents_point_to_the_right_branch():
     sk = trace(TREE.mask(), kind="mask")
     assert len(sk.branches) == 4

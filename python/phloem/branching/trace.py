@@ -515,15 +515,16 @@ def _across_junction(points: F64, thick: F64, at: int, radius: float) -> F64:
     return out
 
 
-def _unswollen(branches: list[Branch]) -> None:
-    """:func:`_beyond_junction` on every child and :func:`_across_junction` on its parent, in place."""
+def _unswollen(branches: list[Branch], *, parents: bool = True) -> None:
+    """:func:`_beyond_junction` on every child and (``parents``) :func:`_across_junction` on its parent, in place."""
     given = [b.thickness.copy() for b in branches]
     for b in branches:
         if b.parent is not None:
             pi, at = b.parent
             radius = float(given[pi][at])
             b.thickness = _beyond_junction(b.points, b.thickness, radius)
-            branches[pi].thickness = _across_junction(branches[pi].points, branches[pi].thickness, at, radius)
+            if parents:
+                branches[pi].thickness = _across_junction(branches[pi].points, branches[pi].thickness, at, radius)
 
 
 # -- trace -----------------------------------------------------------------------------------
@@ -616,10 +617,10 @@ def trace(
        masks). ``"gradient"`` (default for photos, whose ridge masks are narrower than the
        structure) replaces it by :func:`estimate_thickness` on the gray image with
        ``max_radius = 2 max(sigmas) + 2``, median-filtered over 5 vertices and smoothed like
-       the points (before the resampling of 6.). The distance transform's radii are taken
-       without the junctions' own width: a child's radii within :data:`JUNCTION_REACH`
-       junction radii of its junction become its first radius beyond, and its parent's within
-       the junction's radius are interpolated across it.
+       the points (before the resampling of 6.). The radii are taken without the junctions'
+       own width: a child's radii within :data:`JUNCTION_REACH` junction radii of its
+       junction become its first radius beyond, and (distance transform only) its parent's
+       within the junction's radius are interpolated across it.
     8. **Edges.** On a photo, a further tree (not the main one, nor ``root``'s) whose median
        thickness is over the 90th percentile of the main tree's and whose two sides differ in
        brightness (at its radius plus 3 px) by over 3 times as much, relative to its depth, as
@@ -858,6 +859,9 @@ def trace(
     sk = Skeleton(branches, shape)
     if photo:
         sk = estimate_thickness(gray, sk, max_radius=max_radius)
+        # the children's start only: a photo's parents interpolated across their junctions
+        # drift more (docs/pipelines/branching/quality.md, fifty-fifth session)
+        _unswollen(sk.branches, parents=False)
         for b in sk.branches:
             if len(b) > 2:
                 t = ndimage.median_filter(b.thickness, size=5, mode="nearest")
