@@ -469,8 +469,9 @@ def _deal_next(
     The queue holds one generation after the other, in the order their parents finished. A tree
     that reaches its template's length leaves the rest of the queue out, so taken in that order
     the children left out would all be on the branches grown last: a braided river's stem kept
-    its side channels near its root and bare stubs towards its end. Returns the end of the generation's block (``block_end`` while ``qpos`` is
-    inside it: children appended meanwhile are of the next generation).
+    its side channels near its root and bare stubs towards its end. Returns the end of the
+    generation's block (``block_end`` while ``qpos`` is inside it: children appended meanwhile
+    are of the next generation).
     """
     if qpos >= block_end:
         gen = queue[qpos][2]

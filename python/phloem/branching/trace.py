@@ -477,9 +477,8 @@ def _decompose(tree: Any, root: int) -> list[tuple[list[int], int | None, int]]:
 def _beyond_junction(points: F64, thick: F64, radius: float) -> F64:
     """A child's radii near its junction (of ``radius``) replaced by its first one beyond :data:`JUNCTION_REACH`.
 
-    A child's pixel chain starts at the junction and crosses the parent's channel before it
-    leaves it, so the distance transform there measures the junction and the parent (a river
-    mask's children start at 4 times their own radius, median), not the child.
+    A child's chain starts at the junction and crosses the parent's channel before it leaves
+    it, so its first radii measure the junction, not the child.
     """
     d = np.hypot(*(points - points[0]).T)
     beyond = np.flatnonzero(d >= JUNCTION_REACH * radius)
@@ -493,9 +492,8 @@ def _beyond_junction(points: F64, thick: F64, radius: float) -> F64:
 def _across_junction(points: F64, thick: F64, at: int, radius: float) -> F64:
     """A parent's radii inside the disk of a junction at vertex ``at`` interpolated across it.
 
-    The distance transform swells where a child leaves (the inscribed disk of a T reaches into
-    the child's mouth), so a mask's parents are 1.3 times as wide at their junctions as beside
-    them (median, rivers).
+    The distance transform swells where a child leaves: the inscribed disk of a T reaches into
+    the child's mouth.
     """
     inside = np.hypot(*(points - points[at]).T) < radius
     lo, hi = at, at
@@ -503,15 +501,11 @@ def _across_junction(points: F64, thick: F64, at: int, radius: float) -> F64:
         lo -= 1
     while hi < len(points) - 1 and inside[hi + 1]:
         hi += 1
-    if lo == 0 and hi == len(points) - 1:
+    ends = [i for i in (lo - 1, hi + 1) if 0 <= i < len(points)]  # one end alone: its radius
+    if not ends:
         return thick
     out: F64 = thick.copy()
-    if lo == 0:
-        out[: hi + 1] = thick[hi + 1]
-    elif hi == len(points) - 1:
-        out[lo:] = thick[lo - 1]
-    else:
-        out[lo : hi + 1] = np.interp(np.arange(lo, hi + 1), [lo - 1, hi + 1], [thick[lo - 1], thick[hi + 1]])
+    out[lo : hi + 1] = np.interp(np.arange(lo, hi + 1), ends, thick[ends])
     return out
 
 
